@@ -1,0 +1,297 @@
+"""Where the built-in models live, and how to turn a sidecar into a Pinocchio model.
+
+The built-in models (``finger``, ``forearm``, ``gait2d``, ``human3d``) are a
+URDF plus one TOML *sidecar* each, in the repository's ``urdf/`` folder.  A
+wheel installs that folder as the data package ``pinmsk._urdf``; an editable
+or source checkout reads it in place.  ``urdf/README.md`` documents the
+sidecar format and the coordinate conventions.
+
+``human3d`` ships no URDF of its own: its sidecar points at the 36-dof
+``human.urdf`` of the ``example-robot-data`` distribution with the marker
+``@example-robot-data:<path inside share/example-robot-data>``.
+
+Functions
+---------
+builtin_dir, builtin_names, builtin_sidecar
+    find the folder, list the models, get one sidecar's path.
+read_sidecar
+    parse a sidecar (TOML) into a dict, with errors that name the file.
+resolve_urdf, example_robot_data_dir
+    the URDF file a sidecar refers to and the package directories its meshes need.
+build_pinocchio_model, build_geometry_model
+    the Pinocchio skeleton of a sidecar, gravity from ``[model] gravity``.
+coordinate_permutation
+    map Pinocchio's (depth-first) coordinates to a sidecar's ``coordinate_order``.
+"""
+
+from __future__ import annotations
+
+import difflib
+import importlib.metadata
+import importlib.resources
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+import pinocchio as pin
+
+from pinmsk.errors import ModelError
+
+try:  # Python >= 3.11
+    import tomllib as _toml
+except ModuleNotFoundError:  # pragma: no cover - Python 3.10
+    import tomli as _toml
+
+__all__ = [
+    "EXAMPLE_ROBOT_DATA_MARKER",
+    "UrdfSource",
+    "builtin_dir",
+    "builtin_names",
+    "builtin_sidecar",
+    "read_sidecar",
+    "resolve_urdf",
+    "example_robot_data_dir",
+    "build_pinocchio_model",
+    "build_geometry_model",
+    "coordinate_permutation",
+]
+
+#: Prefix of a sidecar ``urdf`` value that lives in the example-robot-data distribution.
+EXAMPLE_ROBOT_DATA_MARKER = "@example-robot-data:"
+_ERD_DIST = "example-robot-data"
+_ERD_DIR = "example-robot-data"  # folder name under <prefix>/share
+
+
+# -----------------------------------------------------------------------------
+# finding the built-in models
+# -----------------------------------------------------------------------------
+
+
+def builtin_dir() -> Path:
+    """The folder holding the built-in URDFs and sidecars.
+
+    Installed from a wheel, that is the data package ``pinmsk._urdf`` (setup
+    maps the repository's ``urdf/`` onto it); from a source checkout or an
+    editable install it is ``<repo>/urdf``.
+    """
+    try:
+        resource = importlib.resources.files("pinmsk._urdf")
+    except ModuleNotFoundError:
+        resource = None
+    if resource is not None:
+        path = Path(str(resource))
+        if path.is_dir() and any(path.glob("*.toml")):
+            return path
+    source = Path(__file__).resolve().parents[1] / "urdf"
+    if source.is_dir() and any(source.glob("*.toml")):
+        return source
+    raise ModelError(
+        "cannot find pinmsk's built-in models: neither the package 'pinmsk._urdf' nor "
+        f"{source} holds any *.toml sidecar; reinstall pinmsk (pip install .) or run from a source checkout"
+    )
+
+
+def builtin_names() -> tuple[str, ...]:
+    """Names of the built-in models (one per sidecar ``<name>.toml``), sorted."""
+    return tuple(sorted(p.stem for p in builtin_dir().glob("*.toml")))
+
+
+def builtin_sidecar(name: str) -> Path:
+    """Path of the sidecar of built-in model ``name`` (e.g. ``"forearm"``)."""
+    names = builtin_names()
+    if name not in names:
+        close = difflib.get_close_matches(str(name), names, n=1)
+        hint = f"; did you mean {close[0]!r}?" if close else "."
+        raise ModelError(f"no built-in model {name!r}{hint} The built-in models are: {', '.join(names)}")
+    return builtin_dir() / f"{name}.toml"
+
+
+# -----------------------------------------------------------------------------
+# sidecars and the URDFs they point at
+# -----------------------------------------------------------------------------
+
+
+def _sidecar_path(sidecar) -> Path:
+    """A sidecar given as a path or as the name of a built-in model."""
+    if isinstance(sidecar, Path) or (isinstance(sidecar, str) and (sidecar.endswith(".toml") or "/" in sidecar)):
+        return Path(sidecar)
+    return builtin_sidecar(str(sidecar))
+
+
+def read_sidecar(path) -> dict:
+    """Parse a sidecar TOML file (a path, or a built-in model's name) into a dict.
+
+    Checks only what every reader needs: the file parses and has a ``[model]``
+    table with a ``urdf`` string.  Muscles and effects are checked by the
+    classes that read them.
+    """
+    path = _sidecar_path(path)
+    try:
+        with open(path, "rb") as fh:
+            data = _toml.load(fh)
+    except FileNotFoundError:
+        raise ModelError(f"sidecar file {path} does not exist") from None
+    except _toml.TOMLDecodeError as exc:
+        raise ModelError(f"sidecar {path} is not valid TOML: {exc}") from None
+    model = data.get("model")
+    if not isinstance(model, dict) or not isinstance(model.get("urdf"), str):
+        raise ModelError(
+            f"sidecar {path} needs a [model] table with a urdf = \"...\" entry (path relative to the sidecar); "
+            "see urdf/README.md"
+        )
+    return data
+
+
+class UrdfSource(NamedTuple):
+    """A URDF file and the package directories that resolve its ``package://`` meshes.
+
+    A named tuple, so ``urdf, package_dirs = resolve_urdf(...)`` works.
+    """
+
+    path: Path
+    package_dirs: tuple[Path, ...] = ()
+
+
+def example_robot_data_dir() -> Path:
+    """``<prefix>/share/example-robot-data`` of the installed example-robot-data.
+
+    Version 6 ships its files under a cmeel prefix without a Python loader, so
+    the folder is found from the distribution's file list.
+    """
+    try:
+        dist = importlib.metadata.distribution(_ERD_DIST)
+    except importlib.metadata.PackageNotFoundError:
+        raise ModelError(
+            "the built-in model 'human3d' uses human.urdf from the example-robot-data package, "
+            "which is not installed; install it with `pip install example-robot-data`"
+        ) from None
+    for f in dist.files or ():
+        parts = f.parts
+        if _ERD_DIR in parts and "robots" in parts:
+            i = parts.index(_ERD_DIR)
+            root = Path(dist.locate_file(Path(*parts[: i + 1])))
+            if root.is_dir():
+                return root.resolve()
+    raise ModelError(
+        f"example-robot-data {dist.version} is installed but its file list has no "
+        f"'{_ERD_DIR}/robots/...' entry; reinstall it (pip install --force-reinstall example-robot-data)"
+    )
+
+
+def resolve_urdf(sidecar, reference: str | None = None) -> UrdfSource:
+    """The URDF that ``sidecar``'s ``[model] urdf`` (or ``reference``) points at.
+
+    A plain value is a path relative to the sidecar's folder.  A value
+    ``@example-robot-data:<relative path>`` is looked up inside the installed
+    example-robot-data (``<prefix>/share/example-robot-data/<relative path>``)
+    and comes with the package directory that resolves its meshes.
+    """
+    path = _sidecar_path(sidecar)
+    if reference is None:
+        reference = read_sidecar(path)["model"]["urdf"]
+    if reference.startswith(EXAMPLE_ROBOT_DATA_MARKER):
+        rel = reference[len(EXAMPLE_ROBOT_DATA_MARKER):].lstrip("/")
+        root = example_robot_data_dir()
+        urdf = root / rel
+        if not urdf.is_file():
+            raise ModelError(
+                f"sidecar {path}: urdf = {reference!r} names {urdf}, which example-robot-data does not ship; "
+                f"look in {root} for the right relative path"
+            )
+        # meshes are "package://example-robot-data/robots/...": the package dir is <prefix>/share
+        return UrdfSource(urdf, (root.parent,))
+    urdf = (path.parent / reference).resolve()
+    if not urdf.is_file():
+        raise ModelError(f"sidecar {path}: urdf = {reference!r} does not exist (looked for {urdf})")
+    return UrdfSource(urdf, (urdf.parent,))
+
+
+# -----------------------------------------------------------------------------
+# Pinocchio models
+# -----------------------------------------------------------------------------
+
+
+def build_pinocchio_model(sidecar) -> pin.Model:
+    """The Pinocchio skeleton of a sidecar (path, or built-in model name).
+
+    Sets ``model.gravity`` from ``[model] gravity``.  The joints stay in the
+    URDF parser's depth-first order (siblings sorted by joint name), which is
+    the only order Pinocchio supports; a sidecar's ``[model] coordinate_order``
+    is applied at the boundary with :func:`coordinate_permutation`.
+    """
+    path = _sidecar_path(sidecar)
+    cfg = read_sidecar(path)
+    src = resolve_urdf(path, cfg["model"]["urdf"])
+    model = pin.buildModelFromUrdf(str(src.path))
+    gravity = cfg["model"].get("gravity")
+    if gravity is not None:
+        g = np.asarray(gravity, dtype=float)
+        if g.shape != (3,) or not np.all(np.isfinite(g)):
+            raise ModelError(f"sidecar {path}: [model] gravity must be three finite numbers (m/s^2), got {gravity!r}")
+        model.gravity = pin.Motion(g, np.zeros(3))
+    order = cfg["model"].get("coordinate_order")
+    if order is not None:
+        coordinate_permutation(model, order, source=path)  # validate it against the URDF now
+    return model
+
+
+def build_geometry_model(sidecar, model: pin.Model, kind: str = "visual") -> pin.GeometryModel:
+    """Visual (``kind="visual"``) or collision geometry of a sidecar's URDF for ``model``.
+
+    ``model`` must be the one :func:`build_pinocchio_model` returned for the
+    same sidecar.
+    """
+    kinds = {"visual": pin.GeometryType.VISUAL, "collision": pin.GeometryType.COLLISION}
+    if kind not in kinds:
+        raise ModelError(f"geometry kind must be 'visual' or 'collision', got {kind!r}")
+    src = resolve_urdf(_sidecar_path(sidecar))
+    return pin.buildGeomFromUrdf(model, str(src.path), kinds[kind], package_dirs=[str(p) for p in src.package_dirs])
+
+
+def coordinate_permutation(model: pin.Model, order, *, source=None) -> np.ndarray:
+    """Indices mapping Pinocchio's velocity coordinates to the order ``order``.
+
+    Pinocchio needs every subtree's joints to be contiguous (depth-first
+    order: ``Data.lastChild`` / ``nvSubtree``, CRBA and ``Model.check`` rely
+    on it), and its URDF parser sorts sibling joints by name, so a model can
+    present its coordinates in another order only through a permutation at
+    the Pinocchio boundary.  With ``perm = coordinate_permutation(model, order)``:
+
+        x_user = x_pin[..., perm]            # q, v, a, tau of 1-dof joints
+        x_pin[..., perm] = x_user
+        M_user = M_pin[np.ix_(perm, perm)]
+
+    ``order`` must name every joint once; every joint must have nq == nv == 1.
+    """
+    where = f"sidecar {source}: " if source else ""
+    names = list(model.names)[1:]
+    order = [str(n) for n in order]
+    dupes = sorted({n for n in order if order.count(n) > 1})
+    missing = [n for n in names if n not in order]
+    unknown = [n for n in order if n not in names]
+    if dupes or missing or unknown:
+        parts = []
+        if unknown:
+            hints = []
+            for n in unknown:
+                close = difflib.get_close_matches(n, names, n=1)
+                hints.append(f"{n!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+            parts.append("unknown joints " + ", ".join(hints))
+        if missing:
+            parts.append("missing joints " + ", ".join(map(repr, missing)))
+        if dupes:
+            parts.append("repeated joints " + ", ".join(map(repr, dupes)))
+        raise ModelError(
+            f"{where}coordinate_order must list every joint of the model exactly once: {'; '.join(parts)}. "
+            f"The model's joints are: {', '.join(names)}"
+        )
+    perm = []
+    for n in order:
+        j = model.getJointId(n)
+        if model.nqs[j] != 1 or model.nvs[j] != 1:
+            raise ModelError(
+                f"{where}coordinate_order can only permute 1-dof joints; joint {n!r} has nq = {model.nqs[j]}, "
+                f"nv = {model.nvs[j]}"
+            )
+        perm.append(model.idx_vs[j])
+    return np.asarray(perm, dtype=int)

@@ -1,0 +1,227 @@
+"""Feet: the foot2d model, the three-sphere contact sets of thesis Ch. 4, and per-foot totals.
+
+* :func:`load_foot2d` -- the 4-dof kinematically driven foot (``urdf/foot2d.urdf``).
+* :func:`foot_contacts` -- spheres at the heel H, first metatarsal P and toe T
+  with the bounds of Tables 4.2-4.4 (``kind`` = ``point``, ``volumetric`` or
+  ``hypervolumetric``).  Works for any model with those frames: foot2d's
+  ``heel, metatarsal, toe`` or gait2d's ``heel_r, metatarsal_r, toe_r`` (``side="r"``).
+* :func:`ground_reaction` -- total ground reaction force, centre of pressure and
+  free moment of a set of contact outputs (one foot).
+
+COP regularisation.  The COP of the model is the normal-force-weighted mean of
+the application points,
+
+    x_cop = (sum_i w_i x_i + eps * x_ref) / (sum_i w_i + eps),
+    w_i = smooth_positive(f_n,i, 1e-3 N),  x_ref = mean_i x_i,
+
+with ``eps = cop_eps`` (default 1 N).  It equals the exact COP within
+``eps / F`` relative weight (0.1 % of the position at 1 kN), is C-infinity, and
+tends to the mean of the sphere positions (not NaN or inf) as the vertical force
+vanishes.  ``ground_reaction`` also returns ``loaded`` (F_y > ``cop_eps``), a mask
+of the frames where the COP means something physically.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import pinocchio as pin
+
+from ..errors import ModelError
+from .hunt_crossley import HuntCrossley
+from .sphere import ContactForces, smooth_positive
+from .volumetric import HyperVolumetric, Volumetric
+
+URDF_DIR = Path(__file__).resolve().parents[2] / "urdf"
+
+#: contact model names (CLI ``--contact``) -> classes
+KINDS = {"point": HuntCrossley, "volumetric": Volumetric, "hypervolumetric": HyperVolumetric}
+SITES = ("heel", "metatarsal", "toe")
+
+#: Upper bound of the radius / rest length per site, Tables 4.2-4.4 (m)
+RADIUS_UPPER = {"heel": 0.055, "metatarsal": 0.050, "toe": 0.045}
+#: Table 4.2-4.4 optimal values, the defaults of the spheres at each site
+THESIS_VALUES = {
+    "point": {
+        "heel": dict(k_s=1.2e4, a_s=64.6, L0=0.052, n_s=0.95),
+        "metatarsal": dict(k_s=1.9e3, a_s=1.4e3, L0=0.048, n_s=0.96),
+        "toe": dict(k_s=6.4e4, a_s=3e-3, L0=0.043, n_s=0.96),
+    },
+    "volumetric": {
+        "heel": dict(k_v=2.21e6, a_v=1.2, R=0.051),
+        "metatarsal": dict(k_v=1.87e6, a_v=0.45, R=0.049),
+        "toe": dict(k_v=2.51e5, a_v=0.1, R=0.044),
+    },
+    "hypervolumetric": {
+        "heel": dict(k_h=8.0e5, a_h=52.3e6, R=0.050, H=0.74, mu_f=0.20, v_s=0.005),
+        "metatarsal": dict(k_h=1.4e6, a_h=1.2e5, R=0.049, H=0.80, mu_f=0.22, v_s=0.050),
+        "toe": dict(k_h=7.5e5, a_h=13e6, R=0.044, H=0.79, mu_f=0.34, v_s=0.034),
+    },
+}
+
+
+def load_foot2d():
+    """The foot2d :class:`pinmsk.Model` (4 dof: ankle_x, ankle_y, foot_angle, mtp)."""
+    from ..model import Model, load_model
+
+    try:
+        return load_model("foot2d")
+    except Exception:  # the sidecar loader is optional here: build from the URDF directly
+        pass
+    urdf = URDF_DIR / "foot2d.urdf"
+    if not urdf.exists():
+        raise ModelError(f"foot2d URDF not found at {urdf}; run python urdf/generate_foot2d.py")
+    pm = pin.buildModelFromUrdf(str(urdf))
+    pm.gravity = pin.Motion(np.array([0.0, -9.81, 0.0, 0.0, 0.0, 0.0]))
+    return Model(name="foot2d", pin_model=pm,
+                 meta={"urdf": str(urdf), "up_axis": "y",
+                       "description": "Kinematically driven sagittal foot, thesis Ch. 4"})
+
+
+def site_frames(model, side: str | None = None) -> dict[str, str]:
+    """``{site: frame name}`` for heel, metatarsal, toe (``side`` appends ``_r``/``_l``)."""
+    out = {}
+    for s in SITES:
+        name = s if not side else f"{s}_{side}"
+        model.frame_id(name)  # ModelError with suggestions if absent
+        out[s] = name
+    return out
+
+
+def foot_contacts(model, kind: str = "hypervolumetric", *, side: str | None = None,
+                  relax: bool = False, ground_speed: float = 0.0, values=None,
+                  smoothing: float = 1e-4) -> list:
+    """Three contact elements of type ``kind`` at the heel, metatarsal and toe of ``model``.
+
+    Defaults are the thesis optima (Tables 4.2-4.4), radius/rest-length bounds
+    per site as in the tables, friction (mu_f, v_s) of Table 4.4 where given.
+    ``relax=True`` frees the centre offsets dx, dy (Sec. 4.1.4, +-20 mm).
+    ``values`` optionally maps site -> {parameter: value}.
+    """
+    if kind not in KINDS:
+        raise ModelError(f"unknown contact model '{kind}'; choose one of {', '.join(KINDS)}")
+    cls = KINDS[kind]
+    frames = site_frames(model, side)
+    out = []
+    for site, frame in frames.items():
+        vals = dict(THESIS_VALUES[kind][site])
+        vals.update((values or {}).get(site, {}))
+        c = cls(frame, ground_speed=ground_speed, smoothing=smoothing,
+                bounds={cls.radius_name: (0.001, RADIUS_UPPER[site])}, **vals)
+        if relax:
+            from .sphere import _replace
+            c._params = {k: (_replace(p, vary=True) if k in ("dx", "dy") else p) for k, p in c._params.items()}
+        out.append(c)
+    return out
+
+
+@dataclass(frozen=True)
+class GroundReaction:
+    """Totals of one foot over N frames: ``force`` (N, 3), ``moment`` (N, 3) about the world
+    origin, ``cop`` (N, 3) on the ground plane (regularised, see module doc), ``free_moment``
+    (N,) about the vertical at the COP, and ``loaded`` (N,) where F_y > cop_eps."""
+
+    force: np.ndarray
+    moment: np.ndarray
+    cop: np.ndarray
+    free_moment: np.ndarray
+    loaded: np.ndarray
+
+    @property
+    def normal(self) -> np.ndarray:
+        return self.force[:, 1]
+
+    @property
+    def friction(self) -> np.ndarray:
+        return self.force[:, 0]
+
+
+def ground_reaction(outputs: Sequence[ContactForces], *, cop_eps: float = 1.0) -> GroundReaction:
+    """Total force, moment about the origin, COP and free moment of the contacts of one foot."""
+    if not outputs:
+        raise ModelError("ground_reaction: no contact outputs given")
+    F = sum(o.force for o in outputs)
+    M = sum(np.cross(o.point, o.force) for o in outputs)
+    w = [smooth_positive(o.normal, 1e-3) for o in outputs]
+    W = sum(w)
+    pts = np.stack([o.point for o in outputs])  # (k, N, 3)
+    ref = pts.mean(axis=0)
+    num = sum(wi[:, None] * o.point for wi, o in zip(w, outputs))
+    cop = (num + cop_eps * ref) / (W + cop_eps)[:, None]
+    cop[:, 1] = 0.0
+    # free moment about the vertical through the COP: M = cop x F + T y  =>  T = M_y - (cop x F)_y
+    free = M[:, 1] - np.cross(cop, F)[:, 1]
+    return GroundReaction(F, M, cop, free, F[:, 1] > cop_eps)
+
+
+# -- analytic planar kinematics of foot2d ----------------------------------------
+
+@dataclass(frozen=True)
+class Foot2dGeometry:
+    """Site positions of foot2d in their body frames, read from the Pinocchio model."""
+
+    heel: np.ndarray      # (3,) in the foot frame (origin A)
+    metatarsal: np.ndarray
+    mtp: np.ndarray       # MTP joint origin in the foot frame
+    toe: np.ndarray       # (3,) in the toes frame (origin at the MTP joint)
+
+    @classmethod
+    def from_model(cls, model) -> "Foot2dGeometry":
+        pm = model.pin
+        for c in ("ankle_x", "ankle_y", "foot_angle", "mtp"):
+            model.coordinate_index(c)
+
+        def frame_local(name):
+            return np.array(pm.frames[model.frame_id(name)].placement.translation)
+
+        jm = pm.getJointId("mtp")
+        return cls(frame_local("heel"), frame_local("metatarsal"),
+                   np.array(pm.jointPlacements[jm].translation), frame_local("toe"))
+
+
+def _rot(angle):
+    """World rotation of a body turned by ``angle`` about (0, 0, -1): (N, 3, 3)."""
+    c, s = np.cos(angle), np.sin(angle)
+    n = np.shape(angle)[0]
+    R = np.zeros((n, 3, 3))
+    R[:, 0, 0] = c
+    R[:, 0, 1] = s
+    R[:, 1, 0] = -s
+    R[:, 1, 1] = c
+    R[:, 2, 2] = 1.0
+    return R
+
+
+def foot2d_site_kinematics(geom: Foot2dGeometry, q: np.ndarray, v: np.ndarray) -> dict:
+    """``{site: SiteKinematics}`` of foot2d from ``q, v`` (N, 4), vectorised (no Pinocchio loop).
+
+    Same numbers as :func:`pinmsk.contact.sphere.site_kinematics` (tested), without
+    the Jacobians; used by the identification where the toe angle changes every iteration.
+    """
+    from .sphere import SiteKinematics
+
+    q = np.asarray(q, dtype=float)
+    v = np.asarray(v, dtype=float)
+    n = q.shape[0]
+    A = np.zeros((n, 3))
+    A[:, 0], A[:, 1] = q[:, 0], q[:, 1]
+    vA = np.zeros((n, 3))
+    vA[:, 0], vA[:, 1] = v[:, 0], v[:, 1]
+    Rf = _rot(q[:, 2])
+    wf = np.zeros((n, 3))
+    wf[:, 2] = -v[:, 2]
+    Rt = _rot(q[:, 2] + q[:, 3])
+    wt = np.zeros((n, 3))
+    wt[:, 2] = -(v[:, 2] + v[:, 3])
+    foot = SiteKinematics(A, Rf, vA, wf)
+    out = {}
+    for site in ("heel", "metatarsal"):
+        p, vp = foot.point(getattr(geom, site))
+        out[site] = SiteKinematics(p, Rf, vp, wf)
+    pm, vpm = foot.point(geom.mtp)
+    toes = SiteKinematics(pm, Rt, vpm, wt)
+    p, vp = toes.point(geom.toe)
+    out["toe"] = SiteKinematics(p, Rt, vp, wt)
+    return out

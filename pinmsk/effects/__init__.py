@@ -1,0 +1,77 @@
+"""Effects: the physical effects a model may be missing, as model components.
+
+Every family is a :class:`pinmsk.components.Component` registered by name
+(its ``family``) in :mod:`pinmsk.effects.registry`; the same objects serve
+inverse dynamics, simulation, the solvers and the diagnosis.
+
+=========================  ===========  ==================================================
+family                     target       generalized force
+=========================  ===========  ==================================================
+joint_damping              coordinate   ``-c qdot``
+coulomb_friction           coordinate   ``-F_c tanh(qdot / 0.01)``
+joint_spring               coordinate   ``-k (q - q0)``
+passive_elastic            coordinate   ``exp(-k_lo (q - theta_lo)) - exp(k_hi (q - theta_hi))`` N m
+riener_edrich_1999         side r / l   thesis Eq. 5.11 on hip, knee, ankle (x ``scale``)
+payload                    frame        ``-m J_p^T (a_p - g)`` (point mass; inertial)
+segment_mass               body         ``-delta Y_j pi_j`` (mass/inertia scale; inertial)
+activation_dynamics        muscles      excitation -> activation, Eq. A.2 (muscle level)
+electromechanical_delay    muscles      excitation delayed by ``delay`` (muscle level)
+=========================  ===========  ==================================================
+
+Add your own effect with the :func:`register` decorator.  A coordinate effect
+only needs its force; the diagnosis then fits it (by linear least squares
+when ``linear = True``), ranks it and adds it like the built-in ones::
+
+    >>> import numpy as np
+    >>> from pinmsk.components import Parameter
+    >>> from pinmsk.effects import JointEffect, register
+    >>> @register
+    ... class QuadraticDrag(JointEffect):
+    ...     '''Aerodynamic-like drag Q = -c_d |qdot| qdot.'''
+    ...     family = "quadratic_drag"
+    ...     linear = True
+    ...     parameters = (Parameter("c_d", 0.01, 0.0, 10.0, "N m s^2/rad^2", "drag coefficient"),)
+    ...     zero_params = {"c_d": 0.0}
+    ...     def _force(self, q, v, p):
+    ...         return -p["c_d"] * np.abs(v) * v
+    ...     def _dforce_dparams(self, q, v, p):
+    ...         return (-np.abs(v) * v)[:, None]
+    ...     def _dforce_dstate(self, q, v, p):
+    ...         return np.zeros_like(q), -2.0 * p["c_d"] * np.abs(v)
+    >>> "quadratic_drag" in families()
+    True
+
+Subclass :class:`pinmsk.components.Component` directly for any other
+target (implement ``generalized_force(model, motion, params=None, cache=None)
+-> (N, nv)``); see :mod:`pinmsk.effects.catalog` for how candidates are chosen.
+"""
+from .registry import families, from_spec, get, register
+from ._base import JointEffect, SignalEffect
+from .damping import JointDamping
+from .friction import CoulombFriction
+from .spring import JointSpring
+from .passive import PassiveElastic, RienerEdrich1999PassiveMoment
+from .payload import Payload
+from .segment_mass import SegmentMass
+from .activation import ActivationDynamics
+from .delay import ElectromechanicalDelay
+from .catalog import CatalogContext, catalog
+
+
+def unregister(family: str) -> None:
+    """Remove a user-registered family (built-in families cannot be removed)."""
+    from . import registry as _r
+    if family in _BUILTIN:
+        from ..errors import ModelError
+        raise ModelError(f"'{family}' is a built-in effect family and cannot be unregistered")
+    _r._REGISTRY.pop(family, None)
+
+
+_BUILTIN = frozenset(families())
+
+__all__ = [
+    "ActivationDynamics", "CatalogContext", "CoulombFriction", "ElectromechanicalDelay",
+    "JointDamping", "JointEffect", "JointSpring", "PassiveElastic", "Payload",
+    "RienerEdrich1999PassiveMoment", "SegmentMass", "SignalEffect", "catalog", "families",
+    "from_spec", "get", "register", "unregister",
+]

@@ -1,0 +1,263 @@
+"""Shared machinery of the effect families.
+
+* :class:`JointEffect` -- an effect acting on one coordinate through a closed
+  form ``Q_i(q_i, v_i)``; subclasses implement :meth:`JointEffect._force`
+  and, where they can, the analytic derivatives used by the fitters and the
+  conformance tests.
+* :class:`SignalEffect` -- a muscle-level effect: it transforms the measured
+  excitation/EMG signals on their way to muscle activation (activation
+  dynamics, electromechanical delay) and applies no generalized force of its
+  own.
+* batch kinematics shared by the frame- and body-targeted effects
+  (frame Jacobians and classical accelerations, the joint torque regressor),
+  memoised on the identity of the motion's arrays so that several candidates
+  prepared on the same motion do not repeat the Pinocchio calls.
+"""
+from __future__ import annotations
+
+import re
+from typing import Any, Mapping
+
+import numpy as np
+import pinocchio as pin
+
+from ..components import Component, Motion
+from ..errors import ModelError
+
+__all__ = ["JointEffect", "SignalEffect", "frame_point_kinematics", "torque_regressor",
+           "unactuated_coordinates", "moving_bodies", "hand_like_frames"]
+
+
+class JointEffect(Component):
+    """An effect applying a generalized force on one coordinate, ``Q_i = f(q_i, v_i; theta)``.
+
+    Subclasses implement ``_force(q, v, p) -> (N,)`` (``q, v`` the target
+    coordinate's columns, ``p`` a dict of parameter values) and optionally
+    ``_dforce_dparams(q, v, p) -> (N, n_params)`` and ``_dforce_dstate(q, v, p)
+    -> (dQ/dq, dQ/dv)``, both ``(N,)``.
+    """
+
+    kind = "effect"
+    level = "joint"
+    target_kind = "coordinate"
+
+    def generalized_force(self, model, motion: Motion, params: Mapping[str, float] | None = None,
+                          cache: Any = None) -> np.ndarray:
+        i = model.coordinate_index(self.target)
+        out = np.zeros((motion.n_frames, model.nv))
+        out[:, i] = self._force(motion.q[:, i], motion.v[:, i], self._p(params))
+        return out
+
+    def param_jacobian(self, model, motion: Motion, params: Mapping[str, float] | None = None,
+                       cache: Any = None) -> np.ndarray:
+        """``dQ/dtheta`` over frames, ``(N, nv, n_params)`` in declaration order."""
+        i = model.coordinate_index(self.target)
+        out = np.zeros((motion.n_frames, model.nv, len(self.parameters)))
+        out[:, i, :] = self._dforce_dparams(motion.q[:, i], motion.v[:, i], self._p(params))
+        return out
+
+    def state_derivatives(self, model, motion: Motion, params: Mapping[str, float] | None = None,
+                          cache: Any = None) -> tuple[np.ndarray, np.ndarray]:
+        """``(dQ/dq, dQ/dv)`` over frames, each ``(N, nv, nv)``."""
+        i = model.coordinate_index(self.target)
+        dq = np.zeros((motion.n_frames, model.nv, model.nv))
+        dv = np.zeros_like(dq)
+        a, b = self._dforce_dstate(motion.q[:, i], motion.v[:, i], self._p(params))
+        dq[:, i, i] = a
+        dv[:, i, i] = b
+        return dq, dv
+
+    def _force(self, q, v, p) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _dforce_dparams(self, q, v, p) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _dforce_dstate(self, q, v, p):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    @classmethod
+    def candidates(cls, model, context) -> list:
+        """One instance per actuated coordinate the diagnosis compares."""
+        return [cls(c) for c in context.coordinates if c not in context.unactuated]
+
+
+class SignalEffect(Component):
+    """A muscle-level effect: a transform of the excitation signals ``u (N, m) -> (N, m)``.
+
+    It acts through the muscles (force = a F_active + F_passive with the
+    transformed activation), so its :meth:`generalized_force` on the skeleton
+    is zero: it shows up where muscle forces are computed from measured
+    excitations (the diagnosis' muscle-level comparison).  ``target`` is
+    ``"muscles"`` (all muscles) or one muscle name.  ``order`` fixes where it
+    sits in the chain from measured signal to activation (delay before
+    activation dynamics).
+    """
+
+    kind = "effect"
+    level = "muscle"
+    target_kind = "muscle"
+    order: int = 0
+
+    def __init__(self, target: str | None = "muscles", **values: float):
+        super().__init__("muscles" if target in (None, "", "all") else target, **values)
+
+    def check_target(self, model) -> None:
+        if model.muscles is None:
+            raise ModelError(f"{self.label}: model '{model.name}' has no muscles")
+        if self.target != "muscles":
+            model.muscles.index(self.target)
+
+    def muscle_mask(self, model) -> np.ndarray:
+        """Boolean ``(m,)``: the muscles this effect applies to."""
+        m = model.n_muscles
+        if self.target == "muscles":
+            return np.ones(m, dtype=bool)
+        mask = np.zeros(m, dtype=bool)
+        mask[model.muscles.index(self.target)] = True
+        return mask
+
+    def generalized_force(self, model, motion: Motion, params: Mapping[str, float] | None = None,
+                          cache: Any = None) -> np.ndarray:
+        return np.zeros((motion.n_frames, model.nv))
+
+    def transform(self, t: np.ndarray, u: np.ndarray, params: Mapping[str, float] | None = None,
+                  mask: np.ndarray | None = None) -> np.ndarray:
+        """The transformed signals ``(N, m)`` (columns outside ``mask`` unchanged)."""
+        return self.transform_batch(t, u, self._p(params), mask)[0]
+
+    def transform_batch(self, t, u, params, mask=None) -> np.ndarray:
+        """Transforms for P parameter sets at once: ``params`` maps names to (P,) arrays -> (P, N, m)."""
+        raise NotImplementedError  # pragma: no cover
+
+    @classmethod
+    def candidates(cls, model, context) -> list:
+        if context.mode != "muscle" or model.muscles is None:
+            return []
+        return [cls("muscles")]
+
+
+# -- model structure helpers ---------------------------------------------------
+
+def unactuated_coordinates(model) -> tuple[str, ...]:
+    """Coordinates no actuator drives: the model's floating base.
+
+    ``model.meta["unactuated"]`` if the sidecar declares it; otherwise the
+    root chain of joints (each an ancestor of every other joint) when that
+    chain contains a prismatic joint -- the sliders-plus-hinge floating base of
+    planar models such as ``gait2d`` (``torso_x, torso_y, torso_angle``).
+    Fixed-base models (``forearm``, ``finger``) have none.
+    """
+    declared = model.meta.get("unactuated") if hasattr(model, "meta") else None
+    if declared is not None:
+        return tuple(declared)
+    pm = model.pin
+    children = {j: [k for k in range(1, pm.njoints) if pm.parents[k] == j] for j in range(pm.njoints)}
+    root, j = [], 0
+    while len(children[j]) == 1:
+        j = children[j][0]
+        root.append(j)
+    if not children[j] or not root:      # a serial chain (or nothing): a fixed-base model
+        return ()
+    if not any(pm.joints[k].shortname().startswith("JointModelP") for k in root):
+        return ()
+    return tuple(pm.names[k] for k in root)
+
+
+def moving_bodies(model) -> dict[str, int]:
+    """Body (link) name -> joint id, one per joint that carries mass (the joint's first body)."""
+    pm = model.pin
+    out = {}
+    for j in range(1, pm.njoints):
+        if pm.inertias[j].mass <= 0:
+            continue
+        for f in pm.frames:
+            if f.type == pin.FrameType.BODY and f.parentJoint == j:
+                out[f.name] = j
+                break
+    return out
+
+
+_HAND_RE = re.compile(r"(^|_)(hand|palm|wrist|fingertip|tip|tool|grip|end_effector)($|_)", re.I)
+
+
+def hand_like_frames(model) -> list[str]:
+    """Frames where a held payload is plausible: named hand/palm/fingertip/tool... and off the joint axis."""
+    pm = model.pin
+    out = []
+    for f in pm.frames:
+        if f.parentJoint == 0 or not _HAND_RE.search(f.name):
+            continue
+        if np.linalg.norm(f.placement.translation) < 1e-9 and f.type == pin.FrameType.BODY:
+            continue      # a body frame at its joint origin: a point mass there has no lever arm
+        out.append(f.name)
+    return out
+
+
+# -- memoised batch kinematics ---------------------------------------------------
+
+_MEMO: list = []       # [(key arrays..., value)], most recent last
+_MEMO_SIZE = 8
+
+
+def _memo(kind, pm, arrays, compute):
+    for entry in _MEMO:
+        if entry[0] == kind and entry[1] is pm and len(entry[2]) == len(arrays) and all(
+                x is y for x, y in zip(entry[2], arrays)):
+            return entry[3]
+    value = compute()
+    _MEMO.append((kind, pm, tuple(arrays), value))
+    if len(_MEMO) > _MEMO_SIZE:
+        del _MEMO[0]
+    return value
+
+
+def frame_point_kinematics(model, motion: Motion, frame: str):
+    """``(J_p, a_p)`` of a frame's origin over frames: world-aligned linear Jacobian ``(N, 3, nv)``
+    and classical linear acceleration ``(N, 3)`` (``J_p a + Jdot_p v``)."""
+    pm = model.pin
+    fid = model.frame_id(frame)
+
+    def compute():
+        n = motion.n_frames
+        J = np.empty((n, 3, pm.nv))
+        acc = np.empty((n, 3))
+        data = pm.createData()
+        lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        q, v, a = motion.q, motion.v, motion.a
+        for k in range(n):
+            pin.forwardKinematics(pm, data, q[k], v[k], a[k])
+            pin.updateFramePlacement(pm, data, fid)
+            acc[k] = pin.getFrameClassicalAcceleration(pm, data, fid, lwa).linear
+            J[k] = pin.computeFrameJacobian(pm, data, q[k], fid, lwa)[:3]
+        return J, acc
+
+    return _memo(("point", fid), pm, (motion.q, motion.v, motion.a), compute)
+
+
+def torque_regressor(model, motion: Motion) -> np.ndarray:
+    """Pinocchio's joint torque regressor over frames, ``(N, nv, 10 (njoints - 1))``.
+
+    ``rnea(q, v, a) = Y(q, v, a) pi`` with ``pi`` the stacked dynamic
+    parameters ``[m, m c, I_origin]`` of each joint's inertia (gravity included).
+    """
+    pm = model.pin
+
+    def compute():
+        n = motion.n_frames
+        data = pm.createData()
+        Y = np.empty((n, pm.nv, 10 * (pm.njoints - 1)))
+        q, v, a = motion.q, motion.v, motion.a
+        for k in range(n):
+            Y[k] = pin.computeJointTorqueRegressor(pm, data, q[k], v[k], a[k])
+        return Y
+
+    return _memo("regressor", pm, (motion.q, motion.v, motion.a), compute)
+
+
+def add_dynamic_parameters(pin_model, joint: int, dpi: np.ndarray) -> None:
+    """``pin_model.inertias[joint] += dpi`` in dynamic-parameter space (exact, any sign)."""
+    pi = pin_model.inertias[joint].toDynamicParameters() + np.asarray(dpi, dtype=float)
+    if pi[0] <= 0:
+        raise ModelError(f"joint '{pin_model.names[joint]}' would get mass {pi[0]:.4g} kg <= 0")
+    pin_model.inertias[joint] = pin.Inertia.FromDynamicParameters(pi)

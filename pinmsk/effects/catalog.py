@@ -1,0 +1,91 @@
+"""Which effects apply to a model and a trial: the diagnosis' candidate list.
+
+:func:`catalog` returns one default-parameter instance per applicable
+``(family, target)``.  Each family decides through a classmethod
+``candidates(model, context)``; families registered by users without one get
+a rule from their ``target_kind``:
+
+* ``"coordinate"`` -- every actuated coordinate the trial lets us compare;
+* ``"frame"`` -- the frames the user names (``frames=[...]``);
+* ``"body"`` -- every body that carries mass;
+* ``"model"`` -- one instance without target;
+* ``"muscle"`` -- one instance for all muscles, in muscle-level comparisons.
+
+Rules of the built-in families: joint effects (damping, friction, spring,
+passive elastic) on compared, actuated coordinates; ``payload`` on hand-like
+frames (a frame named hand, palm, fingertip, tool, ...) or the frames the user
+names; ``segment_mass`` on every body with mass; ``riener_edrich_1999`` on
+legs with hip, knee and ankle coordinates; ``activation_dynamics`` and
+``electromechanical_delay`` only when the trial has excitation or EMG
+channels and the model has muscles.  Effects the model already has (same
+label) are left out.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from ..errors import ModelError
+from . import registry
+from ._base import moving_bodies
+
+
+@dataclass(frozen=True)
+class CatalogContext:
+    """What the candidates can be judged on: the comparison mode and the compared coordinates."""
+
+    mode: str
+    coordinates: tuple[str, ...]
+    unactuated: tuple[str, ...] = ()
+    frames: tuple[str, ...] = field(default_factory=tuple)
+
+
+def catalog(model, trial=None, *, frames=None, mode: str = "auto", families=None,
+            context: CatalogContext | None = None) -> list:
+    """Default instances of every effect that applies to ``model`` and ``trial``.
+
+    ``frames`` names frames for frame-targeted effects (payload); ``families``
+    restricts the list to those family names.  ``mode`` is the comparison
+    (``"auto"``, ``"torque"``, ``"motion"``, ``"muscle"``, see
+    :func:`pinmsk.diagnose.compare`).
+    """
+    if context is None:
+        from ..diagnose.compare import catalog_context
+        context = catalog_context(model, trial, mode=mode, frames=frames)
+    names = registry.families() if families is None else list(families)
+    for f in names:
+        registry.get(f)                       # unknown names: ModelError listing the known ones
+    for f in context.frames:
+        model.frame_id(f)
+    have = {c.label for c in model.components}
+    out = []
+    for fam in names:
+        cls = registry.get(fam)
+        if hasattr(cls, "candidates"):
+            cands = cls.candidates(model, context)
+        else:
+            cands = _default_candidates(cls, model, context)
+        for c in cands:
+            if c.label in have:
+                continue
+            try:
+                c.check_target(model)
+            except ModelError:
+                continue
+            out.append(c)
+    return out
+
+
+def _default_candidates(cls, model, context) -> list:
+    kind = getattr(cls, "target_kind", "coordinate")
+    level = getattr(cls, "level", "joint")
+    if level == "muscle":
+        return [cls("muscles")] if context.mode == "muscle" and model.muscles is not None else []
+    if kind == "coordinate":
+        return [cls(c) for c in context.coordinates if c not in context.unactuated]
+    if kind == "frame":
+        return [cls(f) for f in context.frames]
+    if kind == "body":
+        return [cls(b) for b in moving_bodies(model)]
+    if kind == "model":
+        return [cls(None)]
+    return []

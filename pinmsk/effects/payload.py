@@ -1,0 +1,67 @@
+"""A point mass held at a frame (a dumbbell in the hand, a backpack, a sensor).
+
+Physics: a point mass ``m`` rigidly attached at the origin of frame
+``target`` (e.g. ``hand``, the hand's centre of mass).  Its contribution to the
+equations of motion is ``m J_p^T (a_p - g)``, so the generalized force it
+applies to the rest of the system is::
+
+    Q = -m J_p(q)^T (a_p - g),     a_p = J_p a + Jdot_p v
+
+with ``J_p`` the frame origin's world-aligned linear Jacobian, ``a_p`` its
+classical (not spatial) acceleration and ``g`` the model's gravity vector
+(both from Pinocchio: ``computeFrameJacobian`` and
+``getFrameClassicalAcceleration`` in ``LOCAL_WORLD_ALIGNED``).  ``Q`` is
+linear in ``m``; ``prepare`` computes ``J_p^T (a_p - g)`` once per motion.
+The payload is *inertial*: forward dynamics folds it into the parent joint's
+inertia (:meth:`Payload.apply_inertia`) instead of calling
+:meth:`generalized_force`, which needs the acceleration.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from ..components import Component, Parameter
+from ._base import add_dynamic_parameters, frame_point_kinematics, hand_like_frames
+from .registry import register
+
+
+@register
+class Payload(Component):
+    """Point mass ``m`` at the origin of frame ``target``."""
+
+    family = "payload"
+    level = "joint"
+    target_kind = "frame"
+    linear = True
+    inertial = True
+    parameters = (
+        Parameter("mass", 1.0, 0.0, 200.0, "kg", "mass held at the frame origin"),
+    )
+    zero_params = {"mass": 0.0}
+
+    def prepare(self, model, motion):
+        """``J_p^T (a_p - g)`` over frames, ``(N, nv)``."""
+        J, acc = frame_point_kinematics(model, motion, self.target)
+        return np.einsum("nkv,nk->nv", J, acc - model.gravity[None, :])
+
+    def generalized_force(self, model, motion, params=None, cache=None):
+        basis = self.prepare(model, motion) if cache is None else cache
+        return -self._p(params)["mass"] * basis
+
+    def param_jacobian(self, model, motion, params=None, cache=None):
+        basis = self.prepare(model, motion) if cache is None else cache
+        return -basis[:, :, None]
+
+    def apply_inertia(self, model, pin_model) -> None:
+        f = model.pin.frames[model.frame_id(self.target)]
+        m = self.values["mass"]
+        if m == 0.0:
+            return
+        point = pin.Inertia(m, np.array(f.placement.translation), np.zeros((3, 3)))
+        add_dynamic_parameters(pin_model, f.parentJoint, point.toDynamicParameters())
+
+    @classmethod
+    def candidates(cls, model, context) -> list:
+        frames = list(context.frames) if context.frames else hand_like_frames(model)
+        return [cls(f) for f in frames]

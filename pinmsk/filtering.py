@@ -1,0 +1,177 @@
+"""Zero-lag low-pass filtering and spline differentiation of sampled signals.
+
+Arrays are time-first: a signal is ``(N,)`` or ``(N, k)`` with one column per
+channel, and every function works on all columns at once.
+
+* :func:`lowpass` is a Butterworth filter run forwards and backwards
+  (``scipy.signal.sosfiltfilt`` on second-order sections), so it has no phase
+  lag.  Because the signal passes the filter twice, the gain is
+  ``|H(f)|**2 = 1 / (1 + (f / cutoff)**(2 * order))``: 0.5 (-6 dB) at
+  ``cutoff``, not -3 dB, and the effective order is ``2 * order``.  ``cutoff`` is
+  the design frequency of the single pass; no "Winter correction" is applied.
+* :func:`differentiate` optionally low-passes, then passes a quintic
+  interpolating B-spline (``scipy.interpolate.make_interp_spline(k=5)``, with
+  scipy's default not-a-knot end conditions) through the samples and returns
+  its first and second derivatives at the sample times.  The spline
+  reproduces polynomials up to degree 5 exactly, so the derivatives are exact
+  for them; for smooth signals the error of the j-th derivative falls as
+  ``h**(6 - j)``.
+
+Problems with the input raise :class:`pinmsk.errors.TrialError` naming the
+cutoff, rate, number of samples or the offending column and row.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.interpolate import make_interp_spline
+from scipy.signal import butter, sosfiltfilt
+
+from pinmsk.errors import TrialError
+
+__all__ = ["lowpass", "differentiate", "filter_padlen", "UNIFORM_TOLERANCE"]
+
+#: Largest relative deviation of a time step from the median step that
+#: :func:`differentiate` still treats as uniform sampling when it filters
+#: (covers time stamps rounded to a few decimals, e.g. 600 Hz written as
+#: 0.0017, 0.0033, 0.005).
+UNIFORM_TOLERANCE = 0.1
+
+
+def filter_padlen(order: int) -> int:
+    """Samples of odd extension added at each end by :func:`lowpass`.
+
+    This is scipy's default for ``sosfiltfilt`` on a Butterworth low-pass of
+    this ``order`` (``3 * (2 * n_sections + 1)``); the signal must be longer.
+    """
+    n_sections = (int(order) + 1) // 2
+    return 3 * (2 * n_sections + 1)
+
+
+def _check_finite(x: np.ndarray, what: str) -> None:
+    bad = ~np.isfinite(x)
+    if bad.any():
+        flat = bad.reshape(bad.shape[0], -1)
+        col = int(np.flatnonzero(flat.any(axis=0))[0])
+        row = int(np.flatnonzero(flat[:, col])[0])
+        where = f"column {col}, " if x.ndim > 1 else ""
+        raise TrialError(
+            f"{what}: {where}row {row} is {float(x.reshape(x.shape[0], -1)[row, col])!r} "
+            f"({int(flat.sum())} non-finite value(s) in total); fill or cut the "
+            "gap before filtering or differentiating"
+        )
+
+
+def lowpass(x, *, rate: float, cutoff: float, order: int = 4) -> np.ndarray:
+    """Zero-lag Butterworth low-pass of ``x`` along axis 0.
+
+    Parameters
+    ----------
+    x : array_like, shape (N,) or (N, k)
+        Uniformly sampled signal(s), time first.
+    rate : float
+        Sampling rate in Hz.
+    cutoff : float
+        Cut-off frequency in Hz of the designed (single-pass) filter;
+        ``0 < cutoff < rate / 2``.
+    order : int
+        Order of the designed filter; forward-backward filtering doubles it.
+
+    Returns
+    -------
+    numpy.ndarray
+        Filtered signal with the shape of ``x``.
+
+    Notes
+    -----
+    ``sosfiltfilt`` with ``padtype="odd"`` and ``padlen=filter_padlen(order)``:
+    each end is extended by a point reflection about the end sample, which
+    keeps the end value and slope and limits start-up transients.
+    """
+    x = np.asarray(x, dtype=float)
+    if x.ndim == 0:
+        raise TrialError("lowpass needs a signal of shape (N,) or (N, k), got a scalar")
+    rate = float(rate)
+    cutoff = float(cutoff)
+    if not (np.isfinite(rate) and rate > 0):
+        raise TrialError(f"sampling rate must be a positive number of Hz, got {rate!r}")
+    nyquist = 0.5 * rate
+    if not (np.isfinite(cutoff) and 0 < cutoff < nyquist):
+        raise TrialError(
+            f"cutoff {cutoff:g} Hz must be above 0 and below the Nyquist frequency "
+            f"{nyquist:g} Hz (rate {rate:g} Hz); choose a lower cutoff"
+        )
+    if int(order) != order or order < 1:
+        raise TrialError(f"filter order must be a positive integer, got {order!r}")
+    order = int(order)
+    padlen = filter_padlen(order)
+    n = x.shape[0]
+    if n <= padlen:
+        raise TrialError(
+            f"{n} samples are too few for an order-{order} Butterworth low-pass "
+            f"(cutoff {cutoff:g} Hz, rate {rate:g} Hz): zero-lag filtering pads "
+            f"{padlen} samples at each end and needs N > {padlen}; use a longer "
+            "trial or a lower order"
+        )
+    _check_finite(x, "lowpass input")
+    sos = butter(order, cutoff / nyquist, btype="low", output="sos")
+    return sosfiltfilt(sos, x, axis=0, padtype="odd", padlen=padlen)
+
+
+def differentiate(time, x, *, cutoff: float | None = None, order: int = 4):
+    """Smoothed samples and first and second time derivatives of ``x``.
+
+    Parameters
+    ----------
+    time : array_like, shape (N,)
+        Strictly increasing sample times in s (N >= 6).
+    x : array_like, shape (N,) or (N, k)
+        Samples, time first.
+    cutoff : float, optional
+        If given, ``x`` is first passed through :func:`lowpass` with this
+        cut-off (Hz) and ``order``, at the rate ``1 / median(diff(time))``;
+        the time steps must then be uniform within :data:`UNIFORM_TOLERANCE`.
+    order : int
+        Butterworth order used when ``cutoff`` is given.
+
+    Returns
+    -------
+    x_s, dx, ddx : numpy.ndarray
+        The (filtered) samples and the first and second derivatives of the
+        quintic interpolating spline through them, at ``time``; each with the
+        shape of ``x``.
+    """
+    t = np.asarray(time, dtype=float)
+    x = np.asarray(x, dtype=float)
+    if t.ndim != 1:
+        raise TrialError(f"time must have shape (N,), got {t.shape}")
+    if x.ndim not in (1, 2) or x.shape[0] != t.shape[0]:
+        raise TrialError(
+            f"x must have shape (N,) or (N, k) with N = len(time) = {t.shape[0]}, got {x.shape}"
+        )
+    n = t.shape[0]
+    if n < 6:
+        raise TrialError(
+            f"differentiation by quintic spline needs at least 6 samples, got {n}"
+        )
+    _check_finite(t, "time")
+    dt = np.diff(t)
+    if np.any(dt <= 0):
+        row = int(np.flatnonzero(dt <= 0)[0]) + 1
+        raise TrialError(
+            f"time is not strictly increasing at row {row}: "
+            f"time[{row}]={float(t[row])!r} <= time[{row - 1}]={float(t[row - 1])!r}"
+        )
+    _check_finite(x, "signal to differentiate")
+    if cutoff is not None:
+        step = float(np.median(dt))
+        spread = float(np.max(np.abs(dt - step))) / step
+        if spread > UNIFORM_TOLERANCE:
+            raise TrialError(
+                f"filtering needs uniform sampling, but time steps range from "
+                f"{dt.min():.6g} to {dt.max():.6g} s (median {step:.6g} s); resample "
+                "first, e.g. trial.resample(rate)"
+            )
+        x = lowpass(x, rate=1.0 / step, cutoff=cutoff, order=order)
+    spline = make_interp_spline(t, x, k=5, axis=0)
+    return x, spline.derivative(1)(t), spline.derivative(2)(t)

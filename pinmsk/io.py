@@ -1,0 +1,525 @@
+"""Reading and writing Trials: CSV and OpenSim ``.sto`` / ``.mot`` files.
+
+Formats (chosen by suffix, case-insensitive):
+
+* ``.csv``: one header row of column names, the first of which must be
+  ``time``; then one row per frame.  Values are SI (angles in radians);
+  CSV cannot declare degrees.
+* ``.sto`` / ``.mot`` (OpenSim storage): header lines up to a line
+  ``endheader``.  The first line is the table name unless it is a
+  ``key=value`` line; ``key=value`` lines give fields such as ``version``,
+  ``nRows``, ``nColumns`` (time included), ``inDegrees`` and ``DataType``
+  (old ``datarows N`` / ``datacolumns N`` lines are read too); other lines are
+  comments.  Then a column-label line starting with ``time`` and the data.
+  Columns are tab separated, or comma separated, or separated by whitespace,
+  chosen from the label line; trailing separators are ignored.
+
+Degrees: when a file says ``inDegrees=yes`` the angular channels are
+converted to radians at read (``meta["converted_to_radians"]`` lists them).
+Which channels are angular: ``angular`` if given, else those that
+:func:`pinmsk.trial.is_angular_name` accepts (not ``time``; not ending in
+``_tx/_ty/_tz``, ``_x/_y/_z``, ``_p[xyz]``, ``_v[xyz]``; not containing
+force, moment, torque, activation, excitation, emg, length, power, energy).
+:func:`write_trial` stores radians with ``inDegrees=no`` unless asked for
+``in_degrees=True``, which writes the angular channels in degrees.
+
+Writes are atomic: the file is written to a temporary file in the target
+directory and moved over the target with :func:`os.replace`; on any error the
+temporary file is removed and an existing target is left as it was.  Numbers
+are written with 17 significant digits, so a write then read gives the same
+float64 values.
+
+Errors are :class:`pinmsk.errors.TrialError` naming the file, line and column.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import io as _io
+import os
+import re
+import tempfile
+import warnings
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from pinmsk.errors import TrialError
+from pinmsk.trial import TIME, Trial, is_angular_name
+
+__all__ = ["read_trial", "write_trial", "read_sto_header", "StoHeader", "FORMATS"]
+
+#: File suffix -> format name.
+FORMATS = {".csv": "csv", ".sto": "sto", ".mot": "mot"}
+
+_FLOAT_FORMAT = "%.17g"
+_KEY_VALUE = re.compile(r"^([A-Za-z_][\w.\-]*)\s*=\s*(.*)$")
+_OLD_KEY = re.compile(r"^(datarows|datacolumns)\s+(\S+)$", re.IGNORECASE)
+
+
+def _format_of(path: Path) -> str:
+    kind = FORMATS.get(path.suffix.lower())
+    if kind is None:
+        raise TrialError(
+            f"file {str(path)!r}: unsupported file type {path.suffix!r}; "
+            f"use one of {', '.join(FORMATS)}"
+        )
+    return kind
+
+
+def _read_lines(path: Path) -> list[str]:
+    text = path.read_text(encoding="utf-8-sig", errors="replace")
+    return text.splitlines()
+
+
+def _clean(line: str) -> str:
+    """A header line without surrounding whitespace and trailing separators."""
+    return line.strip().rstrip(",\t ").strip()
+
+
+# ---------------------------------------------------------------------------
+# Header
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class StoHeader:
+    """The header of an OpenSim ``.sto`` / ``.mot`` file.
+
+    ``fields`` maps each ``key=value`` key as written to its value (strings);
+    ``lines`` maps the same keys to their 1-based line numbers; ``n_lines`` is
+    the number of lines up to and including ``endheader``.
+    """
+
+    path: str
+    name: str
+    fields: Mapping[str, str]
+    comments: tuple[str, ...]
+    n_lines: int
+    lines: Mapping[str, int] = field(default_factory=dict)
+
+    def _lookup(self, *keys: str) -> tuple[str, str] | None:
+        lowered = {k.lower(): k for k in self.fields}
+        for key in keys:
+            if key in lowered:
+                return lowered[key], self.fields[lowered[key]]
+        return None
+
+    def _int(self, *keys: str) -> int | None:
+        found = self._lookup(*keys)
+        if found is None:
+            return None
+        key, value = found
+        try:
+            return int(value)
+        except ValueError:
+            raise TrialError(
+                f"file {self.path!r}, line {self.lines.get(key, '?')}: {key}={value!r} "
+                "is not an integer"
+            ) from None
+
+    @property
+    def n_rows(self) -> int | None:
+        """``nRows`` (or old ``datarows``), or ``None`` if absent."""
+        return self._int("nrows", "datarows")
+
+    @property
+    def n_columns(self) -> int | None:
+        """``nColumns`` (or old ``datacolumns``), time included, or ``None``."""
+        return self._int("ncolumns", "datacolumns")
+
+    @property
+    def in_degrees(self) -> bool | None:
+        """``inDegrees`` as a bool, or ``None`` if the header does not say."""
+        found = self._lookup("indegrees")
+        if found is None:
+            return None
+        key, value = found
+        v = value.strip().lower()
+        if v in ("yes", "true", "1"):
+            return True
+        if v in ("no", "false", "0"):
+            return False
+        raise TrialError(
+            f"file {self.path!r}, line {self.lines.get(key, '?')}: inDegrees={value!r} must be yes or no"
+        )
+
+
+def _parse_header(lines: list[str], path: Path) -> StoHeader:
+    end = next((i for i, line in enumerate(lines) if _clean(line).lower() == "endheader"), None)
+    if end is None:
+        if not any(line.strip() for line in lines):
+            raise TrialError(f"file {str(path)!r} is empty")
+        raise TrialError(
+            f"file {str(path)!r}: no 'endheader' line; an OpenSim .sto/.mot file starts with "
+            "header lines (name, version=1, nRows=..., nColumns=..., inDegrees=...) ending "
+            "with a line 'endheader'"
+        )
+    name = ""
+    fields: dict[str, str] = {}
+    where: dict[str, int] = {}
+    comments: list[str] = []
+    for i in range(end):
+        text = _clean(lines[i])
+        m = _KEY_VALUE.match(text) or _OLD_KEY.match(text)
+        if m:
+            fields[m[1]] = m[2].strip()
+            where[m[1]] = i + 1
+        elif i == 0:
+            name = text
+        elif text:
+            comments.append(text)
+    return StoHeader(str(path), name, fields, tuple(comments), end + 1, where)
+
+
+def read_sto_header(path) -> StoHeader:
+    """The header of an OpenSim ``.sto`` / ``.mot`` file (lines up to ``endheader``)."""
+    path = Path(path)
+    return _parse_header(_read_lines(path), path)
+
+
+# ---------------------------------------------------------------------------
+# Reading
+# ---------------------------------------------------------------------------
+
+
+def _strip_trailing_empty(cells: list[str]) -> list[str]:
+    while cells and not cells[-1].strip():
+        cells.pop()
+    return cells
+
+
+def _table(
+    path: Path,
+    labels: list[str],
+    label_line: int,
+    rows: list[list[str]],
+    linenos: list[int],
+    notes: list[str],
+    strict: bool,
+):
+    """Check labels and rows; return (time, names, values (N, C)).
+
+    A *repeated frame* has the time of the previous row and values equal to
+    it within 1e-8 relative (files printed with rounding repeat the last frame
+    so); with ``strict=False`` such rows are dropped, with a note in ``notes``.
+    """
+    src = str(path)
+    labels = [lab.strip() for lab in labels]
+    if not labels:
+        raise TrialError(f"file {src!r}, line {label_line}: no column labels")
+    if labels[0].lower() != TIME:
+        raise TrialError(
+            f"file {src!r}, line {label_line}: missing time column; the first column is "
+            f"{labels[0]!r} but must be 'time' (seconds)"
+        )
+    empty = [j + 1 for j, lab in enumerate(labels) if not lab]
+    if empty:
+        raise TrialError(f"file {src!r}, line {label_line}: column {empty[0]} has an empty label")
+    positions: dict[str, list[int]] = {}
+    for j, lab in enumerate(labels):
+        positions.setdefault(lab, []).append(j + 1)
+    dup = {lab: cols for lab, cols in positions.items() if len(cols) > 1}
+    if dup:
+        detail = "; ".join(f"{lab!r} (columns {', '.join(map(str, cols))})" for lab, cols in dup.items())
+        raise TrialError(
+            f"file {src!r}, line {label_line}: duplicate column names {detail}; rename them"
+        )
+    if not rows:
+        raise TrialError(f"file {src!r}: header only; column labels on line {label_line} but no data rows")
+    n_cols = len(labels)
+    lengths = np.fromiter((len(r) for r in rows), dtype=int, count=len(rows))
+    ragged = np.flatnonzero(lengths != n_cols)
+    if ragged.size:
+        k = int(ragged[0])
+        others = ", ".join(str(linenos[i]) for i in ragged[1:6]) + (", ..." if ragged.size > 6 else "")
+        more = f" ({ragged.size - 1} more ragged rows, lines {others})" if ragged.size > 1 else ""
+        raise TrialError(
+            f"file {src!r}, line {linenos[k]}: ragged row with {lengths[k]} values but "
+            f"{n_cols} column labels on line {label_line}{more}"
+        )
+    try:
+        values = np.array(rows, dtype=float)
+    except ValueError:
+        for r, row in enumerate(rows):  # error path only: find the first bad cell
+            for j, cell in enumerate(row):
+                try:
+                    float(cell)
+                except ValueError:
+                    raise TrialError(
+                        f"file {src!r}, line {linenos[r]}, column {j + 1} ({labels[j]!r}): "
+                        f"cannot read {cell.strip()!r} as a number"
+                    ) from None
+        raise TrialError(f"file {src!r}: cannot read the data rows as numbers") from None
+    time = values[:, 0]
+    bad = np.flatnonzero(~np.isfinite(time))
+    if bad.size:
+        k = int(bad[0])
+        raise TrialError(f"file {src!r}, line {linenos[k]}: time is {float(time[k])!r}; it must be finite")
+    same = np.abs(values[1:] - values[:-1]) <= 1e-8 * np.maximum(np.abs(values[1:]), np.abs(values[:-1]))
+    repeated = np.flatnonzero((values[1:, 0] == values[:-1, 0]) & np.all(same, axis=1)) + 1
+    if not strict and repeated.size:
+        notes.append(
+            f"file {src!r}: dropped {repeated.size} repeated frame(s) (lines "
+            + ", ".join(str(linenos[k]) for k in repeated[:5])
+            + (", ..." if repeated.size > 5 else "")
+            + ")"
+        )
+        keep = np.ones(len(rows), dtype=bool)
+        keep[repeated] = False
+        values = values[keep]
+        linenos = [n for n, k in zip(linenos, keep) if k]
+        time = values[:, 0]
+    back = np.flatnonzero(np.diff(time) <= 0)
+    if back.size:
+        k = int(back[0]) + 1
+        exact = (
+            "; it repeats the previous frame, pass strict=False to drop repeated frames"
+            if k in set(repeated.tolist())
+            else ""
+        )
+        raise TrialError(
+            f"file {src!r}, line {linenos[k]} (data row {k}): time {float(time[k])!r} is not greater "
+            f"than {float(time[k - 1])!r} on line {linenos[k - 1]}; time must be strictly increasing "
+            f"({back.size} such row(s){exact})"
+        )
+    return time, labels[1:], values[:, 1:]
+
+
+def _split_sto(line: str, delimiter: str | None) -> list[str]:
+    if delimiter is None:
+        return line.split()
+    return _strip_trailing_empty(line.rstrip().split(delimiter))
+
+
+def _mismatch(message: str, notes: list[str], strict: bool) -> None:
+    if strict:
+        raise TrialError(message + "; if the data are complete, pass strict=False to read them anyway")
+    notes.append(message)
+
+
+def _read_sto(path: Path, lines: list[str], notes: list[str], strict: bool):
+    header = _parse_header(lines, path)
+    src = str(path)
+    dtype = header._lookup("datatype")
+    if dtype is not None and dtype[1].strip().lower() != "double":
+        raise TrialError(
+            f"file {src!r}, line {header.lines.get(dtype[0], '?')}: DataType={dtype[1]!r} is not "
+            "supported; only scalar (double) columns can be read"
+        )
+    label_idx = next((i for i in range(header.n_lines, len(lines)) if _clean(lines[i])), None)
+    if label_idx is None:
+        raise TrialError(
+            f"file {src!r}: header only; nothing after 'endheader' on line {header.n_lines} "
+            "(expected a column-label line starting with 'time' and data rows)"
+        )
+    label_text = lines[label_idx]
+    delimiter = "\t" if "\t" in label_text else ("," if "," in label_text else None)
+    labels = _split_sto(label_text, delimiter)
+    data = [(i + 1, lines[i]) for i in range(label_idx + 1, len(lines)) if _clean(lines[i])]
+    rows = [_split_sto(text, delimiter) for _, text in data]
+    linenos = [n for n, _ in data]
+    n_columns = header.n_columns
+    if n_columns is not None and n_columns != len(labels):
+        key = header._lookup("ncolumns", "datacolumns")[0]
+        shown = ", ".join(labels[:6]) + (", ..." if len(labels) > 6 else "")
+        _mismatch(
+            f"file {src!r}: header says {key}={n_columns} (line {header.lines.get(key)}) but the "
+            f"column-label line {label_idx + 1} has {len(labels)} columns ({shown}); fix the header "
+            "or the labels",
+            notes,
+            strict,
+        )
+    time, names, values = _table(path, labels, label_idx + 1, rows, linenos, notes, strict)
+    n_rows = header.n_rows
+    if n_rows is not None and n_rows != len(rows):
+        key = header._lookup("nrows", "datarows")[0]
+        _mismatch(
+            f"file {src!r}: header says {key}={n_rows} (line {header.lines.get(key)}) but there are "
+            f"{len(rows)} data rows (lines {linenos[0]}-{linenos[-1]}); the file may be truncated, "
+            "or fix the header",
+            notes,
+            strict,
+        )
+    return header, time, names, values
+
+
+def _read_csv(path: Path, lines: list[str], notes: list[str], strict: bool):
+    reader = csv.reader(lines)
+    rows: list[list[str]] = []
+    linenos: list[int] = []
+    for row in reader:
+        row = _strip_trailing_empty(row)
+        if row:
+            rows.append(row)
+            linenos.append(reader.line_num)
+    if not rows:
+        raise TrialError(f"file {str(path)!r} is empty")
+    return _table(path, rows[0], linenos[0], rows[1:], linenos[1:], notes, strict)
+
+
+def read_trial(path, *, angular=None, strict: bool = True) -> Trial:
+    """Read a Trial from a ``.csv``, ``.sto`` or ``.mot`` file.
+
+    Parameters
+    ----------
+    path : str or Path
+    angular : iterable of str, optional
+        Channels that are angles, converted from degrees when the file says
+        ``inDegrees=yes``; names that are not columns of the file are ignored
+        (so a model's rotational coordinates can be passed for any file).
+        Default: the channels :func:`is_angular_name` accepts.
+    strict : bool
+        If True (default), a header ``nRows``/``nColumns`` that disagrees with
+        the data, or a frame repeated exactly, is an error.  If False, the
+        disagreement is a warning (also kept in ``meta["read_notes"]``) and
+        exact repeated frames are dropped; other problems still raise.
+
+    Returns
+    -------
+    Trial
+        ``meta`` holds ``source`` (the path), ``format`` (csv/sto/mot),
+        ``name`` (first header line), ``in_degrees`` (as declared; ``None``
+        if not declared, ``False`` for CSV), ``header`` (the key=value
+        fields), ``converted_to_radians`` (channel names) and ``read_notes``
+        (what ``strict=False`` let through).
+    """
+    path = Path(path)
+    kind = _format_of(path)
+    lines = _read_lines(path)
+    notes: list[str] = []
+    if kind == "csv":
+        time, names, values = _read_csv(path, lines, notes, strict)
+        name, in_degrees, fields = path.stem, False, {}
+    else:
+        header, time, names, values = _read_sto(path, lines, notes, strict)
+        name, in_degrees, fields = header.name, header.in_degrees, dict(header.fields)
+    if angular is None:
+        angular_names = tuple(n for n in names if is_angular_name(n))
+    else:
+        wanted = {angular} if isinstance(angular, str) else set(angular)
+        angular_names = tuple(n for n in names if n in wanted)
+    converted: tuple[str, ...] = ()
+    if in_degrees:
+        idx = [names.index(a) for a in angular_names]
+        values[:, idx] = np.deg2rad(values[:, idx])
+        converted = angular_names
+    meta = {
+        "source": str(path),
+        "format": kind,
+        "name": name,
+        "in_degrees": in_degrees,
+        "header": fields,
+        "converted_to_radians": converted,
+        "read_notes": tuple(notes),
+    }
+    for note in notes:
+        warnings.warn(note, stacklevel=2)
+    return Trial.from_array(time, names, values, meta=meta)
+
+
+# ---------------------------------------------------------------------------
+# Writing
+# ---------------------------------------------------------------------------
+
+
+def _write_rows(fh, table: np.ndarray, delimiter: str) -> None:
+    """Write the (N, 1 + C) numeric table, one line per frame."""
+    np.savetxt(fh, table, fmt=_FLOAT_FORMAT, delimiter=delimiter)
+
+
+def _atomic_write(path: Path, write) -> None:
+    """Call ``write(fh)`` on a temporary file next to ``path``, then replace ``path``."""
+    directory = path.parent if str(path.parent) else Path(".")
+    if not directory.is_dir():
+        raise FileNotFoundError(f"cannot write {str(path)!r}: directory {str(directory)!r} does not exist")
+    mode = path.stat().st_mode & 0o777 if path.exists() else 0o644
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
+    try:
+        try:
+            fh = os.fdopen(fd, "w", encoding="utf-8", newline="\n")
+        except BaseException:
+            os.close(fd)
+            raise
+        with fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.chmod(tmp, mode)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+
+
+def write_trial(trial: Trial, path, *, in_degrees: bool = False, angular=None) -> Path:
+    """Write ``trial`` to ``path`` (``.csv``, ``.sto`` or ``.mot``), atomically.
+
+    Parameters
+    ----------
+    trial : Trial
+    path : str or Path
+    in_degrees : bool
+        ``.sto``/``.mot`` only: write the angular channels in degrees and
+        declare ``inDegrees=yes``.  Default: radians, ``inDegrees=no``.
+    angular : iterable of str, optional
+        Channels that are angles (used with ``in_degrees=True``; names not in
+        the trial are ignored); default: those
+        :func:`pinmsk.trial.is_angular_name` accepts.
+
+    Returns
+    -------
+    Path
+        The path written.
+    """
+    if not isinstance(trial, Trial):
+        raise TypeError(f"write_trial needs a Trial, got {type(trial).__name__}")
+    path = Path(path)
+    kind = _format_of(path)
+    names = trial.names
+    bad = [n for n in names if any(c in n for c in "\t\r\n")]
+    if bad:
+        raise TrialError(f"cannot write {str(path)!r}: channel names contain tabs or line breaks: {bad!r}")
+    table = np.empty((trial.n_frames, trial.n_channels + 1))
+    table[:, 0] = trial.time
+    table[:, 1:] = trial.values
+    if in_degrees:
+        if kind == "csv":
+            raise TrialError(
+                f"cannot write {str(path)!r} in degrees: a CSV file cannot declare degrees; "
+                "write a .sto/.mot or keep radians"
+            )
+        if angular is None:
+            idx = [1 + i for i, n in enumerate(names) if is_angular_name(n)]
+        else:
+            wanted = {angular} if isinstance(angular, str) else set(angular)
+            idx = [1 + i for i, n in enumerate(names) if n in wanted]
+        table[:, idx] = np.rad2deg(table[:, idx])
+
+    if kind == "csv":
+        buf = _io.StringIO()
+        csv.writer(buf, lineterminator="\n").writerow((TIME,) + names)
+        head = buf.getvalue()
+        delimiter = ","
+    else:
+        title = trial.meta.get("name")
+        if not isinstance(title, str) or not title.strip() or "\n" in title or "=" in title:
+            title = path.stem
+        head = (
+            f"{title}\nversion=1\nnRows={trial.n_frames}\nnColumns={trial.n_channels + 1}\n"
+            f"inDegrees={'yes' if in_degrees else 'no'}\nendheader\n"
+            + "\t".join((TIME,) + names)
+            + "\n"
+        )
+        delimiter = "\t"
+
+    def write(fh):
+        fh.write(head)
+        _write_rows(fh, table, delimiter)
+
+    _atomic_write(path, write)
+    return path

@@ -1,0 +1,337 @@
+"""The musculoskeletal Model: a Pinocchio skeleton plus components.
+
+A :class:`Model` never changes once built (as a Pinocchio ``Model``):
+algorithms take ``(model, ...)`` and create their own workspaces.  Adding an
+effect returns a new model::
+
+    model = pinmsk.load_model("forearm")
+    heavier = model.with_effect(Payload("hand", mass=2.0))   # or model + effect
+
+Built-in models are a URDF plus a TOML sidecar in ``urdf/`` (schema in
+``urdf/README.md``); ``load_model`` also takes the path of a user's sidecar
+(``.toml``) or a bare URDF (no muscles).
+"""
+from __future__ import annotations
+
+import difflib
+import sys
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+import pinocchio as pin
+
+from .components import Component, Motion
+from .errors import ModelError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+
+class Model:
+    """A skeleton (Pinocchio model) with muscles, effects and contacts. Immutable."""
+
+    def __init__(self, *, name: str, pin_model: pin.Model, muscles=None,
+                 effects: Sequence[Component] = (), contacts: Sequence[Component] = (),
+                 meta: dict | None = None):
+        if pin_model.nq != pin_model.nv:
+            raise ModelError(
+                f"model '{name}': pinmsk supports skeletons of 1-dof joints (nq == nv); "
+                f"this one has nq={pin_model.nq}, nv={pin_model.nv}"
+            )
+        self._pin = pin_model
+        self.name = name
+        self.muscles = muscles
+        self.effects = tuple(effects)
+        self.contacts = tuple(contacts)
+        self.meta = dict(meta or {})
+        self.coordinates = tuple(pin_model.names[j] for j in range(1, pin_model.njoints))
+        self._coord_index = {c: pin_model.joints[j].idx_v
+                             for j, c in enumerate(pin_model.names) if j > 0}
+        labels = [c.label for c in self.effects + self.contacts]
+        dup = sorted({x for x in labels if labels.count(x) > 1})
+        if dup:
+            raise ModelError(f"model '{name}': components {dup} appear twice; remove one first")
+        for comp in self.effects + self.contacts:
+            comp.check_target(self)
+
+    # -- skeleton -------------------------------------------------------
+    @property
+    def pin(self) -> pin.Model:
+        """The Pinocchio model. Treat it as read-only (algorithms never modify it)."""
+        return self._pin
+
+    @property
+    def nq(self) -> int:
+        return self._pin.nq
+
+    @property
+    def nv(self) -> int:
+        return self._pin.nv
+
+    @property
+    def n_muscles(self) -> int:
+        return 0 if self.muscles is None else self.muscles.n
+
+    @property
+    def muscle_names(self) -> tuple[str, ...]:
+        return () if self.muscles is None else self.muscles.names
+
+    @property
+    def gravity(self) -> np.ndarray:
+        return np.array(self._pin.gravity.linear)
+
+    @property
+    def mass(self) -> float:
+        return float(sum(inert.mass for inert in self._pin.inertias))
+
+    @property
+    def components(self) -> tuple[Component, ...]:
+        return self.effects + self.contacts
+
+    def create_data(self) -> pin.Data:
+        """A fresh Pinocchio workspace for this model."""
+        return self._pin.createData()
+
+    def coordinate_index(self, name: str) -> int:
+        """Column of coordinate ``name`` in ``q``/``v`` (ModelError with suggestions)."""
+        try:
+            return self._coord_index[name]
+        except (KeyError, TypeError):
+            close = difflib.get_close_matches(str(name), self.coordinates, n=3)
+            hint = f"; did you mean {', '.join(map(repr, close))}?" if close else ""
+            raise ModelError(
+                f"model '{self.name}' has no coordinate '{name}'{hint} "
+                f"(coordinates: {', '.join(self.coordinates)})"
+            ) from None
+
+    def frame_id(self, name: str) -> int:
+        """Pinocchio frame id of a frame/body/joint ``name`` (ModelError with suggestions)."""
+        if name is not None and self._pin.existFrame(name):
+            return self._pin.getFrameId(name)
+        names = [f.name for f in self._pin.frames]
+        close = difflib.get_close_matches(str(name), names, n=3)
+        hint = f"; did you mean {', '.join(map(repr, close))}?" if close else ""
+        raise ModelError(f"model '{self.name}' has no frame '{name}'{hint}")
+
+    @property
+    def coordinate_order(self) -> tuple[str, ...]:
+        """Coordinates in the order the model's sidecar lists them (e.g. thesis Eq. 5.1 for
+        gait2d), used for columns of written results.  Arrays (``q``, ``v``, ``tau``)
+        follow :attr:`coordinates`, Pinocchio's depth-first joint order."""
+        order = self.meta.get("coordinate_order")
+        return tuple(order) if order else self.coordinates
+
+    @property
+    def rotational_coordinates(self) -> tuple[str, ...]:
+        """Coordinates of revolute joints (radians; degrees in files that say inDegrees=yes)."""
+        pm = self._pin
+        return tuple(pm.names[j] for j in range(1, pm.njoints)
+                     if pm.joints[j].shortname().startswith("JointModelR"))
+
+    @property
+    def frame_names(self) -> tuple[str, ...]:
+        return tuple(f.name for f in self._pin.frames)
+
+    # -- components -----------------------------------------------------
+    def with_effect(self, *effects: Component) -> "Model":
+        """A new model with ``effects`` added (duplicates of an existing label are refused)."""
+        eff = list(self.effects)
+        con = list(self.contacts)
+        for e in effects:
+            if not isinstance(e, Component):
+                raise ModelError(f"with_effect takes components, not {type(e).__name__}")
+            (con if e.kind == "contact" else eff).append(e)
+        return Model(name=self.name, pin_model=self._pin, muscles=self.muscles,
+                     effects=eff, contacts=con, meta=self.meta)
+
+    def __add__(self, other: Component) -> "Model":
+        return self.with_effect(other)
+
+    def without(self, label: str) -> "Model":
+        """A new model without the component labelled ``label`` (``family:target``)."""
+        comps = self.effects + self.contacts
+        if label not in [c.label for c in comps]:
+            raise ModelError(f"model '{self.name}' has no component '{label}' "
+                             f"(has: {', '.join(c.label for c in comps) or 'none'})")
+        return Model(name=self.name, pin_model=self._pin, muscles=self.muscles,
+                     effects=[e for e in self.effects if e.label != label],
+                     contacts=[c for c in self.contacts if c.label != label], meta=self.meta)
+
+    def component(self, label: str) -> Component:
+        for c in self.effects + self.contacts:
+            if c.label == label:
+                return c
+        raise ModelError(f"model '{self.name}' has no component '{label}'")
+
+    def with_muscles(self, muscles) -> "Model":
+        return Model(name=self.name, pin_model=self._pin, muscles=muscles,
+                     effects=self.effects, contacts=self.contacts, meta=self.meta)
+
+    # -- trials ---------------------------------------------------------
+    def motion(self, trial, *, cutoff: float | None = None, signals: Iterable[str] | None = None) -> Motion:
+        """The model's :class:`Motion` (q, v, a in coordinate order) from a Trial.
+
+        Velocities and accelerations come from the trial's coordinates by
+        ``Trial.kinematics`` (optional zero-lag low-pass at ``cutoff`` Hz, then
+        quintic-spline derivatives).  All other channels are passed as signals.
+        """
+        trial.require(self.coordinates)
+        q, v, a = trial.kinematics(self.coordinates, cutoff=cutoff)
+        names = [n for n in trial.names if n not in self.coordinates] if signals is None else list(signals)
+        sig = {n: trial[n] for n in names}
+        return Motion(np.asarray(trial.time, dtype=float), q, v, a, sig)
+
+    def describe(self) -> str:
+        """A short human-readable summary (used by ``pinmsk info``)."""
+        lines = [f"model {self.name}: {self.nv} dof, {self.n_muscles} muscles, "
+                 f"mass {self.mass:.3f} kg, gravity {np.round(self.gravity, 3).tolist()} m/s^2"]
+        if self.meta.get("description"):
+            lines.append(f"  {self.meta['description']}")
+        lines.append("  coordinates: " + ", ".join(self.coordinate_order))
+        if self.muscles is not None:
+            lines.append(f"  muscles ({self.muscles.model_type}, {self.muscles.tendon} tendon): "
+                         + ", ".join(self.muscles.names))
+        if self.components:
+            lines.append("  components: " + ", ".join(c.label for c in self.components))
+        return "\n".join(lines)
+
+    def __repr__(self) -> str:
+        return f"<pinmsk.Model {self.name}: {self.nv} dof, {self.n_muscles} muscles, {len(self.components)} components>"
+
+    def __reduce__(self):
+        # Pinocchio models pickle; rebuild through the constructor.
+        return (_rebuild, (self.name, self._pin, self.muscles, self.effects, self.contacts, self.meta))
+
+
+def _rebuild(name, pm, muscles, effects, contacts, meta):
+    return Model(name=name, pin_model=pm, muscles=muscles, effects=effects, contacts=contacts, meta=meta)
+
+
+# -- loading ---------------------------------------------------------------
+
+def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
+               tendon: str | None = None) -> Model:
+    """Load a built-in model by name (``finger``, ``forearm``, ``gait2d``, ``human3d``)
+    or a user's model from a sidecar ``.toml`` (which names its URDF) or a bare ``.urdf``.
+
+    ``moment_arms`` picks a path variant declared in the sidecar (e.g.
+    ``"constant"`` or ``"angle"``); ``tendon`` overrides the sidecar's
+    default tendon (``"rigid"`` or ``"compliant"``).
+    """
+    from . import builtin_models
+
+    p = Path(str(name_or_path))
+    if p.suffix.lower() == ".urdf":
+        if not p.exists():
+            raise ModelError(f"URDF file not found: {p}")
+        pm = pin.buildModelFromUrdf(str(p))
+        return Model(name=p.stem, pin_model=pm, meta={"urdf": str(p)})
+    if p.suffix.lower() == ".toml":
+        if not p.exists():
+            raise ModelError(f"model sidecar not found: {p}")
+        sidecar = p
+    else:
+        names = builtin_models.builtin_names()
+        if str(name_or_path) not in names:
+            close = difflib.get_close_matches(str(name_or_path), names, n=3)
+            hint = f"; did you mean {', '.join(map(repr, close))}?" if close else ""
+            raise ModelError(
+                f"no built-in model '{name_or_path}'{hint}. Built-ins: {', '.join(names)}; "
+                "or pass the path of a .toml sidecar or a .urdf file"
+            )
+        sidecar = builtin_models.builtin_sidecar(str(name_or_path))
+    return _load_sidecar(sidecar, moment_arms=moment_arms, tendon=tendon)
+
+
+def _load_sidecar(sidecar: Path, *, moment_arms: str | None, tendon: str | None) -> Model:
+    from . import builtin_models
+    from .effects import registry
+    from .muscles.paths import MomentArmPath
+
+    try:
+        with open(sidecar, "rb") as fh:
+            spec = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise ModelError(f"{sidecar}: invalid TOML: {exc}") from None
+    mspec = spec.get("model")
+    if not isinstance(mspec, dict) or "urdf" not in mspec:
+        raise ModelError(f"{sidecar}: needs a [model] table with a 'urdf' entry")
+    urdf, package_dirs = builtin_models.resolve_urdf(sidecar, mspec["urdf"])
+    try:
+        pm = pin.buildModelFromUrdf(str(urdf))
+    except Exception as exc:  # pinocchio raises bare ValueError/RuntimeError
+        raise ModelError(f"{sidecar}: Pinocchio could not load URDF {urdf}: {exc}") from None
+    if "gravity" in mspec:
+        g = np.asarray(mspec["gravity"], dtype=float)
+        if g.shape != (3,):
+            raise ModelError(f"{sidecar}: [model] gravity must be 3 numbers, got {mspec['gravity']}")
+        pm.gravity = pin.Motion(np.concatenate([g, np.zeros(3)]))
+    name = mspec.get("name", sidecar.stem)
+    coords = tuple(pm.names[j] for j in range(1, pm.njoints))
+    order = mspec.get("coordinate_order")
+    if order is not None and sorted(order) != sorted(coords):
+        raise ModelError(f"{sidecar}: [model] coordinate_order must list exactly the URDF's joints "
+                         f"{sorted(coords)}; got {order}")
+    meta = {
+        "sidecar": str(sidecar), "urdf": str(urdf), "package_dirs": [str(d) for d in package_dirs],
+        "description": mspec.get("description", ""), "up_axis": mspec.get("up_axis", "z"),
+        "coordinate_order": list(order) if order else None,
+    }
+    muscles = None
+    entries = spec.get("muscles", [])
+    if entries:
+        mm = spec.get("muscle_model", {})
+        variant = moment_arms or mspec.get("default_paths", "constant")
+        meta["moment_arms"] = variant
+        path = MomentArmPath.from_sidecar(entries, coords, variant)
+        muscles = _build_muscles(entries, mm, path, tendon or mm.get("tendon", "rigid"), sidecar)
+    effects = []
+    for e in spec.get("effects", []):
+        effects.append(registry.from_spec(e))
+    model = Model(name=name, pin_model=pm, muscles=muscles, meta=meta)
+    return model.with_effect(*effects) if effects else model
+
+
+def _build_muscles(entries, mm: dict, path, tendon: str, sidecar: Path):
+    from .muscles import NaganoGerritsen, Thelen2003
+    from .muscles.muscle_set import MuscleSet
+
+    kind = mm.get("type", "thelen2003")
+    names = [e.get("name") for e in entries]
+    for i, n in enumerate(names):
+        if not n:
+            raise ModelError(f"{sidecar}: muscle entry {i + 1} has no name")
+
+    def col(key, default=None, required=True):
+        vals = []
+        for e in entries:
+            if key in e:
+                vals.append(float(e[key]))
+            elif required and default is None:
+                raise ModelError(f"{sidecar}: muscle '{e['name']}' has no '{key}'")
+            else:
+                vals.append(np.nan if default is None else default)
+        return np.array(vals)
+
+    common = dict(f_max=col("f_max"), l_opt=col("l_opt"), l_slack=col("l_slack"),
+                  pennation=col("pennation", 0.0))
+    for key in ("f_max", "l_opt", "l_slack"):
+        bad = np.flatnonzero(~(common[key] > 0))
+        if bad.size:
+            raise ModelError(f"{sidecar}: muscle '{names[bad[0]]}' has {key} = {common[key][bad[0]]}; "
+                             "it must be > 0")
+    if kind == "thelen2003":
+        mtu = Thelen2003(**common)
+    elif kind == "nagano_gerritsen":
+        mtu = NaganoGerritsen(**common, width=col("width"))
+    else:
+        raise ModelError(f"{sidecar}: unknown muscle_model type '{kind}' "
+                         "(known: thelen2003, nagano_gerritsen)")
+    volume = col("volume", required=False) if any("volume" in e for e in entries) else None
+    ff = col("fast_fraction", 0.5, required=False)
+    points = {e["name"]: [tuple(p) for p in e.get("points", [])] for e in entries}
+    return MuscleSet(names=names, model_type=kind, mtu=mtu, path=path, tendon=tendon,
+                     volume=volume, fast_fraction=ff, display_points=points)

@@ -1,0 +1,329 @@
+"""Muscle-tendon paths: lengths, moment arms and their time derivatives.
+
+A path gives each muscle ``i`` a length ``l0_i`` at ``q = 0`` and, for every
+coordinate ``j`` it crosses, a moment-arm polynomial in that coordinate alone,
+``r_ij(q_j) = sum_k c_ijk q_j**k``.  With the sign convention
+``r = -dl/dq`` (positive: the muscle shortens when ``q_j`` grows):
+
+    l_i(q)       = l0_i - sum_j integral_0^{q_j} r_ij(s) ds
+    dl_i/dt      = -sum_j r_ij(q_j) v_j
+    d2l_i/dt2    = -sum_j [ r_ij(q_j) a_j + r_ij'(q_j) v_j**2 ]
+
+The thesis's constant moment arms (Table 3.5, forearm) and its Eq. 5.12 (gait,
+``l = l0 - r_H phi_H + r_K phi_K - r_A (phi_A - pi/2)``) are the degree-0 case.
+Sidecars store paths per muscle as ``paths.<variant> = { l0 = ...,
+moment_arms = { <coordinate> = [c0, c1, ...] } }`` (see ``urdf/README.md``).
+
+Arrays are time-first: ``q`` is ``(N, nv)`` or one frame ``(nv,)``; results
+are ``(N, m)`` / ``(N, m, nv)``, or ``(m,)`` / ``(m, nv)`` for one frame.
+Polynomials are evaluated by Horner's rule over all frames, muscles and
+coordinates at once (the only Python loop is over the polynomial degree).
+"""
+
+from __future__ import annotations
+
+import difflib
+from dataclasses import dataclass
+
+import numpy as np
+
+from pinmsk.errors import ModelError, PinmskError
+
+__all__ = ["MomentArmPath", "DisplayPoints", "display_points_from_sidecar", "path_variants"]
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, dtype=float, copy=True)
+    a.flags.writeable = False
+    return a
+
+
+def _horner(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """sum_k coeffs[i, j, k] x[n, j]**k for all n, i, j -> (N, m, nv)."""
+    out = np.empty((x.shape[0],) + coeffs.shape[:2])
+    out[...] = coeffs[None, :, :, -1]
+    for k in range(coeffs.shape[2] - 2, -1, -1):
+        out *= x[:, None, :]
+        out += coeffs[None, :, :, k]
+    return out
+
+
+def _rebuild(cls, muscles, coordinates, l0, coeffs):  # pickle support
+    return cls(muscles=muscles, coordinates=coordinates, l0=l0, coeffs=coeffs)
+
+
+class MomentArmPath:
+    """Polynomial moment-arm paths of ``m`` muscles over a model's ``nv`` coordinates.
+
+    Parameters (keyword-only)
+    -------------------------
+    muscles : tuple of str, length m
+    coordinates : tuple of str, length nv -- the model's velocity coordinates, in order
+    l0 : (m,) muscle-tendon lengths at q = 0 (m)
+    coeffs : (m, nv, K) moment-arm polynomial coefficients, ``coeffs[i, j, k]``
+        multiplies ``q_j**k`` in ``r_ij`` (m/rad^k; m/m^k for a prismatic coordinate)
+
+    Instances are immutable; build them from a sidecar with :meth:`from_sidecar`.
+    """
+
+    __slots__ = ("_muscles", "_coordinates", "_l0", "_coeffs", "_int_coeffs", "_der_coeffs")
+
+    def __init__(self, *, muscles, coordinates, l0, coeffs):
+        muscles = tuple(str(m) for m in muscles)
+        coordinates = tuple(str(c) for c in coordinates)
+        for what, names in (("muscle", muscles), ("coordinate", coordinates)):
+            dupes = sorted({n for n in names if names.count(n) > 1})
+            if dupes:
+                raise ModelError(f"MomentArmPath: {what} names must be unique; repeated: {', '.join(dupes)}")
+        m, nv = len(muscles), len(coordinates)
+        l0 = np.asarray(l0, dtype=float)
+        coeffs = np.asarray(coeffs, dtype=float)
+        if l0.shape != (m,):
+            raise ModelError(f"MomentArmPath: l0 must have shape ({m},) for {m} muscles, got {l0.shape}")
+        if coeffs.ndim != 3 or coeffs.shape[:2] != (m, nv) or coeffs.shape[2] < 1:
+            raise ModelError(
+                f"MomentArmPath: coeffs must have shape ({m}, {nv}, K>=1) (muscles, coordinates, degree + 1), "
+                f"got {coeffs.shape}"
+            )
+        if not (np.all(np.isfinite(l0)) and np.all(np.isfinite(coeffs))):
+            raise ModelError("MomentArmPath: l0 and coeffs must be finite")
+        K = coeffs.shape[2]
+        k = np.arange(1, K + 1, dtype=float)
+        # antiderivative of r (zero constant term) and derivative of r
+        int_coeffs = np.concatenate([np.zeros((m, nv, 1)), coeffs / k], axis=2)
+        der_coeffs = coeffs[:, :, 1:] * k[: K - 1] if K > 1 else np.zeros((m, nv, 1))
+        set_ = object.__setattr__
+        set_(self, "_muscles", muscles)
+        set_(self, "_coordinates", coordinates)
+        set_(self, "_l0", _readonly(l0))
+        set_(self, "_coeffs", _readonly(coeffs))
+        set_(self, "_int_coeffs", _readonly(int_coeffs))
+        set_(self, "_der_coeffs", _readonly(der_coeffs))
+
+    def __setattr__(self, name, value):
+        raise AttributeError(f"MomentArmPath is immutable; build a new one instead of setting {name!r}")
+
+    def __delattr__(self, name):
+        raise AttributeError("MomentArmPath is immutable")
+
+    def __reduce__(self):
+        return (_rebuild, (type(self), self._muscles, self._coordinates, np.array(self._l0), np.array(self._coeffs)))
+
+    def __repr__(self) -> str:
+        return (
+            f"MomentArmPath({len(self._muscles)} muscles x {len(self._coordinates)} coordinates, "
+            f"degree {self.degree})"
+        )
+
+    # --- read-only views ------------------------------------------------------
+    @property
+    def muscles(self) -> tuple[str, ...]:
+        return self._muscles
+
+    @property
+    def coordinates(self) -> tuple[str, ...]:
+        return self._coordinates
+
+    @property
+    def l0(self) -> np.ndarray:
+        return self._l0
+
+    @property
+    def coeffs(self) -> np.ndarray:
+        return self._coeffs
+
+    @property
+    def n_muscles(self) -> int:
+        return len(self._muscles)
+
+    @property
+    def nv(self) -> int:
+        return len(self._coordinates)
+
+    @property
+    def degree(self) -> int:
+        """Polynomial degree of the moment arms (0 = constant)."""
+        return self._coeffs.shape[2] - 1
+
+    # --- construction from a sidecar -------------------------------------------
+    @classmethod
+    def from_sidecar(cls, muscle_entries, coordinates, variant: str, *, source=None) -> "MomentArmPath":
+        """Paths of variant ``variant`` from a sidecar's ``[[muscles]]`` entries.
+
+        ``muscle_entries`` is the parsed list of muscle tables, ``coordinates``
+        the model's velocity coordinates in order, ``source`` (optional) the
+        file named in error messages.  Coordinates a muscle does not list get a
+        zero moment arm.
+        """
+        where = f" in {source}" if source else ""
+        coordinates = tuple(str(c) for c in coordinates)
+        index = {c: j for j, c in enumerate(coordinates)}
+        entries = list(muscle_entries)
+        if not entries:
+            raise ModelError(f"no [[muscles]]{where}: a MomentArmPath needs at least one muscle")
+        names, l0s, arms = [], [], []
+        for n, entry in enumerate(entries, start=1):
+            name = entry.get("name") if isinstance(entry, dict) else None
+            if not isinstance(name, str) or not name:
+                raise ModelError(f"muscle #{n}{where} has no name = \"...\"")
+            paths = entry.get("paths") or {}
+            if not isinstance(paths, dict) or variant not in paths:
+                have = sorted(paths) if isinstance(paths, dict) else []
+                close = difflib.get_close_matches(str(variant), have, n=1)
+                hint = f"; did you mean {close[0]!r}?" if close else "."
+                raise ModelError(
+                    f"muscle {name!r}{where} has no path variant {variant!r}{hint} "
+                    f"Its variants: {', '.join(have) if have else 'none'}. Add "
+                    f"paths.{variant} = {{ l0 = ..., moment_arms = {{ <coordinate> = [c0, ...] }} }} "
+                    "or choose an existing variant"
+                )
+            path = paths[variant]
+            if not isinstance(path, dict) or "l0" not in path:
+                raise ModelError(f"muscle {name!r}{where}: paths.{variant} needs l0 = <length at q = 0 in m>")
+            try:
+                l0 = float(path["l0"])
+            except (TypeError, ValueError):
+                raise ModelError(f"muscle {name!r}{where}: paths.{variant}.l0 must be a number, got {path['l0']!r}") from None
+            moment_arms = path.get("moment_arms", {})
+            if not isinstance(moment_arms, dict):
+                raise ModelError(
+                    f"muscle {name!r}{where}: paths.{variant}.moment_arms must be a table "
+                    "{ <coordinate> = [c0, c1, ...] }"
+                )
+            row = {}
+            for coord, cs in moment_arms.items():
+                if coord not in index:
+                    close = difflib.get_close_matches(coord, coordinates, n=1)
+                    hint = f"; did you mean {close[0]!r}?" if close else "."
+                    raise ModelError(
+                        f"muscle {name!r}{where}: path {variant!r} has a moment arm for coordinate {coord!r}, "
+                        f"which the model does not have{hint} The model's coordinates are: {', '.join(coordinates)}"
+                    )
+                try:
+                    c = np.atleast_1d(np.asarray(cs, dtype=float))
+                except (TypeError, ValueError):
+                    c = np.zeros(0)
+                if c.ndim != 1 or c.size == 0 or not np.all(np.isfinite(c)):
+                    raise ModelError(
+                        f"muscle {name!r}{where}: paths.{variant}.moment_arms.{coord} must be a non-empty list of "
+                        f"finite numbers [c0, c1, ...], got {cs!r}"
+                    )
+                row[index[coord]] = c
+            names.append(name)
+            l0s.append(l0)
+            arms.append(row)
+        K = max([len(c) for row in arms for c in row.values()] + [1])
+        coeffs = np.zeros((len(names), len(coordinates), K))
+        for i, row in enumerate(arms):
+            for j, c in row.items():
+                coeffs[i, j, : len(c)] = c
+        dupes = sorted({n for n in names if names.count(n) > 1})
+        if dupes:
+            raise ModelError(f"muscle names must be unique{where}; repeated: {', '.join(dupes)}")
+        return cls(muscles=tuple(names), coordinates=coordinates, l0=np.array(l0s), coeffs=coeffs)
+
+    # --- evaluation ---------------------------------------------------------------
+    def _frames(self, **arrays):
+        """Check shapes; return 2-D arrays and whether the inputs were single frames."""
+        out, ndims = [], set()
+        n = None
+        for label, a in arrays.items():
+            a = np.asarray(a, dtype=float)
+            if a.ndim not in (1, 2) or a.shape[-1] != self.nv:
+                raise PinmskError(
+                    f"{label} must have shape ({self.nv},) or (N, {self.nv}) for coordinates "
+                    f"({', '.join(self._coordinates)}), got {a.shape}"
+                )
+            ndims.add(a.ndim)
+            a2 = a.reshape(-1, self.nv)
+            if n is not None and a2.shape[0] != n:
+                raise PinmskError(f"{', '.join(arrays)} must have the same number of frames; got {n} and {a2.shape[0]}")
+            n = a2.shape[0]
+            out.append(a2)
+        if len(ndims) > 1:
+            raise PinmskError(f"{', '.join(arrays)} must all be single frames (nv,) or all (N, nv)")
+        return out, ndims == {1}
+
+    def lengths(self, q) -> np.ndarray:
+        """Muscle-tendon lengths l(q): (N, m), or (m,) for one frame."""
+        (q,), single = self._frames(q=q)
+        out = self._l0 - _horner(self._int_coeffs, q).sum(axis=2)
+        return out[0] if single else out
+
+    def moment_arms(self, q) -> np.ndarray:
+        """Moment arms r = -dl/dq: (N, m, nv), or (m, nv) for one frame."""
+        (q,), single = self._frames(q=q)
+        out = _horner(self._coeffs, q)
+        return out[0] if single else out
+
+    def velocities(self, q, v) -> np.ndarray:
+        """Lengthening velocities dl/dt = -sum_j r_j v_j: (N, m), or (m,)."""
+        (q, v), single = self._frames(q=q, v=v)
+        out = -np.einsum("nmj,nj->nm", _horner(self._coeffs, q), v)
+        return out[0] if single else out
+
+    def accelerations(self, q, v, a) -> np.ndarray:
+        """d2l/dt2 = -sum_j (r_j a_j + r_j'(q_j) v_j^2): (N, m), or (m,)."""
+        (q, v, a), single = self._frames(q=q, v=v, a=a)
+        out = -np.einsum("nmj,nj->nm", _horner(self._coeffs, q), a) - np.einsum(
+            "nmj,nj->nm", _horner(self._der_coeffs, q), v * v
+        )
+        return out[0] if single else out
+
+
+def path_variants(muscle_entries) -> tuple[str, ...]:
+    """Path variants every muscle of ``muscle_entries`` defines, sorted."""
+    sets = [set((e.get("paths") or {}).keys()) for e in muscle_entries]
+    return tuple(sorted(set.intersection(*sets))) if sets else ()
+
+
+@dataclass(frozen=True, eq=False)
+class DisplayPoints:
+    """Display-only polyline of one muscle: points fixed in bodies.
+
+    ``bodies[p]`` is the body (URDF link) of point ``p``; ``positions[p]`` its
+    coordinates in that body's frame (m).  These points only draw the muscle;
+    lengths and moment arms come from :class:`MomentArmPath`.
+    """
+
+    muscle: str
+    bodies: tuple
+    positions: np.ndarray
+
+    def __init__(self, *, muscle: str, bodies, positions):
+        bodies = tuple(str(b) for b in bodies)
+        positions = np.asarray(positions, dtype=float)
+        if positions.shape != (len(bodies), 3) or len(bodies) < 2:
+            raise ModelError(
+                f"muscle {muscle!r}: display points need at least 2 points, each [body, x, y, z]; "
+                f"got {len(bodies)} bodies and positions of shape {positions.shape}"
+            )
+        object.__setattr__(self, "muscle", str(muscle))
+        object.__setattr__(self, "bodies", bodies)
+        object.__setattr__(self, "positions", _readonly(positions))
+
+
+def display_points_from_sidecar(muscle_entries, *, bodies=None, source=None) -> tuple[DisplayPoints, ...]:
+    """The ``points`` of every muscle that has them, in sidecar order.
+
+    ``bodies`` (optional): the model's body/link names, to check each point's body.
+    """
+    where = f" in {source}" if source else ""
+    known = None if bodies is None else tuple(bodies)
+    out = []
+    for entry in muscle_entries:
+        pts = entry.get("points")
+        if pts is None:
+            continue
+        name = entry.get("name", "?")
+        rows = []
+        for p in pts:
+            if not (isinstance(p, (list, tuple)) and len(p) == 4 and isinstance(p[0], str)):
+                raise ModelError(f"muscle {name!r}{where}: each display point must be [\"body\", x, y, z], got {p!r}")
+            if known is not None and p[0] not in known:
+                close = difflib.get_close_matches(p[0], known, n=1)
+                hint = f"; did you mean {close[0]!r}?" if close else "."
+                raise ModelError(f"muscle {name!r}{where}: display point on unknown body {p[0]!r}{hint}")
+            rows.append(p)
+        out.append(DisplayPoints(muscle=name, bodies=[r[0] for r in rows], positions=[r[1:] for r in rows]))
+    return tuple(out)

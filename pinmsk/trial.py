@@ -1,0 +1,808 @@
+"""Trial: measured or simulated data over time as named channels.
+
+A :class:`Trial` holds a time base ``time`` (N,) in seconds, strictly
+increasing, and C named channels stored together as one read-only (N, C)
+float array (time first, SI units: rad, m, N, N·m, s).  Operations return new
+Trials; the arrays of a Trial are never modified.
+
+Channel names follow the pinmsk conventions (see DESIGN.md):
+
+* ``<coord>`` (generalized coordinate, rad or m), ``<coord>_speed``,
+  ``<coord>_moment``;
+* ``<muscle>_activation``, ``<muscle>_excitation``, ``<muscle>_emg``,
+  ``<muscle>_force``;
+* ground reaction ``ground_force_v[xyz]`` (force, N), ``ground_force_p[xyz]``
+  (centre of pressure, m), ``ground_torque_[xyz]`` (N·m), with an optional
+  side prefix ``r_ground_force_vy``; OpenSim's ``1_ground_force_vy`` and
+  ``ground_force_r_vy`` spellings are recognised by :func:`parse_ground_reaction`.
+
+Reading and writing files lives in :mod:`pinmsk.io`; filtering and
+differentiation in :mod:`pinmsk.filtering`.
+"""
+
+from __future__ import annotations
+
+import difflib
+import fnmatch
+import math
+import re
+import types
+from collections.abc import Iterable, Mapping
+from typing import NamedTuple
+
+import numpy as np
+
+from pinmsk.errors import TrialError
+from pinmsk.filtering import UNIFORM_TOLERANCE, differentiate, lowpass
+
+__all__ = [
+    "Trial",
+    "TIME",
+    "SPEED_SUFFIX",
+    "MOMENT_SUFFIX",
+    "ACTIVATION_SUFFIX",
+    "EXCITATION_SUFFIX",
+    "EMG_SUFFIX",
+    "FORCE_SUFFIX",
+    "GROUND_REACTION_CHANNELS",
+    "DEGREES_THRESHOLD",
+    "GroundReactionName",
+    "coordinate_channels",
+    "speed_channels",
+    "moment_channels",
+    "activation_channels",
+    "excitation_channels",
+    "emg_channels",
+    "force_channels",
+    "ground_reaction_channels",
+    "parse_ground_reaction",
+    "is_angular_name",
+    "close_matches",
+]
+
+# ---------------------------------------------------------------------------
+# Channel names
+# ---------------------------------------------------------------------------
+
+TIME = "time"
+SPEED_SUFFIX = "_speed"
+MOMENT_SUFFIX = "_moment"
+ACTIVATION_SUFFIX = "_activation"
+EXCITATION_SUFFIX = "_excitation"
+EMG_SUFFIX = "_emg"
+FORCE_SUFFIX = "_force"
+
+#: The nine ground-reaction channels of one force plate, without side prefix.
+GROUND_REACTION_CHANNELS = (
+    "ground_force_vx", "ground_force_vy", "ground_force_vz",
+    "ground_force_px", "ground_force_py", "ground_force_pz",
+    "ground_torque_x", "ground_torque_y", "ground_torque_z",
+)  # fmt: skip
+
+#: An angular channel declared in radians whose largest magnitude exceeds this
+#: (1.5 turns, 540 degrees) is taken to be in degrees by :meth:`Trial.validate`.
+DEGREES_THRESHOLD = 3.0 * math.pi
+
+
+def _as_names(names, what: str = "names") -> tuple[str, ...]:
+    """A tuple of channel names from one name or an iterable of names."""
+    if isinstance(names, str):
+        return (names,)
+    out = tuple(names)
+    bad = [n for n in out if not isinstance(n, str)]
+    if bad:
+        raise TrialError(f"{what} must be strings, got {bad[:3]!r}")
+    return out
+
+
+def _suffixed(names, suffix: str) -> tuple[str, ...]:
+    return tuple(n + suffix for n in _as_names(names))
+
+
+def coordinate_channels(coords) -> tuple[str, ...]:
+    """Channel names of generalized coordinates: the coordinate names."""
+    return _as_names(coords, "coordinates")
+
+
+def speed_channels(coords) -> tuple[str, ...]:
+    """``<coord>_speed`` for each coordinate."""
+    return _suffixed(coords, SPEED_SUFFIX)
+
+
+def moment_channels(coords) -> tuple[str, ...]:
+    """``<coord>_moment`` for each coordinate (generalized force, N·m or N)."""
+    return _suffixed(coords, MOMENT_SUFFIX)
+
+
+def activation_channels(muscles) -> tuple[str, ...]:
+    """``<muscle>_activation`` for each muscle."""
+    return _suffixed(muscles, ACTIVATION_SUFFIX)
+
+
+def excitation_channels(muscles) -> tuple[str, ...]:
+    """``<muscle>_excitation`` for each muscle."""
+    return _suffixed(muscles, EXCITATION_SUFFIX)
+
+
+def emg_channels(muscles) -> tuple[str, ...]:
+    """``<muscle>_emg`` for each muscle."""
+    return _suffixed(muscles, EMG_SUFFIX)
+
+
+def force_channels(muscles) -> tuple[str, ...]:
+    """``<muscle>_force`` for each muscle (N)."""
+    return _suffixed(muscles, FORCE_SUFFIX)
+
+
+def ground_reaction_channels(side: str | None = None) -> tuple[str, ...]:
+    """The nine ground-reaction channel names, prefixed ``<side>_`` if given.
+
+    ``ground_reaction_channels("r")[1] == "r_ground_force_vy"``.
+    """
+    if side is None or side == "":
+        return GROUND_REACTION_CHANNELS
+    return tuple(f"{side}_{n}" for n in GROUND_REACTION_CHANNELS)
+
+
+class GroundReactionName(NamedTuple):
+    """A parsed ground-reaction channel name.
+
+    ``quantity`` is ``"force"`` (``v``), ``"point"`` (``p``, centre of
+    pressure) or ``"torque"``; ``axis`` is ``"x"``, ``"y"`` or ``"z"``;
+    ``side`` is the prefix or infix (``"r"``, ``"1"``) or ``None``.
+    """
+
+    side: str | None
+    quantity: str
+    axis: str
+
+
+_GRF_RE = re.compile(
+    r"^(?:(?P<pre>[A-Za-z0-9]+)_)?ground_(?:"
+    r"force_(?:(?P<mid>[A-Za-z0-9]+)_)?(?P<vp>[vp])(?P<fax>[xyz])"
+    r"|torque_(?:(?P<tmid>[A-Za-z0-9]+)_)?(?P<tax>[xyz]))$"
+)
+
+
+def parse_ground_reaction(name: str) -> GroundReactionName | None:
+    """Parse a ground-reaction channel name, or return ``None``.
+
+    Accepts ``ground_force_vy``, ``r_ground_force_vy``, OpenSim's
+    ``1_ground_force_vy`` and ``ground_force_r_vy``, and the torque forms
+    ``ground_torque_x``, ``l_ground_torque_x``, ``ground_torque_l_x``.
+    """
+    m = _GRF_RE.match(name)
+    if m is None:
+        return None
+    inner = m["mid"] or m["tmid"]
+    if m["pre"] is not None and inner is not None:
+        return None
+    side = m["pre"] or inner
+    if m["vp"] is not None:
+        quantity = "force" if m["vp"] == "v" else "point"
+        return GroundReactionName(side, quantity, m["fax"])
+    return GroundReactionName(side, "torque", m["tax"])
+
+
+_NOT_ANGULAR_WORDS = (
+    "force", "moment", "torque", "activation", "excitation", "emg",
+    "length", "power", "energy",
+)  # fmt: skip
+_NOT_ANGULAR_END = re.compile(r"(?:^|_)(?:t[xyz]|[pv][xyz]|[xyz]|trans(?:lation)?[xyz]?)$")
+_DERIVATIVE_END = re.compile(r"_(?:speed|u|acceleration|accel)$")
+
+
+def is_angular_name(name: str) -> bool:
+    """Whether a channel name looks like a rotational coordinate (or its rate).
+
+    This is the heuristic used when a file declares ``inDegrees=yes`` and the
+    caller does not say which channels are angles.  A name is angular unless
+
+    * it is ``time`` or contains a ``.`` (OpenSim 3 state variables such as
+      ``soleus.activation``);
+    * it is an OpenSim 4 state path (contains ``/``) whose last part is not
+      ``value``, ``speed``, ``accel`` or ``acceleration`` (then the coordinate
+      is the part before it);
+    * after removing a ``_speed``, ``_u``, ``_acceleration`` or ``_accel``
+      suffix, it contains force, moment, torque, activation, excitation, emg,
+      length, power or energy (case-insensitive);
+    * it ends in a translation or position suffix: ``_tx/_ty/_tz``,
+      ``_px/_py/_pz``, ``_vx/_vy/_vz``, ``_x/_y/_z`` or ``trans``/``translation``
+      with an optional axis letter (``box_transX``).
+    """
+    if not isinstance(name, str):
+        return False
+    lowered = name.lower()
+    if lowered == TIME or "." in lowered:
+        return False
+    if "/" in lowered:
+        parts = [p for p in lowered.split("/") if p]
+        if len(parts) < 2 or parts[-1] not in ("value", "speed", "accel", "acceleration"):
+            return False
+        lowered = parts[-2]
+    base = _DERIVATIVE_END.sub("", lowered)
+    if not base or any(w in base for w in _NOT_ANGULAR_WORDS):
+        return False
+    return _NOT_ANGULAR_END.search(base) is None
+
+
+def close_matches(name: str, candidates: Iterable[str], n: int = 3) -> list[str]:
+    """Up to ``n`` candidates that look like ``name`` (difflib, then substrings)."""
+    candidates = list(candidates)
+    found = difflib.get_close_matches(name, candidates, n=n, cutoff=0.6)
+    low = name.lower()
+    for c in candidates:
+        if len(found) >= n:
+            break
+        cl = c.lower()
+        if c not in found and low and (low in cl or (len(cl) >= 3 and cl in low)):
+            found.append(c)
+    return found
+
+
+def _missing_message(missing: list[str], available: tuple[str, ...], what: str) -> str:
+    parts = []
+    for name in missing:
+        hint = close_matches(name, available)
+        if hint:
+            alts = " or ".join(repr(h) for h in hint)
+            parts.append(f"{name!r} (did you mean {alts}?)")
+        else:
+            parts.append(repr(name))
+    shown = ", ".join(available[:12]) + (", ..." if len(available) > 12 else "")
+    return (
+        f"missing {what}: {', '.join(parts)}; the trial has {len(available)} "
+        f"channels: {shown or '(none)'}"
+    )
+
+
+# ---------------------------------------------------------------------------
+# Trial
+# ---------------------------------------------------------------------------
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
+
+
+class Trial:
+    """Time plus named channels, each (N,), stored as one (N, C) array.
+
+    Parameters
+    ----------
+    time : array_like, shape (N,)
+        Sample times in s; finite and strictly increasing, N >= 1.
+    channels : Mapping[str, array_like], optional
+        Channel name to samples of shape (N,).  Order is kept.
+    units : Mapping[str, str], optional
+        Unit of some channels (e.g. ``{"knee_moment": "N*m"}``); informative.
+    meta : Mapping, optional
+        Free information such as ``source`` (the file read), ``format`` and
+        ``in_degrees`` (what the file declared).
+
+    Notes
+    -----
+    ``time``, ``values`` and the arrays returned by ``trial[name]`` are
+    read-only views; copy them to modify.  ``meta`` and ``units`` are
+    read-only mappings; use :meth:`with_meta` / :meth:`with_units`.
+    """
+
+    __slots__ = ("_time", "_values", "_names", "_index", "_units", "_meta")
+
+    def __init__(self, time, channels: Mapping | None = None, *, units=None, meta=None):
+        if channels is None:
+            channels = {}
+        if not isinstance(channels, Mapping):
+            raise TrialError(
+                f"channels must be a mapping of name -> (N,) array, got {type(channels).__name__}; "
+                "use Trial.from_array(time, names, values) for an (N, C) array"
+            )
+        t = np.asarray(time, dtype=float)
+        names = _as_names(channels, "channel names")
+        cols = []
+        for name in names:
+            try:
+                col = np.asarray(channels[name], dtype=float)
+            except (TypeError, ValueError) as exc:
+                raise TrialError(f"channel {name!r}: values are not numeric ({exc})") from None
+            if col.shape != t.shape:
+                raise TrialError(
+                    f"channel {name!r} has shape {col.shape}, expected {t.shape} to match time"
+                )
+            cols.append(col)
+        values = np.stack(cols, axis=1) if cols else np.empty(t.shape + (0,))
+        self._setup(t, names, values, units, meta)
+
+    @classmethod
+    def from_array(cls, time, names, values, *, units=None, meta=None) -> Trial:
+        """A Trial from ``time`` (N,), ``names`` (C,) and ``values`` (N, C)."""
+        names = _as_names(names, "channel names")
+        try:
+            v = np.asarray(values, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise TrialError(f"values are not numeric ({exc})") from None
+        t = np.asarray(time, dtype=float)
+        if v.ndim == 1 and len(names) == 1:
+            v = v[:, None]
+        if v.ndim != 2 or v.shape[1] != len(names) or (t.ndim == 1 and v.shape[0] != t.shape[0]):
+            raise TrialError(
+                f"values have shape {v.shape}, expected (N, C) = ({t.shape[0] if t.ndim else '?'}, "
+                f"{len(names)}) for {len(names)} names and {t.shape[0] if t.ndim else '?'} time samples"
+            )
+        obj = cls.__new__(cls)
+        obj._setup(t, names, v, units, meta)
+        return obj
+
+    def _setup(self, t, names, values, units, meta) -> None:
+        meta = dict(meta or {})
+        where = f"file {meta['source']!r}: " if meta.get("source") else ""
+        if t.ndim != 1 or t.shape[0] == 0:
+            raise TrialError(f"{where}time must be a non-empty (N,) array, got shape {t.shape}")
+        if not np.all(np.isfinite(t)):
+            row = int(np.flatnonzero(~np.isfinite(t))[0])
+            raise TrialError(f"{where}time is not finite at row {row} (value {float(t[row])!r})")
+        _check_increasing(t, where)
+        empty = [i for i, n in enumerate(names) if not n]
+        if empty:
+            raise TrialError(f"{where}channel name at position {empty[0]} is empty")
+        if TIME in names:
+            raise TrialError(
+                f"{where}a channel is named 'time', which is reserved for the time base; "
+                "pass it as time instead"
+            )
+        if len(set(names)) != len(names):
+            seen, dup = set(), []
+            for n in names:
+                if n in seen and n not in dup:
+                    dup.append(n)
+                seen.add(n)
+            raise TrialError(f"{where}duplicate channel names: {', '.join(map(repr, dup))}")
+        units = dict(units or {})
+        unknown = [u for u in units if u not in names and u != TIME]
+        if unknown:
+            raise TrialError(f"{where}units given for unknown channels: {unknown}")
+        self._time = _readonly(np.array(t, dtype=float))
+        self._values = _readonly(np.array(values, dtype=float).reshape(t.shape[0], len(names)))
+        self._names = tuple(names)
+        self._index = {n: i for i, n in enumerate(self._names)}
+        self._units = types.MappingProxyType(units)
+        self._meta = types.MappingProxyType(meta)
+
+    def __reduce__(self):
+        return (
+            _rebuild,
+            (self._time, self._names, self._values, dict(self._units), dict(self._meta)),
+        )
+
+    # -- basic properties --------------------------------------------------
+
+    @property
+    def time(self) -> np.ndarray:
+        """Sample times (N,) in s, read-only."""
+        return self._time
+
+    @property
+    def values(self) -> np.ndarray:
+        """All channels as a read-only (N, C) array, columns in :attr:`names` order."""
+        return self._values
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Channel names in column order (``time`` excluded)."""
+        return self._names
+
+    @property
+    def units(self) -> Mapping[str, str]:
+        """Read-only mapping of channel name to unit string (only those given)."""
+        return self._units
+
+    @property
+    def meta(self) -> Mapping:
+        """Read-only mapping of free information (``source``, ``in_degrees``, ...)."""
+        return self._meta
+
+    @property
+    def n_frames(self) -> int:
+        """Number of samples N."""
+        return self._time.shape[0]
+
+    @property
+    def n_channels(self) -> int:
+        """Number of channels C."""
+        return len(self._names)
+
+    @property
+    def duration(self) -> float:
+        """``time[-1] - time[0]`` in s."""
+        return float(self._time[-1] - self._time[0])
+
+    @property
+    def rate(self) -> float:
+        """Median sampling rate in Hz (``nan`` for a single frame)."""
+        if self.n_frames < 2:
+            return float("nan")
+        return float(1.0 / np.median(np.diff(self._time)))
+
+    def _where(self) -> str:
+        src = self._meta.get("source")
+        return f"file {src!r}: " if src else ""
+
+    # -- access --------------------------------------------------------------
+
+    def __contains__(self, name) -> bool:
+        return name in self._index
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        """Samples (N,) of one channel (read-only view)."""
+        if not isinstance(name, str):
+            raise TypeError(
+                f"Trial indices are channel names, got {type(name).__name__}; "
+                "use trial.get(names) for several channels"
+            )
+        return self._values[:, self._indices((name,))[0]]
+
+    def _indices(self, names: tuple[str, ...], what: str = "channels") -> list[int]:
+        missing = [n for n in names if n not in self._index]
+        if missing:
+            msg = self._where() + _missing_message(missing, self._names, what)
+            if TIME in missing:
+                msg += "; 'time' is the time base, use trial.time"
+            raise TrialError(msg)
+        return [self._index[n] for n in names]
+
+    def get(self, names) -> np.ndarray:
+        """Channels ``names`` as an (N, k) array (a copy), in the order given.
+
+        A single string gives an (N, 1) array.
+        """
+        return self._values[:, self._indices(_as_names(names))]
+
+    def channels_matching(self, pattern) -> tuple[str, ...]:
+        """Names matching a glob pattern (``"*_moment"``) or a compiled regex (search)."""
+        if isinstance(pattern, re.Pattern):
+            return tuple(n for n in self._names if pattern.search(n))
+        return tuple(n for n in self._names if fnmatch.fnmatchcase(n, pattern))
+
+    def to_dict(self) -> dict[str, np.ndarray]:
+        """``{"time": time, name: samples, ...}`` with writable copies."""
+        out = {TIME: self._time.copy()}
+        out.update({n: self._values[:, i].copy() for i, n in enumerate(self._names)})
+        return out
+
+    def __repr__(self) -> str:
+        shown = ", ".join(self._names[:8]) + (", ..." if self.n_channels > 8 else "")
+        rate = f" at {self.rate:.6g} Hz" if self.n_frames > 1 else ""
+        src = f", source={self._meta['source']!r}" if self._meta.get("source") else ""
+        return (
+            f"Trial({self.n_frames} frames, {self._time[0]:.6g} to {self._time[-1]:.6g} s{rate}, "
+            f"{self.n_channels} channels: {shown or '-'}{src})"
+        )
+
+    # -- new trials ----------------------------------------------------------
+
+    def _new(self, time, names, values, *, units=None, meta=None) -> Trial:
+        keep_units = {n: u for n, u in (self._units if units is None else units).items() if n in names}
+        return Trial.from_array(
+            time, names, values, units=keep_units, meta=dict(self._meta if meta is None else meta)
+        )
+
+    def with_channels(self, channels: Mapping | None = None, /, **more) -> Trial:
+        """A new Trial with channels added or replaced (replaced keep their column).
+
+        ``trial.with_channels({"a_speed": v})`` or ``trial.with_channels(a_speed=v)``.
+        """
+        new = dict(channels or {})
+        both = sorted(set(new) & set(more))
+        if both:
+            raise TrialError(f"channels given twice (mapping and keyword): {both}")
+        new.update(more)
+        if TIME in new:
+            raise TrialError("'time' cannot be set as a channel; build a new Trial instead")
+        cols = {}
+        for name, v in new.items():
+            if not isinstance(name, str) or not name:
+                raise TrialError(f"channel names must be non-empty strings, got {name!r}")
+            try:
+                col = np.asarray(v, dtype=float)
+            except (TypeError, ValueError) as exc:
+                raise TrialError(f"channel {name!r}: values are not numeric ({exc})") from None
+            if col.shape != self._time.shape:
+                raise TrialError(
+                    f"channel {name!r} has shape {col.shape}, expected {self._time.shape} to match time"
+                )
+            cols[name] = col
+        names = list(self._names) + [n for n in cols if n not in self._index]
+        values = np.empty((self.n_frames, len(names)))
+        values[:, : self.n_channels] = self._values
+        for name, col in cols.items():
+            values[:, names.index(name)] = col
+        return self._new(self._time, names, values)
+
+    def with_meta(self, **entries) -> Trial:
+        """A new Trial (same arrays) with ``meta`` entries added or replaced."""
+        return self._new(self._time, self._names, self._values, meta={**self._meta, **entries})
+
+    def with_units(self, units: Mapping[str, str]) -> Trial:
+        """A new Trial (same arrays) with channel units added or replaced."""
+        self._indices(tuple(units))
+        return self._new(self._time, self._names, self._values, units={**self._units, **units})
+
+    def select(self, names) -> Trial:
+        """A new Trial with only ``names``, in that order."""
+        names = _as_names(names)
+        return self._new(self._time, names, self._values[:, self._indices(names)])
+
+    def drop(self, names) -> Trial:
+        """A new Trial without ``names`` (each must exist)."""
+        gone = set(self._indices(_as_names(names)))
+        keep = [i for i in range(self.n_channels) if i not in gone]
+        return self._new(self._time, [self._names[i] for i in keep], self._values[:, keep])
+
+    def slice_time(self, t0: float | None = None, t1: float | None = None) -> Trial:
+        """A new Trial with the samples ``t0 <= time <= t1`` (ends included).
+
+        ``None`` leaves that side open.  Bounds are matched with a tolerance of
+        1e-6 of the median time step, so bounds printed with rounding still
+        include the sample they name.
+        """
+        t = self._time
+        tol = 1e-6 * (np.median(np.diff(t)) if t.shape[0] > 1 else 1.0)
+        lo = -np.inf if t0 is None else float(t0) - tol
+        hi = np.inf if t1 is None else float(t1) + tol
+        if t0 is not None and t1 is not None and float(t1) < float(t0):
+            raise TrialError(f"slice_time: t1={t1!r} is before t0={t0!r}")
+        mask = (t >= lo) & (t <= hi)
+        if not mask.any():
+            raise TrialError(
+                f"{self._where()}no samples between {t0!r} and {t1!r} s; "
+                f"the trial spans {t[0]:.6g} to {t[-1]:.6g} s"
+            )
+        return self._new(t[mask], self._names, self._values[mask])
+
+    def resample(self, time_or_rate, *, method: str = "cubic") -> Trial:
+        """A new Trial interpolated onto new sample times.
+
+        Parameters
+        ----------
+        time_or_rate : float or array_like
+            A rate in Hz (samples at ``time[0] + k / rate`` up to ``time[-1]``)
+            or the new times (strictly increasing, inside ``[time[0], time[-1]]``;
+            no extrapolation).
+        method : {"cubic", "linear"}
+            ``"cubic"``: not-a-knot cubic spline
+            (``scipy.interpolate.CubicSpline``), all channels must be finite.
+            ``"linear"``: piecewise linear (``numpy.interp``); a NaN only
+            affects the intervals next to it.
+        """
+        t = self._time
+        if np.ndim(time_or_rate) == 0:
+            rate = float(time_or_rate)
+            if not (np.isfinite(rate) and rate > 0):
+                raise TrialError(f"resample rate must be a positive number of Hz, got {time_or_rate!r}")
+            n = int(math.floor((t[-1] - t[0]) * rate * (1 + 1e-12) + 1e-9)) + 1
+            new_t = np.minimum(t[0] + np.arange(n) / rate, t[-1])
+        else:
+            new_t = np.asarray(time_or_rate, dtype=float)
+            if new_t.ndim != 1 or new_t.shape[0] == 0:
+                raise TrialError(f"new times must be a non-empty (M,) array, got shape {new_t.shape}")
+            _check_increasing(new_t, "resample: new ")
+            tol = 1e-9 * max(1.0, abs(t[0]), abs(t[-1]))
+            out = np.flatnonzero((new_t < t[0] - tol) | (new_t > t[-1] + tol))
+            if out.size:
+                k = int(out[0])
+                raise TrialError(
+                    f"{self._where()}resample: new time[{k}]={float(new_t[k])!r} is outside the trial "
+                    f"[{float(t[0])!r}, {float(t[-1])!r}] s ({out.size} such samples); slice the new times, "
+                    "extrapolation is not done"
+                )
+            new_t = np.clip(new_t, t[0], t[-1])
+        if method == "linear":
+            values = np.empty((new_t.shape[0], self.n_channels))
+            for j in range(self.n_channels):  # one call per channel, vectorised over frames
+                values[:, j] = np.interp(new_t, t, self._values[:, j])
+        elif method == "cubic":
+            if self.n_frames < 2:
+                raise TrialError("resample needs at least 2 frames")
+            self._check_finite(self._names, hint="or use method='linear'")
+            from scipy.interpolate import CubicSpline
+
+            if self.n_channels:
+                values = CubicSpline(t, self._values, axis=0)(new_t)
+            else:
+                values = np.empty((new_t.shape[0], 0))
+        else:
+            raise TrialError(f"resample method must be 'cubic' or 'linear', got {method!r}")
+        return self._new(new_t, self._names, values, meta={**self._meta, "resampled": method})
+
+    def merge(self, other: Trial) -> Trial:
+        """A new Trial with the channels of both; the time bases must agree.
+
+        Times agree when both have N samples differing by at most 1e-6 of the
+        median time step.  Channel names must not overlap.  Entries of
+        ``self.meta`` win over those of ``other.meta``.
+        """
+        if not isinstance(other, Trial):
+            raise TypeError(f"can only merge a Trial, got {type(other).__name__}")
+        t, u = self._time, other._time
+        tol = 1e-6 * (np.median(np.diff(t)) if t.shape[0] > 1 else 1.0)
+        if t.shape != u.shape or np.max(np.abs(t - u)) > tol:
+            detail = (
+                f"{t.shape[0]} vs {u.shape[0]} frames"
+                if t.shape != u.shape
+                else f"largest difference {np.max(np.abs(t - u)):.3g} s "
+                f"at row {int(np.argmax(np.abs(t - u)))}"
+            )
+            raise TrialError(
+                f"cannot merge trials with different time bases ({detail}; "
+                f"{t[0]:.6g}-{t[-1]:.6g} s vs {u[0]:.6g}-{u[-1]:.6g} s); "
+                "resample one onto the other first: other.resample(trial.time)"
+            )
+        dup = [n for n in other._names if n in self._index]
+        if dup:
+            raise TrialError(
+                f"cannot merge: both trials have channels {', '.join(map(repr, dup))}; "
+                "drop or rename them first"
+            )
+        return Trial.from_array(
+            t,
+            self._names + other._names,
+            np.concatenate([self._values, other._values], axis=1),
+            units={**other._units, **self._units},
+            meta={**other._meta, **self._meta},
+        )
+
+    # -- checks ----------------------------------------------------------------
+
+    def require(self, coordinates) -> tuple[str, ...]:
+        """Check that every coordinate has a channel; return the names.
+
+        Raises TrialError naming the missing ones with close matches
+        ("did you mean 'r_elbow_flex'?").
+        """
+        names = coordinate_channels(coordinates)
+        self._indices(names, what="coordinate channel(s)")
+        return names
+
+    def _check_finite(self, names, hint: str = "") -> None:
+        idx = self._indices(tuple(names))
+        bad = ~np.isfinite(self._values[:, idx])
+        cols = np.flatnonzero(bad.any(axis=0))
+        if cols.size == 0:
+            return
+        lines = []
+        for c in cols[:5]:
+            rows = np.flatnonzero(bad[:, c])
+            first = ", ".join(str(r) for r in rows[:5]) + (", ..." if rows.size > 5 else "")
+            name = self._names[idx[c]]
+            kind = "NaN" if np.isnan(self._values[rows[0], idx[c]]) else "inf"
+            lines.append(
+                f"channel {name!r} has {rows.size} non-finite value(s) ({kind} first) at rows "
+                f"{first} (time {self._time[rows[0]]:.6g} s)"
+            )
+        more = f"; and {cols.size - 5} more channels" if cols.size > 5 else ""
+        raise TrialError(
+            self._where() + "; ".join(lines) + more
+            + "; fill or cut the gaps (slice_time, resample(method='linear'))"
+            + (f" {hint}" if hint else "")
+        )
+
+    def _check_radians(self, names) -> None:
+        idx = self._indices(tuple(names))
+        if not idx:
+            return
+        block = self._values[:, idx]
+        peak = np.max(np.abs(block), axis=0, initial=0.0, where=np.isfinite(block))
+        over = np.flatnonzero(peak > DEGREES_THRESHOLD)
+        if over.size == 0:
+            return
+        k = int(over[0])
+        name = self._names[idx[k]]
+        declared = self._meta.get("in_degrees")
+        converted = self._meta.get("converted_to_radians", ())
+        what = f"column {name!r} looks like degrees (max {peak[k]:.1f})"
+        if not self._meta.get("source"):
+            fix = "but trial channels must be in radians; convert with numpy.deg2rad"
+        elif declared is True and name not in converted:
+            fix = (
+                "but it was not converted from degrees because it was not recognised as "
+                f"an angle; pass angular=[..., {name!r}] to read_trial"
+            )
+        elif declared is None:
+            fix = (
+                "but the file does not declare inDegrees (radians assumed); set inDegrees=yes "
+                "in the header or convert"
+            )
+        else:
+            fix = "but the file declares radians; set inDegrees=yes in the header or convert"
+        others = f" (also {', '.join(repr(self._names[idx[i]]) for i in over[1:4])})" if over.size > 1 else ""
+        raise TrialError(f"{self._where()}{what} {fix}{others}")
+
+    def validate(self, *, coordinates=None, angular=None) -> Trial:
+        """Check the trial for use; return it unchanged or raise TrialError.
+
+        Checks, in order: time finite and strictly increasing (first offending
+        row and values); the ``coordinates`` are present (with suggestions);
+        every channel is finite (channel, count and first rows); and angular
+        channels look like radians: a largest magnitude above
+        :data:`DEGREES_THRESHOLD` (3π, 540°) means degrees.  The angular
+        channels are ``angular`` if given (names absent from the trial are
+        ignored; presence is what ``coordinates`` checks), else those
+        ``coordinates`` that :func:`is_angular_name` takes for rotations; with
+        neither, no unit check is made.
+        """
+        _check_increasing(self._time, self._where())
+        coords = self.require(coordinates) if coordinates is not None else ()
+        self._check_finite(self._names)
+        if angular is not None:
+            self._check_radians([n for n in _as_names(angular) if n in self._index])
+        else:
+            self._check_radians([c for c in coords if is_angular_name(c)])
+        return self
+
+    # -- filtering -------------------------------------------------------------
+
+    def kinematics(self, coordinates, *, cutoff: float | None = None, order: int = 4):
+        """Coordinates, speeds and accelerations ``(q, v, a)``, each (N, n).
+
+        ``q`` are the ``coordinates`` channels (low-passed at ``cutoff`` Hz if
+        given); ``v`` and ``a`` are derivatives of the quintic spline through
+        them (:func:`pinmsk.filtering.differentiate`).  The coordinates must be
+        present and finite, and rotational ones (by :func:`is_angular_name`)
+        must look like radians.
+        """
+        names = self.require(coordinates)
+        self._check_finite(names)
+        self._check_radians([c for c in names if is_angular_name(c)])
+        return differentiate(self._time, self.get(names), cutoff=cutoff, order=order)
+
+    def smoothed(self, cutoff: float, *, order: int = 4, names=None) -> Trial:
+        """A new Trial with channels (all, or ``names``) low-passed at ``cutoff`` Hz.
+
+        Zero-lag Butterworth (:func:`pinmsk.filtering.lowpass`) at the median
+        rate; the time steps must be uniform within
+        :data:`pinmsk.filtering.UNIFORM_TOLERANCE` (10 %).
+        """
+        names = self._names if names is None else _as_names(names)
+        idx = self._indices(names)
+        self._check_finite(names)
+        t = self._time
+        if t.shape[0] < 2:
+            raise TrialError("smoothing needs at least 2 frames")
+        dt = np.diff(t)
+        step = float(np.median(dt))
+        if np.max(np.abs(dt - step)) > UNIFORM_TOLERANCE * step:
+            raise TrialError(
+                f"{self._where()}filtering needs uniform sampling, but time steps range from "
+                f"{dt.min():.6g} to {dt.max():.6g} s; resample first, e.g. trial.resample({1 / step:.6g})"
+            )
+        values = self._values.copy()
+        values[:, idx] = lowpass(values[:, idx], rate=1.0 / step, cutoff=cutoff, order=order)
+        return self._new(t, self._names, values, meta={**self._meta, "lowpass_cutoff": float(cutoff)})
+
+    # -- files -----------------------------------------------------------------
+
+    def write(self, path, *, in_degrees: bool = False, angular=None):
+        """Write to ``.csv``, ``.sto`` or ``.mot``; see :func:`pinmsk.io.write_trial`."""
+        from pinmsk.io import write_trial
+
+        return write_trial(self, path, in_degrees=in_degrees, angular=angular)
+
+
+def _rebuild(time, names, values, units, meta) -> Trial:
+    """Unpickle a Trial."""
+    return Trial.from_array(time, names, values, units=units, meta=meta)
+
+
+def _check_increasing(t: np.ndarray, where: str = "") -> None:
+    """Raise TrialError at the first row whose time is not above the previous one."""
+    if t.shape[0] < 2:
+        return
+    bad = np.flatnonzero(np.diff(t) <= 0)
+    if bad.size:
+        row = int(bad[0]) + 1
+        raise TrialError(
+            f"{where}time is not strictly increasing at row {row}: time[{row}]={float(t[row])!r} "
+            f"<= time[{row - 1}]={float(t[row - 1])!r} ({bad.size} such row(s)); sort the samples "
+            "or remove repeated frames"
+        )

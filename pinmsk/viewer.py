@@ -1,0 +1,851 @@
+"""Interactive 3-D viewer: a model, its muscles and a trial in meshcat.
+
+Built on Pinocchio's :class:`~pinocchio.visualize.MeshcatVisualizer` (which
+places the skeleton's visual geometry) and meshcat's own server, which serves
+the bundled JavaScript viewer on localhost, so no network is needed::
+
+    viewer = pinmsk.viewer.Viewer(pinmsk.load_model("forearm"))   # prints the URL
+    viewer.display(q)                                  # one configuration
+    viewer.play(trial, results=so_results)             # animation + time slider
+    viewer.jupyter_cell()                              # in a notebook cell
+
+Scene (paths under meshcat's ``/meshcat``)::
+
+    pinmsk                              model frame -> z-up world (y-up models stand up)
+    pinmsk/ground                       the ground plane
+    pinmsk/model/skeleton/visuals/<geometry>   bodies (Pinocchio's MeshcatVisualizer)
+    pinmsk/model/muscles/<muscle>/seg<i>/c<k>  muscle polylines; colour level k of 0..levels-1
+    pinmsk/model/contacts/<n>                  contact spheres
+    pinmsk/model/residuals/<coord>/c<k>        joint residual markers, colour level k
+    pinmsk/ghost/skeleton/visuals/<geometry>   second motion (translucent), optional offset
+    pinmsk/grf/<side>/shaft, head              ground reaction force arrows
+
+Colours: activation (or force / f_max, or |residual| / scale) in [0, 1] maps to
+``levels`` discrete colours from blue (0) to red (1).  Each level is its own
+mesh whose visibility is switched, so animated colours also reach a browser
+that connects after the animation was sent (meshcat re-sends the scene to late
+clients with the animation before the objects, which breaks material tracks).
+
+Channels used (see DESIGN.md): coordinates by name; ``<muscle>_activation``
+or ``<muscle>_force``; ``<coord>_residual``; ``ground_force_v[xyz]`` and
+``ground_force_p[xyz]`` with an optional side prefix.
+"""
+from __future__ import annotations
+
+import os
+import sys
+import time
+import warnings
+from collections import namedtuple
+from typing import Mapping, Sequence
+
+import numpy as np
+import pinocchio as pin
+
+from . import viewer_geometry as vg
+from .errors import ModelError, TrialError
+
+__all__ = ["Viewer", "ViewerCommand", "view_cli", "default_ground_height"]
+
+#: One command sent to the meshcat server: ``kind`` (``set_object``, ``set_transform``,
+#: ``set_property``, ``set_animation``, ``delete``), the node ``path`` and a detail
+#: (the property name, or the animated paths of a ``set_animation``).
+ViewerCommand = namedtuple("ViewerCommand", "kind path detail")
+
+_KIND = {"SetObject": "set_object", "SetTransform": "set_transform", "SetProperty": "set_property",
+         "SetAnimation": "set_animation", "Delete": "delete", "DaeMeshGeometry": "set_object"}
+
+BONE = (0.89, 0.85, 0.79, 1.0)
+GHOST = (0.45, 0.75, 1.0, 0.35)
+GROUND = 0x7f8c99
+CONTACT = 0xe0c020
+GRF = 0x22bb44
+
+
+class Viewer:
+    """A meshcat scene of one model. Starts (or connects to) a meshcat server.
+
+    Parameters (keyword-only)
+    -------------------------
+    zmq_url : connect to a running ``meshcat-server`` instead of starting one.
+    open_browser : open the URL in a browser; ignored on a machine without a
+        display (no ``DISPLAY``/``WAYLAND_DISPLAY`` on Linux).
+    ground : draw the ground plane (at :func:`default_ground_height` unless
+        ``ground_height`` is given, in metres along the model's up axis).
+    levels : number of discrete colours for activations/forces/residuals.
+    skeleton_opacity : opacity of the bones (default 0.6 for models with muscles,
+        whose display points often lie inside the bones' visuals, else 1).
+    quiet : do not print the URL.
+
+    Attributes: ``url``, ``model``, ``visual_model`` (the Pinocchio
+    GeometryModel shown), ``commands`` (a list of :data:`ViewerCommand`, every
+    command sent, for tests and debugging), ``vis`` (the meshcat Visualizer)
+    and ``viz`` (Pinocchio's MeshcatVisualizer).
+    """
+
+    def __init__(self, model, *, zmq_url: str | None = None, open_browser: bool = False,
+                 ground: bool = True, ground_height: float | None = None, levels: int = 8,
+                 skeleton_opacity: float | None = None, quiet: bool = False):
+        import meshcat
+        from pinocchio.visualize import MeshcatVisualizer
+
+        self.model = model
+        self.levels = int(levels)
+        self._colors = vg.color_levels(self.levels)
+        self.commands: list[ViewerCommand] = []
+        self.up_axis = str(model.meta.get("up_axis", "z"))
+        self._up = vg.up_index(self.up_axis)
+        self._closed = False
+        self._level_state: dict[str, int] = {}
+        self._residual_built = False
+        self._grf_sides: list[str] = []
+        self._ghost_viz = None
+        self._ghost_offset = np.zeros(3)
+
+        self.visual_model = build_visual_model(model)
+        if skeleton_opacity is None:
+            # muscle display points lie inside the bones' visuals: let them show through
+            skeleton_opacity = 0.6 if getattr(model, "muscles", None) is not None else 1.0
+        for g in self.visual_model.geometryObjects:
+            g.meshColor = np.concatenate([np.asarray(g.meshColor[:3]), [float(skeleton_opacity)]])
+        self.vis = meshcat.Visualizer(zmq_url=zmq_url) if zmq_url else _start_quietly(meshcat)
+        self._record(self.vis.window)
+        self.url = self.vis.url()
+        try:
+            self._setup(quiet=quiet, open_browser=open_browser, ground=ground, ground_height=ground_height)
+        except BaseException:
+            self.close()
+            raise
+
+    def _setup(self, *, quiet, open_browser, ground, ground_height) -> None:
+        from pinocchio.visualize import MeshcatVisualizer
+
+        model = self.model
+        if not quiet:
+            print(f"pinmsk viewer: {self.url}", flush=True)
+        if open_browser:
+            if _has_display():
+                self.vis.open()
+            elif not quiet:
+                print("pinmsk viewer: no display found; open the URL above in a browser", flush=True)
+
+        self.vis["/Grid"].set_property("visible", False)
+        self.vis["/Axes"].set_property("visible", False)
+        self._root = "pinmsk"
+        self.vis[self._root].set_transform(vg.up_rotation(self.up_axis))
+
+        self.viz = MeshcatVisualizer(model.pin, None, self.visual_model)
+        self.viz.initViewer(viewer=self.vis[f"{self._root}/model"])
+        self.viz.loadViewerModel(rootNodeName="skeleton")
+
+        self._q0 = neutral_configuration(model.pin)
+        self._muscle_segments = self._build_muscles()
+        self._contacts = self._build_contacts()
+        self._joint_ids = {c: model.pin.getJointId(c) for c in model.coordinates}
+
+        self.ground_height = (default_ground_height(model, self.visual_model, self._q0)
+                              if ground_height is None else float(ground_height))
+        if ground:
+            self._build_ground()
+        self.display(self._q0)
+        self.frame_camera([self._q0])
+
+    # ------------------------------------------------------------------ setup
+    def _record(self, window) -> None:
+        send = window.send
+        log = self.commands
+
+        def recording_send(command):
+            kind = _KIND.get(type(command).__name__, type(command).__name__)
+            if kind == "set_animation":
+                detail = tuple(p.lower() for p in command.animation.clips)
+                log.append(ViewerCommand(kind, "", detail))
+            else:
+                path = getattr(command, "path", None)
+                path = path.lower() if hasattr(path, "lower") and not isinstance(path, str) else path
+                log.append(ViewerCommand(kind, path or "", getattr(command, "key", None)))
+            return send(command)
+
+        window.send = recording_send
+
+    def _node(self, rel: str):
+        return self.vis[f"{self._root}/{rel}"]
+
+    def _build_muscles(self) -> dict[str, list[tuple[str, int, str, int, np.ndarray]]]:
+        """Create the level meshes of every muscle segment; return the segment table."""
+        import meshcat.geometry as mg
+
+        m = self.model
+        if m.muscles is None or not getattr(m.muscles, "display_points", None):
+            return {}
+        radii = _muscle_radii(m.muscles)
+        segments = {}
+        frames = {f.name for f in m.pin.frames}
+        for i, name in enumerate(m.muscles.names):
+            pts = m.muscles.display_points.get(name) or []
+            resolved = []
+            for p in pts:
+                body, xyz = p[0], np.asarray(p[1:4], dtype=float)
+                if body not in frames:
+                    warnings.warn(f"muscle '{name}': display point on unknown body '{body}'; skipped",
+                                  stacklevel=3)
+                    continue
+                resolved.append((m.pin.getFrameId(body), xyz))
+            if len(resolved) < 2:
+                continue
+            segs = []
+            for s in range(len(resolved) - 1):
+                path = f"model/muscles/{name}/seg{s}"
+                for k in range(self.levels):
+                    mat = mg.MeshLambertMaterial(color=vg.rgb_to_int(self._colors[k]))
+                    self._node(f"{path}/c{k}").set_object(mg.Cylinder(1.0, 1.0), mat)
+                    if k:
+                        self._node(f"{path}/c{k}").set_property("visible", False)
+                segs.append((path, resolved[s][0], resolved[s][1], resolved[s + 1][0], resolved[s + 1][1]))
+            segments[name] = (float(radii[i]), segs)
+            self._level_state[f"muscle:{name}"] = 0
+        return segments
+
+    def _build_contacts(self):
+        import meshcat.geometry as mg
+
+        spheres = contact_spheres(self.model)
+        for k, (label, fid, pos, radius) in enumerate(spheres):
+            self._node(f"model/contacts/c{k}").set_object(
+                mg.Sphere(radius), mg.MeshLambertMaterial(color=CONTACT, opacity=0.8, transparent=True))
+        return spheres
+
+    def _build_ground(self) -> None:
+        import meshcat.geometry as mg
+
+        pts = vg.geometry_points(self.model.pin, self.visual_model, self._q0)
+        size = float(np.clip(3.0 * np.ptp(pts, axis=0).max(), 2.0, 20.0))
+        dims = [size, size, size]
+        dims[self._up] = 0.005
+        T = np.eye(4)
+        T[self._up, 3] = self.ground_height - 0.0025
+        centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+        for ax in range(3):
+            if ax != self._up:
+                T[ax, 3] = centre[ax]
+        node = self._node("ground")
+        node.set_object(mg.Box(dims), mg.MeshLambertMaterial(color=GROUND, opacity=0.6, transparent=True))
+        node.set_transform(T)
+
+    def _build_residuals(self) -> None:
+        import meshcat.geometry as mg
+
+        if self._residual_built:
+            return
+        pts = vg.geometry_points(self.model.pin, self.visual_model, self._q0)
+        r = float(np.clip(0.03 * np.ptp(pts, axis=0).max(), 0.012, 0.05))
+        for c in self.model.coordinates:
+            for k in range(self.levels):
+                node = self._node(f"model/residuals/{c}/c{k}")
+                node.set_object(mg.Sphere(r), mg.MeshLambertMaterial(color=vg.rgb_to_int(self._colors[k]),
+                                                                     opacity=0.85, transparent=True))
+                if k:
+                    node.set_property("visible", False)
+            self._level_state[f"residual:{c}"] = 0
+        self._residual_built = True
+
+    def _build_ghost(self, offset) -> None:
+        from pinocchio.visualize import MeshcatVisualizer
+
+        self._ghost_offset = self._offset_vector(offset)
+        T = np.eye(4)
+        T[:3, 3] = self._ghost_offset
+        self._node("ghost").set_transform(T)
+        if self._ghost_viz is None:
+            self._ghost_viz = MeshcatVisualizer(self.model.pin, None, self.visual_model.copy())
+            self._ghost_viz.initViewer(viewer=self.vis[f"{self._root}/ghost"])
+            self._ghost_viz.loadViewerModel(rootNodeName="skeleton", visual_color=list(GHOST))
+
+    def _offset_vector(self, offset) -> np.ndarray:
+        if np.ndim(offset) == 0:
+            v = np.zeros(3)
+            v[vg.lateral_axis(self.up_axis)] = float(offset)
+            return v
+        v = np.asarray(offset, dtype=float)
+        if v.shape != (3,):
+            raise ValueError(f"ghost offset must be a number (lateral, m) or 3 numbers, got {offset!r}")
+        return v
+
+    def _build_grf(self, sides: Sequence[str]) -> None:
+        import meshcat.geometry as mg
+
+        for side in sides:
+            if side in self._grf_sides:
+                continue
+            mat = mg.MeshLambertMaterial(color=GRF)
+            self._node(f"grf/{_side_key(side)}/shaft").set_object(mg.Cylinder(1.0, 1.0), mat)
+            self._node(f"grf/{_side_key(side)}/head").set_object(
+                mg.Cylinder(self._grf_head, radiusTop=0.0, radiusBottom=2.2 * self._grf_radius), mat)
+            self._grf_sides.append(side)
+
+    _grf_radius = 0.012
+    _grf_head = 0.06
+
+    # ------------------------------------------------------------- display
+    @property
+    def muscle_paths(self) -> dict[str, list[str]]:
+        """Scene paths (relative to ``pinmsk/``) of each muscle's segments."""
+        return {n: [s[0] for s in segs] for n, (_, segs) in self._muscle_segments.items()}
+
+    def display(self, q=None, *, activation=None, force=None, residual=None, residual_scale=None,
+                ghost_q=None, ghost_offset=0.0, grf: Mapping | None = None):
+        """Show configuration ``q`` (nq,) (default: neutral, inside the joint limits).
+
+        ``activation`` / ``force``: per-muscle values, an ``(n_muscles,)`` array or a
+        ``{muscle: value}`` dict (force is shown as force / f_max).  ``residual``:
+        ``(nv,)`` or ``{coord: value}``; coloured as ``|r| / residual_scale``
+        (default: the largest |r|).  ``ghost_q``: a second configuration drawn
+        translucent, shifted sideways by ``ghost_offset`` metres (or a 3-vector).
+        ``grf``: ``{side: (force_xyz, point_xyz)}`` in the model frame.
+        """
+        q = self._q0 if q is None else self._check_q(q, "q")
+        self.viz.display(q)
+        data = self.model.pin.createData()
+        pin.framesForwardKinematics(self.model.pin, data, q)
+        values = self._muscle_values(activation, force)
+        for name, (radius, segs) in self._muscle_segments.items():
+            for path, f0, p0, f1, p1 in segs:
+                a = data.oMf[f0].act(p0)
+                b = data.oMf[f1].act(p1)
+                self._node(path).set_transform(vg.segment_transform(a, b, radius))
+            if values is not None:
+                self._set_level(f"muscle:{name}", [s[0] for s in segs], values.get(name, 0.0))
+        for k, (label, fid, pos, radius) in enumerate(self._contacts):
+            T = np.eye(4)
+            T[:3, 3] = data.oMf[fid].act(pos)
+            self._node(f"model/contacts/c{k}").set_transform(T)
+        if residual is not None:
+            self._build_residuals()
+            r = self._per_coordinate(residual, "residual")
+            scale = residual_scale or (np.nanmax(np.abs(r)) if np.any(np.abs(r) > 0) else 1.0)
+            for c, val in zip(self.model.coordinates, r):
+                T = np.eye(4)
+                T[:3, 3] = data.oMi[self._joint_ids[c]].translation
+                self._node(f"model/residuals/{c}").set_transform(T)
+                self._set_level(f"residual:{c}", [f"model/residuals/{c}"], abs(val) / scale)
+        if ghost_q is not None:
+            self._build_ghost(ghost_offset)
+            self._ghost_viz.display(self._check_q(ghost_q, "ghost_q"))
+        if grf:
+            self._build_grf(list(grf))
+            for side, (force_xyz, point_xyz) in grf.items():
+                self._set_grf(side, force_xyz, point_xyz, self._grf_scale())
+        return self
+
+    def _set_level(self, key: str, paths: Sequence[str], value: float) -> None:
+        level = int(vg.level_of([value], self.levels)[0])
+        old = self._level_state.get(key, 0)
+        if level == old:
+            return
+        for p in paths:
+            self._node(f"{p}/c{old}").set_property("visible", False)
+            self._node(f"{p}/c{level}").set_property("visible", True)
+        self._level_state[key] = level
+
+    def _set_grf(self, side, force_xyz, point_xyz, scale) -> None:
+        shaft, head = vg.arrow_transforms(point_xyz, force_xyz, scale=scale, radius=self._grf_radius,
+                                          head_length=self._grf_head)
+        self._node(f"grf/{_side_key(side)}/shaft").set_transform(shaft)
+        self._node(f"grf/{_side_key(side)}/head").set_transform(head)
+
+    def _grf_scale(self) -> float:
+        """Arrow length per newton: body weight -> 1 m."""
+        mass = float(sum(i.mass for i in self.model.pin.inertias))
+        g = float(np.linalg.norm(self.model.pin.gravity.linear)) or 9.81
+        return 1.0 / (mass * g) if mass > 0 else 1e-3
+
+    def _check_q(self, q, what: str) -> np.ndarray:
+        q = np.asarray(q, dtype=float).reshape(-1)
+        if q.shape != (self.model.pin.nq,):
+            raise ModelError(f"{what} has {q.size} values; model '{self.model.name}' has nq = "
+                             f"{self.model.pin.nq} ({', '.join(self.model.coordinates)})")
+        return q
+
+    def _muscle_values(self, activation, force):
+        if activation is None and force is None:
+            return None
+        m = self.model.muscles
+        if m is None:
+            raise ModelError(f"model '{self.model.name}' has no muscles to colour")
+        if activation is not None:
+            vals = self._per_muscle(activation, "activation")
+        else:
+            vals = self._per_muscle(force, "force") / np.asarray(m.f_max, dtype=float)
+        return dict(zip(m.names, vals))
+
+    def _per_muscle(self, x, what) -> np.ndarray:
+        names = self.model.muscles.names
+        if isinstance(x, Mapping):
+            unknown = sorted(set(x) - set(names))
+            if unknown:
+                raise ModelError(f"{what}: unknown muscles {unknown} (muscles: {', '.join(names)})")
+            return np.array([float(x.get(n, 0.0)) for n in names])
+        x = np.asarray(x, dtype=float).reshape(-1)
+        if x.shape != (len(names),):
+            raise ModelError(f"{what} has {x.size} values; the model has {len(names)} muscles")
+        return x
+
+    def _per_coordinate(self, x, what) -> np.ndarray:
+        coords = self.model.coordinates
+        if isinstance(x, Mapping):
+            unknown = sorted(set(x) - set(coords))
+            if unknown:
+                raise ModelError(f"{what}: unknown coordinates {unknown} (coordinates: {', '.join(coords)})")
+            return np.array([float(x.get(c, 0.0)) for c in coords])
+        x = np.asarray(x, dtype=float).reshape(-1)
+        if x.shape != (len(coords),):
+            raise ModelError(f"{what} has {x.size} values; the model has {len(coords)} coordinates")
+        return x
+
+    # ---------------------------------------------------------------- play
+    def play(self, trial, *, results=None, ghost=None, ghost_offset=0.0, residual=None,
+             residual_scale=None, fps: float = 60.0, speed: float = 1.0, play: bool = True,
+             repetitions: int = 1):
+        """Send ``trial`` as a meshcat animation (time slider in the viewer's controls).
+
+        Key frames are at the trial's own times (resampled to at most ``fps``
+        per second), in seconds, so the animation runs at real time (``speed``
+        > 1 plays faster).  ``results`` is a second Trial (e.g. static
+        optimisation output) with ``<muscle>_activation`` or ``<muscle>_force``
+        channels, ``<coord>_residual`` and/or ground reaction channels; it is
+        interpolated onto the trial's times.  ``ghost``: a second Trial of the
+        same model (e.g. the simulated motion) drawn translucent, shifted
+        sideways by ``ghost_offset`` metres.  ``residual``: an ``(N, nv)`` array
+        on the trial's times, instead of ``<coord>_residual`` channels.
+        Returns the ``meshcat.animation.Animation`` sent.
+        """
+        from meshcat.animation import Animation
+
+        model = self.model
+        t_src = np.asarray(trial.time, dtype=float)
+        if t_src.size < 2:
+            raise TrialError("play: the trial needs at least 2 frames")
+        t = _playback_times(t_src, fps)
+        q = _interp_columns(t, t_src, _coordinates_of(trial, model, "trial"))
+        sources = [s for s in (results, trial) if s is not None]
+        values = self._muscle_channels(sources, t)
+        res = None
+        if residual is not None:
+            arr = np.asarray(residual, dtype=float)
+            if arr.shape != (t_src.size, model.nv):
+                raise TrialError(f"residual must be (N, nv) = ({t_src.size}, {model.nv}), got {arr.shape}")
+            res = _interp_columns(t, t_src, arr)
+        else:
+            res = _channels_on(sources, [f"{c}_residual" for c in model.coordinates], t)
+        grf = _grf_on(sources, t)
+        gq = None
+        if ghost is not None:
+            gq = _interp_columns(t, np.asarray(ghost.time, dtype=float), _coordinates_of(ghost, model, "ghost"))
+            self._build_ghost(ghost_offset)
+        if res is not None:
+            self._build_residuals()
+            scale = residual_scale or (np.nanmax(np.abs(res)) if np.any(np.abs(res) > 0) else 1.0)
+            res_levels = vg.level_of(np.abs(res) / scale, self.levels)
+        if grf:
+            self._build_grf(list(grf))
+
+        anim = Animation(default_framerate=1)  # key times in seconds
+        key_t = (t - t[0]) / float(speed)
+        data = model.pin.createData()
+        gm = self.visual_model
+        gdata = gm.createData()
+        gnames = [self.viz.getViewerNodeName(g, pin.GeometryType.VISUAL) for g in gm.geometryObjects]
+        ghost_names = ([self._ghost_viz.getViewerNodeName(g, pin.GeometryType.VISUAL)
+                        for g in self._ghost_viz.visual_model.geometryObjects] if gq is not None else [])
+        scales = [g.meshScale for g in gm.geometryObjects]
+        moving = [g.parentJoint != 0 for g in gm.geometryObjects]
+        gscale = self._grf_scale()
+        from pinocchio.visualize.meshcat_visualizer import applyScalingOnHomegeneousTransform as scaled
+        for i, tk in enumerate(key_t):
+            frame = anim.at_frame(self.vis, float(tk))
+            pin.framesForwardKinematics(model.pin, data, q[i])
+            pin.updateGeometryPlacements(model.pin, data, gm, gdata)
+            for name, M, s, mov in zip(gnames, gdata.oMg, scales, moving):
+                if mov:
+                    frame[f"{self._root}/model/{name}"].set_transform(scaled(M.homogeneous, s))
+            for mname, (radius, segs) in self._muscle_segments.items():
+                for path, f0, p0, f1, p1 in segs:
+                    T = vg.segment_transform(data.oMf[f0].act(p0), data.oMf[f1].act(p1), radius)
+                    _set_scaled(frame[f"{self._root}/{path}"], T)
+            for k, (label, fid, pos, radius) in enumerate(self._contacts):
+                T = np.eye(4)
+                T[:3, 3] = data.oMf[fid].act(pos)
+                frame[f"{self._root}/model/contacts/c{k}"].set_transform(T)
+            if res is not None:
+                for c in model.coordinates:
+                    T = np.eye(4)
+                    T[:3, 3] = data.oMi[self._joint_ids[c]].translation
+                    frame[f"{self._root}/model/residuals/{c}"].set_transform(T)
+            if gq is not None:
+                pin.framesForwardKinematics(model.pin, data, gq[i])
+                pin.updateGeometryPlacements(model.pin, data, gm, gdata)
+                for name, M, s, mov in zip(ghost_names, gdata.oMg, scales, moving):
+                    if mov:
+                        frame[f"{self._root}/ghost/{name}"].set_transform(scaled(M.homogeneous, s))
+            for side, (F, P) in grf.items():
+                shaft, head = vg.arrow_transforms(P[i], F[i], scale=gscale, radius=self._grf_radius,
+                                                  head_length=self._grf_head)
+                _set_scaled(frame[f"{self._root}/grf/{_side_key(side)}/shaft"], shaft)
+                _set_scaled(frame[f"{self._root}/grf/{_side_key(side)}/head"], head)
+        # colours: visibility of the level meshes, keyed only where the level changes
+        for mname, (radius, segs) in self._muscle_segments.items():
+            if mname in values:
+                lv = vg.level_of(values[mname], self.levels)
+                for path, *_ in segs:
+                    self._visibility_tracks(anim, key_t, lv, path)
+                self._level_state[f"muscle:{mname}"] = int(lv[0])
+        if res is not None:
+            for j, c in enumerate(model.coordinates):
+                self._visibility_tracks(anim, key_t, res_levels[:, j], f"model/residuals/{c}")
+                self._level_state[f"residual:{c}"] = int(res_levels[0, j])
+        self.vis.set_animation(anim, play=play, repetitions=repetitions)
+        self.frame_camera(q[:: max(1, len(q) // 10)])
+        return anim
+
+    def _visibility_tracks(self, anim, key_t, lv, path) -> None:
+        changes = np.flatnonzero(np.diff(lv)) + 1
+        idx = np.concatenate([[0], changes, [len(lv) - 1]])
+        for k in range(self.levels):
+            node = f"{self._root}/{path}/c{k}"
+            for i in idx:
+                anim.at_frame(self.vis, float(key_t[i]))[node].set_property("visible", "boolean",
+                                                                           bool(lv[i] == k))
+
+    def _muscle_channels(self, sources, t) -> dict[str, np.ndarray]:
+        m = self.model.muscles
+        if m is None:
+            return {}
+        out = {}
+        for i, n in enumerate(m.names):
+            act = _channels_on(sources, [f"{n}_activation"], t)
+            if act is not None:
+                out[n] = act[:, 0]
+                continue
+            force = _channels_on(sources, [f"{n}_force"], t)
+            if force is not None:
+                out[n] = force[:, 0] / float(np.asarray(m.f_max)[i])
+        return out
+
+    # -------------------------------------------------------------- camera
+    def frame_camera(self, qs: Sequence[np.ndarray] | None = None, *, distance: float | None = None) -> None:
+        """Point the camera at the model (at configurations ``qs``), seen from its right side.
+
+        The scene root is translated so that the model's centre is at meshcat's
+        origin, which the orbit camera looks at (``self.centre`` is that centre in
+        the z-up world before the shift).
+        """
+        qs = [self._q0] if qs is None else qs
+        pts = np.concatenate([vg.geometry_points(self.model.pin, self.visual_model, q) for q in qs])
+        if self._ghost_viz is not None:
+            pts = np.concatenate([pts, pts + self._ghost_offset])
+        R = vg.up_rotation(self.up_axis)[:3, :3]
+        w = pts @ R.T
+        lo, hi = w.min(axis=0), w.max(axis=0)
+        centre = 0.5 * (lo + hi)
+        extent = max(float(np.max(hi - lo)), 0.3)
+        d = distance or (1.25 * extent + 0.2)
+        direction = np.array([0.45, -1.0, 0.3])
+        offset = d * direction / np.linalg.norm(direction)
+        # meshcat's orbit camera looks at the world origin: move the scene there instead
+        T = vg.up_rotation(self.up_axis)
+        T[:3, 3] = -centre
+        self.vis[self._root].set_transform(T)
+        self.centre = centre
+        # the camera object lives in three.js's y-up frame: (x, y, z)_world -> (x, z, -y)
+        self.vis["/Cameras/default/rotated/<object>"].set_property(
+            "position", [float(offset[0]), float(offset[2]), float(-offset[1])])
+
+    # --------------------------------------------------------------- misc
+    def jupyter_cell(self, height: int = 400):
+        """An IPython HTML object embedding the viewer (put it last in a notebook cell)."""
+        return self.vis.jupyter_cell(height=height)
+
+    def static_html(self) -> str:
+        """The whole current scene as one self-contained HTML page (from the server)."""
+        return self.vis.static_html()
+
+    def scene(self) -> dict[str, set[str]]:
+        """The server's scene tree: ``{path: {"object", "transform", "animation", "property"}}``.
+
+        Read back from the meshcat server (its ``get_scene`` reply), not from
+        what this object remembers sending.
+        """
+        return parse_static_scene(self.static_html())
+
+    def wait(self) -> None:
+        """Block until a browser has connected."""
+        self.vis.wait()
+
+    def close(self) -> None:
+        """Stop the meshcat server this viewer started (no-op when connected to another one)."""
+        if self._closed:
+            return
+        self._closed = True
+        window = self.vis.window
+        proc = getattr(window, "server_proc", None)
+        try:
+            window.zmq_socket.close(linger=0)
+        except Exception:  # pragma: no cover
+            pass
+        if proc is not None and proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(timeout=5)
+            except Exception:  # pragma: no cover
+                proc.kill()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"<pinmsk.Viewer {self.model.name} at {self.url}>"
+
+
+# ------------------------------------------------------------------ helpers
+
+def _start_quietly(meshcat):
+    """Start a meshcat server subprocess; its banner goes to stderr, we print the URL ourselves."""
+    import contextlib
+    import io
+
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        vis = meshcat.Visualizer()
+    return vis
+
+
+def _has_display() -> bool:
+    if sys.platform in ("darwin", "win32"):
+        return True
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def _side_key(side) -> str:
+    return side if side else "grf"
+
+
+def _set_scaled(frame, T: np.ndarray) -> None:
+    """Animation keys for a transform with scale (meshcat's helper drops the scale)."""
+    from meshcat.animation import js_position, js_quaternion
+
+    S = np.linalg.norm(T[:3, :3], axis=0)
+    R = T[:3, :3] / np.where(S > 0, S, 1.0)
+    M = np.eye(4)
+    M[:3, :3] = R
+    M[:3, 3] = T[:3, 3]
+    frame.set_property("position", "vector3", js_position(M))
+    frame.set_property("quaternion", "quaternion", js_quaternion(M))
+    frame.set_property("scale", "vector3", [float(x) for x in S])
+
+
+def _playback_times(t: np.ndarray, fps: float) -> np.ndarray:
+    """The trial's own times, or a uniform grid at ``fps`` when the trial is denser."""
+    duration = float(t[-1] - t[0])
+    if fps <= 0 or t.size <= duration * fps + 1:
+        return t
+    n = int(np.ceil(duration * fps)) + 1
+    return np.linspace(t[0], t[-1], n)
+
+
+def _interp_columns(t, t_src, values) -> np.ndarray:
+    values = np.asarray(values, dtype=float)
+    if values.ndim == 1:
+        values = values[:, None]
+    if len(t) == len(t_src) and np.array_equal(t, t_src):
+        return values.copy()
+    return np.stack([np.interp(t, t_src, values[:, k]) for k in range(values.shape[1])], axis=1)
+
+
+def _coordinates_of(trial, model, what: str) -> np.ndarray:
+    """``(N, nq)`` configuration of ``model`` from a trial's coordinate channels."""
+    names = set(trial.names)
+    missing = [c for c in model.coordinates if c not in names]
+    if missing:
+        import difflib
+        hints = [f"{c} (did you mean {difflib.get_close_matches(c, trial.names, n=1)[0]!r}?)"
+                 if difflib.get_close_matches(c, trial.names, n=1) else c for c in missing]
+        raise TrialError(
+            f"{what} has no channel for coordinate(s) {', '.join(hints)} of model "
+            f"'{model.name}'; a motion to view needs all of: {', '.join(model.coordinates)}")
+    q = np.zeros((len(trial.time), model.pin.nq))
+    for c in model.coordinates:
+        q[:, model.pin.joints[model.pin.getJointId(c)].idx_q] = np.asarray(trial[c], dtype=float)
+    return q
+
+
+def _channels_on(sources, names, t) -> np.ndarray | None:
+    """Channels ``names`` from the first source holding all of them, on times ``t``; else None."""
+    for s in sources:
+        if all(n in s.names for n in names):
+            vals = np.stack([np.asarray(s[n], dtype=float) for n in names], axis=1)
+            return _interp_columns(t, np.asarray(s.time, dtype=float), vals)
+    return None
+
+
+def _grf_on(sources, t) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """``{side: (F (N, 3), P (N, 3))}`` from ground reaction channels (missing axes are 0)."""
+    from .trial import parse_ground_reaction
+
+    out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for s in sources:
+        found: dict[str, dict[tuple[str, str], str]] = {}
+        for n in s.names:
+            g = parse_ground_reaction(n)
+            if g is not None and g.quantity in ("force", "point"):
+                found.setdefault(g.side or "", {})[(g.quantity, g.axis)] = n
+        for side, chans in found.items():
+            if side in out or not any(k[0] == "force" for k in chans):
+                continue
+            arrays = []
+            for quantity in ("force", "point"):
+                cols = [np.asarray(s[chans[(quantity, ax)]], dtype=float) if (quantity, ax) in chans
+                        else np.zeros(len(s.time)) for ax in "xyz"]
+                arrays.append(_interp_columns(t, np.asarray(s.time, dtype=float), np.stack(cols, axis=1)))
+            out[side] = (arrays[0], arrays[1])
+    return out
+
+
+def _muscle_radii(muscles) -> np.ndarray:
+    """Display radius of each muscle from its PCSA (volume / l_opt), 4 .. 15 mm."""
+    try:
+        pcsa = np.asarray(muscles.volume, dtype=float) / np.asarray(muscles.l_opt, dtype=float)
+        r = np.sqrt(pcsa / np.pi)
+    except Exception:
+        r = np.full(len(muscles.names), 0.006)
+    return np.clip(np.nan_to_num(r, nan=0.006), 0.004, 0.015)
+
+
+def build_visual_model(model) -> pin.GeometryModel:
+    """The visual GeometryModel of ``model``: its URDF visuals (meshes resolved with
+    ``meta['package_dirs']``) plus capsules for massive bodies without a visual."""
+    urdf = model.meta.get("urdf")
+    gm = pin.GeometryModel()
+    if urdf:
+        dirs = [str(d) for d in model.meta.get("package_dirs", [])]
+        try:
+            gm = pin.buildGeomFromUrdf(model.pin, str(urdf), pin.GeometryType.VISUAL, package_dirs=dirs)
+        except Exception as exc:
+            warnings.warn(f"model '{model.name}': could not load visual geometry from {urdf} ({exc}); "
+                          "showing capsules instead", stacklevel=2)
+            gm = pin.GeometryModel()
+    return vg.fallback_geometry(model.pin, gm, color=BONE)
+
+
+def neutral_configuration(pin_model: pin.Model) -> np.ndarray:
+    """Pinocchio's neutral configuration moved inside finite joint limits."""
+    q = pin.neutral(pin_model)
+    lo, hi = pin_model.lowerPositionLimit, pin_model.upperPositionLimit
+    ok = np.isfinite(lo) & np.isfinite(hi) & (lo <= hi)
+    q[ok] = np.clip(q[ok], lo[ok], hi[ok])
+    return q
+
+
+def default_ground_height(model, visual_model: pin.GeometryModel, q0) -> float:
+    """Ground height along the up axis: ``meta['ground_height']`` if set; 0 for models
+    with a translational (prismatic) joint (the ground is the world's y = 0 or z = 0);
+    otherwise just below the lowest point of the model at ``q0``."""
+    if "ground_height" in model.meta:
+        return float(model.meta["ground_height"])
+    pm = model.pin
+    if any(pm.joints[j].shortname().startswith(("JointModelP", "JointModelFreeFlyer", "JointModelPlanar"))
+           for j in range(1, pm.njoints)):
+        return 0.0
+    up = vg.up_index(model.meta.get("up_axis", "z"))
+    pts = vg.geometry_points(pm, visual_model, q0)
+    return float(pts[:, up].min()) - 0.02
+
+
+def contact_spheres(model) -> list[tuple[str, int, np.ndarray, float]]:
+    """``(label, frame id, position in the frame, radius)`` of the model's contact spheres.
+
+    Reads each contact component's frame (``frame``, ``body`` or ``target``),
+    position (``position``, ``point``, ``offset`` or ``location``, else the
+    frame origin) and ``radius`` (attribute or parameter, else 2 cm).
+    """
+    out = []
+    for c in getattr(model, "contacts", ()):
+        frame = getattr(c, "frame", None) or getattr(c, "body", None) or getattr(c, "target", None)
+        if not isinstance(frame, str) or not model.pin.existFrame(frame):
+            warnings.warn(f"contact {getattr(c, 'label', c)!r}: no frame found to draw it on", stacklevel=2)
+            continue
+        pos = None
+        for attr in ("position", "point", "offset", "location"):
+            if getattr(c, attr, None) is not None:
+                pos = np.asarray(getattr(c, attr), dtype=float).reshape(-1)[:3]
+                break
+        if pos is None or pos.shape != (3,):
+            pos = np.zeros(3)
+        radius = getattr(c, "radius", None)
+        if radius is None:
+            radius = getattr(c, "values", {}).get("radius", 0.02) if hasattr(c, "values") else 0.02
+        out.append((str(getattr(c, "label", frame)), model.pin.getFrameId(frame), pos, float(radius)))
+    return out
+
+
+def parse_static_scene(html: str) -> dict[str, set[str]]:
+    """Decode the commands embedded in meshcat's static HTML into ``{path: kinds}``.
+
+    ``kinds`` holds ``object``, ``transform``, ``property`` and ``animation``;
+    a ``set_animation`` adds ``animation`` to every animated path.
+    """
+    import base64
+    import re
+
+    import umsgpack
+
+    out: dict[str, set[str]] = {}
+    for b64 in re.findall(r'data:application/octet-binary;base64,([A-Za-z0-9+/=]+)', html):
+        cmd = umsgpack.unpackb(base64.b64decode(b64))
+        kind = cmd.get("type")
+        if kind == "set_animation":
+            for a in cmd.get("animations", []):
+                out.setdefault(a["path"], set()).add("animation")
+            continue
+        label = {"set_object": "object", "set_transform": "transform",
+                 "set_property": "property"}.get(kind, kind)
+        out.setdefault(cmd.get("path", ""), set()).add(label)
+    return out
+
+
+def view_cli(model_name, trial_path=None, results_path=None, *, open_browser: bool = False,
+             block: bool = True, timeout: float | None = None) -> Viewer:
+    """``pinmsk view MODEL [TRIAL] [--results RESULTS]``: start the viewer and print its URL.
+
+    Loads the model (built-in name or file), shows the neutral pose, or plays
+    the trial with the results' activations/forces/residuals/GRF.  With
+    ``block`` it then waits (Ctrl-C, or ``timeout`` seconds) and stops the
+    server; otherwise it returns the running :class:`Viewer`.
+    """
+    from .io import read_trial
+    from .model import load_model
+
+    model = load_model(model_name)
+    trial = read_trial(trial_path) if trial_path else None
+    results = read_trial(results_path) if results_path else None
+    viewer = Viewer(model, open_browser=open_browser)
+    if trial is not None:
+        viewer.play(trial, results=results)
+        print(f"pinmsk viewer: playing {trial_path} ({trial.time[-1] - trial.time[0]:.2f} s); "
+              "use the Animations controls for the time slider", flush=True)
+    elif results is not None:
+        raise TrialError("--results needs a TRIAL with the motion to show them on")
+    if not block:
+        return viewer
+    print("pinmsk viewer: press Ctrl-C to stop the server", flush=True)
+    t_end = None if timeout is None else time.monotonic() + timeout
+    try:
+        while t_end is None or time.monotonic() < t_end:
+            time.sleep(0.2)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        viewer.close()
+    return viewer
