@@ -263,9 +263,7 @@ class Viewer:
 
     def _offset_vector(self, offset) -> np.ndarray:
         if np.ndim(offset) == 0:
-            v = np.zeros(3)
-            v[vg.lateral_axis(self.up_axis)] = float(offset)
-            return v
+            return float(offset) * vg.left_vector(self.up_axis)
         v = np.asarray(offset, dtype=float)
         if v.shape != (3,):
             raise ValueError(f"ghost offset must be a number (lateral, m) or 3 numbers, got {offset!r}")
@@ -300,7 +298,8 @@ class Viewer:
         ``{muscle: value}`` dict (force is shown as force / f_max).  ``residual``:
         ``(nv,)`` or ``{coord: value}``; coloured as ``|r| / residual_scale``
         (default: the largest |r|).  ``ghost_q``: a second configuration drawn
-        translucent, shifted sideways by ``ghost_offset`` metres (or a 3-vector).
+        translucent, shifted ``ghost_offset`` metres to the subject's left (away from
+        the camera), or by a 3-vector in the model frame.
         ``grf``: ``{side: (force_xyz, point_xyz)}`` in the model frame.
         """
         q = self._q0 if q is None else self._check_q(q, "q")
@@ -415,7 +414,7 @@ class Viewer:
         channels, ``<coord>_residual`` and/or ground reaction channels; it is
         interpolated onto the trial's times.  ``ghost``: a second Trial of the
         same model (e.g. the simulated motion) drawn translucent, shifted
-        sideways by ``ghost_offset`` metres.  ``residual``: an ``(N, nv)`` array
+        ``ghost_offset`` metres to the subject's left (0: overlaid; a 3-vector: any shift).  ``residual``: an ``(N, nv)`` array
         on the trial's times, instead of ``<coord>_residual`` channels.
         Returns the ``meshcat.animation.Animation`` sent.
         """
@@ -498,11 +497,14 @@ class Viewer:
                 lv = vg.level_of(values[mname], self.levels)
                 for path, *_ in segs:
                     self._visibility_tracks(anim, key_t, lv, path)
-                self._level_state[f"muscle:{mname}"] = int(lv[0])
         if res is not None:
             for j, c in enumerate(model.coordinates):
                 self._visibility_tracks(anim, key_t, res_levels[:, j], f"model/residuals/{c}")
-                self._level_state[f"residual:{c}"] = int(res_levels[0, j])
+        # the static scene shows the first frame (what a paused animation and late clients see)
+        self.display(q[0], activation={n: v[0] for n, v in values.items()} if values else None,
+                     residual=None if res is None else np.abs(res[0]), residual_scale=scale if res is not None else None,
+                     ghost_q=None if gq is None else gq[0], ghost_offset=ghost_offset,
+                     grf={side: (F[0], P[0]) for side, (F, P) in grf.items()} or None)
         self.vis.set_animation(anim, play=play, repetitions=repetitions)
         self.frame_camera(q[:: max(1, len(q) // 10)])
         return anim
@@ -548,8 +550,8 @@ class Viewer:
         lo, hi = w.min(axis=0), w.max(axis=0)
         centre = 0.5 * (lo + hi)
         extent = max(float(np.max(hi - lo)), 0.3)
-        d = distance or (1.25 * extent + 0.2)
-        direction = np.array([0.45, -1.0, 0.3])
+        d = distance or (0.9 * extent + 0.15)
+        direction = np.array([0.7, -1.0, 0.35])
         offset = d * direction / np.linalg.norm(direction)
         # meshcat's orbit camera looks at the world origin: move the scene there instead
         T = vg.up_rotation(self.up_axis)
@@ -576,6 +578,18 @@ class Viewer:
         what this object remembers sending.
         """
         return parse_static_scene(self.static_html())
+
+    def serve(self, *, timeout: float | None = None) -> None:
+        """Keep the server up until Ctrl-C (or ``timeout`` seconds), then stop it."""
+        print(f"pinmsk viewer: serving {self.url}; press Ctrl-C to stop", flush=True)
+        t_end = None if timeout is None else time.monotonic() + timeout
+        try:
+            while t_end is None or time.monotonic() < t_end:
+                time.sleep(0.1)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            self.close()
 
     def wait(self) -> None:
         """Block until a browser has connected."""
@@ -837,15 +851,6 @@ def view_cli(model_name, trial_path=None, results_path=None, *, open_browser: bo
               "use the Animations controls for the time slider", flush=True)
     elif results is not None:
         raise TrialError("--results needs a TRIAL with the motion to show them on")
-    if not block:
-        return viewer
-    print("pinmsk viewer: press Ctrl-C to stop the server", flush=True)
-    t_end = None if timeout is None else time.monotonic() + timeout
-    try:
-        while t_end is None or time.monotonic() < t_end:
-            time.sleep(0.2)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        viewer.close()
+    if block:
+        viewer.serve(timeout=timeout)
     return viewer

@@ -27,7 +27,7 @@ import numpy as np
 import pinocchio as pin
 
 __all__ = [
-    "up_rotation", "up_index", "lateral_axis", "segment_transform", "arrow_transforms",
+    "up_rotation", "up_index", "lateral_axis", "left_vector", "segment_transform", "arrow_transforms",
     "color_levels", "level_of", "rgb_to_int", "fallback_geometry", "geometry_points",
 ]
 
@@ -62,6 +62,17 @@ def up_rotation(up_axis: str) -> np.ndarray:
 def lateral_axis(up_axis: str) -> int:
     """Model axis pointing to the subject's side: z for y-up models, y for z-up, y for x-up."""
     return 2 if up_index(up_axis) == 1 else 1
+
+
+def left_vector(up_axis: str) -> np.ndarray:
+    """Unit vector to the subject's left in the model frame: -z for y-up (z is right),
+    +y for z-up (x forward, y left), +y for x-up."""
+    v = np.zeros(3)
+    if up_index(up_axis) == 1:
+        v[2] = -1.0
+    else:
+        v[1] = 1.0
+    return v
 
 
 def segment_transform(p0, p1, radius: float) -> np.ndarray:

@@ -116,3 +116,179 @@ def distinct_colors(rgb: np.ndarray, *, step: int = 16) -> int:
     """Number of distinct colours after quantising each channel to ``step`` levels."""
     q = (rgb // step).reshape(-1, 3).astype(np.int64)
     return int(np.unique(q[:, 0] * 65536 + q[:, 1] * 256 + q[:, 2]).size)
+
+
+# --------------------------------------------------------------------------
+# DevTools protocol: a live page we can query and wait on (uses tornado's
+# websocket client, which meshcat already depends on).
+
+class Chrome:
+    """A headless Chromium with one page, driven over the DevTools protocol.
+
+        with Chrome(width=800, height=600) as page:
+            page.navigate(url)
+            page.wait_for("window.viewer !== undefined", timeout=20)
+            value = page.evaluate("1 + 1")
+            page.screenshot("shot.png")
+    """
+
+    def __init__(self, *, width: int = 800, height: int = 600, timeout: float = 30.0):
+        import asyncio
+        import json
+        import re
+        import urllib.request
+
+        exe = find_chromium()
+        if exe is None:
+            raise BrowserError("no Chromium executable found")
+        self._profile = tempfile.TemporaryDirectory(prefix="pinmsk-chromium-")
+        self._loop = asyncio.new_event_loop()
+        self._id = 0
+        self._ws = None
+        cmd = [exe, *FLAGS, f"--user-data-dir={self._profile.name}", f"--window-size={width},{height}",
+               "--remote-debugging-port=0", "--remote-allow-origins=*", "about:blank"]
+        self.proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        try:
+            port = None
+            lines = []
+            import time as _time
+            t_end = _time.monotonic() + timeout
+            while port is None and _time.monotonic() < t_end:
+                line = self.proc.stderr.readline()
+                if not line:
+                    if self.proc.poll() is not None:
+                        break
+                    continue
+                lines.append(line)
+                m = re.search(r"DevTools listening on ws://[^:]+:(\d+)/", line)
+                if m:
+                    port = int(m.group(1))
+            if port is None:
+                raise BrowserError("Chromium did not open its DevTools port:\n" + "".join(lines)[-2000:])
+            # keep draining stderr so Chromium never blocks on a full pipe
+            import threading
+            threading.Thread(target=lambda: [None for _ in self.proc.stderr], daemon=True).start()
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=timeout) as r:
+                targets = json.load(r)
+            page = next(t for t in targets if t.get("type") == "page")
+            self._loop.run_until_complete(self._connect(page["webSocketDebuggerUrl"], timeout))
+            self.send("Page.enable")
+            self.send("Runtime.enable")
+            self.send("Emulation.setDeviceMetricsOverride",
+                      {"width": width, "height": height, "deviceScaleFactor": 1, "mobile": False})
+        except BaseException:
+            self.close()
+            raise
+
+    async def _connect(self, url, timeout):
+        import asyncio
+
+        from tornado.websocket import websocket_connect
+
+        self._ws = await asyncio.wait_for(websocket_connect(url, max_message_size=256 * 1024 * 1024),
+                                          timeout)
+
+    async def _call(self, method, params, timeout):
+        import asyncio
+        import json
+
+        self._id += 1
+        my_id = self._id
+        await self._ws.write_message(json.dumps({"id": my_id, "method": method, "params": params or {}}))
+        while True:
+            msg = await asyncio.wait_for(self._ws.read_message(), timeout)
+            if msg is None:
+                raise BrowserError("the DevTools connection closed")
+            data = json.loads(msg)
+            if data.get("id") == my_id:
+                if "error" in data:
+                    raise BrowserError(f"{method}: {data['error']}")
+                return data.get("result", {})
+
+    def send(self, method: str, params: dict | None = None, *, timeout: float = 30.0) -> dict:
+        """Send one DevTools command and return its result."""
+        return self._loop.run_until_complete(self._call(method, params, timeout))
+
+    def navigate(self, url: str, *, timeout: float = 30.0) -> None:
+        self.send("Page.navigate", {"url": url}, timeout=timeout)
+        self.wait_for("document.readyState === 'complete'", timeout=timeout)
+
+    def evaluate(self, expression: str, *, timeout: float = 30.0):
+        """Value of a JavaScript expression in the page (JSON-serialisable results)."""
+        res = self.send("Runtime.evaluate", {"expression": expression, "returnByValue": True,
+                                             "awaitPromise": True}, timeout=timeout)
+        if "exceptionDetails" in res:
+            raise BrowserError(f"JavaScript error in {expression[:80]!r}: "
+                               f"{res['exceptionDetails'].get('exception', {}).get('description', res)}")
+        return res.get("result", {}).get("value")
+
+    def wait_for(self, expression: str, *, timeout: float = 20.0, interval: float = 0.1):
+        """Poll ``expression`` until it is truthy; return its value (BrowserError on timeout)."""
+        import time as _time
+
+        t_end = _time.monotonic() + timeout
+        last = None
+        while _time.monotonic() < t_end:
+            try:
+                last = self.evaluate(expression)
+            except BrowserError as exc:
+                last = exc
+            if last and not isinstance(last, BrowserError):
+                return last
+            _time.sleep(interval)
+        raise BrowserError(f"timed out after {timeout} s waiting for {expression!r} (last: {last!r})")
+
+    def screenshot(self, path) -> Path:
+        import base64
+
+        res = self.send("Page.captureScreenshot", {"format": "png"})
+        path = Path(path)
+        path.write_bytes(base64.b64decode(res["data"]))
+        return path
+
+    def close(self) -> None:
+        if self._ws is not None:
+            try:
+                self._ws.close()
+            except Exception:
+                pass
+            self._ws = None
+        if getattr(self, "proc", None) is not None and self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(timeout=10)
+        if not self._loop.is_closed():
+            self._loop.close()
+        self._profile.cleanup()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+#: JavaScript: the meshcat viewer's scene tree as {path: object type} (no nodes created).
+MESHCAT_SCENE_JS = """
+(() => {
+  const out = {};
+  const walk = (node, path) => {
+    for (const [name, child] of Object.entries(node.children)) {
+      const p = path + "/" + name;
+      if (child.object) out[p] = child.object.type + (child.object.visible ? "" : ":hidden");
+      walk(child, p);
+    }
+  };
+  walk(viewer.scene_tree, "");
+  return out;
+})()
+"""
+
+#: JavaScript: the meshcat animation: number of actions and duration (s).
+MESHCAT_ANIMATION_JS = """
+({actions: viewer.animator.actions.length, duration: viewer.animator.duration,
+  time: viewer.animator.time, playing: viewer.animator.playing})
+"""

@@ -152,10 +152,10 @@ def test_gait2d_lengths_reproduce_eq_5_12():
     assert lengths["vasti_r"] == pytest.approx(0.271 + 0.042 * 0.3, abs=1e-15)
     for side in "rl":
         phi_H, phi_K = values[f"hip_{side}"], values[f"knee_{side}"]
-        phi_A = values[f"ankle_{side}"] + math.pi / 2  # thesis ankle angle (Eq. 5.12)
+        phi_A = values[f"ankle_{side}"]  # thesis ankle angle, zero at neutral (urdf/README.md)
         for muscle, (r_A, r_K, r_H, l0) in TABLE_5_3.items():
             expected = l0 - r_H * phi_H + r_K * phi_K - r_A * (phi_A - math.pi / 2)  # Eq. 5.12
-            assert lengths[f"{muscle}_{side}"] == pytest.approx(expected, abs=1e-15), (muscle, side)
+            assert lengths[f"{muscle}_{side}"] == pytest.approx(expected, abs=1e-14), (muscle, side)
     # moment arms r = -dl/dq: hip r_H, knee -r_K, ankle r_A; nothing on the other leg or the torso
     R = path.moment_arms(q)
     i = path.muscles.index("gastrocnemius_l")

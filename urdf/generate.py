@@ -776,8 +776,8 @@ def gait_urdf(g) -> str:
         "(q[torso_x], q[torso_y]) is the HAT centre of mass in the world (Eq. 5.1); torso_angle and\n"
         "every leg joint rotate about (0, 0, -1), so: torso_angle + = forward lean, hip + = extension,\n"
         "knee + = flexion, ankle + = plantarflexion, mtp + = toe flexion (toes down).  q = 0 is upright\n"
-        "standing: segments vertical, foot perpendicular to the shank (thesis phi_A = ankle + pi/2,\n"
-        f"Eq. 5.12), heel and metatarsal head on the ground y = 0 when torso_y = {g['standing_torso_y']!r} m.\n"
+        "standing: segments vertical, foot perpendicular to the shank (thesis phi_A = ankle, see the\n"
+        f"muscle notes), heel and metatarsal head on the ground y = 0 when torso_y = {g['standing_torso_y']!r} m.\n"
         "Joint order: Pinocchio's URDF parser orders joints depth-first, siblings by joint name,\n"
         "giving torso_x, torso_y, torso_angle, hip_l, knee_l, ankle_l, mtp_l, hip_r, knee_r, ankle_r,\n"
         "mtp_r; Pinocchio needs subtrees contiguous, so no joint order can be Eq. 5.1's interleaved\n"
@@ -831,7 +831,7 @@ def gait_urdf(g) -> str:
                  comment="Shank. Origin = knee joint centre, tibia along -y."),
             Joint(f"ankle_{side}", "revolute", f"shank_{side}", f"foot_{side}", xyz=(0, -Ls, 0), axis=(0, 0, -1),
                   lower=F("-0.8"), upper=F("1.0"),
-                  comment="Ankle, + = plantarflexion; 0 = foot perpendicular to the shank (phi_A = ankle + pi/2)."),
+                  comment="Ankle, + = plantarflexion; 0 = foot perpendicular to the shank (thesis phi_A = ankle)."),
             Link(f"foot_{side}", _along_x(foot["mass"], foot["com"], foot["izz"]),
                  visuals=(Visual("box", (P[0] - H[0], geo["height"], F("0.08")),
                                  xyz=((P[0] + H[0]) / 2, -geo["height"] / 2, 0), material=mat),),
@@ -884,8 +884,8 @@ Coordinates, in the order of Eq. 5.1 ([model] coordinate_order):
   hip_r, hip_l       + = extension           knee_r, knee_l   + = flexion
   ankle_r, ankle_l   + = plantarflexion      mtp_r, mtp_l     + = toe flexion (toes down)
 All revolute joints rotate about (0, 0, -1); world x forward, y up, z to the right.
-q = 0: upright standing, segments vertical, foot perpendicular to the shank, so the
-thesis's ankle angle is phi_A = ankle + pi/2 (Eq. 5.12); its torso angle phi_T is
+q = 0: upright standing, segments vertical, foot perpendicular to the shank; the
+thesis's ankle angle phi_A is our ankle (zero at neutral, see Lengths); its torso angle phi_T is
 pi/2 when upright (Eq. 5.7) where torso_angle = 0.  Heel and metatarsal head touch
 the ground y = 0 when torso_y = {g['standing_torso_y']!r} m
 (hip drop + thigh + shank + ankle height).
@@ -901,10 +901,13 @@ Muscles: 8 groups per leg, Table 5.3 (Ackermann 2007; Gerritsen et al. 1998,
 pennation Menegaldo et al. 2003), Nagano & Gerritsen (2001) contraction dynamics with
 the Winters (1990) quadratic tendon (Eq. A.10-A.11, eps0 = 0.04); no parallel elastic
 element - passive joint moments come from the Riener & Edrich effects below.
-Lengths (Eq. 5.12): l_mt = l0 - r_H phi_H + r_K phi_K - r_A (phi_A - pi/2), i.e. in these
-coordinates  l_mt = l0 - r_H hip + r_K knee - r_A ankle, so the moment arms
-r = -dl/dq are  hip: r_H,  knee: -r_K,  ankle: r_A  (thesis sign: extensors and
-plantarflexors positive); zero entries are omitted.  l0 is Table 5.3's l_0^tm.
+Lengths (Eq. 5.12): l_mt = l0 - r_H phi_H + r_K phi_K - r_A (phi_A - pi/2) with phi_A = ankle
+(zero at neutral), i.e.  l_mt = (l0 + r_A pi/2) - r_H hip + r_K knee - r_A ankle, so the
+moment arms r = -dl/dq are  hip: r_H,  knee: -r_K,  ankle: r_A  (thesis sign: extensors
+and plantarflexors positive); zero entries are omitted.  The path's l0 (length at q = 0)
+is Table 5.3's l_0^tm + r_A pi/2.  Reading phi_A as ankle + pi/2 instead would leave
+soleus (l0 0.201 m < l_slack 0.245 m) and gastrocnemius (0.404 < 0.420 m) shorter than
+their tendons at standing; with phi_A = ankle every fibre sits at 0.5-1.2 l_opt there.
 volume = F_max l_opt / sigma with sigma = 0.25 MPa (thesis Eq. B.3).
 
 {SCHEMA_NOTE}
@@ -952,7 +955,7 @@ volume = F_max l_opt / sigma with sigma = 0.25 MPa (thesis Eq. B.3).
                 f"volume = {fnum(volume)}",
                 f"fast_fraction = {fnum(F(ffast))}",
                 f"width = {fnum(F(width))}",
-                f"paths.constant = {toml_path(F(l0), arms)}",
+                f"paths.constant = {toml_path(float(F(l0)) + float(F(rA)) * math.pi / 2, arms)}",
                 f"points = {toml_points(gait_points(name, side, g))}",
                 "",
             ]
@@ -961,7 +964,7 @@ volume = F_max l_opt / sigma with sigma = 0.25 MPa (thesis Eq. B.3).
             """
 Passive joint moments of hip, knee and ankle (Riener & Edrich 1999, thesis Eq. 5.11),
 one entry per leg.  Eq. 5.11 takes angles in degrees in the thesis's conventions
-(hip + = extension, knee + = flexion, phi_A = ankle + 90 deg); converting from these
+(hip + = extension, knee + = flexion, phi_A = ankle, zero at neutral); converting from these
 coordinates is the effect class's job."""
         ).rstrip("\n"),
         "[[effects]]",

@@ -1,0 +1,35 @@
+"""Foot-ground contact (thesis Ch. 4): sphere elements, friction, feet and identification.
+
+Components (``kind = "contact"``, target = a body frame), vectorised over frames, C1-smooth:
+
+* :class:`HuntCrossley` -- point contact, Eq. 4.4;
+* :class:`Volumetric` -- linear volumetric sphere, Eq. 4.5-4.8;
+* :class:`HyperVolumetric` -- hyper-volumetric sphere, Eq. 4.9-4.15;
+* friction of all three: regularized Coulomb, Eq. 4.16-4.17 (:func:`regularized_coulomb`).
+
+Each reports normal force, friction force and point of application
+(:class:`ContactForces`); :func:`ground_reaction` gives one foot's GRF, COP and
+free moment.  Their ``generalized_force`` is ``J^T`` of the world wrench.
+
+Feet and fitting: :func:`load_foot2d`, :func:`foot_contacts`, :class:`ContactFit`
+(Eq. 4.2 identification), :func:`fit_cli_run` (what ``pinmsk contact fit`` calls),
+:func:`synthetic_foot_trial`, :func:`contact_candidates` (diagnosis hook).
+"""
+from .friction import friction_coefficient, regularized_coulomb
+from .sphere import (ContactForces, SiteKinematics, SphereContact, cap_centroid_depth, cap_volume,
+                     site_kinematics, smooth_positive, wrench_generalized_force)
+from .hunt_crossley import HuntCrossley
+from .volumetric import HyperVolumetric, Volumetric
+from .foot import (KINDS, SITES, GroundReaction, foot_contacts, ground_reaction, load_foot2d,
+                   site_frames)
+from .identify import ContactFit, fit_cli_run, fourier_basis, stance_cycle
+from .synthetic import synthetic_foot_trial
+from .diagnosis import contact_candidates
+
+__all__ = [
+    "ContactFit", "ContactForces", "GroundReaction", "HuntCrossley", "HyperVolumetric", "KINDS",
+    "SITES", "SiteKinematics", "SphereContact", "Volumetric", "cap_centroid_depth", "cap_volume",
+    "contact_candidates", "fit_cli_run", "foot_contacts", "fourier_basis", "friction_coefficient",
+    "ground_reaction", "load_foot2d", "regularized_coulomb", "site_frames", "site_kinematics",
+    "smooth_positive", "stance_cycle", "synthetic_foot_trial", "wrench_generalized_force",
+]

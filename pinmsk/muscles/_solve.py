@@ -42,14 +42,18 @@ def safeguarded_newton(fun: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]
                        x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, *, lo_sign: float,
                        tol: np.ndarray | float, max_iter: int = 100, what: str = "root",
                        names: Sequence[str] | None = None,
-                       inputs: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
+                       inputs: Mapping[str, np.ndarray] | None = None,
+                       accept_jumps: bool = False) -> np.ndarray:
     """Solve ``fun(x) = 0`` elementwise, keeping ``x`` in the bracket ``(lo, hi)``.
 
     ``fun(x)`` returns ``(R, dR/dx)`` (the derivative may be approximate).
     ``R`` has the sign ``lo_sign`` at ``lo`` and the opposite sign at ``hi``.
     An element has converged when its Newton step is at most ``tol`` (absolute,
-    broadcastable); it then takes that last step and is frozen.  Elements whose
-    bracket collapses without a small Newton step have no root in the bracket.
+    broadcastable); it then takes that last step and is frozen.  A bracket that
+    collapses onto an interior point is a root if ``R`` is continuous there; if
+    ``R`` jumps across zero instead, the element fails unless ``accept_jumps``
+    (then the jump point is returned).  A bracket that collapses onto ``lo`` or
+    ``hi`` means there was no sign change: no root.
     Raises :class:`ConvergenceError` naming the first failing muscle and frame.
     """
     x = np.array(x0, dtype=float)
@@ -86,7 +90,7 @@ def safeguarded_newton(fun: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]
             # ...unless the residual jumps there: a continuous R is within
             # |dR| tol of zero at a bracket end that is tol away from the root.
             jump = collapsed & ~(np.abs(r) <= 1e3 * np.abs(dr) * tol)
-            if jump.any():
+            if not accept_jumps and jump.any():
                 _fail(f"{what}: the residual is discontinuous at the solution", jump, names,
                       inputs)
             x = np.where(collapsed, 0.5 * (lo + hi), x)
@@ -124,7 +128,10 @@ def compliant_equilibrium(l_mt, *, l_opt, l_slack, height,
     share of ``v_mt`` (``x' = k_t v_mt / (k_t + k_m)`` with the isometric fibre
     stiffness ``k_m >= 0`` along the line of action, negative values on the
     descending limb counted as 0; OpenSim's initialisation heuristic): a
-    consistent initial state, not an exact one.
+    consistent initial state, not an exact one.  The share inherits the jumps
+    of the tendon stiffness (at slack, and at the Thelen toe where the thesis
+    constants leave a 0.07 % slope step); a root that falls on such a jump is
+    returned at the jump, with a residual no larger than the jump (~1e-5 F_max).
 
     Returns ``(l_ce, v_ce, f_t, cos_alpha)``.
     """
@@ -185,7 +192,7 @@ def compliant_equilibrium(l_mt, *, l_opt, l_slack, height,
                                " (with v_mt: the unit may shorten faster than the fibre can at "
                                "this activation; use the isometric equilibrium, v_mt=None)"
                                if dynamic else ""),
-                           names=names, inputs=inputs)
+                           names=names, inputs=inputs, accept_jumps=dynamic)
     l, inv_l, cos, f_t, k_t = kinematics(x)
     v = velocity(l, inv_l, cos, k_t) if dynamic else np.zeros(shape)
     return l, v, f_t, cos

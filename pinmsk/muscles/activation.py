@@ -120,6 +120,8 @@ def activation_from_excitation(t, u, a0=None, *, tau_rise: float = TAU_RISE,
         raise TrialError(f"time must increase strictly; t[{k + 1}] = {t[k + 1]} <= t[{k}] = {t[k]}")
     n, m = u.shape
     a = np.empty_like(u)
+    if a0 is not None:
+        check_finite(a0=a0)
     a[0] = u[0] if a0 is None else np.broadcast_to(as_array(a0, "a0"), (m,))
     if n == 1:
         return a[:, 0] if squeeze else a

@@ -18,8 +18,6 @@ the parameter arrays and mark them read-only, and attributes cannot be set.
 """
 from __future__ import annotations
 
-from typing import Sequence
-
 import numpy as np
 
 from ._common import check_finite, locate, muscle_parameter, n_muscles, where_first
@@ -30,7 +28,7 @@ from .nagano_gerritsen import (ng_contraction_rate, ng_equilibrium, ng_fiber_for
                                ng_force_length)
 from .pennation import check_along_positive, pennation_height
 from .tendon import TENDON_STRAIN0, thelen_tendon_force, winters_tendon_force
-from .thelen2003 import (A_F, F_HAT, GAMMA, K_PE, PASSIVE_STRAIN0, thelen_contraction_rate,
+from .thelen2003 import (GAMMA, K_PE, PASSIVE_STRAIN0, thelen_contraction_rate,
                          thelen_equilibrium, thelen_fiber_force, thelen_force_velocity)
 from ..errors import ModelError, TrialError
 
@@ -120,6 +118,16 @@ class _MuscleModel:
     def _check(self, **arrays):
         check_finite(self.names, **arrays)
 
+    def _taut(self, l_mt):
+        """``(l_mt', slack)``: frames where the unit is not longer than its tendon are
+        slack (a rigid tendon cannot transmit force there); ``l_mt'`` moves them just
+        past the slack length so the fibre geometry stays defined."""
+        l_mt = np.asarray(l_mt, dtype=float)
+        slack = l_mt - self.l_slack <= 1e-9 * self.l_opt
+        if slack.any():
+            l_mt = np.where(slack, self.l_slack + 1e-6 * self.l_opt, l_mt)
+        return l_mt, slack
+
     def _check_activation(self, a):
         a = np.asarray(a, dtype=float)
         if not (a >= 0).all():
@@ -173,6 +181,9 @@ class _MuscleModel:
             raise ModelError(f"tendon must be one of {_TENDONS}, not {tendon!r}")
         if tendon == "compliant":
             return self.equilibrium(l_mt, a, v_mt)["force"]
+        if v_mt is None:
+            raise TrialError("the rigid-tendon force needs the muscle-tendon velocity v_mt "
+                             "(pass 0.0 for an isometric fibre)")
         self._check(a=a, l_mt=l_mt, v_mt=v_mt)
         a = self._check_activation(a)
         return self._rigid_force(a, l_mt, v_mt)
@@ -231,6 +242,7 @@ class Thelen2003(_MuscleModel):
         linear-in-activation approximation).
         """
         self._check(l_mt=l_mt, v_mt=v_mt)
+        l_mt, slack = self._taut(l_mt)
         l_ce, v_ce, cos = self._rigid(l_mt, v_mt)
         d = l_ce / self.l_opt - 1.0
         fmc = self.f_max * cos
@@ -241,6 +253,9 @@ class Thelen2003(_MuscleModel):
         d *= K_PE / PASSIVE_STRAIN0
         f_pas = np.expm1(d, out=d)
         f_pas *= fmc / np.expm1(K_PE)
+        if slack.any():  # a slack unit cannot pull
+            f_act = np.where(slack, 0.0, f_act)
+            f_pas = np.where(slack, 0.0, f_pas)
         return f_act, f_pas
 
     def equilibrium(self, l_mt, a, v_mt=None, *, tol: float = 1e-10, max_iter: int = 100):
@@ -323,10 +338,13 @@ class NaganoGerritsen(_MuscleModel):
         of the velocity (``a_hat``) is ignored.
         """
         self._check(l_mt=l_mt, v_mt=v_mt)
+        l_mt, slack = self._taut(l_mt)
         l_ce, v_ce, cos = self._rigid(l_mt, v_mt)
         fi = ng_force_length(l_ce / self.l_opt, self.width)
         f_act = ng_fiber_force(v_ce / self.l_opt, 1.0, fi)
         f_act *= self.f_max * cos
+        if slack.any():  # a slack unit cannot pull
+            f_act = np.where(slack, 0.0, f_act)
         return f_act, np.zeros_like(f_act)
 
     def equilibrium(self, l_mt, a, v_mt=None, *, tol: float = 1e-10, max_iter: int = 100):

@@ -114,9 +114,8 @@ def ng_fiber_force_partials(v_norm, a, f_isom, *, a_rel=A_REL, b_rel=B_REL, f_ha
     """``(f, df/dv_norm, df/da, df/df_isom)`` of the CE force ``f = a q(v, a_hat, f_isom)``.
 
     Analytic partials for the inverse model's activation rate (thesis Eq. 5.4).
-    ``d a_hat/d a = 10/3`` below ``a = 0.3`` and 0 above (right value at 0.3... the
-    derivative jumps there; the value for ``a < 0.3`` is used at exactly 0.3 only
-    from below).
+    ``d a_hat/d a = 10/3`` below ``a = 0.3`` and 0 from 0.3 on (the derivative
+    jumps at 0.3; exactly there the right-hand value, 0, is used).
     """
     v = np.asarray(v_norm, dtype=float)
     a = np.asarray(a, dtype=float)

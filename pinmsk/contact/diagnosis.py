@@ -1,0 +1,68 @@
+"""Diagnosis hook: the contact models as catalog candidates for models with foot contact sites.
+
+:func:`contact_candidates` is what the diagnosis catalog (``pinmsk.diagnose``)
+calls for a model and a trial.  It returns one :class:`ContactCandidate` per
+contact model (point, linear volumetric, hyper-volumetric, hyper-volumetric
+relaxed) when the model has the heel/metatarsal/toe sites and the trial the
+driving and GRF channels; otherwise an empty list (so the catalog can always
+ask).  Each candidate carries its three components (thesis defaults) and a
+``fit(trial)`` that runs the Eq. 4.2 identification and returns a
+:class:`ContactFit` -- ``objective_`` / ``objective_full_`` to rank by,
+``n_free_`` for AIC/BIC, ``reaction_`` for the per-candidate GRF curve.  This
+is how the diagnosis shows that a point contact cannot make the double hump of
+the vertical GRF and a volumetric sphere can.
+
+Only foot2d-like models (coordinates ankle_x, ankle_y, foot_angle, mtp) can be
+kinematically driven today; for other models with the sites (gait2d) the
+candidates are listed with ``drivable = False`` and ``fit`` raises.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from ..errors import ModelError
+from .foot import KINDS, foot_contacts
+from .identify import DRIVE, GRF, ContactFit
+
+_VARIANTS = (("point", False), ("volumetric", False), ("hypervolumetric", False), ("hypervolumetric", True))
+
+
+@dataclass
+class ContactCandidate:
+    """One contact model offered to the diagnosis: ``name``, ``kind``, ``relax``, ``components``."""
+
+    name: str
+    kind: str
+    relax: bool
+    components: list
+    drivable: bool
+    options: dict = field(default_factory=dict)
+
+    @property
+    def n_params(self) -> int:
+        return sum(sum(p.vary for p in c.params.values()) for c in self.components)
+
+    def fit(self, model, trial, **options) -> ContactFit:
+        """Run the identification of this candidate (see :class:`ContactFit`)."""
+        if not self.drivable:
+            raise ModelError(f"contact candidate '{self.name}': model '{model.name}' cannot be kinematically "
+                             f"driven (needs coordinates {', '.join(DRIVE)}, mtp); use foot2d")
+        return ContactFit(contact=self.kind, relax=self.relax, **{**self.options, **options}).fit(model, trial)
+
+
+def contact_candidates(model, trial=None, *, side: str | None = None) -> list[ContactCandidate]:
+    """Contact candidates for ``model`` (and ``trial``, if given: it must hold the GRF channels)."""
+    try:
+        sets = {kind: foot_contacts(model, kind, side=side) for kind in KINDS}
+    except ModelError:
+        return []
+    if trial is not None and not all(c in trial for c in GRF):
+        return []
+    drivable = all(c in model.coordinates for c in DRIVE + ("mtp",))
+    if drivable and trial is not None and not all(c in trial for c in DRIVE):
+        drivable = False
+    out = []
+    for kind, relax in _VARIANTS:
+        comps = foot_contacts(model, kind, side=side, relax=relax) if relax else sets[kind]
+        out.append(ContactCandidate(f"{kind}{'_relaxed' if relax else ''}", kind, relax, comps, drivable))
+    return out

@@ -1,0 +1,559 @@
+"""Compare a model with measurements: residuals, noise floor, where it fails.
+
+Three comparison modes (:func:`compare`, ``mode=``):
+
+``"torque"``
+    Inverse dynamics of the measured kinematics against the measured
+    generalized forces ``<coord>_moment`` (dynamometer, exoskeleton, another
+    pipeline).  Unactuated coordinates (a floating base such as gait2d's
+    ``torso_x, torso_y, torso_angle``) are compared against zero when the trial
+    has ground reaction forces, which enter as world-frame wrenches at the
+    feet: their rows of inverse dynamics vanish when model and forces agree.
+``"muscle"``
+    Net joint moments of the muscles driven by measured excitations or EMG
+    (``<muscle>_excitation`` / ``<muscle>_emg``, normalised to [0, 1]):
+    ``tau_mus = R(q)^T (a F_active(q, qdot) + F_passive(q))`` with ``a`` the
+    signal after the model's muscle-level effects (``a = u`` without any),
+    against inverse dynamics.
+``"motion"``
+    Forward simulation driven by the measured ``<coord>_moment`` against the
+    measured coordinates, restarted from the measured state at the start of
+    each ``sim_window`` (multiple shooting: open-loop simulations of a few
+    seconds drift).  Fixed-base models only.
+
+Every mode has the same *residual* ``measured - model`` per channel.  For
+fitting effects, torque and motion modes use the torque-level equation error
+``e = tau_measured - tau_ID`` (fast and linear in most effects); the muscle
+mode uses ``e = tau_mus - tau_ID``.  An effect with generalized force ``Q``
+changes ``e`` by ``+Q`` (inverse dynamics of the richer model is ``tau_ID - Q``);
+a muscle-level effect changes it by the change of ``tau_mus``.
+
+Kinematics are low-passed (zero-lag Butterworth, ``cutoff`` Hz, default 6)
+and differentiated by quintic spline; frames within ``1.5 / cutoff`` s of
+either end (filter and spline end effects) are left out of every statistic.
+
+Noise floor (:class:`NoiseFloor`), estimated from the data, per channel::
+
+    sigma^2 = sigma_white^2 + sigma_kinematic^2
+
+* ``sigma_white``: white measurement noise of the residual (torque sensor,
+  force plates, EMG) from its third differences, which cancel any smooth
+  signal: ``d_k = (e_{k+3} - 3 e_{k+2} + 3 e_{k+1} - e_k) / sqrt(20)`` has the
+  noise's variance for white noise; the RMS of ``d`` after discarding values
+  beyond 5 robust (MAD) standard deviations (steps such as friction
+  reversals) is the estimate.
+* ``sigma_kinematic``: the measured angles' noise seen through filtering,
+  differentiation and inverse dynamics, which is low-pass and invisible to
+  differences.  The angle noise ``sigma_q`` of each coordinate is estimated
+  from third differences as above; three realisations of white noise of that
+  size are pushed through the same low-pass, spline and residual
+  computation, and the RMS change of the residual is the estimate.
+* motion mode: angle noise ``sigma_q`` combined with the spread of the
+  simulated angles when the driving moments get their white noise and the
+  initial states their filtered-kinematics noise (two Monte-Carlo runs).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from ..components import Motion
+from ..errors import ModelError, TrialError
+from ..filtering import differentiate
+from ..skeleton import ExternalForce
+from ..trial import Trial, parse_ground_reaction
+from ..effects._base import SignalEffect, unactuated_coordinates
+from ..effects.catalog import CatalogContext
+
+__all__ = ["DEFAULT_CUTOFF", "MODES", "Comparison", "EquationError", "NoiseFloor", "compare",
+           "catalog_context", "external_forces_from_trial", "white_noise_sigma"]
+
+DEFAULT_CUTOFF = 6.0
+MODES = ("torque", "motion", "muscle")
+_N_PROPAGATE = 3
+
+
+@dataclass(frozen=True)
+class NoiseFloor:
+    """Per-channel noise floor ``sigma`` (same units as the channel) and how it was estimated."""
+
+    channels: tuple[str, ...]
+    sigma: np.ndarray
+    white: np.ndarray
+    propagated: np.ndarray
+    method: str
+
+    def as_dict(self) -> dict[str, float]:
+        out = {c: float(s) for c, s in zip(self.channels, self.sigma)}
+        out["total"] = float(np.sqrt(np.mean(self.sigma ** 2)))
+        return out
+
+
+# -- small numerical helpers ---------------------------------------------------
+
+def white_noise_sigma(x: np.ndarray, axis: int = 0) -> np.ndarray:
+    """White-noise standard deviation of ``x`` from third differences (robust to steps and spikes)."""
+    x = np.asarray(x, dtype=float)
+    d = np.diff(x, n=3, axis=axis) / np.sqrt(20.0)
+    med = np.median(d, axis=axis, keepdims=True)
+    mad = 1.4826 * np.median(np.abs(d - med), axis=axis, keepdims=True)
+    keep = np.abs(d - med) <= 5.0 * np.maximum(mad, 1e-300)
+    ss = np.sum(np.where(keep, d * d, 0.0), axis=axis)
+    n = np.maximum(np.sum(keep, axis=axis), 1)
+    return np.sqrt(ss / n)
+
+
+def _rows_for(t: np.ndarray, cutoff: float | None) -> np.ndarray:
+    n = t.size
+    trim = 1.5 / cutoff if cutoff else 0.0
+    rows = np.flatnonzero((t >= t[0] + trim) & (t <= t[-1] - trim))
+    edge = 5
+    if cutoff is None:
+        rows = np.arange(edge, n - edge)
+    return rows
+
+
+# -- ground reaction forces -----------------------------------------------------
+
+_FOOT_FRAMES = ("heel_{s}", "calcn_{s}", "foot_{s}", "{s}_foot", "toes_{s}")
+
+
+def external_forces_from_trial(model, trial: Trial, *, grf_frames: Mapping[str, str] | None = None
+                               ) -> list[ExternalForce]:
+    """Ground reaction wrenches of the trial as :class:`ExternalForce` s on the model's feet.
+
+    Channels ``[<side>_]ground_force_v[xyz]`` (N), ``..._p[xyz]`` (centre of
+    pressure, m) and optionally ``..._torque_[xyz]`` (free moment, N m).  A side
+    ``s`` goes to the first frame of ``heel_s, calcn_s, foot_s, s_foot, toes_s``
+    that the model has, or to ``grf_frames[s]``.
+    """
+    groups: dict = {}
+    for name in trial.names:
+        p = parse_ground_reaction(name)
+        if p is None:
+            continue
+        groups.setdefault(p.side, {})[(p.quantity, p.axis)] = name
+    out = []
+    for side, chans in sorted(groups.items(), key=lambda kv: str(kv[0])):
+        missing = [f"{q}_{a}" for q in ("force", "point") for a in "xyz" if (q, a) not in chans]
+        if missing:
+            raise TrialError(f"ground reaction of side {side!r} lacks {', '.join(missing)} channels "
+                             f"(need ground_force_v[xyz] and ground_force_p[xyz])")
+        frame = None
+        if grf_frames and side in grf_frames:
+            frame = grf_frames[side]
+            model.frame_id(frame)
+        elif side is not None:
+            for pattern in _FOOT_FRAMES:
+                cand = pattern.format(s=side)
+                if cand in model.frame_names:
+                    frame = cand
+                    break
+        if frame is None:
+            raise TrialError(
+                f"cannot tell which body receives the ground reaction of side {side!r}; pass "
+                f"grf_frames={{{side!r}: '<frame>'}} (frames: {', '.join(model.frame_names[:12])}, ...)"
+            )
+        f = np.column_stack([trial[chans[("force", a)]] for a in "xyz"])
+        p = np.column_stack([trial[chans[("point", a)]] for a in "xyz"])
+        tq = None
+        if all(("torque", a) in chans for a in "xyz"):
+            tq = np.column_stack([trial[chans[("torque", a)]] for a in "xyz"])
+        out.append(ExternalForce(frame, f, p, tq))
+    return out
+
+
+def _subset_external(external, rows):
+    return [ExternalForce(e.frame, np.asarray(e.force)[rows], np.asarray(e.point)[rows],
+                          None if e.torque is None else np.asarray(e.torque)[rows]) for e in external]
+
+
+def _has_grf(trial) -> bool:
+    return any(parse_ground_reaction(n) is not None for n in trial.names)
+
+
+def _excitations(model, trial):
+    """``(kind, (N, m))`` of measured excitation (preferred) or EMG, or ``(None, None)``."""
+    if model.muscles is None:
+        return None, None
+    for kind in ("excitation", "emg"):
+        names = [f"{m}_{kind}" for m in model.muscle_names]
+        have = [n in trial for n in names]
+        if all(have):
+            return kind, np.column_stack([trial[n] for n in names])
+        if any(have):
+            missing = [n for n, h in zip(names, have) if not h]
+            raise TrialError(f"the trial has {kind} channels for some muscles but not {', '.join(missing)}; "
+                             f"muscle-level comparison needs all {len(names)} (or none)")
+    return None, None
+
+
+def _muscle_coordinates(model) -> list[str]:
+    R = model.muscles.moment_arms(np.zeros((1, model.nq)))[0]
+    return [c for j, c in enumerate(model.coordinates) if np.any(np.abs(R[:, j]) > 0)]
+
+
+# -- channel selection -------------------------------------------------------------
+
+@dataclass(frozen=True)
+class _Plan:
+    mode: str
+    coordinates: tuple[str, ...]       # coordinates compared (channel = <coord>_moment or <coord>)
+    unactuated: tuple[str, ...]
+    excitation_kind: str | None
+
+
+def _plan(model, trial, mode: str) -> _Plan:
+    if mode not in ("auto",) + MODES:
+        raise ModelError(f"unknown comparison mode {mode!r}; use one of auto, {', '.join(MODES)}")
+    unact = unactuated_coordinates(model)
+    grf = _has_grf(trial)
+    with_moment = [c for c in model.coordinates if f"{c}_moment" in trial]
+    actuated_moment = [c for c in with_moment if c not in unact]
+    base_rows = [c for c in unact if grf or c in with_moment]
+    kind, _ = _excitations(model, trial)
+    missing_coords = [c for c in model.coordinates if c not in trial]
+    if missing_coords:
+        from ..trial import close_matches
+        hints = {c: close_matches(c, trial.names) for c in missing_coords[:3]}
+        hint = "; ".join(f"{c}: did you mean {', '.join(map(repr, h))}?" for c, h in hints.items() if h)
+        raise TrialError(
+            f"the trial has no channel for coordinate(s) {', '.join(missing_coords)} of model "
+            f"'{model.name}', so the model cannot be compared on it"
+            + (f" ({hint})" if hint else "") + f". Trial channels: {', '.join(trial.names[:15])}"
+        )
+    if mode == "auto":
+        if actuated_moment or base_rows:
+            mode = "torque"
+        elif kind is not None:
+            mode = "muscle"
+        else:
+            raise TrialError(
+                f"the trial has no channel model '{model.name}' can be compared on: it needs "
+                f"measured generalized forces ({', '.join(f'{c}_moment' for c in model.coordinates[:4])}...), "
+                "ground reaction forces (ground_force_v[xyz], ground_force_p[xyz]) for a floating base, "
+                "or muscle excitations/EMG (<muscle>_excitation, <muscle>_emg)"
+                + ("" if model.muscles is None else f" for {', '.join(model.muscle_names[:4])}...")
+            )
+    if mode == "torque":
+        coords = tuple(c for c in model.coordinates if c in actuated_moment or c in base_rows)
+        if not coords:
+            raise TrialError(
+                f"torque-level comparison needs <coord>_moment channels (none of "
+                f"{', '.join(f'{c}_moment' for c in model.coordinates[:6])} is in the trial) or, for "
+                "a floating base, ground reaction force channels"
+            )
+    elif mode == "muscle":
+        if model.muscles is None:
+            raise TrialError(f"muscle-level comparison needs a model with muscles; '{model.name}' has none")
+        if kind is None:
+            raise TrialError(
+                "muscle-level comparison needs excitation or EMG channels: "
+                + ", ".join(f"{m}_excitation" for m in model.muscle_names[:4]) + ", ..."
+            )
+        mc = _muscle_coordinates(model)
+        coords = tuple(c for c in model.coordinates if c in mc or c in base_rows)
+    else:  # motion
+        if unact:
+            raise TrialError(
+                f"motion-level comparison simulates the model open loop; '{model.name}' has a floating "
+                f"base ({', '.join(unact)}) whose ground contact the simulation does not model. "
+                "Use mode='torque' with ground reaction forces"
+            )
+        if not actuated_moment:
+            raise TrialError("motion-level comparison is driven by measured <coord>_moment channels; "
+                             f"the trial has none of {', '.join(f'{c}_moment' for c in model.coordinates[:6])}")
+        coords = tuple(model.coordinates)
+    return _Plan(mode, coords, tuple(unact), kind)
+
+
+def catalog_context(model, trial, *, mode: str = "auto", frames=None) -> CatalogContext:
+    """The :class:`~pinmsk.effects.catalog.CatalogContext` of a model and trial (no dynamics computed)."""
+    if trial is None:
+        return CatalogContext("torque", tuple(model.coordinates), tuple(unactuated_coordinates(model)),
+                              tuple(frames or ()))
+    plan = _plan(model, trial, mode)
+    return CatalogContext(plan.mode, plan.coordinates, plan.unactuated, tuple(frames or ()))
+
+
+# -- the equation error (what effects are fitted to) ---------------------------------------
+
+class EquationError:
+    """Torque-level (or muscle-level) residual ``e`` over the analysed frames, and how effects change it."""
+
+    def __init__(self, *, model, motion: Motion, rows: np.ndarray, coordinates: Sequence[str],
+                 mode: str, measured_tau: np.ndarray | None, external, excitation: np.ndarray | None):
+        from ..dynamics import inverse_dynamics_array
+
+        self.model = model
+        self.motion = motion
+        self.rows = rows
+        self.motion_rows = motion.subset(rows)
+        self.coordinates = tuple(coordinates)
+        self.columns = np.array([model.coordinate_index(c) for c in coordinates], dtype=int)
+        self.mode = "muscle" if mode == "muscle" else "torque"
+        self.external = list(external)
+        self.measured_tau = measured_tau          # (N, nv) with zeros on unactuated rows (torque mode)
+        self.excitation = excitation              # (N, m) measured signals (muscle mode)
+        self._ext_rows = _subset_external(self.external, rows)
+        tau_id = inverse_dynamics_array(model, self.motion_rows, external=self._ext_rows)
+        self.tau_id = tau_id[:, self.columns]
+        if self.mode == "muscle":
+            self.chain = sorted([c for c in model.effects if isinstance(c, SignalEffect)],
+                                key=lambda c: c.order)
+            q, v = motion.q, motion.v
+            self.f_active, self.f_passive = model.muscles.force_limits(q, v)
+            self.moment_arms = model.muscles.moment_arms(q)[:, :, self.columns]     # (N, m, C)
+            self.activation = self._apply_chain(self.chain, excitation)
+            self.tau_mus = self._muscle_moment(self.activation)[rows]
+            self.actuation = self.tau_mus
+        else:
+            self.actuation = measured_tau[rows][:, self.columns]
+        self.e = self.actuation - self.tau_id
+
+    # -- muscle level ----
+    def _apply_chain(self, chain, u):
+        t = self.motion.t
+        a = u
+        for c in chain:
+            a = c.transform(t, a, mask=c.muscle_mask(self.model))
+        return a
+
+    def _muscle_moment(self, a):
+        """(..., N, C) net moments of activations a (..., N, m)."""
+        force = a * self.f_active + self.f_passive
+        return np.einsum("...nm,nmc->...nc", force, self.moment_arms)
+
+    def signal_delta(self, component: SignalEffect, params_batch: Mapping[str, np.ndarray]) -> np.ndarray:
+        """Change of ``e`` (P, n_rows, C) when ``component`` joins the model's muscle-level chain."""
+        t = self.motion.t
+        before = [c for c in self.chain if c.order <= component.order]
+        after = [c for c in self.chain if c.order > component.order]
+        u = self._apply_chain(before, self.excitation)
+        a = component.transform_batch(t, u, params_batch, component.muscle_mask(self.model))
+        if after:
+            a = np.stack([self._apply_chain(after, ap) for ap in a])
+        dtau = np.einsum("pnm,nmc->pnc", (a - self.activation[None]) * self.f_active[None],
+                         self.moment_arms)
+        return dtau[:, self.rows]
+
+    # -- residual with perturbed kinematics (noise propagation) ----
+    def residual_for(self, motion: Motion) -> np.ndarray:
+        from ..dynamics import inverse_dynamics_array
+
+        mrows = motion.subset(self.rows)
+        tau_id = inverse_dynamics_array(self.model, mrows, external=self._ext_rows)[:, self.columns]
+        if self.mode == "muscle":
+            fa, fp = self.model.muscles.force_limits(motion.q, motion.v)
+            R = self.model.muscles.moment_arms(motion.q)[:, :, self.columns]
+            act = np.einsum("nm,nmc->nc", self.activation * fa + fp, R)[self.rows]
+            return act - tau_id
+        return self.actuation - tau_id
+
+
+# -- the comparison ------------------------------------------------------------------------
+
+@dataclass
+class Comparison:
+    """Model against measurement on named channels, over the analysed frames.
+
+    ``measured``, ``modelled`` and ``residual = measured - modelled`` are
+    ``(n, C)`` over ``time`` (the analysed frames); ``noise`` the per-channel
+    noise floor; ``eq`` the equation error effects are fitted to.
+    """
+
+    mode: str
+    model: object
+    trial: Trial
+    cutoff: float | None
+    time: np.ndarray
+    channels: tuple[str, ...]
+    coordinates: tuple[str, ...]
+    measured: np.ndarray
+    modelled: np.ndarray
+    noise: NoiseFloor
+    eq: EquationError
+    states: dict = field(default_factory=dict)
+    options: dict = field(default_factory=dict)
+    eq_noise: NoiseFloor | None = None
+
+    def __post_init__(self):
+        if self.eq_noise is None:
+            self.eq_noise = self.noise
+
+    @property
+    def residual(self) -> np.ndarray:
+        return self.measured - self.modelled
+
+    def rmse(self) -> dict[str, float]:
+        r = np.sqrt(np.mean(self.residual ** 2, axis=0))
+        out = {c: float(v) for c, v in zip(self.channels, r)}
+        out["total"] = float(np.sqrt(np.mean(r ** 2)))
+        return out
+
+    def ratio(self) -> float:
+        """RMS over channels of ``rmse / noise floor`` (1 = at the floor)."""
+        r = np.sqrt(np.mean(self.residual ** 2, axis=0))
+        return float(np.sqrt(np.mean((r / self.noise.sigma) ** 2)))
+
+    def with_model(self, model) -> "Comparison":
+        """The same comparison (frames, noise floor) for another model, e.g. with an effect added."""
+        return compare(model, self.trial, mode=self.mode, cutoff=self.cutoff,
+                       noise_floor=self.noise, _motion=self.eq.motion, **self.options)
+
+
+def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = DEFAULT_CUTOFF,
+            grf_frames: Mapping[str, str] | None = None, sim_window: float = 0.5,
+            noise_floor: NoiseFloor | None = None, _motion: Motion | None = None) -> Comparison:
+    """Compare ``model`` with ``trial`` (see the module docstring for the modes and the noise floor)."""
+    if not isinstance(trial, Trial):
+        raise TrialError(f"compare needs a Trial, got {type(trial).__name__}; read one with pinmsk.read_trial")
+    plan = _plan(model, trial, mode)
+    t = np.asarray(trial.time, dtype=float)
+    if t.size < 30:
+        raise TrialError(f"the trial has {t.size} samples; the diagnosis needs at least 30 "
+                         "(and several seconds for cross-validation)")
+    motion = _motion if _motion is not None else model.motion(trial, cutoff=cutoff)
+    rows = _rows_for(t, cutoff)
+    if rows.size < 30:
+        raise TrialError(
+            f"only {rows.size} samples remain after leaving out {1.5 / cutoff:.3g} s at each end "
+            f"(filter edge effects at cutoff {cutoff:g} Hz); record a longer trial"
+        )
+    external = external_forces_from_trial(model, trial, grf_frames=grf_frames) if _has_grf(trial) else []
+    measured_tau = None
+    excitation = None
+    if plan.mode in ("torque", "motion"):
+        measured_tau = np.zeros((t.size, model.nv))
+        for c in plan.coordinates:
+            if f"{c}_moment" in trial:
+                measured_tau[:, model.coordinate_index(c)] = trial[f"{c}_moment"]
+    else:
+        _, excitation = _excitations(model, trial)
+    eq_coords = plan.coordinates
+    if plan.mode == "motion":
+        eq_coords = tuple(c for c in plan.coordinates if f"{c}_moment" in trial)
+    eq = EquationError(model=model, motion=motion, rows=rows, coordinates=eq_coords, mode=plan.mode,
+                       measured_tau=measured_tau, external=external, excitation=excitation)
+    options = {"grf_frames": grf_frames, "sim_window": sim_window}
+    states = _states(model, trial, motion, rows, eq_coords, excitation, plan.excitation_kind, external)
+    if plan.mode == "motion":
+        meas, mod, floor = _motion_level(model, trial, motion, rows, sim_window, eq, noise_floor, cutoff)
+        channels = tuple(plan.coordinates)
+        eq_floor = _torque_floor(model, trial, motion, eq, cutoff, tuple(f"{c}_moment" for c in eq_coords))
+        return Comparison("motion", model, trial, cutoff, t[rows], channels, tuple(plan.coordinates),
+                          meas, mod, floor, eq, states, options, eq_floor)
+    channels = tuple(f"{c}_moment" for c in eq_coords)
+    floor = noise_floor if noise_floor is not None else _torque_floor(model, trial, motion, eq, cutoff, channels)
+    return Comparison(plan.mode, model, trial, cutoff, t[rows], channels, eq_coords, eq.actuation.copy(),
+                      eq.tau_id.copy(), floor, eq, states, options)
+
+
+def _torque_floor(model, trial, motion, eq, cutoff, channels) -> NoiseFloor:
+    white = white_noise_sigma(eq.e)
+    raw_q = np.column_stack([trial[c] for c in model.coordinates])
+    sigma_q = white_noise_sigma(raw_q)
+    prop = np.zeros(len(channels))
+    if np.any(sigma_q > 0):
+        rng = np.random.default_rng(12345)
+        t = motion.t
+        acc = np.zeros(len(channels))
+        for _ in range(_N_PROPAGATE):
+            noise = rng.standard_normal(raw_q.shape) * sigma_q
+            dq, dv, da = differentiate(t, noise, cutoff=cutoff)
+            pert = Motion(t, motion.q + dq, motion.v + dv, motion.a + da, motion.signals)
+            diff = eq.residual_for(pert) - eq.e
+            acc += np.mean(diff ** 2, axis=0)
+        prop = np.sqrt(acc / _N_PROPAGATE)
+    sigma = np.sqrt(white ** 2 + prop ** 2)
+    sigma = np.where(sigma > 0, sigma, np.finfo(float).tiny)
+    how = ("white noise of the residual from its third differences (outliers beyond 5 MAD dropped), "
+           "plus angle noise (third differences of the raw coordinates: "
+           + ", ".join(f"{c} {s * 180 / np.pi:.3g} deg" for c, s in zip(model.coordinates[:6], sigma_q[:6]))
+           + f") propagated through the {cutoff if cutoff else 'un'}-Hz low-pass, spline derivatives "
+           f"and the residual ({_N_PROPAGATE} Monte-Carlo realisations)")
+    return NoiseFloor(tuple(channels), sigma, white, prop, how)
+
+
+def _states(model, trial, motion, rows, coords, excitation, kind, external) -> dict:
+    """Candidate explanatory signals over the analysed rows, for residual correlations."""
+    out = {}
+    for c in coords:
+        i = model.coordinate_index(c)
+        out[c] = motion.q[rows, i]
+        out[f"{c}_speed"] = motion.v[rows, i]
+        out[f"{c}_acceleration"] = motion.a[rows, i]
+        out[f"sign({c}_speed)"] = np.sign(motion.v[rows, i])
+    if excitation is not None:
+        for j, m in enumerate(model.muscle_names):
+            out[f"{m}_{kind}"] = excitation[rows, j]
+    for e in external:
+        out[f"{e.frame}_contact_force_y"] = np.asarray(e.force)[rows, 1]
+    return out
+
+
+# -- motion level --------------------------------------------------------------------------
+
+def _windows(rows: np.ndarray, t: np.ndarray, length: float) -> list[np.ndarray]:
+    tr = t[rows]
+    edges = np.arange(tr[0], tr[-1], length)
+    out = []
+    for a in edges:
+        w = rows[(tr >= a) & (tr < a + length)]
+        if w.size >= 3:
+            out.append(w)
+    return out
+
+
+def simulate_windows(model, trial, motion, rows, window, *, tau_noise=None, state_noise=None):
+    """Multiple-shooting simulation: q (n_rows, nv) restarted from the measured state each ``window`` s."""
+    from ..dynamics import simulate
+
+    t = motion.t
+    out = np.empty((rows.size, model.nv))
+    pos = {r: k for k, r in enumerate(rows)}
+    cols = [f"{c}_moment" for c in model.coordinates]
+    drive_all = np.column_stack([trial[c] if c in trial else np.zeros(t.size) for c in cols])
+    if tau_noise is not None:
+        drive_all = drive_all + tau_noise
+    for w in _windows(rows, t, window):
+        drive = Trial(t[w], {c: drive_all[w, j] for j, c in enumerate(cols)})
+        q0 = motion.q[w[0]].copy()
+        v0 = motion.v[w[0]].copy()
+        if state_noise is not None:
+            q0 += state_noise[0][w[0]]
+            v0 += state_noise[1][w[0]]
+        sim = simulate(model, t=t[w], q0=q0, v0=v0, moments=drive)
+        q = np.column_stack([sim[c] for c in model.coordinates])
+        for k, r in enumerate(w):
+            out[pos[r]] = q[k]
+    return out
+
+
+def _motion_level(model, trial, motion, rows, window, eq, floor, cutoff):
+    raw_q = np.column_stack([trial[c] for c in model.coordinates])[rows]
+    qs = simulate_windows(model, trial, motion, rows, window)
+    if floor is None:
+        sigma_q = white_noise_sigma(np.column_stack([trial[c] for c in model.coordinates]))
+        cols = [f"{c}_moment" for c in model.coordinates]
+        tau = np.column_stack([trial[c] if c in trial else np.zeros(trial.n_frames) for c in cols])
+        sigma_tau = white_noise_sigma(tau)
+        rng = np.random.default_rng(54321)
+        acc = np.zeros(model.nv)
+        runs = 2
+        for _ in range(runs):
+            nt = rng.standard_normal(tau.shape) * sigma_tau
+            nq = rng.standard_normal(tau.shape) * sigma_q
+            dq, dv, _ = differentiate(motion.t, nq, cutoff=cutoff)
+            qn = simulate_windows(model, trial, motion, rows, window, tau_noise=nt, state_noise=(dq, dv))
+            acc += np.mean((qn - qs) ** 2, axis=0)
+        prop = np.sqrt(acc / runs)
+        sigma = np.sqrt(sigma_q ** 2 + prop ** 2)
+        floor = NoiseFloor(
+            tuple(model.coordinates), np.maximum(sigma, np.finfo(float).tiny), sigma_q, prop,
+            "angle noise from third differences of the raw coordinates, plus the RMS spread of the "
+            f"{window:g}-s simulations when the driving moments get their white noise (third differences) "
+            "and the initial states their filtered-kinematics noise (2 Monte-Carlo runs)")
+    return raw_q, qs, floor

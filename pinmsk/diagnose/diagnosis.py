@@ -1,0 +1,572 @@
+"""The diagnosis: where the model fails, which effect is missing, and the add-refit loop.
+
+:func:`diagnose` compares a model with a trial (:mod:`.compare`), locates the
+failure (per-channel RMSE against the noise floor, the worst time windows,
+the states the residual follows) and ranks every applicable effect of the
+catalog (:func:`pinmsk.effects.catalog`) by how much of the residual it
+explains *out of sample*:
+
+* each candidate is fitted on all frames (its reported parameters and
+  uncertainties) and, for scoring, by blocked cross-validation (``folds``
+  contiguous time blocks, each predicted by the fit on the others, see
+  :mod:`.fit`), so a flexible effect cannot win by fitting noise;
+* ``explained_fraction = 1 - MSE_heldout_after / MSE_before`` (noise-whitened
+  mean squares over channels and frames);
+* ``significant`` when the held-out improvement ``MSE_before - MSE_heldout_after``
+  exceeds ``threshold`` (default 0.1) in units of the noise variance -- the
+  effect explains at least ~30 % of the noise floor's RMS on data it was not
+  fitted to -- and the in-sample BIC falls;
+* ranked by held-out error, best first.
+
+Verdict: ``"at_noise_floor"`` when the error is within ``at_floor`` (1.5) times
+the noise floor (RMS over channels of ``rmse_c / floor_c``), else
+``"missing_effect"``; the summary says whether a catalog effect explains the
+excess or the gap is outside the catalog.
+
+:func:`run` is the command-line loop: diagnose, then for each ``add`` entry fit
+that effect on all frames, add it to the model (``model.with_effect``) and
+diagnose again.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from ..components import Component
+from ..errors import ConvergenceError, ModelError, PinmskError, TrialError
+from ..effects import catalog as _catalog
+from ..effects import registry
+from .compare import DEFAULT_CUTOFF, Comparison, compare, simulate_windows
+from .fit import CandidateFit, FitResult
+
+__all__ = ["Diagnosis", "DiagnosisRun", "EffectScore", "diagnose", "run", "parse_effect",
+           "AT_FLOOR", "THRESHOLD"]
+
+#: held-out mean-square improvement (in noise variances) that makes an effect significant
+THRESHOLD = 0.1
+#: error / noise floor at or below which the verdict is at_noise_floor
+AT_FLOOR = 1.5
+_MIN_BLOCK = 20
+
+
+@dataclass
+class EffectScore:
+    """One ranked candidate: the fitted effect and how much it explains out of sample."""
+
+    fit: FitResult
+    rmse_after: dict
+    explained_fraction: float
+    improvement: float
+    significant: bool
+    converged: bool
+    note: str = ""
+
+    @property
+    def effect(self) -> Component:
+        """The fitted component (add it with ``model.with_effect(score.effect)``)."""
+        return self.fit.effect
+
+    @property
+    def family(self) -> str:
+        return self.effect.family
+
+    @property
+    def target(self) -> str | None:
+        return self.effect.target
+
+    @property
+    def label(self) -> str:
+        return self.effect.label
+
+    @property
+    def params(self) -> dict:
+        return dict(self.fit.values)
+
+    @property
+    def stderr(self) -> dict:
+        return dict(self.fit.stderr)
+
+    def describe_params(self) -> str:
+        parts = []
+        decl = self.effect.params
+        for k, v in self.params.items():
+            se = self.fit.stderr.get(k)
+            unit = decl[k].unit
+            s = f"{k} = {v:.4g}"
+            if se is not None and np.isfinite(se):
+                s += f" ± {se:.2g}"
+            parts.append(s + (f" {unit}" if unit else ""))
+        return ", ".join(parts)
+
+    def to_json(self) -> dict:
+        return {
+            "effect": self.family, "target": self.target,
+            "params": {k: float(v) for k, v in self.params.items()},
+            "rmse_after": {k: float(v) for k, v in self.rmse_after.items()},
+            "explained_fraction": float(self.explained_fraction),
+            "significant": bool(self.significant),
+            "stderr": {k: _finite(v) for k, v in self.stderr.items()},
+        }
+
+
+def _finite(x):
+    x = float(x)
+    return x if np.isfinite(x) else None
+
+
+class Diagnosis:
+    """Result of :func:`diagnose` for one model and trial.
+
+    Attributes: ``model``, ``comparison`` (:class:`~.compare.Comparison`),
+    ``rmse`` and ``noise_floor`` (channel -> value, plus ``total``),
+    ``worst_windows``, ``correlations`` (channel -> [(state, r)]),
+    ``ranking`` (list of :class:`EffectScore`, best first), ``verdict``,
+    ``best`` (the best significant effect or None).
+    """
+
+    def __init__(self, comparison: Comparison, ranking: list, worst_windows: list, correlations: dict,
+                 settings: dict, skipped: list):
+        self.comparison = comparison
+        self.model = comparison.model
+        self.ranking = ranking
+        self.worst_windows = worst_windows
+        self.correlations = correlations
+        self.settings = settings
+        self.skipped = skipped
+        self.rmse = comparison.rmse()
+        self.noise_floor = comparison.noise.as_dict()
+        self.ratio = comparison.ratio()
+        self.verdict = "at_noise_floor" if self.ratio <= settings["at_floor"] else "missing_effect"
+
+    @property
+    def best(self) -> EffectScore | None:
+        for s in self.ranking:
+            if s.significant:
+                return s
+        return None
+
+    @property
+    def significant(self) -> list:
+        return [s for s in self.ranking if s.significant]
+
+    def score(self, family: str, target: str | None = None) -> EffectScore | None:
+        """The ranking entry of ``family`` (best target, or ``target``), or None."""
+        for s in self.ranking:
+            if s.family == family and (target is None or s.target == target):
+                return s
+        return None
+
+    def fit(self, effect, target: str | None = None) -> FitResult:
+        """Fit an effect (family name, ``family:target`` or a Component) on all frames."""
+        comp = _resolve(effect, target, self)
+        for s in self.ranking:
+            if s.label == comp.label and isinstance(effect, str):
+                if not s.converged:
+                    raise ConvergenceError(
+                        f"the fit of {s.label} did not converge ({s.fit.message}); it cannot be added as is. "
+                        "Check that the trial covers the effect or pass fixed parameter values"
+                    )
+                return s.fit
+        cf = CandidateFit(self.comparison.eq, self.comparison.eq_noise.sigma, comp)
+        x, conv, msg = cf.fit()
+        if not conv:
+            raise ConvergenceError(
+                f"the fit of {comp.label} did not converge ({msg}, {cf.nfev} evaluations); check that "
+                "the trial covers the effect, or fix some parameters (Parameter.vary=False)"
+            )
+        return cf.result(x, conv, msg)
+
+    def with_effect(self, effect=None, target: str | None = None):
+        """The model with an effect added, fitted (default: the best significant one)."""
+        if effect is None:
+            if self.best is None:
+                raise ModelError("no significant effect to add: the verdict is "
+                                 f"{self.verdict}; name one explicitly")
+            return self.model.with_effect(self.best.effect)
+        return self.model.with_effect(self.fit(effect, target).effect)
+
+    # -- reporting -----------------------------------------------------------------------
+    def to_json_dict(self, added: Sequence = ()) -> dict:
+        return {
+            "rmse": dict(self.rmse),
+            "noise_floor": dict(self.noise_floor),
+            "worst_windows": [dict(w) for w in self.worst_windows],
+            "ranking": [s.to_json() for s in self.ranking],
+            "verdict": self.verdict,
+            "added": [_added_json(a) for a in added],
+        }
+
+    def summary_text(self, *, header: bool = True) -> str:
+        c = self.comparison
+        lines = []
+        if header:
+            src = c.trial.meta.get("source") or "trial"
+            dur = float(c.trial.time[-1] - c.trial.time[0])
+            lines.append(f"pinmsk diagnosis: model {self.model.name}, {Path(str(src)).name} "
+                         f"({dur:.2f} s, {c.trial.n_frames} frames), {c.mode}-level comparison")
+            if self.model.components:
+                lines.append("model effects: " + ", ".join(x.label for x in self.model.components))
+            lines.append(f"noise floor: {c.noise.method}")
+        unit = _unit(c)
+        w = max([len(ch) for ch in c.channels] + [8])
+        lines.append(f"  {'channel':<{w}}  {'rmse':>10}  {'noise floor':>11}  {'ratio':>6}")
+        for ch in c.channels:
+            r, f = self.rmse[ch], self.noise_floor[ch]
+            lines.append(f"  {ch:<{w}}  {r:>10.4g}  {f:>11.4g}  {r / f:>5.1f}x")
+        lines.append(f"  {'total':<{w}}  {self.rmse['total']:>10.4g}  {self.noise_floor['total']:>11.4g}  "
+                     f"{self.ratio:>5.1f}x   ({unit}; ratio = RMS of per-channel ratios)")
+        if self.worst_windows:
+            lines.append("worst windows:")
+            for ww in self.worst_windows[:5]:
+                f = self.noise_floor[ww["channel"]]
+                lines.append(f"  {ww['channel']:<{w}}  {ww['start']:7.2f}-{ww['end']:<7.2f} s  rmse "
+                             f"{ww['rmse']:.4g} ({ww['rmse'] / f:.1f}x floor)")
+        if self.correlations and self.verdict == "missing_effect":
+            lines.append("residual follows:")
+            for ch, cors in self.correlations.items():
+                if cors:
+                    lines.append(f"  {ch:<{w}}  " + ", ".join(f"{s} (r = {r:+.2f})" for s, r in cors[:3]))
+        if self.ranking:
+            lines.append(f"ranking ({self.settings['folds']}-fold blocked cross-validation; explained = "
+                         "held-out share of the residual's mean square):")
+            lw = max(len(s.label) for s in self.ranking)
+            for k, s in enumerate(self.ranking, 1):
+                sig = "yes" if s.significant else "no "
+                lines.append(f"  {k:>2}. {s.label:<{lw}}  explained {100 * s.explained_fraction:6.1f}%  "
+                             f"rmse after {s.rmse_after['total']:.4g}  significant {sig}  {s.describe_params()}"
+                             + (f"  [{s.note}]" if s.note else ""))
+        else:
+            lines.append("ranking: no catalog effect applies to this model and trial")
+        for label, why in self.skipped:
+            lines.append(f"  (skipped {label}: {why})")
+        lines.append(self.verdict_line())
+        return "\n".join(lines)
+
+    def verdict_line(self) -> str:
+        if self.verdict == "at_noise_floor":
+            return (f"verdict: at_noise_floor -- the error is {self.ratio:.2f}x the noise floor "
+                    f"(<= {self.settings['at_floor']:g}x); nothing to add")
+        if self.best is not None:
+            return (f"verdict: missing_effect -- the error is {self.ratio:.1f}x the noise floor; "
+                    f"best explanation: {self.best.label} ({self.best.describe_params()}); "
+                    f"add it with --add {self.best.label}")
+        return (f"verdict: missing_effect -- the error is {self.ratio:.1f}x the noise floor but no catalog "
+                "effect explains it significantly: the gap is outside the catalog (segment lengths, moment "
+                "arms, sensor offsets, ...) or the noise floor is underestimated")
+
+    def __repr__(self) -> str:
+        return (f"<Diagnosis {self.model.name} {self.comparison.mode}: total rmse {self.rmse['total']:.4g}, "
+                f"{self.ratio:.2f}x floor, {self.verdict}>")
+
+
+def _unit(c: Comparison) -> str:
+    return "rad" if c.mode == "motion" else "N m (N for translations)"
+
+
+def _added_json(a) -> dict:
+    fit = a.fit if isinstance(a, EffectScore) else a
+    eff = fit.effect
+    return {"effect": eff.family, "target": eff.target,
+            "params": {k: float(v) for k, v in fit.values.items()},
+            "stderr": {k: _finite(v) for k, v in fit.stderr.items()}}
+
+
+# -- building blocks -------------------------------------------------------------------------
+
+def parse_effect(text: str):
+    """``"family"``, ``"family:target"`` or ``"family:target:p=v[,p=v]"`` -> (family, target, values)."""
+    if not isinstance(text, str) or not text.strip():
+        raise ModelError(f"an effect is written FAMILY[:TARGET[:PARAM=VALUE,...]], got {text!r}")
+    parts = text.strip().split(":")
+    family = parts[0].strip()
+    registry.get(family)
+    target = parts[1].strip() if len(parts) > 1 and parts[1].strip() else None
+    values = {}
+    for chunk in parts[2:]:
+        for item in chunk.split(","):
+            item = item.strip()
+            if not item:
+                continue
+            if "=" not in item:
+                raise ModelError(f"effect parameters are written NAME=VALUE, got {item!r} in {text!r}")
+            k, v = item.split("=", 1)
+            try:
+                values[k.strip()] = float(v)
+            except ValueError:
+                raise ModelError(f"parameter {k.strip()!r} in {text!r}: {v!r} is not a number") from None
+    return family, target, values
+
+
+def _resolve(effect, target, diag: Diagnosis) -> Component:
+    model = diag.model
+    if isinstance(effect, Component):
+        effect.check_target(model)
+        return effect
+    if isinstance(effect, tuple):
+        effect, target = effect[0], effect[1] if len(effect) > 1 else target
+    family, t2, values = parse_effect(effect)
+    target = target if target is not None else t2
+    cls = registry.get(family)
+    if target is None:
+        s = diag.score(family)
+        if s is not None:
+            return s.effect if not values else s.effect.with_params(values)
+        applicable = sorted({x.label for x in diag.ranking} | {lab for lab, _ in diag.skipped})
+        raise ModelError(
+            f"effect '{family}' does not apply to model '{model.name}' with this trial; name a target "
+            f"({family}:TARGET) or pick one of: {', '.join(applicable) or 'none'}"
+        )
+    try:
+        comp = cls(target, **values)
+        comp.check_target(model)
+    except ModelError as exc:
+        targets = _targets(cls, model)
+        raise ModelError(f"{exc}. Targets for {family} in model '{model.name}': {targets}") from None
+    return comp
+
+
+def _targets(cls, model) -> str:
+    kind = getattr(cls, "target_kind", "coordinate")
+    if kind == "coordinate":
+        return ", ".join(model.coordinates)
+    if kind in ("frame", "body"):
+        from ..effects._base import moving_bodies
+        names = list(moving_bodies(model)) if kind == "body" else list(model.frame_names)
+        return ", ".join(names)
+    if kind == "muscle":
+        return "muscles, " + ", ".join(model.muscle_names)
+    if kind == "side":
+        return "r, l"
+    return "(none)"
+
+
+def _worst_windows(c: Comparison, window: float, k: int = 5) -> list:
+    t = c.time
+    res = c.residual
+    dur = t[-1] - t[0]
+    if dur / window < 3:
+        window = dur / 5
+    dt = float(np.median(np.diff(t)))
+    if window / dt < 10:
+        raise TrialError(
+            f"windows of {window:.3g} s hold {window / dt:.1f} samples at {1 / dt:.4g} Hz; need at least 10 "
+            "per window: pass a longer window= or a longer, denser trial"
+        )
+    out = []
+    starts = np.arange(t[0], t[-1] - 0.5 * window, window)
+    for a in starts:
+        sel = (t >= a) & (t < a + window)
+        if sel.sum() < 5:
+            continue
+        r = np.sqrt(np.mean(res[sel] ** 2, axis=0))
+        for ch, v in zip(c.channels, r):
+            out.append({"channel": ch, "start": float(a), "end": float(min(a + window, t[-1])),
+                        "rmse": float(v)})
+    floor = c.noise.as_dict()
+    out.sort(key=lambda w: -w["rmse"] / floor[w["channel"]])
+    return out[:k]
+
+
+def _correlations(c: Comparison, k: int = 4) -> dict:
+    out = {}
+    res = c.residual
+    for j, ch in enumerate(c.channels):
+        r = res[:, j]
+        if c.mode == "motion":
+            r = c.eq.e[:, list(c.eq.coordinates).index(c.coordinates[j])] \
+                if c.coordinates[j] in c.eq.coordinates else r
+        rs = r - r.mean()
+        vals = []
+        for name, s in c.states.items():
+            s = np.asarray(s, dtype=float)
+            ss = s - s.mean()
+            den = np.sqrt(np.sum(rs ** 2) * np.sum(ss ** 2))
+            if den > 0:
+                vals.append((name, float(np.sum(rs * ss) / den)))
+        vals.sort(key=lambda x: -abs(x[1]))
+        out[ch] = vals[:k]
+    return out
+
+
+def _score(c: Comparison, cf: CandidateFit, settings) -> EffectScore:
+    folds = settings["folds"]
+    guard = settings["guard"]
+    x, conv, msg = cf.fit()
+    fit = cf.result(x, conv, msg)
+    e_cv, cv_ok = cf.cross_validate(folds, guard, x_full=None if cf.linear else x)
+    sig = c.eq_noise.sigma
+    mse0 = float(np.mean((c.eq.e / sig) ** 2))
+    mse1 = float(np.mean((e_cv / sig) ** 2))
+    improvement = mse0 - mse1
+    explained = 1.0 - mse1 / mse0 if mse0 > 0 else 0.0
+    if c.mode == "motion":
+        rmse_after = _motion_rmse_after(c, fit.effect)
+    else:
+        r = np.sqrt(np.mean(e_cv ** 2, axis=0))
+        rmse_after = {ch: float(v) for ch, v in zip(c.channels, r)}
+        rmse_after["total"] = float(np.sqrt(np.mean(r ** 2)))
+    converged = bool(conv)
+    note = "" if converged else f"fit did not converge: {msg}"
+    significant = converged and improvement >= settings["threshold"] and fit.bic_change < 0
+    return EffectScore(fit, rmse_after, explained, improvement, significant, converged, note)
+
+
+def _motion_rmse_after(c: Comparison, effect) -> dict:
+    model = c.model.with_effect(effect)
+    eq = c.eq
+    qs = simulate_windows(model, c.trial, eq.motion, eq.rows, c.options["sim_window"])
+    r = np.sqrt(np.mean((c.measured - qs) ** 2, axis=0))
+    out = {ch: float(v) for ch, v in zip(c.channels, r)}
+    out["total"] = float(np.sqrt(np.mean(r ** 2)))
+    return out
+
+
+def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT_CUTOFF,
+             candidates=None, frames: Sequence[str] | None = None, folds: int = 5,
+             threshold: float = THRESHOLD, at_floor: float = AT_FLOOR, window: float = 1.0,
+             grf_frames=None, sim_window: float = 0.5, comparison: Comparison | None = None) -> Diagnosis:
+    """Compare ``model`` with ``trial``, locate the failure and rank the missing effects.
+
+    ``candidates``: effects to rank (Components, or family names / ``family:target``
+    strings); default the whole catalog that applies (:func:`pinmsk.effects.catalog`).
+    ``frames`` names frames for frame effects (a payload).  See the module
+    docstring for the scoring and :func:`pinmsk.diagnose.compare.compare` for
+    ``mode``, ``cutoff`` and the noise floor.
+    """
+    if folds < 2:
+        raise ModelError(f"folds must be >= 2 for cross-validation, got {folds}")
+    c = comparison if comparison is not None else compare(
+        model, trial, mode=mode, cutoff=cutoff, grf_frames=grf_frames, sim_window=sim_window)
+    n = c.eq.rows.size
+    if n < folds * _MIN_BLOCK:
+        raise TrialError(
+            f"{n} analysable samples are too few for {folds} cross-validation blocks of at least "
+            f"{_MIN_BLOCK}; record a longer trial or pass folds={max(2, n // _MIN_BLOCK)}"
+        )
+    dt = float(np.median(np.diff(c.eq.motion.t)))
+    guard = int(np.ceil(1.0 / (cutoff * dt))) if cutoff else 2
+    settings = {"folds": folds, "threshold": threshold, "at_floor": at_floor, "guard": guard,
+                "window": window, "cutoff": cutoff}
+    ctx = _catalog.CatalogContext(c.mode, tuple(c.eq.coordinates),
+                                  tuple(x for x in c.coordinates if x not in c.eq.coordinates)
+                                  + tuple(_unactuated(c)), tuple(frames or ()))
+    if candidates is None:
+        cands = _catalog.catalog(model, trial, frames=frames, context=ctx)
+    else:
+        cands = []
+        for x in candidates:
+            if isinstance(x, Component):
+                cands.append(x)
+                continue
+            fam, tgt, vals = parse_effect(x) if isinstance(x, str) else (x[0], x[1], {})
+            if tgt is None:
+                cands.extend(_catalog.catalog(model, trial, families=[fam], frames=frames, context=ctx))
+            else:
+                comp = registry.get(fam)(tgt, **vals)
+                comp.check_target(model)
+                cands.append(comp)
+    ranking, skipped = [], []
+    for comp in cands:
+        try:
+            cf = CandidateFit(c.eq, c.eq_noise.sigma, comp)
+            ranking.append(_score(c, cf, settings))
+        except PinmskError as exc:
+            skipped.append((comp.label, str(exc)))
+    ranking.sort(key=lambda s: (not s.converged, -s.explained_fraction))
+    windows = _worst_windows(c, window)
+    cors = _correlations(c)
+    return Diagnosis(c, ranking, windows, cors, settings, skipped)
+
+
+def _unactuated(c: Comparison):
+    from ..effects._base import unactuated_coordinates
+    return unactuated_coordinates(c.model)
+
+
+class DiagnosisRun:
+    """The loop of :func:`run`: ``steps[0]`` for the model as given, one more per added effect."""
+
+    def __init__(self, steps: list, added: list):
+        self.steps = steps
+        self.added = added
+
+    @property
+    def final(self) -> Diagnosis:
+        return self.steps[-1]
+
+    @property
+    def model(self):
+        return self.final.model
+
+    def __getattr__(self, name):
+        if name in ("rmse", "noise_floor", "worst_windows", "ranking", "verdict", "best", "comparison",
+                    "ratio", "correlations"):
+            return getattr(self.steps[-1], name)
+        raise AttributeError(name)
+
+    def to_json_dict(self) -> dict:
+        return self.final.to_json_dict(self.added)
+
+    def summary_text(self) -> str:
+        first = self.steps[0]
+        if len(self.steps) == 1:
+            return first.summary_text()
+        out = [first.summary_text().rsplit("\n", 1)[0] if False else first.summary_text()]
+        for k, (fit, step) in enumerate(zip(self.added, self.steps[1:]), 1):
+            prev = self.steps[k - 1]
+            sc = EffectScore(fit, {}, 0.0, 0.0, True, fit.converged)
+            out.append("")
+            out.append(f"step {k}: added {fit.effect.label} ({sc.describe_params()})")
+            out.append(f"  total rmse {prev.rmse['total']:.4g} -> {step.rmse['total']:.4g} "
+                       f"(noise floor {step.noise_floor['total']:.4g}; {prev.ratio:.1f}x -> {step.ratio:.2f}x)")
+            out.append(step.summary_text(header=False))
+        return "\n".join(out)
+
+    def write_json(self, path) -> Path:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(self.to_json_dict(), indent=2))
+        return path
+
+    def __repr__(self) -> str:
+        return f"<DiagnosisRun {len(self.added)} added, final {self.final!r}>"
+
+
+def run(model, trial, *, add: Sequence = (), json_path=None, report_path=None, plot_dir=None,
+        **options) -> DiagnosisRun:
+    """Diagnose, then fit and add each ``add`` entry in turn, diagnosing after each.
+
+    ``add`` entries: ``"family"`` (its best-ranked target), ``"family:target"``,
+    ``(family, target)`` tuples or Components.  Writes the JSON summary
+    (``json_path``), the HTML report (``report_path``) and PNG figures
+    (``plot_dir``) when asked.  ``options`` go to :func:`diagnose`.
+    """
+    if isinstance(add, (str, Component)):
+        add = [add]
+    d = diagnose(model, trial, **options)
+    steps, added = [d], []
+    for entry in add or ():
+        if isinstance(entry, tuple):
+            fam, tgt = entry[0], (entry[1] if len(entry) > 1 else None)
+            fit = steps[-1].fit(fam, tgt)
+        else:
+            fit = steps[-1].fit(entry)
+        new_model = steps[-1].model.with_effect(fit.effect)
+        comp = steps[-1].comparison.with_model(new_model)
+        opts = {k: v for k, v in options.items() if k not in ("mode", "cutoff", "grf_frames", "sim_window")}
+        steps.append(diagnose(new_model, trial, comparison=comp, cutoff=steps[-1].settings["cutoff"], **opts))
+        added.append(fit)
+    result = DiagnosisRun(steps, added)
+    if plot_dir is not None:
+        from .. import plots
+        plots.save_diagnosis_figures(result, plot_dir)
+    if json_path is not None:
+        result.write_json(json_path)
+    if report_path is not None:
+        from ..report import write_report
+        write_report(result, report_path)
+    return result

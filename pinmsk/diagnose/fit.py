@@ -1,0 +1,310 @@
+"""Fitting one effect's parameters to the equation error, in and out of sample.
+
+An effect with parameters ``theta`` changes the equation error ``e`` (see
+:mod:`pinmsk.diagnose.compare`) by ``d(theta)``; the fit minimises the
+noise-whitened sum of squares ``sum_c sum_k ((e_kc + d_kc(theta)) / sigma_c)^2``
+within the parameters' bounds:
+
+* ``linear`` components (``d = B theta``): linear least squares, bounded by
+  :func:`scipy.optimize.lsq_linear` when the unconstrained solution leaves the
+  bounds -- exact and fast;
+* others: :func:`scipy.optimize.least_squares` (trust-region reflective,
+  bounds), with the component's analytic ``param_jacobian`` when it has one
+  and forward differences evaluated in one batched call otherwise; started
+  from the best of the component's ``initial_guess`` values (if it has the
+  hook), its current values and, for muscle-level effects, a grid over the
+  bounds evaluated in one batch.
+
+Uncertainties: ``cov = s^2 (J^T J)^-1`` with ``J`` the whitened Jacobian at
+the optimum and ``s^2`` the residual variance, inflated by
+``(1 + rho) / (1 - rho)`` with ``rho`` the residual's lag-1 autocorrelation (an
+AR(1) effective-sample-size correction; the filtered-kinematics part of the
+noise is not white).
+
+Blocked cross-validation (:meth:`CandidateFit.cross_validate`): the frames
+are cut into ``folds`` contiguous blocks; each block is predicted by the fit
+on the others, leaving out a guard of ``guard`` frames on either side of the
+held-out block (the low-pass filter correlates neighbouring frames).
+"""
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares, lsq_linear
+
+from ..components import Component
+from ..errors import ConvergenceError, ModelError
+from ..effects._base import SignalEffect
+
+__all__ = ["CandidateFit", "FitResult", "fit_effect"]
+
+
+@dataclass
+class FitResult:
+    """Fitted parameters of one effect on the equation error."""
+
+    effect: Component
+    values: dict
+    stderr: dict
+    sse: float
+    sse_before: float
+    n: int
+    converged: bool
+    message: str
+    nfev: int
+    delta: np.ndarray = field(repr=False, default=None)
+
+    @property
+    def n_params(self) -> int:
+        return len(self.values)
+
+    @property
+    def bic_change(self) -> float:
+        """BIC(with effect) - BIC(without), Gaussian likelihood with unknown variance."""
+        n = max(self.n, 1)
+        return float(n * np.log(max(self.sse, 1e-300) / max(self.sse_before, 1e-300))
+                     + self.n_params * np.log(n))
+
+
+class CandidateFit:
+    """One candidate effect on one :class:`~pinmsk.diagnose.compare.EquationError`."""
+
+    def __init__(self, eq, sigma: np.ndarray, component: Component):
+        self.eq = eq
+        self.sigma = np.asarray(sigma, dtype=float)
+        self.component = component
+        self.model = eq.model
+        self.signal = isinstance(component, SignalEffect)
+        if getattr(component, "level", "joint") == "muscle" and eq.mode != "muscle":
+            raise ModelError(f"{component.label} acts through muscle excitations; it can only be fitted "
+                             "in a muscle-level comparison (a trial with <muscle>_excitation or _emg channels)")
+        decl = component.params
+        self.all_names = list(decl)
+        self.names = [n for n, p in decl.items() if p.vary]
+        self.fixed = {n: p.value for n, p in decl.items() if not p.vary}
+        self.lo = np.array([decl[n].min for n in self.names], dtype=float)
+        self.hi = np.array([decl[n].max for n in self.names], dtype=float)
+        self.x_default = np.array([decl[n].value for n in self.names], dtype=float)
+        self.cache = None if self.signal else component.prepare(self.model, eq.motion_rows)
+        self._basis = None
+        self._memo = None
+        self.nfev = 0
+
+    # -- predictions of the change of e -------------------------------------------------
+    def _params(self, x) -> dict:
+        out = dict(self.fixed)
+        out.update(zip(self.names, np.asarray(x, dtype=float)))
+        return out
+
+    @property
+    def linear(self) -> bool:
+        return bool(getattr(self.component, "linear", False)) and not self.fixed
+
+    def basis(self) -> np.ndarray:
+        """``B`` with ``d = B theta`` for linear components, ``(n, C, p)``."""
+        if self._basis is None:
+            self._basis = self.jacobian(self.x_default)
+        return self._basis
+
+    def predict(self, X) -> np.ndarray:
+        """Change of ``e`` for parameter sets ``X`` (P, p) -> (P, n, C)."""
+        X = np.atleast_2d(np.asarray(X, dtype=float))
+        self.nfev += X.shape[0]
+        if self.signal:
+            batch = {n: np.full(X.shape[0], v) for n, v in self.fixed.items()}
+            batch.update({n: X[:, k] for k, n in enumerate(self.names)})
+            return self.eq.signal_delta(self.component, batch)
+        if self.linear:
+            return np.einsum("ncp,Pp->Pnc", self.basis(), X)
+        cols = self.eq.columns
+        out = np.empty((X.shape[0], self.eq.rows.size, cols.size))
+        for k, x in enumerate(X):
+            Q = self.component.generalized_force(self.model, self.eq.motion_rows, self._params(x), self.cache)
+            out[k] = Q[:, cols]
+        return out
+
+    def jacobian(self, x) -> np.ndarray:
+        """``d(change of e)/d theta`` at ``x``, ``(n, C, p)``."""
+        comp = self.component
+        if not self.signal and hasattr(comp, "param_jacobian"):
+            J = comp.param_jacobian(self.model, self.eq.motion_rows, self._params(x), self.cache)
+            idx = [self.all_names.index(n) for n in self.names]
+            return J[:, self.eq.columns][:, :, idx]
+        x = np.asarray(x, dtype=float)
+        span = np.where(np.isfinite(self.hi - self.lo), self.hi - self.lo, 1.0)
+        h = 1e-6 * np.maximum(np.abs(x), 1e-3 * span) + 1e-12
+        step = np.where(x + h <= self.hi, h, -h)
+        X = np.vstack([x, x + np.diag(step)])
+        D = self.predict(X)
+        return np.moveaxis((D[1:] - D[0]) / step[:, None, None], 0, -1)
+
+    # -- objective ---------------------------------------------------------------------
+    def _whiten(self, d, mask):
+        r = (self.eq.e + d) / self.sigma
+        return r[mask].ravel()
+
+    def sse(self, X, mask=None) -> np.ndarray:
+        """Whitened SSE of ``e + d(x)`` on the ``mask`` rows for each parameter set (P,)."""
+        mask = slice(None) if mask is None else mask
+        D = self.predict(X)
+        r = (self.eq.e[None] + D) / self.sigma
+        return np.sum(r[:, mask] ** 2, axis=(1, 2))
+
+    # -- fitting ------------------------------------------------------------------------
+    def starts(self, mask) -> list[np.ndarray]:
+        out = [np.clip(self.x_default, self.lo, self.hi)]
+        comp = self.component
+        if hasattr(comp, "initial_guess") and not self.signal:
+            rows_motion = self.eq.motion_rows.subset(np.flatnonzero(mask))
+            target = np.full((rows_motion.n_frames, self.model.nv), np.nan)
+            target[:, self.eq.columns] = -self.eq.e[mask]
+            try:
+                guesses = comp.initial_guess(self.model, rows_motion, target, None) or []
+            except Exception:           # a bad guess hook must not stop the fit
+                guesses = []
+            for g in guesses:
+                x = np.array([g.get(n, v) for n, v in zip(self.names, self.x_default)], dtype=float)
+                out.append(np.clip(x, self.lo, self.hi))
+        if self.signal:
+            grids = []
+            for lo, hi in zip(self.lo, self.hi):
+                if lo > 0 and hi / lo > 10:
+                    grids.append(np.geomspace(lo * 1.5, hi / 1.5, 7))
+                else:
+                    grids.append(np.linspace(lo, hi, 9)[1:-1] if lo < hi else np.array([lo]))
+            X = np.array(list(itertools.product(*grids)), dtype=float)
+            s = self.sse(X, mask)
+            out.extend(X[np.argsort(s)[:2]])
+        return out
+
+    def fit(self, mask=None, x0=None, *, max_nfev: int = 200) -> tuple[np.ndarray, bool, str]:
+        """Best parameters on the ``mask`` rows: ``(x, converged, message)``."""
+        n = self.eq.rows.size
+        mask = np.ones(n, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+        if not self.names:
+            return np.zeros(0), True, "no free parameters"
+        if self.linear:
+            B = self.basis()[mask] / self.sigma[None, :, None]
+            A = B.reshape(-1, B.shape[-1])
+            b = -(self.eq.e[mask] / self.sigma).ravel()
+            x, *_ = np.linalg.lstsq(A, b, rcond=None)
+            if np.all(x >= self.lo) and np.all(x <= self.hi):
+                return x, True, "linear least squares"
+            res = lsq_linear(A, b, bounds=(self.lo, self.hi))
+            return res.x, bool(res.success), f"bounded linear least squares: {res.message}"
+        candidates = [x0] if x0 is not None else self.starts(mask)
+        if len(candidates) > 1:
+            s = self.sse(np.array(candidates), mask)
+            order = np.argsort(s)
+            candidates = [candidates[i] for i in order[:2]]
+        best = None
+        for start in candidates:
+            res = self._least_squares(start, mask, max_nfev)
+            if best is None or res.cost < best.cost:
+                best = res
+        return best.x, bool(best.status > 0), str(best.message)
+
+    def _least_squares(self, x0, mask, max_nfev):
+        span = self.hi - self.lo
+        eps = np.where(np.isfinite(span), 1e-9 * span, 1e-9)
+        x0 = np.clip(np.asarray(x0, dtype=float), self.lo + eps, self.hi - eps)
+
+        def fun(x):
+            d = self.predict(x[None])[0]
+            r = self._whiten(d, mask)
+            if not np.all(np.isfinite(r)):
+                raise ConvergenceError(
+                    f"fitting {self.component.label}: the model gave non-finite values at "
+                    f"{dict(zip(self.names, np.round(x, 6)))}; tighten the parameter bounds"
+                )
+            return r
+
+        def jac(x):
+            J = self.jacobian(x)[mask] / self.sigma[None, :, None]
+            return J.reshape(-1, J.shape[-1])
+
+        return least_squares(fun, x0, jac=jac, bounds=(self.lo, self.hi), method="trf",
+                             x_scale="jac", max_nfev=max_nfev, xtol=1e-10, ftol=1e-10)
+
+    def result(self, x, converged: bool, message: str, mask=None) -> FitResult:
+        """A :class:`FitResult` with uncertainties at ``x`` (fit on ``mask``)."""
+        n_rows = self.eq.rows.size
+        mask = np.ones(n_rows, dtype=bool) if mask is None else mask
+        d = self.predict(x[None])[0] if self.names else np.zeros_like(self.eq.e)
+        r = ((self.eq.e + d) / self.sigma)[mask]
+        sse = float(np.sum(r ** 2))
+        sse0 = float(np.sum((self.eq.e / self.sigma)[mask] ** 2))
+        n = int(r.size)
+        p = len(self.names)
+        stderr = {}
+        if p:
+            J = (self.jacobian(x)[mask] / self.sigma[None, :, None]).reshape(-1, p)
+            s2 = sse / max(n - p, 1)
+            rho = _lag1(r)
+            infl = (1 + rho) / (1 - rho)
+            try:
+                cov = np.linalg.inv(J.T @ J) * s2 * infl
+                se = np.sqrt(np.clip(np.diag(cov), 0, None))
+            except np.linalg.LinAlgError:
+                se = np.full(p, np.inf)
+            stderr = dict(zip(self.names, map(float, se)))
+        values = self._params(x)
+        clipped = {k: float(np.clip(v, self.component.params[k].min, self.component.params[k].max))
+                   for k, v in values.items()}
+        effect = self.component.with_params(clipped, stderr=stderr)
+        return FitResult(effect, {k: clipped[k] for k in self.all_names}, stderr, sse, sse0, n,
+                         converged, message, self.nfev, d)
+
+    def cross_validate(self, folds: int, guard: int, x_full=None) -> tuple[np.ndarray, bool]:
+        """Held-out predictions: ``e`` plus each block's change predicted by the fit on the others."""
+        n = self.eq.rows.size
+        blocks = np.array_split(np.arange(n), folds)
+        e_cv = np.empty_like(self.eq.e)
+        ok = True
+        for blk in blocks:
+            train = np.ones(n, dtype=bool)
+            train[max(blk[0] - guard, 0):min(blk[-1] + guard + 1, n)] = False
+            if not self.names:
+                x = np.zeros(0)
+            elif self.linear or x_full is None:
+                x, conv, _ = self.fit(train)
+                ok &= conv
+            else:
+                x, conv, _ = self.fit(train, x0=x_full, max_nfev=60)
+            d = self.predict(x[None])[0] if self.names else 0.0
+            e_cv[blk] = (self.eq.e + d)[blk]
+        return e_cv, ok
+
+
+def _lag1(r: np.ndarray) -> float:
+    r = np.asarray(r, dtype=float)
+    if r.ndim == 1:
+        r = r[:, None]
+    num = np.sum(r[1:] * r[:-1])
+    den = np.sum(r * r)
+    rho = num / den if den > 0 else 0.0
+    return float(np.clip(rho, 0.0, 0.98))
+
+
+def fit_effect(comparison, component: Component, *, strict: bool = True) -> FitResult:
+    """Fit ``component`` to a comparison's equation error (all analysed frames).
+
+    Raises :class:`~pinmsk.errors.ConvergenceError` when ``strict`` and the
+    optimiser stops without converging.
+    """
+    cf = CandidateFit(comparison.eq, _eq_sigma(comparison), component)
+    x, conv, msg = cf.fit()
+    if strict and not conv:
+        raise ConvergenceError(
+            f"the fit of {component.label} did not converge ({msg}, {cf.nfev} evaluations); "
+            "check the trial covers the effect (e.g. the joint range for passive_elastic), "
+            "or fix some parameters (Parameter.vary=False) and fit again"
+        )
+    return cf.result(x, conv, msg)
+
+
+def _eq_sigma(comparison) -> np.ndarray:
+    """Noise floor of the equation-error channels (in motion mode: of the driving moments)."""
+    return comparison.eq_noise.sigma

@@ -1,0 +1,552 @@
+"""The QP layer shared by the muscle-redundancy solvers (SO, MSO, EID, FSO).
+
+Every solver here works on the *scaled* per-frame problem
+
+    minimise    sum_i w_i x_i^P  + reserve cost  (+ 1/2 x'Qx + q'x, FSO only)
+    subject to  A x + rho = b          (nd balanced dofs; rho only with reserves)
+                lo <= x <= hi          (x = F / F_max or x = a, so O(1))
+
+with rows of ``A`` and ``b`` divided by a typical moment of each dof, so
+``A`` entries are at most 1 and a unit residual is a whole dof's capacity.
+The min/max criterion (thesis Eq. 2.13) replaces the cost by ``max_i u_i x_i``
+(an epigraph LP in ``(x, t)``).  The reserve cost is the exact-penalty form
+``W sum_j (|rho_j| + rho_j^2)``: zero reserve whenever the muscles can
+balance the dof with multipliers below ``W``, strictly convex so the answer
+is unique.
+
+Three independent ways to solve it live here:
+
+:class:`FrameQP`
+    proxsuite's dense solver, one :class:`proxsuite.proxqp.dense.QP` of fixed
+    dimensions reused frame after frame with ``update`` and
+    ``WARM_START_WITH_PREVIOUS_RESULT``.  P = 1 and min/max are LPs, P = 2 a
+    QP, P > 2 sequential QP (Newton steps on the convex objective with the
+    linear constraints, each step a proxsuite QP, Armijo line search, stopped
+    when the step is below the tolerance).  Crashes seen with warm starts
+    after failed solves are avoided by construction: dimensions never change,
+    and after any status other than ``PROXQP_SOLVED`` the QP object is thrown
+    away and the next solve starts cold on a fresh one.
+
+:func:`dual_newton`
+    For P >= 2 (any weights, reserves or not), all frames at once in numpy.
+    The Lagrangian is separable, so for multipliers ``lam`` the minimiser
+    over the box is explicit, ``x_i = clip((s_i / (P w_i))^(1/(P-1)), lo, hi)``
+    with ``s = A' lam``; it satisfies stationarity, complementarity and the
+    bounds exactly.  Semismooth Newton with an Armijo line search on the
+    concave dual function drives the equality residual ``b - A x - rho`` to
+    the tolerance (for P = 2 this is the primal-dual active-set method: it
+    stops at the exact active set).  A frame counts as solved only when its
+    residual is below the tolerance, which *is* the KKT verification; the
+    others go to :class:`FrameQP`.
+
+:func:`lp_verify` / :func:`lp_basis_from`
+    For LPs (P = 1, min/max): guess an optimal basis from another frame's
+    solution, solve the basis system for all frames in one batched call and
+    keep the frames whose vertex is primal feasible (dual feasibility holds by
+    construction).  Along a smooth motion the basis repeats for many frames,
+    so only a few frames need proxsuite.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import SolverError
+
+#: Stand-in for an infinite bound in proxsuite box constraints.
+BIG = 1e20
+
+#: proxsuite statuses that count as solved.
+_SOLVED_NAMES = ("PROXQP_SOLVED",)
+
+
+def _proxqp():
+    try:
+        from proxsuite import proxqp
+    except ImportError as exc:  # pragma: no cover - proxsuite is a hard dependency
+        raise SolverError("the muscle-redundancy solvers need proxsuite: pip install proxsuite") from exc
+    return proxqp
+
+
+def check_exponent(exponent) -> float:
+    """The cost exponent as a float; P must be 1 (LP) or >= 2."""
+    try:
+        p = float(exponent)
+    except (TypeError, ValueError):
+        raise SolverError(f"exponent must be a number (1, 2, 3, 10, ...), got {exponent!r}") from None
+    if not np.isfinite(p) or not (p == 1.0 or p >= 2.0):
+        raise SolverError(f"exponent P = {exponent!r} is not supported: use P = 1 (LP) or P >= 2 "
+                          "(thesis Eq. 2.11 uses 1, 2, 3 and 10)")
+    return p
+
+
+# ---------------------------------------------------------------------------
+# Results
+# ---------------------------------------------------------------------------
+
+@dataclass
+class FrameSolution:
+    """Solution of one frame by :class:`FrameQP` (scaled units)."""
+
+    x: np.ndarray            # (m,)
+    rho: np.ndarray          # (nd,) reserves (zeros without reserves)
+    lam: np.ndarray          # (nd,) multipliers of A x + rho = b (cost gradient = A' lam)
+    solved: bool
+    status: str              # proxsuite status name of the last QP
+    iterations: int          # proxsuite iterations, summed over SQP steps
+    qp_solves: int           # number of proxsuite QPs (1, or the SQP steps)
+
+
+@dataclass
+class BatchSolution:
+    """Solution of many frames by :func:`dual_newton` (scaled units)."""
+
+    x: np.ndarray            # (N, m)
+    rho: np.ndarray          # (N, nd)
+    lam: np.ndarray          # (N, nd)
+    converged: np.ndarray    # (N,) bool: residual <= tol (KKT verified)
+    iterations: np.ndarray   # (N,) Newton iterations
+    residual: np.ndarray     # (N,) max |b - A x - rho|
+
+
+# ---------------------------------------------------------------------------
+# proxsuite, frame by frame
+# ---------------------------------------------------------------------------
+
+class FrameQP:
+    """A proxsuite dense QP for one frame of the scaled problem, reused across frames.
+
+    Parameters (keyword-only): ``m`` muscle variables, ``nd`` equality rows,
+    ``weights`` ``w`` (m,) of ``sum w x^P``, ``exponent`` P, ``minmax`` (use
+    ``max_i u_i x_i`` with ``u = weights``), ``reserve_weight`` W or None,
+    ``quadratic`` True if an extra ``1/2 x'Qx + q'x`` will be passed to
+    :meth:`solve` (FSO's tracking cost), ``eps`` proxsuite's absolute
+    tolerance, ``sqp_tol`` the step size at which SQP stops.
+    """
+
+    def __init__(self, *, m: int, nd: int, weights, exponent: float = 2.0, minmax: bool = False,
+                 reserve_weight: float | None = None, quadratic: bool = False, eps: float = 1e-10,
+                 max_iter: int = 300, sqp_tol: float = 1e-9, sqp_max_iter: int = 60):
+        self.proxqp = _proxqp()
+        self.m = int(m)
+        self.nd = int(nd)
+        self.w = np.asarray(weights, dtype=float).reshape(self.m)
+        self.P = check_exponent(exponent)
+        self.minmax = bool(minmax)
+        self.W = None if reserve_weight is None else float(reserve_weight)
+        self.quadratic = bool(quadratic)
+        self.eps = float(eps)
+        self.max_iter = int(max_iter)
+        self.sqp_tol = float(sqp_tol)
+        self.sqp_max_iter = int(sqp_max_iter)
+        self.nr = 2 * self.nd if self.W is not None else 0
+        self.nt = 1 if self.minmax else 0
+        self.n = self.m + self.nt + self.nr
+        self.n_in = self.m if self.minmax else 0
+        self._qp = None
+        self._warm = False
+        # constant blocks
+        self._C = None
+        if self.minmax:
+            C = np.zeros((self.m, self.n))
+            C[:, :self.m] = np.diag(self.w)
+            C[:, self.m] = -1.0
+            self._C = C
+            self._l = np.full(self.m, -BIG)
+            self._u = np.zeros(self.m)
+        self._Afull = np.zeros((self.nd, self.n))
+        if self.nr:
+            r0 = self.m + self.nt
+            self._Afull[:, r0:r0 + self.nd] = np.eye(self.nd)
+            self._Afull[:, r0 + self.nd:] = -np.eye(self.nd)
+        self.sqp = (not self.minmax) and self.P > 2.0
+
+    # -- pieces of the QP -----------------------------------------------------
+    def _objective(self, x_lin: np.ndarray | None, Q, q):
+        """H, g of the QP; ``x_lin`` is the SQP linearisation point (None: exact P=1/2)."""
+        n, m = self.n, self.m
+        H = np.zeros((n, n))
+        g = np.zeros(n)
+        if self.minmax:
+            g[m] = 1.0
+        elif self.P == 1.0:
+            g[:m] = self.w
+        elif x_lin is None:  # P = 2, or the P = 2 start of SQP
+            H[np.arange(m), np.arange(m)] = 2.0 * self.w
+        else:
+            P = self.P
+            xf = np.maximum(x_lin, 1e-4)
+            h = self.w * P * (P - 1.0) * xf ** (P - 2.0)
+            grad = self.w * P * np.maximum(x_lin, 0.0) ** (P - 1.0)
+            H[np.arange(m), np.arange(m)] = h
+            g[:m] = grad - h * x_lin
+        if self.nr:
+            r0 = m + self.nt
+            idx = np.arange(r0, n)
+            H[idx, idx] = 2.0 * self.W
+            g[r0:] = self.W
+        if Q is not None:
+            H[:m, :m] += Q
+        if q is not None:
+            g[:m] += q
+        return H, g
+
+    def _boxes(self, lo, hi):
+        lb = np.zeros(self.n)
+        ub = np.full(self.n, BIG)
+        lb[:self.m] = lo
+        ub[:self.m] = hi
+        return lb, ub
+
+    def _fresh(self):
+        pq = self.proxqp
+        qp = pq.dense.QP(self.n, self.nd, self.n_in, True)
+        qp.settings.eps_abs = self.eps
+        qp.settings.eps_rel = 0.0
+        qp.settings.max_iter = self.max_iter
+        qp.settings.verbose = False
+        qp.settings.initial_guess = pq.InitialGuess.EQUALITY_CONSTRAINED_INITIAL_GUESS
+        return qp
+
+    def _qp_solve(self, H, g, A, b, lb, ub):
+        """One QP; warm start only from a successful solve of the same-size QP."""
+        pq = self.proxqp
+        Af = self._Afull
+        Af[:, :self.m] = A
+        attempts = ("warm", "cold") if (self._qp is not None and self._warm) else ("cold",)
+        for how in attempts:
+            if how == "warm":
+                qp = self._qp
+                qp.settings.initial_guess = pq.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
+                qp.update(H=H, g=g, A=Af, b=b, C=self._C,
+                          l=self._l if self.minmax else None, u=self._u if self.minmax else None,
+                          l_box=lb, u_box=ub, update_preconditioner=False)
+            else:
+                qp = self._fresh()
+                self._qp = qp
+                qp.init(H, g, Af, b, self._C, self._l if self.minmax else None,
+                        self._u if self.minmax else None, lb, ub)
+            qp.solve()
+            res = qp.results
+            ok = (res.info.status.name in _SOLVED_NAMES and np.all(np.isfinite(res.x))
+                  and np.all(np.isfinite(res.y)))
+            if ok:
+                self._warm = True
+                return res, True
+            self._warm = False   # never warm start from a failed solve
+        return res, False
+
+    def solve(self, A, b, lo, hi, *, Q=None, q=None, x0=None) -> FrameSolution:
+        """Solve one frame: ``A`` (nd, m), ``b`` (nd,), bounds (m,); optional ``Q`` (m, m), ``q`` (m,).
+
+        For P > 2, ``x0`` (m,) -- e.g. the previous frame's answer -- is the
+        first linearisation point of SQP; without it SQP starts from the
+        P = 2 solution.
+        """
+        A = np.asarray(A, dtype=float).reshape(self.nd, self.m)
+        b = np.asarray(b, dtype=float).reshape(self.nd)
+        lo = np.broadcast_to(np.asarray(lo, dtype=float), (self.m,))
+        hi = np.broadcast_to(np.asarray(hi, dtype=float), (self.m,))
+        lb, ub = self._boxes(lo, hi)
+        iters = 0
+        nsolve = 0
+        if self.sqp and x0 is not None and np.all(np.isfinite(x0)):
+            z = np.zeros(self.n)
+            z[:self.m] = np.clip(x0, lo, hi)
+            first_exact = False
+        else:
+            H, g = self._objective(None, Q, q)
+            res, ok = self._qp_solve(H, g, A, b, lb, ub)
+            iters += int(res.info.iter)
+            nsolve += 1
+            z = np.array(res.x)
+            status = res.info.status.name
+            first_exact = True
+            if not ok:
+                return self._pack(z, False, status, iters, nsolve)
+        if self.sqp:
+            z, ok, it2, n2, status = self._sqp(z, A, b, lb, ub, Q, q, feasible=first_exact)
+            iters += it2
+            nsolve += n2
+        return self._pack(z, ok, status, iters, nsolve)
+
+    def _pack(self, z, ok, status, iters, nsolve) -> FrameSolution:
+        m = self.m
+        x = np.array(z[:m])
+        if self.nr:
+            r0 = m + self.nt
+            rho = z[r0:r0 + self.nd] - z[r0 + self.nd:]
+        else:
+            rho = np.zeros(self.nd)
+        lam = -np.array(self._qp.results.y) if ok else np.full(self.nd, np.nan)
+        return FrameSolution(x=x, rho=np.array(rho), lam=lam, solved=bool(ok), status=status,
+                             iterations=int(iters), qp_solves=int(nsolve))
+
+    def _total(self, zz, Q, q):
+        m = self.m
+        x = zz[:m]
+        c = float(np.sum(self.w * np.maximum(x, 0.0) ** self.P))
+        if self.nr:
+            r = zz[m + self.nt:]
+            c += self.W * float(np.sum(r + r * r))
+        if Q is not None:
+            c += 0.5 * float(x @ Q @ x)
+        if q is not None:
+            c += float(q @ x)
+        return c
+
+    def _sqp(self, z, A, b, lb, ub, Q, q, *, feasible: bool):
+        """Newton steps on sum w x^P (+ reserves, + tracking) with the linear constraints.
+
+        Each step is a proxsuite QP in ``x`` itself (so any linearisation
+        point works); from a feasible point an Armijo line search on the cost
+        keeps the iterates feasible and decreasing.  Stops when the step is
+        below ``sqp_tol`` or the predicted decrease below 1e-15 of the cost.
+        """
+        m = self.m
+        iters = 0
+        nsolve = 0
+        f0 = self._total(z, Q, q) if feasible else np.inf
+        for _ in range(self.sqp_max_iter):
+            H, g = self._objective(z[:m], Q, q)
+            res, ok = self._qp_solve(H, g, A, b, lb, ub)
+            iters += int(res.info.iter)
+            nsolve += 1
+            if not ok:
+                return z, False, iters, nsolve, res.info.status.name
+            znew = np.array(res.x)
+            if not feasible:          # first step from an outside guess: take it whole
+                z, f0, feasible = znew, self._total(znew, Q, q), True
+                continue
+            d = znew - z
+            step = float(np.max(np.abs(d[:m]))) if m else 0.0
+            # predicted decrease of the quadratic model
+            dx = d[:m]
+            grad = self.w * self.P * np.maximum(z[:m], 0.0) ** (self.P - 1.0)
+            if Q is not None:
+                grad = grad + Q @ z[:m]
+            if q is not None:
+                grad = grad + q
+            pred = -float(grad @ dx)
+            if self.nr:
+                r = z[m + self.nt:]
+                pred -= float(self.W * np.sum((1.0 + 2.0 * r) * d[m + self.nt:]))
+            if step <= self.sqp_tol or pred <= 1e-15 * (1.0 + abs(f0)):
+                return znew, True, iters, nsolve, "PROXQP_SOLVED"
+            alpha = 1.0
+            for _ls in range(40):
+                zt = z + alpha * d
+                ft = self._total(zt, Q, q)
+                if ft <= f0 - 1e-4 * alpha * pred + 1e-15 * (1.0 + abs(f0)):
+                    break
+                alpha *= 0.5
+            else:
+                return z, True, iters, nsolve, "PROXQP_SOLVED"   # no more decrease possible
+            z, f0 = zt, ft
+        return z, False, iters, nsolve, "SQP_MAX_ITER_REACHED"
+
+
+# ---------------------------------------------------------------------------
+# batched semismooth Newton on the dual (P >= 2)
+# ---------------------------------------------------------------------------
+
+def _primal_from_dual(A, lam, w, P, lo, hi, W):
+    """Box minimiser of the Lagrangian for multipliers ``lam`` and its derivative.
+
+    Returns ``x, D, rho, Drho, s`` where ``D = dx/ds`` (0 at the bounds).
+    """
+    s = np.einsum("njm,nj->nm", A, lam)
+    if P == 2.0:
+        xu = s / (2.0 * w)
+        D = np.broadcast_to(1.0 / (2.0 * w), s.shape)
+    else:
+        sp = np.maximum(s, 0.0)
+        xu = (sp / (P * w)) ** (1.0 / (P - 1.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            D = np.where(sp > 0.0, xu / ((P - 1.0) * np.where(sp > 0, s, 1.0)), 0.0)
+    x = np.minimum(np.maximum(xu, lo), hi)
+    free = (xu > lo) & (xu < hi)
+    D = np.where(free, D, 0.0)
+    if W is None:
+        rho = np.zeros_like(lam)
+        Drho = np.zeros_like(lam)
+    else:
+        mag = np.maximum(np.abs(lam) - W, 0.0)
+        rho = np.sign(lam) * mag / (2.0 * W)
+        Drho = np.where(mag > 0, 1.0 / (2.0 * W), 0.0)
+    return x, D, rho, Drho, s
+
+
+def _dual_value(x, s, rho, lam, b, w, P, W):
+    th = np.sum(w * x ** P - s * x, axis=1) + np.sum(lam * b, axis=1)
+    if W is not None:
+        th = th + np.sum(W * (np.abs(rho) + rho * rho) - lam * rho, axis=1)
+    return th
+
+
+def dual_newton(A, b, w, P, lo, hi, *, reserve_weight=None, lam0=None, tol: float = 1e-10,
+                max_iter: int = 60) -> BatchSolution:
+    """Solve many frames of the scaled problem (P >= 2) at once; see the module notes.
+
+    ``A`` (N, nd, m), ``b`` (N, nd), ``w`` (m,) or (N, m) positive, ``lo``/``hi``
+    broadcastable to (N, m).  Frames whose residual stays above ``tol`` after
+    ``max_iter`` Newton steps (or whose line search stalls) come back with
+    ``converged = False``; their ``x`` is not optimal.
+    """
+    A = np.asarray(A, dtype=float)
+    b = np.asarray(b, dtype=float)
+    N, nd, m = A.shape
+    P = float(P)
+    if P < 2.0:
+        raise SolverError("dual_newton needs P >= 2 (P = 1 is an LP: use lp_verify or FrameQP)")
+    w = np.broadcast_to(np.asarray(w, dtype=float), (N, m))
+    lo = np.broadcast_to(np.asarray(lo, dtype=float), (N, m))
+    hi = np.broadcast_to(np.asarray(hi, dtype=float), (N, m))
+    W = None if reserve_weight is None else float(reserve_weight)
+    eye = np.eye(nd)
+
+    def hess(idx, D, Drho):
+        Ai = A[idx]
+        Hm = np.einsum("njm,nm,nkm->njk", Ai, D, Ai)
+        Hm[:, np.arange(nd), np.arange(nd)] += Drho
+        return Hm
+
+    if lam0 is None:
+        # start from the problem without bounds at P = 2 ...
+        D0 = 1.0 / (2.0 * w)
+        H0 = np.einsum("njm,nm,nkm->njk", A, D0, A) + 1e-12 * eye
+        lam = np.linalg.solve(H0, b[..., None])[..., 0]
+        if P != 2.0:
+            # ... and, for P > 2, match its activations in the KKT relation s = P w x^(P-1)
+            x2 = np.clip(np.einsum("njm,nj->nm", A, lam) * D0, lo, hi)
+            x2 = np.maximum(x2, 1e-3)
+            target = P * w * x2 ** (P - 1.0)
+            G = np.einsum("njm,nkm->njk", A, A) + 1e-12 * eye
+            lam = np.linalg.solve(G, np.einsum("njm,nm->nj", A, target)[..., None])[..., 0]
+    else:
+        lam = np.array(np.broadcast_to(lam0, (N, nd)), dtype=float)
+
+    x, D, rho, Drho, s = _primal_from_dual(A, lam, w, P, lo, hi, W)
+    res = b - np.einsum("njm,nm->nj", A, x) - rho
+    rnorm = np.max(np.abs(res), axis=1) if nd else np.zeros(N)
+    iters = np.zeros(N, dtype=int)
+    active = rnorm > tol
+    stalled = np.zeros(N, dtype=bool)
+    for _ in range(max_iter):
+        idx = np.flatnonzero(active & ~stalled)
+        if idx.size == 0:
+            break
+        iters[idx] += 1
+        g = res[idx]
+        gn = rnorm[idx]
+        Hm = hess(idx, D[idx], Drho[idx])
+        reg = 1e-12 + 1e-3 * np.minimum(gn, 1.0) * np.maximum(
+            np.trace(Hm, axis1=1, axis2=2) / max(nd, 1), 1e-6)
+        Hm[:, np.arange(nd), np.arange(nd)] += reg[:, None]
+        d = np.linalg.solve(Hm, g[..., None])[..., 0]
+        # keep steps within a sane trust radius (a dof with no free muscle has a flat dual)
+        dmax = np.max(np.abs(d), axis=1)
+        cap = 10.0 * (1.0 + np.max(np.abs(lam[idx]), axis=1))
+        d *= np.minimum(1.0, cap / np.maximum(dmax, 1e-300))[:, None]
+        wi, loi, hii, bi = w[idx], lo[idx], hi[idx], b[idx]
+        lam_i = lam[idx]
+        th0 = _dual_value(x[idx], s[idx], rho[idx], lam_i, bi, wi, P, W)
+        slope = np.sum(g * d, axis=1)
+        alpha = np.ones(idx.size)
+        todo = np.ones(idx.size, dtype=bool)
+        new_lam = lam_i.copy()
+        if P != 2.0:
+            # for P > 2 first try the full step along the curve lam = phi(mu + dmu),
+            # phi(mu) = sign(mu)|mu|^(P-1): x is linear in mu for one dof, so this
+            # step is exact there and nearly so for several dofs.
+            e = 1.0 / (P - 1.0)
+            mu = np.sign(lam_i) * np.abs(lam_i) ** e
+            dphi = (P - 1.0) * np.abs(mu) ** (P - 2.0)
+            small = dphi < 1e-300
+            dmu = np.where(small, 0.0, d / np.where(small, 1.0, dphi))
+            mu_t = mu + dmu
+            lam_c = np.where(small, lam_i + d, np.sign(mu_t) * np.abs(mu_t) ** (P - 1.0))
+            xt, Dt, rt, Drt, st = _primal_from_dual(A[idx], lam_c, wi, P, loi, hii, W)
+            tht = _dual_value(xt, st, rt, lam_c, bi, wi, P, W)
+            ok = tht >= th0 + 1e-4 * slope - 1e-13 * (1.0 + np.abs(th0))
+            new_lam[ok] = lam_c[ok]
+            todo[ok] = False
+        for _ls in range(40):
+            t = np.flatnonzero(todo)
+            if t.size == 0:
+                break
+            lam_t = lam_i[t] + alpha[t, None] * d[t]
+            xt, Dt, rt, Drt, st = _primal_from_dual(A[idx[t]], lam_t, wi[t], P, loi[t], hii[t], W)
+            tht = _dual_value(xt, st, rt, lam_t, bi[t], wi[t], P, W)
+            ok = tht >= th0[t] + 1e-4 * alpha[t] * slope[t] - 1e-13 * (1.0 + np.abs(th0[t]))
+            new_lam[t[ok]] = lam_t[ok]
+            todo[t[ok]] = False
+            alpha[t[~ok]] *= 0.5
+        stalled[idx[todo]] = True
+        lam[idx] = new_lam
+        xi, Di, ri, Dri, si = _primal_from_dual(A[idx], new_lam, wi, P, loi, hii, W)
+        x[idx], D[idx], rho[idx], Drho[idx], s[idx] = xi, Di, ri, Dri, si
+        res[idx] = bi - np.einsum("njm,nm->nj", A[idx], xi) - ri
+        rnorm[idx] = np.max(np.abs(res[idx]), axis=1)
+        active[idx] = rnorm[idx] > tol
+    converged = rnorm <= tol
+    return BatchSolution(x=x, rho=rho, lam=lam, converged=converged, iterations=iters, residual=rnorm)
+
+
+# ---------------------------------------------------------------------------
+# batched basis verification for LPs (P = 1 and min/max)
+# ---------------------------------------------------------------------------
+
+def lp_basis_from(z, lo, hi, ne: int) -> np.ndarray:
+    """A guess of the optimal basis (``ne`` variable indices) from a solution ``z`` (n,).
+
+    The variables farthest from their bounds (relative to the box width, or
+    1 for unbounded ones) are taken as basic.
+    """
+    z = np.asarray(z, dtype=float)
+    width = np.where(hi >= BIG / 10, 1.0, np.maximum(hi - lo, 1e-12))
+    dist = np.minimum(z - lo, np.where(hi >= BIG / 10, np.inf, hi - z)) / width
+    return np.sort(np.argsort(-dist, kind="stable")[:ne])
+
+
+def lp_verify(E, f, c, lo, hi, basis, *, tol: float = 1e-9):
+    """Vertex solutions of ``min c'z, E z = f, lo <= z <= hi`` for a guessed basis.
+
+    ``E`` (N, ne, n), ``f`` (N, ne), ``c`` (n,), ``lo``/``hi`` (N, n), ``basis``
+    (ne,) indices shared by all frames.  Non-basic variables sit at the bound
+    their reduced cost asks for, so the vertex is dual feasible by
+    construction; ``ok`` marks the frames where it is also primal feasible
+    (basic variables within bounds, finite non-basic bounds), i.e. optimal.
+    Returns ``ok (N,), z (N, n), y (N, ne)``.
+    """
+    E = np.asarray(E, dtype=float)
+    N, ne, n = E.shape
+    basis = np.asarray(basis, dtype=int)
+    nb = np.setdiff1d(np.arange(n), basis)
+    EB = E[:, :, basis]
+    cB = c[basis]
+    ok = np.ones(N, dtype=bool)
+    try:
+        y = np.linalg.solve(np.swapaxes(EB, 1, 2), np.broadcast_to(cB, (N, ne))[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        det = np.linalg.det(EB)
+        sing = ~(np.abs(det) > 1e-12)
+        ok &= ~sing
+        EB = np.where(sing[:, None, None], np.eye(ne), EB)
+        y = np.linalg.solve(np.swapaxes(EB, 1, 2), np.broadcast_to(cB, (N, ne))[..., None])[..., 0]
+    r = c[None, nb] - np.einsum("njk,nj->nk", E[:, :, nb], y)
+    loN, hiN = lo[:, nb], hi[:, nb]
+    zN = np.where(r > 0, loN, hiN)
+    ok &= ~np.any((r < 0) & (hiN >= BIG / 10), axis=1)
+    ok &= ~np.any((r > 0) & (loN <= -BIG / 10), axis=1)
+    rhs = f - np.einsum("njk,nk->nj", E[:, :, nb], zN)
+    zB = np.linalg.solve(EB, rhs[..., None])[..., 0]
+    ok &= np.all(zB >= lo[:, basis] - tol, axis=1) & np.all(zB <= hi[:, basis] + tol, axis=1)
+    ok &= np.all(np.isfinite(zB), axis=1)
+    z = np.empty((N, n))
+    z[:, basis] = np.clip(zB, lo[:, basis], hi[:, basis])
+    z[:, nb] = zN
+    # the clip moved z by at most tol; keep the equality residual honest
+    ok &= np.max(np.abs(np.einsum("njk,nk->nj", E, z) - f), axis=1) <= 10 * tol if ne else True
+    return ok, z, y
