@@ -1,6 +1,6 @@
 """View the forearm model playing an elbow flexion, muscles coloured by activation.
 
-    python examples/view_forearm.py            # prints the URL; Ctrl-C to stop
+    python examples/view_forearm.py            # prints the URL; serves until Ctrl-C (in a terminal)
     python examples/view_forearm.py --no-block # set the scene up, print the URL, exit
 
 The motion and the activations are synthetic (a smooth flexion-extension and a
@@ -9,6 +9,7 @@ flexor/extensor pattern that follows it), so the example needs no data.  The
 beside it; its elbow residual is the coloured ball at the elbow.
 """
 import argparse
+import sys
 
 import numpy as np
 
@@ -34,7 +35,9 @@ def synthetic_trials(model, duration=4.0, rate=100.0):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--no-block", action="store_true", help="set the scene up and exit")
+    parser.add_argument("--no-block", action="store_true", help="set the scene up, print the URL and exit")
+    parser.add_argument("--block", action="store_true",
+                        help="keep serving even without a terminal (default: serve only in a terminal)")
     parser.add_argument("--timeout", type=float, default=None, help="stop after this many seconds")
     args = parser.parse_args(argv)
 
@@ -42,7 +45,9 @@ def main(argv=None):
     measured, results, simulated = synthetic_trials(model)
     viewer = Viewer(model)                                      # prints the URL
     viewer.play(measured, results=results, ghost=simulated, ghost_offset=0.35)
-    if args.no_block:
+    if args.no_block or not (args.block or sys.stdin.isatty()):
+        if not args.no_block:
+            print("no terminal: not serving; pass --block to keep the viewer up")
         viewer.close()
     else:
         viewer.serve(timeout=args.timeout)

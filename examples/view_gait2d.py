@@ -1,6 +1,6 @@
 """View the sagittal gait model walking, with muscles, ground reaction forces and a ghost.
 
-    python examples/view_gait2d.py            # prints the URL; Ctrl-C to stop
+    python examples/view_gait2d.py            # prints the URL; serves until Ctrl-C (in a terminal)
     python examples/view_gait2d.py --no-block # set the scene up, print the URL, exit
 
 The gait is synthetic (sinusoidal joint angles at 1.2 m/s, vertical ground
@@ -9,6 +9,7 @@ second ("simulated") motion walks beside it as a translucent ghost, and the
 joints are coloured by a made-up residual.
 """
 import argparse
+import sys
 
 import numpy as np
 
@@ -49,7 +50,9 @@ def synthetic_gait(model, *, cycles=2, period=1.1, rate=100.0, speed=1.2):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--no-block", action="store_true", help="set the scene up and exit")
+    parser.add_argument("--no-block", action="store_true", help="set the scene up, print the URL and exit")
+    parser.add_argument("--block", action="store_true",
+                        help="keep serving even without a terminal (default: serve only in a terminal)")
     parser.add_argument("--timeout", type=float, default=None, help="stop after this many seconds")
     args = parser.parse_args(argv)
 
@@ -57,7 +60,9 @@ def main(argv=None):
     measured, results, simulated = synthetic_gait(model)
     viewer = Viewer(model)                                      # prints the URL
     viewer.play(measured, results=results, ghost=simulated, ghost_offset=0.6)
-    if args.no_block:
+    if args.no_block or not (args.block or sys.stdin.isatty()):
+        if not args.no_block:
+            print("no terminal: not serving; pass --block to keep the viewer up")
         viewer.close()
     else:
         viewer.serve(timeout=args.timeout)

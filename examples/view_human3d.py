@@ -1,11 +1,12 @@
 """View the 36-dof human3d skeleton (meshes from example-robot-data) swinging arms and legs.
 
-    python examples/view_human3d.py            # prints the URL; Ctrl-C to stop
+    python examples/view_human3d.py            # prints the URL; serves until Ctrl-C (in a terminal)
     python examples/view_human3d.py --no-block # set the scene up, print the URL, exit
 
 The motion is synthetic; a ghost with smaller amplitude stands beside it.
 """
 import argparse
+import sys
 
 import numpy as np
 
@@ -30,7 +31,9 @@ def synthetic_swing(model, *, duration=2.0, rate=60.0):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--no-block", action="store_true", help="set the scene up and exit")
+    parser.add_argument("--no-block", action="store_true", help="set the scene up, print the URL and exit")
+    parser.add_argument("--block", action="store_true",
+                        help="keep serving even without a terminal (default: serve only in a terminal)")
     parser.add_argument("--timeout", type=float, default=None, help="stop after this many seconds")
     args = parser.parse_args(argv)
 
@@ -38,7 +41,9 @@ def main(argv=None):
     measured, smaller = synthetic_swing(model)
     viewer = Viewer(model)                                      # prints the URL
     viewer.play(measured, ghost=smaller, ghost_offset=0.8)
-    if args.no_block:
+    if args.no_block or not (args.block or sys.stdin.isatty()):
+        if not args.no_block:
+            print("no terminal: not serving; pass --block to keep the viewer up")
         viewer.close()
     else:
         viewer.serve(timeout=args.timeout)

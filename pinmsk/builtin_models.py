@@ -92,8 +92,15 @@ def builtin_dir() -> Path:
 
 
 def builtin_names() -> tuple[str, ...]:
-    """Names of the built-in models (one per sidecar ``<name>.toml``), sorted."""
-    return tuple(sorted(p.stem for p in builtin_dir().glob("*.toml")))
+    """Names of the built-in models (one per sidecar ``<name>.toml`` whose ``[model]``
+    table names a URDF; other TOML files there, such as marker sets, are not models), sorted."""
+    return tuple(sorted(p.stem for p in builtin_dir().glob("*.toml") if _names_urdf(p)))
+
+
+def _names_urdf(path: Path) -> bool:
+    with open(path, "rb") as fh:
+        model = _toml.load(fh).get("model", {})
+    return isinstance(model, dict) and "urdf" in model
 
 
 def builtin_sidecar(name: str) -> Path:

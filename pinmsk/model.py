@@ -239,7 +239,7 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
             close = difflib.get_close_matches(str(name_or_path), names, n=3)
             hint = f"; did you mean {', '.join(map(repr, close))}?" if close else ""
             raise ModelError(
-                f"no built-in model '{name_or_path}'{hint}. Built-ins: {', '.join(names)}; "
+                f"no built-in model '{name_or_path}'{hint} (built-ins: {', '.join(names)}); "
                 "or pass the path of a .toml sidecar or a .urdf file"
             )
         sidecar = builtin_models.builtin_sidecar(str(name_or_path))

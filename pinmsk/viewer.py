@@ -87,7 +87,6 @@ class Viewer:
                  ground: bool = True, ground_height: float | None = None, levels: int = 8,
                  skeleton_opacity: float | None = None, quiet: bool = False):
         import meshcat
-        from pinocchio.visualize import MeshcatVisualizer
 
         self.model = model
         self.levels = int(levels)
@@ -145,6 +144,7 @@ class Viewer:
 
         self.ground_height = (default_ground_height(model, self.visual_model, self._q0)
                               if ground_height is None else float(ground_height))
+        self._ground = bool(ground)
         if ground:
             self._build_ground()
         self.display(self._q0)
@@ -215,12 +215,14 @@ class Viewer:
                 mg.Sphere(radius), mg.MeshLambertMaterial(color=CONTACT, opacity=0.8, transparent=True))
         return spheres
 
-    def _build_ground(self) -> None:
+    def _build_ground(self, qs: Sequence[np.ndarray] | None = None) -> None:
+        """The ground plane: a thin box under the model at configurations ``qs``, 1 m margin."""
         import meshcat.geometry as mg
 
-        pts = vg.geometry_points(self.model.pin, self.visual_model, self._q0)
-        size = float(np.clip(3.0 * np.ptp(pts, axis=0).max(), 2.0, 20.0))
-        dims = [size, size, size]
+        qs = [self._q0] if qs is None else qs
+        pts = np.concatenate([vg.geometry_points(self.model.pin, self.visual_model, q) for q in qs])
+        span = np.ptp(pts, axis=0) + 2.0
+        dims = [float(np.clip(x, 2.0, 50.0)) for x in span]
         dims[self._up] = 0.005
         T = np.eye(4)
         T[self._up, 3] = self.ground_height - 0.0025
@@ -292,7 +294,8 @@ class Viewer:
 
     def display(self, q=None, *, activation=None, force=None, residual=None, residual_scale=None,
                 ghost_q=None, ghost_offset=0.0, grf: Mapping | None = None):
-        """Show configuration ``q`` (nq,) (default: neutral, inside the joint limits).
+        """Show configuration ``q``: ``(nq,)`` or ``{coordinate: value}`` (default: neutral,
+        inside the joint limits; coordinates not named stay neutral).
 
         ``activation`` / ``force``: per-muscle values, an ``(n_muscles,)`` array or a
         ``{muscle: value}`` dict (force is shown as force / f_max).  ``residual``:
@@ -302,6 +305,8 @@ class Viewer:
         the camera), or by a 3-vector in the model frame.
         ``grf``: ``{side: (force_xyz, point_xyz)}`` in the model frame.
         """
+        if isinstance(q, Mapping):
+            q = self._configuration_from(q)
         q = self._q0 if q is None else self._check_q(q, "q")
         self.viz.display(q)
         data = self.model.pin.createData()
@@ -357,6 +362,16 @@ class Viewer:
         mass = float(sum(i.mass for i in self.model.pin.inertias))
         g = float(np.linalg.norm(self.model.pin.gravity.linear)) or 9.81
         return 1.0 / (mass * g) if mass > 0 else 1e-3
+
+    def _configuration_from(self, values: Mapping[str, float]) -> np.ndarray:
+        """``{coordinate: value}`` -> q (unnamed coordinates at their neutral value)."""
+        unknown = sorted(set(values) - set(self.model.coordinates))
+        if unknown:
+            raise ModelError(f"unknown coordinates {unknown} (coordinates: {', '.join(self.model.coordinates)})")
+        q = self._q0.copy()
+        for c, val in values.items():
+            q[self.model.pin.joints[self._joint_ids[c]].idx_q] = float(val)
+        return q
 
     def _check_q(self, q, what: str) -> np.ndarray:
         q = np.asarray(q, dtype=float).reshape(-1)
@@ -506,7 +521,10 @@ class Viewer:
                      ghost_q=None if gq is None else gq[0], ghost_offset=ghost_offset,
                      grf={side: (F[0], P[0]) for side, (F, P) in grf.items()} or None)
         self.vis.set_animation(anim, play=play, repetitions=repetitions)
-        self.frame_camera(q[:: max(1, len(q) // 10)])
+        samples = q[:: max(1, len(q) // 10)]
+        if self._ground:
+            self._build_ground(samples)
+        self.frame_camera(samples)
         return anim
 
     def _visibility_tracks(self, anim, key_t, lv, path) -> None:
@@ -566,6 +584,10 @@ class Viewer:
     def jupyter_cell(self, height: int = 400):
         """An IPython HTML object embedding the viewer (put it last in a notebook cell)."""
         return self.vis.jupyter_cell(height=height)
+
+    def _repr_html_(self) -> str:
+        # a bare ``viewer`` at the end of a notebook cell shows the scene
+        return self.jupyter_cell().data
 
     def static_html(self) -> str:
         """The whole current scene as one self-contained HTML page (from the server)."""
@@ -841,16 +863,20 @@ def view_cli(model_name, trial_path=None, results_path=None, *, open_browser: bo
     from .io import read_trial
     from .model import load_model
 
+    if results_path and not trial_path:
+        raise TrialError("--results needs a TRIAL with the motion to show them on")
     model = load_model(model_name)
     trial = read_trial(trial_path) if trial_path else None
     results = read_trial(results_path) if results_path else None
     viewer = Viewer(model, open_browser=open_browser)
     if trial is not None:
-        viewer.play(trial, results=results)
+        try:
+            viewer.play(trial, results=results)
+        except BaseException:
+            viewer.close()
+            raise
         print(f"pinmsk viewer: playing {trial_path} ({trial.time[-1] - trial.time[0]:.2f} s); "
-              "use the Animations controls for the time slider", flush=True)
-    elif results is not None:
-        raise TrialError("--results needs a TRIAL with the motion to show them on")
+              "open 'Open Controls' > Animations for the time slider", flush=True)
     if block:
         viewer.serve(timeout=timeout)
     return viewer

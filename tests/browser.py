@@ -63,6 +63,17 @@ def chromium_or_skip() -> str:
     return exe
 
 
+def chrome_or_skip(**kwargs) -> "Chrome":
+    """A started :class:`Chrome`, or skip the calling test saying why it cannot start."""
+    import pytest
+
+    chromium_or_skip()
+    try:
+        return Chrome(**kwargs)
+    except BrowserError as exc:
+        pytest.skip(f"headless Chromium could not be started: {exc}")
+
+
 def _run(args: list[str], *, timeout: float) -> subprocess.CompletedProcess:
     exe = find_chromium()
     if exe is None:
@@ -145,6 +156,8 @@ class Chrome:
         self._loop = asyncio.new_event_loop()
         self._id = 0
         self._ws = None
+        #: DevTools events received so far ({"method": ..., "params": ...}), oldest first.
+        self.events: list[dict] = []
         cmd = [exe, *FLAGS, f"--user-data-dir={self._profile.name}", f"--window-size={width},{height}",
                "--remote-debugging-port=0", "--remote-allow-origins=*", "about:blank"]
         self.proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
@@ -200,6 +213,9 @@ class Chrome:
             if msg is None:
                 raise BrowserError("the DevTools connection closed")
             data = json.loads(msg)
+            if "method" in data and "id" not in data:
+                self.events.append(data)
+                continue
             if data.get("id") == my_id:
                 if "error" in data:
                     raise BrowserError(f"{method}: {data['error']}")
@@ -237,6 +253,11 @@ class Chrome:
                 return last
             _time.sleep(interval)
         raise BrowserError(f"timed out after {timeout} s waiting for {expression!r} (last: {last!r})")
+
+    def requested_urls(self) -> list[str]:
+        """URLs the page requested (needs ``send("Network.enable")`` before navigating)."""
+        return [e["params"]["request"]["url"] for e in self.events
+                if e.get("method") == "Network.requestWillBeSent"]
 
     def screenshot(self, path) -> Path:
         import base64
@@ -291,4 +312,9 @@ MESHCAT_SCENE_JS = """
 MESHCAT_ANIMATION_JS = """
 ({actions: viewer.animator.actions.length, duration: viewer.animator.duration,
   time: viewer.animator.time, playing: viewer.animator.playing})
+"""
+
+#: JavaScript: every <img> of the page as [src prefix, complete, naturalWidth, naturalHeight].
+IMAGES_JS = """
+Array.from(document.images).map(i => [i.src.slice(0, 22), i.complete, i.naturalWidth, i.naturalHeight])
 """

@@ -147,6 +147,9 @@ def test_display_moves_muscles_and_colours_them(viewer, forearm):
     assert viewer._level_state["muscle:BICLH"] == 0
     with pytest.raises(ModelError, match="nq = 1"):
         viewer.display(np.zeros(3))
+    viewer.display({"elbow_flexion": 0.7})
+    with pytest.raises(ModelError, match="unknown coordinates.*elbow"):
+        viewer.display({"elbow": 0.7})
     with pytest.raises(ModelError, match="unknown muscles.*BICEPS"):
         viewer.display(activation={"BICEPS": 1.0})
 
@@ -264,6 +267,7 @@ def test_viewer_prints_url_and_does_not_open_a_browser(forearm, capsys, monkeypa
 def test_jupyter_cell_embeds_the_url(viewer):
     html = viewer.jupyter_cell(height=300)
     assert viewer.url in html.data and "300px" in html.data
+    assert viewer.url in viewer._repr_html_()
 
 
 def test_view_cli_plays_files(tmp_path, forearm, capsys):
@@ -348,3 +352,12 @@ def test_examples_run_headless(script):
         pytest.skip(f"gait2d does not load yet: {res.stderr.strip().splitlines()[-1]}")
     assert res.returncode == 0, res.stderr
     assert "http://127.0.0.1:" in res.stdout
+
+
+def test_example_without_terminal_exits_by_itself():
+    # a generic "run every example" harness passes no flags and has no terminal
+    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    res = subprocess.run([sys.executable, str(REPO / "examples" / "view_forearm.py")], stdin=subprocess.DEVNULL,
+                         capture_output=True, text=True, timeout=120, env=env, cwd=REPO)
+    assert res.returncode == 0, res.stderr
+    assert "http://127.0.0.1:" in res.stdout and "not serving" in res.stdout

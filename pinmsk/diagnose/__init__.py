@@ -1,0 +1,33 @@
+"""Diagnosis: compare a model with measurements, find the missing physical effect, add it, refit.
+
+The loop, in a notebook::
+
+    import pinmsk
+    from pinmsk import diagnose as dx
+
+    model = pinmsk.load_model("forearm")
+    trial = pinmsk.read_trial("forearm_payload.csv")
+    d = dx.diagnose(model, trial)          # where it fails, ranked effects
+    print(d.summary_text())
+    d.ranking[0].effect                    # the fitted effect, with uncertainties
+    model2 = d.with_effect()               # model + the best significant effect
+    d2 = dx.diagnose(model2, trial)        # the error falls; verdict at_noise_floor
+
+and as the CLI does it: ``dx.run(model, trial, add=["payload:hand"], json_path=...,
+report_path=..., plot_dir=...)``.  Modules: :mod:`.compare` (residuals, modes,
+noise floor), :mod:`.fit` (fitting and cross-validation), :mod:`.diagnosis`
+(ranking, verdict, the loop), :mod:`.synth` (hidden-effect trials).
+"""
+from .compare import DEFAULT_CUTOFF, Comparison, NoiseFloor, compare, external_forces_from_trial
+from .diagnosis import (AT_FLOOR, THRESHOLD, Diagnosis, DiagnosisRun, EffectScore, diagnose,
+                        parse_effect, run)
+from .fit import FitResult, fit_effect
+from . import synth
+from .synth import make_trial
+from .demo import demo, shipped_trial, shipped_trials
+
+__all__ = [
+    "AT_FLOOR", "Comparison", "DEFAULT_CUTOFF", "Diagnosis", "DiagnosisRun", "EffectScore", "FitResult",
+    "NoiseFloor", "THRESHOLD", "compare", "demo", "diagnose", "external_forces_from_trial", "fit_effect",
+    "make_trial", "parse_effect", "run", "shipped_trial", "shipped_trials", "synth",
+]

@@ -117,52 +117,18 @@ def _rows_for(t: np.ndarray, cutoff: float | None) -> np.ndarray:
 
 # -- ground reaction forces -----------------------------------------------------
 
-_FOOT_FRAMES = ("heel_{s}", "calcn_{s}", "foot_{s}", "{s}_foot", "toes_{s}")
-
-
 def external_forces_from_trial(model, trial: Trial, *, grf_frames: Mapping[str, str] | None = None
                                ) -> list[ExternalForce]:
     """Ground reaction wrenches of the trial as :class:`ExternalForce` s on the model's feet.
 
     Channels ``[<side>_]ground_force_v[xyz]`` (N), ``..._p[xyz]`` (centre of
-    pressure, m) and optionally ``..._torque_[xyz]`` (free moment, N m).  A side
-    ``s`` goes to the first frame of ``heel_s, calcn_s, foot_s, s_foot, toes_s``
-    that the model has, or to ``grf_frames[s]``.
+    pressure, m) and optionally ``..._torque_[xyz]`` (free moment, N m), via
+    :func:`pinmsk.grf.external_forces` (side ``s`` to the body of ``foot_s``,
+    ``calcn_s``, ``heel_s``, ... or ``grf_frames[s]``; unloaded samples get no
+    force).
     """
-    groups: dict = {}
-    for name in trial.names:
-        p = parse_ground_reaction(name)
-        if p is None:
-            continue
-        groups.setdefault(p.side, {})[(p.quantity, p.axis)] = name
-    out = []
-    for side, chans in sorted(groups.items(), key=lambda kv: str(kv[0])):
-        missing = [f"{q}_{a}" for q in ("force", "point") for a in "xyz" if (q, a) not in chans]
-        if missing:
-            raise TrialError(f"ground reaction of side {side!r} lacks {', '.join(missing)} channels "
-                             f"(need ground_force_v[xyz] and ground_force_p[xyz])")
-        frame = None
-        if grf_frames and side in grf_frames:
-            frame = grf_frames[side]
-            model.frame_id(frame)
-        elif side is not None:
-            for pattern in _FOOT_FRAMES:
-                cand = pattern.format(s=side)
-                if cand in model.frame_names:
-                    frame = cand
-                    break
-        if frame is None:
-            raise TrialError(
-                f"cannot tell which body receives the ground reaction of side {side!r}; pass "
-                f"grf_frames={{{side!r}: '<frame>'}} (frames: {', '.join(model.frame_names[:12])}, ...)"
-            )
-        f = np.column_stack([trial[chans[("force", a)]] for a in "xyz"])
-        p = np.column_stack([trial[chans[("point", a)]] for a in "xyz"])
-        tq = None
-        if all(("torque", a) in chans for a in "xyz"):
-            tq = np.column_stack([trial[chans[("torque", a)]] for a in "xyz"])
-        out.append(ExternalForce(frame, f, p, tq))
-    return out
+    from ..grf import external_forces
+    return external_forces(model, trial, frames=grf_frames)
 
 
 def _subset_external(external, rows):
@@ -339,6 +305,37 @@ class EquationError:
                          self.moment_arms)
         return dtau[:, self.rows]
 
+    # -- EMG noise through the muscle-level chain ----
+    def emg_noise(self, extra: SignalEffect | None = None) -> np.ndarray:
+        """RMS (C,) of the muscle moments' response to the measured signals' white noise.
+
+        The excitations' noise level is estimated locally (third differences,
+        0.5-s moving RMS, so signal-dependent EMG noise is followed); three
+        realisations of it are passed through the model's muscle-level chain
+        (plus ``extra``, e.g. a fitted candidate) and the muscle moments.
+        """
+        if self.mode != "muscle":
+            return np.zeros(self.columns.size)
+        if not hasattr(self, "_u_noise"):
+            u = self.excitation
+            d = np.diff(u, n=3, axis=0) / np.sqrt(20.0)
+            d = np.vstack([d[:2], d, d[-1:]])
+            dt = float(np.median(np.diff(self.motion.t)))
+            w = max(int(round(0.5 / dt)), 5)
+            kernel = np.ones(w) / w
+            var = np.column_stack([np.convolve(d[:, j] ** 2, kernel, mode="same") for j in range(u.shape[1])])
+            sig = np.sqrt(var)
+            rng = np.random.default_rng(2024)
+            self._u_noise = [sig * rng.standard_normal(u.shape) for _ in range(_N_PROPAGATE)]
+        chain = self.chain if extra is None else sorted(self.chain + [extra], key=lambda c: c.order)
+        base = self._apply_chain(chain, self.excitation) if extra is not None else self.activation
+        acc = np.zeros(self.columns.size)
+        for xi in self._u_noise:
+            a = self._apply_chain(chain, self.excitation + xi)
+            dtau = np.einsum("nm,nmc->nc", (a - base) * self.f_active, self.moment_arms)[self.rows]
+            acc += np.mean(dtau ** 2, axis=0)
+        return np.sqrt(acc / len(self._u_noise))
+
     # -- residual with perturbed kinematics (noise propagation) ----
     def residual_for(self, motion: Motion) -> np.ndarray:
         from ..dynamics import inverse_dynamics_array
@@ -446,7 +443,12 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
         return Comparison("motion", model, trial, cutoff, t[rows], channels, tuple(plan.coordinates),
                           meas, mod, floor, eq, states, options, eq_floor)
     channels = tuple(f"{c}_moment" for c in eq_coords)
-    floor = noise_floor if noise_floor is not None else _torque_floor(model, trial, motion, eq, cutoff, channels)
+    if plan.mode == "muscle":
+        # the measured side's noise passes through the model's own muscle-level chain: recompute it
+        floor = _muscle_floor(model, trial, motion, eq, cutoff, channels, noise_floor)
+    else:
+        floor = noise_floor if noise_floor is not None else _torque_floor(model, trial, motion, eq, cutoff,
+                                                                         channels)
     return Comparison(plan.mode, model, trial, cutoff, t[rows], channels, eq_coords, eq.actuation.copy(),
                       eq.tau_id.copy(), floor, eq, states, options)
 
@@ -477,6 +479,22 @@ def _torque_floor(model, trial, motion, eq, cutoff, channels) -> NoiseFloor:
     return NoiseFloor(tuple(channels), sigma, white, prop, how)
 
 
+def _muscle_floor(model, trial, motion, eq, cutoff, channels, previous) -> NoiseFloor:
+    """Muscle level: kinematic noise propagated as in torque mode, plus EMG noise through the chain."""
+    if previous is not None:
+        kin = previous.propagated
+        how = previous.method
+    else:
+        tf = _torque_floor(model, trial, motion, eq, cutoff, channels)
+        kin = tf.propagated
+        how = ("excitation/EMG noise (local third-difference RMS of each signal, 0.5-s window) propagated "
+               "through the model's muscle-level chain and muscle moments (3 Monte-Carlo realisations), "
+               "plus " + tf.method.split("plus ", 1)[-1])
+    emg = eq.emg_noise()
+    sigma = np.sqrt(kin ** 2 + emg ** 2)
+    return NoiseFloor(tuple(channels), np.maximum(sigma, np.finfo(float).tiny), emg, kin, how)
+
+
 def _states(model, trial, motion, rows, coords, excitation, kind, external) -> dict:
     """Candidate explanatory signals over the analysed rows, for residual correlations."""
     out = {}
@@ -497,14 +515,15 @@ def _states(model, trial, motion, rows, coords, excitation, kind, external) -> d
 # -- motion level --------------------------------------------------------------------------
 
 def _windows(rows: np.ndarray, t: np.ndarray, length: float) -> list[np.ndarray]:
+    """Consecutive groups of ``rows`` spanning ``length`` s each (a short tail joins the last group)."""
     tr = t[rows]
-    edges = np.arange(tr[0], tr[-1], length)
-    out = []
-    for a in edges:
-        w = rows[(tr >= a) & (tr < a + length)]
-        if w.size >= 3:
-            out.append(w)
-    return out
+    k = np.floor((tr - tr[0]) / length + 1e-9).astype(int)
+    groups = [rows[k == i] for i in range(k.max() + 1)]
+    groups = [g for g in groups if g.size]
+    if len(groups) > 1 and groups[-1].size < 3:
+        tail = groups.pop()
+        groups[-1] = np.concatenate([groups[-1], tail])
+    return groups
 
 
 def simulate_windows(model, trial, motion, rows, window, *, tau_noise=None, state_noise=None):
@@ -512,7 +531,7 @@ def simulate_windows(model, trial, motion, rows, window, *, tau_noise=None, stat
     from ..dynamics import simulate
 
     t = motion.t
-    out = np.empty((rows.size, model.nv))
+    out = np.full((rows.size, model.nv), np.nan)
     pos = {r: k for k, r in enumerate(rows)}
     cols = [f"{c}_moment" for c in model.coordinates]
     drive_all = np.column_stack([trial[c] if c in trial else np.zeros(t.size) for c in cols])

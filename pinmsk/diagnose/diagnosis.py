@@ -38,7 +38,8 @@ import numpy as np
 
 from ..components import Component
 from ..errors import ConvergenceError, ModelError, PinmskError, TrialError
-from ..effects import catalog as _catalog
+from ..effects import CatalogContext
+from ..effects import catalog as effect_catalog
 from ..effects import registry
 from .compare import DEFAULT_CUTOFF, Comparison, compare, simulate_windows
 from .fit import CandidateFit, FitResult
@@ -99,7 +100,10 @@ class EffectScore:
             s = f"{k} = {v:.4g}"
             if se is not None and np.isfinite(se):
                 s += f" ± {se:.2g}"
-            parts.append(s + (f" {unit}" if unit else ""))
+            s += f" {unit}" if unit else ""
+            if se is not None and np.isnan(se):
+                s += " (at bound)"
+            parts.append(s)
         return ", ".join(parts)
 
     def to_json(self) -> dict:
@@ -264,7 +268,11 @@ class Diagnosis:
 
 
 def _unit(c: Comparison) -> str:
-    return "rad" if c.mode == "motion" else "N m (N for translations)"
+    from ..effects._base import is_prismatic
+    lin = [is_prismatic(c.model, x) for x in c.coordinates]
+    if c.mode == "motion":
+        return "m and rad" if any(lin) and not all(lin) else ("m" if all(lin) else "rad")
+    return "N and N m" if any(lin) and not all(lin) else ("N" if all(lin) else "N m")
 
 
 def _added_json(a) -> dict:
@@ -401,8 +409,15 @@ def _score(c: Comparison, cf: CandidateFit, settings) -> EffectScore:
     sig = c.eq_noise.sigma
     mse0 = float(np.mean((c.eq.e / sig) ** 2))
     mse1 = float(np.mean((e_cv / sig) ** 2))
-    improvement = mse0 - mse1
-    explained = 1.0 - mse1 / mse0 if mse0 > 0 else 0.0
+    # A muscle-level effect also filters the measured signals' noise; that part of the fall is not
+    # physics.  Count only the fall beyond the change of the noise floor it causes.
+    floor_change = 0.0
+    if cf.signal and c.mode == "muscle":
+        emg_after = c.eq.emg_noise(fit.effect)
+        after2 = c.noise.propagated ** 2 + emg_after ** 2
+        floor_change = float(np.mean((sig ** 2 - after2) / sig ** 2))
+    improvement = mse0 - mse1 - floor_change
+    explained = max(improvement / mse0, -1.0) if mse0 > 0 else 0.0
     if c.mode == "motion":
         rmse_after = _motion_rmse_after(c, fit.effect)
     else:
@@ -451,11 +466,9 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
     guard = int(np.ceil(1.0 / (cutoff * dt))) if cutoff else 2
     settings = {"folds": folds, "threshold": threshold, "at_floor": at_floor, "guard": guard,
                 "window": window, "cutoff": cutoff}
-    ctx = _catalog.CatalogContext(c.mode, tuple(c.eq.coordinates),
-                                  tuple(x for x in c.coordinates if x not in c.eq.coordinates)
-                                  + tuple(_unactuated(c)), tuple(frames or ()))
+    ctx = CatalogContext(c.mode, tuple(c.eq.coordinates), tuple(_unactuated(c)), tuple(frames or ()))
     if candidates is None:
-        cands = _catalog.catalog(model, trial, frames=frames, context=ctx)
+        cands = effect_catalog(model, trial, frames=frames, context=ctx)
     else:
         cands = []
         for x in candidates:
@@ -464,7 +477,7 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
                 continue
             fam, tgt, vals = parse_effect(x) if isinstance(x, str) else (x[0], x[1], {})
             if tgt is None:
-                cands.extend(_catalog.catalog(model, trial, families=[fam], frames=frames, context=ctx))
+                cands.extend(effect_catalog(model, trial, families=[fam], frames=frames, context=ctx))
             else:
                 comp = registry.get(fam)(tgt, **vals)
                 comp.check_target(model)
@@ -476,10 +489,26 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
             ranking.append(_score(c, cf, settings))
         except PinmskError as exc:
             skipped.append((comp.label, str(exc)))
-    ranking.sort(key=lambda s: (not s.converged, -s.explained_fraction))
+    ranking = _order(ranking)
     windows = _worst_windows(c, window)
     cors = _correlations(c)
     return Diagnosis(c, ranking, windows, cors, settings, skipped)
+
+
+def _order(ranking: list, tie: float = 0.05) -> list:
+    """Best held-out improvement first; within ``tie`` (noise variances) the fewer parameters first."""
+    out = sorted(ranking, key=lambda s: (not s.converged, -s.improvement))
+    for _ in range(len(out)):
+        swapped = False
+        for i in range(len(out) - 1):
+            a, b = out[i], out[i + 1]
+            if (a.converged == b.converged and a.target == b.target and a.fit.n_params > b.fit.n_params
+                    and a.improvement - b.improvement < tie):
+                out[i], out[i + 1] = b, a
+                swapped = True
+        if not swapped:
+            break
+    return out
 
 
 def _unactuated(c: Comparison):
@@ -515,7 +544,7 @@ class DiagnosisRun:
         first = self.steps[0]
         if len(self.steps) == 1:
             return first.summary_text()
-        out = [first.summary_text().rsplit("\n", 1)[0] if False else first.summary_text()]
+        out = [first.summary_text()]
         for k, (fit, step) in enumerate(zip(self.added, self.steps[1:]), 1):
             prev = self.steps[k - 1]
             sc = EffectScore(fit, {}, 0.0, 0.0, True, fit.converged)

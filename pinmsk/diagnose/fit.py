@@ -245,10 +245,16 @@ class CandidateFit:
             rho = _lag1(r)
             infl = (1 + rho) / (1 - rho)
             try:
-                cov = np.linalg.inv(J.T @ J) * s2 * infl
-                se = np.sqrt(np.clip(np.diag(cov), 0, None))
+                with np.errstate(over="ignore", invalid="ignore"):
+                    cov = np.linalg.inv(J.T @ J) * s2 * infl
+                    se = np.sqrt(np.clip(np.diag(cov), 0, None))
+                se = np.where(np.isfinite(se), se, np.inf)
             except np.linalg.LinAlgError:
                 se = np.full(p, np.inf)
+            span = self.hi - self.lo
+            tol = np.where(np.isfinite(span), 1e-6 * span, 1e-9)
+            at_bound = (x <= self.lo + tol) | (x >= self.hi - tol)
+            se = np.where(at_bound, np.nan, se)          # no curvature-based error at a bound
             stderr = dict(zip(self.names, map(float, se)))
         values = self._params(x)
         clipped = {k: float(np.clip(v, self.component.params[k].min, self.component.params[k].max))

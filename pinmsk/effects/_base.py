@@ -164,6 +164,12 @@ def unactuated_coordinates(model) -> tuple[str, ...]:
     return tuple(pm.names[k] for k in root)
 
 
+def is_prismatic(model, coordinate: str) -> bool:
+    """Whether ``coordinate`` is a translation (its generalized force is in N, not N m)."""
+    pm = model.pin
+    return pm.joints[pm.getJointId(coordinate)].shortname().startswith("JointModelP")
+
+
 def moving_bodies(model) -> dict[str, int]:
     """Body (link) name -> joint id, one per joint that carries mass (the joint's first body)."""
     pm = model.pin
@@ -184,12 +190,18 @@ _HAND_RE = re.compile(r"(^|_)(hand|palm|wrist|fingertip|tip|tool|grip|end_effect
 def hand_like_frames(model) -> list[str]:
     """Frames where a held payload is plausible: named hand/palm/fingertip/tool... and off the joint axis."""
     pm = model.pin
-    out = []
+    out, seen = [], []
     for f in pm.frames:
         if f.parentJoint == 0 or not _HAND_RE.search(f.name):
             continue
-        if np.linalg.norm(f.placement.translation) < 1e-9 and f.type == pin.FrameType.BODY:
-            continue      # a body frame at its joint origin: a point mass there has no lever arm
+        if f.type not in (pin.FrameType.BODY, pin.FrameType.OP_FRAME):
+            continue      # joint frames duplicate the body frame they carry
+        pos = np.array(f.placement.translation)
+        if np.linalg.norm(pos) < 1e-9:
+            continue      # at its joint's origin: a point mass there has no lever arm
+        if any(j == f.parentJoint and np.allclose(pos, p) for j, p in seen):
+            continue
+        seen.append((f.parentJoint, pos))
         out.append(f.name)
     return out
 
@@ -229,7 +241,7 @@ def frame_point_kinematics(model, motion: Motion, frame: str):
             pin.forwardKinematics(pm, data, q[k], v[k], a[k])
             pin.updateFramePlacement(pm, data, fid)
             acc[k] = pin.getFrameClassicalAcceleration(pm, data, fid, lwa).linear
-            J[k] = pin.computeFrameJacobian(pm, data, q[k], fid, lwa)[:3]
+            J[k] = np.reshape(pin.computeFrameJacobian(pm, data, q[k], fid, lwa), (6, pm.nv))[:3]
         return J, acc
 
     return _memo(("point", fid), pm, (motion.q, motion.v, motion.a), compute)
@@ -249,7 +261,7 @@ def torque_regressor(model, motion: Motion) -> np.ndarray:
         Y = np.empty((n, pm.nv, 10 * (pm.njoints - 1)))
         q, v, a = motion.q, motion.v, motion.a
         for k in range(n):
-            Y[k] = pin.computeJointTorqueRegressor(pm, data, q[k], v[k], a[k])
+            Y[k] = np.reshape(pin.computeJointTorqueRegressor(pm, data, q[k], v[k], a[k]), Y.shape[1:])
         return Y
 
     return _memo("regressor", pm, (motion.q, motion.v, motion.a), compute)

@@ -99,6 +99,14 @@ class FrameSolution:
 
 
 @dataclass
+class _QPOut:
+    x: np.ndarray
+    y: np.ndarray
+    iter: int
+    status: str
+
+
+@dataclass
 class BatchSolution:
     """Solution of many frames by :func:`dual_newton` (scaled units)."""
 
@@ -146,6 +154,7 @@ class FrameQP:
         self.n_in = self.m if self.minmax else 0
         self._qp = None
         self._warm = False
+        self._last_y = np.zeros(self.nd)
         # constant blocks
         self._C = None
         if self.minmax:
@@ -163,7 +172,7 @@ class FrameQP:
         self.sqp = (not self.minmax) and self.P > 2.0
 
     # -- pieces of the QP -----------------------------------------------------
-    def _objective(self, x_lin: np.ndarray | None, Q, q):
+    def _objective(self, x_lin: np.ndarray | None, Q, q, floor: float = 1e-4):
         """H, g of the QP; ``x_lin`` is the SQP linearisation point (None: exact P=1/2)."""
         n, m = self.n, self.m
         H = np.zeros((n, n))
@@ -176,9 +185,19 @@ class FrameQP:
             H[np.arange(m), np.arange(m)] = 2.0 * self.w
         else:
             P = self.P
-            xf = np.maximum(x_lin, 1e-4)
+            xf = np.maximum(x_lin, floor)
             h = self.w * P * (P - 1.0) * xf ** (P - 2.0)
+            # keep the model strictly convex (its fixed point is the exact optimum
+            # whatever positive curvature is used; flat directions stall proxsuite)
+            h = np.maximum(h, 1e-8 * float(np.max(h)))
             grad = self.w * P * np.maximum(x_lin, 0.0) ** (P - 1.0)
+            if self.nr == 0 and Q is None and q is None:
+                # scale the model so its gradient is O(1): with P = 10 the cost of
+                # small forces is ~1e-20 and proxsuite's absolute tolerances would
+                # accept anything (the minimiser does not change)
+                gam = 1.0 / max(float(np.max(np.abs(grad))), float(np.max(h)) * 1e-3, 1e-300)
+                h = h * gam
+                grad = grad * gam
             H[np.arange(m), np.arange(m)] = h
             g[:m] = grad - h * x_lin
         if self.nr:
@@ -209,9 +228,29 @@ class FrameQP:
         qp.settings.initial_guess = pq.InitialGuess.EQUALITY_CONSTRAINED_INITIAL_GUESS
         return qp
 
-    def _qp_solve(self, H, g, A, b, lb, ub):
-        """One QP; warm start only from a successful solve of the same-size QP."""
+    def _qp_solve(self, H, g, A, b, lb, ub) -> "_QPOut":
+        """One QP; warm start only from a successful solve of the same-size QP.
+
+        The frame is rescaled first: variables by ``beta = max|b|`` (so a frame
+        with tiny moments is not a tiny problem: proxsuite's absolute
+        tolerances and infeasibility test would misjudge it) and the objective
+        to unit size.  Results come back in the original units.
+        """
         pq = self.proxqp
+        beta = max(float(np.max(np.abs(b))) if b.size else 1.0, 1e-9)
+        Hs = H * (beta * beta)
+        gs = g * beta
+        c = float(np.max(np.abs(gs))) if gs.size else 0.0
+        if not c > 1e-300:
+            c = float(np.max(np.abs(Hs))) if Hs.size else 0.0
+        c = c if c > 1e-300 else 1.0
+        Hs /= c
+        gs /= c
+        inf_lo = lb <= -BIG / 10
+        inf_hi = ub >= BIG / 10
+        lbs = np.where(inf_lo, -BIG, lb / beta)
+        ubs = np.where(inf_hi, BIG, ub / beta)
+        bs = b / beta
         Af = self._Afull
         Af[:, :self.m] = A
         attempts = ("warm", "cold") if (self._qp is not None and self._warm) else ("cold",)
@@ -219,23 +258,26 @@ class FrameQP:
             if how == "warm":
                 qp = self._qp
                 qp.settings.initial_guess = pq.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
-                qp.update(H=H, g=g, A=Af, b=b, C=self._C,
+                qp.update(H=Hs, g=gs, A=Af, b=bs, C=self._C,
                           l=self._l if self.minmax else None, u=self._u if self.minmax else None,
-                          l_box=lb, u_box=ub, update_preconditioner=False)
+                          l_box=lbs, u_box=ubs, update_preconditioner=False)
             else:
                 qp = self._fresh()
                 self._qp = qp
-                qp.init(H, g, Af, b, self._C, self._l if self.minmax else None,
-                        self._u if self.minmax else None, lb, ub)
+                qp.init(Hs, gs, Af, bs, self._C, self._l if self.minmax else None,
+                        self._u if self.minmax else None, lbs, ubs)
             qp.solve()
             res = qp.results
             ok = (res.info.status.name in _SOLVED_NAMES and np.all(np.isfinite(res.x))
                   and np.all(np.isfinite(res.y)))
+            out = _QPOut(x=np.array(res.x) * beta, y=np.array(res.y) * (c / beta),
+                         iter=int(res.info.iter), status=res.info.status.name)
             if ok:
                 self._warm = True
-                return res, True
+                self._last_y = out.y
+                return out, True
             self._warm = False   # never warm start from a failed solve
-        return res, False
+        return out, False
 
     def solve(self, A, b, lo, hi, *, Q=None, q=None, x0=None) -> FrameSolution:
         """Solve one frame: ``A`` (nd, m), ``b`` (nd,), bounds (m,); optional ``Q`` (m, m), ``q`` (m,).
@@ -258,10 +300,10 @@ class FrameQP:
         else:
             H, g = self._objective(None, Q, q)
             res, ok = self._qp_solve(H, g, A, b, lb, ub)
-            iters += int(res.info.iter)
+            iters += int(res.iter)
             nsolve += 1
-            z = np.array(res.x)
-            status = res.info.status.name
+            z = res.x
+            status = res.status
             first_exact = True
             if not ok:
                 return self._pack(z, False, status, iters, nsolve)
@@ -279,7 +321,7 @@ class FrameQP:
             rho = z[r0:r0 + self.nd] - z[r0 + self.nd:]
         else:
             rho = np.zeros(self.nd)
-        lam = -np.array(self._qp.results.y) if ok else np.full(self.nd, np.nan)
+        lam = -self._last_y if ok else np.full(self.nd, np.nan)
         return FrameSolution(x=x, rho=np.array(rho), lam=lam, solved=bool(ok), status=status,
                              iterations=int(iters), qp_solves=int(nsolve))
 
@@ -308,14 +350,18 @@ class FrameQP:
         iters = 0
         nsolve = 0
         f0 = self._total(z, Q, q) if feasible else np.inf
-        for _ in range(self.sqp_max_iter):
-            H, g = self._objective(z[:m], Q, q)
+        for it in range(self.sqp_max_iter):
+            # curvature floor for near-zero forces (x^(P-2) vanishes there, which would
+            # make them free torque sources in the model): 5 % of the largest x at
+            # first, shrinking tenfold per step so the final steps are pure Newton
+            floor = max(0.05 * float(np.max(z[:m], initial=0.0)) * 0.1 ** it, 1e-6)
+            H, g = self._objective(z[:m], Q, q, floor)
             res, ok = self._qp_solve(H, g, A, b, lb, ub)
-            iters += int(res.info.iter)
+            iters += int(res.iter)
             nsolve += 1
             if not ok:
-                return z, False, iters, nsolve, res.info.status.name
-            znew = np.array(res.x)
+                return z, False, iters, nsolve, res.status
+            znew = res.x
             if not feasible:          # first step from an outside guess: take it whole
                 z, f0, feasible = znew, self._total(znew, Q, q), True
                 continue
@@ -332,13 +378,13 @@ class FrameQP:
             if self.nr:
                 r = z[m + self.nt:]
                 pred -= float(self.W * np.sum((1.0 + 2.0 * r) * d[m + self.nt:]))
-            if step <= self.sqp_tol or pred <= 1e-15 * (1.0 + abs(f0)):
+            if step <= self.sqp_tol or pred <= 1e-13 * abs(f0):
                 return znew, True, iters, nsolve, "PROXQP_SOLVED"
             alpha = 1.0
             for _ls in range(40):
                 zt = z + alpha * d
                 ft = self._total(zt, Q, q)
-                if ft <= f0 - 1e-4 * alpha * pred + 1e-15 * (1.0 + abs(f0)):
+                if ft <= f0 - 1e-4 * alpha * pred + 1e-15 * abs(f0):
                     break
                 alpha *= 0.5
             else:
@@ -421,9 +467,9 @@ def dual_newton(A, b, w, P, lo, hi, *, reserve_weight=None, lam0=None, tol: floa
             # ... and, for P > 2, match its activations in the KKT relation s = P w x^(P-1)
             x2 = np.clip(np.einsum("njm,nj->nm", A, lam) * D0, lo, hi)
             x2 = np.maximum(x2, 1e-3)
-            target = P * w * x2 ** (P - 1.0)
+            s_target = P * w * x2 ** (P - 1.0)
             G = np.einsum("njm,nkm->njk", A, A) + 1e-12 * eye
-            lam = np.linalg.solve(G, np.einsum("njm,nm->nj", A, target)[..., None])[..., 0]
+            lam = np.linalg.solve(G, np.einsum("njm,nm->nj", A, s_target)[..., None])[..., 0]
     else:
         lam = np.array(np.broadcast_to(lam0, (N, nd)), dtype=float)
 
@@ -431,7 +477,8 @@ def dual_newton(A, b, w, P, lo, hi, *, reserve_weight=None, lam0=None, tol: floa
     res = b - np.einsum("njm,nm->nj", A, x) - rho
     rnorm = np.max(np.abs(res), axis=1) if nd else np.zeros(N)
     iters = np.zeros(N, dtype=int)
-    active = rnorm > tol
+    target = 1e-3 * tol      # iterate past the acceptance tolerance (Newton is cheap there)
+    active = rnorm > target
     stalled = np.zeros(N, dtype=bool)
     for _ in range(max_iter):
         idx = np.flatnonzero(active & ~stalled)
@@ -441,7 +488,9 @@ def dual_newton(A, b, w, P, lo, hi, *, reserve_weight=None, lam0=None, tol: floa
         g = res[idx]
         gn = rnorm[idx]
         Hm = hess(idx, D[idx], Drho[idx])
-        reg = 1e-12 + 1e-3 * np.minimum(gn, 1.0) * np.maximum(
+        # Levenberg-Marquardt term ~ |g|^2: harmless near the solution (keeps the
+        # exact active-set step of P = 2), decisive where a dof has no free muscle
+        reg = 1e-13 + (1e-12 + 1e-2 * np.minimum(gn, 1.0) ** 2) * np.maximum(
             np.trace(Hm, axis1=1, axis2=2) / max(nd, 1), 1e-6)
         Hm[:, np.arange(nd), np.arange(nd)] += reg[:, None]
         d = np.linalg.solve(Hm, g[..., None])[..., 0]
@@ -489,7 +538,7 @@ def dual_newton(A, b, w, P, lo, hi, *, reserve_weight=None, lam0=None, tol: floa
         x[idx], D[idx], rho[idx], Drho[idx], s[idx] = xi, Di, ri, Dri, si
         res[idx] = bi - np.einsum("njm,nm->nj", A[idx], xi) - ri
         rnorm[idx] = np.max(np.abs(res[idx]), axis=1)
-        active[idx] = rnorm[idx] > tol
+        active[idx] = rnorm[idx] > target
     converged = rnorm <= tol
     return BatchSolution(x=x, rho=rho, lam=lam, converged=converged, iterations=iters, residual=rnorm)
 

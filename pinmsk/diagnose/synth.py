@@ -1,0 +1,393 @@
+"""Synthetic trials with hidden effects: the ground truth the diagnosis is tested on.
+
+:func:`make_trial` builds a smooth motion for a model, computes what the
+*true* model -- the model plus the hidden ``effects`` -- needs to produce it,
+and returns the measurements a lab would record, with noise:
+
+* fixed-base models (``forearm``, ``finger``): a multi-sine of each
+  coordinate over 8-92 % of its joint range (0.2-1.3 Hz, seeded phases),
+  exact derivatives; measured ``<coord>`` and ``<coord>_moment`` (the true
+  inverse dynamics: what a dynamometer sees), and with muscle-level hidden
+  effects (or ``measure=("excitations",)``) the excitations
+  ``<muscle>_excitation`` instead of the moments:
+  activations share the moment by a smooth minimum-norm split over flexors
+  and extensors on top of 5 % co-activation; with hidden
+  ``activation_dynamics`` the excitation is the exact inverse (thesis Eq. A.5)
+  of those activations; with a hidden ``electromechanical_delay`` the
+  recorded excitation leads the muscle's by ``delay``;
+* floating-base models (``gait2d``): a squat-and-sway with the right foot flat
+  on the ground at a fixed place (the torso coordinates follow from the
+  closure), the left leg slightly out of phase; measured coordinates and
+  ground reaction forces per foot (``r_ground_force_v[xyz]``, ``..._p[xyz]``,
+  ``..._torque_[xyz]``) whose wrench makes the torso rows of the true
+  inverse dynamics vanish: the vertical load split 50 +- 15 % between the
+  feet, both centres of pressure under the feet, shifted together to carry
+  the moment.
+
+Noise (``noise="realistic"``, seeded, white): angles 0.2 deg, translations
+0.5 mm; moments 2 % of the channel's peak; ground reaction forces 1 % of the
+peak vertical force, centres of pressure 2 mm; excitations EMG-like,
+signal-dependent ``u (1 + 0.05 xi) + 0.005 xi'``, clipped at 0 (a white
+simplification of envelope noise).  ``noise=None`` gives exact data; a dict
+overrides single levels (keys ``angle``, ``translation``, ``moment``, ``grf``,
+``cop``, ``excitation``, ``excitation_floor``).
+
+The CLI's ``pinmsk synth MODEL --effect FAMILY:TARGET:param=value ...`` maps
+onto :func:`make_trial` with effect strings in the same syntax
+(:func:`pinmsk.diagnose.parse_effect`).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+from scipy.interpolate import make_interp_spline
+
+from ..components import Component, Motion
+from ..errors import ModelError
+from ..effects import registry
+from ..effects._base import SignalEffect, unactuated_coordinates
+from ..muscles.activation import excitation_from_activation
+from ..trial import Trial
+
+__all__ = ["make_trial", "NOISE", "effect_from_text", "write_compact"]
+
+#: realistic noise levels (see the module docstring)
+NOISE = {"angle": np.deg2rad(0.2), "translation": 0.0005, "moment": 0.02, "grf": 0.01, "cop": 0.002,
+         "excitation": 0.05, "excitation_floor": 0.005}
+
+
+def effect_from_text(text: str) -> Component:
+    """``"family:target:p=v,p=v"`` -> a Component (all parameters not given keep their defaults)."""
+    from .diagnosis import parse_effect
+    family, target, values = parse_effect(text)
+    cls = registry.get(family)
+    if target is None and getattr(cls, "level", "joint") != "muscle":
+        raise ModelError(f"effect {text!r} needs a target: write {family}:TARGET[:PARAM=VALUE,...]")
+    return cls(target, **values) if target is not None else cls(**values)
+
+
+def _load(model):
+    if isinstance(model, (str, Path)):
+        from ..model import load_model
+        return load_model(model)
+    return model
+
+
+def make_trial(model, effects: Sequence = (), *, duration: float = 10.0, rate: float = 100.0,
+               noise="realistic", seed: int = 0, measure: Sequence[str] | None = None,
+               amplitude: float = 1.0) -> Trial:
+    """A synthetic trial of ``model`` with hidden ``effects`` (Components or effect strings).
+
+    ``measure`` picks the recorded channel groups among ``"moments"``,
+    ``"excitations"``, ``"grf"`` (default: moments for fixed-base models,
+    excitations when a muscle-level effect is hidden, ground reaction forces
+    for a floating base).  ``amplitude`` scales the motion (1 = the default
+    range).  Returns a :class:`~pinmsk.trial.Trial` whose ``meta`` records the
+    hidden effects and noise levels.
+    """
+    model = _load(model)
+    effs = [effect_from_text(e) if isinstance(e, str) else e for e in effects]
+    for e in effs:
+        if not isinstance(e, Component):
+            raise ModelError(f"hidden effects are Components or 'family:target:p=v' strings, got {e!r}")
+    if duration <= 0 or rate <= 0:
+        raise ModelError(f"duration and rate must be positive, got {duration} s at {rate} Hz")
+    levels = _levels(noise)
+    rng = np.random.default_rng(seed)
+    joint = [e for e in effs if not isinstance(e, SignalEffect)]
+    signal = sorted([e for e in effs if isinstance(e, SignalEffect)], key=lambda e: e.order)
+    truth = model.with_effect(*joint) if joint else model
+    for e in signal:
+        e.check_target(model)
+    unact = unactuated_coordinates(model)
+    if measure is None:
+        measure = ("grf",) if unact else (("excitations",) if signal else ("moments",))
+    measure = tuple(measure)
+    bad = [m for m in measure if m not in ("moments", "excitations", "grf")]
+    if bad:
+        raise ModelError(f"measure entries are 'moments', 'excitations' or 'grf', got {bad}")
+    if signal and "excitations" not in measure:
+        raise ModelError("muscle-level hidden effects only show in excitation channels; "
+                         "include 'excitations' in measure")
+    n = int(round(duration * rate)) + 1
+    t = np.arange(n) / rate
+    lead = 0.3 if signal else 0.0            # extra time so a delayed signal exists at the end
+    if unact:
+        q, v, a = _squat(model, t, rng, amplitude)
+    else:
+        q, v, a = _multisine(model, np.arange(int(round((duration + lead) * rate)) + 1) / rate,
+                             rng, amplitude)
+    motion = Motion(t, q[:n], v[:n], a[:n])
+    chans: dict[str, np.ndarray] = {}
+    for i, c in enumerate(model.coordinates):
+        chans[c] = q[:n, i].copy()
+    from ..dynamics import inverse_dynamics_array
+    if "moments" in measure or "excitations" in measure:
+        full = Motion(np.arange(q.shape[0]) / rate, q, v, a)
+        tau = inverse_dynamics_array(truth, full)
+        if "moments" in measure:
+            for i, c in enumerate(model.coordinates):
+                if c not in unact:
+                    chans[f"{c}_moment"] = tau[:n, i].copy()
+        if "excitations" in measure:
+            u = _excitations(model, full, tau, signal)
+            for j, m in enumerate(model.muscle_names):
+                chans[f"{m}_excitation"] = u[:n, j]
+    if "grf" in measure:
+        if not unact:
+            raise ModelError(f"model '{model.name}' is fixed to the world: it has no ground reaction forces")
+        chans.update(_grf(truth, motion, unact, t))
+    trial = Trial(t, chans, meta={"source": f"synth:{model.name}", "hidden_effects": [repr(e) for e in effs],
+                                  "noise": {k: float(v) for k, v in levels.items()}, "seed": seed})
+    return _add_noise(trial, model, levels, rng) if levels else trial
+
+
+def _levels(noise) -> dict:
+    if noise is None or noise is False or noise == "none":
+        return {}
+    if noise == "realistic" or noise is True:
+        return dict(NOISE)
+    if isinstance(noise, dict):
+        unknown = set(noise) - set(NOISE)
+        if unknown:
+            raise ModelError(f"unknown noise keys {sorted(unknown)}; known: {sorted(NOISE)}")
+        return {**NOISE, **noise}
+    raise ModelError(f"noise must be 'realistic', None or a dict of levels, got {noise!r}")
+
+
+# -- motions -------------------------------------------------------------------------------
+
+_FREQS = np.array([0.21, 0.37, 0.59, 0.83, 1.13, 1.31])
+
+
+def _multisine(model, t, rng, amplitude):
+    pm = model.pin
+    nv = model.nv
+    q = np.empty((t.size, nv))
+    v = np.empty_like(q)
+    a = np.empty_like(q)
+    for i in range(nv):
+        lo, hi = float(pm.lowerPositionLimit[i]), float(pm.upperPositionLimit[i])
+        if not (np.isfinite(lo) and np.isfinite(hi)) or hi - lo > 20:
+            lo, hi = -1.0, 1.0
+        mid, half = 0.5 * (lo + hi), 0.42 * (hi - lo) * amplitude
+        ph = rng.uniform(0, 2 * np.pi, _FREQS.size)
+        amp = 1.0 / (1.0 + np.arange(_FREQS.size) * 0.35)
+        w = 2 * np.pi * _FREQS
+        s = np.sin(np.outer(t, w) + ph) @ amp
+        ds = (np.cos(np.outer(t, w) + ph) * w) @ amp
+        dds = (-np.sin(np.outer(t, w) + ph) * w ** 2) @ amp
+        k = half / np.max(np.abs(s))
+        q[:, i], v[:, i], a[:, i] = mid + k * s, k * ds, k * dds
+    return q, v, a
+
+
+def _squat(model, t, rng, amplitude, fine: int = 10):
+    """Squat-and-sway of a planar floating-base leg model: right foot flat and fixed on the ground."""
+    import pinocchio as pin
+
+    pm = model.pin
+    idx = {c: model.coordinate_index(c) for c in model.coordinates}
+    need = ["hip_r", "knee_r", "ankle_r", "hip_l", "knee_l", "ankle_l", "torso_angle", "torso_x", "torso_y"]
+    missing = [c for c in need if c not in idx]
+    if missing or "heel_r" not in model.frame_names:
+        raise ModelError(f"the synthetic squat needs a planar leg model with {', '.join(need)} and a heel_r "
+                         f"frame; '{model.name}' lacks {', '.join(missing) or 'heel_r'}")
+    tf = np.linspace(t[0], t[-1], (t.size - 1) * fine + 1)
+    ph = rng.uniform(0, 2 * np.pi, 4)
+    s = amplitude
+    w = 2 * np.pi
+    knee = s * (0.45 - 0.35 * np.cos(w * 0.25 * tf + ph[0]) + 0.08 * np.sin(w * 0.61 * tf + ph[1]))
+    hip = -0.8 * knee * 0.7 + s * 0.06 * np.sin(w * 0.43 * tf + ph[2])
+    lean = s * (0.10 * np.sin(w * 0.17 * tf + ph[3]) + 0.05 * np.sin(w * 0.71 * tf))
+    lag = 0.15
+    knee_l = np.interp(tf - lag, tf, knee) * 0.92
+    hip_l = np.interp(tf - lag, tf, hip) * 0.92
+    Q = np.zeros((tf.size, model.nq))
+    Q[:, idx["knee_r"]], Q[:, idx["hip_r"]], Q[:, idx["torso_angle"]] = knee, hip, lean
+    Q[:, idx["knee_l"]], Q[:, idx["hip_l"]] = knee_l, hip_l
+    for side, ph_m in (("r", 0.0), ("l", 1.0)):
+        if f"mtp_{side}" in idx:
+            Q[:, idx[f"mtp_{side}"]] = 0.05 * s * np.sin(w * 0.9 * tf + ph_m)
+    data = pm.createData()
+    # foot world angle is affine in the joint angles (parallel axes): find the coefficients numerically
+    fid = {sd: pm.getFrameId(f"heel_{sd}") for sd in ("r", "l")}
+
+    def foot_angle(qq, sd):
+        pin.framesForwardKinematics(pm, data, qq)
+        R = data.oMf[fid[sd]].rotation
+        return np.arctan2(R[1, 0], R[0, 0])
+
+    q0 = np.zeros(model.nq)
+    coef = {}
+    for sd in ("r", "l"):
+        base = foot_angle(q0, sd)
+        coef[sd] = {}
+        for c in ("torso_angle", f"hip_{sd}", f"knee_{sd}", f"ankle_{sd}"):
+            qq = q0.copy()
+            qq[idx[c]] = 0.1
+            coef[sd][c] = (foot_angle(qq, sd) - base) / 0.1
+    for sd in ("r", "l"):
+        cc = coef[sd]
+        rest = (cc["torso_angle"] * Q[:, idx["torso_angle"]] + cc[f"hip_{sd}"] * Q[:, idx[f"hip_{sd}"]]
+                + cc[f"knee_{sd}"] * Q[:, idx[f"knee_{sd}"]])
+        Q[:, idx[f"ankle_{sd}"]] = -rest / cc[f"ankle_{sd}"]
+    heel = np.empty((tf.size, 3))
+    for k in range(tf.size):
+        pin.framesForwardKinematics(pm, data, Q[k])
+        heel[k] = data.oMf[fid["r"]].translation
+    Q[:, idx["torso_x"]] = -heel[:, 0]
+    Q[:, idx["torso_y"]] = -heel[:, 1]
+    spline = make_interp_spline(tf, Q, k=5, axis=0)
+    return spline(t), spline.derivative(1)(t), spline.derivative(2)(t)
+
+
+# -- measurements --------------------------------------------------------------------------
+
+def _excitations(model, motion, tau, signal):
+    """Excitations that make the muscles produce ``tau`` (after the hidden muscle-level effects)."""
+    ms = model.muscles
+    if ms is None:
+        raise ModelError(f"model '{model.name}' has no muscles: it cannot have excitation channels")
+    fa, fp = ms.force_limits(motion.q, motion.v)
+    R = ms.moment_arms(motion.q)                               # (N, m, nv)
+    base = 0.05
+    act = np.full(fa.shape, base)
+    for j in range(model.nv):
+        d = fa * R[:, :, j]                                    # moment per unit activation
+        need = tau[:, j] - np.einsum("nm,nm->n", act * fa + fp, R[:, :, j])
+        if not np.any(np.abs(R[:, :, j]) > 0):
+            continue
+        eps = 0.02 * np.max(np.abs(need)) + 1e-9
+        pos = 0.5 * (need + np.sqrt(need ** 2 + eps ** 2))
+        neg = pos - need
+        dp = np.where(d > 0, d, 0.0)
+        dn = np.where(d < 0, -d, 0.0)
+        act = act + pos[:, None] * dp / np.maximum(np.sum(dp ** 2, axis=1), 1e-300)[:, None] \
+                  + neg[:, None] * dn / np.maximum(np.sum(dn ** 2, axis=1), 1e-300)[:, None]
+    if np.max(act) > 1.0:
+        raise ModelError(f"the synthetic motion needs activation {np.max(act):.2f} > 1 for model "
+                         f"'{model.name}'; lower the amplitude")
+    u = act
+    t = motion.t
+    for e in reversed(signal):                                 # undo the chain, last effect first
+        mask = e.muscle_mask(model)
+        if e.family == "activation_dynamics":
+            p = e.values
+            spline = make_interp_spline(t, u, k=5, axis=0)
+            adot = spline.derivative(1)(t)
+            inv = excitation_from_activation(u, adot, tau_rise=p["tau_rise"], tau_fall=p["tau_fall"])
+            u = np.where(mask[None, :], inv, u)
+        elif e.family == "electromechanical_delay":
+            d = e.values["delay"]
+            shifted = np.column_stack([np.interp(t + d, t, u[:, j]) for j in range(u.shape[1])])
+            u = np.where(mask[None, :], shifted, u)
+        else:
+            raise ModelError(f"the synthesiser cannot invert the muscle-level effect {e.label}")
+    if np.min(u) < 0 or np.max(u) > 1:
+        u = np.clip(u, 0.0, 1.0)
+    return u
+
+
+def _grf(truth, motion: Motion, unact, t) -> dict:
+    """Per-foot ground reaction forces making the torso rows of the true inverse dynamics vanish."""
+    from ..dynamics import inverse_dynamics_array
+    from ..skeleton import ExternalForce, external_generalized_force
+    import pinocchio as pin
+
+    model = truth
+    tau = inverse_dynamics_array(truth, motion)
+    base = [model.coordinate_index(c) for c in unact]
+    b = tau[:, base]                                            # J_base^T f must equal this
+    n = t.size
+    pm = model.pin
+    data = pm.createData()
+    mid = {}
+    zside = {}
+    for sd in ("r", "l"):
+        h = pm.getFrameId(f"heel_{sd}")
+        mname = f"metatarsal_{sd}" if f"metatarsal_{sd}" in model.frame_names else f"toe_{sd}"
+        mf = pm.getFrameId(mname)
+        pts = np.empty((n, 3))
+        for k in range(n):
+            pin.framesForwardKinematics(pm, data, motion.q[k])
+            pts[k] = 0.5 * (data.oMf[h].translation + data.oMf[mf].translation)
+        mid[sd] = pts
+        zside[sd] = pts[:, 2]
+    share = 0.5 + 0.15 * np.sin(2 * np.pi * 0.3 * t)
+    ex, ey = np.tile([1.0, 0, 0], (n, 1)), np.tile([0, 1.0, 0], (n, 1))
+
+    def gen(sd, unit, dx):
+        p = mid[sd].copy()
+        p[:, 1] = 0.0
+        p[:, 0] += dx
+        return external_generalized_force(model, motion.q, [ExternalForce(f"heel_{sd}", unit, p)])[:, base]
+
+    # generalized force of the two feet carrying F = (Fx, Fy) with shares w, 1-w, CoP shift dx
+    A = {}
+    for dx in (0.0, 1.0):
+        cols = []
+        for unit in (ex, ey):
+            cols.append(share[:, None] * gen("r", unit, dx) + (1 - share)[:, None] * gen("l", unit, dx))
+        A[dx] = np.stack(cols, axis=2)                          # (N, nbase, 2)
+    F = np.empty((n, 2))
+    delta = np.empty(n)
+    for k in range(n):
+        A0, A1 = A[0.0][k], A[1.0][k]
+        # Solve (A0 + delta (A1 - A0)) F = b: the translation rows fix F, the rest fixes delta.
+        F[k] = np.linalg.lstsq(A0[:2], b[k, :2], rcond=None)[0]
+        g0, g1 = A0 @ F[k], (A1 - A0) @ F[k]
+        delta[k] = np.dot(g1[2:], b[k, 2:] - g0[2:]) / max(np.dot(g1[2:], g1[2:]), 1e-300)
+    out = {}
+    for sd, w in (("r", share), ("l", 1 - share)):
+        f = np.column_stack([w * F[:, 0], w * F[:, 1], np.zeros(n)])
+        p = np.column_stack([mid[sd][:, 0] + delta, np.zeros(n), zside[sd]])
+        for ax, j in zip("xyz", range(3)):
+            out[f"{sd}_ground_force_v{ax}"] = f[:, j]
+        for ax, j in zip("xyz", range(3)):
+            out[f"{sd}_ground_force_p{ax}"] = p[:, j]
+        for ax in "xyz":
+            out[f"{sd}_ground_torque_{ax}"] = np.zeros(n)
+    return out
+
+
+def _add_noise(trial: Trial, model, lv: dict, rng) -> Trial:
+    from ..trial import parse_ground_reaction
+    new = {}
+    n = trial.n_frames
+    peak_fy = max([np.max(np.abs(trial[c])) for c in trial.names if c.endswith("ground_force_vy")] or [0.0])
+    for c in trial.names:
+        x = np.array(trial[c], dtype=float)
+        if c in model.coordinates:
+            prismatic = _is_prismatic(model, c)
+            x = x + rng.standard_normal(n) * (lv["translation"] if prismatic else lv["angle"])
+        elif c.endswith("_moment"):
+            x = x + rng.standard_normal(n) * lv["moment"] * np.max(np.abs(x))
+        elif c.endswith("_excitation"):
+            x = x * (1 + lv["excitation"] * rng.standard_normal(n)) + lv["excitation_floor"] * rng.standard_normal(n)
+            x = np.maximum(x, 0.0)
+        else:
+            g = parse_ground_reaction(c)
+            if g is not None and g.quantity == "force":
+                x = x + rng.standard_normal(n) * lv["grf"] * peak_fy
+            elif g is not None and g.quantity == "point" and g.axis != "z":
+                x = x + rng.standard_normal(n) * lv["cop"]
+        new[c] = x
+    return Trial(trial.time, new, meta=dict(trial.meta))
+
+
+def _is_prismatic(model, coord: str) -> bool:
+    pm = model.pin
+    j = pm.getJointId(coord)
+    return pm.joints[j].shortname().startswith("JointModelP")
+
+
+def write_compact(trial: Trial, path, *, digits: int = 8) -> Path:
+    """Write a trial as CSV with ``digits`` significant digits (small files for ``data/``)."""
+    path = Path(path)
+    header = ",".join(("time",) + tuple(trial.names))
+    table = np.column_stack([trial.time, trial.values])
+    np.savetxt(path, table, delimiter=",", header=header, comments="", fmt=f"%.{digits}g")
+    return path

@@ -1,0 +1,262 @@
+"""Inverse kinematics from markers: weighted least squares per frame.
+
+For each frame k, the coordinates minimise
+
+    sum_m  w_m || P_a (x_m(q) - y_m[k]) ||^2
+
+where ``x_m(q)`` is model marker m (a point fixed in a body, from a
+:class:`pinmsk.markers.MarkerSet`), ``y_m[k]`` the measured position, ``P_a``
+keeps the measured axes (``"xy"`` for sagittal data, ``"xyz"`` for 3-D) and
+``w_m`` the marker weight.  A marker that is NaN in a frame has zero weight
+there (gaps that :func:`pinmsk.markers.fill_gaps` did not fill).
+
+The solver is Levenberg-Marquardt on the Gauss-Newton normal equations with
+Pinocchio frame Jacobians (``LOCAL_WORLD_ALIGNED``: the linear rows are the
+marker point's world velocity Jacobian), warm-started from the previous
+frame's solution, so after the first frame it typically converges in 2-3
+iterations.  Coordinates that no marker moves are held at ``q0``.
+
+:class:`InverseKinematics` follows the fitter habits: ``fit(model, markers)``
+returns self; ``result_`` (a Trial of coordinates in ``model.coordinate_order``),
+``marker_rms_`` (per-marker RMS error over frames, m), ``frame_rms_`` (per-frame RMS
+over markers, m), ``iterations_`` and ``converged_`` (per frame).
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+import pinocchio as pin
+
+from .errors import ConvergenceError, ModelError, TrialError
+from .markers import MarkerSet, load_marker_set, marker_array, marker_names
+from .trial import Trial
+
+__all__ = ["InverseKinematics", "inverse_kinematics", "model_marker_positions", "add_marker_frames"]
+
+
+def add_marker_frames(model, markers: MarkerSet) -> tuple[pin.Model, list[int]]:
+    """A copy of the Pinocchio model with one OP_FRAME per marker; returns (model, frame ids)."""
+    pm = pin.Model(model.pin if hasattr(model, "pin") else model)
+    ids = []
+    for m in markers.markers:
+        if not pm.existFrame(m.body):
+            import difflib
+            close = difflib.get_close_matches(m.body, [f.name for f in pm.frames], n=3)
+            raise ModelError(f"marker {m.name!r}: the model has no body/frame {m.body!r}"
+                             + (f"; did you mean {', '.join(map(repr, close))}?" if close else ""))
+        parent_id = pm.getFrameId(m.body)
+        parent = pm.frames[parent_id]
+        placement = parent.placement * pin.SE3(np.eye(3), np.asarray(m.position, dtype=float))
+        name = f"__marker__{m.name}"
+        ids.append(pm.addFrame(pin.Frame(name, parent.parentJoint, parent_id, placement, pin.FrameType.OP_FRAME)))
+    return pm, ids
+
+
+def _q_pin(model, q_user_order_trial: Trial) -> np.ndarray:
+    return q_user_order_trial.get(model.coordinates)
+
+
+def model_marker_positions(model, markers: MarkerSet, q: np.ndarray) -> np.ndarray:
+    """World positions ``(N, M, 3)`` of the model markers at ``q`` ((N, nq), Pinocchio order)."""
+    markers = load_marker_set(markers) if not isinstance(markers, MarkerSet) else markers
+    pm, ids = add_marker_frames(model, markers)
+    pd = pm.createData()
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    out = np.empty((q.shape[0], len(ids), 3))
+    for k in range(q.shape[0]):
+        pin.framesForwardKinematics(pm, pd, q[k])
+        for j, fid in enumerate(ids):
+            out[k, j] = pd.oMf[fid].translation
+    return out
+
+
+def markers_trial(model, markers: MarkerSet, time, q: np.ndarray, *, axes: str = "xyz") -> Trial:
+    """Synthetic marker Trial (``<marker>_<axis>``, m) of the model moving through ``q``."""
+    xyz = model_marker_positions(model, markers, q)
+    chans = {}
+    for j, m in enumerate(markers.names):
+        for a in axes:
+            chans[f"{m}_{a}"] = xyz[:, j, "xyz".index(a)]
+    return Trial(time, chans, meta={"markers": markers.names, "format": "synthetic"})
+
+
+class InverseKinematics:
+    """Marker-based inverse kinematics (weighted least squares, LM, warm-started).
+
+    Parameters (keyword-only)
+    ----------
+    markers : MarkerSet or path
+        Model markers; those absent from the measured trial are ignored (the
+        fit needs at least as many measured coordinates as free coordinates).
+    coordinates : sequence of str, optional
+        Coordinates to solve for; default: every coordinate that moves some marker.
+    axes : str
+        Measured axes used, ``"xy"`` (sagittal) or ``"xyz"``; default: ``"xyz"`` if the
+        trial has ``_z`` channels for all used markers, else ``"xy"``.
+    weights : dict, optional
+        Per-marker weights overriding the marker set's.
+    q0 : dict or (nq,) array, optional
+        Initial pose (Pinocchio order) for the first frame and for the held coordinates.
+    max_iter, tol : int, float
+        Per-frame iteration limit and step tolerance (rad or m).
+    """
+
+    def __init__(self, *, markers, coordinates: Sequence[str] | None = None, axes: str | None = None,
+                 weights: dict | None = None, q0=None, max_iter: int = 50, tol: float = 1e-10,
+                 strict: bool = False):
+        self.markers = markers
+        self.coordinates = coordinates
+        self.axes = axes
+        self.weights = weights
+        self.q0 = q0
+        self.max_iter = max_iter
+        self.tol = tol
+        self.strict = strict
+
+    def fit(self, model, trial: Trial, *, progress=None) -> "InverseKinematics":
+        mset = self.markers if isinstance(self.markers, MarkerSet) else load_marker_set(self.markers)
+        measured = set(marker_names(trial))
+        used = [m for m in mset.markers if m.name in measured]
+        if not used:
+            raise TrialError(f"none of the model markers ({', '.join(mset.names)}) is in the trial "
+                             f"(markers: {', '.join(sorted(measured))}); rename with MarkerSet.renamed")
+        mset = MarkerSet(tuple(used), {}, mset.model, mset.source)
+        axes = self.axes
+        if axes is None:
+            axes = "xyz" if all(f"{m.name}_z" in trial for m in used) else "xy"
+        ax = ["xyz".index(a) for a in axes]
+        Y = marker_array(trial, mset.names, axes=axes)              # (N, M, A)
+        n, nm, na = Y.shape
+        w = np.array([(self.weights or {}).get(m.name, m.weight) for m in used], dtype=float)
+        pm, fids = add_marker_frames(model, mset)
+        pd = pm.createData()
+        nq = pm.nq
+        # initial pose
+        q = np.zeros(nq)
+        if self.q0 is not None:
+            if isinstance(self.q0, dict):
+                for c, v in self.q0.items():
+                    q[model.coordinate_index(c)] = v
+            else:
+                q[:] = np.asarray(self.q0, dtype=float)
+        # free coordinates: those that move a marker
+        pin.computeJointJacobians(pm, pd, q)
+        pin.updateFramePlacements(pm, pd)
+        moves = np.zeros(nq, dtype=bool)
+        for fid in fids:
+            J = pin.getFrameJacobian(pm, pd, fid, pin.LOCAL_WORLD_ALIGNED)[:3]
+            moves |= np.abs(J[ax]).sum(axis=0) > 0
+        if self.coordinates is None:
+            free = np.flatnonzero(moves)
+        else:
+            free = np.array([model.coordinate_index(c) for c in self.coordinates])
+        if free.size == 0:
+            raise ModelError("inverse kinematics: no coordinate moves any measured marker")
+        if nm * na < free.size:
+            raise TrialError(f"inverse kinematics: {nm} markers x {na} axes = {nm * na} measurements "
+                             f"cannot determine {free.size} coordinates; add markers or fix coordinates")
+        Q = np.empty((n, nq))
+        err = np.full((n, nm), np.nan)
+        iters = np.zeros(n, dtype=int)
+        conv = np.zeros(n, dtype=bool)
+        nf = free.size
+        eye = np.eye(nf)
+        x = np.empty((nm, na))
+        Jall = np.empty((nm, na, nq))
+
+        def evaluate(qk, with_jac):
+            if with_jac:
+                pin.computeJointJacobians(pm, pd, qk)
+                pin.updateFramePlacements(pm, pd)
+            else:
+                pin.framesForwardKinematics(pm, pd, qk)
+            for j, fid in enumerate(fids):
+                x[j] = pd.oMf[fid].translation[ax]
+                if with_jac:
+                    Jall[j] = pin.getFrameJacobian(pm, pd, fid, pin.LOCAL_WORLD_ALIGNED)[ax]
+            return x
+
+        for k in range(n):
+            y = Y[k]
+            ok = np.isfinite(y).all(axis=1)
+            wk = np.where(ok, w, 0.0)
+            yk = np.where(ok[:, None], y, 0.0)
+            if np.count_nonzero(wk) * na < nf:
+                raise TrialError(f"inverse kinematics: frame {k} (t = {trial.time[k]:.6g} s) has only "
+                                 f"{int(np.count_nonzero(wk))} measured marker(s) for {nf} coordinates; "
+                                 "fill the gaps (read_trc max_gap=...) or cut the frames")
+            lam = 1e-6
+            xk = evaluate(q, True)
+            r = (xk - yk) * np.sqrt(wk)[:, None]
+            cost = float(np.sum(r * r))
+            it = 0
+            done = False
+            while it < self.max_iter:
+                it += 1
+                J = (Jall[:, :, free] * np.sqrt(wk)[:, None, None]).reshape(nm * na, nf)
+                g = J.T @ r.ravel()
+                H = J.T @ J
+                scale = np.diag(H).copy()
+                scale[scale <= 0] = 1.0
+                while True:
+                    dq = -np.linalg.solve(H + lam * np.diag(scale), g)
+                    qn = q.copy()
+                    qn[free] += dq
+                    xn = evaluate(qn, False)
+                    rn = (xn - yk) * np.sqrt(wk)[:, None]
+                    cn = float(np.sum(rn * rn))
+                    if cn <= cost or np.max(np.abs(dq)) < self.tol:
+                        break
+                    lam *= 10.0
+                    if lam > 1e10:
+                        break
+                if cn <= cost:
+                    q = qn
+                    cost = cn
+                    lam = max(lam / 10.0, 1e-12)
+                step = float(np.max(np.abs(dq)))
+                xk = evaluate(q, True)
+                r = (xk - yk) * np.sqrt(wk)[:, None]
+                if step < self.tol or lam > 1e10:
+                    done = step < self.tol or np.max(np.abs(J.T @ r.ravel())) < 1e-12
+                    break
+            # final residual per marker (unweighted, only measured)
+            d = np.linalg.norm(xk - yk, axis=1)
+            err[k] = np.where(ok, d, np.nan)
+            Q[k] = q
+            iters[k] = it
+            conv[k] = done
+            if progress is not None:
+                progress.update(1)
+        if self.strict and not conv.all():
+            k = int(np.flatnonzero(~conv)[0])
+            raise ConvergenceError(f"inverse kinematics did not converge at frame {k} "
+                                   f"(t = {trial.time[k]:.6g} s) in {self.max_iter} iterations")
+        with np.errstate(invalid="ignore"):
+            self.marker_rms_ = {m: float(np.sqrt(np.nanmean(err[:, j] ** 2))) for j, m in enumerate(mset.names)}
+            self.frame_rms_ = np.sqrt(np.nanmean(err ** 2, axis=1))
+        self.marker_error_ = err
+        self.iterations_ = iters
+        self.converged_ = conv
+        self.free_coordinates_ = tuple(model.coordinates[i] for i in free)
+        self.axes_ = axes
+        self.q_ = Q
+        chans = {c: Q[:, model.coordinate_index(c)] for c in model.coordinate_order}
+        self.result_ = Trial(trial.time, chans,
+                             meta={"analysis": "inverse_kinematics", "model": model.name,
+                                   "markers": mset.names, "axes": axes,
+                                   "marker_rms": self.marker_rms_})
+        return self
+
+    def report(self) -> str:
+        lines = [f"inverse kinematics: {len(self.frame_rms_)} frames, axes {self.axes_}, free "
+                 f"{', '.join(self.free_coordinates_)}; converged {int(self.converged_.sum())}/"
+                 f"{len(self.converged_)}; mean iterations {self.iterations_.mean():.2f}",
+                 "marker RMS error (mm): " + ", ".join(f"{m} {1000 * v:.1f}" for m, v in self.marker_rms_.items())]
+        return "\n".join(lines)
+
+
+def inverse_kinematics(model, trial: Trial, *, markers, **options) -> Trial:
+    """Shortcut: ``InverseKinematics(markers=markers, **options).fit(model, trial).result_``."""
+    return InverseKinematics(markers=markers, **options).fit(model, trial).result_

@@ -1,0 +1,176 @@
+"""One self-contained HTML report of a diagnosis (figures embedded, no network).
+
+:func:`write_report` takes a :class:`~pinmsk.diagnose.DiagnosisRun` (or one
+:class:`~pinmsk.diagnose.Diagnosis`) and writes a single HTML file: the
+model, the data, how the noise floor was estimated, the error per channel at
+each step, the worst windows, the ranked effects with parameters and
+uncertainties, the effects added, the verdict, and the figures as
+base64-embedded PNGs.  No scripts, stylesheets or fonts are fetched.
+"""
+from __future__ import annotations
+
+import base64
+import html
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["write_report", "render_report"]
+
+_CSS = """
+body{font-family:system-ui,-apple-system,'Segoe UI',sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}
+h1{font-size:1.5em}h2{font-size:1.15em;border-bottom:1px solid #ddd;padding-bottom:.2em;margin-top:1.6em}
+table{border-collapse:collapse;margin:.5em 0;font-size:.9em}td,th{border:1px solid #ccc;padding:.25em .6em;text-align:right}
+th{background:#f3f3f3}td.l,th.l{text-align:left}pre{background:#f7f7f7;padding:.8em;overflow-x:auto;font-size:.8em}
+.v-missing_effect{color:#b03a2e;font-weight:bold}.v-at_noise_floor{color:#1e8449;font-weight:bold}
+img{max-width:100%;border:1px solid #eee;margin:.4em 0}.small{color:#666;font-size:.85em}
+"""
+
+
+def _e(x) -> str:
+    return html.escape(str(x))
+
+
+def _img(fig) -> str:
+    from .plots import figure_png
+    data = base64.b64encode(figure_png(fig)).decode("ascii")
+    return f'<img alt="figure" src="data:image/png;base64,{data}">'
+
+
+def _table(header, rows, left=1) -> str:
+    out = ["<table><tr>" + "".join(f'<th class="{"l" if i < left else ""}">{_e(h)}</th>'
+                                   for i, h in enumerate(header)) + "</tr>"]
+    for r in rows:
+        out.append("<tr>" + "".join(f'<td class="{"l" if i < left else ""}">{_e(v)}</td>'
+                                    for i, v in enumerate(r)) + "</tr>")
+    out.append("</table>")
+    return "\n".join(out)
+
+
+def _g(x) -> str:
+    return "–" if x is None or not np.isfinite(x) else f"{x:.4g}"
+
+
+def render_report(run, *, title: str | None = None) -> str:
+    """The report as an HTML string."""
+    from . import plots
+
+    steps = run.steps if hasattr(run, "steps") else [run]
+    added = list(getattr(run, "added", []))
+    first, last = steps[0], steps[-1]
+    c = first.comparison
+    trial = c.trial
+    src = trial.meta.get("source") or "trial"
+    title = title or f"pinmsk diagnosis: {first.model.name} vs {Path(str(src)).name}"
+    parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{_e(title)}</title>"
+             f"<style>{_CSS}</style></head><body>", f"<h1>{_e(title)}</h1>"]
+    parts.append(f'<p>Verdict: <span class="v-{last.verdict}">{_e(last.verdict)}</span> — '
+                 f"{_e(last.verdict_line().split(' -- ', 1)[-1])}</p>")
+
+    parts.append("<h2>Model</h2><pre>" + _e(first.model.describe()) + "</pre>")
+    t = np.asarray(trial.time)
+    dt = float(np.median(np.diff(t))) if t.size > 1 else float("nan")
+    parts.append("<h2>Data</h2>")
+    parts.append(_table(["item", "value"], [
+        ("source", src), ("frames", trial.n_frames), ("duration (s)", f"{t[-1] - t[0]:.3f}"),
+        ("rate (Hz)", f"{1 / dt:.4g}"), ("channels", ", ".join(trial.names)),
+        ("comparison", f"{c.mode} level on {', '.join(c.channels)}"),
+        ("kinematics", f"low-pass {c.cutoff} Hz, quintic-spline derivatives; analysed "
+                       f"{c.time[0]:.3f}-{c.time[-1]:.3f} s"),
+        ("noise floor", c.noise.method),
+    ]))
+
+    parts.append("<h2>Error per channel</h2>")
+    header = ["channel", "noise floor"] + ["model"] + [f"+ {a.effect.label}" for a in added]
+    rows = []
+    for ch in list(c.channels) + ["total"]:
+        rows.append([ch, _g(last.noise_floor[ch])] + [_g(s.rmse[ch]) for s in steps])
+    rows.append(["rmse / floor (RMS over channels)", ""] + [f"{s.ratio:.2f}" for s in steps])
+    parts.append(_table(header, rows))
+    if added:
+        parts.append("<h2>Effects added</h2>")
+        rows = []
+        for a in added:
+            for k, v in a.values.items():
+                se = a.stderr.get(k)
+                rows.append([a.effect.label, k, _g(v), _g(se), a.effect.params[k].unit])
+        parts.append(_table(["effect", "parameter", "value", "std. error", "unit"], rows, left=2))
+
+    for k, d in enumerate(steps):
+        label = "model as given" if k == 0 else f"after adding {added[k - 1].effect.label}"
+        parts.append(f"<h2>Diagnosis: {_e(label)}</h2>")
+        parts.append(f'<p>Verdict: <span class="v-{d.verdict}">{_e(d.verdict)}</span>; error '
+                     f"{d.ratio:.2f}× the noise floor.</p>")
+        if d.worst_windows:
+            parts.append("<p>Worst windows:</p>")
+            parts.append(_table(["channel", "start (s)", "end (s)", "rmse", "× floor"],
+                                [[w["channel"], f"{w['start']:.2f}", f"{w['end']:.2f}", _g(w["rmse"]),
+                                  f"{w['rmse'] / d.noise_floor[w['channel']]:.1f}"] for w in d.worst_windows]))
+        if d.correlations and d.verdict == "missing_effect":
+            parts.append("<p>States the residual follows (correlation):</p>")
+            parts.append(_table(["channel", "states"], [[ch, ", ".join(f"{s} ({r:+.2f})" for s, r in cors[:3])]
+                                                        for ch, cors in d.correlations.items()], left=2))
+        if d.ranking:
+            parts.append("<p>Ranked effects (blocked cross-validation; explained = held-out share):</p>")
+            parts.append(_table(["#", "effect", "explained", "rmse after", "significant", "parameters"],
+                                [[i + 1, s.label, f"{100 * s.explained_fraction:.1f}%", _g(s.rmse_after["total"]),
+                                  "yes" if s.significant else "no", s.describe_params()]
+                                 for i, s in enumerate(d.ranking)], left=2))
+        parts.append(_img(plots.plot_comparison(d)))
+        if k == 0:
+            parts.append(_img(plots.plot_residual_heatmap(d)))
+            parts.append(_img(plots.plot_ranking(d)))
+            if d.ranking:
+                parts.append(_img(plots.plot_effect_contribution(d)))
+    if len(steps) > 1:
+        parts.append("<h2>Error after each step</h2>" + _img(plots.plot_error_steps(run)))
+    parts.append("<h2>Summary text</h2><pre>" + _e(run.summary_text()) + "</pre>")
+    parts.append('<p class="small">Generated by pinmsk. Figures are embedded PNGs; this file needs no network.</p>')
+    parts.append("</body></html>")
+    return "\n".join(parts)
+
+
+def write_report(run, path=None, *, model=None, trial=None, title: str | None = None, **options) -> Path:
+    """Write the HTML report of a run (or one Diagnosis) to ``path``.
+
+    Also ``write_report(path, model=model, trial=trial, **options)``: diagnose
+    first (``options`` go to :func:`pinmsk.diagnose.run`).  If the diagnosis
+    cannot run on that trial (too short, nothing to compare), the report
+    states why and shows the trial's channels instead.
+    """
+    if model is not None or trial is not None:
+        if model is None or trial is None:
+            from .errors import PinmskError
+            raise PinmskError("write_report(path, model=..., trial=...) needs both a model and a trial")
+        out = Path(run if path is None else path)
+        from .diagnose import run as run_diagnosis
+        from .errors import PinmskError
+        try:
+            run = run_diagnosis(model, trial, **options)
+        except PinmskError as exc:
+            out.parent.mkdir(parents=True, exist_ok=True)
+            out.write_text(_failure_page(model, trial, exc, title), encoding="utf-8")
+            return out
+    else:
+        out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(render_report(run, title=title), encoding="utf-8")
+    return out
+
+
+def _failure_page(model, trial, exc, title) -> str:
+    from . import plots
+    title = title or f"pinmsk diagnosis: {model.name}"
+    fig = plots.new_figure(9.0, 1.5 + 1.2 * min(len(trial.names), 8))
+    names = list(trial.names)[:8]
+    axes = fig.subplots(max(len(names), 1), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, c in zip(axes, names):
+        ax.plot(trial.time, trial[c], lw=0.8)
+        ax.set_title(c, fontsize=8, loc="left")
+    axes[-1].set_xlabel("time (s)")
+    return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{_e(title)}</title>"
+            f"<style>{_CSS}</style></head><body><h1>{_e(title)}</h1>"
+            f'<p class="v-missing_effect">The diagnosis could not run: {_e(exc)}</p>'
+            "<h2>Model</h2><pre>" + _e(model.describe()) + "</pre><h2>Data</h2>"
+            + _table(["item", "value"], [("frames", trial.n_frames), ("channels", ", ".join(trial.names))])
+            + _img(fig) + "</body></html>")

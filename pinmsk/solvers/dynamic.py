@@ -1,0 +1,1025 @@
+"""Dynamic optimization with globally parametrized controls (thesis Sec. 3.1-3.3, 5.1).
+
+The optimal control problem is turned into a parameter optimization: the
+controls are ``s(t) = B(t) P`` for a :mod:`~pinmsk.solvers.parametrization`
+(polynomial Eq. 3.2, Fourier series Eq. 3.4, or local splines) and a gradient
+based optimizer (SciPy SLSQP) searches the coefficients ``P``.
+
+Simulation designs (Sec. 5.1)
+-----------------------------
+``"ff"`` (fully forward)
+    the signals are muscle excitations ``u``; the state ``[q, v, a(, l_ce)]``
+    is integrated: activation dynamics (Eq. A.2) -> muscle force (Thelen 2003,
+    rigid tendon, or compliant tendon with the contraction dynamics of
+    Eq. 3.9 / A.6-A.9 and fibre lengths as states) -> skeleton (Pinocchio ABA).
+``"ifm"`` (inverse-forward from muscle forces)
+    the signals are muscle-tendon forces ``F`` (Eq. 5.5); only the skeleton is
+    integrated (``tau = R(q)^T F``), then activations, activation rates and
+    excitations come from the inverse muscle model (Fig. 5.6, Eq. 5.2-5.4,
+    compliant tendon) fed with the *analytic* ``F, F', F''`` of the
+    parametrization and ``l_mt, l_mt', l_mt''`` of the simulated kinematics.
+``"ift"`` (inverse-forward from joint torques)
+    the signals are joint torques; only the skeleton is integrated; muscle
+    forces come from the closed-form minimum ``sum (F_i/F_max,i)^2`` sharing
+    among the agonists (1-dof models with constant moment arms, where the
+    sharing matrix is constant so ``F' = S tau'`` and ``F'' = S tau''`` are
+    exact), then the inverse muscle model as in IFM.
+
+Integration is classical RK4 on a fixed grid of step ``step`` (excitations
+and forces are evaluated analytically at the grid points and midpoints), with
+all muscles -- and all parameter perturbations of a finite-difference
+gradient -- vectorised in one batch.  For a fixed-base skeleton with a single
+revolute joint (finger, forearm) the ABA is evaluated in closed form
+``a = (tau - c1 cos q - c2 sin q) / M``, with ``M, c1, c2`` identified from
+Pinocchio and verified against ``pin.aba`` at construction; any other
+skeleton calls ``pin.aba`` per sample.
+
+Excitations are clipped to [0, 1] inside the FF simulation (the bounds
+themselves are constraints, Eq. 3.8) and the compliant contraction dynamics
+use ``max(a, 0.01)`` (the fibre velocity is undetermined at zero activation).
+
+Objectives (``objective=``)
+---------------------------
+``{"kind": "effort", "exponent": P, "weights": "none"|"volume", "normalize": True}``
+    ``J = 1/sum S_i 1/tau sum_i S_i int a_i^P dt`` (Eq. 3.5; ``normalize=False``
+    drops ``1/sum S_i``, which is the ``J_1`` of Eq. 3.3).
+``{"kind": "metabolic", "model": "umberger2003"|"bhargava2004"}``
+    ``J = 1/sum max(E_i') 1/tau sum_i int E_i' dt`` (Eq. 3.6).  The normalizer
+    ``sum_i max_t E_i'`` is taken from the first start's initial guess and then
+    held fixed, so that ``J`` stays proportional to the energy (the thesis's
+    self-normalizing form would reward spikes).
+``tracking_weight = 1 - mu`` (Eq. 3.3) adds
+    ``(1 - mu) 1/(tau max theta_d^2) int (theta_s - theta_d)^2 dt`` and scales the
+    physiological term by ``mu``; ``tracking_tolerance = eps`` instead imposes
+    ``|theta_s - theta_d| <= eps`` on the grid (Eq. 3.7).
+Excitation bounds ``0 <= u <= 1`` (Eq. 3.8) are imposed on a dense grid of
+``bound_points`` times (linear constraints in FF, where they are exact).
+
+Derivatives: forward finite differences of the whole batched simulation, one
+batch of ``n + 1`` simulations per gradient (every parameter perturbed at
+once), which costs about as much as a handful of single simulations.
+
+An optimizer that stops without converging, or converges to a point that
+violates the constraints by more than ``constraint_tol``, is flagged in the
+result (``converged=False``, ``status``) and on stderr; its numbers are
+never reported as a solution.
+"""
+from __future__ import annotations
+
+import json
+import sys
+import time as _time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import pinocchio as pin
+
+from ..errors import ModelError, SolverError
+from ..muscles.activation import activation_rate, excitation_from_activation
+from ..muscles.tendon import thelen_tendon_force
+from ..muscles.thelen2003 import (GAMMA, K_PE, PASSIVE_STRAIN0, thelen_contraction_rate,
+                                  thelen_force_velocity, thelen_passive_force_length)
+from .parametrization import Fourier, Parametrization, Polynomial, Spline
+
+__all__ = ["BatchSkeleton", "simulate_ff", "simulate_skeleton", "muscle_inverse",
+           "DynamicOptimization", "DynamicResult", "Target", "optimize_task",
+           "load_task", "TASK_SCHEMA"]
+
+DESIGNS = ("ff", "ifm", "ift")
+A_MIN = 0.01   # activation floor of the compliant contraction dynamics
+
+
+# =============================================================================== skeleton
+class BatchSkeleton:
+    """Forward dynamics ``a = ABA(q, v, tau)`` over a batch ``(B, nv)`` of states."""
+
+    def __init__(self, model):
+        self.pm = model.pin if hasattr(model, "pin") else model
+        self.nv = self.pm.nv
+        self.data = self.pm.createData()
+        self.closed_form = False
+        pm, pd = self.pm, self.data
+        if self.nv == 1 and pm.njoints == 2 and pm.nq == 1:
+            qa = np.array([0.0])
+            qb = np.array([np.pi / 2])
+            M = float(pin.crba(pm, pd, qa)[0, 0])
+            c1 = float(pin.computeGeneralizedGravity(pm, pd, qa)[0])
+            c2 = float(pin.computeGeneralizedGravity(pm, pd, qb)[0])
+            ok = True
+            for qq, vv, tt in ((0.7, 3.0, 0.2), (-1.9, -5.0, -1.0), (2.6, 0.5, 0.0)):
+                ref = pin.aba(pm, pd, np.array([qq]), np.array([vv]), np.array([tt]))[0]
+                mine = (tt - c1 * np.cos(qq) - c2 * np.sin(qq)) / M
+                ok &= abs(ref - mine) <= 1e-9 * (1.0 + abs(ref))
+            if ok:
+                self.closed_form = True
+                self.M, self.c1, self.c2 = M, c1, c2
+
+    def accel(self, q, v, tau):
+        if self.closed_form:
+            return (tau - self.c1 * np.cos(q) - self.c2 * np.sin(q)) / self.M
+        out = np.empty_like(tau)
+        for b in range(q.shape[0]):
+            out[b] = pin.aba(self.pm, self.data, q[b], v[b], tau[b])
+        return out
+
+
+# =============================================================================== muscles
+class _Muscles:
+    """Thelen 2003 muscle layer bound to a model's MuscleSet, batched over ``(B, m)``."""
+
+    def __init__(self, model):
+        ms = model.muscles
+        if ms is None:
+            raise ModelError(f"model '{model.name}' has no muscles; dynamic optimization of "
+                             "muscle controls needs a model with [[muscles]]")
+        if ms.model_type != "thelen2003":
+            raise ModelError(f"dynamic optimization supports Thelen 2003 muscles only; model "
+                             f"'{model.name}' uses {ms.model_type}")
+        self.ms = ms
+        self.path = ms.path
+        mtu = ms.mtu
+        self.mtu = mtu
+        self.f_max = np.asarray(mtu.f_max, dtype=float)
+        self.l_opt = np.asarray(mtu.l_opt, dtype=float)
+        self.l_slack = np.asarray(mtu.l_slack, dtype=float)
+        self.pennation = np.asarray(mtu.pennation, dtype=float)
+        self.h2 = np.asarray(mtu.height, dtype=float) ** 2
+        self.v_max = np.asarray(mtu.v_max, dtype=float)
+        self.strain0 = float(mtu.tendon_strain0)
+        self.tau_rise = float(mtu.tau_rise)
+        self.tau_fall = float(mtu.tau_fall)
+        self.m = ms.n
+        self.constant_arms = self.path.degree == 0
+        if self.constant_arms:
+            self.R = np.asarray(self.path.moment_arms(np.zeros(model.nv)), dtype=float)  # (m, nv)
+            self.l0 = np.asarray(self.path.lengths(np.zeros(model.nv)), dtype=float)
+
+    # -- paths, batched -------------------------------------------------------
+    def lengths(self, q):
+        if self.constant_arms:
+            return self.l0 - q @ self.R.T
+        return self.path.lengths(q)
+
+    def velocities(self, q, v):
+        if self.constant_arms:
+            return -(v @ self.R.T)
+        return self.path.velocities(q, v)
+
+    def moments(self, q, F):
+        if self.constant_arms:
+            return F @ self.R
+        return np.einsum("bm,bmj->bj", F, self.path.moment_arms(q))
+
+    # -- rigid tendon ---------------------------------------------------------
+    def rigid(self, a, l_mt, v_mt):
+        """``(F, l_ce, v_ce, f_ce, f_isom)``; F, f_ce in N."""
+        x = np.maximum(l_mt - self.l_slack, 1e-6 * self.l_opt)
+        l_ce = np.sqrt(x * x + self.h2)
+        cos = x / l_ce
+        v_ce = v_mt * cos
+        d = l_ce / self.l_opt - 1.0
+        fl = np.exp(d * d * (-1.0 / GAMMA))
+        s = 0.25 + 0.75 * a
+        f_act = a * fl * thelen_force_velocity(v_ce / (s * self.v_max))
+        f_pe = np.expm1((K_PE / PASSIVE_STRAIN0) * np.maximum(d, 0.0)) / np.expm1(K_PE)
+        F = self.f_max * (f_act + f_pe) * cos
+        return F, l_ce, v_ce, self.f_max * f_act, fl
+
+    # -- compliant tendon -----------------------------------------------------
+    def compliant(self, a, l_mt, l_ce):
+        """``(F, v_ce, f_ce, f_isom)`` from the fibre-length state (Eq. 3.9)."""
+        a = np.maximum(a, A_MIN)
+        l_ce = np.maximum(l_ce, 1.0001 * np.sqrt(self.h2) + 1e-6 * self.l_opt)
+        x = np.sqrt(np.maximum(l_ce * l_ce - self.h2, 0.0))
+        F = self.f_max * thelen_tendon_force((l_mt - x) / self.l_slack - 1.0, strain0=self.strain0)
+        v_ce = thelen_contraction_rate(l_ce, np.maximum(l_mt, x + 1e-9), a, l_opt=self.l_opt,
+                                       l_slack=self.l_slack, pennation=self.pennation,
+                                       v_max=self.v_max, tendon_strain0=self.strain0)
+        d = l_ce / self.l_opt - 1.0
+        fl = np.exp(d * d * (-1.0 / GAMMA))
+        f_ce = F * l_ce / x - self.f_max * thelen_passive_force_length(l_ce / self.l_opt)
+        return F, v_ce, np.maximum(f_ce, 0.0), fl
+
+
+# =============================================================================== integration
+def _rk4(deriv, x0, t, inputs, inputs_mid):
+    """Fixed-step RK4 of ``x' = deriv(x, w)`` with inputs given at grid points and midpoints.
+
+    ``x0`` (B, nx); ``inputs`` (N, B, ...) and ``inputs_mid`` (N-1, B, ...).  Returns (N, B, nx).
+    """
+    n = t.size
+    X = np.empty((n,) + x0.shape)
+    X[0] = x = x0
+    for i in range(n - 1):
+        h = t[i + 1] - t[i]
+        k1 = deriv(x, inputs[i])
+        k2 = deriv(x + 0.5 * h * k1, inputs_mid[i])
+        k3 = deriv(x + 0.5 * h * k2, inputs_mid[i])
+        k4 = deriv(x + h * k3, inputs[i + 1])
+        x = x + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
+        X[i + 1] = x
+    return X
+
+
+def _batch3(x, b):
+    x = np.asarray(x, dtype=float)
+    if x.ndim == 2:
+        x = np.broadcast_to(x[:, None, :], (x.shape[0], b, x.shape[1]))
+    return x
+
+
+def simulate_ff(model, t, u, u_mid, q0, v0, *, a0=None, l_ce0=None, tendon: str = "rigid",
+                skeleton: BatchSkeleton | None = None, muscles: _Muscles | None = None) -> dict:
+    """Fully forward simulation (Sec. 5.1 design 1) of excitations on the grid ``t``.
+
+    ``u`` (N, B, m) at the grid points and ``u_mid`` (N-1, B, m) at the interval
+    midpoints (B parameter sets at once; (N, m) for one).  ``q0, v0`` (nv,) or
+    (B, nv); ``a0`` defaults to the clipped ``u[0]`` (steady state); with
+    ``tendon="compliant"`` the fibres start in isometric equilibrium unless
+    ``l_ce0`` is given.  Returns time-first arrays (N, B, ...): ``q, v, acc, a,
+    u, force, l_ce, v_ce, f_ce, f_isom``.
+    """
+    if tendon not in ("rigid", "compliant"):
+        raise ModelError(f"tendon must be 'rigid' or 'compliant', not {tendon!r}")
+    sk = skeleton or BatchSkeleton(model)
+    mu = muscles or _Muscles(model)
+    t = np.asarray(t, dtype=float)
+    u = np.asarray(u, dtype=float)
+    single = u.ndim == 2
+    if single:
+        u = u[:, None, :]
+        u_mid = np.asarray(u_mid, dtype=float)[:, None, :]
+    n, B, m = u.shape
+    nv = sk.nv
+    uc = np.clip(u, 0.0, 1.0)
+    ucm = np.clip(u_mid, 0.0, 1.0)
+    q0 = np.broadcast_to(np.asarray(q0, dtype=float), (B, nv))
+    v0 = np.broadcast_to(np.asarray(v0, dtype=float), (B, nv))
+    a0 = uc[0] if a0 is None else np.broadcast_to(np.asarray(a0, dtype=float), (B, m))
+    tr, tf = mu.tau_rise, mu.tau_fall
+    compliant = tendon == "compliant"
+    parts = [q0, v0, a0]
+    if compliant:
+        if l_ce0 is None:
+            l_mt0 = mu.lengths(q0)
+            l_ce0 = mu.mtu.equilibrium(l_mt0, np.maximum(a0, A_MIN))["l_ce"]
+        parts.append(np.broadcast_to(np.asarray(l_ce0, dtype=float), (B, m)))
+    x0 = np.concatenate(parts, axis=1)
+    iq, iv, ia, il = slice(0, nv), slice(nv, 2 * nv), slice(2 * nv, 2 * nv + m), \
+        slice(2 * nv + m, 2 * nv + 2 * m)
+
+    def deriv(x, w):
+        q, v, a = x[:, iq], x[:, iv], x[:, ia]
+        l_mt = mu.lengths(q)
+        out = np.empty_like(x)
+        out[:, iq] = v
+        out[:, ia] = activation_rate(w, a, tau_rise=tr, tau_fall=tf)
+        if compliant:
+            F, v_ce, _, _ = mu.compliant(a, l_mt, x[:, il])
+            out[:, il] = v_ce
+        else:
+            F = mu.rigid(a, l_mt, mu.velocities(q, v))[0]
+        out[:, iv] = sk.accel(q, v, mu.moments(q, F))
+        return out
+
+    X = _rk4(deriv, x0, t, uc, ucm)
+    flat = X.reshape(n * B, -1)
+    q, v, a = flat[:, iq], flat[:, iv], flat[:, ia]
+    l_mt = mu.lengths(q)
+    if compliant:
+        l_ce = flat[:, il]
+        F, v_ce, f_ce, fl = mu.compliant(a, l_mt, l_ce)
+    else:
+        F, l_ce, v_ce, f_ce, fl = mu.rigid(a, l_mt, mu.velocities(q, v))
+    acc = sk.accel(q, v, mu.moments(q, F))
+    out = {"q": q, "v": v, "acc": acc, "a": a, "u": uc.reshape(n * B, m), "force": F,
+           "l_ce": l_ce, "v_ce": v_ce, "f_ce": f_ce, "f_isom": fl}
+    shp = (n, B) if not single else (n,)
+    return {k: val.reshape(shp + val.shape[1:]) for k, val in out.items()}
+
+
+def simulate_skeleton(model, t, tau, tau_mid, q0, v0, *, skeleton=None, muscles=None,
+                      forces=None, forces_mid=None):
+    """Integrate the skeleton alone under joint torques ``tau`` (N, B, nv) -- or muscle forces.
+
+    With ``forces`` (N, B, m) / ``forces_mid`` the torque is ``R(q)^T F`` (IFM).
+    Returns ``(q, v, acc)`` each (N, B, nv).
+    """
+    sk = skeleton or BatchSkeleton(model)
+    nv = sk.nv
+    t = np.asarray(t, dtype=float)
+    if forces is not None:
+        mu = muscles or _Muscles(model)
+        w, wm = np.asarray(forces, dtype=float), np.asarray(forces_mid, dtype=float)
+
+        def torque(q, f):
+            return mu.moments(q, f)
+    else:
+        w, wm = np.asarray(tau, dtype=float), np.asarray(tau_mid, dtype=float)
+
+        def torque(q, f):
+            return f
+    B = w.shape[1]
+    x0 = np.concatenate([np.broadcast_to(np.asarray(q0, dtype=float), (B, nv)),
+                         np.broadcast_to(np.asarray(v0, dtype=float), (B, nv))], axis=1)
+
+    def deriv(x, f):
+        q, v = x[:, :nv], x[:, nv:]
+        return np.concatenate([v, sk.accel(q, v, torque(q, f))], axis=1)
+
+    X = _rk4(deriv, x0, t, w, wm)
+    n = t.size
+    flat = X.reshape(n * B, 2 * nv)
+    q, v = flat[:, :nv], flat[:, nv:]
+    acc = sk.accel(q, v, torque(q, w.reshape(n * B, -1)))
+    return (q.reshape(n, B, nv), v.reshape(n, B, nv), acc.reshape(n, B, nv))
+
+
+def muscle_inverse(model, q, v, acc, F, dF, ddF, *, muscles=None) -> dict:
+    """Inverse muscle model (Fig. 5.6, Eq. 5.2-5.4) over frames: ``a, adot, u, l_ce, v_ce``.
+
+    ``q, v, acc`` (N, nv) kinematics; ``F, dF, ddF`` (N, m) muscle-tendon force and its
+    exact time derivatives.  Compliant Thelen tendon.
+    """
+    mu = muscles or _Muscles(model)
+    l_mt = mu.lengths(q)
+    dl = mu.velocities(q, v)
+    ddl = mu.path.accelerations(q, v, acc)
+    return mu.mtu.inverse(F, dF, l_mt, dl, ddl, ddF)
+
+
+# =============================================================================== target
+class Target:
+    """A desired motion ``q_d(t)`` with analytic derivatives (the tracked coordinate(s)).
+
+    ``kind="sine"``: ``offset + amplitude sin(2 pi frequency t + phase)`` (Eq. 3.1);
+    ``kind="cycle"``: ``offset + amplitude (1 - cos(2 pi t / period)) / 2``
+    (a flexion-extension cycle starting and ending at ``offset``);
+    ``kind="samples"``: a quintic spline through ``(time, values)``.
+    """
+
+    def __init__(self, kind: str, *, amplitude: float = 0.0, frequency: float | None = None,
+                 period: float | None = None, offset: float = 0.0, phase: float = 0.0,
+                 time=None, values=None):
+        self.kind = kind
+        self.amplitude, self.offset, self.phase = float(amplitude), float(offset), float(phase)
+        if kind == "sine":
+            if not (frequency and frequency > 0):
+                raise ModelError("sine motion needs frequency > 0 (Hz)")
+            self.frequency = float(frequency)
+            self.period = 1.0 / self.frequency
+        elif kind == "cycle":
+            if not (period and period > 0):
+                raise ModelError("cycle motion needs period > 0 (s)")
+            self.period = float(period)
+            self.frequency = 1.0 / self.period
+        elif kind == "samples":
+            from scipy.interpolate import make_interp_spline
+            tt = np.asarray(time, dtype=float)
+            self._spl = make_interp_spline(tt, np.asarray(values, dtype=float), k=5)
+            self.period = float(tt[-1] - tt[0])
+            self.frequency = 1.0 / self.period
+        else:
+            raise ModelError(f"unknown motion kind '{kind}'; valid: sine, cycle, samples")
+
+    def __call__(self, t, deriv: int = 0):
+        t = np.asarray(t, dtype=float)
+        if self.kind == "sine":
+            w = 2 * np.pi * self.frequency
+            y = self.amplitude * w ** deriv * np.sin(w * t + self.phase + deriv * np.pi / 2)
+            return y + (self.offset if deriv == 0 else 0.0)
+        if self.kind == "cycle":
+            w = 2 * np.pi / self.period
+            if deriv == 0:
+                return self.offset + 0.5 * self.amplitude * (1 - np.cos(w * t))
+            return -0.5 * self.amplitude * w ** deriv * np.cos(w * t + deriv * np.pi / 2)
+        return self._spl(t, nu=deriv)
+
+    def peak_square(self, t):
+        return float(np.max(self(t) ** 2))
+
+
+# =============================================================================== result
+@dataclass
+class DynamicResult:
+    """Outcome of :class:`DynamicOptimization`.  ``converged`` False means: not a solution."""
+
+    converged: bool
+    status: str
+    objective: float
+    terms: dict
+    max_bound_violation: float
+    max_tracking_error: float
+    coeffs: np.ndarray
+    parametrization: Parametrization
+    design: str
+    time: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    u: np.ndarray
+    force: np.ndarray
+    target: np.ndarray
+    seconds: float
+    nit: int
+    nfev: int
+    starts: list = field(default_factory=list)
+    coordinates: tuple = ()
+    muscles: tuple = ()
+
+    def summary(self) -> dict:
+        return {"converged": bool(self.converged), "status": self.status,
+                "objective": float(self.objective),
+                "terms": {k: float(v) for k, v in self.terms.items()},
+                "max_bound_violation": float(self.max_bound_violation),
+                "max_tracking_error": float(self.max_tracking_error),
+                "seconds": float(self.seconds), "nit": int(self.nit), "nfev": int(self.nfev),
+                "design": self.design, "parametrization": self.parametrization.describe(),
+                "coefficients": np.asarray(self.coeffs).tolist(),
+                "starts": self.starts}
+
+    def report(self) -> str:
+        flag = "CONVERGED" if self.converged else "NOT CONVERGED (not a solution)"
+        lines = [f"dynamic optimization ({self.design}, {self.parametrization!r}): {flag}",
+                 f"  status: {self.status}",
+                 f"  objective {self.objective:.6g}  "
+                 + "  ".join(f"{k} {v:.6g}" for k, v in self.terms.items()),
+                 f"  max excitation-bound violation {self.max_bound_violation:.3g}, "
+                 f"max tracking error {self.max_tracking_error:.4g} rad",
+                 f"  {self.nit} iterations, {self.nfev} batched evaluations, {self.seconds:.2f} s"]
+        return "\n".join(lines)
+
+    def to_trial(self):
+        """Coordinates, speeds, excitations, activations and forces as a :class:`~pinmsk.trial.Trial`."""
+        from ..trial import Trial
+        ch = {}
+        for j, c in enumerate(self.coordinates):
+            ch[c] = self.q[:, j]
+            ch[f"{c}_speed"] = self.v[:, j]
+            ch[f"{c}_desired"] = self.target[:, j]
+        for i, n in enumerate(self.muscles):
+            ch[f"{n}_excitation"] = self.u[:, i]
+            ch[f"{n}_activation"] = self.a[:, i]
+            ch[f"{n}_force"] = self.force[:, i]
+        return Trial(self.time, ch)
+
+
+# =============================================================================== problem
+_OBJ_KEYS = {"kind", "exponent", "weights", "normalize", "model", "tracking_weight"}
+
+
+class DynamicOptimization:
+    """Parametrized dynamic optimization of a musculoskeletal model (thesis Ch. 3).
+
+    Keyword arguments (stored; :meth:`fit` solves):
+
+    - ``design``: ``"ff"``, ``"ifm"`` or ``"ift"`` (Sec. 5.1);
+    - ``parametrization``: a :class:`Parametrization` (one per signal, shared basis);
+    - ``target``: :class:`Target` for coordinate ``coordinate`` (default: the first);
+    - ``duration`` (s; default: the target's period), ``step`` (RK4 step, s);
+    - ``objective``: dict, see the module docstring;
+    - ``tracking_weight`` (``1 - mu`` of Eq. 3.3) or ``tracking_tolerance`` (Eq. 3.7, rad);
+    - ``excitation_bounds`` (0, 1), ``bound_points`` (dense constraint grid);
+    - ``tendon``: ``"rigid"``/``"compliant"`` for FF (IFM/IFT always compliant);
+    - ``maxiter``, ``tol`` (SLSQP ``ftol``), ``constraint_tol``, ``n_starts``,
+      ``fd_step``, ``progress`` (object with ``update(n)``), ``verbose``.
+    """
+
+    def __init__(self, model, *, parametrization: Parametrization, target: Target,
+                 design: str = "ff", coordinate: str | None = None, duration: float | None = None,
+                 step: float = 1e-3, objective: dict | None = None,
+                 tracking_weight: float | None = None, tracking_tolerance: float | None = None,
+                 excitation_bounds=(0.0, 1.0), bound_points: int = 200,
+                 tendon: str = "rigid", maxiter: int = 200, tol: float = 1e-7,
+                 constraint_tol: float = 1e-5, n_starts: int = 3, fd_step: float = 1e-6,
+                 progress=None, verbose: bool = False):
+        self.model = model
+        self.parametrization = parametrization
+        self.target = target
+        self.design = design
+        self.coordinate = coordinate
+        self.duration = duration
+        self.step = step
+        self.objective = objective
+        self.tracking_weight = tracking_weight
+        self.tracking_tolerance = tracking_tolerance
+        self.excitation_bounds = excitation_bounds
+        self.bound_points = bound_points
+        self.tendon = tendon
+        self.maxiter = maxiter
+        self.tol = tol
+        self.constraint_tol = constraint_tol
+        self.n_starts = n_starts
+        self.fd_step = fd_step
+        self.progress = progress
+        self.verbose = verbose
+
+    # -- setup -----------------------------------------------------------------
+    def _setup(self):
+        model = self.model
+        if self.design not in DESIGNS:
+            raise ModelError(f"unknown design '{self.design}'; valid: {', '.join(DESIGNS)}")
+        if model.components:
+            raise ModelError(f"model '{model.name}' has components "
+                             f"({', '.join(c.label for c in model.components)}); dynamic "
+                             "optimization does not include effects or contacts yet")
+        self._mu = _Muscles(model)
+        self._sk = BatchSkeleton(model)
+        nv, m = model.nv, self._mu.m
+        self._jc = model.coordinate_index(self.coordinate or model.coordinates[0])
+        T = float(self.duration or self.target.period)
+        n = max(int(np.ceil(T / self.step)), 4)
+        self._t = np.linspace(0.0, T, n + 1)
+        tm = 0.5 * (self._t[1:] + self._t[:-1])
+        par = self.parametrization
+        self._B = par.basis(self._t)
+        self._Bm = par.basis(tm)
+        self._qd = self.target(self._t)
+        q0 = np.zeros(nv)
+        v0 = np.zeros(nv)
+        q0[self._jc] = self.target(0.0)
+        v0[self._jc] = self.target(0.0, 1)
+        self._q0, self._v0 = q0, v0
+        obj = dict(self.objective or {"kind": "effort", "exponent": 2, "weights": "none",
+                                      "normalize": True})
+        bad = set(obj) - _OBJ_KEYS
+        if bad:
+            raise ModelError(f"unknown objective key(s) {sorted(bad)}; valid: {sorted(_OBJ_KEYS)}")
+        kind = obj.get("kind", "effort")
+        if kind not in ("effort", "metabolic"):
+            raise ModelError(f"unknown objective kind '{kind}'; valid: effort, metabolic")
+        if kind == "effort":
+            w = obj.get("weights", "none")
+            if w not in ("none", "volume"):
+                raise ModelError(f"objective weights must be 'none' or 'volume', not {w!r}")
+            S = np.ones(m) if w == "none" else np.asarray(self._mu.ms.volume, dtype=float)
+            self._S = S / S.sum() if obj.get("normalize", True) else S
+            self._P = float(obj.get("exponent", 2))
+        else:
+            mm = obj.get("model", "umberger2003")
+            if mm not in ("umberger2003", "bhargava2004"):
+                raise ModelError(f"metabolic model must be umberger2003 or bhargava2004, not {mm!r}")
+            self._metab = mm
+            self._E_norm = None
+        self._kind = kind
+        if self.tracking_weight is None and self.tracking_tolerance is None:
+            raise ModelError("give tracking_weight (1 - mu, Eq. 3.3) or tracking_tolerance "
+                             "(rad, Eq. 3.7): the motion must be tracked")
+        if self.tracking_weight is not None and not 0 <= self.tracking_weight <= 1:
+            raise ModelError(f"tracking_weight must be in [0, 1], got {self.tracking_weight}")
+        lo, hi = map(float, self.excitation_bounds)
+        if not lo < hi:
+            raise ModelError(f"excitation bounds {self.excitation_bounds} are empty: lower must be "
+                             "below upper (the problem would be infeasible)")
+        self._lo, self._hi = lo, hi
+        nb = min(self.bound_points, self._t.size)
+        self._ib = np.unique(np.linspace(0, self._t.size - 1, nb).round().astype(int))
+        if self.tracking_tolerance is not None and not self.tracking_tolerance > 0:
+            raise ModelError(f"tracking_tolerance must be > 0 rad, got {self.tracking_tolerance} "
+                             "(the problem would be infeasible)")
+        # signal scaling (decision variables are O(1))
+        if self.design == "ff":
+            self._n_sig, self._scale = m, np.ones(m)
+        elif self.design == "ifm":
+            self._n_sig, self._scale = m, np.asarray(self._mu.f_max, dtype=float) * 0.1
+        else:
+            if nv != 1 or not self._mu.constant_arms:
+                raise ModelError("design 'ift' is implemented for 1-dof models with constant "
+                                 "moment arms (exact analytic force derivatives); use 'ifm'")
+            tau_cap = float(np.abs(self._mu.R[:, 0] * self._mu.f_max).sum())
+            self._n_sig, self._scale = 1, np.array([0.1 * tau_cap])
+        self._npar = par.n_params * self._n_sig
+        if self.design == "ift":
+            r = self._mu.R[:, 0]
+            w = self._mu.f_max ** 2
+            pos, neg = r > 0, r < 0
+            self._S_pos = np.where(pos, r * w, 0.0) / np.sum((r * r * w)[pos])
+            self._S_neg = np.where(neg, r * w, 0.0) / np.sum((r * r * w)[neg])
+        self._cache = {}
+        self.n_sim_ = 0
+
+    # -- evaluation ------------------------------------------------------------
+    def _coeffs(self, X):
+        """(B, npar) decision vectors -> (B, n_params, n_sig) coefficients."""
+        X = np.atleast_2d(X)
+        return X.reshape(X.shape[0], self.parametrization.n_params, self._n_sig) * self._scale
+
+    def _signals(self, C, deriv=0, where="grid"):
+        Bm = {"grid": self._B, "mid": self._Bm}[where] if deriv == 0 else \
+            self.parametrization.basis(self._t if where == "grid" else
+                                       0.5 * (self._t[1:] + self._t[:-1]), deriv)
+        return np.einsum("np,bps->nbs", Bm, C)
+
+    def simulate(self, X) -> dict:
+        """Batched simulation of decision vectors ``X`` (B, npar): dict of (N, B, ...) arrays."""
+        C = self._coeffs(X)
+        self.n_sim_ += C.shape[0]
+        if self.design == "ff":
+            sim = simulate_ff(self.model, self._t, self._signals(C), self._signals(C, where="mid"),
+                              self._q0, self._v0, tendon=self.tendon, skeleton=self._sk,
+                              muscles=self._mu)
+            sim["u_raw"] = self._signals(C)
+            return sim
+        n, B = self._t.size, C.shape[0]
+        if self.design == "ifm":
+            F, Fm = self._signals(C), self._signals(C, where="mid")
+            q, v, acc = simulate_skeleton(self.model, self._t, None, None, self._q0, self._v0,
+                                          skeleton=self._sk, muscles=self._mu,
+                                          forces=F, forces_mid=Fm)
+            dF, ddF = self._signals(C, 1), self._signals(C, 2)
+        else:
+            tau, taum = self._signals(C), self._signals(C, where="mid")
+            q, v, acc = simulate_skeleton(self.model, self._t, tau, taum, self._q0, self._v0,
+                                          skeleton=self._sk)
+            share = np.where(tau >= 0, self._S_pos, self._S_neg)   # (N, B, m)
+            F = share * tau
+            dF = share * self._signals(C, 1)
+            ddF = share * self._signals(C, 2)
+        flat = lambda x: x.reshape(n * B, -1)   # noqa: E731
+        inv = muscle_inverse(self.model, flat(q), flat(v), flat(acc), flat(F), flat(dF),
+                             flat(ddF), muscles=self._mu)
+        sim = {"q": q, "v": v, "acc": acc, "force": F}
+        for k in ("a", "u", "l_ce", "v_ce"):
+            sim[k] = inv[k].reshape(n, B, -1)
+        sim["u_raw"] = sim["u"]
+        mu = self._mu
+        d = sim["l_ce"] / mu.l_opt - 1.0
+        sim["f_isom"] = np.exp(d * d * (-1.0 / GAMMA))
+        x = np.sqrt(np.maximum(sim["l_ce"] ** 2 - mu.h2, 1e-12))
+        sim["f_ce"] = np.maximum(F * sim["l_ce"] / x
+                                 - mu.f_max * thelen_passive_force_length(sim["l_ce"] / mu.l_opt), 0)
+        return sim
+
+    def _integral(self, y):
+        """(1/tau) int y dt over the grid, y (N, B, ...) -> (B, ...)."""
+        T = self._t[-1] - self._t[0]
+        return np.trapezoid(y, self._t, axis=0) / T
+
+    def _terms(self, sim) -> dict:
+        a = sim["a"]
+        if self._kind == "effort":
+            phys = self._integral(np.maximum(a, 0.0) ** self._P) @ self._S
+        else:
+            E = self._energy(sim)                     # (N, B, m)
+            if self._E_norm is None:
+                self._E_norm = float(np.sum(np.max(E[:, 0, :], axis=0)))
+            phys = self._integral(E).sum(axis=-1) / self._E_norm
+        err = sim["q"][:, :, self._jc] - self._qd[:, None]
+        track = self._integral(err ** 2) / self.target.peak_square(self._t)
+        return {"physiological": phys, "tracking": track, "max_error": np.max(np.abs(err), axis=0)}
+
+    def _energy(self, sim):
+        from .. import energy
+        mu = self._mu
+        kw = dict(u=np.clip(sim["u"], 0, 1), a=np.clip(sim["a"], 0, 1), l_ce=sim["l_ce"],
+                  v_ce=sim["v_ce"], f_ce=sim["f_ce"], f_isom=sim["f_isom"], l_opt=mu.l_opt,
+                  f_max=mu.f_max, fast_fraction=mu.ms.fast_fraction)
+        if self._metab == "bhargava2004":
+            n, B, m = sim["u"].shape
+            ts = energy.stimulation_time(self._t, sim["u"].reshape(n, B * m)).reshape(n, B, m)
+            return energy.bhargava2004(**kw, t_stim=ts)["total"]
+        return energy.umberger2003(**kw)["total"]
+
+    def _objective_of(self, terms):
+        if self.tracking_weight is not None:
+            w = self.tracking_weight
+            return (1.0 - w) * terms["physiological"] + w * terms["tracking"]
+        return terms["physiological"]
+
+    def _constraints_of(self, sim):
+        """Nonlinear inequality constraints g >= 0, (B, nc)."""
+        cons = []
+        if self.design != "ff":   # bounds on the recovered excitation
+            u = sim["u"][self._ib]                           # (nb, B, m)
+            cons += [np.moveaxis(u - self._lo, 1, 0).reshape(u.shape[1], -1),
+                     np.moveaxis(self._hi - u, 1, 0).reshape(u.shape[1], -1)]
+        if self.tracking_tolerance is not None:
+            err = sim["q"][self._ib, :, self._jc] - self._qd[self._ib, None]
+            cons += [(self.tracking_tolerance - err).T, (self.tracking_tolerance + err).T]
+        if not cons:
+            return None
+        return np.concatenate(cons, axis=1)
+
+    def _evaluate(self, x):
+        key = x.tobytes()
+        if key in self._cache:
+            return self._cache[key]
+        n = x.size
+        h = self.fd_step * np.maximum(1.0, np.abs(x))
+        X = np.vstack([x, x + np.diag(h)])
+        sim = self.simulate(X)
+        terms = self._terms(sim)
+        f = self._objective_of(terms)
+        g = (f[1:] - f[0]) / h
+        c = self._constraints_of(sim)
+        dc = None if c is None else ((c[1:] - c[0]) / h[:, None]).T
+        out = (f[0], g, None if c is None else c[0], dc)
+        if len(self._cache) > 4:
+            self._cache.clear()
+        self._cache[key] = out
+        if self.progress is not None:
+            self.progress.update(1)
+        return out
+
+    # -- initial guesses (Sec. 3.5.3) -------------------------------------------
+    def initial_guesses(self) -> list[np.ndarray]:
+        """Cheap starts: inverse dynamics of the target, minimum-effort sharing, inverse
+        activation dynamics with analytic derivatives -> least-squares fits of the parametrization."""
+        par, mu, t = self.parametrization, self._mu, self._t
+        nv = self.model.nv
+        q = np.zeros((t.size, nv))
+        v = np.zeros_like(q)
+        a_ = np.zeros_like(q)
+        q[:, self._jc] = self._qd
+        v[:, self._jc] = self.target(t, 1)
+        a_[:, self._jc] = self.target(t, 2)
+        from ..skeleton import inverse_dynamics
+        tau = inverse_dynamics(self.model, q, v, a_)
+        guesses = []
+        if self.design == "ift":
+            c = par.fit(t, tau) / self._scale
+            guesses.append(c.ravel())
+            guesses.append((0.5 * c).ravel())
+            return guesses[: self.n_starts]
+        # minimum sum (a/.)^2 sharing among agonists with a rigid tendon (closed form, 1 dof)
+        l_mt = mu.lengths(q)
+        v_mt = mu.velocities(q, v)
+        F1, *_ = mu.rigid(np.ones_like(l_mt), l_mt, v_mt)
+        F0, *_ = mu.rigid(np.zeros_like(l_mt) + 1e-9, l_mt, v_mt)
+        Fa = np.maximum(F1 - F0, 1e-6)
+        R = mu.R if mu.constant_arms else mu.path.moment_arms(q)[:, :, 0]
+        R = np.broadcast_to(R[:, 0] if R.ndim == 2 and R.shape[0] == mu.m else R, l_mt.shape)
+        need = tau[:, [0]] - np.sum(R * F0, axis=1, keepdims=True)
+        S = np.ones(mu.m) if self._kind != "effort" else np.maximum(self._S, 1e-12) / self._S.max()
+        g = R * Fa / S                                     # a_i = lam * g_i for agonists
+        ag = np.sign(R) == np.sign(need)
+        lam = need[:, 0] / np.maximum(np.sum(np.where(ag, R * Fa * g, 0.0), axis=1), 1e-12)
+        act = np.clip(np.where(ag, lam[:, None] * g, 0.0), 0.0, 1.0)
+        if self.design == "ifm":
+            Fg = act * Fa + F0
+            c = par.fit(t, Fg) / self._scale
+            return [c.ravel(), (1.1 * c).ravel(), (0.9 * c).ravel()][: self.n_starts]
+        ca = par.fit(t, act)
+        a_fit = par.evaluate(ca, t)
+        adot = par.evaluate(ca, t, 1)
+        u = excitation_from_activation(np.clip(a_fit, 0, 1), adot, tau_rise=mu.tau_rise,
+                                       tau_fall=mu.tau_fall)
+        lo, hi = self._lo, self._hi
+        span = hi - lo
+        u1 = np.clip(u, lo + 0.02 * span, hi - 0.02 * span)
+        guesses.append(par.fit(t, u1).ravel())
+        guesses.append(par.fit(t, np.clip(act, lo + 0.02 * span, hi - 0.02 * span)).ravel())
+        guesses.append(par.constant(lo + 0.05 * span, mu.m).ravel())
+        return guesses[: self.n_starts]
+
+    # -- solve -------------------------------------------------------------------
+    def fit(self, x0=None):
+        """Solve from ``x0`` (decision vector) or from the multi-start guesses; returns ``self``."""
+        from scipy.optimize import LinearConstraint, minimize
+        t0 = _time.perf_counter()
+        self._setup()
+        starts = [np.asarray(x0, dtype=float).ravel()] if x0 is not None else self.initial_guesses()
+        cons = []
+        A_lin = None
+        if self.design == "ff":
+            par = self.parametrization
+            Bd = par.basis(np.linspace(self._t[0], self._t[-1], self.bound_points))
+            A_lin = np.kron(Bd, np.eye(self._n_sig))    # rows: (time, muscle); x is (p, s) row-major
+        best = None
+        records = []
+        for k, xs in enumerate(starts):
+            cons = []
+            if A_lin is not None:
+                cons.append({"type": "ineq", "fun": lambda x, A=A_lin: np.concatenate([A @ x - self._lo, self._hi - A @ x]),
+                             "jac": lambda x, A=A_lin: np.vstack([A, -A])})
+            if self.tracking_tolerance is not None or self.design != "ff":
+                cons.append({"type": "ineq", "fun": lambda x: self._evaluate(x)[2],
+                             "jac": lambda x: self._evaluate(x)[3]})
+            ts = _time.perf_counter()
+            try:
+                res = minimize(lambda x: self._evaluate(x)[0], xs, jac=lambda x: self._evaluate(x)[1],
+                               method="SLSQP", constraints=cons,
+                               options={"maxiter": self.maxiter, "ftol": self.tol})
+            except (SolverError, FloatingPointError, ValueError) as exc:
+                records.append({"start": k, "success": False, "message": f"failed: {exc}"})
+                continue
+            x = res.x
+            viol = self._violation(x, A_lin)
+            f = float(self._evaluate(x)[0])
+            ok = bool(res.success) and viol <= self.constraint_tol and np.isfinite(f)
+            rec = {"start": k, "success": bool(res.success), "message": str(res.message),
+                   "objective": f, "violation": viol, "nit": int(res.nit),
+                   "seconds": _time.perf_counter() - ts}
+            records.append(rec)
+            if self.verbose:
+                print(f"  start {k}: {rec}", file=sys.stderr)
+            key = (0 if ok else 1, f if ok else viol + f)
+            if best is None or key < best[0]:
+                best = (key, x, res, ok)
+        if best is None:
+            raise SolverError("every start of the dynamic optimization failed: "
+                              + "; ".join(r["message"] for r in records))
+        _, x, res, ok = best
+        self.result_ = self._result(x, res, ok, records, _time.perf_counter() - t0, A_lin)
+        if not ok:
+            print(f"pinmsk: WARNING dynamic optimization did not converge ({self.result_.status}); "
+                  "the result is not a solution", file=sys.stderr)
+        return self
+
+    def _violation(self, x, A_lin):
+        viol = 0.0
+        if A_lin is not None:
+            ub = A_lin @ x
+            viol = max(viol, float(np.max(np.maximum(self._lo - ub, 0))),
+                       float(np.max(np.maximum(ub - self._hi, 0))))
+        c = self._evaluate(x)[2]
+        if c is not None:
+            viol = max(viol, float(np.max(np.maximum(-c, 0.0))))
+        return viol
+
+    def _result(self, x, res, ok, records, seconds, A_lin):
+        sim = self.simulate(x[None, :])
+        terms = self._terms(sim)
+        f = float(self._objective_of(terms)[0])
+        u = sim["u_raw"][:, 0]
+        bound_viol = float(max(np.max(np.maximum(self._lo - u, 0)), np.max(np.maximum(u - self._hi, 0))))
+        if A_lin is not None:
+            ub = A_lin @ x
+            bound_viol = max(bound_viol, float(np.max(np.maximum(self._lo - ub, 0))),
+                             float(np.max(np.maximum(ub - self._hi, 0))))
+        err = float(terms["max_error"][0])
+        status = str(res.message)
+        if ok and self.tracking_tolerance is not None and err > self.tracking_tolerance + 1e-3:
+            ok, status = False, f"tracking error {err:.4g} rad exceeds the tolerance on the full grid"
+        if not ok and res.success:
+            status = f"constraints violated by {self._violation(x, A_lin):.3g} ({status})"
+        nq = self.model.nv
+        qd = np.zeros((self._t.size, nq))
+        qd[:, self._jc] = self._qd
+        tn = {"J": f, "physiological": float(terms["physiological"][0]),
+              "tracking": float(terms["tracking"][0])}
+        return DynamicResult(
+            converged=bool(ok), status=status, objective=f, terms=tn,
+            max_bound_violation=bound_viol, max_tracking_error=err,
+            coeffs=self._coeffs(x)[0], parametrization=self.parametrization, design=self.design,
+            time=self._t.copy(), q=sim["q"][:, 0], v=sim["v"][:, 0], a=sim["a"][:, 0], u=u,
+            force=sim["force"][:, 0], target=qd, seconds=seconds, nit=int(res.nit),
+            nfev=int(res.nfev), starts=records, coordinates=self.model.coordinates,
+            muscles=self.model.muscle_names)
+
+
+# =============================================================================== task files
+TASK_SCHEMA = {
+    "model": {"name": "built-in model name or path of a .toml sidecar (required)",
+              "moment_arms": "path variant, e.g. 'constant' or 'angle'",
+              "tendon": "'rigid' or 'compliant' (FF muscle tendon)",
+              "mass_scale": "scale factor on all segment masses and inertias (e.g. 0.5)"},
+    "motion": {"kind": "'sine' | 'cycle' | 'file'", "coordinate": "tracked coordinate",
+               "amplitude": "rad", "frequency": "Hz (sine)", "period": "s (cycle)",
+               "offset": "rad", "phase": "rad (sine)", "duration": "s (default: one period)",
+               "file": "trial file (.csv/.sto/.mot) holding the coordinate (kind = 'file')"},
+    "parametrization": {"kind": "'polynomial' | 'fourier' | 'spline'",
+                        "design": "'ff' | 'ifm' | 'ift'", "order": "polynomial order",
+                        "n_harmonics": "Fourier K (2K + 1 terms)",
+                        "period": "Fourier period tau (s; default the duration)",
+                        "n_params": "spline coefficients"},
+    "objective": {"kind": "'effort' | 'metabolic'", "exponent": "P of Eq. 3.5",
+                  "weights": "'none' | 'volume'", "normalize": "divide by sum S_i (Eq. 3.5)",
+                  "model": "'umberger2003' | 'bhargava2004'",
+                  "tracking_weight": "1 - mu of Eq. 3.3"},
+    "constraints": {"excitation_bounds": "[lower, upper] (Eq. 3.8)",
+                    "tracking_tolerance": "rad (Eq. 3.7)", "bound_points": "constraint grid size"},
+    "solver": {"step": "RK4 step (s)", "maxiter": "SLSQP iterations", "tol": "SLSQP ftol",
+               "constraint_tol": "accepted constraint violation", "n_starts": "multi-start count",
+               "fd_step": "relative finite-difference step"},
+}
+
+
+def _check_keys(table: dict, section: str, where: str):
+    if not isinstance(table, dict):
+        raise ModelError(f"{where}: [{section}] must be a table")
+    valid = TASK_SCHEMA[section]
+    for k in table:
+        if k not in valid:
+            import difflib
+            close = difflib.get_close_matches(k, list(valid), n=1)
+            hint = f" (did you mean '{close[0]}'?)" if close else ""
+            raise ModelError(f"{where}: unknown key '{k}' in [{section}]{hint}; valid keys: "
+                             f"{', '.join(valid)}")
+
+
+def load_task(task_path) -> dict:
+    """Read and validate a task file (TOML or JSON); see :data:`TASK_SCHEMA`."""
+    p = Path(task_path)
+    if not p.exists():
+        raise ModelError(f"task file not found: {p}")
+    if p.suffix.lower() == ".json":
+        spec = json.loads(p.read_text())
+    else:
+        try:
+            import tomllib
+        except ImportError:  # pragma: no cover
+            import tomli as tomllib
+        try:
+            spec = tomllib.loads(p.read_text())
+        except tomllib.TOMLDecodeError as exc:
+            raise ModelError(f"{p}: invalid TOML: {exc}") from None
+    for k in spec:
+        if k not in TASK_SCHEMA:
+            raise ModelError(f"{p}: unknown section '{k}'; valid sections: {', '.join(TASK_SCHEMA)}")
+    if "model" not in spec or "name" not in spec.get("model", {}):
+        raise ModelError(f"{p}: missing model: add a [model] table with name = \"finger\" (a "
+                         "built-in name) or the path of a model sidecar .toml")
+    if "motion" not in spec:
+        raise ModelError(f"{p}: missing [motion] table (the motion to track)")
+    for k, v in spec.items():
+        _check_keys(v, k, str(p))
+    return spec
+
+
+def build_from_task(spec: dict, *, base_dir=None, progress=None) -> DynamicOptimization:
+    """A :class:`DynamicOptimization` from a validated task dict."""
+    from ..model import Model, load_model
+    ms = spec["model"]
+    name = ms["name"]
+    if base_dir is not None and str(name).endswith((".toml", ".urdf")) and not Path(name).is_absolute():
+        name = str(Path(base_dir) / name)
+    model = load_model(name, moment_arms=ms.get("moment_arms"))
+    scale = float(ms.get("mass_scale", 1.0))
+    if scale != 1.0:
+        model = scale_masses(model, scale)
+    mo = spec["motion"]
+    kind = mo.get("kind", "sine")
+    coord = mo.get("coordinate", model.coordinates[0])
+    model.coordinate_index(coord)
+    if kind == "file":
+        from ..io import read_trial
+        f = Path(mo["file"])
+        if base_dir is not None and not f.is_absolute():
+            f = Path(base_dir) / f
+        tr = read_trial(f)
+        target = Target("samples", time=tr.time - tr.time[0], values=tr[coord])
+    elif kind in ("sine", "cycle"):
+        target = Target(kind, amplitude=mo.get("amplitude", 0.0), frequency=mo.get("frequency"),
+                        period=mo.get("period"), offset=mo.get("offset", 0.0),
+                        phase=mo.get("phase", 0.0))
+    else:
+        raise ModelError(f"unknown motion kind '{kind}'; valid: sine, cycle, file")
+    duration = float(mo.get("duration", target.period))
+    pa = dict(spec.get("parametrization", {}))
+    design = pa.pop("design", "ff")
+    pk = pa.pop("kind", "fourier")
+    if pk == "polynomial":
+        par = Polynomial(pa.get("order", 6), duration=duration)
+    elif pk == "fourier":
+        par = Fourier(pa.get("n_harmonics", 5), period=pa.get("period", duration))
+    elif pk == "spline":
+        par = Spline(pa.get("n_params", 10), duration=duration)
+    else:
+        raise ModelError(f"unknown parametrization kind '{pk}'; valid: polynomial, fourier, spline")
+    ob = dict(spec.get("objective", {}))
+    tw = ob.pop("tracking_weight", None)
+    co = spec.get("constraints", {})
+    so = spec.get("solver", {})
+    if tw is None and "tracking_tolerance" not in co:
+        raise ModelError("task: give [objective] tracking_weight or [constraints] "
+                         "tracking_tolerance (the motion must be tracked)")
+    return DynamicOptimization(
+        model, parametrization=par, target=target, design=design, coordinate=coord,
+        duration=duration, step=so.get("step", 1e-3), objective=ob or None,
+        tracking_weight=tw, tracking_tolerance=co.get("tracking_tolerance"),
+        excitation_bounds=tuple(co.get("excitation_bounds", (0.0, 1.0))),
+        bound_points=co.get("bound_points", 200), tendon=ms.get("tendon", "rigid"),
+        maxiter=so.get("maxiter", 200), tol=so.get("tol", 1e-7),
+        constraint_tol=so.get("constraint_tol", 1e-5), n_starts=so.get("n_starts", 3),
+        fd_step=so.get("fd_step", 1e-6), progress=progress)
+
+
+def scale_masses(model, factor: float):
+    """A new model whose segment masses and inertias are scaled by ``factor``."""
+    from ..model import Model
+    if not factor > 0:
+        raise ModelError(f"mass_scale must be > 0, got {factor}")
+    pm = pin.Model(model.pin)
+    for j in range(1, pm.njoints):
+        I = pm.inertias[j]
+        pm.inertias[j] = pin.Inertia(I.mass * factor, I.lever, I.inertia * factor)
+    return Model(name=model.name, pin_model=pm, muscles=model.muscles, effects=model.effects,
+                 contacts=model.contacts, meta=model.meta)
+
+
+def optimize_task(task_path, out_path=None, progress=None) -> DynamicResult:
+    """Run the task file ``task_path``; write the result trial to ``out_path`` (.sto/.csv/.mot)
+    and a JSON summary next to it (``<out>.json``).  Returns the :class:`DynamicResult`
+    (check ``converged``)."""
+    spec = load_task(task_path)
+    prob = build_from_task(spec, base_dir=Path(task_path).parent, progress=progress)
+    res = prob.fit().result_
+    if out_path is not None:
+        from ..io import write_trial
+        out = Path(out_path)
+        write_trial(res.to_trial(), out)
+        out.with_suffix(out.suffix + ".json").write_text(json.dumps(res.summary(), indent=2))
+    return res

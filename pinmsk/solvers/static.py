@@ -1,0 +1,660 @@
+"""Static optimization (SO): one muscle-redundancy problem per frame (thesis Sec. 2.2.2, 3.4).
+
+At each frame ``k`` of a motion, with moment arms ``R_k`` (m, nv) and the
+actuator moments ``tau_k`` of inverse dynamics, SO finds muscle forces
+
+    minimise    J_k = sum_i (F_i / N_i)^P            (Eq. 2.11, 2.12, 3.13)
+    subject to  sum_i R_k[i, j] F_i = tau_k[j]       for the balanced dofs j (Eq. 3.14)
+                0 <= F_i <= F_max,i                  (force mode)
+
+or, in activation mode (as OpenSim's static optimization),
+``F_i = a_i F_active,i + F_passive,i`` with ``F_active = F_max f_L f_V cos(alpha)``
+at the trial's muscle lengths and velocities, ``0 <= a_i <= 1`` and cost
+``sum_i S_i a_i^P`` (Eq. 2.14).  ``N_i`` / ``S_i`` is 1, ``F_max``, PCSA or the
+muscle volume (``weights=``).  P = 1 is an LP, P = 2 a QP, P > 2 is solved by
+sequential QP or the dual Newton method (see :mod:`pinmsk.solvers.qp`), and
+``minmax=True`` minimises ``max_i F_i / N_i`` (Eq. 2.13, an epigraph LP).
+
+The problem is scaled before solving: the variables are ``x = F / F_max``
+(force mode) or ``x = a``, each dof's equation is divided by that dof's
+moment capacity ``s_j = max_k sum_i |R_k[i, j]| F_max,i`` (force mode) or the
+active capacity (activation mode), and the cost weights are divided by their
+largest value.  ``tol`` is then the largest accepted moment residual as a
+fraction of ``s_j`` and proxsuite's absolute tolerance.
+
+How frames are solved (``method="auto"``): 2 <= P <= 4 -- all frames at
+once by the batched dual Newton method, each frame's optimality verified by
+its residual, proxsuite for the few that fail; P = 1 and min/max -- proxsuite
+on a frame, then the basis of its vertex tried on all remaining frames at
+once (kept where primal feasible, so optimal), repeated until every frame is
+solved; P > 4 -- proxsuite SQP frame by frame, each frame starting from the
+previous answer.  ``method="proxsuite"`` solves every frame with proxsuite
+(the reference path).
+
+Infeasible frames (muscles too weak for the moment) raise
+:class:`~pinmsk.errors.InfeasibleError` listing frames, dof and moment deficit,
+unless ``reserves=True``: then each balanced dof gets an ideal actuator
+``r_j`` (N m) with the exact-penalty cost
+``reserve_weight * sum_j (|r_j| / s_j + (r_j / s_j)^2)`` in the scaled
+problem, where a muscle at full force costs at most 1.  With the default
+``reserve_weight = 1000`` reserves stay at zero wherever the muscles can
+produce the moment at a marginal cost below 1000 fully-active muscles per
+unit of capacity, i.e. in practice only where they cannot.
+
+Fitters follow scikit-learn's habits: the constructor only stores arguments,
+``fit`` returns ``self``, learned values end in ``_``, :meth:`report` prints
+the objective, iterations, convergence and constraint violation.
+"""
+from __future__ import annotations
+
+import time as _time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..components import Motion
+from ..errors import ConvergenceError, InfeasibleError, ModelError, SolverError, TrialError
+from ..trial import Trial
+from . import qp as _qp
+
+MODES = ("force", "activation")
+WEIGHTS = ("none", "fmax", "pcsa", "volume")
+METHODS = ("auto", "proxsuite")
+
+#: Per-frame ``status`` codes in results.
+STATUS = {
+    0: "optimal, KKT verified in the batched solve (dual Newton residual or LP basis)",
+    1: "optimal, proxsuite",
+    2: "optimal with reserve actuators in use",
+}
+
+#: Largest exponent solved by the batched dual Newton method; above it the
+#: dual becomes too steep near zero forces (x ~ s^(1/(P-1))) and SQP is used.
+DUAL_MAX_EXPONENT = 4.0
+
+
+# ---------------------------------------------------------------------------
+# The scaled problem
+# ---------------------------------------------------------------------------
+
+@dataclass
+class SOProblem:
+    """The scaled SO problem of a whole motion (see the module notes).
+
+    Forces are ``F = c * x + d``; cost ``sum_i k_i x_i^P`` (physical units) or
+    ``max_i u_i x_i`` (min/max); the solvers see ``w = k / max(k)`` and
+    ``u / max(u)``.  ``A x = b`` are the balanced dofs' equations divided by
+    ``scale`` (N m).
+    """
+
+    time: np.ndarray          # (N,)
+    muscles: tuple            # (m,) names
+    dofs: tuple               # (nd,) balanced coordinate names
+    dof_index: np.ndarray     # (nd,) columns in q / v
+    mode: str
+    A: np.ndarray             # (N, nd, m)
+    b: np.ndarray             # (N, nd)
+    lo: np.ndarray            # (N, m)
+    hi: np.ndarray            # (N, m)
+    c: np.ndarray             # (N, m)  N per unit x
+    d: np.ndarray             # (N, m)  N
+    R: np.ndarray             # (N, m, nd) moment arms of the balanced dofs
+    tau: np.ndarray           # (N, nd) moments to balance (N m)
+    scale: np.ndarray         # (nd,) N m per scaled unit
+    k: np.ndarray             # (m,) physical cost coefficients of x^P
+    u: np.ndarray             # (m,) physical min/max coefficients
+    f_max: np.ndarray         # (m,)
+    exponent: float
+
+    @property
+    def n_frames(self) -> int:
+        return self.A.shape[0]
+
+    @property
+    def w(self) -> np.ndarray:
+        return self.k / np.max(self.k)
+
+    @property
+    def w_minmax(self) -> np.ndarray:
+        return self.u / np.max(self.u)
+
+    def forces(self, x) -> np.ndarray:
+        return self.c * x + self.d
+
+    def moments(self, F) -> np.ndarray:
+        return np.einsum("nm,nmj->nj", F, self.R)
+
+    def cost(self, x, minmax: bool) -> np.ndarray:
+        x = np.maximum(x, 0.0)
+        if minmax:
+            return np.max(self.u * x, axis=1)
+        return np.sum(self.k * x ** self.exponent, axis=1)
+
+
+def _muscle_property(muscles, which: str) -> np.ndarray:
+    if which == "none":
+        return np.ones(muscles.n)
+    if which == "fmax":
+        return np.asarray(muscles.f_max, dtype=float)
+    if which == "pcsa":
+        return np.asarray(muscles.pcsa, dtype=float)
+    if which == "volume":
+        return np.asarray(muscles.volume, dtype=float)
+    raise SolverError(f"weights must be one of {', '.join(WEIGHTS)}; got {which!r}")
+
+
+def check_model(model):
+    """The model's MuscleSet, or ModelError saying what is missing."""
+    muscles = getattr(model, "muscles", None)
+    if muscles is None or getattr(muscles, "n", 0) == 0:
+        raise ModelError(f"model '{getattr(model, 'name', '?')}' has no muscles; static optimization "
+                         "needs a model with muscles (e.g. load_model('forearm'))")
+    f_max = np.asarray(muscles.f_max, dtype=float)
+    bad = np.flatnonzero(~(f_max > 0) | ~np.isfinite(f_max))
+    if bad.size:
+        i = int(bad[0])
+        raise ModelError(f"muscle '{muscles.names[i]}' has F_max = {f_max[i]}; it must be a finite "
+                         "value > 0 (fix the model's sidecar)")
+    return muscles
+
+
+def as_motion(model, data, cutoff=None) -> Motion:
+    """A :class:`Motion` of the model from a Trial (differentiated) or a Motion, checked."""
+    if isinstance(data, Motion):
+        motion = data
+        if motion.q.shape[1] != model.nv:
+            raise TrialError(f"the motion has {motion.q.shape[1]} coordinates; model "
+                             f"'{model.name}' has {model.nv} ({', '.join(model.coordinates)})")
+    elif isinstance(data, Trial):
+        motion = model.motion(data, cutoff=cutoff)
+    else:
+        raise TrialError(f"expected a Trial or a Motion, got {type(data).__name__}")
+    if motion.n_frames == 0:
+        raise TrialError("the trial has no frames; static optimization needs at least one")
+    for name in ("q", "v", "a"):
+        arr = getattr(motion, name)
+        bad = ~np.isfinite(arr)
+        if bad.any():
+            k, j = np.argwhere(bad)[0]
+            raise TrialError(f"the motion's {name} is not finite at frame {k} (t = {motion.t[k]:.6g} s), "
+                             f"coordinate '{model.coordinates[j]}'; fill or cut the gaps first")
+    return motion
+
+
+def resolve_dofs(model, R_all: np.ndarray, dofs, *, allow_unspanned: bool = False):
+    """Names and columns of the balanced dofs; default: those spanned by at least one muscle."""
+    spanned = np.any(np.abs(R_all) > 0, axis=(0, 1))
+    if dofs is None:
+        idx = np.flatnonzero(spanned)
+        if idx.size == 0:
+            raise ModelError(f"no coordinate of model '{model.name}' is spanned by a muscle "
+                             "(all moment arms are zero over the trial)")
+    else:
+        if isinstance(dofs, str):
+            dofs = [dofs]
+        idx = np.array([model.coordinate_index(d) for d in dofs], dtype=int)
+        if len(set(idx.tolist())) != idx.size:
+            raise ModelError(f"dofs lists a coordinate twice: {list(dofs)}")
+        lonely = [model.coordinates[j] for j in idx if not spanned[j]]
+        if lonely and not allow_unspanned:
+            raise ModelError(
+                f"no muscle spans {', '.join(lonely)} over this trial, so static optimization "
+                "cannot balance it; leave it out of dofs (the default balances the "
+                "coordinates spanned by muscles) or pass reserves=True")
+    return tuple(model.coordinates[j] for j in idx), idx
+
+
+def required_moments(model, motion: Motion, moments, idx, dofs) -> np.ndarray:
+    """Moments (N, nd) to balance: given (Trial or array) or by inverse dynamics."""
+    n = motion.n_frames
+    if moments is None:
+        from ..dynamics import inverse_dynamics_array
+
+        tau = inverse_dynamics_array(model, motion)[:, idx]
+    elif isinstance(moments, Trial):
+        if moments.n_frames != n:
+            raise TrialError(f"the moments trial has {moments.n_frames} frames; the motion has {n}")
+        cols = [f"{c}_moment" for c in dofs]
+        missing = [c for c in cols if c not in moments]
+        if missing:
+            raise TrialError(f"the moments trial lacks {', '.join(missing)} "
+                             f"(it has {', '.join(moments.names)})")
+        tau = np.column_stack([np.asarray(moments[c], dtype=float) for c in cols])
+    else:
+        tau = np.asarray(moments, dtype=float)
+        if tau.ndim == 1 and len(idx) == 1:
+            tau = tau[:, None]
+        if tau.ndim != 2 or tau.shape[0] != n:
+            raise TrialError(f"moments must be (N, nv) or (N, n_dofs) with N = {n}; got {tau.shape}")
+        if tau.shape[1] == model.nv and tau.shape[1] != len(idx):
+            tau = tau[:, idx]
+        elif tau.shape[1] != len(idx):
+            raise TrialError(f"moments has {tau.shape[1]} columns; expected {model.nv} (all "
+                             f"coordinates) or {len(idx)} (the dofs {', '.join(dofs)})")
+    bad = ~np.isfinite(tau)
+    if bad.any():
+        k, j = np.argwhere(bad)[0]
+        raise TrialError(f"the moment of '{dofs[j]}' is not finite at frame {k} "
+                         f"(t = {motion.t[k]:.6g} s); check the trial and its inverse dynamics")
+    return tau
+
+
+def build_problem(model, motion: Motion, *, mode: str = "force", weights: str = "none",
+                  exponent: float = 2.0, dofs=None, moments=None, reserves: bool = False) -> SOProblem:
+    """The scaled SO problem of ``motion`` (moments by inverse dynamics unless given)."""
+    if mode not in MODES:
+        raise SolverError(f"mode must be one of {', '.join(MODES)}; got {mode!r}")
+    P = _qp.check_exponent(exponent)
+    muscles = check_model(model)
+    q, v = motion.q, motion.v
+    R_all = np.asarray(muscles.moment_arms(q), dtype=float)
+    if R_all.shape != (motion.n_frames, muscles.n, model.nv):
+        raise ModelError(f"moment arms have shape {R_all.shape}; expected "
+                         f"{(motion.n_frames, muscles.n, model.nv)}")
+    names, idx = resolve_dofs(model, R_all, dofs, allow_unspanned=reserves)
+    tau = required_moments(model, motion, moments, idx, names)
+    R = np.ascontiguousarray(R_all[:, :, idx])
+    n, m = motion.n_frames, muscles.n
+    f_max = np.asarray(muscles.f_max, dtype=float)
+    prop = _muscle_property(muscles, weights)
+    if np.any(~(prop > 0)):
+        i = int(np.flatnonzero(~(prop > 0))[0])
+        raise ModelError(f"muscle '{muscles.names[i]}' has {weights} = {prop[i]}; weights need "
+                         "positive values")
+    if mode == "force":
+        c = np.broadcast_to(f_max, (n, m)).copy()
+        d = np.zeros((n, m))
+        k = (f_max / prop) ** P
+        u = f_max / prop
+    else:
+        fa, fp = muscles.force_limits(q, v)
+        c = np.maximum(np.asarray(fa, dtype=float), 0.0)
+        d = np.asarray(fp, dtype=float)
+        if not (np.all(np.isfinite(c)) and np.all(np.isfinite(d))):
+            k0, i0 = np.argwhere(~np.isfinite(c + d))[0]
+            raise SolverError(f"muscle '{muscles.names[i0]}' force capacity is not finite at frame "
+                              f"{k0} (t = {motion.t[k0]:.6g} s)")
+        k = prop.copy()
+        u = prop.copy()
+    cap = np.einsum("nmj,nm->nj", np.abs(R), c)
+    scale = np.max(cap, axis=0)
+    for j in np.flatnonzero(~(scale > 0)):
+        scale[j] = max(float(np.max(np.abs(tau[:, j]))), 1.0)
+    A = np.einsum("nmj,nm->njm", R, c) / scale[None, :, None]
+    b = (tau - np.einsum("nmj,nm->nj", R, d)) / scale
+    lo = np.zeros((n, m))
+    hi = np.ones((n, m))
+    return SOProblem(time=np.asarray(motion.t, dtype=float), muscles=tuple(muscles.names), dofs=names,
+                     dof_index=idx, mode=mode, A=A, b=b, lo=lo, hi=hi, c=c, d=d, R=R, tau=tau,
+                     scale=scale, k=k, u=u, f_max=f_max, exponent=P)
+
+
+# ---------------------------------------------------------------------------
+# Solving all frames
+# ---------------------------------------------------------------------------
+
+@dataclass
+class FramesResult:
+    """Scaled solution of all frames with bookkeeping."""
+
+    x: np.ndarray            # (N, m)
+    rho: np.ndarray          # (N, nd) scaled reserves
+    solved: np.ndarray       # (N,) bool
+    path: np.ndarray         # (N,) 0 batched, 1 proxsuite
+    iterations: int          # Newton + proxsuite iterations
+    qp_solves: int           # proxsuite QPs
+    batched_frames: int
+
+
+def _frame_qp(prob: SOProblem, *, exponent, minmax, reserve_weight, tol) -> _qp.FrameQP:
+    m, nd = prob.A.shape[2], prob.A.shape[1]
+    return _qp.FrameQP(m=m, nd=nd, weights=prob.w_minmax if minmax else prob.w, exponent=exponent,
+                       minmax=minmax, reserve_weight=reserve_weight, eps=tol * 1e-4,
+                       sqp_tol=max(tol * 1e-2, 1e-13))
+
+
+def solve_frames(prob: SOProblem, *, minmax: bool = False, reserve_weight: float | None = None,
+                 tol: float = 1e-9, method: str = "auto", progress=None,
+                 frames: np.ndarray | None = None) -> FramesResult:
+    """Solve the frames of a scaled problem (all, or ``frames``); see the module notes."""
+    if method not in METHODS:
+        raise SolverError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
+    P = prob.exponent
+    N, nd, m = prob.A.shape
+    sel = np.arange(N) if frames is None else np.asarray(frames, dtype=int)
+    x = np.full((N, m), np.nan)
+    rho = np.zeros((N, nd))
+    solved = np.zeros(N, dtype=bool)
+    path = np.full(N, -1, dtype=int)
+    iters = 0
+    nqp = 0
+    batched = 0
+    todo = sel
+    if method == "auto" and not minmax and 2.0 <= P <= DUAL_MAX_EXPONENT:
+        bs = _qp.dual_newton(prob.A[sel], prob.b[sel], prob.w, P, prob.lo[sel], prob.hi[sel],
+                             reserve_weight=reserve_weight, tol=tol)
+        ok = bs.converged
+        x[sel[ok]] = bs.x[ok]
+        rho[sel[ok]] = bs.rho[ok]
+        solved[sel[ok]] = True
+        path[sel[ok]] = 0
+        iters += int(bs.iterations.sum())
+        batched += int(ok.sum())
+        todo = sel[~ok]
+        if progress is not None:
+            progress.update(int(ok.sum()))
+    fq = _frame_qp(prob, exponent=P, minmax=minmax, reserve_weight=reserve_weight, tol=tol)
+    use_lp = (method == "auto" and (minmax or P == 1.0) and reserve_weight is None)
+    if use_lp:
+        E, f, cvec, lo_a, hi_a, ne = _lp_standard_form(prob, minmax)
+    remaining = np.zeros(N, dtype=bool)
+    remaining[todo] = True
+    prev_x = None
+    for k in todo:
+        if not remaining[k]:
+            continue
+        remaining[k] = False
+        sol = fq.solve(prob.A[k], prob.b[k], prob.lo[k], prob.hi[k],
+                       x0=prev_x if P > DUAL_MAX_EXPONENT else None)
+        iters += sol.iterations
+        nqp += sol.qp_solves
+        done_now = 1
+        if sol.solved:
+            x[k], rho[k], solved[k], path[k] = sol.x, sol.rho, True, 1
+            prev_x = sol.x
+            if use_lp:
+                zk = _lp_point(prob, k, sol.x, minmax)
+                basis = _qp.lp_basis_from(zk, lo_a[k], hi_a[k], ne)
+                rest = np.flatnonzero(remaining)
+                cand = np.concatenate([[k], rest])
+                okv, zv, _ = _qp.lp_verify(E[cand], f[cand], cvec, lo_a[cand], hi_a[cand], basis,
+                                           tol=tol)
+                if okv[0]:
+                    x[k] = zv[0, :m]
+                    path[k] = 0
+                acc = cand[1:][okv[1:]]
+                x[acc] = zv[1:][okv[1:], :m]
+                solved[acc] = True
+                path[acc] = 0
+                remaining[acc] = False
+                batched += int(acc.size) + int(okv[0])
+                done_now += int(acc.size)
+        if progress is not None:
+            progress.update(done_now)
+    return FramesResult(x=x, rho=rho, solved=solved, path=path, iterations=iters, qp_solves=nqp,
+                        batched_frames=batched)
+
+
+def _lp_standard_form(prob: SOProblem, minmax: bool):
+    """``min c'z, E z = f, lo <= z <= hi`` of P = 1 (z = x) or min/max (z = [x, t, sigma])."""
+    N, nd, m = prob.A.shape
+    if not minmax:
+        return prob.A, prob.b, prob.w.copy(), prob.lo, prob.hi, nd
+    u = prob.w_minmax
+    n = 2 * m + 1
+    E = np.zeros((N, nd + m, n))
+    E[:, :nd, :m] = prob.A
+    E[:, nd:, :m] = np.diag(u)
+    E[:, nd:, m] = -1.0
+    E[:, nd:, m + 1:] = np.eye(m)
+    f = np.zeros((N, nd + m))
+    f[:, :nd] = prob.b
+    c = np.zeros(n)
+    c[m] = 1.0
+    lo = np.zeros((N, n))
+    lo[:, :m] = prob.lo
+    hi = np.full((N, n), _qp.BIG)
+    hi[:, :m] = prob.hi
+    return E, f, c, lo, hi, nd + m
+
+
+def _lp_point(prob: SOProblem, k: int, x, minmax: bool):
+    if not minmax:
+        return np.asarray(x, dtype=float)
+    u = prob.w_minmax
+    t = float(np.max(u * x))
+    return np.concatenate([x, [t], t - u * x])
+
+
+def diagnose_infeasible(prob: SOProblem, frames, *, minmax: bool, tol: float):
+    """Moment deficits (frames, nd) in N m of frames that have no solution, via strong reserves."""
+    frames = np.asarray(frames, dtype=int)
+    fq = _frame_qp(prob, exponent=min(prob.exponent, 2.0) if not minmax else 1.0, minmax=minmax,
+                   reserve_weight=1e4, tol=tol)
+    out = np.full((frames.size, prob.A.shape[1]), np.nan)
+    for i, k in enumerate(frames):
+        sol = fq.solve(prob.A[k], prob.b[k], prob.lo[k], prob.hi[k])
+        if sol.solved:
+            out[i] = sol.rho * prob.scale
+    return out
+
+
+def infeasible_message(prob: SOProblem, frames, deficits, *, limit: int = 8) -> str:
+    lines = []
+    for i, k in enumerate(frames[:limit]):
+        parts = []
+        for j, dof in enumerate(prob.dofs):
+            dj = deficits[i, j]
+            if np.isfinite(dj) and abs(dj) > 1e-6 * prob.scale[j]:
+                parts.append(f"{dof} short by {dj:+.4g} N m (needs {prob.tau[k, j]:+.4g})")
+        if not parts:
+            parts.append("no solution found (deficit not quantified)")
+        lines.append(f"  frame {k} (t = {prob.time[k]:.4g} s): " + "; ".join(parts))
+    more = f"\n  ... and {len(frames) - limit} more frames" if len(frames) > limit else ""
+    return (f"the muscles cannot produce the required moments at {len(frames)} of "
+            f"{prob.n_frames} frames:\n" + "\n".join(lines) + more +
+            "\nPass reserves=True (CLI --reserves) to add ideal actuators with a high cost and see "
+            "their use per dof and frame, or check the model's strength and the inverse dynamics.")
+
+
+# ---------------------------------------------------------------------------
+# The fitter
+# ---------------------------------------------------------------------------
+
+class StaticOptimization:
+    """Static optimization of muscle forces over a whole trial (thesis Eq. 2.11-2.14, 3.13-3.14).
+
+    Parameters (keyword-only)
+    -------------------------
+    mode : "force" | "activation"
+        Unknown forces ``0 <= F <= F_max``, or activations ``0 <= a <= 1`` with
+        ``F = a F_active + F_passive`` at the trial's muscle lengths and velocities.
+    exponent : float
+        P of the cost ``sum (F/N)^P`` (or ``sum S a^P``): 1 (LP), 2 (QP), >= 2.
+    weights : "none" | "fmax" | "pcsa" | "volume"
+        ``N_i`` (force mode) or ``S_i`` (activation mode).
+    minmax : bool
+        Minimise ``max_i F_i / N_i`` (``max S_i a_i``) instead, Eq. 2.13.
+    reserves : bool
+        Add one ideal actuator per balanced dof with cost ``reserve_weight``
+        (see the module notes) instead of raising InfeasibleError.
+    reserve_weight : float
+        Cost of a reserve using one dof's full muscle capacity, in units of one
+        fully active muscle of the highest weight (default 1000).
+    tol : float
+        Scaled tolerance: the moment residual as a fraction of each dof's
+        capacity and proxsuite's eps_abs (default 1e-9).
+    dofs : sequence of str or None
+        Coordinates whose moments the muscles must balance; default the
+        coordinates spanned by at least one muscle (so a floating base's
+        unactuated coordinates and muscle-free joints are left out).
+    method : "auto" | "proxsuite"
+        "auto" uses the batched paths with proxsuite as fallback;
+        "proxsuite" solves every frame with proxsuite.
+    """
+
+    def __init__(self, *, mode: str = "force", exponent: float = 2, weights: str = "none",
+                 minmax: bool = False, reserves: bool = False, reserve_weight: float = 1000.0,
+                 tol: float = 1e-9, dofs=None, method: str = "auto"):
+        self.mode = mode
+        self.exponent = exponent
+        self.weights = weights
+        self.minmax = minmax
+        self.reserves = reserves
+        self.reserve_weight = reserve_weight
+        self.tol = tol
+        self.dofs = dofs
+        self.method = method
+
+    def get_params(self) -> dict:
+        return {k: getattr(self, k) for k in ("mode", "exponent", "weights", "minmax", "reserves",
+                                              "reserve_weight", "tol", "dofs", "method")}
+
+    def _check_params(self):
+        if self.mode not in MODES:
+            raise SolverError(f"mode must be one of {', '.join(MODES)}; got {self.mode!r}")
+        if self.weights not in WEIGHTS:
+            raise SolverError(f"weights must be one of {', '.join(WEIGHTS)}; got {self.weights!r}")
+        if self.method not in METHODS:
+            raise SolverError(f"method must be one of {', '.join(METHODS)}; got {self.method!r}")
+        _qp.check_exponent(self.exponent)
+        if not (float(self.tol) > 0):
+            raise SolverError(f"tol must be > 0; got {self.tol!r}")
+        if self.reserves and not (float(self.reserve_weight) > 0):
+            raise SolverError(f"reserve_weight must be > 0; got {self.reserve_weight!r}")
+
+    # -- fitting -----------------------------------------------------------
+    def fit(self, model, trial, *, moments=None, cutoff: float | None = None, progress=None):
+        """Solve every frame of ``trial`` (a Trial or a Motion); returns ``self``.
+
+        ``moments``: the moments to balance -- a Trial with ``<coord>_moment``
+        channels, or an (N, nv) / (N, n_dofs) array; default inverse dynamics
+        of the trial (``cutoff`` Hz low-pass of the coordinates first, if given).
+        ``progress``: an object with ``update(n)`` (e.g. pinmsk.progress.Progress).
+        """
+        self._check_params()
+        t0 = _time.perf_counter()
+        motion = as_motion(model, trial, cutoff)
+        prob = build_problem(model, motion, mode=self.mode, weights=self.weights,
+                             exponent=self.exponent, dofs=self.dofs, moments=moments,
+                             reserves=self.reserves)
+        t1 = _time.perf_counter()
+        self._solve(prob, progress=progress)
+        t2 = _time.perf_counter()
+        self.timing_ = {"setup_s": t1 - t0, "solve_s": t2 - t1, "total_s": t2 - t0}
+        self.model_name_ = getattr(model, "name", "?")
+        return self
+
+    def fit_problem(self, prob: SOProblem, progress=None):
+        """Solve an already built :class:`SOProblem` (used by benchmarks and FSO)."""
+        self._check_params()
+        t0 = _time.perf_counter()
+        self._solve(prob, progress=progress)
+        self.timing_ = {"setup_s": 0.0, "solve_s": _time.perf_counter() - t0,
+                        "total_s": _time.perf_counter() - t0}
+        self.model_name_ = "?"
+        return self
+
+    def _solve(self, prob: SOProblem, progress=None):
+        tol = float(self.tol)
+        W = float(self.reserve_weight) if self.reserves else None
+        fr = solve_frames(prob, minmax=bool(self.minmax), reserve_weight=W, tol=tol,
+                          method=self.method, progress=progress)
+        failed = np.flatnonzero(~fr.solved)
+        if failed.size:
+            if W is None:
+                deficits = diagnose_infeasible(prob, failed, minmax=bool(self.minmax), tol=tol)
+                quantified = np.isfinite(deficits).all(axis=1)
+                real = quantified & (np.max(np.abs(deficits) / prob.scale, axis=1, initial=0.0) > 10 * tol)
+                if real.any() or not quantified.all():
+                    bad = failed[real | ~quantified]
+                    raise InfeasibleError(infeasible_message(prob, bad, deficits[real | ~quantified]))
+            raise ConvergenceError(
+                f"static optimization did not converge at {failed.size} frame(s) "
+                f"{failed[:10].tolist()}{' ...' if failed.size > 10 else ''} (tol = {tol:g}); "
+                "loosen tol, or report the trial and settings")
+        self.problem_ = prob
+        x = fr.x
+        F = prob.forces(x)
+        reserves = fr.rho * prob.scale
+        moment = prob.moments(F) + (reserves if W is not None else 0.0)
+        self.forces_ = F
+        self.activations_ = x if prob.mode == "activation" else F / prob.f_max
+        self.reserves_ = reserves if W is not None else None
+        self.cost_ = prob.cost(x, bool(self.minmax))
+        self.violation_ = np.max(np.abs(moment - prob.tau), axis=1)
+        status = fr.path.copy()
+        if W is not None:
+            used = np.any(np.abs(fr.rho) > 1e-6, axis=1)
+            status[used] = 2
+        self.status_ = status
+        self.n_iter_ = fr.iterations
+        self.n_qp_ = fr.qp_solves
+        self.n_batched_ = fr.batched_frames
+        self.dofs_ = prob.dofs
+        self.muscles_ = prob.muscles
+        self.result_ = self._result_trial(prob)
+        return self
+
+    def _result_trial(self, prob: SOProblem) -> Trial:
+        ch = {}
+        for i, name in enumerate(prob.muscles):
+            ch[f"{name}_force"] = self.forces_[:, i]
+        for i, name in enumerate(prob.muscles):
+            ch[f"{name}_activation"] = self.activations_[:, i]
+        if self.reserves_ is not None:
+            for j, dof in enumerate(prob.dofs):
+                ch[f"{dof}_reserve"] = self.reserves_[:, j]
+        ch["status"] = self.status_.astype(float)
+        ch["cost"] = self.cost_
+        ch["violation"] = self.violation_
+        meta = {"analysis": "static_optimization", **{k: str(v) for k, v in self.get_params().items()}}
+        units = {f"{n}_force": "N" for n in prob.muscles}
+        if self.reserves_ is not None:
+            units.update({f"{d}_reserve": "N*m" for d in prob.dofs})
+        units["violation"] = "N*m"
+        return Trial(prob.time, ch, units=units, meta=meta)
+
+    # -- reporting -----------------------------------------------------------
+    def _check_fitted(self):
+        if not hasattr(self, "result_"):
+            raise SolverError("this StaticOptimization is not fitted yet; call fit(model, trial) first")
+
+    def criterion(self) -> str:
+        if self.minmax:
+            what = "max_i F_i/N_i" if self.mode == "force" else "max_i S_i a_i"
+            return f"min/max {what} (Eq. 2.13)"
+        p = float(self.exponent)
+        ps = f"{p:g}"
+        if self.mode == "force":
+            n = {"none": "", "fmax": "/F_max", "pcsa": "/PCSA", "volume": "/V"}[self.weights]
+            return f"sum_i (F_i{n})^{ps} (Eq. 2.11)"
+        s = {"none": "", "fmax": "F_max ", "pcsa": "PCSA ", "volume": "V "}[self.weights]
+        return f"sum_i {s}a_i^{ps} (Eq. 2.14)"
+
+    def report(self) -> str:
+        """Objective, iterations, convergence and constraint violation, as text."""
+        self._check_fitted()
+        prob = self.problem_
+        N, m = self.forces_.shape
+        lines = [
+            f"Static optimization ({prob.mode} mode) of model '{self.model_name_}'",
+            f"  criterion      {self.criterion()}",
+            f"  frames         {N} ({prob.time[0]:.4g}-{prob.time[-1]:.4g} s), muscles {m}, "
+            f"balanced dofs {', '.join(prob.dofs)}",
+            f"  free variables {N * m} ({m} per frame)",
+            f"  objective      sum over frames {np.sum(self.cost_):.6g}, per frame "
+            f"min {np.min(self.cost_):.6g} max {np.max(self.cost_):.6g}",
+            f"  solver         {self.n_batched_} frames verified in the batched solve, "
+            f"{N - self.n_batched_} by proxsuite ({self.n_qp_} QPs); {self.n_iter_} iterations in all",
+            f"  convergence    all {N} frames optimal to tol {float(self.tol):g} "
+            f"(moment residual / dof capacity)",
+            f"  violation      max |R^T F - tau| = {np.max(self.violation_):.3g} N m "
+            f"(capacity {', '.join(f'{d} {s:.4g}' for d, s in zip(prob.dofs, prob.scale))} N m)",
+        ]
+        if self.reserves_ is not None:
+            used = np.abs(self.reserves_) > 1e-6 * prob.scale
+            parts = []
+            for j, d in enumerate(prob.dofs):
+                if used[:, j].any():
+                    parts.append(f"{d}: {used[:, j].sum()} frames, max {np.max(np.abs(self.reserves_[:, j])):.4g} N m")
+            lines.append("  reserves       " + ("; ".join(parts) if parts else "not used"))
+        if hasattr(self, "timing_"):
+            t = self.timing_
+            lines.append(f"  time           {t['total_s'] * 1e3:.1f} ms (setup {t['setup_s'] * 1e3:.1f} ms, "
+                         f"solve {t['solve_s'] * 1e3:.1f} ms, {t['solve_s'] / N * 1e6:.1f} us/frame)")
+        return "\n".join(lines)
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
+        return f"StaticOptimization({args})"

@@ -1,0 +1,103 @@
+"""Self-contained HTML reports in a real browser: every figure loads, nothing is fetched
+from the network.  The harness is checked on a page built here with matplotlib; the
+report of ``pinmsk.report`` is checked when that module exists."""
+from __future__ import annotations
+
+import base64
+import importlib
+import io
+
+import numpy as np
+import pytest
+
+import browser
+
+
+def _png_figure(seed: int) -> bytes:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rng = np.random.default_rng(seed)
+    fig, ax = plt.subplots(figsize=(4, 3), dpi=80)
+    ax.plot(np.cumsum(rng.normal(size=200)), color="tab:red")
+    ax.set_title(f"figure {seed}")
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def check_html_in_browser(path, *, min_images: int = 1, screenshot=None) -> list:
+    """Open ``path`` in headless Chromium; assert it is self-contained and its figures load.
+
+    Returns the images as ``[src prefix, complete, width, height]``.
+    """
+    with browser.chrome_or_skip(width=1000, height=800) as page:
+        page.send("Network.enable")
+        page.navigate(path.resolve().as_uri())
+        images = page.wait_for(f"""(() => {{ const im = {browser.IMAGES_JS.strip()};
+            return im.length >= {min_images} && im.every(i => i[1]) ? im : null; }})()""", timeout=20)
+        external = [u for u in page.requested_urls() if not u.startswith(("file:", "data:"))]
+        if screenshot is not None:
+            page.screenshot(screenshot)
+    assert not external, f"the report fetches from the network: {external[:5]}"
+    broken = [i for i in images if i[2] == 0 or i[3] == 0]
+    assert not broken, f"figures that did not load: {broken}"
+    return images
+
+
+def test_self_contained_html_with_embedded_figures(tmp_path):
+    browser.chromium_or_skip()
+    imgs = "".join(
+        f'<figure><img alt="f{k}" src="data:image/png;base64,{base64.b64encode(_png_figure(k)).decode()}">'
+        f"</figure>" for k in range(3))
+    page = tmp_path / "report.html"
+    page.write_text(f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>t</title></head>"
+                    f"<body><h1>report</h1>{imgs}<table><tr><td>1</td></tr></table></body></html>")
+    images = check_html_in_browser(page, min_images=3, screenshot=tmp_path / "report.png")
+    assert [i[2:] for i in images] == [[320, 240]] * 3          # 4x3 in at 80 dpi
+    rgb = browser.read_png(tmp_path / "report.png")
+    assert browser.warm_fraction(rgb) > 0.001                   # the red curves are drawn
+
+
+def test_broken_figure_is_reported(tmp_path):
+    browser.chromium_or_skip()
+    page = tmp_path / "broken.html"
+    page.write_text('<html><body><img src="data:image/png;base64,AAAA"></body></html>')
+    with pytest.raises(AssertionError, match="did not load"):
+        check_html_in_browser(page)
+
+
+def test_network_fetch_is_reported(tmp_path):
+    browser.chromium_or_skip()
+    page = tmp_path / "external.html"
+    png = base64.b64encode(_png_figure(0)).decode()
+    page.write_text(f'<html><body><img src="data:image/png;base64,{png}">'
+                    '<script src="http://127.0.0.1:9/missing.js"></script></body></html>')
+    with pytest.raises(AssertionError, match="fetches from the network"):
+        check_html_in_browser(page)
+
+
+def test_pinmsk_report_in_browser(tmp_path):
+    try:
+        report = importlib.import_module("pinmsk.report")
+    except ModuleNotFoundError:
+        pytest.skip("pinmsk.report is not written yet (owned by the diagnosis work); "
+                    "the harness above checks self-contained HTML already")
+    browser.chromium_or_skip()
+    make = getattr(report, "write_report", None) or getattr(report, "write_html", None)
+    if make is None:
+        pytest.skip(f"pinmsk.report has no write_report/write_html yet (has: "
+                    f"{', '.join(n for n in dir(report) if not n.startswith('_'))})")
+    import pinmsk
+
+    model = pinmsk.load_model("forearm")
+    t = np.linspace(0, 1, 51)
+    trial = pinmsk.Trial(t, {"elbow_flexion": 0.5 + t, "elbow_flexion_moment": np.sin(t)})
+    out = tmp_path / "report.html"
+    try:
+        make(out, model=model, trial=trial)
+    except TypeError as exc:
+        pytest.skip(f"pinmsk.report.{make.__name__} takes other arguments than (path, model=, trial=): {exc}")
+    check_html_in_browser(out, min_images=1)
