@@ -101,6 +101,8 @@ def stance_mask(fy: np.ndarray, *, min_force: float = 20.0) -> np.ndarray:
 def check_vertical_force(trial: Trial, *, min_force: float = 20.0, body_mass: float | None = None) -> None:
     """Raise TrialError if a vertical ground force is negative during stance (wrong sign/axis).
 
+    Wrong axis: when the plate is loaded, a horizontal component larger than the vertical
+    one (median magnitudes) means y is not the plate's vertical axis (a z-up lab).
     Loaded samples are those with ``|F_y| >= min_force``; if most of them are
     negative (or the most negative exceeds the largest positive), the plate's
     sign convention is the reaction *on the plate*, or y is not vertical.
@@ -115,6 +117,20 @@ def check_vertical_force(trial: Trial, *, min_force: float = 20.0, body_mass: fl
         if name is None:
             raise TrialError(f"ground reaction of side {side!r} has no vertical force ..._vy channel")
         fy = np.asarray(trial[name])
+        comps = {a: np.asarray(trial[ch[("force", a)]]) for a in "xz" if ("force", a) in ch}
+        norm = np.sqrt(fy ** 2 + sum(c ** 2 for c in comps.values()))
+        heavy = norm >= min_force
+        if heavy.any():
+            med_y = float(np.median(np.abs(fy[heavy])))
+            meds = {a: float(np.median(np.abs(c[heavy]))) for a, c in comps.items()}
+            for a in sorted(meds, key=meds.get, reverse=True)[:1]:
+                med = meds[a]
+                if med > med_y:
+                    raise TrialError(
+                        f"ground reaction of side {side!r}: the force along {a} (median {med:.0f} N when loaded, "
+                        f"channel {ch[('force', a)]!r}) exceeds the vertical {name!r} (median {med_y:.0f} N); "
+                        f"the plate's axes are not the lab's (y up): remap them (e.g. pinmsk.c3d.remap_axes "
+                        f"for a z-up lab)")
         loaded = np.abs(fy) >= min_force
         if not loaded.any():
             continue

@@ -53,10 +53,6 @@ def add_marker_frames(model, markers: MarkerSet) -> tuple[pin.Model, list[int]]:
     return pm, ids
 
 
-def _q_pin(model, q_user_order_trial: Trial) -> np.ndarray:
-    return q_user_order_trial.get(model.coordinates)
-
-
 def model_marker_positions(model, markers: MarkerSet, q: np.ndarray) -> np.ndarray:
     """World positions ``(N, M, 3)`` of the model markers at ``q`` ((N, nq), Pinocchio order)."""
     markers = load_marker_set(markers) if not isinstance(markers, MarkerSet) else markers
@@ -100,11 +96,13 @@ class InverseKinematics:
         Initial pose (Pinocchio order) for the first frame and for the held coordinates.
     max_iter, tol : int, float
         Per-frame iteration limit and step tolerance (rad or m).
+    max_step : float
+        Largest change of any coordinate in one iteration (rad or m; a trust region).
     """
 
     def __init__(self, *, markers, coordinates: Sequence[str] | None = None, axes: str | None = None,
                  weights: dict | None = None, q0=None, max_iter: int = 50, tol: float = 1e-10,
-                 strict: bool = False):
+                 max_step: float = 0.5, strict: bool = False):
         self.markers = markers
         self.coordinates = coordinates
         self.axes = axes
@@ -112,6 +110,7 @@ class InverseKinematics:
         self.q0 = q0
         self.max_iter = max_iter
         self.tol = tol
+        self.max_step = max_step
         self.strict = strict
 
     def fit(self, model, trial: Trial, *, progress=None) -> "InverseKinematics":
@@ -161,22 +160,17 @@ class InverseKinematics:
         iters = np.zeros(n, dtype=int)
         conv = np.zeros(n, dtype=bool)
         nf = free.size
-        eye = np.eye(nf)
-        x = np.empty((nm, na))
-        Jall = np.empty((nm, na, nq))
-
-        def evaluate(qk, with_jac):
-            if with_jac:
-                pin.computeJointJacobians(pm, pd, qk)
-                pin.updateFramePlacements(pm, pd)
-            else:
-                pin.framesForwardKinematics(pm, pd, qk)
+        rot = np.array([model.coordinate_index(c) for c in model.rotational_coordinates], dtype=int)
+        def evaluate(qk, x, Jall):
+            """Marker positions (and Jacobians) at qk into x (nm, na) and Jall (nm, na, nq)."""
+            pin.computeJointJacobians(pm, pd, qk)      # also runs forward kinematics
+            pin.updateFramePlacements(pm, pd)
             for j, fid in enumerate(fids):
                 x[j] = pd.oMf[fid].translation[ax]
-                if with_jac:
-                    Jall[j] = pin.getFrameJacobian(pm, pd, fid, pin.LOCAL_WORLD_ALIGNED)[ax]
-            return x
+                Jall[j] = pin.getFrameJacobian(pm, pd, fid, pin.LOCAL_WORLD_ALIGNED)[ax]
 
+        xk, Jk = np.empty((nm, na)), np.empty((nm, na, nq))
+        xn, Jn = np.empty((nm, na)), np.empty((nm, na, nq))
         for k in range(n):
             y = Y[k]
             ok = np.isfinite(y).all(axis=1)
@@ -186,44 +180,49 @@ class InverseKinematics:
                 raise TrialError(f"inverse kinematics: frame {k} (t = {trial.time[k]:.6g} s) has only "
                                  f"{int(np.count_nonzero(wk))} measured marker(s) for {nf} coordinates; "
                                  "fill the gaps (read_trc max_gap=...) or cut the frames")
+            sw = np.sqrt(wk)[:, None]
             lam = 1e-6
-            xk = evaluate(q, True)
-            r = (xk - yk) * np.sqrt(wk)[:, None]
+            evaluate(q, xk, Jk)
+            r = (xk - yk) * sw
             cost = float(np.sum(r * r))
             it = 0
             done = False
             while it < self.max_iter:
                 it += 1
-                J = (Jall[:, :, free] * np.sqrt(wk)[:, None, None]).reshape(nm * na, nf)
+                J = (Jk[:, :, free] * sw[:, :, None]).reshape(nm * na, nf)
                 g = J.T @ r.ravel()
                 H = J.T @ J
                 scale = np.diag(H).copy()
                 scale[scale <= 0] = 1.0
                 while True:
                     dq = -np.linalg.solve(H + lam * np.diag(scale), g)
+                    big = np.max(np.abs(dq))
+                    if big > self.max_step:  # trust region: no jumps by whole turns
+                        dq *= self.max_step / big
                     qn = q.copy()
                     qn[free] += dq
-                    xn = evaluate(qn, False)
-                    rn = (xn - yk) * np.sqrt(wk)[:, None]
+                    evaluate(qn, xn, Jn)
+                    rn = (xn - yk) * sw
                     cn = float(np.sum(rn * rn))
                     if cn <= cost or np.max(np.abs(dq)) < self.tol:
                         break
                     lam *= 10.0
                     if lam > 1e10:
                         break
-                if cn <= cost:
-                    q = qn
-                    cost = cn
+                if cn <= cost:          # accept: the trial point's positions and Jacobians become current
+                    q, cost, r = qn, cn, rn
+                    xk, xn = xn, xk
+                    Jk, Jn = Jn, Jk
                     lam = max(lam / 10.0, 1e-12)
                 step = float(np.max(np.abs(dq)))
-                xk = evaluate(q, True)
-                r = (xk - yk) * np.sqrt(wk)[:, None]
                 if step < self.tol or lam > 1e10:
-                    done = step < self.tol or np.max(np.abs(J.T @ r.ravel())) < 1e-12
+                    Jw = (Jk[:, :, free] * sw[:, :, None]).reshape(nm * na, nf)
+                    done = step < self.tol or np.max(np.abs(Jw.T @ r.ravel())) < 1e-12
                     break
             # final residual per marker (unweighted, only measured)
             d = np.linalg.norm(xk - yk, axis=1)
             err[k] = np.where(ok, d, np.nan)
+            q[rot] = np.angle(np.exp(1j * q[rot]))  # revolute coordinates in (-pi, pi]
             Q[k] = q
             iters[k] = it
             conv[k] = done

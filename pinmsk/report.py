@@ -38,10 +38,12 @@ def _img(fig) -> str:
 
 
 def _table(header, rows, left=1) -> str:
-    out = ["<table><tr>" + "".join(f'<th class="{"l" if i < left else ""}">{_e(h)}</th>'
+    """An HTML table; columns ``< left`` (or in the set ``left``) are left-aligned, others right."""
+    is_left = (lambda i: i in left) if isinstance(left, (set, frozenset)) else (lambda i: i < left)
+    out = ["<table><tr>" + "".join(f'<th class="{"l" if is_left(i) else ""}">{_e(h)}</th>'
                                    for i, h in enumerate(header)) + "</tr>"]
     for r in rows:
-        out.append("<tr>" + "".join(f'<td class="{"l" if i < left else ""}">{_e(v)}</td>'
+        out.append("<tr>" + "".join(f'<td class="{"l" if is_left(i) else ""}">{_e(v)}</td>'
                                     for i, v in enumerate(r)) + "</tr>")
     out.append("</table>")
     return "\n".join(out)
@@ -78,7 +80,7 @@ def render_report(run, *, title: str | None = None) -> str:
         ("kinematics", f"low-pass {c.cutoff} Hz, quintic-spline derivatives; analysed "
                        f"{c.time[0]:.3f}-{c.time[-1]:.3f} s"),
         ("noise floor", c.noise.method),
-    ]))
+    ], left=2))
 
     parts.append("<h2>Error per channel</h2>")
     header = ["channel", "noise floor"] + ["model"] + [f"+ {a.effect.label}" for a in added]
@@ -115,7 +117,7 @@ def render_report(run, *, title: str | None = None) -> str:
             parts.append(_table(["#", "effect", "explained", "rmse after", "significant", "parameters"],
                                 [[i + 1, s.label, f"{100 * s.explained_fraction:.1f}%", _g(s.rmse_after["total"]),
                                   "yes" if s.significant else "no", s.describe_params()]
-                                 for i, s in enumerate(d.ranking)], left=2))
+                                 for i, s in enumerate(d.ranking)], left={1, 5}))
         parts.append(_img(plots.plot_comparison(d)))
         if k == 0:
             parts.append(_img(plots.plot_residual_heatmap(d)))

@@ -268,3 +268,35 @@ def test_contact_candidates(foot):
     assert all(c.drivable for c in cands)
     assert cands[3].n_params > cands[2].n_params
     assert contact_candidates(foot, tr.drop(["ground_force_vy"])) == []
+
+
+# -- contacts inside the model's dynamics ----------------------------------------------
+
+def test_inverse_dynamics_with_contacts_equals_external_wrenches(foot):
+    from pinmsk.dynamics import inverse_dynamics_array
+    from pinmsk.skeleton import inverse_dynamics
+    mo = _random_motion(foot, n=20, seed=5)
+    cs = foot_contacts(foot, "hypervolumetric")
+    model = foot.with_effect(*cs)
+    assert len(model.contacts) == 3
+    tau = inverse_dynamics_array(model, mo)
+    outs = [c.evaluate(foot, mo) for c in cs]
+    ext = [ExternalForce(c.target, o.force, o.point) for c, o in zip(cs, outs)]
+    np.testing.assert_allclose(tau, inverse_dynamics(foot, mo.q, mo.v, mo.a, external=ext), atol=1e-8)
+
+
+def test_dropped_foot_comes_to_rest_on_its_spheres(foot):
+    """Forward dynamics: the unactuated foot falls 10 mm onto the ground and settles with F_y = m g."""
+    from pinmsk.dynamics import simulate
+    cs = foot_contacts(foot, "hypervolumetric", values={s: {"a_h": 5e8} for s in SITES})
+    geom = Foot2dGeometry.from_model(foot)
+    t = np.arange(0.0, 0.6 + 1e-9, 1e-3)
+    q0 = np.array([0.0, -geom.heel[1] + 0.06, 0.0, 0.0])
+    tr = simulate(foot.with_effect(*cs), t=t, q0=q0, v0=np.zeros(4))
+    q = np.column_stack([tr[c] for c in foot.coordinates])
+    v = np.column_stack([tr[f"{c}_speed"] for c in foot.coordinates])
+    assert np.abs(v[-1]).max() < 1e-3
+    mo = Motion(t[-1:], q[-1:], v[-1:], np.zeros((1, 4)))
+    gr = ground_reaction([c.evaluate(foot, mo) for c in cs])
+    assert gr.normal[0] == pytest.approx(foot.mass * 9.81, rel=1e-3)
+    assert abs(gr.friction[0]) < 1e-6

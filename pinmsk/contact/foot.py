@@ -31,7 +31,7 @@ import pinocchio as pin
 
 from ..errors import ModelError
 from .hunt_crossley import HuntCrossley
-from .sphere import ContactForces, smooth_positive
+from .sphere import ContactForces, cross, smooth_positive
 from .volumetric import HyperVolumetric, Volumetric
 
 URDF_DIR = Path(__file__).resolve().parents[2] / "urdf"
@@ -143,7 +143,7 @@ def ground_reaction(outputs: Sequence[ContactForces], *, cop_eps: float = 1.0) -
     if not outputs:
         raise ModelError("ground_reaction: no contact outputs given")
     F = sum(o.force for o in outputs)
-    M = sum(np.cross(o.point, o.force) for o in outputs)
+    M = sum(cross(o.point, o.force) for o in outputs)
     w = [smooth_positive(o.normal, 1e-3) for o in outputs]
     W = sum(w)
     pts = np.stack([o.point for o in outputs])  # (k, N, 3)
@@ -152,7 +152,7 @@ def ground_reaction(outputs: Sequence[ContactForces], *, cop_eps: float = 1.0) -
     cop = (num + cop_eps * ref) / (W + cop_eps)[:, None]
     cop[:, 1] = 0.0
     # free moment about the vertical through the COP: M = cop x F + T y  =>  T = M_y - (cop x F)_y
-    free = M[:, 1] - np.cross(cop, F)[:, 1]
+    free = M[:, 1] - cross(cop, F)[:, 1]
     return GroundReaction(F, M, cop, free, F[:, 1] > cop_eps)
 
 

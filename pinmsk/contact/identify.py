@@ -29,7 +29,6 @@ import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -101,7 +100,10 @@ class ContactFit:
     initial        ``{site: {param: value}}`` overriding the thesis initial values
     bounds         ``{site: {param: (lo, hi)}}`` overriding the bounds
     fixed          names of parameters to hold at their initial value (all sites)
-    fit_toe        fit the Fourier toe angle (else use ``toe_angle`` channel ``mtp``)
+    toe            toe angle: ``"fit"`` (the Eq. 4.1 series is fitted with the contact
+                   parameters, as the issue asks), ``"flat"`` (the series is fixed to its
+                   least-squares fit of "toes flat on the ground while the heel is up",
+                   ``mtp = -max(foot_angle, 0)``), or ``"channel"`` (the trial's ``mtp``)
     ground_speed   ground x-velocity (m/s); default ``trial.meta["ground_speed"]`` or 0
     cop_threshold  COP term only where f_n^e > cop_threshold * max f_n^e
     n_jobs         processes for the multi-start (fork; 1 = serial)
@@ -110,12 +112,13 @@ class ContactFit:
     Learned attributes end in ``_``: ``contacts_`` (fitted components),
     ``fourier_`` (11 toe coefficients), ``objective_`` (the minimised Eq. 4.2
     value), ``objective_full_`` (all three terms), ``terms_``, ``rmse_``,
-    ``starts_`` (objective of every start), ``seconds_``, ``nfev_``.
+    ``starts_`` (objective of every start), ``seconds_``, ``nfev_``, ``aic_``, ``bic_``,
+    ``reaction_`` (the model's GroundReaction), ``outputs_`` (per-sphere ContactForces).
     """
 
     def __init__(self, *, contact: str = "hypervolumetric", relax: bool = False, window=None,
                  cutoff: float | None = 12.0, n_starts: int = 6, initial=None, bounds=None,
-                 fixed=(), fit_toe: bool = True, ground_speed: float | None = None,
+                 fixed=(), toe: str = "fit", ground_speed: float | None = None,
                  cop_threshold: float = 0.05, seed: int = 0, max_nfev: int = 400, ftol: float = 1e-10,
                  relax_range: float = 0.02, n_jobs: int = 1):
         self.contact = contact
@@ -126,7 +129,7 @@ class ContactFit:
         self.initial = initial
         self.bounds = bounds
         self.fixed = tuple(fixed)
-        self.fit_toe = fit_toe
+        self.toe = toe
         self.ground_speed = ground_speed
         self.cop_threshold = cop_threshold
         self.seed = seed
@@ -220,17 +223,21 @@ class ContactFit:
         q = np.zeros((t.size, 4))
         v = np.zeros((t.size, 4))
         q[:, :3], v[:, :3] = qs[sel], vs[sel]
-        if not self.fit_toe:
+        if self.toe == "channel":
             if "mtp" not in trial:
-                raise TrialError("fit_toe=False needs an 'mtp' channel (toe angle, rad)")
+                raise TrialError("toe='channel' needs an 'mtp' channel (toe angle, rad)")
             m, dm, _ = differentiate(t_all, np.asarray(trial["mtp"], dtype=float), cutoff=self.cutoff)
             q[:, 3], v[:, 3] = m[sel], dm[sel]
         return _Problem(t, q, v, B, dB, Foot2dGeometry.from_model(model), meas, cop_mask, scale, weights)
 
+    @property
+    def _fit_toe(self) -> bool:
+        return self.toe == "fit"
+
     # -- evaluation ---------------------------------------------------------
     def _simulate(self, prob: _Problem, contacts, fourier):
         q, v = prob.q, prob.v
-        if self.fit_toe:
+        if self._fit_toe:
             q = q.copy()
             v = v.copy()
             q[:, 3] = prob.B @ fourier
@@ -249,6 +256,8 @@ class ContactFit:
     def fit(self, model, trial) -> "ContactFit":
         """Identify the parameters; returns self."""
         t_start = time.perf_counter()
+        if self.toe not in ("fit", "flat", "channel"):
+            raise ModelError(f"ContactFit: toe must be 'fit', 'flat' or 'channel', got {self.toe!r}")
         if model is None:
             model = load_foot2d()
         gs = self.ground_speed
@@ -259,6 +268,8 @@ class ContactFit:
         prob = self._problem(model, trial, gs)
         # Fourier initial guess: toes flat on the ground when the heel is up
         fourier0 = np.linalg.lstsq(prob.B, -np.maximum(prob.q[:, 2], 0.0), rcond=None)[0]
+        if self.toe == "flat":
+            prob.q[:, 3], prob.v[:, 3] = prob.B @ fourier0, prob.dB @ fourier0
         self._check_contact(prob, contacts, fourier0)
 
         # free-parameter vector
@@ -272,7 +283,7 @@ class ContactFit:
         lo = np.array([contacts[i]._params[n].min for i, n in slots])
         hi = np.array([contacts[i]._params[n].max for i, n in slots])
         typ = np.array([_typical(contacts[i], n) for i, n in slots])
-        if self.fit_toe:
+        if self._fit_toe:
             p0 = np.concatenate([p0, fourier0])
             lo = np.concatenate([lo, np.full(N_FOURIER, -2.0)])
             hi = np.concatenate([hi, np.full(N_FOURIER, 2.0)])
@@ -285,7 +296,7 @@ class ContactFit:
             vals = [dict(c.values) for c in contacts]
             for (i, n), val in zip(slots, p[:nfree]):
                 vals[i][n] = val
-            four = p[nfree:] if self.fit_toe else None
+            four = p[nfree:] if self._fit_toe else None
             return vals, four
 
         def fun(x):
@@ -325,7 +336,7 @@ class ContactFit:
             raise SolverError("ContactFit: no start produced a finite solution")
         vals, four = unpack(best.x)
         self.contacts_ = [c.with_params(v) for c, v in zip(contacts, vals)]
-        self.fourier_ = four if four is not None else None
+        self.fourier_ = four if four is not None else (fourier0 if self.toe == "flat" else None)
         self.result_ = best
         self.nfev_ = nfev
         self.n_free_ = best.x.size
@@ -348,7 +359,7 @@ class ContactFit:
     def _check_contact(self, prob, contacts, fourier0):
         """Refuse spheres that cannot touch the ground anywhere in the window, even at their largest size."""
         q = prob.q.copy()
-        if self.fit_toe:
+        if self._fit_toe:
             q[:, 3] = prob.B @ fourier0
         kin = foot2d_site_kinematics(prob.geom, q, prob.v)
         msgs = []
@@ -375,6 +386,12 @@ class ContactFit:
         self.terms_ = {"normal_force": float(terms[0]), "friction_force": float(terms[1]), "cop": float(terms[2])}
         self.objective_ = float(np.dot(terms, prob.weights))
         self.objective_full_ = float(terms.sum())
+        # information criteria on the minimised residuals (Gaussian errors): n ln(RSS/n) + 2k / + k ln n
+        n_res = int(prob.t.size * np.count_nonzero(prob.weights))
+        rss = max(self.objective_ * prob.t.size, 1e-300)
+        k = int(self.n_free_)
+        self.aic_ = float(n_res * math.log(rss / n_res) + 2 * k)
+        self.bic_ = float(n_res * math.log(rss / n_res) + k * math.log(n_res))
         diff_n = gr.normal - prob.meas[0]
         diff_f = gr.friction - prob.meas[1]
         diff_c = (gr.cop[:, 0] - prob.meas[2])[prob.cop_mask]
@@ -388,18 +405,21 @@ class ContactFit:
         return {s: dict(c.values) for s, c in zip(SITES, self.contacts_)}
 
     def to_dict(self) -> dict:
-        return {"contact": self.contact, "relax": bool(self.relax),
+        return {"contact": self.contact, "relax": bool(self.relax), "toe": self.toe,
                 "objective": self.objective_, "objective_full": self.objective_full_,
                 "terms": self.terms_, "params": self.params_(),
                 "toe_fourier": None if self.fourier_ is None else [float(x) for x in self.fourier_],
                 "rmse": self.rmse_, "seconds": self.seconds_, "n_free": int(self.n_free_),
+                "aic": self.aic_, "bic": self.bic_, "converged": bool(self.result_.status > 0),
                 "nfev": int(self.nfev_), "starts": self.starts_, "ground_speed": self.ground_speed_,
                 "window": [float(self.problem_.t[0]), float(self.problem_.t[-1])]}
 
     def report(self) -> str:
         lines = [f"contact fit ({self.contact}{', relaxed' if self.relax else ''}): "
                  f"J (Eq. 4.2) = {self.objective_:.5f} (all terms {self.objective_full_:.5f}), "
-                 f"{self.n_free_} free parameters, {self.nfev_} evaluations, {self.seconds_:.2f} s",
+                 f"{self.n_free_} free parameters, {self.nfev_} evaluations, {self.seconds_:.2f} s, "
+                 f"AIC {self.aic_:.1f}, BIC {self.bic_:.1f}"
+                 f"{'' if self.result_.status > 0 else ' (best start hit max_nfev)'}",
                  f"  RMSE: normal {self.rmse_['normal_force']:.1f} N, friction "
                  f"{self.rmse_['friction_force']:.1f} N, COP {1000 * self.rmse_['cop']:.1f} mm"]
         for s, c in zip(SITES, self.contacts_):
@@ -589,11 +609,34 @@ def _typical(c, name: str) -> float:
     return abs(p.value) if p.value != 0 else 1.0
 
 
+def read_contact_trial(path):
+    """A Trial from ``path``: a CSU leg2d text file (first line ``% TimeStamp ...``) or any file
+    :func:`pinmsk.read_trial` reads (.csv/.sto/.mot)."""
+    path = Path(path)
+    if not path.exists():
+        raise TrialError(f"trial file not found: {path}")
+    with open(path, "r", errors="replace") as fh:
+        first = fh.readline()
+    if first.lstrip().startswith("%") and "TimeStamp" in first:
+        from ..csu import read_csu
+        return read_csu(path)
+    from ..io import read_trial
+    return read_trial(path)
+
+
+def _load_model_arg(model):
+    if model is None or str(model) == "foot2d" or Path(str(model)).name in ("foot2d.toml", "foot2d.urdf"):
+        return load_foot2d()
+    from ..model import load_model
+    return load_model(model)
+
+
 def fit_cli_run(model, trial, *, contact: str = "hypervolumetric", relax: bool = False,
                 json_path=None, plot_dir=None, window=None, n_starts: int = 6, **options) -> dict:
     """What ``pinmsk contact fit MODEL TRIAL --contact ... [--relax] [--json] [--plot]`` runs.
 
-    ``model`` is a Model (or None for foot2d) and ``trial`` a Trial with
+    ``model`` is a Model, a model name/path, or None (foot2d); ``trial`` a Trial or a
+    file (CSU leg2d text, .csv, .sto, .mot; see :func:`read_contact_trial`) with
     ankle_x, ankle_y, foot_angle and ground_force_vx/vy/px.  ``window`` defaults
     to one cycle from toe-off to toe-off if the trial holds two, else the whole
     trial.  Returns (and writes to ``json_path``) a dict with ``objective``
@@ -601,6 +644,10 @@ def fit_cli_run(model, trial, *, contact: str = "hypervolumetric", relax: bool =
     ``friction_force`` in N, ``cop`` in m) and ``seconds``; ``plot_dir`` gets the
     GRF and COP figures (their paths under ``figures``).
     """
+    if model is None or isinstance(model, (str, Path)):
+        model = _load_model_arg(model)
+    if isinstance(trial, (str, Path)):
+        trial = read_contact_trial(trial)
     if window is None:
         try:
             window = stance_cycle(trial)

@@ -83,7 +83,7 @@ def synthetic_foot_trial(*, contact: str = "hypervolumetric", values=None, rate:
         fy += noise * fy.max() * rng.standard_normal(t.size)
         fx += noise * np.abs(fx).max() * rng.standard_normal(t.size)
         px += noise * 0.01 * rng.standard_normal(t.size)
-    px = np.where(fy > 20.0, px, np.nan)
+    px = np.where(fy > 0.02 * fy.max(), px, np.nan)  # undefined (NaN) below 2 % of the peak
     return Trial(t, {"ankle_x": ax, "ankle_y": ay, "foot_angle": th, "mtp": mtp,
                      "ground_force_vx": fx, "ground_force_vy": fy, "ground_force_px": px},
                  meta={"ground_speed": ground_speed, "contact": contact,

@@ -21,13 +21,14 @@ noise floor), :mod:`.fit` (fitting and cross-validation), :mod:`.diagnosis`
 from .compare import DEFAULT_CUTOFF, Comparison, NoiseFloor, compare, external_forces_from_trial
 from .diagnosis import (AT_FLOOR, THRESHOLD, Diagnosis, DiagnosisRun, EffectScore, diagnose,
                         parse_effect, run)
-from .fit import FitResult, fit_effect
+from .fit import EffectFit, FitResult, fit_effect
 from . import synth
 from .synth import make_trial
 from .demo import demo, shipped_trial, shipped_trials
 
 __all__ = [
-    "AT_FLOOR", "Comparison", "DEFAULT_CUTOFF", "Diagnosis", "DiagnosisRun", "EffectScore", "FitResult",
+    "AT_FLOOR", "Comparison", "DEFAULT_CUTOFF", "Diagnosis", "DiagnosisRun", "EffectFit", "EffectScore",
+    "FitResult",
     "NoiseFloor", "THRESHOLD", "compare", "demo", "diagnose", "external_forces_from_trial", "fit_effect",
     "make_trial", "parse_effect", "run", "shipped_trial", "shipped_trials", "synth",
 ]

@@ -64,7 +64,7 @@ from ..errors import ModelError, TrialError
 from ..filtering import differentiate
 from ..skeleton import ExternalForce
 from ..trial import Trial, parse_ground_reaction
-from ..effects._base import SignalEffect, unactuated_coordinates
+from ..effects._base import SignalEffect, is_prismatic, unactuated_coordinates
 from ..effects.catalog import CatalogContext
 
 __all__ = ["DEFAULT_CUTOFF", "MODES", "Comparison", "EquationError", "NoiseFloor", "compare",
@@ -106,13 +106,11 @@ def white_noise_sigma(x: np.ndarray, axis: int = 0) -> np.ndarray:
 
 
 def _rows_for(t: np.ndarray, cutoff: float | None) -> np.ndarray:
-    n = t.size
-    trim = 1.5 / cutoff if cutoff else 0.0
-    rows = np.flatnonzero((t >= t[0] + trim) & (t <= t[-1] - trim))
-    edge = 5
-    if cutoff is None:
-        rows = np.arange(edge, n - edge)
-    return rows
+    """Frames analysed: all but ``1.5 / cutoff`` s at each end (5 frames without a filter)."""
+    if cutoff:
+        trim = 1.5 / cutoff
+        return np.flatnonzero((t >= t[0] + trim) & (t <= t[-1] - trim))
+    return np.arange(5, t.size - 5)
 
 
 # -- ground reaction forces -----------------------------------------------------
@@ -299,8 +297,9 @@ class EquationError:
         after = [c for c in self.chain if c.order > component.order]
         u = self._apply_chain(before, self.excitation)
         a = component.transform_batch(t, u, params_batch, component.muscle_mask(self.model))
-        if after:
-            a = np.stack([self._apply_chain(after, ap) for ap in a])
+        for c in after:                       # the rest of the chain, all parameter sets in one pass
+            fixed = {k: np.full(a.shape[0], v) for k, v in c.values.items()}
+            a = c.transform_batch(t, a, fixed, c.muscle_mask(self.model))
         dtau = np.einsum("pnm,nmc->pnc", (a - self.activation[None]) * self.f_active[None],
                          self.moment_arms)
         return dtau[:, self.rows]
@@ -415,10 +414,9 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
     motion = _motion if _motion is not None else model.motion(trial, cutoff=cutoff)
     rows = _rows_for(t, cutoff)
     if rows.size < 30:
-        raise TrialError(
-            f"only {rows.size} samples remain after leaving out {1.5 / cutoff:.3g} s at each end "
-            f"(filter edge effects at cutoff {cutoff:g} Hz); record a longer trial"
-        )
+        edge = f"{1.5 / cutoff:.3g} s (filter edge effects at {cutoff:g} Hz)" if cutoff else "5 frames"
+        raise TrialError(f"only {rows.size} samples remain after leaving out {edge} at each end; "
+                         "the diagnosis needs at least 30: record a longer trial")
     external = external_forces_from_trial(model, trial, grf_frames=grf_frames) if _has_grf(trial) else []
     measured_tau = None
     excitation = None
@@ -473,7 +471,8 @@ def _torque_floor(model, trial, motion, eq, cutoff, channels) -> NoiseFloor:
     sigma = np.where(sigma > 0, sigma, np.finfo(float).tiny)
     how = ("white noise of the residual from its third differences (outliers beyond 5 MAD dropped), "
            "plus angle noise (third differences of the raw coordinates: "
-           + ", ".join(f"{c} {s * 180 / np.pi:.3g} deg" for c, s in zip(model.coordinates[:6], sigma_q[:6]))
+           + ", ".join(f"{c} {s * 1000:.3g} mm" if is_prismatic(model, c) else f"{c} {np.rad2deg(s):.3g} deg"
+                       for c, s in zip(model.coordinates, sigma_q))
            + f") propagated through the {cutoff if cutoff else 'un'}-Hz low-pass, spline derivatives "
            f"and the residual ({_N_PROPAGATE} Monte-Carlo realisations)")
     return NoiseFloor(tuple(channels), sigma, white, prop, how)

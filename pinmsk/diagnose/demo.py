@@ -57,13 +57,13 @@ def demo(out_dir, *, trial: str = DEMO_TRIAL, echo=print):
     echo(first.summary_text())
     if first.best is None:
         echo("nothing to add: the base model is at the noise floor")
-        result = run(model, data, json_path=out / "diagnosis.json", report_path=out / "report.html",
-                     plot_dir=out)
+        result = run(model, data, first=first, json_path=out / "diagnosis.json",
+                     report_path=out / "report.html", plot_dir=out)
         return result
     label = first.best.label
     echo("")
     echo(f"== adding {label} and diagnosing again ==")
-    result = run(model, data, add=[label], json_path=out / "diagnosis.json",
+    result = run(model, data, add=[label], first=first, json_path=out / "diagnosis.json",
                  report_path=out / "report.html", plot_dir=out)
     after = result.final
     echo(after.summary_text(header=False))

@@ -19,9 +19,10 @@ explains *out of sample*:
 * ranked by held-out error, best first.
 
 Verdict: ``"at_noise_floor"`` when the error is within ``at_floor`` (1.5) times
-the noise floor (RMS over channels of ``rmse_c / floor_c``), else
-``"missing_effect"``; the summary says whether a catalog effect explains the
-excess or the gap is outside the catalog.
+the noise floor -- both over all channels (RMS of ``rmse_c / floor_c``) and on
+every single channel -- else ``"missing_effect"``.  When no catalog effect is
+significant the verdict stays ``missing_effect`` (the error *is* above the
+floor) and the summary says the gap lies outside the catalog.
 
 :func:`run` is the command-line loop: diagnose, then for each ``add`` entry fit
 that effect on all frames, add it to the model (``model.with_effect``) and
@@ -30,7 +31,7 @@ diagnose again.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
@@ -41,10 +42,11 @@ from ..errors import ConvergenceError, ModelError, PinmskError, TrialError
 from ..effects import CatalogContext
 from ..effects import catalog as effect_catalog
 from ..effects import registry
+from ..effects._base import unactuated_coordinates
 from .compare import DEFAULT_CUTOFF, Comparison, compare, simulate_windows
 from .fit import CandidateFit, FitResult
 
-__all__ = ["Diagnosis", "DiagnosisRun", "EffectScore", "diagnose", "run", "parse_effect",
+__all__ = ["Diagnosis", "DiagnosisRun", "EffectScore", "diagnose", "run", "parse_effect", "describe_fit",
            "AT_FLOOR", "THRESHOLD"]
 
 #: held-out mean-square improvement (in noise variances) that makes an effect significant
@@ -92,19 +94,8 @@ class EffectScore:
         return dict(self.fit.stderr)
 
     def describe_params(self) -> str:
-        parts = []
-        decl = self.effect.params
-        for k, v in self.params.items():
-            se = self.fit.stderr.get(k)
-            unit = decl[k].unit
-            s = f"{k} = {v:.4g}"
-            if se is not None and np.isfinite(se):
-                s += f" ± {se:.2g}"
-            s += f" {unit}" if unit else ""
-            if se is not None and np.isnan(se):
-                s += " (at bound)"
-            parts.append(s)
-        return ", ".join(parts)
+        """``name = value ± stderr unit, ...`` of the fitted parameters."""
+        return describe_fit(self.fit)
 
     def to_json(self) -> dict:
         return {
@@ -115,6 +106,25 @@ class EffectScore:
             "significant": bool(self.significant),
             "stderr": {k: _finite(v) for k, v in self.stderr.items()},
         }
+
+
+def describe_fit(fit: FitResult) -> str:
+    """``name = value ± stderr unit, ...`` (``(at bound)`` where the fit stopped at a bound)."""
+    parts = []
+    decl = fit.effect.params
+    for k, v in fit.values.items():
+        se = fit.stderr.get(k)
+        unit = decl[k].unit
+        s = f"{k} = {v:.4g}"
+        if se is not None and np.isfinite(se):
+            s += f" ± {se:.2g}"
+        s += f" {unit}" if unit else ""
+        if se is not None and np.isnan(se):
+            s += " (at bound)"
+        elif se is not None and np.isinf(se):
+            s += " (not identifiable)"
+        parts.append(s)
+    return ", ".join(parts)
 
 
 def _finite(x):
@@ -144,7 +154,10 @@ class Diagnosis:
         self.rmse = comparison.rmse()
         self.noise_floor = comparison.noise.as_dict()
         self.ratio = comparison.ratio()
-        self.verdict = "at_noise_floor" if self.ratio <= settings["at_floor"] else "missing_effect"
+        self.channel_ratios = {ch: self.rmse[ch] / self.noise_floor[ch] for ch in comparison.channels}
+        worst = max(self.channel_ratios.values())
+        self.verdict = ("at_noise_floor" if max(self.ratio, worst) <= settings["at_floor"]
+                        else "missing_effect")
 
     @property
     def best(self) -> EffectScore | None:
@@ -164,11 +177,16 @@ class Diagnosis:
                 return s
         return None
 
-    def fit(self, effect, target: str | None = None) -> FitResult:
-        """Fit an effect (family name, ``family:target`` or a Component) on all frames."""
+    def fit(self, effect, target: str | None = None, *, max_nfev: int = 100) -> FitResult:
+        """Fit an effect (family name, ``family:target`` or a Component) on all frames.
+
+        Raises :class:`~pinmsk.errors.ConvergenceError` if the fit does not
+        converge within ``max_nfev`` evaluations.
+        """
         comp = _resolve(effect, target, self)
+        plain = isinstance(effect, str) and not parse_effect(effect)[2]
         for s in self.ranking:
-            if s.label == comp.label and isinstance(effect, str):
+            if plain and s.label == comp.label:
                 if not s.converged:
                     raise ConvergenceError(
                         f"the fit of {s.label} did not converge ({s.fit.message}); it cannot be added as is. "
@@ -176,10 +194,10 @@ class Diagnosis:
                     )
                 return s.fit
         cf = CandidateFit(self.comparison.eq, self.comparison.eq_noise.sigma, comp)
-        x, conv, msg = cf.fit()
+        x, conv, msg = cf.fit(max_nfev=max_nfev)
         if not conv:
             raise ConvergenceError(
-                f"the fit of {comp.label} did not converge ({msg}, {cf.nfev} evaluations); check that "
+                f"the fit of {comp.label} did not converge after {cf.nfev} evaluations ({msg.rstrip('.')}); check that "
                 "the trial covers the effect, or fix some parameters (Parameter.vary=False)"
             )
         return cf.result(x, conv, msg)
@@ -251,16 +269,18 @@ class Diagnosis:
         return "\n".join(lines)
 
     def verdict_line(self) -> str:
+        ch, worst = max(self.channel_ratios.items(), key=lambda kv: kv[1])
         if self.verdict == "at_noise_floor":
             return (f"verdict: at_noise_floor -- the error is {self.ratio:.2f}x the noise floor "
-                    f"(<= {self.settings['at_floor']:g}x); nothing to add")
+                    f"(worst channel {worst:.2f}x; <= {self.settings['at_floor']:g}x); nothing to add")
+        where = (f"the error is {self.ratio:.1f}x the noise floor" if len(self.channel_ratios) == 1
+                 else f"the error is {self.ratio:.1f}x the noise floor over all channels, {worst:.1f}x on {ch}")
         if self.best is not None:
-            return (f"verdict: missing_effect -- the error is {self.ratio:.1f}x the noise floor; "
-                    f"best explanation: {self.best.label} ({self.best.describe_params()}); "
-                    f"add it with --add {self.best.label}")
-        return (f"verdict: missing_effect -- the error is {self.ratio:.1f}x the noise floor but no catalog "
-                "effect explains it significantly: the gap is outside the catalog (segment lengths, moment "
-                "arms, sensor offsets, ...) or the noise floor is underestimated")
+            return (f"verdict: missing_effect -- {where}; best explanation: {self.best.label} "
+                    f"({self.best.describe_params()}); add it with --add {self.best.label}")
+        return (f"verdict: missing_effect -- {where}, but no catalog effect explains it significantly: "
+                "the gap is outside the catalog (segment lengths, moment arms, sensor offsets, ...) or the "
+                "noise floor is underestimated")
 
     def __repr__(self) -> str:
         return (f"<Diagnosis {self.model.name} {self.comparison.mode}: total rmse {self.rmse['total']:.4g}, "
@@ -384,9 +404,6 @@ def _correlations(c: Comparison, k: int = 4) -> dict:
     res = c.residual
     for j, ch in enumerate(c.channels):
         r = res[:, j]
-        if c.mode == "motion":
-            r = c.eq.e[:, list(c.eq.coordinates).index(c.coordinates[j])] \
-                if c.coordinates[j] in c.eq.coordinates else r
         rs = r - r.mean()
         vals = []
         for name, s in c.states.items():
@@ -466,7 +483,7 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
     guard = int(np.ceil(1.0 / (cutoff * dt))) if cutoff else 2
     settings = {"folds": folds, "threshold": threshold, "at_floor": at_floor, "guard": guard,
                 "window": window, "cutoff": cutoff}
-    ctx = CatalogContext(c.mode, tuple(c.eq.coordinates), tuple(_unactuated(c)), tuple(frames or ()))
+    ctx = CatalogContext(c.mode, tuple(c.eq.coordinates), unactuated_coordinates(c.model), tuple(frames or ()))
     if candidates is None:
         cands = effect_catalog(model, trial, frames=frames, context=ctx)
     else:
@@ -511,11 +528,6 @@ def _order(ranking: list, tie: float = 0.05) -> list:
     return out
 
 
-def _unactuated(c: Comparison):
-    from ..effects._base import unactuated_coordinates
-    return unactuated_coordinates(c.model)
-
-
 class DiagnosisRun:
     """The loop of :func:`run`: ``steps[0]`` for the model as given, one more per added effect."""
 
@@ -531,11 +543,16 @@ class DiagnosisRun:
     def model(self):
         return self.final.model
 
-    def __getattr__(self, name):
-        if name in ("rmse", "noise_floor", "worst_windows", "ranking", "verdict", "best", "comparison",
-                    "ratio", "correlations"):
-            return getattr(self.steps[-1], name)
-        raise AttributeError(name)
+    # the final state, as on a Diagnosis
+    rmse = property(lambda self: self.final.rmse, doc="final RMSE per channel (and total)")
+    noise_floor = property(lambda self: self.final.noise_floor, doc="noise floor per channel (and total)")
+    worst_windows = property(lambda self: self.final.worst_windows)
+    ranking = property(lambda self: self.final.ranking)
+    verdict = property(lambda self: self.final.verdict)
+    best = property(lambda self: self.final.best)
+    comparison = property(lambda self: self.final.comparison)
+    ratio = property(lambda self: self.final.ratio)
+    correlations = property(lambda self: self.final.correlations)
 
     def to_json_dict(self) -> dict:
         return self.final.to_json_dict(self.added)
@@ -547,9 +564,8 @@ class DiagnosisRun:
         out = [first.summary_text()]
         for k, (fit, step) in enumerate(zip(self.added, self.steps[1:]), 1):
             prev = self.steps[k - 1]
-            sc = EffectScore(fit, {}, 0.0, 0.0, True, fit.converged)
             out.append("")
-            out.append(f"step {k}: added {fit.effect.label} ({sc.describe_params()})")
+            out.append(f"step {k}: added {fit.effect.label} ({describe_fit(fit)})")
             out.append(f"  total rmse {prev.rmse['total']:.4g} -> {step.rmse['total']:.4g} "
                        f"(noise floor {step.noise_floor['total']:.4g}; {prev.ratio:.1f}x -> {step.ratio:.2f}x)")
             out.append(step.summary_text(header=False))
@@ -566,17 +582,18 @@ class DiagnosisRun:
 
 
 def run(model, trial, *, add: Sequence = (), json_path=None, report_path=None, plot_dir=None,
-        **options) -> DiagnosisRun:
+        first: Diagnosis | None = None, **options) -> DiagnosisRun:
     """Diagnose, then fit and add each ``add`` entry in turn, diagnosing after each.
 
     ``add`` entries: ``"family"`` (its best-ranked target), ``"family:target"``,
     ``(family, target)`` tuples or Components.  Writes the JSON summary
     (``json_path``), the HTML report (``report_path``) and PNG figures
-    (``plot_dir``) when asked.  ``options`` go to :func:`diagnose`.
+    (``plot_dir``) when asked.  ``options`` go to :func:`diagnose`; ``first``
+    reuses a diagnosis of this model and trial already made as step 0.
     """
     if isinstance(add, (str, Component)):
         add = [add]
-    d = diagnose(model, trial, **options)
+    d = first if first is not None else diagnose(model, trial, **options)
     steps, added = [d], []
     for entry in add or ():
         if isinstance(entry, tuple):

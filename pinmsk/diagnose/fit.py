@@ -38,7 +38,7 @@ from ..components import Component
 from ..errors import ConvergenceError, ModelError
 from ..effects._base import SignalEffect
 
-__all__ = ["CandidateFit", "FitResult", "fit_effect"]
+__all__ = ["CandidateFit", "EffectFit", "FitResult", "fit_effect"]
 
 
 @dataclass
@@ -73,10 +73,27 @@ class CandidateFit:
 
     def __init__(self, eq, sigma: np.ndarray, component: Component):
         self.eq = eq
-        self.sigma = np.asarray(sigma, dtype=float)
         self.component = component
         self.model = eq.model
         self.signal = isinstance(component, SignalEffect)
+        # Fit on the channels the effect can change (a joint effect: its coordinate's); the others
+        # only add a constant to the sum of squares.
+        affected = getattr(component, "affected_coordinates", None)
+        if affected is not None and not self.signal:
+            names = set(affected())
+            act = np.array([j for j, c in enumerate(eq.coordinates) if c in names], dtype=int)
+            if act.size == 0:
+                raise ModelError(f"{component.label} acts on {', '.join(sorted(names))}, which this comparison "
+                                 f"does not include (compared: {', '.join(eq.coordinates)})")
+        else:
+            act = np.arange(len(eq.coordinates))
+        self.act = act
+        self.e = eq.e[:, act]
+        self.sigma_full = np.asarray(sigma, dtype=float)
+        self.sigma = self.sigma_full[act]
+        self.columns = eq.columns[act]
+        rest = np.setdiff1d(np.arange(len(eq.coordinates)), act)
+        self._rest_sq = np.sum((eq.e[:, rest] / self.sigma_full[rest]) ** 2, axis=1)   # per frame
         if getattr(component, "level", "joint") == "muscle" and eq.mode != "muscle":
             raise ModelError(f"{component.label} acts through muscle excitations; it can only be fitted "
                              "in a muscle-level comparison (a trial with <muscle>_excitation or _emg channels)")
@@ -111,14 +128,21 @@ class CandidateFit:
     def predict(self, X) -> np.ndarray:
         """Change of ``e`` for parameter sets ``X`` (P, p) -> (P, n, C)."""
         X = np.atleast_2d(np.asarray(X, dtype=float))
+        if X.shape[0] == 1 and self._memo is not None and np.array_equal(self._memo[0], X[0]):
+            return self._memo[1][None]
+        out = self._predict(X)
+        self._memo = (X[0].copy(), out[0])
+        return out
+
+    def _predict(self, X) -> np.ndarray:
         self.nfev += X.shape[0]
         if self.signal:
             batch = {n: np.full(X.shape[0], v) for n, v in self.fixed.items()}
             batch.update({n: X[:, k] for k, n in enumerate(self.names)})
-            return self.eq.signal_delta(self.component, batch)
+            return self.eq.signal_delta(self.component, batch)[:, :, self.act]
         if self.linear:
             return np.einsum("ncp,Pp->Pnc", self.basis(), X)
-        cols = self.eq.columns
+        cols = self.columns
         out = np.empty((X.shape[0], self.eq.rows.size, cols.size))
         for k, x in enumerate(X):
             Q = self.component.generalized_force(self.model, self.eq.motion_rows, self._params(x), self.cache)
@@ -131,7 +155,7 @@ class CandidateFit:
         if not self.signal and hasattr(comp, "param_jacobian"):
             J = comp.param_jacobian(self.model, self.eq.motion_rows, self._params(x), self.cache)
             idx = [self.all_names.index(n) for n in self.names]
-            return J[:, self.eq.columns][:, :, idx]
+            return J[:, self.columns][:, :, idx]
         x = np.asarray(x, dtype=float)
         span = np.where(np.isfinite(self.hi - self.lo), self.hi - self.lo, 1.0)
         h = 1e-6 * np.maximum(np.abs(x), 1e-3 * span) + 1e-12
@@ -142,14 +166,14 @@ class CandidateFit:
 
     # -- objective ---------------------------------------------------------------------
     def _whiten(self, d, mask):
-        r = (self.eq.e + d) / self.sigma
+        r = (self.e + d) / self.sigma
         return r[mask].ravel()
 
     def sse(self, X, mask=None) -> np.ndarray:
         """Whitened SSE of ``e + d(x)`` on the ``mask`` rows for each parameter set (P,)."""
         mask = slice(None) if mask is None else mask
         D = self.predict(X)
-        r = (self.eq.e[None] + D) / self.sigma
+        r = (self.e[None] + D) / self.sigma
         return np.sum(r[:, mask] ** 2, axis=(1, 2))
 
     # -- fitting ------------------------------------------------------------------------
@@ -159,7 +183,7 @@ class CandidateFit:
         if hasattr(comp, "initial_guess") and not self.signal:
             rows_motion = self.eq.motion_rows.subset(np.flatnonzero(mask))
             target = np.full((rows_motion.n_frames, self.model.nv), np.nan)
-            target[:, self.eq.columns] = -self.eq.e[mask]
+            target[:, self.columns] = -self.e[mask]
             try:
                 guesses = comp.initial_guess(self.model, rows_motion, target, None) or []
             except Exception:           # a bad guess hook must not stop the fit
@@ -179,7 +203,7 @@ class CandidateFit:
             out.extend(X[np.argsort(s)[:2]])
         return out
 
-    def fit(self, mask=None, x0=None, *, max_nfev: int = 200) -> tuple[np.ndarray, bool, str]:
+    def fit(self, mask=None, x0=None, *, max_nfev: int = 100) -> tuple[np.ndarray, bool, str]:
         """Best parameters on the ``mask`` rows: ``(x, converged, message)``."""
         n = self.eq.rows.size
         mask = np.ones(n, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
@@ -188,12 +212,14 @@ class CandidateFit:
         if self.linear:
             B = self.basis()[mask] / self.sigma[None, :, None]
             A = B.reshape(-1, B.shape[-1])
-            b = -(self.eq.e[mask] / self.sigma).ravel()
+            b = -(self.e[mask] / self.sigma).ravel()
             x, *_ = np.linalg.lstsq(A, b, rcond=None)
             if np.all(x >= self.lo) and np.all(x <= self.hi):
                 return x, True, "linear least squares"
             res = lsq_linear(A, b, bounds=(self.lo, self.hi))
             return res.x, bool(res.success), f"bounded linear least squares: {res.message}"
+        if len(self.names) == 1:
+            return self._fit_scalar(mask)
         candidates = [x0] if x0 is not None else self.starts(mask)
         if len(candidates) > 1:
             s = self.sse(np.array(candidates), mask)
@@ -205,6 +231,49 @@ class CandidateFit:
             if best is None or res.cost < best.cost:
                 best = res
         return best.x, bool(best.status > 0), str(best.message)
+
+    def _grid(self):
+        """Predictions on a 1-D grid over the bounds, computed once in one batch (``(G,), (G, n, C)``)."""
+        if getattr(self, "_grid_cache", None) is None:
+            lo, hi = float(self.lo[0]), float(self.hi[0])
+            if not np.isfinite(lo) or not np.isfinite(hi):
+                c = float(self.x_default[0])
+                w = max(abs(c), 1.0)
+                lo, hi = (max(lo, c - 10 * w), min(hi, c + 10 * w))
+            g = np.geomspace(lo, hi, 33) if lo > 0 and hi / lo > 10 else np.linspace(lo, hi, 33)
+            self._grid_cache = (g, self.predict(g[:, None]))
+        return self._grid_cache
+
+    def _fit_scalar(self, mask):
+        """One free parameter: grid, then bounded Brent on the bracket around the best grid point.
+
+        Least squares (Gauss-Newton) steps are poor here when the prediction
+        carries measured noise that moves with the parameter (a delayed noisy
+        EMG): ``J^T J`` then far exceeds the curvature of the sum of squares.
+        """
+        from scipy.optimize import minimize_scalar
+
+        g, D = self._grid()
+        r = (self.e[None] + D) / self.sigma
+        sse = np.sum(r[:, mask] ** 2, axis=(1, 2))
+        if not np.all(np.isfinite(sse)):
+            bad = g[~np.isfinite(sse)]
+            raise ConvergenceError(
+                f"fitting {self.component.label}: the model gave non-finite values for "
+                f"{self.names[0]} = {bad[0]:.6g} (and {bad.size - 1} more grid values); tighten its bounds"
+            )
+        i = int(np.argmin(sse))
+        a, b = g[max(i - 1, 0)], g[min(i + 1, g.size - 1)]
+        if a == b:
+            return np.array([a]), True, "grid"
+
+        def f(x):
+            return float(self.sse(np.array([[x]]), mask)[0])
+
+        res = minimize_scalar(f, bounds=(a, b), method="bounded",
+                              options={"xatol": 1e-7 * max(abs(b - a), 1e-12), "maxiter": 100})
+        x = res.x if res.fun <= sse[i] else g[i]
+        return np.array([x]), bool(res.success), f"grid + bounded Brent: {res.message}"
 
     def _least_squares(self, x0, mask, max_nfev):
         span = self.hi - self.lo
@@ -226,27 +295,42 @@ class CandidateFit:
             return J.reshape(-1, J.shape[-1])
 
         return least_squares(fun, x0, jac=jac, bounds=(self.lo, self.hi), method="trf",
-                             x_scale="jac", max_nfev=max_nfev, xtol=1e-10, ftol=1e-10)
+                             x_scale="jac", max_nfev=max_nfev, xtol=1e-8, ftol=1e-9)
 
     def result(self, x, converged: bool, message: str, mask=None) -> FitResult:
         """A :class:`FitResult` with uncertainties at ``x`` (fit on ``mask``)."""
         n_rows = self.eq.rows.size
         mask = np.ones(n_rows, dtype=bool) if mask is None else mask
-        d = self.predict(x[None])[0] if self.names else np.zeros_like(self.eq.e)
-        r = ((self.eq.e + d) / self.sigma)[mask]
-        sse = float(np.sum(r ** 2))
-        sse0 = float(np.sum((self.eq.e / self.sigma)[mask] ** 2))
+        d = self.predict(x[None])[0] if self.names else np.zeros_like(self.e)
+        r = ((self.e + d) / self.sigma)[mask]
+        rest = float(np.sum(self._rest_sq[mask]))
+        sse = float(np.sum(r ** 2)) + rest                 # over all channels
+        sse0 = float(np.sum((self.e / self.sigma)[mask] ** 2)) + rest
+        n_all = int(np.sum(mask)) * self.eq.e.shape[1]
         n = int(r.size)
         p = len(self.names)
         stderr = {}
         if p:
-            J = (self.jacobian(x)[mask] / self.sigma[None, :, None]).reshape(-1, p)
-            s2 = sse / max(n - p, 1)
+            s2 = (sse - rest) / max(n - p, 1)
             rho = _lag1(r)
             infl = (1 + rho) / (1 - rho)
+            if p == 1 and not self.linear:
+                # curvature of the sum of squares itself (see _fit_scalar): cov = 2 s^2 / SSE''
+                span = (self.hi - self.lo)[0] if np.isfinite(self.hi - self.lo)[0] else max(abs(x[0]), 1.0)
+                h = 1e-3 * span
+                xs = np.clip(np.array([[x[0] - h], [x[0]], [x[0] + h]]), self.lo, self.hi)
+                S = self.sse(xs, mask)
+                hh = 0.5 * (xs[2, 0] - xs[0, 0])
+                curv = (S[0] - 2 * S[1] + S[2]) / hh ** 2 if hh > 0 else 0.0
+                JtJ = np.array([[0.5 * curv]]) if curv > 0 else np.zeros((1, 1))
+            else:
+                J = (self.jacobian(x)[mask] / self.sigma[None, :, None]).reshape(-1, p)
+                JtJ = J.T @ J
             try:
-                with np.errstate(over="ignore", invalid="ignore"):
-                    cov = np.linalg.inv(J.T @ J) * s2 * infl
+                if not np.all(np.isfinite(JtJ)) or np.linalg.cond(JtJ) > 1e12:
+                    raise np.linalg.LinAlgError("singular")      # parameters not identifiable here
+                with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+                    cov = np.linalg.inv(JtJ) * s2 * infl
                     se = np.sqrt(np.clip(np.diag(cov), 0, None))
                 se = np.where(np.isfinite(se), se, np.inf)
             except np.linalg.LinAlgError:
@@ -260,14 +344,16 @@ class CandidateFit:
         clipped = {k: float(np.clip(v, self.component.params[k].min, self.component.params[k].max))
                    for k, v in values.items()}
         effect = self.component.with_params(clipped, stderr=stderr)
-        return FitResult(effect, {k: clipped[k] for k in self.all_names}, stderr, sse, sse0, n,
-                         converged, message, self.nfev, d)
+        full = np.zeros_like(self.eq.e)
+        full[:, self.act] = d
+        return FitResult(effect, {k: clipped[k] for k in self.all_names}, stderr, sse, sse0, n_all,
+                         converged, message, self.nfev, full)
 
     def cross_validate(self, folds: int, guard: int, x_full=None) -> tuple[np.ndarray, bool]:
         """Held-out predictions: ``e`` plus each block's change predicted by the fit on the others."""
         n = self.eq.rows.size
         blocks = np.array_split(np.arange(n), folds)
-        e_cv = np.empty_like(self.eq.e)
+        e_cv = self.eq.e.copy()
         ok = True
         for blk in blocks:
             train = np.ones(n, dtype=bool)
@@ -278,9 +364,9 @@ class CandidateFit:
                 x, conv, _ = self.fit(train)
                 ok &= conv
             else:
-                x, conv, _ = self.fit(train, x0=x_full, max_nfev=60)
+                x, conv, _ = self.fit(train, x0=x_full, max_nfev=30)
             d = self.predict(x[None])[0] if self.names else 0.0
-            e_cv[blk] = (self.eq.e + d)[blk]
+            e_cv[np.ix_(blk, self.act)] = (self.e + d)[blk]
         return e_cv, ok
 
 
@@ -294,17 +380,17 @@ def _lag1(r: np.ndarray) -> float:
     return float(np.clip(rho, 0.0, 0.98))
 
 
-def fit_effect(comparison, component: Component, *, strict: bool = True) -> FitResult:
+def fit_effect(comparison, component: Component, *, strict: bool = True, max_nfev: int = 100) -> FitResult:
     """Fit ``component`` to a comparison's equation error (all analysed frames).
 
     Raises :class:`~pinmsk.errors.ConvergenceError` when ``strict`` and the
-    optimiser stops without converging.
+    optimiser stops without converging (after ``max_nfev`` evaluations).
     """
     cf = CandidateFit(comparison.eq, _eq_sigma(comparison), component)
-    x, conv, msg = cf.fit()
+    x, conv, msg = cf.fit(max_nfev=max_nfev)
     if strict and not conv:
         raise ConvergenceError(
-            f"the fit of {component.label} did not converge ({msg}, {cf.nfev} evaluations); "
+            f"the fit of {component.label} did not converge after {cf.nfev} evaluations ({msg.rstrip('.')}); "
             "check the trial covers the effect (e.g. the joint range for passive_elastic), "
             "or fix some parameters (Parameter.vary=False) and fit again"
         )
@@ -314,3 +400,43 @@ def fit_effect(comparison, component: Component, *, strict: bool = True) -> FitR
 def _eq_sigma(comparison) -> np.ndarray:
     """Noise floor of the equation-error channels (in motion mode: of the driving moments)."""
     return comparison.eq_noise.sigma
+
+
+class EffectFit:
+    """Fit one effect to a comparison, scikit-learn style.
+
+    ``EffectFit(effect, max_nfev=100).fit(comparison)`` returns the fitter
+    with ``effect_`` (the fitted component, parameter uncertainties in its
+    Parameters' ``stderr``), ``params_``, ``stderr_``, ``sse_`` (noise-whitened
+    sum of squares), ``n_params_``, ``aic_change_``, ``bic_change_`` and
+    ``converged_``; :meth:`report` prints them.  The constructor only stores
+    its arguments.
+    """
+
+    def __init__(self, effect: Component, *, max_nfev: int = 100, strict: bool = True):
+        self.effect = effect
+        self.max_nfev = max_nfev
+        self.strict = strict
+
+    def fit(self, comparison) -> "EffectFit":
+        r = fit_effect(comparison, self.effect, strict=self.strict, max_nfev=self.max_nfev)
+        n = max(r.n, 1)
+        self.result_ = r
+        self.effect_ = r.effect
+        self.params_ = dict(r.values)
+        self.stderr_ = dict(r.stderr)
+        self.sse_ = r.sse
+        self.n_params_ = r.n_params
+        self.bic_change_ = r.bic_change
+        self.aic_change_ = float(n * np.log(max(r.sse, 1e-300) / max(r.sse_before, 1e-300)) + 2 * r.n_params)
+        self.converged_ = r.converged
+        return self
+
+    def report(self) -> str:
+        from .diagnosis import describe_fit
+        r = self.result_
+        return (f"{r.effect.label}: {describe_fit(r)}\n"
+                f"  whitened SSE {r.sse_before:.6g} -> {r.sse:.6g} over {r.n} residuals, "
+                f"{r.n_params} free parameter(s); AIC change {self.aic_change_:+.4g}, "
+                f"BIC change {self.bic_change_:+.4g}; "
+                f"{'converged' if r.converged else 'NOT converged'} ({r.message})")

@@ -124,9 +124,17 @@ def make_trial(model, effects: Sequence = (), *, duration: float = 10.0, rate: f
     for i, c in enumerate(model.coordinates):
         chans[c] = q[:n, i].copy()
     from ..dynamics import inverse_dynamics_array
+    if "grf" in measure:
+        if not unact:
+            raise ModelError(f"model '{model.name}' is fixed to the world: it has no ground reaction forces")
+        chans.update(_grf(truth, motion, unact, t))
     if "moments" in measure or "excitations" in measure:
         full = Motion(np.arange(q.shape[0]) / rate, q, v, a)
-        tau = inverse_dynamics_array(truth, full)
+        external = []
+        if "grf" in measure:                     # the legs carry what the ground pushes
+            from ..grf import external_forces
+            external = external_forces(model, Trial(t, {k: x for k, x in chans.items() if "ground" in k}))
+        tau = inverse_dynamics_array(truth, full, external=external)
         if "moments" in measure:
             for i, c in enumerate(model.coordinates):
                 if c not in unact:
@@ -135,10 +143,6 @@ def make_trial(model, effects: Sequence = (), *, duration: float = 10.0, rate: f
             u = _excitations(model, full, tau, signal)
             for j, m in enumerate(model.muscle_names):
                 chans[f"{m}_excitation"] = u[:n, j]
-    if "grf" in measure:
-        if not unact:
-            raise ModelError(f"model '{model.name}' is fixed to the world: it has no ground reaction forces")
-        chans.update(_grf(truth, motion, unact, t))
     trial = Trial(t, chans, meta={"source": f"synth:{model.name}", "hidden_effects": [repr(e) for e in effs],
                                   "noise": {k: float(v) for k, v in levels.items()}, "seed": seed})
     return _add_noise(trial, model, levels, rng) if levels else trial
@@ -253,6 +257,14 @@ def _excitations(model, motion, tau, signal):
         raise ModelError(f"model '{model.name}' has no muscles: it cannot have excitation channels")
     fa, fp = ms.force_limits(motion.q, motion.v)
     R = ms.moment_arms(motion.q)                               # (N, m, nv)
+    crossing = np.any(np.abs(R) > 0, axis=0).sum(axis=1)       # coordinates each muscle crosses
+    if np.any(crossing > 1):
+        multi = [n for n, k in zip(model.muscle_names, crossing) if k > 1]
+        raise ModelError(
+            f"synthetic excitations share each joint's moment among the muscles crossing it, which needs "
+            f"muscles that cross one coordinate; model '{model.name}' has multi-joint muscles "
+            f"({', '.join(multi[:4])}{', ...' if len(multi) > 4 else ''})"
+        )
     base = 0.05
     act = np.full(fa.shape, base)
     for j in range(model.nv):

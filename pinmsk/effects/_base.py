@@ -41,6 +41,10 @@ class JointEffect(Component):
     level = "joint"
     target_kind = "coordinate"
 
+    def affected_coordinates(self) -> tuple[str, ...]:
+        """The coordinates whose generalized force this effect can change."""
+        return (self.target,)
+
     def generalized_force(self, model, motion: Motion, params: Mapping[str, float] | None = None,
                           cache: Any = None) -> np.ndarray:
         i = model.coordinate_index(self.target)

@@ -45,30 +45,34 @@ class ActivationDynamics(SignalEffect):
     zero_params = None     # there is no parameter value that removes the lag
 
     def transform_batch(self, t, u, params, mask=None):
+        """Activations for P parameter sets; ``u`` is (N, m), or (P, N, m) for one signal per set."""
         t = np.asarray(t, dtype=float)
         u = np.asarray(u, dtype=float)
         tr = np.atleast_1d(np.asarray(params["tau_rise"], dtype=float))
         tf = np.atleast_1d(np.asarray(params["tau_fall"], dtype=float))
         tr, tf = np.broadcast_arrays(tr, tf)
-        P = tr.size
-        n, m = u.shape
+        P = max(tr.size, u.shape[0] if u.ndim == 3 else 1)
+        tr, tf = np.broadcast_to(tr, (P,)), np.broadcast_to(tf, (P,))
+        ub = np.broadcast_to(u, (P,) + u.shape[-2:])
+        n, m = ub.shape[1:]
         cols = np.arange(m) if mask is None else np.flatnonzero(mask)
-        out = np.broadcast_to(u, (P, n, m)).copy()
+        out = ub.copy()
         if n < 2 or cols.size == 0:
             return out
-        us = u[:, cols]
-        t2 = 1.0 / tf
-        t1 = 1.0 / tr - t2
-        h = np.diff(t)
-        um = 0.5 * (us[1:] + us[:-1])                                        # (N-1, k)
-        e_rise = np.exp(-(t1[:, None, None] * um[None] + t2[:, None, None]) * h[None, :, None])
-        e_fall = np.exp(-t2[:, None] * h[None, :])[:, :, None]               # (P, N-1, 1)
-        a = np.empty((P, n, cols.size))
-        prev = np.broadcast_to(us[0], (P, cols.size)).copy()
-        a[:, 0] = prev
+        us = np.ascontiguousarray(np.moveaxis(ub[:, :, cols], 1, 0))         # (N, P, k)
+        t2 = (1.0 / tf)[:, None]
+        t1 = (1.0 / tr)[:, None] - t2
+        h = np.diff(t)[:, None, None]
+        um = 0.5 * (us[1:] + us[:-1])                                          # (N-1, P, k)
+        e_rise = np.exp(-(t1 * um + t2) * h)
+        e_fall = np.exp(-t2 * h) * np.ones_like(um)
+        a = np.empty_like(us)
+        prev = us[0].copy()
+        a[0] = prev
+        d = np.empty_like(prev)
         for k in range(n - 1):
-            d = um[k] - prev
-            prev = um[k] - d * np.where(d >= 0.0, e_rise[:, k], e_fall[:, k])
-            a[:, k + 1] = prev
-        out[:, :, cols] = a
+            np.subtract(um[k], prev, out=d)
+            prev = um[k] - d * np.where(d >= 0.0, e_rise[k], e_fall[k])
+            a[k + 1] = prev
+        out[:, :, cols] = np.moveaxis(a, 0, 1)
         return out

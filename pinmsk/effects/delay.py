@@ -37,26 +37,41 @@ class ElectromechanicalDelay(SignalEffect):
         Parameter("delay", 0.04, 0.0, 0.25, "s", "delay from EMG/excitation to muscle activation"),
     )
     zero_params = {"delay": 0.0}
+    _spectrum_cache = None
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state.pop("_spectrum_cache", None)
+        return state
 
     def transform_batch(self, t, u, params, mask=None):
+        """Delayed signals for P delays; ``u`` is (N, m), or (P, N, m) for one signal per delay."""
         t = np.asarray(t, dtype=float)
         u = np.asarray(u, dtype=float)
         d = np.atleast_1d(np.asarray(params["delay"], dtype=float))
-        n, m = u.shape
+        P = max(d.size, u.shape[0] if u.ndim == 3 else 1)
+        d = np.broadcast_to(d, (P,))
+        ub = np.broadcast_to(u, (P,) + u.shape[-2:])
+        n, m = ub.shape[1:]
         cols = np.arange(m) if mask is None else np.flatnonzero(mask)
-        out = np.broadcast_to(u, (d.size, n, m)).copy()
+        out = ub.copy()
         if n < 2 or cols.size == 0:
             return out
         dt = float(np.median(np.diff(t)))
         pad = int(np.ceil(self.params["delay"].max / dt)) + 8
-        x = u[:, cols]
-        s = (np.arange(1, 2 * pad + 1) / (2 * pad + 1))[:, None]
-        bridge = x[-1] + (x[0] - x[-1]) * 0.5 * (1 - np.cos(np.pi * s))
-        ext = np.vstack([x, bridge])                                   # circular: bridge also precedes x
-        L = ext.shape[0]
-        spec = np.fft.rfft(ext, axis=0)
+        key = (id(u), u.shape, float(u.flat[0]), float(u.flat[-1]), pad, tuple(cols))
+        if self._spectrum_cache is not None and self._spectrum_cache[0] == key:
+            spec, L = self._spectrum_cache[1:]           # same signal, other delays: reuse its FFT
+        else:
+            x = (u if u.ndim == 3 else u[None])[:, :, cols]                  # (P or 1, N, k)
+            s = (np.arange(1, 2 * pad + 1) / (2 * pad + 1))[None, :, None]
+            bridge = x[:, -1:] + (x[:, :1] - x[:, -1:]) * 0.5 * (1 - np.cos(np.pi * s))
+            ext = np.concatenate([x, bridge], axis=1)                        # circular: bridge also precedes x
+            L = ext.shape[1]
+            spec = np.fft.rfft(ext, axis=1)
+            self._spectrum_cache = (key, spec, L) if u.ndim == 2 else None
         omega = 2 * np.pi * np.fft.rfftfreq(L, dt)
-        shift = np.exp(-1j * omega[None, :] * d[:, None])              # (P, F)
-        y = np.fft.irfft(spec[None] * shift[:, :, None], n=L, axis=1)
+        shift = np.exp(-1j * omega[None, :] * d[:, None])                   # (P, F)
+        y = np.fft.irfft(spec * shift[:, :, None], n=L, axis=1)
         out[:, :, cols] = y[:, :n]
         return out

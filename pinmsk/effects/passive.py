@@ -170,6 +170,9 @@ class RienerEdrich1999PassiveMoment(JointEffect):
         s = self.target
         return f"hip_{s}", f"knee_{s}", f"ankle_{s}"
 
+    def affected_coordinates(self) -> tuple[str, ...]:
+        return self.coordinates()
+
     def check_target(self, model) -> None:
         for c in self.coordinates():
             model.coordinate_index(c)

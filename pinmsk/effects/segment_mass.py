@@ -20,7 +20,6 @@ with a payload on the same body).
 """
 from __future__ import annotations
 
-import numpy as np
 
 from ..components import Component, Parameter
 from ..errors import ModelError

@@ -102,20 +102,22 @@ def _water_fill(a, e, U, target):
     with np.errstate(divide="ignore"):
         brk = np.where(e > 0, U / e, np.inf)
     order = np.argsort(brk)
-    slope = float(np.sum(a * e))          # d(moment)/dc while nothing saturates
+    slope0 = float(np.sum(a * e))
+    slope = slope0                        # d(moment)/dc while nothing more saturates
     base = 0.0                            # moment of the saturated muscles
     c_prev = 0.0
+    n_sat = 0
     for j in order:
         c_j = brk[j]
         if not np.isfinite(c_j):
             break
-        # moment at c_j: base + slope * c_j
-        if base + slope * c_j >= target:
+        if base + slope * c_j >= target:  # the solution lies before this breakpoint
             break
         base += a[j] * U[j]
         slope -= a[j] * e[j]
         c_prev = c_j
-    if slope <= 1e-300 * max(1.0, abs(target)):
+        n_sat += 1
+    if n_sat == a.size or slope <= 1e-12 * slope0:
         if abs(base - target) <= 1e-12 * max(1.0, abs(target)):
             c = c_prev
         else:
@@ -178,8 +180,9 @@ def one_dof_forces(r, T, *, exponent: float = 2.0, n=None, upper=None, minmax: b
         else:
             if P <= 1.0:
                 raise SolverError("exponent must be 1 or > 1")
-            e = (a * Nk ** P) ** (1.0 / (P - 1.0))
-            e = e / np.max(e)   # only ratios matter; keeps powers of large P finite
+            # e = (a N^P)^(1/(P-1)), in logs and normalised (only ratios matter; P = 200 overflows)
+            le = (np.log(a) + P * np.log(Nk)) / (P - 1.0)
+            e = np.exp(le - np.max(le))
         out[k, ag] = _water_fill(a, e, Uk, abs(t))
     return out[0] if single else out
 
@@ -211,16 +214,17 @@ def one_dof_activations(r, T, f_active, f_passive=0.0, *, exponent: float = 2.0,
 # ---------------------------------------------------------------------------
 
 def gaussian_elbow_motion(*, n_frames: int = 201, duration: float = 2.0, peak_deg: float = 120.0,
-                          sigma: float = 0.25) -> Motion:
+                          sigma: float = 0.25, times=None) -> Motion:
     """The Gaussian 0 -> peak -> 0 elbow flexion of thesis Fig. 3.13, with exact derivatives.
 
     ``q(t) = peak exp(-(t - T/2)^2 / (2 sigma^2))`` over ``[0, T]``; with the
     default ``sigma = 0.25 s`` and ``T = 2 s`` the motion starts and ends at
     ``120 deg * exp(-8) = 0.04 deg`` (the thesis does not give sigma; this
     choice makes the curve start and end at rest as in the figure).  Returns a
-    :class:`Motion` with ``q, v, a`` (N, 1) in rad, rad/s, rad/s^2.
+    :class:`Motion` with ``q, v, a`` (N, 1) in rad, rad/s, rad/s^2, at ``n_frames``
+    uniform samples or at the given ``times``.
     """
-    t = np.linspace(0.0, duration, int(n_frames))
+    t = np.linspace(0.0, duration, int(n_frames)) if times is None else np.asarray(times, dtype=float)
     A = np.deg2rad(peak_deg)
     c = duration / 2.0
     g = np.exp(-(t - c) ** 2 / (2 * sigma ** 2))

@@ -34,8 +34,10 @@ revolute joint (finger, forearm) the ABA is evaluated in closed form
 Pinocchio and verified against ``pin.aba`` at construction; any other
 skeleton calls ``pin.aba`` per sample.
 
-Excitations are clipped to [0, 1] inside the FF simulation (the bounds
-themselves are constraints, Eq. 3.8) and the compliant contraction dynamics
+Excitations are clipped to [-0.2, 1.2] inside the FF simulation only to keep
+infeasible iterates finite: the bounds themselves are constraints (Eq. 3.8),
+and clipping exactly at 0 would make the problem non-smooth where
+excitations rest on their lower bound and the compliant contraction dynamics
 use ``max(a, 0.01)`` (the fibre velocity is undetermined at zero activation).
 
 Objectives (``objective=``)
@@ -89,6 +91,7 @@ __all__ = ["BatchSkeleton", "simulate_ff", "simulate_skeleton", "muscle_inverse"
 
 DESIGNS = ("ff", "ifm", "ift")
 A_MIN = 0.01   # activation floor of the compliant contraction dynamics
+U_MARGIN = 0.2  # FF simulations clip excitations to [-0.2, 1.2]: smooth near the bounds
 
 
 # =============================================================================== skeleton
@@ -126,6 +129,20 @@ class BatchSkeleton:
 
 
 # =============================================================================== muscles
+from ..muscles.thelen2003 import A_F as _A_F, F_HAT as _F_HAT, _C as _FV_C, _K_CON, _K_ECC, _W_THR
+
+_FV_ECC = _FV_C * (_F_HAT - 1.0)
+_mx, _mn = np.maximum, np.minimum
+
+
+def _fv(w):
+    """:func:`thelen_force_velocity` with bare ufuncs (same four pieces, tested equal)."""
+    w1 = _mn(_mx(w, -1.0), 0.0)
+    w2 = _mn(_mx(w, 0.0), _W_THR)
+    return ((1.0 + w1) / (1.0 - w1 / _A_F) + _FV_ECC * w2 / (1.0 + _FV_C * w2)
+            + _K_CON * _mn(w + 1.0, 0.0) + _K_ECC * _mx(w - _W_THR, 0.0))
+
+
 class _Muscles:
     """Thelen 2003 muscle layer bound to a model's MuscleSet, batched over ``(B, m)``."""
 
@@ -151,6 +168,13 @@ class _Muscles:
         self.tau_rise = float(mtu.tau_rise)
         self.tau_fall = float(mtu.tau_fall)
         self.m = ms.n
+        self.no_pennation = bool(np.all(self.h2 == 0))
+        self._x_min = 1e-6 * self.l_opt
+        self._inv_lopt = 1.0 / self.l_opt
+        self._kpe = K_PE / PASSIVE_STRAIN0
+        self._pe_scale = 1.0 / np.expm1(K_PE)
+        t2 = 1.0 / self.tau_fall
+        self._t1, self._t2 = 1.0 / self.tau_rise - t2, t2
         self.constant_arms = self.path.degree == 0
         if self.constant_arms:
             self.R = np.asarray(self.path.moment_arms(np.zeros(model.nv)), dtype=float)  # (m, nv)
@@ -174,16 +198,22 @@ class _Muscles:
 
     # -- rigid tendon ---------------------------------------------------------
     def rigid(self, a, l_mt, v_mt):
-        """``(F, l_ce, v_ce, f_ce, f_isom)``; F, f_ce in N."""
-        x = np.maximum(l_mt - self.l_slack, 1e-6 * self.l_opt)
-        l_ce = np.sqrt(x * x + self.h2)
-        cos = x / l_ce
-        v_ce = v_mt * cos
-        d = l_ce / self.l_opt - 1.0
+        """``(F, l_ce, v_ce, f_ce, f_isom)``; F, f_ce in N (Eq. A.7-A.9, inextensible tendon).
+
+        Written with bare ufuncs (it runs 4 times per RK4 step); equal to
+        ``Thelen2003.force`` with ``tendon="rigid"`` (tested)."""
+        x = np.maximum(l_mt - self.l_slack, self._x_min)
+        if self.no_pennation:
+            l_ce, cos, v_ce = x, 1.0, v_mt
+        else:
+            l_ce = np.sqrt(x * x + self.h2)
+            cos = x / l_ce
+            v_ce = v_mt * cos
+        d = l_ce * self._inv_lopt - 1.0
         fl = np.exp(d * d * (-1.0 / GAMMA))
-        s = 0.25 + 0.75 * a
-        f_act = a * fl * thelen_force_velocity(v_ce / (s * self.v_max))
-        f_pe = np.expm1((K_PE / PASSIVE_STRAIN0) * np.maximum(d, 0.0)) / np.expm1(K_PE)
+        fv = _fv(v_ce / ((0.25 + 0.75 * a) * self.v_max))
+        f_act = a * fl * fv
+        f_pe = np.expm1(self._kpe * np.maximum(d, 0.0)) * self._pe_scale
         F = self.f_max * (f_act + f_pe) * cos
         return F, l_ce, v_ce, self.f_max * f_act, fl
 
@@ -253,12 +283,12 @@ def simulate_ff(model, t, u, u_mid, q0, v0, *, a0=None, l_ce0=None, tendon: str 
         u_mid = np.asarray(u_mid, dtype=float)[:, None, :]
     n, B, m = u.shape
     nv = sk.nv
-    uc = np.clip(u, 0.0, 1.0)
-    ucm = np.clip(u_mid, 0.0, 1.0)
+    uc = np.clip(u, -U_MARGIN, 1.0 + U_MARGIN)
+    ucm = np.clip(u_mid, -U_MARGIN, 1.0 + U_MARGIN)
     q0 = np.broadcast_to(np.asarray(q0, dtype=float), (B, nv))
     v0 = np.broadcast_to(np.asarray(v0, dtype=float), (B, nv))
-    a0 = uc[0] if a0 is None else np.broadcast_to(np.asarray(a0, dtype=float), (B, m))
-    tr, tf = mu.tau_rise, mu.tau_fall
+    a0 = np.clip(uc[0], 0.0, 1.0) if a0 is None else np.broadcast_to(np.asarray(a0, dtype=float), (B, m))
+    t1, t2 = mu._t1, mu._t2
     compliant = tendon == "compliant"
     parts = [q0, v0, a0]
     if compliant:
@@ -275,7 +305,8 @@ def simulate_ff(model, t, u, u_mid, q0, v0, *, a0=None, l_ce0=None, tendon: str 
         l_mt = mu.lengths(q)
         out = np.empty_like(x)
         out[:, iq] = v
-        out[:, ia] = activation_rate(w, a, tau_rise=tr, tau_fall=tf)
+        d = w - a
+        out[:, ia] = d * (t2 + t1 * w * (d >= 0))        # Eq. A.2
         if compliant:
             F, v_ce, _, _ = mu.compliant(a, l_mt, x[:, il])
             out[:, il] = v_ce
@@ -447,7 +478,8 @@ class DynamicResult:
                  f"  objective {self.objective:.6g}  "
                  + "  ".join(f"{k} {v:.6g}" for k, v in self.terms.items()),
                  f"  max excitation-bound violation {self.max_bound_violation:.3g}, "
-                 f"max tracking error {self.max_tracking_error:.4g} rad",
+                 f"max tracking error {self.max_tracking_error:.4g} rad, integration check "
+                 f"{self.terms.get('integration_error', float('nan')):.2g} rad",
                  f"  {self.nit} iterations, {self.nfev} batched evaluations, {self.seconds:.2f} s"]
         return "\n".join(lines)
 
@@ -492,8 +524,9 @@ class DynamicOptimization:
                  step: float = 1e-3, objective: dict | None = None,
                  tracking_weight: float | None = None, tracking_tolerance: float | None = None,
                  excitation_bounds=(0.0, 1.0), bound_points: int = 200,
-                 tendon: str = "rigid", maxiter: int = 200, tol: float = 1e-7,
+                 tracking_points: int = 200, tendon: str = "rigid", maxiter: int = 200, tol: float = 1e-7,
                  constraint_tol: float = 1e-5, n_starts: int = 3, fd_step: float = 1e-6,
+                 fd: str = "central", n_jobs: int = 1,
                  progress=None, verbose: bool = False):
         self.model = model
         self.parametrization = parametrization
@@ -507,12 +540,15 @@ class DynamicOptimization:
         self.tracking_tolerance = tracking_tolerance
         self.excitation_bounds = excitation_bounds
         self.bound_points = bound_points
+        self.tracking_points = tracking_points
         self.tendon = tendon
         self.maxiter = maxiter
         self.tol = tol
         self.constraint_tol = constraint_tol
         self.n_starts = n_starts
         self.fd_step = fd_step
+        self.fd = fd
+        self.n_jobs = n_jobs
         self.progress = progress
         self.verbose = verbose
 
@@ -576,6 +612,7 @@ class DynamicOptimization:
         self._lo, self._hi = lo, hi
         nb = min(self.bound_points, self._t.size)
         self._ib = np.unique(np.linspace(0, self._t.size - 1, nb).round().astype(int))
+        self._ibt = np.unique(np.linspace(0, self._t.size - 1, min(self.tracking_points, self._t.size)).round().astype(int))
         if self.tracking_tolerance is not None and not self.tracking_tolerance > 0:
             raise ModelError(f"tracking_tolerance must be > 0 rad, got {self.tracking_tolerance} "
                              "(the problem would be infeasible)")
@@ -598,6 +635,7 @@ class DynamicOptimization:
             self._S_pos = np.where(pos, r * w, 0.0) / np.sum((r * r * w)[pos])
             self._S_neg = np.where(neg, r * w, 0.0) / np.sum((r * r * w)[neg])
         self._cache = {}
+        self._gcache = {}
         self.n_sim_ = 0
 
     # -- evaluation ------------------------------------------------------------
@@ -696,32 +734,60 @@ class DynamicOptimization:
             cons += [np.moveaxis(u - self._lo, 1, 0).reshape(u.shape[1], -1),
                      np.moveaxis(self._hi - u, 1, 0).reshape(u.shape[1], -1)]
         if self.tracking_tolerance is not None:
-            err = sim["q"][self._ib, :, self._jc] - self._qd[self._ib, None]
-            cons += [(self.tracking_tolerance - err).T, (self.tracking_tolerance + err).T]
+            err = sim["q"][self._ibt, :, self._jc] - self._qd[self._ibt, None]
+            eps = self.tracking_tolerance        # scaled to O(1): 1 - |err|/eps >= 0
+            cons += [(1.0 - err / eps).T, (1.0 + err / eps).T]
         if not cons:
             return None
         return np.concatenate(cons, axis=1)
 
-    def _evaluate(self, x):
+    def _value(self, x):
+        """``(f, c)`` at one decision vector (one simulation), cached."""
         key = x.tobytes()
-        if key in self._cache:
-            return self._cache[key]
-        n = x.size
-        h = self.fd_step * np.maximum(1.0, np.abs(x))
-        X = np.vstack([x, x + np.diag(h)])
-        sim = self.simulate(X)
-        terms = self._terms(sim)
-        f = self._objective_of(terms)
-        g = (f[1:] - f[0]) / h
+        hit = self._cache.get(key)
+        if hit is not None:
+            return hit
+        sim = self.simulate(x[None, :])
+        f = float(self._objective_of(self._terms(sim))[0])
         c = self._constraints_of(sim)
-        dc = None if c is None else ((c[1:] - c[0]) / h[:, None]).T
-        out = (f[0], g, None if c is None else c[0], dc)
-        if len(self._cache) > 4:
+        out = (f, None if c is None else c[0])
+        if len(self._cache) > 64:
             self._cache.clear()
         self._cache[key] = out
+        return out
+
+    def _gradient(self, x):
+        """``(df/dx, dc/dx)`` by forward differences, all perturbations in one batch."""
+        key = x.tobytes()
+        hit = self._gcache.get(key)
+        if hit is not None:
+            return hit
+        f0, c0 = self._value(x)
+        h = self.fd_step * np.maximum(1.0, np.abs(x))
+        n = x.size
+        if self.fd == "central":
+            X = np.vstack([x[None, :] + np.diag(h), x[None, :] - np.diag(h)])
+        else:
+            X = x[None, :] + np.diag(h)
+        sim = self.simulate(X)
+        f = self._objective_of(self._terms(sim))
+        c = self._constraints_of(sim)
+        if self.fd == "central":
+            g = (f[:n] - f[n:]) / (2 * h)
+            dc = None if c is None else ((c[:n] - c[n:]) / (2 * h[:, None])).T
+        else:
+            g = (f - f0) / h
+            dc = None if c is None else ((c - c0[None, :]) / h[:, None]).T
+        self._gcache.clear()
+        self._gcache[key] = (g, dc)
         if self.progress is not None:
             self.progress.update(1)
-        return out
+        return g, dc
+
+    def _evaluate(self, x):
+        f, c = self._value(x)
+        g, dc = self._gradient(x)
+        return f, g, c, dc
 
     # -- initial guesses (Sec. 3.5.3) -------------------------------------------
     def initial_guesses(self) -> list[np.ndarray]:
@@ -776,57 +842,108 @@ class DynamicOptimization:
 
     # -- solve -------------------------------------------------------------------
     def fit(self, x0=None):
-        """Solve from ``x0`` (decision vector) or from the multi-start guesses; returns ``self``."""
-        from scipy.optimize import LinearConstraint, minimize
+        """Solve from ``x0`` (decision vector) or from the multi-start guesses; returns ``self``.
+
+        With ``n_jobs > 1`` the starts run in parallel worker processes (fork)."""
         t0 = _time.perf_counter()
         self._setup()
         starts = [np.asarray(x0, dtype=float).ravel()] if x0 is not None else self.initial_guesses()
-        cons = []
-        A_lin = None
+        self._A_lin = None
         if self.design == "ff":
-            par = self.parametrization
-            Bd = par.basis(np.linspace(self._t[0], self._t[-1], self.bound_points))
-            A_lin = np.kron(Bd, np.eye(self._n_sig))    # rows: (time, muscle); x is (p, s) row-major
+            Bd = self.parametrization.basis(np.linspace(self._t[0], self._t[-1], self.bound_points))
+            self._A_lin = np.kron(Bd, np.eye(self._n_sig))  # rows (time, muscle); x is (p, s) row-major
+        # Objective scaled by its value at the first start (SLSQP's ftol is absolute).
+        self._f_ref = max(abs(self._value(starts[0])[0]), 1e-12)
+        if self.n_jobs > 1 and len(starts) > 1 and sys.platform != "win32":
+            import multiprocessing as mp
+            global _ACTIVE
+            _ACTIVE = self
+            prog, self.progress = self.progress, None
+            try:
+                with mp.get_context("fork").Pool(min(self.n_jobs, len(starts))) as pool:
+                    outs = pool.map(_run_start, list(enumerate(starts)))
+            finally:
+                _ACTIVE = None
+                self.progress = prog
+        else:
+            outs = [self._solve_start(k, xs) for k, xs in enumerate(starts)]
         best = None
         records = []
-        for k, xs in enumerate(starts):
-            cons = []
-            if A_lin is not None:
-                cons.append({"type": "ineq", "fun": lambda x, A=A_lin: np.concatenate([A @ x - self._lo, self._hi - A @ x]),
-                             "jac": lambda x, A=A_lin: np.vstack([A, -A])})
-            if self.tracking_tolerance is not None or self.design != "ff":
-                cons.append({"type": "ineq", "fun": lambda x: self._evaluate(x)[2],
-                             "jac": lambda x: self._evaluate(x)[3]})
-            ts = _time.perf_counter()
-            try:
-                res = minimize(lambda x: self._evaluate(x)[0], xs, jac=lambda x: self._evaluate(x)[1],
-                               method="SLSQP", constraints=cons,
-                               options={"maxiter": self.maxiter, "ftol": self.tol})
-            except (SolverError, FloatingPointError, ValueError) as exc:
-                records.append({"start": k, "success": False, "message": f"failed: {exc}"})
-                continue
-            x = res.x
-            viol = self._violation(x, A_lin)
-            f = float(self._evaluate(x)[0])
-            ok = bool(res.success) and viol <= self.constraint_tol and np.isfinite(f)
-            rec = {"start": k, "success": bool(res.success), "message": str(res.message),
-                   "objective": f, "violation": viol, "nit": int(res.nit),
-                   "seconds": _time.perf_counter() - ts}
+        for x, rec in outs:
             records.append(rec)
             if self.verbose:
-                print(f"  start {k}: {rec}", file=sys.stderr)
-            key = (0 if ok else 1, f if ok else viol + f)
+                print(f"  start {rec['start']}: {rec}", file=sys.stderr)
+            if x is None:
+                continue
+            ok = rec["ok"]
+            key = (0 if ok else 1, rec["objective"] if ok else rec["violation"] + rec["objective"])
             if best is None or key < best[0]:
-                best = (key, x, res, ok)
+                best = (key, x, rec)
         if best is None:
             raise SolverError("every start of the dynamic optimization failed: "
                               + "; ".join(r["message"] for r in records))
-        _, x, res, ok = best
-        self.result_ = self._result(x, res, ok, records, _time.perf_counter() - t0, A_lin)
-        if not ok:
+        _, x, rec = best
+        self.result_ = self._result(x, rec, records, _time.perf_counter() - t0)
+        if not self.result_.converged:
             print(f"pinmsk: WARNING dynamic optimization did not converge ({self.result_.status}); "
                   "the result is not a solution", file=sys.stderr)
         return self
+
+    def _solve_start(self, k, xs):
+        """One SLSQP run (plus one restart after a line-search failure): ``(x, record)``."""
+        from scipy.optimize import minimize
+        fs = 1.0 / self._f_ref
+        cons = []
+        A = self._A_lin
+        if A is not None:
+            lo, hi = self._lo, self._hi
+            AA = np.vstack([A, -A])
+            cons.append({"type": "ineq", "fun": lambda x: np.concatenate([A @ x - lo, hi - A @ x]),
+                         "jac": lambda x: AA})
+        if self.tracking_tolerance is not None or self.design != "ff":
+            cons.append({"type": "ineq", "fun": lambda x: self._value(x)[1],
+                         "jac": lambda x: self._gradient(x)[1]})
+        opts = {"maxiter": self.maxiter, "ftol": self.tol}
+        ts = _time.perf_counter()
+        try:
+            res = minimize(lambda x: fs * self._value(x)[0], xs, jac=lambda x: fs * self._gradient(x)[0],
+                           method="SLSQP", constraints=cons, options=opts)
+            nit, nfev = res.nit, res.nfev
+            if not res.success and res.status in (4, 8):   # line-search trouble: one restart
+                res = minimize(lambda x: fs * self._value(x)[0], res.x,
+                               jac=lambda x: fs * self._gradient(x)[0], method="SLSQP",
+                               constraints=cons, options=opts)
+                nit, nfev = nit + res.nit, nfev + res.nfev
+        except (SolverError, FloatingPointError, ValueError) as exc:
+            return None, {"start": k, "ok": False, "success": False, "message": f"failed: {exc}",
+                          "objective": float("nan"), "violation": float("inf"), "nit": 0,
+                          "nfev": 0, "seconds": _time.perf_counter() - ts}
+        x = res.x
+        viol = self._violation(x, A)
+        f = float(self._value(x)[0])
+        ok = bool(res.success) and viol <= self.constraint_tol and bool(np.isfinite(f))
+        return x, {"start": k, "ok": ok, "success": bool(res.success), "message": str(res.message),
+                   "objective": f, "violation": viol, "nit": int(nit), "nfev": int(nfev),
+                   "seconds": _time.perf_counter() - ts}
+
+    def _integration_error(self, x, sim) -> float:
+        """Max |q| difference (rad) against a simulation on a grid twice as fine (a check)."""
+        t_f = np.linspace(self._t[0], self._t[-1], 2 * self._t.size - 1)
+        tm_f = 0.5 * (t_f[1:] + t_f[:-1])
+        C = self._coeffs(x[None, :])
+        par = self.parametrization
+        sig = np.einsum("np,bps->nbs", par.basis(t_f), C)
+        sig_m = np.einsum("np,bps->nbs", par.basis(tm_f), C)
+        if self.design == "ff":
+            q = simulate_ff(self.model, t_f, sig, sig_m, self._q0, self._v0, tendon=self.tendon,
+                            skeleton=self._sk, muscles=self._mu)["q"]
+        elif self.design == "ifm":
+            q = simulate_skeleton(self.model, t_f, None, None, self._q0, self._v0, skeleton=self._sk,
+                                  muscles=self._mu, forces=sig, forces_mid=sig_m)[0]
+        else:
+            q = simulate_skeleton(self.model, t_f, sig, sig_m, self._q0, self._v0,
+                                  skeleton=self._sk)[0]
+        return float(np.max(np.abs(q[::2, 0] - sim["q"][:, 0])))
 
     def _violation(self, x, A_lin):
         viol = 0.0
@@ -834,12 +951,14 @@ class DynamicOptimization:
             ub = A_lin @ x
             viol = max(viol, float(np.max(np.maximum(self._lo - ub, 0))),
                        float(np.max(np.maximum(ub - self._hi, 0))))
-        c = self._evaluate(x)[2]
+        c = self._value(x)[1]
         if c is not None:
             viol = max(viol, float(np.max(np.maximum(-c, 0.0))))
         return viol
 
-    def _result(self, x, res, ok, records, seconds, A_lin):
+    def _result(self, x, rec, records, seconds):
+        A_lin = self._A_lin
+        ok = rec["ok"]
         sim = self.simulate(x[None, :])
         terms = self._terms(sim)
         f = float(self._objective_of(terms)[0])
@@ -850,24 +969,33 @@ class DynamicOptimization:
             bound_viol = max(bound_viol, float(np.max(np.maximum(self._lo - ub, 0))),
                              float(np.max(np.maximum(ub - self._hi, 0))))
         err = float(terms["max_error"][0])
-        status = str(res.message)
+        status = rec["message"]
         if ok and self.tracking_tolerance is not None and err > self.tracking_tolerance + 1e-3:
             ok, status = False, f"tracking error {err:.4g} rad exceeds the tolerance on the full grid"
-        if not ok and res.success:
+        if not ok and rec["success"]:
             status = f"constraints violated by {self._violation(x, A_lin):.3g} ({status})"
+        ierr = self._integration_error(x, sim)
         nq = self.model.nv
         qd = np.zeros((self._t.size, nq))
         qd[:, self._jc] = self._qd
         tn = {"J": f, "physiological": float(terms["physiological"][0]),
-              "tracking": float(terms["tracking"][0])}
+              "tracking": float(terms["tracking"][0]), "integration_error": ierr}
         return DynamicResult(
             converged=bool(ok), status=status, objective=f, terms=tn,
             max_bound_violation=bound_viol, max_tracking_error=err,
             coeffs=self._coeffs(x)[0], parametrization=self.parametrization, design=self.design,
             time=self._t.copy(), q=sim["q"][:, 0], v=sim["v"][:, 0], a=sim["a"][:, 0], u=u,
-            force=sim["force"][:, 0], target=qd, seconds=seconds, nit=int(res.nit),
-            nfev=int(res.nfev), starts=records, coordinates=self.model.coordinates,
+            force=sim["force"][:, 0], target=qd, seconds=seconds, nit=int(rec["nit"]),
+            nfev=int(rec["nfev"]), starts=records, coordinates=self.model.coordinates,
             muscles=self.model.muscle_names)
+
+
+_ACTIVE = None
+
+
+def _run_start(arg):  # worker of the multi-start pool (fork: inherits _ACTIVE)
+    k, xs = arg
+    return _ACTIVE._solve_start(k, xs)
 
 
 # =============================================================================== task files

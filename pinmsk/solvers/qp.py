@@ -57,6 +57,12 @@ from ..errors import SolverError
 #: Stand-in for an infinite bound in proxsuite box constraints.
 BIG = 1e20
 
+#: SQP (P > 2) also stops when the predicted decrease of the cost is below this
+#: fraction of the cost: for large P, muscles far below the most active one
+#: change the cost by less (a muscle at 3 % of the top one weighs 3e-16 at P = 10)
+#: and their exact value is numerically meaningless.
+SQP_RTOL = 1e-10
+
 #: proxsuite statuses that count as solved.
 _SOLVED_NAMES = ("PROXQP_SOLVED",)
 
@@ -126,101 +132,113 @@ class FrameQP:
     """A proxsuite dense QP for one frame of the scaled problem, reused across frames.
 
     Parameters (keyword-only): ``m`` muscle variables, ``nd`` equality rows,
-    ``weights`` ``w`` (m,) of ``sum w x^P``, ``exponent`` P, ``minmax`` (use
-    ``max_i u_i x_i`` with ``u = weights``), ``reserve_weight`` W or None,
-    ``quadratic`` True if an extra ``1/2 x'Qx + q'x`` will be passed to
-    :meth:`solve` (FSO's tracking cost), ``eps`` proxsuite's absolute
-    tolerance, ``sqp_tol`` the step size at which SQP stops.
+    ``weights`` ``w`` (m,) of ``sum w x^P`` (or ``u`` of ``max u x``),
+    ``exponent`` P, ``minmax``, ``reserve_weight`` W or None (reserve cost
+    ``W (|rho| + rho^2)``, or ``W rho^2`` with ``reserve_linear=False`` -- a
+    soft equality, as FSO's tracking cost uses it), ``eps``
+    proxsuite's absolute tolerance, ``max_iter`` its iteration limit,
+    ``sqp_tol`` the step at which SQP stops, ``sqp_max_iter``.
+
+    Internally the variables are ``y = sig * x`` with ``sig = (w / max w)^(1/P)``
+    (``w / max w`` for P = 1 and min/max), so the cost is ``sum y^P`` or
+    ``max y`` with unit weights: P = 10 with F_max weights spans 1e-11..1 in
+    ``w`` but only 0.08..1 in ``sig``.  The min/max epigraph is written with
+    slacks as equalities, ``y_i - t + s_i = 0, s_i >= 0`` (proxsuite wrongly
+    reported some feasible frames as infeasible in the inequality form), and
+    every bound is finite (``t, s <= max(hi) + 1``; a reserve never needs
+    more than ``|b_j| + sum_i |A_ji| hi_i``).
     """
 
     def __init__(self, *, m: int, nd: int, weights, exponent: float = 2.0, minmax: bool = False,
-                 reserve_weight: float | None = None, quadratic: bool = False, eps: float = 1e-10,
-                 max_iter: int = 300, sqp_tol: float = 1e-9, sqp_max_iter: int = 60):
+                 reserve_weight: float | None = None, reserve_linear: bool = True,
+                 eps: float = 1e-10, max_iter: int = 300, sqp_tol: float = 1e-9,
+                 sqp_max_iter: int = 100):
         self.proxqp = _proxqp()
-        self.m = int(m)
-        self.nd = int(nd)
-        self.w = np.asarray(weights, dtype=float).reshape(self.m)
+        self.m = m = int(m)
+        self.nd = nd = int(nd)
         self.P = check_exponent(exponent)
         self.minmax = bool(minmax)
+        w = np.asarray(weights, dtype=float).reshape(m)
+        if np.any(~(w > 0)):
+            raise SolverError(f"FrameQP: weights must be > 0, got {w}")
+        w = w / np.max(w)
+        self.sig = w if (self.minmax or self.P == 1.0) else w ** (1.0 / self.P)
         self.W = None if reserve_weight is None else float(reserve_weight)
-        self.quadratic = bool(quadratic)
+        self.WL = self.W if (self.W is not None and reserve_linear) else 0.0
         self.eps = float(eps)
         self.max_iter = int(max_iter)
         self.sqp_tol = float(sqp_tol)
         self.sqp_max_iter = int(sqp_max_iter)
-        self.nr = 2 * self.nd if self.W is not None else 0
-        self.nt = 1 if self.minmax else 0
-        self.n = self.m + self.nt + self.nr
-        self.n_in = self.m if self.minmax else 0
+        # layout: [y (m) | t, s (m) if minmax | rho+ (nd), rho- (nd) if reserves]
+        self.nt = (1 + m) if self.minmax else 0
+        self.nr = 2 * nd if self.W is not None else 0
+        self.r0 = m + self.nt
+        self.n = m + self.nt + self.nr
+        self.n_eq = nd + (m if self.minmax else 0)
         self._qp = None
         self._warm = False
-        self._last_y = np.zeros(self.nd)
-        # constant blocks
-        self._C = None
-        if self.minmax:
-            C = np.zeros((self.m, self.n))
-            C[:, :self.m] = np.diag(self.w)
-            C[:, self.m] = -1.0
-            self._C = C
-            self._l = np.full(self.m, -BIG)
-            self._u = np.zeros(self.m)
-        self._Afull = np.zeros((self.nd, self.n))
+        self._last_y = np.zeros(nd)
+        Af = np.zeros((self.n_eq, self.n))
         if self.nr:
-            r0 = self.m + self.nt
-            self._Afull[:, r0:r0 + self.nd] = np.eye(self.nd)
-            self._Afull[:, r0 + self.nd:] = -np.eye(self.nd)
+            Af[:nd, self.r0:self.r0 + nd] = np.eye(nd)
+            Af[:nd, self.r0 + nd:] = -np.eye(nd)
+        if self.minmax:
+            Af[nd:, :m] = np.eye(m)
+            Af[nd:, m] = -1.0
+            Af[nd:, m + 1:m + 1 + m] = np.eye(m)
+        self._Afull = Af
+        self._bfull = np.zeros(self.n_eq)
         self.sqp = (not self.minmax) and self.P > 2.0
 
     # -- pieces of the QP -----------------------------------------------------
-    def _objective(self, x_lin: np.ndarray | None, Q, q, floor: float = 1e-4):
-        """H, g of the QP; ``x_lin`` is the SQP linearisation point (None: exact P=1/2)."""
+    def _objective(self, y_lin, Q, q, floor: float = 1e-4):
+        """H, g of the QP in internal units; ``y_lin`` is the SQP linearisation point."""
         n, m = self.n, self.m
         H = np.zeros((n, n))
         g = np.zeros(n)
+        diag = np.arange(m)
         if self.minmax:
             g[m] = 1.0
         elif self.P == 1.0:
-            g[:m] = self.w
-        elif x_lin is None:  # P = 2, or the P = 2 start of SQP
-            H[np.arange(m), np.arange(m)] = 2.0 * self.w
+            g[:m] = 1.0
+        elif y_lin is None:  # P = 2, or the P = 2 start of SQP
+            H[diag, diag] = 2.0
         else:
             P = self.P
-            xf = np.maximum(x_lin, floor)
-            h = self.w * P * (P - 1.0) * xf ** (P - 2.0)
+            yf = np.maximum(y_lin, floor)
+            h = P * (P - 1.0) * yf ** (P - 2.0)
             # keep the model strictly convex (its fixed point is the exact optimum
             # whatever positive curvature is used; flat directions stall proxsuite)
-            h = np.maximum(h, 1e-8 * float(np.max(h)))
-            grad = self.w * P * np.maximum(x_lin, 0.0) ** (P - 1.0)
-            if self.nr == 0 and Q is None and q is None:
-                # scale the model so its gradient is O(1): with P = 10 the cost of
-                # small forces is ~1e-20 and proxsuite's absolute tolerances would
-                # accept anything (the minimiser does not change)
-                gam = 1.0 / max(float(np.max(np.abs(grad))), float(np.max(h)) * 1e-3, 1e-300)
-                h = h * gam
-                grad = grad * gam
-            H[np.arange(m), np.arange(m)] = h
-            g[:m] = grad - h * x_lin
+            h = np.maximum(h, 1e-5 * float(np.max(h)))
+            grad = P * np.maximum(y_lin, 0.0) ** (P - 1.0)
+            H[diag, diag] = h
+            g[:m] = grad - h * y_lin
         if self.nr:
-            r0 = m + self.nt
-            idx = np.arange(r0, n)
+            idx = np.arange(self.r0, n)
             H[idx, idx] = 2.0 * self.W
-            g[r0:] = self.W
+            g[self.r0:] = self.WL
         if Q is not None:
             H[:m, :m] += Q
         if q is not None:
             g[:m] += q
         return H, g
 
-    def _boxes(self, lo, hi):
+    def _boxes(self, lo, hi, A, b):
         lb = np.zeros(self.n)
-        ub = np.full(self.n, BIG)
+        ub = np.zeros(self.n)
         lb[:self.m] = lo
         ub[:self.m] = hi
+        if self.minmax:
+            ub[self.m:self.m + 1 + self.m] = max(float(np.max(hi)), 0.0) + 1.0
+        if self.nr:
+            cap = np.abs(b) + np.abs(A) @ np.abs(hi) + 1.0
+            ub[self.r0:self.r0 + self.nd] = cap
+            ub[self.r0 + self.nd:] = cap
         return lb, ub
 
     def _fresh(self):
         pq = self.proxqp
-        qp = pq.dense.QP(self.n, self.nd, self.n_in, True)
+        qp = pq.dense.QP(self.n, self.n_eq, 0, True)
         qp.settings.eps_abs = self.eps
         qp.settings.eps_rel = 0.0
         qp.settings.max_iter = self.max_iter
@@ -234,43 +252,48 @@ class FrameQP:
         The frame is rescaled first: variables by ``beta = max|b|`` (so a frame
         with tiny moments is not a tiny problem: proxsuite's absolute
         tolerances and infeasibility test would misjudge it) and the objective
-        to unit size.  Results come back in the original units.
+        to a unit gradient (or Hessian).  Results come back in internal units.
         """
         pq = self.proxqp
         beta = max(float(np.max(np.abs(b))) if b.size else 1.0, 1e-9)
         Hs = H * (beta * beta)
         gs = g * beta
-        c = float(np.max(np.abs(gs))) if gs.size else 0.0
+        # normalise by the muscle (and t) part only: the reserves' high cost must
+        # not shrink the muscles' curvature below proxsuite's tolerances
+        k = self.r0
+        c = float(np.max(np.abs(gs[:k]))) if k else 0.0
         if not c > 1e-300:
-            c = float(np.max(np.abs(Hs))) if Hs.size else 0.0
+            c = float(np.max(np.abs(Hs[:k, :k]))) if k else 0.0
         c = c if c > 1e-300 else 1.0
         Hs /= c
         gs /= c
-        inf_lo = lb <= -BIG / 10
-        inf_hi = ub >= BIG / 10
-        lbs = np.where(inf_lo, -BIG, lb / beta)
-        ubs = np.where(inf_hi, BIG, ub / beta)
-        bs = b / beta
+        if self.nr:
+            # a reserve cost above 1e6 muscle-gradients is an exact penalty already;
+            # capping it keeps frames with tiny forces (P = 10: gradients ~1e-22) solvable
+            idx = np.arange(k, self.n)
+            Hs[idx, idx] = np.minimum(Hs[idx, idx], 1e6)
+            gs[k:] = np.minimum(gs[k:], 1e6)
+        lbs = lb / beta
+        ubs = ub / beta
         Af = self._Afull
-        Af[:, :self.m] = A
+        Af[:self.nd, :self.m] = A
+        bs = self._bfull
+        bs[:self.nd] = b / beta
         attempts = ("warm", "cold") if (self._qp is not None and self._warm) else ("cold",)
         for how in attempts:
             if how == "warm":
                 qp = self._qp
                 qp.settings.initial_guess = pq.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
-                qp.update(H=Hs, g=gs, A=Af, b=bs, C=self._C,
-                          l=self._l if self.minmax else None, u=self._u if self.minmax else None,
-                          l_box=lbs, u_box=ubs, update_preconditioner=False)
+                qp.update(H=Hs, g=gs, A=Af, b=bs, l_box=lbs, u_box=ubs, update_preconditioner=False)
             else:
                 qp = self._fresh()
                 self._qp = qp
-                qp.init(Hs, gs, Af, bs, self._C, self._l if self.minmax else None,
-                        self._u if self.minmax else None, lbs, ubs)
+                qp.init(Hs, gs, Af, bs, None, None, None, lbs, ubs)
             qp.solve()
             res = qp.results
             ok = (res.info.status.name in _SOLVED_NAMES and np.all(np.isfinite(res.x))
                   and np.all(np.isfinite(res.y)))
-            out = _QPOut(x=np.array(res.x) * beta, y=np.array(res.y) * (c / beta),
+            out = _QPOut(x=np.array(res.x) * beta, y=np.array(res.y)[:self.nd] * (c / beta),
                          iter=int(res.info.iter), status=res.info.status.name)
             if ok:
                 self._warm = True
@@ -286,78 +309,81 @@ class FrameQP:
         first linearisation point of SQP; without it SQP starts from the
         P = 2 solution.
         """
-        A = np.asarray(A, dtype=float).reshape(self.nd, self.m)
+        sig = self.sig
+        A = np.asarray(A, dtype=float).reshape(self.nd, self.m) / sig
         b = np.asarray(b, dtype=float).reshape(self.nd)
-        lo = np.broadcast_to(np.asarray(lo, dtype=float), (self.m,))
-        hi = np.broadcast_to(np.asarray(hi, dtype=float), (self.m,))
-        lb, ub = self._boxes(lo, hi)
+        lo = np.broadcast_to(np.asarray(lo, dtype=float), (self.m,)) * sig
+        hi = np.broadcast_to(np.asarray(hi, dtype=float), (self.m,)) * sig
+        if Q is not None:
+            Q = np.asarray(Q, dtype=float) / np.outer(sig, sig)
+        if q is not None:
+            q = np.asarray(q, dtype=float) / sig
+        lb, ub = self._boxes(lo, hi, A, b)
         iters = 0
         nsolve = 0
+        status = "PROXQP_SOLVED"
         if self.sqp and x0 is not None and np.all(np.isfinite(x0)):
             z = np.zeros(self.n)
-            z[:self.m] = np.clip(x0, lo, hi)
-            first_exact = False
+            z[:self.m] = np.clip(np.asarray(x0, dtype=float) * sig, lo, hi)
+            feasible = False
         else:
             H, g = self._objective(None, Q, q)
             res, ok = self._qp_solve(H, g, A, b, lb, ub)
-            iters += int(res.iter)
+            iters += res.iter
             nsolve += 1
             z = res.x
             status = res.status
-            first_exact = True
+            feasible = True
             if not ok:
                 return self._pack(z, False, status, iters, nsolve)
+        ok = True
         if self.sqp:
-            z, ok, it2, n2, status = self._sqp(z, A, b, lb, ub, Q, q, feasible=first_exact)
+            z, ok, it2, n2, status = self._sqp(z, A, b, lb, ub, Q, q, feasible=feasible)
             iters += it2
             nsolve += n2
         return self._pack(z, ok, status, iters, nsolve)
 
     def _pack(self, z, ok, status, iters, nsolve) -> FrameSolution:
-        m = self.m
-        x = np.array(z[:m])
-        if self.nr:
-            r0 = m + self.nt
-            rho = z[r0:r0 + self.nd] - z[r0 + self.nd:]
-        else:
-            rho = np.zeros(self.nd)
-        lam = -self._last_y if ok else np.full(self.nd, np.nan)
+        m, nd = self.m, self.nd
+        x = np.array(z[:m]) / self.sig
+        rho = (z[self.r0:self.r0 + nd] - z[self.r0 + nd:]) if self.nr else np.zeros(nd)
+        lam = -self._last_y if ok else np.full(nd, np.nan)
         return FrameSolution(x=x, rho=np.array(rho), lam=lam, solved=bool(ok), status=status,
                              iterations=int(iters), qp_solves=int(nsolve))
 
-    def _total(self, zz, Q, q):
+    def _total(self, z, Q, q):
         m = self.m
-        x = zz[:m]
-        c = float(np.sum(self.w * np.maximum(x, 0.0) ** self.P))
+        y = z[:m]
+        c = float(np.sum(np.maximum(y, 0.0) ** self.P))
         if self.nr:
-            r = zz[m + self.nt:]
-            c += self.W * float(np.sum(r + r * r))
+            r = z[self.r0:]
+            c += float(np.sum(self.WL * r + self.W * r * r))
         if Q is not None:
-            c += 0.5 * float(x @ Q @ x)
+            c += 0.5 * float(y @ Q @ y)
         if q is not None:
-            c += float(q @ x)
+            c += float(q @ y)
         return c
 
     def _sqp(self, z, A, b, lb, ub, Q, q, *, feasible: bool):
-        """Newton steps on sum w x^P (+ reserves, + tracking) with the linear constraints.
+        """Newton steps on sum y^P (+ reserves, + tracking) with the linear constraints.
 
-        Each step is a proxsuite QP in ``x`` itself (so any linearisation
+        Each step is a proxsuite QP in ``y`` itself (so any linearisation
         point works); from a feasible point an Armijo line search on the cost
         keeps the iterates feasible and decreasing.  Stops when the step is
-        below ``sqp_tol`` or the predicted decrease below 1e-15 of the cost.
+        below ``sqp_tol`` or the predicted decrease below SQP_RTOL of the cost.
         """
         m = self.m
         iters = 0
         nsolve = 0
         f0 = self._total(z, Q, q) if feasible else np.inf
         for it in range(self.sqp_max_iter):
-            # curvature floor for near-zero forces (x^(P-2) vanishes there, which would
-            # make them free torque sources in the model): 5 % of the largest x at
-            # first, shrinking tenfold per step so the final steps are pure Newton
+            # curvature floor for near-zero forces (y^(P-2) vanishes there, which
+            # would make them free torque sources in the model): 5 % of the
+            # largest y at first, shrinking tenfold per step
             floor = max(0.05 * float(np.max(z[:m], initial=0.0)) * 0.1 ** it, 1e-6)
             H, g = self._objective(z[:m], Q, q, floor)
             res, ok = self._qp_solve(H, g, A, b, lb, ub)
-            iters += int(res.iter)
+            iters += res.iter
             nsolve += 1
             if not ok:
                 return z, False, iters, nsolve, res.status
@@ -367,18 +393,16 @@ class FrameQP:
                 continue
             d = znew - z
             step = float(np.max(np.abs(d[:m]))) if m else 0.0
-            # predicted decrease of the quadratic model
-            dx = d[:m]
-            grad = self.w * self.P * np.maximum(z[:m], 0.0) ** (self.P - 1.0)
+            grad = self.P * np.maximum(z[:m], 0.0) ** (self.P - 1.0)
             if Q is not None:
                 grad = grad + Q @ z[:m]
             if q is not None:
                 grad = grad + q
-            pred = -float(grad @ dx)
+            pred = -float(grad @ d[:m])
             if self.nr:
-                r = z[m + self.nt:]
-                pred -= float(self.W * np.sum((1.0 + 2.0 * r) * d[m + self.nt:]))
-            if step <= self.sqp_tol or pred <= 1e-13 * abs(f0):
+                r = z[self.r0:]
+                pred -= float(np.sum((self.WL + 2.0 * self.W * r) * d[self.r0:]))
+            if step <= self.sqp_tol or pred <= SQP_RTOL * abs(f0):
                 return znew, True, iters, nsolve, "PROXQP_SOLVED"
             alpha = 1.0
             for _ls in range(40):
@@ -388,7 +412,7 @@ class FrameQP:
                     break
                 alpha *= 0.5
             else:
-                return z, True, iters, nsolve, "PROXQP_SOLVED"   # no more decrease possible
+                return z, True, iters, nsolve, "PROXQP_SOLVED"   # no further decrease possible
             z, f0 = zt, ft
         return z, False, iters, nsolve, "SQP_MAX_ITER_REACHED"
 
@@ -547,6 +571,24 @@ def dual_newton(A, b, w, P, lo, hi, *, reserve_weight=None, lam0=None, tol: floa
 # batched basis verification for LPs (P = 1 and min/max)
 # ---------------------------------------------------------------------------
 
+def _solve_many(M, r):
+    """Batched ``M x = r``; singular (or non-finite) systems give x = 0 and a True flag."""
+    try:
+        x = np.linalg.solve(M, r[..., None])[..., 0]
+        bad = ~np.all(np.isfinite(x), axis=1)
+        return np.where(bad[:, None], 0.0, x), bad
+    except np.linalg.LinAlgError:
+        x = np.zeros(r.shape)
+        bad = np.zeros(r.shape[0], dtype=bool)
+        for i in range(r.shape[0]):
+            try:
+                x[i] = np.linalg.solve(M[i], r[i])
+                bad[i] = not np.all(np.isfinite(x[i]))
+            except np.linalg.LinAlgError:
+                bad[i] = True
+        return x, bad
+
+
 def lp_basis_from(z, lo, hi, ne: int) -> np.ndarray:
     """A guess of the optimal basis (``ne`` variable indices) from a solution ``z`` (n,).
 
@@ -575,22 +617,18 @@ def lp_verify(E, f, c, lo, hi, basis, *, tol: float = 1e-9):
     nb = np.setdiff1d(np.arange(n), basis)
     EB = E[:, :, basis]
     cB = c[basis]
-    ok = np.ones(N, dtype=bool)
-    try:
-        y = np.linalg.solve(np.swapaxes(EB, 1, 2), np.broadcast_to(cB, (N, ne))[..., None])[..., 0]
-    except np.linalg.LinAlgError:
-        det = np.linalg.det(EB)
-        sing = ~(np.abs(det) > 1e-12)
-        ok &= ~sing
-        EB = np.where(sing[:, None, None], np.eye(ne), EB)
-        y = np.linalg.solve(np.swapaxes(EB, 1, 2), np.broadcast_to(cB, (N, ne))[..., None])[..., 0]
+    y, sing = _solve_many(np.swapaxes(EB, 1, 2), np.broadcast_to(cB, (N, ne)))
+    ok = ~sing
     r = c[None, nb] - np.einsum("njk,nj->nk", E[:, :, nb], y)
     loN, hiN = lo[:, nb], hi[:, nb]
-    zN = np.where(r > 0, loN, hiN)
-    ok &= ~np.any((r < 0) & (hiN >= BIG / 10), axis=1)
-    ok &= ~np.any((r > 0) & (loN <= -BIG / 10), axis=1)
+    # r ~ 0 (a tie) may sit at either bound: take the lower one
+    up = r < -1e-12
+    zN = np.where(up, hiN, loN)
+    ok &= ~np.any(up & (hiN >= BIG / 10), axis=1)
+    ok &= ~np.any(~up & (loN <= -BIG / 10), axis=1)
     rhs = f - np.einsum("njk,nk->nj", E[:, :, nb], zN)
-    zB = np.linalg.solve(EB, rhs[..., None])[..., 0]
+    zB, sing = _solve_many(EB, rhs)
+    ok &= ~sing
     ok &= np.all(zB >= lo[:, basis] - tol, axis=1) & np.all(zB <= hi[:, basis] + tol, axis=1)
     ok &= np.all(np.isfinite(zB), axis=1)
     z = np.empty((N, n))

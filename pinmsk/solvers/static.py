@@ -72,6 +72,11 @@ STATUS = {
 #: dual becomes too steep near zero forces (x ~ s^(1/(P-1))) and SQP is used.
 DUAL_MAX_EXPONENT = 4.0
 
+#: LP basis guesses are verified on this many following unsolved frames; after
+#: a guess that helps no other frame, the next LP_SKIP frames go straight to proxsuite.
+LP_WINDOW = 64
+LP_SKIP = 8
+
 
 # ---------------------------------------------------------------------------
 # The scaled problem
@@ -349,23 +354,24 @@ def solve_frames(prob: SOProblem, *, minmax: bool = False, reserve_weight: float
         E, f, cvec, lo_a, hi_a, ne = _lp_standard_form(prob, minmax)
     remaining = np.zeros(N, dtype=bool)
     remaining[todo] = True
-    prev_x = None
+    skip = 0
     for k in todo:
         if not remaining[k]:
             continue
         remaining[k] = False
-        sol = fq.solve(prob.A[k], prob.b[k], prob.lo[k], prob.hi[k],
-                       x0=prev_x if P > DUAL_MAX_EXPONENT else None)
+        sol = fq.solve(prob.A[k], prob.b[k], prob.lo[k], prob.hi[k])
         iters += sol.iterations
         nqp += sol.qp_solves
         done_now = 1
         if sol.solved:
             x[k], rho[k], solved[k], path[k] = sol.x, sol.rho, True, 1
-            prev_x = sol.x
-            if use_lp:
+            if use_lp and skip > 0:
+                skip -= 1
+            elif use_lp:
+                # try this frame's basis on the next LP_WINDOW unsolved frames at once
                 zk = _lp_point(prob, k, sol.x, minmax)
                 basis = _qp.lp_basis_from(zk, lo_a[k], hi_a[k], ne)
-                rest = np.flatnonzero(remaining)
+                rest = np.flatnonzero(remaining)[:LP_WINDOW]
                 cand = np.concatenate([[k], rest])
                 okv, zv, _ = _qp.lp_verify(E[cand], f[cand], cvec, lo_a[cand], hi_a[cand], basis,
                                            tol=tol)
@@ -379,8 +385,11 @@ def solve_frames(prob: SOProblem, *, minmax: bool = False, reserve_weight: float
                 remaining[acc] = False
                 batched += int(acc.size) + int(okv[0])
                 done_now += int(acc.size)
+                if acc.size == 0:          # degenerate or changing bases: stop guessing
+                    skip = LP_SKIP          # for a while (min/max is rarely a vertex)
         if progress is not None:
             progress.update(done_now)
+    x = np.where(np.isfinite(x), np.clip(x, prob.lo, prob.hi), x)   # proxsuite: inside to ~1e-16
     return FramesResult(x=x, rho=rho, solved=solved, path=path, iterations=iters, qp_solves=nqp,
                         batched_frames=batched)
 
@@ -658,3 +667,46 @@ class StaticOptimization:
     def __repr__(self) -> str:
         args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
         return f"StaticOptimization({args})"
+
+
+# ---------------------------------------------------------------------------
+# An independent reference: scipy's SLSQP, frame by frame
+# ---------------------------------------------------------------------------
+
+def solve_frame_slsqp(prob: SOProblem, k: int, *, minmax: bool = False, ftol: float = 1e-14,
+                      maxiter: int = 1000, x0=None) -> np.ndarray:
+    """Frame ``k`` of the scaled problem solved by ``scipy.optimize.minimize(method="SLSQP")``.
+
+    The second computation path of tests and benchmarks (no proxsuite, no
+    batching): returns ``x`` (m,), raises SolverError if SLSQP fails.
+    """
+    from scipy.optimize import minimize
+
+    A, b, lo, hi = prob.A[k], prob.b[k], prob.lo[k], prob.hi[k]
+    m = A.shape[1]
+    P = prob.exponent
+    if minmax:
+        u = prob.w_minmax
+        z0 = np.concatenate([np.clip(np.full(m, 0.5) if x0 is None else x0, lo, hi), [1.0]])
+        res = minimize(lambda z: z[-1], z0, jac=lambda z: np.r_[np.zeros(m), 1.0], method="SLSQP",
+                       bounds=list(zip(lo, hi)) + [(0.0, None)],
+                       constraints=[{"type": "eq", "fun": lambda z: A @ z[:m] - b,
+                                     "jac": lambda z: np.hstack([A, np.zeros((A.shape[0], 1))])},
+                                    {"type": "ineq", "fun": lambda z: z[-1] - u * z[:m],
+                                     "jac": lambda z: np.hstack([-np.diag(u), np.ones((m, 1))])}],
+                       options={"ftol": ftol, "maxiter": maxiter})
+        x = res.x[:m]
+    else:
+        w = prob.w
+        # SLSQP's ftol is absolute: scale the cost to O(1) at the start point
+        xs = np.clip(np.full(m, 0.1) if x0 is None else x0, lo, hi)
+        c = 1.0 / max(float(np.sum(w * np.maximum(xs, 1e-3) ** P)), 1e-300)
+        res = minimize(lambda x: c * float(np.sum(w * np.maximum(x, 0.0) ** P)), xs,
+                       jac=lambda x: c * w * P * np.maximum(x, 0.0) ** (P - 1.0), method="SLSQP",
+                       bounds=list(zip(lo, hi)),
+                       constraints=[{"type": "eq", "fun": lambda x: A @ x - b, "jac": lambda x: A}],
+                       options={"ftol": ftol, "maxiter": maxiter})
+        x = res.x
+    if not res.success:
+        raise SolverError(f"SLSQP failed at frame {k}: {res.message}")
+    return np.clip(x, lo, hi)

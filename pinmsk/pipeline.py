@@ -1,0 +1,439 @@
+"""Batch processing: IK -> ID -> SO -> report over many trials from one config file.
+
+``pinmsk batch CONFIG`` calls :func:`batch_cli`.  The config is TOML::
+
+    [batch]
+    model = "gait2d"            # built-in name or a sidecar path
+    out = "results"             # relative to the config file
+    jobs = 2                    # local worker processes (default: all cores)
+
+    [defaults]                  # any trial key, applied to every trial
+    cutoff = 6.0                # Hz, low-pass of the coordinates before differentiating
+    so = { mode = "activation", exponent = 2, reserves = true }
+
+    [[trials]]
+    name = "csu_subject7"
+    kind = "csu"                # CSU leg2d text: markers + one force plate (right foot)
+    path = "../shared/data/real/csu-treadmill-leg2d/rawdata.txt"
+    markers = "csu"             # set in urdf/markers_gait2d.toml (or a path to a marker TOML)
+    body_mass = 67.2
+
+    [[trials]]
+    name = "rajagopal_walk"
+    kind = "opensim"            # OpenSim coordinates mapped onto gait2d, GRF .mot
+    coordinates = ".../coordinates.sto"
+    grf = ".../grf_walk.mot"
+    trc = ".../markers_walk.trc"          # optional: ankle markers to transfer the COP
+    cop_reference = { r = "R.Ankle", l = "L.Ankle" }
+
+    [[trials]]
+    name = "lab_trial"
+    kind = "trc"                # TRC markers (+ optional GRF .mot), IK with a marker set
+    trc = "walk.trc"
+    markers = "csu"
+    marker_map = { RSHO = "R.Shoulder" }  # model marker -> measured name
+    grf = "walk_grf.mot"
+
+Each trial is processed by :func:`run_trial` (a plain top-level function of
+picklable arguments, so any ``concurrent.futures``-style executor can run it):
+one folder ``<out>/<name>/`` with ``kinematics.sto``, ``inverse_dynamics.sto``,
+``residuals.sto``, ``activations.sto`` (if the model has muscles), ``summary.json`` and
+``moments.png`` / ``residuals.png`` (``plots = false`` in a trial or ``[defaults]`` skips them); :func:`batch` writes ``<out>/summary.csv`` (one row per trial).
+
+Parallelism: local trials go to a :class:`concurrent.futures.ProcessPoolExecutor`
+with ``jobs`` workers and a progress bar (:class:`pinmsk.progress.Progress`).  With
+``scheduler="tcp://host:8786"`` the same function is submitted through
+``distributed.Client(scheduler).get_executor()`` (the Dask ``concurrent.futures``
+interface): ``pip install distributed`` on the client and the workers, and pinmsk
+plus the data paths must be visible to the workers.  Dask is not a dependency.
+"""
+from __future__ import annotations
+
+import concurrent.futures as cf
+import csv
+import json
+import os
+import sys
+import time as _time
+import traceback
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from .errors import PinmskError, TrialError
+from .trial import Trial
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+__all__ = ["opensim_to_gait2d", "frame_positions", "transferred_cops", "run_trial", "batch",
+           "batch_cli", "load_config", "RAJAGOPAL_HIP_OFFSET", "KINDS"]
+
+#: Hip joint centre in the pelvis frame of the Rajagopal et al. (2016) model (unscaled, m;
+#: x forward, y up): ``hip_r`` location_in_parent (-0.056276, -0.07849, 0.07726).
+RAJAGOPAL_HIP_OFFSET = (-0.056276, -0.07849)
+
+KINDS = ("csu", "opensim", "trc")
+
+
+# ---------------------------------------------------------------------------
+# OpenSim coordinates -> gait2d
+# ---------------------------------------------------------------------------
+
+def _col(trial: Trial, coord: str) -> np.ndarray:
+    """Channel of an OpenSim coordinate, by bare name or ``/jointset/<j>/<coord>/value`` path."""
+    if coord in trial:
+        return np.asarray(trial[coord])
+    for n in trial.names:
+        parts = n.split("/")
+        if len(parts) >= 2 and parts[-1] == "value" and parts[-2] == coord:
+            return np.asarray(trial[n])
+    raise TrialError(f"{trial.meta.get('source', 'trial')}: no column for OpenSim coordinate {coord!r}")
+
+
+def opensim_to_gait2d(coords: Trial, model, *, hip_offset=RAJAGOPAL_HIP_OFFSET) -> Trial:
+    """gait2d coordinates from an OpenSim full-body model's coordinates (sagittal plane).
+
+    Sign conventions (OpenSim: rotations about +z, z to the right):
+
+    * ``torso_angle = -pelvis_tilt`` (OpenSim + = posterior tilt; gait2d + = forward lean);
+      the HAT is taken as rigid with the pelvis (lumbar extension is ignored);
+    * ``hip = -hip_flexion`` (gait2d + = extension), ``knee = knee_angle`` (both + = flexion),
+      ``ankle = -ankle_angle`` (OpenSim + = dorsiflexion; gait2d + = plantarflexion), ``mtp = 0``;
+    * ``torso_x, torso_y`` = the gait2d HAT centre of mass placed so that gait2d's hip joint
+      lies on the OpenSim hip centre ``pelvis_t[xy] + R(pelvis_tilt) hip_offset``
+      (``hip_offset``: the hip in the pelvis frame; default the unscaled Rajagopal model's).
+
+    Out-of-plane coordinates (list, rotation, adduction, pelvis_tz, arms) are dropped.
+    """
+    tilt = _col(coords, "pelvis_tilt")
+    tx, ty = _col(coords, "pelvis_tx"), _col(coords, "pelvis_ty")
+    ox, oy = hip_offset
+    hx = tx + np.cos(tilt) * ox - np.sin(tilt) * oy
+    hy = ty + np.sin(tilt) * ox + np.cos(tilt) * oy
+    ta = -tilt
+    # distance from the hip joint up to the HAT COM in gait2d (the hip's placement in the HAT frame)
+    pm = model.pin
+    jr = pm.getJointId("hip_r")
+    above = -float(pm.jointPlacements[jr].translation[1])
+    ch = {
+        "torso_x": hx + above * np.sin(ta),
+        "torso_y": hy + above * np.cos(ta),
+        "torso_angle": ta,
+    }
+    for s in "rl":
+        ch[f"hip_{s}"] = -_col(coords, f"hip_flexion_{s}")
+        ch[f"knee_{s}"] = _col(coords, f"knee_angle_{s}")
+        ch[f"ankle_{s}"] = -_col(coords, f"ankle_angle_{s}")
+        ch[f"mtp_{s}"] = np.zeros_like(tilt)
+    ordered = {c: ch[c] for c in model.coordinate_order}
+    return Trial(coords.time, ordered, meta={"source": coords.meta.get("source"),
+                                             "mapping": "opensim_to_gait2d", "hip_offset": tuple(hip_offset)})
+
+
+def frame_positions(model, q: np.ndarray, frames: Sequence[str]) -> dict:
+    """World positions ``{frame: (N, 3)}`` of model frames over ``q`` ((N, nq), Pinocchio order)."""
+    import pinocchio as pin
+
+    pm = model.pin
+    pd = pm.createData()
+    ids = [model.frame_id(f) for f in frames]
+    out = {f: np.empty((q.shape[0], 3)) for f in frames}
+    for k in range(q.shape[0]):
+        pin.forwardKinematics(pm, pd, q[k])
+        for f, fid in zip(frames, ids):
+            out[f][k] = pin.updateFramePlacement(pm, pd, fid).translation
+    return out
+
+
+def transferred_cops(model, kin: Trial, grf: Trial, markers: Trial, reference: Mapping[str, str], *,
+                     model_frames: Mapping[str, str] | None = None) -> dict:
+    """Per side, the COP moved from the subject's reference marker to the model's ankle.
+
+    ``reference`` maps a side to a measured marker (e.g. ``{"r": "R.Ankle"}``); the marker
+    trial is interpolated (cubic) onto ``kin.time``; ``model_frames`` maps a side to the model
+    frame standing for that marker (default ``foot_<side>``, the ankle joint centre).
+    See :func:`pinmsk.grf.transfer_cop`.
+    """
+    from .grf import grf_channels, transfer_cop
+
+    q = kin.get(model.coordinates)
+    frames = {s: (model_frames or {}).get(s, f"foot_{s}") for s in reference}
+    pos = frame_positions(model, q, list(frames.values()))
+    mk = markers.resample(kin.time, method="cubic")
+    groups = grf_channels(grf)
+    out = {}
+    for s, mname in reference.items():
+        ch = groups.get(s)
+        if ch is None:
+            raise TrialError(f"the GRF trial has no side {s!r} (sides: {sorted(map(str, groups))})")
+        meas = np.column_stack([mk[f"{mname}_{a}"] for a in "xyz"])
+        P = np.column_stack([grf[ch[("point", a)]] for a in "xyz"])
+        out[s] = transfer_cop(P, meas, pos[frames[s]])
+    return out
+
+
+# ---------------------------------------------------------------------------
+# one trial
+# ---------------------------------------------------------------------------
+
+def _path(base: Path, p) -> Path:
+    p = Path(os.path.expandvars(str(p))).expanduser()
+    return p if p.is_absolute() else (base / p)
+
+
+def _load_model(spec):
+    from .model import load_model
+    return load_model(spec)
+
+
+def _kinematics(model, spec: dict, base: Path):
+    """(kinematics Trial, GRF Trial or None, info dict) for one trial spec."""
+    import warnings
+
+    from .grf import external_forces
+    from .ik import InverseKinematics
+    from .markers import load_marker_set, read_trc
+    from .resample import to_time
+
+    kind = spec.get("kind")
+    info: dict = {}
+    ext = []
+    if kind == "csu":
+        from .csu import read_csu
+
+        raw = read_csu(_path(base, spec["path"]), body_mass=spec.get("body_mass"),
+                       belt_height=float(spec.get("belt_height", 0.0)))
+        mset = load_marker_set(spec.get("marker_file", "gait2d")).subset(spec.get("markers", "csu"))
+        ik = InverseKinematics(markers=mset, axes="xy", q0={"torso_y": 1.0}).fit(model, raw)
+        kin = ik.result_
+        info["ik_marker_rms_mm"] = {k: 1000 * v for k, v in ik.marker_rms_.items()}
+        info["ik_mean_iterations"] = float(ik.iterations_.mean())
+        side = spec.get("side", "r")
+        ext = external_forces(model, raw, frames={None: f"foot_{side}"}, planar=True,
+                              min_force=float(spec.get("min_force", 20.0)))
+        info["body_mass"] = spec.get("body_mass")
+    elif kind == "opensim":
+        from .io import read_trial
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            coords = read_trial(_path(base, spec["coordinates"]), strict=False)
+            grf = read_trial(_path(base, spec["grf"]), strict=False)
+        kin = opensim_to_gait2d(coords, model, hip_offset=tuple(spec.get("hip_offset", RAJAGOPAL_HIP_OFFSET)))
+        if "t0" in spec or "t1" in spec:
+            kin = kin.slice_time(spec.get("t0"), spec.get("t1"))
+        grf = to_time(grf, kin.time)
+        cops = None
+        if spec.get("trc"):
+            mk = read_trc(_path(base, spec["trc"]), warn=False)
+            cops = transferred_cops(model, kin, grf, mk, spec.get("cop_reference", {"r": "R.Ankle", "l": "L.Ankle"}))
+        ext = external_forces(model, grf, planar=True, cop=cops, min_force=float(spec.get("min_force", 20.0)))
+        fy = sum(np.asarray(grf[n]) for n in grf.names if n.endswith("_vy") or n == "ground_force_vy")
+        info["body_mass"] = spec.get("body_mass", float(np.mean(fy) / 9.81))
+        info["body_mass_source"] = "config" if "body_mass" in spec else "mean vertical GRF / g"
+    elif kind == "trc":
+        mk = read_trc(_path(base, spec["trc"]), max_gap=int(spec.get("max_gap", 10)), warn=False)
+        mset = load_marker_set(spec.get("marker_file", "gait2d")).subset(spec.get("markers", "csu"))
+        if spec.get("marker_map"):
+            mset = mset.renamed(dict(spec["marker_map"]))
+        ik = InverseKinematics(markers=mset, axes=spec.get("axes", "xy"), q0={"torso_y": 1.0}).fit(model, mk)
+        kin = ik.result_
+        info["ik_marker_rms_mm"] = {k: 1000 * v for k, v in ik.marker_rms_.items()}
+        if spec.get("grf"):
+            from .io import read_trial
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                grf = read_trial(_path(base, spec["grf"]), strict=False)
+            grf = to_time(grf, kin.time)
+            ext = external_forces(model, grf, planar=True)
+        info["body_mass"] = spec.get("body_mass")
+    else:
+        raise TrialError(f"trial {spec.get('name')!r}: kind must be one of {', '.join(KINDS)}, got {kind!r}")
+    return kin, ext, info
+
+
+def run_trial(spec: dict, *, model="gait2d", out_dir=None, base_dir=".") -> dict:
+    """IK (or coordinate mapping) -> ID -> SO for one trial spec; writes ``out_dir`` if given.
+
+    Returns a summary row (JSON-serialisable).  Never raises on a bad trial: the row gets
+    ``status = "failed: <message>"`` instead, so one bad file does not stop a batch.
+    """
+    from .dynamics import inverse_dynamics
+    from .grf import torso_residuals
+
+    t0 = _time.perf_counter()
+    name = spec.get("name", "trial")
+    row: dict = {"name": name, "kind": spec.get("kind")}
+    try:
+        m = _load_model(model) if not hasattr(model, "pin") else model
+        base = Path(base_dir)
+        kin, ext, info = _kinematics(m, spec, base)
+        t1 = _time.perf_counter()
+        cutoff = spec.get("cutoff")
+        idt = inverse_dynamics(m, kin, cutoff=cutoff, external=ext)
+        t2 = _time.perf_counter()
+        bm = info.get("body_mass")
+        res, rsum = torso_residuals(m, idt, body_mass=bm)
+        row.update({"frames": kin.n_frames, "duration_s": float(kin.time[-1] - kin.time[0]),
+                    "body_mass": bm})
+        for k, v in info.items():
+            if k.startswith("ik_") and isinstance(v, dict):
+                row["ik_rms_mm_max"] = max(v.values())
+        norm = bm if bm else 1.0
+        for c in m.coordinate_order:
+            if c.startswith(("hip", "knee", "ankle")):
+                row[f"{c}_peak_abs_nm_per_kg" if bm else f"{c}_peak_abs_nm"] = float(
+                    np.max(np.abs(idt[f"{c}_moment"])) / norm)
+        for c, s in rsum.items():
+            row[f"{c}_residual_rms"] = s["rms"]
+        act = None
+        if m.n_muscles and spec.get("so", True) is not False:
+            from .solvers.static import StaticOptimization
+
+            opts = dict(spec.get("so") or {}) if isinstance(spec.get("so"), dict) else {}
+            opts.setdefault("mode", "activation")
+            opts.setdefault("reserves", True)
+            so = StaticOptimization(**opts).fit(m, kin, moments=idt, cutoff=cutoff)
+            act = so.result_
+            row["so_max_activation"] = float(np.max(so.activations_))
+            row["so_reserve_frames"] = int(np.sum(so.status_ == 2))
+        t3 = _time.perf_counter()
+        row.update({"time_kinematics_s": t1 - t0, "time_id_s": t2 - t1, "time_so_s": t3 - t2,
+                    "status": "ok"})
+        if out_dir is not None:
+            d = Path(out_dir)
+            d.mkdir(parents=True, exist_ok=True)
+            kin.write(d / "kinematics.sto")
+            idt.write(d / "inverse_dynamics.sto")
+            res.write(d / "residuals.sto")
+            if act is not None:
+                act.write(d / "activations.sto")
+            if spec.get("plots", True):
+                row["figures"] = _figures(m, d, idt, res)
+            (d / "summary.json").write_text(json.dumps({"row": row, "info": info, "residuals": rsum},
+                                                       indent=2, default=str))
+    except PinmskError as exc:
+        row["status"] = f"failed: {exc}"
+    except Exception as exc:  # noqa: BLE001 - a batch reports, it does not stop
+        row["status"] = f"failed: {type(exc).__name__}: {exc}"
+        row["traceback"] = traceback.format_exc(limit=5)
+    row["time_total_s"] = _time.perf_counter() - t0
+    return row
+
+
+def _figures(model, d: Path, idt: Trial, res: Trial) -> int:
+    """Per-trial PNGs (joint moments, torso residuals) via :mod:`pinmsk.plots`; returns how many."""
+    try:
+        from . import plots
+    except ImportError:  # pragma: no cover - plots is optional for the batch
+        return 0
+    joints = [f"{c}_moment" for c in model.coordinate_order if c.startswith(("hip", "knee", "ankle"))]
+    n = len(plots.save_channels(idt, joints, d, stem="moments", ylabel="N m"))
+    n += len(plots.save_channels(res, list(res.names), d, stem="residuals"))
+    return n
+
+
+# ---------------------------------------------------------------------------
+# many trials
+# ---------------------------------------------------------------------------
+
+def load_config(path) -> dict:
+    """Parse and check a batch config (see the module docstring)."""
+    path = Path(path)
+    if not path.exists():
+        raise TrialError(f"batch config not found: {path}")
+    try:
+        cfg = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise TrialError(f"{path}: not valid TOML ({exc})") from None
+    trials = cfg.get("trials")
+    if not trials:
+        raise TrialError(f"{path}: no [[trials]] entries")
+    defaults = cfg.get("defaults", {})
+    names = set()
+    out = []
+    for k, t in enumerate(trials):
+        spec = {**defaults, **t}
+        spec.setdefault("name", f"trial{k + 1:03d}")
+        if spec["name"] in names:
+            raise TrialError(f"{path}: two trials are named {spec['name']!r}; names must be unique "
+                             "(they are the output folders)")
+        names.add(spec["name"])
+        if spec.get("kind") not in KINDS:
+            raise TrialError(f"{path}: trial {spec['name']!r} has kind {spec.get('kind')!r}; "
+                             f"use one of {', '.join(KINDS)}")
+        out.append(spec)
+    cfg["trials"] = out
+    cfg.setdefault("batch", {})
+    return cfg
+
+
+def _executor(scheduler, jobs):
+    if scheduler:
+        try:
+            from distributed import Client
+        except ImportError as exc:
+            raise ImportError("--scheduler needs Dask distributed: pip install distributed "
+                              "(on this machine and on the workers)") from exc
+        client = Client(scheduler)
+        return client.get_executor(), client
+    return cf.ProcessPoolExecutor(max_workers=jobs), None
+
+
+def batch(trials: Sequence[dict], *, model="gait2d", out=None, base_dir=".", jobs: int | None = None,
+          scheduler: str | None = None, progress: bool | None = None) -> list[dict]:
+    """Run :func:`run_trial` over ``trials`` in parallel; write ``<out>/summary.csv``; return the rows.
+
+    ``jobs=1`` runs in this process (no pool).  Rows keep the order of ``trials``.
+    """
+    from .progress import Progress
+
+    out = None if out is None else Path(out)
+    jobs = jobs or os.cpu_count() or 1
+    rows: list = [None] * len(trials)
+    args = [dict(model=model, out_dir=None if out is None else str(out / t["name"]), base_dir=str(base_dir))
+            for t in trials]
+    with Progress(len(trials), "batch", force=bool(progress)) as bar:
+        if jobs == 1 and not scheduler:
+            for i, t in enumerate(trials):
+                rows[i] = run_trial(t, **args[i])
+                bar.update(1)
+        else:
+            ex, client = _executor(scheduler, jobs)
+            try:
+                futs = {ex.submit(run_trial, t, **a): i for i, (t, a) in enumerate(zip(trials, args))}
+                for f in cf.as_completed(futs):
+                    rows[futs[f]] = f.result()
+                    bar.update(1)
+            finally:
+                ex.shutdown(wait=True)
+                if client is not None:
+                    client.close()
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        keys: list = []
+        for r in rows:
+            keys += [k for k in r if k not in keys and k != "traceback"]
+        with open(out / "summary.csv", "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=keys, extrasaction="ignore")
+            w.writeheader()
+            for r in rows:
+                w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+    return rows
+
+
+def batch_cli(config_path, *, scheduler: str | None = None, jobs: int | None = None) -> dict:
+    """``pinmsk batch CONFIG``: run the config's trials; returns ``{"rows", "table", "failed"}``."""
+    path = Path(config_path).resolve()
+    cfg = load_config(path)
+    b = cfg["batch"]
+    out = _path(path.parent, b.get("out", "results"))
+    rows = batch(cfg["trials"], model=b.get("model", "gait2d"), out=out, base_dir=path.parent,
+                 jobs=jobs if jobs is not None else b.get("jobs"), scheduler=scheduler or b.get("scheduler"),
+                 progress=None)
+    failed = [r["name"] for r in rows if not str(r.get("status", "")).startswith("ok")]
+    return {"rows": rows, "table": str(out / "summary.csv"), "failed": failed}

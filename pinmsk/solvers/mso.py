@@ -1,0 +1,233 @@
+"""Modified static optimization (MSO): SO with activation dynamics between frames (thesis Sec. 2.2.3).
+
+MSO solves the activation-mode SO problem frame by frame, but the
+activations of frame ``k`` may only be those the Winters-Stark activation
+dynamics (thesis Eq. A.2-A.4) can reach from frame ``k-1`` with an
+excitation ``0 <= u <= 1``.  For an excitation held over the step
+``dt = t_k - t_{k-1}`` the dynamics solve exactly; because the activation
+rate grows with ``u``, the reachable set is the interval between the answers
+for ``u = 0`` and ``u = 1``:
+
+    a_k >= a_{k-1} exp(-dt / tau_fall)                    (u = 0: adot = -a t2)
+    a_k <= 1 - (1 - a_{k-1}) exp(-dt / tau_rise)          (u = 1: adot = (1 - a)(t1 + t2))
+
+Both bounds are linear in ``(a_{k-1}, a_k)``, which is what lets
+:mod:`pinmsk.solvers.eid` put them into one sparse QP.  The excitation that
+moves ``a_{k-1}`` to ``a_k`` over the step (constant within it) is recovered
+exactly: in closed form when falling, by bisection of the monotone rise
+solution otherwise; ``<muscle>_excitation`` channels report it at frame ``k``
+(frame 0: ``u = a``, steady state).
+
+Frame 0 is plain SO (``0 <= a <= 1``), unless ``a0`` is given.  Each frame is
+one proxsuite QP (:class:`pinmsk.solvers.qp.FrameQP`, warm started).
+"""
+from __future__ import annotations
+
+import time as _time
+
+import numpy as np
+
+from ..errors import InfeasibleError, SolverError
+from ..trial import Trial
+from . import qp as _qp
+from .static import (WEIGHTS, as_motion, build_problem, diagnose_infeasible, infeasible_message)
+
+try:  # the foundation's constants (thesis A.2: 11 ms and 68 ms)
+    from ..muscles.activation import TAU_FALL, TAU_RISE
+except ImportError:  # pragma: no cover
+    TAU_RISE, TAU_FALL = 0.011, 0.068
+
+
+def activation_bounds(a_prev, dt, *, tau_rise: float = TAU_RISE, tau_fall: float = TAU_FALL):
+    """Reachable ``(lo, hi)`` activations after ``dt`` from ``a_prev`` (Winters-Stark, exact).
+
+    ``a_prev`` and ``dt`` broadcast; see the module notes.
+    """
+    if not (tau_rise > 0 and tau_fall > 0):
+        raise SolverError(f"activation time constants must be > 0 (tau_rise={tau_rise}, tau_fall={tau_fall})")
+    a_prev = np.asarray(a_prev, dtype=float)
+    dt = np.asarray(dt, dtype=float)
+    lo = a_prev * np.exp(-dt / tau_fall)
+    hi = 1.0 - (1.0 - a_prev) * np.exp(-dt / tau_rise)
+    return lo, hi
+
+
+def step_excitation(a_prev, a_next, dt, *, tau_rise: float = TAU_RISE, tau_fall: float = TAU_FALL):
+    """Constant excitation over ``dt`` that takes ``a_prev`` to ``a_next`` (Eq. A.2 solved exactly).
+
+    Falling (``a_next < a_prev``): ``a_next = u + (a_prev - u) e^(-t2 dt)``, closed form.
+    Rising: ``a_next = u + (a_prev - u) e^(-(t1 u + t2) dt)``, increasing in ``u``; bisection.
+    Results are clipped to [0, 1] (values outside come only from round-off at the bounds).
+    """
+    t2 = 1.0 / tau_fall
+    t1 = 1.0 / tau_rise - t2
+    a_prev, a_next, dt = np.broadcast_arrays(np.asarray(a_prev, float), np.asarray(a_next, float),
+                                             np.asarray(dt, float))
+    u = np.empty(a_prev.shape)
+    fall = a_next < a_prev
+    e = np.exp(-t2 * dt)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u_fall = (a_next - a_prev * e) / (1.0 - e)
+    u[fall] = u_fall[fall]
+    rise = ~fall
+    if rise.any():
+        ap, an, h = a_prev[rise], a_next[rise], dt[rise]
+        lo = ap.copy()              # u = a_prev gives no change
+        hi = np.ones_like(ap)
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            val = mid + (ap - mid) * np.exp(-(t1 * mid + t2) * h)
+            big = val > an
+            hi = np.where(big, mid, hi)
+            lo = np.where(big, lo, mid)
+        u[rise] = 0.5 * (lo + hi)
+    return np.clip(u, 0.0, 1.0)
+
+
+def excitations(time, a, *, tau_rise: float = TAU_RISE, tau_fall: float = TAU_FALL):
+    """Step excitations (N, m) for activations (N, m) at ``time``; ``u_0 = a_0``."""
+    a = np.asarray(a, dtype=float)
+    u = np.empty_like(a)
+    u[0] = np.clip(a[0], 0.0, 1.0)
+    if a.shape[0] > 1:
+        dt = np.diff(np.asarray(time, dtype=float))[:, None]
+        u[1:] = step_excitation(a[:-1], a[1:], dt, tau_rise=tau_rise, tau_fall=tau_fall)
+    return u
+
+
+class ModifiedStaticOptimization:
+    """MSO: activation-mode SO whose activations obey activation dynamics between frames.
+
+    Parameters (keyword-only): ``exponent``, ``weights`` (``S_i`` of Eq. 2.14),
+    ``tau_rise``, ``tau_fall`` (s, thesis A.2: 0.011 and 0.068), ``a0``
+    (activations before the first frame, (m,) or scalar; None: frame 0 is
+    free), ``reserves``, ``reserve_weight``, ``tol``, ``dofs`` as
+    :class:`~pinmsk.solvers.static.StaticOptimization`.
+    """
+
+    def __init__(self, *, exponent: float = 2, weights: str = "none", tau_rise: float = TAU_RISE,
+                 tau_fall: float = TAU_FALL, a0=None, reserves: bool = False,
+                 reserve_weight: float = 1000.0, tol: float = 1e-9, dofs=None):
+        self.exponent = exponent
+        self.weights = weights
+        self.tau_rise = tau_rise
+        self.tau_fall = tau_fall
+        self.a0 = a0
+        self.reserves = reserves
+        self.reserve_weight = reserve_weight
+        self.tol = tol
+        self.dofs = dofs
+
+    def get_params(self) -> dict:
+        return {k: getattr(self, k) for k in ("exponent", "weights", "tau_rise", "tau_fall", "a0",
+                                              "reserves", "reserve_weight", "tol", "dofs")}
+
+    def fit(self, model, trial, *, moments=None, cutoff: float | None = None, progress=None):
+        """Solve frame after frame; returns ``self`` (results as StaticOptimization's, plus excitations)."""
+        if self.weights not in WEIGHTS:
+            raise SolverError(f"weights must be one of {', '.join(WEIGHTS)}; got {self.weights!r}")
+        P = _qp.check_exponent(self.exponent)
+        t0 = _time.perf_counter()
+        motion = as_motion(model, trial, cutoff)
+        prob = build_problem(model, motion, mode="activation", weights=self.weights, exponent=P,
+                             dofs=self.dofs, moments=moments, reserves=self.reserves)
+        N, nd, m = prob.A.shape
+        tol = float(self.tol)
+        W = float(self.reserve_weight) if self.reserves else None
+        fq = _qp.FrameQP(m=m, nd=nd, weights=prob.w, exponent=P, reserve_weight=W, eps=tol * 1e-4,
+                         sqp_tol=max(tol * 1e-2, 1e-13))
+        x = np.zeros((N, m))
+        rho = np.zeros((N, nd))
+        lo_all = np.zeros((N, m))
+        hi_all = np.ones((N, m))
+        iters = nqp = 0
+        prev = None if self.a0 is None else np.broadcast_to(np.asarray(self.a0, dtype=float), (m,))
+        dts = np.diff(prob.time)
+        for k in range(N):
+            if prev is None:
+                lo, hi = np.zeros(m), np.ones(m)
+            else:
+                dt = dts[k - 1] if k > 0 else (dts[0] if dts.size else 0.01)
+                lo, hi = activation_bounds(prev, dt, tau_rise=self.tau_rise, tau_fall=self.tau_fall)
+                lo = np.clip(lo, 0.0, 1.0)
+                hi = np.clip(hi, lo, 1.0)
+            lo_all[k], hi_all[k] = lo, hi
+            sol = fq.solve(prob.A[k], prob.b[k], lo, hi)
+            iters += sol.iterations
+            nqp += sol.qp_solves
+            if not sol.solved:
+                prob_k = _bounded(prob, k, lo, hi)
+                deficit = diagnose_infeasible(prob_k, [k], minmax=False, tol=tol)
+                raise InfeasibleError(
+                    "MSO: " + infeasible_message(prob, np.array([k]), deficit) +
+                    " (in MSO the activation dynamics limit how fast activations can change: "
+                    f"a in [{', '.join(f'{v:.3g}' for v in lo)}] .. [{', '.join(f'{v:.3g}' for v in hi)}])")
+            x[k] = np.clip(sol.x, lo, hi)      # proxsuite's answer is inside to ~1e-16
+            rho[k] = sol.rho
+            prev = x[k]
+            if progress is not None:
+                progress.update(1)
+        self.problem_ = prob
+        F = prob.forces(x)
+        self.activations_ = x
+        self.forces_ = F
+        self.excitations_ = excitations(prob.time, x, tau_rise=self.tau_rise, tau_fall=self.tau_fall)
+        self.reserves_ = rho * prob.scale if W is not None else None
+        self.bounds_ = (lo_all, hi_all)
+        moment = prob.moments(F) + (self.reserves_ if W is not None else 0.0)
+        self.violation_ = np.max(np.abs(moment - prob.tau), axis=1)
+        self.cost_ = prob.cost(x, False)
+        self.n_iter_ = iters
+        self.n_qp_ = nqp
+        self.time_ = _time.perf_counter() - t0
+        self.model_name_ = model.name
+        self.result_ = result_trial(prob, F, x, self.excitations_, self.reserves_, self.cost_,
+                                    self.violation_, meta={"analysis": "modified_static_optimization",
+                                                           **{k: str(v) for k, v in self.get_params().items()}})
+        return self
+
+    def report(self) -> str:
+        if not hasattr(self, "result_"):
+            raise SolverError("this ModifiedStaticOptimization is not fitted yet; call fit(model, trial)")
+        prob = self.problem_
+        lo, hi = self.bounds_
+        at_bound = np.sum((self.activations_ <= lo + 1e-9) & (lo > 1e-9)) + np.sum(
+            (self.activations_ >= hi - 1e-9) & (hi < 1 - 1e-9))
+        return "\n".join([
+            f"Modified static optimization (activation dynamics between frames) of model '{self.model_name_}'",
+            f"  criterion      sum_i S_i a_i^{float(self.exponent):g} (Eq. 2.14), S = {self.weights}",
+            f"  dynamics       Winters-Stark, tau_rise {self.tau_rise * 1e3:g} ms, tau_fall {self.tau_fall * 1e3:g} ms",
+            f"  frames         {prob.n_frames}, muscles {len(prob.muscles)}, dofs {', '.join(prob.dofs)}",
+            f"  objective      sum over frames {np.sum(self.cost_):.6g}",
+            f"  rate limits    active at {at_bound} muscle-frames",
+            f"  solver         {self.n_qp_} proxsuite QPs, {self.n_iter_} iterations",
+            f"  violation      max {np.max(self.violation_):.3g} N m",
+            f"  time           {self.time_ * 1e3:.1f} ms",
+        ])
+
+
+def _bounded(prob, k, lo, hi):
+    import copy
+    p2 = copy.copy(prob)
+    p2.lo = prob.lo.copy()
+    p2.hi = prob.hi.copy()
+    p2.lo[k] = lo
+    p2.hi[k] = hi
+    return p2
+
+
+def result_trial(prob, F, a, u, reserves, cost, violation, *, meta) -> Trial:
+    """The result Trial shared by MSO and EID."""
+    ch = {}
+    for i, n in enumerate(prob.muscles):
+        ch[f"{n}_force"] = F[:, i]
+    for i, n in enumerate(prob.muscles):
+        ch[f"{n}_activation"] = a[:, i]
+    for i, n in enumerate(prob.muscles):
+        ch[f"{n}_excitation"] = u[:, i]
+    if reserves is not None:
+        for j, d in enumerate(prob.dofs):
+            ch[f"{d}_reserve"] = reserves[:, j]
+    ch["cost"] = cost
+    ch["violation"] = violation
+    return Trial(prob.time, ch, meta=meta)

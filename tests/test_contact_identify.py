@@ -1,0 +1,228 @@
+"""Contact identification (thesis Eq. 4.1-4.2), the CSU reader and bad input."""
+import json
+import math
+
+import numpy as np
+import pytest
+
+from pinmsk.contact import ContactFit, fit_cli_run, fourier_basis, stance_cycle, synthetic_foot_trial
+from pinmsk.errors import ModelError, SolverError, TrialError
+from pinmsk.trial import Trial
+
+from conftest import REPO
+
+CSU = "real/csu-treadmill-leg2d/rawdata.txt"
+
+
+@pytest.fixture(scope="module")
+def synth():
+    return synthetic_foot_trial()
+
+
+def _perturbed(true, keys, rel=0.2, seed=1):
+    rng = np.random.default_rng(seed)
+    upper = {"heel": 0.055, "metatarsal": 0.050, "toe": 0.045}
+    out = {}
+    for s, p in true.items():
+        out[s] = {k: p[k] * (1 + rel * rng.uniform(-1, 1)) for k in keys}
+        if "R" in out[s]:
+            out[s]["R"] = min(out[s]["R"], upper[s])
+        if "v_s" in out[s]:
+            out[s]["v_s"] = min(out[s]["v_s"], 0.1)
+    return out
+
+
+def test_fourier_basis_derivative_and_period():
+    t = np.linspace(0, 1.3, 400)
+    B, dB = fourier_basis(t, 1.3)
+    assert B.shape == (400, 11)
+    np.testing.assert_allclose(B[0], B[-1], atol=1e-12)  # periodic over the window
+    num = np.gradient(B, t, axis=0)
+    np.testing.assert_allclose(num[5:-5], dB[5:-5], atol=2e-3 * np.abs(dB).max())
+
+
+def test_synthetic_trial_is_sane(synth):
+    fy = synth["ground_force_vy"]
+    assert 300 < fy.max() < 1000
+    assert np.all(np.abs(fy[synth.time < 0.3]) < 1.0)  # swing: no force
+    px = synth["ground_force_px"]
+    lo = fy < 0.02 * fy.max()
+    assert np.all(np.isnan(px[lo])) and np.all(np.isfinite(px[~lo]))
+
+
+def test_hypervolumetric_fit_recovers_known_parameters(synth):
+    """All 18 contact parameters and the 11 toe coefficients from a start 20 % off."""
+    true = synth.meta["true_params"]
+    keys = ("k_h", "a_h", "R", "H", "mu_f", "v_s")
+    fit = ContactFit(contact="hypervolumetric", cutoff=None, n_starts=1,
+                     initial=_perturbed(true, keys)).fit(None, synth)
+    assert fit.objective_ < 1e-12
+    got = fit.params_()
+    for s in true:
+        for k in keys:
+            assert got[s][k] == pytest.approx(true[s][k], rel=0.02), (s, k)
+    np.testing.assert_allclose(fit.fourier_, synth.meta["true_fourier"], atol=1e-4)
+    assert fit.rmse_["normal_force"] < 0.5 and fit.rmse_["cop"] < 1e-3
+    # Fig. 4.11 study: +10 % stiffness raises the peak normal force, by less than 10 %
+    sens = fit.sensitivity()
+    assert set(sens) == {"heel", "metatarsal", "toe"}
+    assert all(0 <= v["peak_percent"] < 10 for v in sens.values())
+
+
+def test_volumetric_fit_recovers_known_parameters():
+    tr = synthetic_foot_trial(contact="volumetric")
+    true = tr.meta["true_params"]
+    keys = ("k_v", "a_v", "R")
+    fit = ContactFit(contact="volumetric", cutoff=None, n_starts=1, fixed=("mu_f", "v_s"),
+                     initial=_perturbed(true, keys, seed=2)).fit(None, tr)
+    for s in true:
+        for k in keys:
+            assert fit.params_()[s][k] == pytest.approx(true[s][k], rel=0.02), (s, k)
+
+
+def test_point_fit_tracks_normal_force_only():
+    tr = synthetic_foot_trial(contact="point")
+    fit = ContactFit(contact="point", cutoff=None, n_starts=1, max_nfev=60).fit(None, tr)
+    assert fit.terms_["normal_force"] == pytest.approx(fit.objective_)
+    assert fit.objective_ <= fit.objective_full_
+
+
+def test_toe_channel_and_flat_modes(synth):
+    true = synth.meta["true_params"]
+    keys = ("k_h", "R", "H")
+    fit = ContactFit(toe="channel", cutoff=None, n_starts=1, fixed=("a_h", "mu_f", "v_s"),
+                     initial=_perturbed(true, keys, rel=0.1, seed=4)).fit(None, synth)
+    assert fit.params_()["heel"]["k_h"] == pytest.approx(true["heel"]["k_h"], rel=0.02)
+    assert fit.n_free_ == 9 and fit.fourier_ is None
+    flat = ContactFit(toe="flat", cutoff=None, n_starts=1, max_nfev=5).fit(None, synth)
+    assert flat.n_free_ == 18 and len(flat.fourier_) == 11
+    with pytest.raises(ModelError, match="toe must be"):
+        ContactFit(toe="free").fit(None, synth)
+
+
+def test_multistart_and_relaxed_run(synth):
+    fit = ContactFit(contact="hypervolumetric", relax=True, cutoff=None, n_starts=2, max_nfev=15,
+                     seed=3).fit(None, synth)
+    assert len(fit.starts_) == 2 and fit.objective_ == pytest.approx(min(fit.starts_), rel=1e-9)
+    assert all(abs(fit.params_()[s]["dx"]) <= 0.02 for s in ("heel", "metatarsal", "toe"))
+
+
+def test_fit_cli_run_writes_json_and_plots(synth, tmp_path):
+    out = fit_cli_run(None, synth, contact="hypervolumetric", json_path=tmp_path / "fit.json",
+                      plot_dir=tmp_path / "plots", n_starts=1, max_nfev=5, cutoff=None)
+    data = json.loads((tmp_path / "fit.json").read_text())
+    assert set(data) >= {"objective", "params", "rmse", "seconds"}
+    assert set(data["rmse"]) == {"normal_force", "friction_force", "cop"}
+    assert set(data["params"]) == {"heel", "metatarsal", "toe"} and "k_h" in data["params"]["heel"]
+    assert math.isfinite(data["objective"]) and data["seconds"] > 0
+    assert all((tmp_path / "plots" / p).exists() for p in ("grf_hypervolumetric.png", "cop_hypervolumetric.png"))
+    assert out["objective"] == data["objective"]
+
+
+# -- bad input --------------------------------------------------------------------
+
+def _with(trial, **cols):
+    d = {n: trial[n] for n in trial.names}
+    d.update(cols)
+    return Trial(trial.time, d, meta=dict(trial.meta))
+
+
+def test_spheres_that_never_touch_the_ground_are_refused(synth):
+    lifted = _with(synth, ankle_y=np.asarray(synth["ankle_y"]) + 0.5)
+    with pytest.raises(ModelError, match="never touch the ground.*'heel'.*ankle_y"):
+        ContactFit(cutoff=None, n_starts=1).fit(None, lifted)
+
+
+def test_nan_grf_in_swing_is_refused(synth):
+    fy = np.array(synth["ground_force_vy"])
+    fy[5] = np.nan
+    with pytest.raises(TrialError, match="ground_force_vy.*NaN.*t = 0.05 s.*set them to 0"):
+        ContactFit(cutoff=None, n_starts=1).fit(None, _with(synth, ground_force_vy=fy))
+
+
+def test_undefined_cop_under_load_is_refused(synth):
+    px = np.array(synth["ground_force_px"])
+    i = int(np.argmax(synth["ground_force_vy"]))
+    px[i] = np.nan
+    with pytest.raises(TrialError, match="COP.*undefined"):
+        ContactFit(cutoff=None, n_starts=1).fit(None, _with(synth, ground_force_px=px))
+
+
+def test_bounds_excluding_the_initial_guess_are_refused(synth):
+    with pytest.raises(SolverError, match=r"initial guess heel.R = 0.05 m is outside its bounds \[0.06, 0.07\]"):
+        ContactFit(cutoff=None, bounds={"heel": {"R": (0.06, 0.07)}}).fit(None, synth)
+    with pytest.raises(ModelError, match="unknown site"):
+        ContactFit(cutoff=None, initial={"ankle": {"R": 0.05}}).fit(None, synth)
+    with pytest.raises(ModelError, match="unknown contact model"):
+        ContactFit(contact="elastic").fit(None, synth)
+
+
+def test_missing_channels_are_named(synth):
+    with pytest.raises(Exception, match="foot_angle"):
+        ContactFit(cutoff=None).fit(None, synth.drop(["foot_angle"]))
+
+
+# -- CSU data ------------------------------------------------------------------------
+
+def test_csu_reader(shared_data, tmp_path):
+    from pinmsk.csu import read_csu
+    tr = read_csu(shared_data / CSU, body_mass=67.2)
+    assert tr.n_frames == 301 and tr.rate == pytest.approx(100.0)
+    fy, fx = tr["ground_force_vy"], tr["ground_force_vx"]
+    mz = tr["ground_moment_origin_z"]
+    ok = fy >= 20
+    np.testing.assert_allclose(tr["ground_force_px"][ok], mz[ok] / fy[ok])  # belt at y = 0
+    assert np.all(np.isnan(tr["ground_force_px"][~ok]))
+    assert all(np.all(np.isfinite(tr[c])) for c in ("ankle_x", "ankle_y", "foot_angle"))
+    assert tr.meta["filled"]["RLM.PosX"] == 5  # the marker gap near t = 7.45 s
+    assert -1.1 < tr.meta["ground_speed"] < -0.8  # belt backwards at ~0.94 m/s
+    # belt height shifts heights and the COP (M_z = x F_y - y F_x)
+    tr2 = read_csu(shared_data / CSU, belt_height=0.01)
+    np.testing.assert_allclose(tr2["RHEE_y"], tr["RHEE_y"] - 0.01)
+    np.testing.assert_allclose(tr2["ground_force_px"][ok], (mz[ok] + 0.01 * fx[ok]) / fy[ok])
+    t0, t1 = stance_cycle(tr)
+    assert 7.9 < t0 < 8.1 and 9.1 < t1 < 9.3
+
+
+def test_csu_reader_bad_file(tmp_path):
+    from pinmsk.csu import read_csu
+    p = tmp_path / "bad.txt"
+    p.write_text("TimeStamp\tFP2.ForX\n7.0\t1.0\n")
+    with pytest.raises(TrialError, match="header line starting with '%'"):
+        read_csu(p)
+    p.write_text("% TimeStamp\tRLM.PosX\tFP2.ForX\tFP2.ForY\tFP2.MomZ\n7.0\tNaN\t0\t0\t0\n7.01\t1\t0\t0\t0\n")
+    with pytest.raises(TrialError, match="RLM.PosX.*edge of the file"):
+        read_csu(p)
+
+
+@pytest.mark.slow
+def test_real_data_hypervolumetric_identification(shared_data):
+    from pinmsk.csu import read_csu
+    tr = read_csu(shared_data / CSU, body_mass=67.2)
+    fit = ContactFit(contact="hypervolumetric", window=stance_cycle(tr), n_starts=2, n_jobs=2).fit(None, tr)
+    assert fit.objective_ < 0.05
+    assert fit.seconds_ < 60
+
+
+def test_example_05_runs_headless(tmp_path):
+    import runpy
+    import sys
+    argv = sys.argv
+    sys.argv = ["05_contact_identification.py", "--quick", "--toe", "flat", "--out", str(tmp_path)]
+    try:
+        runpy.run_path(str(REPO / "examples" / "05_contact_identification.py"), run_name="__main__")
+    finally:
+        sys.argv = argv
+    summary = json.loads((tmp_path / "contact_summary.json").read_text())
+    assert len(summary["fits"]) == 4 and all("(toe flat)" in k for k in summary["fits"])
+    (sens,) = summary["sensitivity"].values()
+    assert set(sens) == {"heel", "metatarsal", "toe"}
+    assert (tmp_path / "toe_flat" / "grf_hypervolumetric_relaxed.png").exists()
+
+
+def test_fit_cli_run_from_files(shared_data, tmp_path):
+    """The CLI path: model by name, trial as the CSU file."""
+    out = fit_cli_run("foot2d", shared_data / CSU, contact="volumetric", json_path=tmp_path / "o.json",
+                      n_starts=1, max_nfev=3)
+    assert out["window"][0] == pytest.approx(7.99) and math.isfinite(out["objective"])
+    assert json.loads((tmp_path / "o.json").read_text())["params"]["toe"]["R"] <= 0.045

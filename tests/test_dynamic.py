@@ -1,0 +1,208 @@
+"""Dynamic optimization (thesis Sec. 3.1-3.3, 5.1): simulation designs, objectives, optimizer."""
+import json
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import pinmsk
+from pinmsk.errors import ModelError
+from pinmsk.solvers.dynamic import (BatchSkeleton, DynamicOptimization, Target, _Muscles,
+                                    load_task, muscle_inverse, optimize_task, scale_masses,
+                                    simulate_ff, simulate_skeleton)
+from pinmsk.solvers.parametrization import Fourier, Polynomial
+
+
+@pytest.fixture(scope="module")
+def finger():
+    return pinmsk.load_model("finger")
+
+
+@pytest.mark.parametrize("name", ["finger", "forearm"])
+def test_batch_skeleton_closed_form_equals_pinocchio_aba(name):
+    model = pinmsk.load_model(name)
+    sk = BatchSkeleton(model)
+    assert sk.closed_form
+    rng = np.random.default_rng(0)
+    q, v, tau = rng.normal(size=(3, 20, 1)) * [[[2.0]], [[5.0]], [[0.5]]]
+    pd = model.pin.createData()
+    ref = np.array([pin.aba(model.pin, pd, q[i], v[i], tau[i]) for i in range(20)])
+    assert np.allclose(sk.accel(q, v, tau), ref, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["finger", "forearm"])
+def test_fast_rigid_muscle_force_equals_thelen2003(name):
+    model = pinmsk.load_model(name)
+    mu = _Muscles(model)
+    rng = np.random.default_rng(1)
+    q = rng.uniform(0, 2, (40, 1))
+    v = rng.normal(size=(40, 1)) * 3
+    a = rng.uniform(0.01, 1, (40, model.n_muscles))
+    F = mu.rigid(a, mu.lengths(q), mu.velocities(q, v))[0]
+    ref = model.muscles.mtu.force(a, model.muscles.lengths(q), model.muscles.velocities(q, v),
+                                  tendon="rigid")
+    assert np.allclose(F, ref, rtol=1e-12, atol=1e-9)
+
+
+def test_ff_batch_equals_one_by_one(finger):
+    t = np.linspace(0, 0.2, 101)
+    tm = 0.5 * (t[1:] + t[:-1])
+    par = Polynomial(3, duration=0.2)
+    P = np.random.default_rng(2).uniform(0.05, 0.3, (3, 4, 2))     # 3 parameter sets
+    U = np.stack([par.evaluate(p, t) for p in P], axis=1)
+    Um = np.stack([par.evaluate(p, tm) for p in P], axis=1)
+    batch = simulate_ff(finger, t, U, Um, [0.0], [0.5])
+    for b in range(3):
+        one = simulate_ff(finger, t, U[:, b], Um[:, b], [0.0], [0.5])
+        assert np.array_equal(one["q"], batch["q"][:, b])
+
+
+def test_ifm_recovered_excitations_drive_ff_to_the_same_motion(finger):
+    """IFM (Eq. 5.5 forces -> skeleton -> inverse muscle Fig. 5.6 with analytic F', F'')
+    gives excitations that, fed to the fully forward compliant-tendon model, reproduce
+    the motion, the forces and the activations."""
+    T, h = 0.5, 2e-4
+    par = Fourier(2, period=T)
+    P = np.array([[20.0, 20.9], [0.05, -0.05], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]])
+    tf = np.linspace(0, T, int(round(T / (h / 2))) + 1)          # grid of half steps
+    tm = 0.5 * (tf[1:] + tf[:-1])
+    F = par.evaluate(P, tf)
+    q, v, acc = simulate_skeleton(finger, tf, None, None, [0.0], [0.0], forces=F[:, None],
+                                  forces_mid=par.evaluate(P, tm)[:, None])
+    q, v, acc = q[:, 0], v[:, 0], acc[:, 0]
+    assert 0.3 < q.max() < 0.6                                   # it really moves
+    inv = muscle_inverse(finger, q, v, acc, F, par.evaluate(P, tf, 1), par.evaluate(P, tf, 2))
+    u = inv["u"]
+    assert 0.0 < u.min() and u.max() < 1.0
+    ff = simulate_ff(finger, tf[::2], u[::2], u[1::2], q[0], v[0], a0=inv["a"][0],
+                     l_ce0=inv["l_ce"][0], tendon="compliant")
+    assert np.abs(ff["q"][:, 0] - q[::2, 0]).max() < 2e-4          # rad
+    assert np.abs(ff["force"] - F[::2]).max() < 0.01               # N, of ~20 N
+    assert np.abs(ff["a"] - inv["a"][::2]).max() < 2e-4
+
+
+def test_tracking_optimum_is_recovered(finger):
+    """Pure tracking (Eq. 3.3 with mu = 0) of a motion produced by known excitations:
+    the optimum J2 = 0 is reached."""
+    T = 0.25
+    par = Polynomial(3, duration=T)
+    P_true = np.array([[0.20, 0.25], [0.05, -0.04], [-0.02, 0.03], [0.01, 0.0]])
+    t = np.linspace(0, T, 126)
+    tm = 0.5 * (t[1:] + t[:-1])
+    sim = simulate_ff(finger, t, par.evaluate(P_true, t), par.evaluate(P_true, tm), [0.0], [1.0])
+    target = Target("samples", time=t, values=sim["q"][:, 0])
+    prob = DynamicOptimization(finger, parametrization=par, target=target, step=T / 125,
+                               tracking_weight=1.0, n_starts=1, tol=1e-10)
+    res = prob.fit().result_
+    assert res.converged, res.status
+    assert res.terms["tracking"] < 1e-7
+    assert res.max_tracking_error < 2e-3
+    assert res.max_bound_violation <= 1e-6
+
+
+def test_unconverged_is_flagged_not_reported(finger, capsys):
+    tg = Target("sine", amplitude=0.21, frequency=4.0)
+    prob = DynamicOptimization(finger, parametrization=Polynomial(6, duration=0.25), target=tg,
+                               step=0.25 / 100, tracking_weight=0.9, n_starts=1, maxiter=2)
+    res = prob.fit().result_
+    assert not res.converged
+    assert "NOT CONVERGED" in res.report()
+    assert "did not converge" in capsys.readouterr().err
+    assert res.summary()["converged"] is False
+
+
+def test_bad_problems_are_named(finger):
+    tg = Target("sine", amplitude=0.21, frequency=4.0)
+    par = Polynomial(3, duration=0.25)
+    with pytest.raises(ModelError, match="lower must be below upper"):
+        DynamicOptimization(finger, parametrization=par, target=tg, tracking_weight=0.9,
+                            excitation_bounds=(0.6, 0.2)).fit()
+    with pytest.raises(ModelError, match="tracking_tolerance must be > 0"):
+        DynamicOptimization(finger, parametrization=par, target=tg,
+                            tracking_tolerance=0.0).fit()
+    with pytest.raises(ModelError, match="tracking_weight .* or tracking_tolerance"):
+        DynamicOptimization(finger, parametrization=par, target=tg).fit()
+    with pytest.raises(ModelError, match="valid: ff, ifm, ift"):
+        DynamicOptimization(finger, parametrization=par, target=tg, tracking_weight=1,
+                            design="fwd").fit()
+    with pytest.raises(ModelError, match="unknown objective key"):
+        DynamicOptimization(finger, parametrization=par, target=tg, tracking_weight=1,
+                            objective={"kind": "effort", "power": 2}).fit()
+
+
+def test_effort_objective_is_eq_3_5(finger):
+    """J of Eq. 3.5 from the simulated activations by an independent trapezoid."""
+    tg = Target("sine", amplitude=0.1, frequency=4.0)
+    par = Polynomial(2, duration=0.25)
+    prob = DynamicOptimization(finger, parametrization=par, target=tg, step=0.25 / 50,
+                               tracking_weight=0.0,
+                               objective={"kind": "effort", "exponent": 3, "weights": "volume"})
+    prob._setup()
+    x = par.constant(0.3, 2).ravel()
+    sim = prob.simulate(x[None])
+    a = sim["a"][:, 0]
+    V = finger.muscles.volume
+    t = prob._t
+    integ = [np.sum(0.5 * (a[1:, i] ** 3 + a[:-1, i] ** 3) * np.diff(t)) for i in range(2)]
+    J = (V[0] * integ[0] + V[1] * integ[1]) / (V.sum() * 0.25)
+    assert prob._value(x)[0] == pytest.approx(J, rel=1e-12)
+
+
+def test_scale_masses_halves_the_finger(finger):
+    half = scale_masses(finger, 0.5)
+    assert half.mass == pytest.approx(0.5 * finger.mass)
+    assert BatchSkeleton(half).M == pytest.approx(0.5 * BatchSkeleton(finger).M)
+
+
+TASK = """
+[model]
+name = "finger"
+
+[motion]
+kind = "sine"
+amplitude = 0.21
+frequency = 4.0
+
+[parametrization]
+kind = "polynomial"
+order = 3
+design = "ff"
+
+[objective]
+kind = "effort"
+exponent = 2
+normalize = false
+tracking_weight = 0.9
+
+[solver]
+step = 0.0025
+n_starts = 1
+"""
+
+
+def test_task_file_runs_and_writes_a_trial(tmp_path):
+    task = tmp_path / "task.toml"
+    task.write_text(TASK)
+    out = tmp_path / "out.sto"
+    res = optimize_task(task, out)
+    assert res.converged
+    assert out.exists()
+    summary = json.loads(out.with_suffix(".sto.json").read_text())
+    assert summary["converged"] is True
+    tr = pinmsk.io.read_trial(out)
+    assert "flexor_excitation" in tr.names and "mcp_flexion" in tr.names
+
+
+def test_task_file_errors(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(TASK.replace("exponent = 2", "expnent = 2"))
+    with pytest.raises(ModelError, match=r"unknown key 'expnent' in \[objective\].*exponent"):
+        load_task(bad)
+    bad.write_text(TASK.replace('[model]\nname = "finger"', ""))
+    with pytest.raises(ModelError, match="missing model"):
+        load_task(bad)
+    bad.write_text(TASK + "\n[extras]\nx = 1\n")
+    with pytest.raises(ModelError, match="unknown section 'extras'.*valid sections"):
+        load_task(bad)
+    with pytest.raises(ModelError, match="not found"):
+        load_task(tmp_path / "nope.toml")
