@@ -106,6 +106,45 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def cmd_diagnose(args) -> int:
+    from .diagnose import run
+    model = _model(args)
+    trial = _read(args.trial, model)
+    r = run(model, trial, add=args.add or [], json_path=args.json, report_path=args.report,
+            plot_dir=args.plot, mode=args.mode, cutoff=args.cutoff, frames=args.frame or None)
+    print(r.summary_text())
+    for path in (args.json, args.report):
+        if path:
+            print(f"wrote {path}")
+    return 0
+
+
+def cmd_synth(args) -> int:
+    from .diagnose.synth import make_trial
+    trial = make_trial(args.model, args.effect or [], duration=args.duration, rate=args.rate,
+                       noise=None if args.no_noise else "realistic", seed=args.seed,
+                       measure=args.measure or None)
+    _write(trial, args.output)
+    return 0
+
+
+def cmd_view(args) -> int:
+    from .viewer import view_cli
+    view_cli(args.model, args.trial, args.results, open_browser=args.open,
+             block=not args.no_block, timeout=args.timeout)
+    return 0
+
+
+def cmd_batch(args) -> int:
+    from .pipeline import batch_cli
+    summary = batch_cli(args.config, scheduler=args.scheduler, jobs=args.jobs)
+    n = len(summary["rows"])
+    print(f"{n - len(summary['failed'])}/{n} trials done; summary table {summary['table']}")
+    for name in summary["failed"]:
+        print(f"  failed: {name}", file=sys.stderr)
+    return 1 if summary["failed"] else 0
+
+
 # -- parser ----------------------------------------------------------------------
 
 def build_parser() -> argparse.ArgumentParser:
@@ -148,13 +187,53 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", default="pinmsk-demo", help="folder for figures and the report (default ./pinmsk-demo)")
     s.set_defaults(func=cmd_demo)
 
-    for extra in _EXTRA_COMMANDS:
-        extra(sub)
+    s = sub.add_parser("diagnose", help="where the model fails and which physical effect is missing")
+    s.add_argument("model")
+    s.add_argument("trial", help="measured trial: coordinates plus <coord>_moment, EMG/excitations or GRF")
+    s.add_argument("--add", action="append", metavar="EFFECT[:TARGET]",
+                   help="fit and add this effect, then diagnose again (repeat to iterate)")
+    s.add_argument("--json", metavar="OUT.json", default=None, help="write the summary as JSON")
+    s.add_argument("--report", metavar="OUT.html", default=None, help="write a self-contained HTML report")
+    s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
+    s.add_argument("--mode", default="auto", choices=["auto", "torque", "motion", "muscle"],
+                   help="comparison level (default: chosen from the trial's channels)")
+    s.add_argument("--cutoff", type=float, default=6.0,
+                   help="low-pass cut-off (Hz) for differentiating the coordinates (default 6)")
+    s.add_argument("--frame", action="append", metavar="FRAME",
+                   help="frames to try frame effects (e.g. a payload) at, besides the defaults")
+    s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
+    s.set_defaults(func=cmd_diagnose)
+
+    s = sub.add_parser("synth", help="write a synthetic trial of a model with hidden effects and noise")
+    s.add_argument("model")
+    s.add_argument("--effect", action="append", metavar="FAMILY:TARGET:P=V[,P=V]",
+                   help="hidden effect, e.g. payload:hand:mass=1.0 (repeatable)")
+    s.add_argument("--duration", type=float, default=10.0, help="seconds (default 10)")
+    s.add_argument("--rate", type=float, default=100.0, help="Hz (default 100)")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--measure", action="append", choices=["moments", "excitations", "grf"],
+                   help="channel groups to record (default: by model)")
+    s.add_argument("--no-noise", action="store_true", help="noise-free channels")
+    s.add_argument("-o", "--output", required=True, help="output .csv or .sto")
+    s.set_defaults(func=cmd_synth)
+
+    s = sub.add_parser("view", help="meshcat viewer: the model, optionally playing a trial with results")
+    s.add_argument("model")
+    s.add_argument("trial", nargs="?", default=None, help="motion to play (coordinates over time)")
+    s.add_argument("--results", default=None,
+                   help="results on the same time base: <muscle>_activation/_force, <coord>_residual, GRF")
+    s.add_argument("--open", action="store_true", help="open a browser tab (if a display exists)")
+    s.add_argument("--no-block", action="store_true", help="return at once instead of serving until Ctrl-C")
+    s.add_argument("--timeout", type=float, default=None, help="serve for this many seconds, then stop")
+    s.set_defaults(func=cmd_view)
+
+    s = sub.add_parser("batch", help="run IK -> ID -> SO -> report over the trials of a config file")
+    s.add_argument("config", help="TOML config listing trials (see pinmsk.pipeline)")
+    s.add_argument("--jobs", type=int, default=None, help="parallel local workers (default: all cores)")
+    s.add_argument("--scheduler", default=None,
+                   help="Dask distributed scheduler ADDRESS (needs `pip install distributed`)")
+    s.set_defaults(func=cmd_batch)
     return p
-
-
-#: Functions ``f(subparsers)`` adding the solver and diagnosis commands.
-_EXTRA_COMMANDS: list = []
 
 
 def main(argv=None) -> int:

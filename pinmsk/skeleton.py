@@ -170,42 +170,33 @@ def nonlinear_effects(model, q, v, *, data: pin.Data | None = None) -> np.ndarra
     return out
 
 
-def rnea_derivatives(model, q, v, a, *, data: pin.Data | None = None):
-    """``(dtau/dq, dtau/dv, M)`` over frames, each ``(N, nv, nv)`` (Pinocchio RNEA derivatives)."""
+def _derivatives(fn, model, q, v, x, x_name, data):
+    """Run a Pinocchio derivative routine over frames; the third output is symmetrised."""
     pm = _pin(model)
     q = _frames(q, pm.nq, "q")
     v = _frames(v, pm.nv, "v")
-    a = _frames(a, pm.nv, "a")
+    x = _frames(x, pm.nv, x_name)
     pd = data if data is not None else pm.createData()
     n = q.shape[0]
-    dq = np.empty((n, pm.nv, pm.nv))
-    dv = np.empty_like(dq)
-    M = np.empty_like(dq)
+    d1 = np.empty((n, pm.nv, pm.nv))
+    d2 = np.empty_like(d1)
+    d3 = np.empty_like(d1)
     for i in range(n):
-        r = pin.computeRNEADerivatives(pm, pd, q[i], v[i], a[i])
-        dq[i], dv[i] = r[0], r[1]
-        Mi = r[2]
-        M[i] = np.triu(Mi) + np.triu(Mi, 1).T
-    return dq, dv, M
+        r = fn(pm, pd, q[i], v[i], x[i])
+        d1[i], d2[i] = r[0], r[1]
+        # Pinocchio fills only the upper triangle of M / M^-1
+        d3[i] = np.triu(r[2]) + np.triu(r[2], 1).T
+    return d1, d2, d3
+
+
+def rnea_derivatives(model, q, v, a, *, data: pin.Data | None = None):
+    """``(dtau/dq, dtau/dv, M)`` over frames, each ``(N, nv, nv)`` (Pinocchio RNEA derivatives)."""
+    return _derivatives(pin.computeRNEADerivatives, model, q, v, a, "a", data)
 
 
 def aba_derivatives(model, q, v, tau, *, data: pin.Data | None = None):
-    """``(da/dq, da/dv, da/dtau)`` over frames, each ``(N, nv, nv)`` (Pinocchio ABA derivatives)."""
-    pm = _pin(model)
-    q = _frames(q, pm.nq, "q")
-    v = _frames(v, pm.nv, "v")
-    tau = _frames(tau, pm.nv, "tau")
-    pd = data if data is not None else pm.createData()
-    n = q.shape[0]
-    dq = np.empty((n, pm.nv, pm.nv))
-    dv = np.empty_like(dq)
-    dtau = np.empty_like(dq)
-    for i in range(n):
-        r = pin.computeABADerivatives(pm, pd, q[i], v[i], tau[i])
-        dq[i], dv[i] = r[0], r[1]
-        Minv = r[2]
-        dtau[i] = np.triu(Minv) + np.triu(Minv, 1).T
-    return dq, dv, dtau
+    """``(da/dq, da/dv, da/dtau = M^-1)`` over frames, each ``(N, nv, nv)`` (Pinocchio ABA derivatives)."""
+    return _derivatives(pin.computeABADerivatives, model, q, v, tau, "tau", data)
 
 
 def mechanical_energy(model, q, v, *, data: pin.Data | None = None) -> np.ndarray:

@@ -70,6 +70,6 @@ def test_simulate_round_trip_through_files(tmp_path):
 
 
 def test_every_command_has_help():
-    for cmd in ([], ["models"], ["info"], ["id"], ["simulate"], ["demo"]):
+    for cmd in ([], ["models"], ["info"], ["id"], ["simulate"], ["demo"], ["view"], ["batch"]):
         r = subprocess.run([sys.executable, "-m", "pinmsk.cli", *cmd, "--help"], capture_output=True, text=True)
         assert r.returncode == 0 and "usage: pinmsk" in r.stdout, (cmd, r.stderr)

@@ -336,7 +336,7 @@ class CandidateFit:
             except np.linalg.LinAlgError:
                 se = np.full(p, np.inf)
             span = self.hi - self.lo
-            tol = np.where(np.isfinite(span), 1e-6 * span, 1e-9)
+            tol = np.where(np.isfinite(span), 1e-8 * span, 1e-9)
             at_bound = (x <= self.lo + tol) | (x >= self.hi - tol)
             se = np.where(at_bound, np.nan, se)          # no curvature-based error at a bound
             stderr = dict(zip(self.names, map(float, se)))

@@ -78,7 +78,7 @@ from typing import Callable
 import numpy as np
 import pinocchio as pin
 
-from ..errors import ModelError, SolverError
+from ..errors import ConvergenceError, ModelError, SolverError, TrialError
 from ..muscles.activation import activation_rate, excitation_from_activation
 from ..muscles.tendon import thelen_tendon_force
 from ..muscles.thelen2003 import (GAMMA, K_PE, PASSIVE_STRAIN0, thelen_contraction_rate,
@@ -636,6 +636,7 @@ class DynamicOptimization:
             self._S_neg = np.where(neg, r * w, 0.0) / np.sum((r * r * w)[neg])
         self._cache = {}
         self._gcache = {}
+        self._c_size = None
         self.n_sim_ = 0
 
     # -- evaluation ------------------------------------------------------------
@@ -747,9 +748,19 @@ class DynamicOptimization:
         hit = self._cache.get(key)
         if hit is not None:
             return hit
-        sim = self.simulate(x[None, :])
+        try:
+            sim = self.simulate(x[None, :])
+        except (TrialError, ConvergenceError) as exc:
+            # e.g. the inverse muscle model has no fibre state at a wild iterate: a
+            # large objective and violated constraints make the line search back off.
+            if self._c_size is None:
+                raise
+            self._last_failure = str(exc)
+            return (1e6 * getattr(self, "_f_ref", 1.0),
+                    None if self._c_size == 0 else -np.ones(self._c_size))
         f = float(self._objective_of(self._terms(sim))[0])
         c = self._constraints_of(sim)
+        self._c_size = 0 if c is None else c.shape[1]
         out = (f, None if c is None else c[0])
         if len(self._cache) > 64:
             self._cache.clear()
@@ -853,7 +864,7 @@ class DynamicOptimization:
             Bd = self.parametrization.basis(np.linspace(self._t[0], self._t[-1], self.bound_points))
             self._A_lin = np.kron(Bd, np.eye(self._n_sig))  # rows (time, muscle); x is (p, s) row-major
         # Objective scaled by its value at the first start (SLSQP's ftol is absolute).
-        self._f_ref = max(abs(self._value(starts[0])[0]), 1e-12)
+        self._f_ref = max(abs(self._value(starts[0])[0]), 1e-6)
         if self.n_jobs > 1 and len(starts) > 1 and sys.platform != "win32":
             import multiprocessing as mp
             global _ACTIVE

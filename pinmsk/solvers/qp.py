@@ -426,7 +426,7 @@ def _primal_from_dual(A, lam, w, P, lo, hi, W):
 
     Returns ``x, D, rho, Drho, s`` where ``D = dx/ds`` (0 at the bounds).
     """
-    s = np.einsum("njm,nj->nm", A, lam)
+    s = np.matmul(lam[:, None, :], A)[:, 0, :]           # A' lam, batched
     if P == 2.0:
         xu = s / (2.0 * w)
         D = np.broadcast_to(1.0 / (2.0 * w), s.shape)
@@ -478,27 +478,27 @@ def dual_newton(A, b, w, P, lo, hi, *, reserve_weight=None, lam0=None, tol: floa
 
     def hess(idx, D, Drho):
         Ai = A[idx]
-        Hm = np.einsum("njm,nm,nkm->njk", Ai, D, Ai)
+        Hm = np.matmul(Ai * D[:, None, :], np.swapaxes(Ai, 1, 2))
         Hm[:, np.arange(nd), np.arange(nd)] += Drho
         return Hm
 
     if lam0 is None:
         # start from the problem without bounds at P = 2 ...
         D0 = 1.0 / (2.0 * w)
-        H0 = np.einsum("njm,nm,nkm->njk", A, D0, A) + 1e-12 * eye
+        H0 = np.matmul(A * D0[:, None, :], np.swapaxes(A, 1, 2)) + 1e-12 * eye
         lam = np.linalg.solve(H0, b[..., None])[..., 0]
         if P != 2.0:
             # ... and, for P > 2, match its activations in the KKT relation s = P w x^(P-1)
-            x2 = np.clip(np.einsum("njm,nj->nm", A, lam) * D0, lo, hi)
+            x2 = np.clip(np.matmul(lam[:, None, :], A)[:, 0, :] * D0, lo, hi)
             x2 = np.maximum(x2, 1e-3)
             s_target = P * w * x2 ** (P - 1.0)
-            G = np.einsum("njm,nkm->njk", A, A) + 1e-12 * eye
-            lam = np.linalg.solve(G, np.einsum("njm,nm->nj", A, s_target)[..., None])[..., 0]
+            G = np.matmul(A, np.swapaxes(A, 1, 2)) + 1e-12 * eye
+            lam = np.linalg.solve(G, np.matmul(A, s_target[..., None]))[..., 0]
     else:
         lam = np.array(np.broadcast_to(lam0, (N, nd)), dtype=float)
 
     x, D, rho, Drho, s = _primal_from_dual(A, lam, w, P, lo, hi, W)
-    res = b - np.einsum("njm,nm->nj", A, x) - rho
+    res = b - np.matmul(A, x[..., None])[..., 0] - rho
     rnorm = np.max(np.abs(res), axis=1) if nd else np.zeros(N)
     iters = np.zeros(N, dtype=int)
     target = 1e-3 * tol      # iterate past the acceptance tolerance (Newton is cheap there)
@@ -560,7 +560,7 @@ def dual_newton(A, b, w, P, lo, hi, *, reserve_weight=None, lam0=None, tol: floa
         lam[idx] = new_lam
         xi, Di, ri, Dri, si = _primal_from_dual(A[idx], new_lam, wi, P, loi, hii, W)
         x[idx], D[idx], rho[idx], Drho[idx], s[idx] = xi, Di, ri, Dri, si
-        res[idx] = bi - np.einsum("njm,nm->nj", A[idx], xi) - ri
+        res[idx] = bi - np.matmul(A[idx], xi[..., None])[..., 0] - ri
         rnorm[idx] = np.max(np.abs(res[idx]), axis=1)
         active[idx] = rnorm[idx] > target
     converged = rnorm <= tol
@@ -619,14 +619,15 @@ def lp_verify(E, f, c, lo, hi, basis, *, tol: float = 1e-9):
     cB = c[basis]
     y, sing = _solve_many(np.swapaxes(EB, 1, 2), np.broadcast_to(cB, (N, ne)))
     ok = ~sing
-    r = c[None, nb] - np.einsum("njk,nj->nk", E[:, :, nb], y)
+    EN = E[:, :, nb]
+    r = c[None, nb] - np.matmul(y[:, None, :], EN)[:, 0, :]
     loN, hiN = lo[:, nb], hi[:, nb]
     # r ~ 0 (a tie) may sit at either bound: take the lower one
     up = r < -1e-12
     zN = np.where(up, hiN, loN)
     ok &= ~np.any(up & (hiN >= BIG / 10), axis=1)
     ok &= ~np.any(~up & (loN <= -BIG / 10), axis=1)
-    rhs = f - np.einsum("njk,nk->nj", E[:, :, nb], zN)
+    rhs = f - np.matmul(EN, zN[..., None])[..., 0]
     zB, sing = _solve_many(EB, rhs)
     ok &= ~sing
     ok &= np.all(zB >= lo[:, basis] - tol, axis=1) & np.all(zB <= hi[:, basis] + tol, axis=1)
@@ -635,5 +636,6 @@ def lp_verify(E, f, c, lo, hi, basis, *, tol: float = 1e-9):
     z[:, basis] = np.clip(zB, lo[:, basis], hi[:, basis])
     z[:, nb] = zN
     # the clip moved z by at most tol; keep the equality residual honest
-    ok &= np.max(np.abs(np.einsum("njk,nk->nj", E, z) - f), axis=1) <= 10 * tol if ne else True
+    if ne:
+        ok &= np.max(np.abs(np.matmul(E, z[..., None])[..., 0] - f), axis=1) <= 10 * tol
     return ok, z, y
