@@ -106,6 +106,53 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def _so_options(args) -> dict:
+    return dict(mode=args.mode, exponent=args.exponent, weights=args.weights,
+                reserves=args.reserves)
+
+
+def _report_results(args, model, trial, result, title, text):
+    if args.plot:
+        from . import plots
+        chans = [f"{m}_force" for m in model.muscle_names if f"{m}_force" in result]
+        for path in plots.save_channels(result, chans, args.plot, stem=title, ylabel="force (N)"):
+            print(f"wrote {path}")
+    if args.report:
+        from .report import write_results_report
+        write_results_report(args.report, model=model, trial=trial, results=result,
+                             title=title.replace("_", " "), text=text)
+        print(f"wrote {args.report}")
+
+
+def cmd_so(args) -> int:
+    from .progress import Progress
+    from .solvers.static import StaticOptimization
+    model = _model(args)
+    trial = _read(args.trial, model)
+    so = StaticOptimization(**_so_options(args), minmax=args.minmax)
+    with Progress(trial.n_frames, "SO") as bar:
+        so.fit(model, trial, cutoff=args.cutoff, progress=bar)
+    print(so.report())
+    _write(so.result_, args.output)
+    _report_results(args, model, trial, so.result_, "static_optimization", so.report())
+    return 0
+
+
+def cmd_fso(args) -> int:
+    from .progress import Progress
+    from .solvers.fso import ForwardStaticOptimization
+    model = _model(args)
+    trial = _read(args.trial, model)
+    fso = ForwardStaticOptimization(**_so_options(args), tracking=args.tracking, enforce=args.enforce,
+                                    control_points=args.control_points, integrator=args.integrator)
+    with Progress(args.control_points, "FSO") as bar:
+        fso.fit(model, trial, cutoff=args.cutoff, progress=bar)
+    print(fso.report())
+    _write(fso.result_, args.output)
+    _report_results(args, model, trial, fso.result_, "forward_static_optimization", fso.report())
+    return 0
+
+
 def cmd_diagnose(args) -> int:
     from .diagnose import run
     model = _model(args)
@@ -186,6 +233,38 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("demo", help="the diagnosis loop on a shipped forearm trial with a hidden effect")
     s.add_argument("--out", default="pinmsk-demo", help="folder for figures and the report (default ./pinmsk-demo)")
     s.set_defaults(func=cmd_demo)
+
+    def so_flags(s):
+        s.add_argument("model")
+        s.add_argument("trial", help="trial with the coordinates (and optionally <coord>_moment)")
+        s.add_argument("-o", "--output", required=True, help="output .sto or .csv")
+        s.add_argument("--mode", choices=["force", "activation"], default="force",
+                       help="unknowns: muscle forces (0..F_max) or activations (F = a F_active + F_passive)")
+        s.add_argument("--exponent", type=float, default=2.0, help="P in sum (F/N)^P (1 = LP, 2 = QP, >2 SQP)")
+        s.add_argument("--weights", choices=["none", "fmax", "pcsa", "volume"], default="none",
+                       help="normaliser N_i of each muscle (thesis Eq. 2.11-2.14)")
+        s.add_argument("--reserves", action="store_true",
+                       help="ideal reserve actuators per dof at high cost instead of failing on infeasible frames")
+        s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
+        s.add_argument("--cutoff", type=float, default=None,
+                       help="low-pass cut-off (Hz) before differentiating the coordinates")
+        s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
+        s.add_argument("--report", metavar="OUT.html", default=None, help="write a self-contained HTML report")
+
+    s = sub.add_parser("so", help="static optimization: muscle forces and activations frame by frame")
+    so_flags(s)
+    s.add_argument("--minmax", action="store_true", help="min/max criterion (thesis Eq. 2.13) as an epigraph LP")
+    s.set_defaults(func=cmd_so)
+
+    s = sub.add_parser("fso", help="forward static optimization: track a motion forward in time (thesis Sec. 3.4)")
+    so_flags(s)
+    s.add_argument("--tracking", choices=["q", "qv", "qva", "pid"], default="pid",
+                   help="tracking term: Eq. 3.16 (q), 3.17 (qv), 3.18 (qva) or the PID form 3.19")
+    s.add_argument("--enforce", choices=["constraint", "cost"], default="constraint",
+                   help="tracking as a QP constraint or as a weighted cost term (Eq. 3.15)")
+    s.add_argument("--control-points", type=int, default=100, help="number of control points (default 100)")
+    s.add_argument("--integrator", default="rk4", help="rk4 (fixed step) or a solve_ivp method such as RK45")
+    s.set_defaults(func=cmd_fso)
 
     s = sub.add_parser("diagnose", help="where the model fails and which physical effect is missing")
     s.add_argument("model")

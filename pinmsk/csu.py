@@ -17,16 +17,36 @@ the **global origin**, not about the centre of pressure.
   ``ground_force_py`` (= 0 after the shift below).  Where ``F_y < min_force``
   the COP is undefined and set to **NaN**: mask it (``ground_force_vy >=
   min_force``) before use;
-* if the ankle (``RLM``), heel (``RHEE``) and 5th-metatarsal (``RMT5``) markers are
-  present, the foot2d driving coordinates ``ankle_x``, ``ankle_y`` (the lateral
-  malleolus) and ``foot_angle`` (rad, + = toes down): the heel->MT5 marker line's
-  angle below the horizontal, minus its value with the foot flat (median over
-  frames with F_y > 50 % of its maximum and |d angle/dt| < 0.5 rad/s).
+* if the heel (``RHEE``) and 5th-metatarsal (``RMT5``) markers are present, the
+  foot2d driving coordinates ``foot_angle`` (rad, + = toes down: the heel->MT5
+  marker line's angle below the horizontal, minus its value with the foot flat,
+  the median over frames with F_y > 50 % of its maximum and |d angle/dt| < 0.5
+  rad/s) and ``ankle_x``, ``ankle_y``, placed by ``anchor``:
+
+  ``"heel"`` (default) -- the foot segment is located by its markers: the heel
+      sphere's site H of foot2d (Table 4.1) is a point fixed in the marker-defined
+      foot frame, ``H = RHEE + Rot(foot_angle) o``, and ``ankle_x, ankle_y`` is the
+      foot2d ankle A that puts H there (``A = H - Rot h_AH``).  The constant offset
+      ``o`` (m, foot frame) is ``heel_offset`` if given, else calibrated: its height
+      puts H (and P, level with it) at ``heel_height`` above the belt in foot flat
+      (default 0.045 m: the thesis radii of Tables 4.2-4.4, H 50, P 49, T 44 mm,
+      then give 5, 4 and ~0 mm of static penetration, inside the radius bounds;
+      the vertical datum is otherwise nearly interchangeable with the fitted
+      radii -- 40, 45 and 50 mm gave J = 0.110, 0.113, 0.108 in one-start fits) and its x puts H above the measured COP during
+      heel-only loading (frames within 0.1 s of each force onset with F_y >=
+      ``min_force`` while the toes are still up, foot_angle < -0.02 rad: there the
+      contact point is straight below the heel sphere's centre).  The result is in
+      ``meta["heel_offset"]``, the implied (mean) offset of the foot2d ankle from the
+      lateral malleolus marker in ``meta["ankle_from_marker"]`` (foot frame, m).
+  ``"ankle"`` -- ``ankle_x, ankle_y`` = the lateral malleolus marker (``RLM``), the
+      Table 4.1 foot hanging from it (the marker is not the ankle joint centre, so
+      this puts the heel site where the heel marker is, ~4 cm behind the heel's
+      contact point in this trial).
 
 All heights are shifted by ``-belt_height`` so the belt surface is ``y = 0``,
 the ground plane of :mod:`pinmsk.contact`.  ``meta["ground_speed"]`` is the belt
-velocity along x (m/s, negative: moving backwards) estimated as the median
-ankle-marker x velocity over the same foot-flat frames; the contact fit uses it
+velocity along x (m/s, negative: moving backwards) estimated as the median x
+velocity of the heel and MT5 markers' midpoint over the same foot-flat frames; the contact fit uses it
 as the ground's tangential velocity.  ``meta["body_mass"]`` is ``body_mass`` if given.
 """
 from __future__ import annotations
@@ -61,11 +81,52 @@ def _fill_gaps(x: np.ndarray, max_gap: int, name: str, path) -> tuple[np.ndarray
     return out, int(bad.sum())
 
 
+def _anchor_heel(t, hx, hy, theta, fy, cop, flat, *, min_force, heel_offset, heel_height, path):
+    """foot2d ankle ``(ax, ay)`` that puts the heel site H at ``RHEE + Rot(theta) o`` (see read_csu)."""
+    from .contact.foot import Foot2dGeometry, load_foot2d
+
+    h = Foot2dGeometry.from_model(load_foot2d()).heel[:2]
+    c, s = np.cos(theta), np.sin(theta)
+    info = {}
+    if heel_offset is None:
+        # heel-only loading: from each force onset, up to 0.1 s, while the toes are still up
+        on = fy >= min_force
+        onsets = np.flatnonzero(on[1:] & ~on[:-1]) + 1
+        hs = np.zeros_like(on)
+        for i0 in onsets:
+            k = i0
+            while k < t.size and on[k] and theta[k] < -0.02 and t[k] - t[i0] <= 0.1:
+                hs[k] = True
+                k += 1
+        if hs.sum() < 2:
+            raise TrialError(f"{path}: cannot calibrate the heel offset: no heel-only loading frames (force "
+                             f"onset with the toes up, foot_angle < -0.02 rad); pass heel_offset=(ox, oy) in m "
+                             "(heel marker -> heel sphere centre, foot frame) or anchor='ankle'")
+        # unknowns o = (ox, oy):  mean over flat of  hy - s ox + c oy = heel_height
+        #                         mean over hs   of  hx + c ox + s oy = cop_x
+        A = np.array([[np.mean(-s[flat]), np.mean(c[flat])], [np.mean(c[hs]), np.mean(s[hs])]])
+        b = np.array([heel_height - np.mean(hy[flat]), np.mean(cop[hs] - hx[hs])])
+        o = np.linalg.solve(A, b)
+        info["heel_calibration_frames"] = int(hs.sum())
+    else:
+        o = np.asarray(heel_offset, dtype=float).reshape(2)
+    Hx = hx + c * o[0] + s * o[1]
+    Hy = hy - s * o[0] + c * o[1]
+    ax = Hx - (c * h[0] + s * h[1])
+    ay = Hy - (-s * h[0] + c * h[1])
+    info["heel_offset"] = [float(o[0]), float(o[1])]
+    return ax, ay, info
+
+
 def read_csu(path, *, plate: str = "FP2", belt_height: float = 0.0, min_force: float = 20.0,
              max_gap: int = 5, ankle: str = "RLM", heel: str = "RHEE", toe: str = "RMT5",
-             body_mass: float | None = None) -> Trial:
+             body_mass: float | None = None, anchor: str = "heel", heel_offset=None,
+             heel_height: float = 0.045) -> Trial:
     """Read a CSU leg2d text file (see the module docstring) into a Trial."""
     path = Path(path)
+    if anchor not in ("heel", "ankle"):
+        raise TrialError(f"read_csu: anchor must be 'heel' (locate the foot from the heel and MT5 markers) "
+                         f"or 'ankle' (hang the foot from the {ankle} marker), got {anchor!r}")
     if not path.exists():
         raise TrialError(f"CSU file not found: {path}")
     lines = path.read_text().splitlines()
@@ -120,19 +181,36 @@ def read_csu(path, *, plate: str = "FP2", belt_height: float = 0.0, min_force: f
             "min_force": min_force, "filled": filled}
     if body_mass is not None:
         meta["body_mass"] = float(body_mass)
-    if all(f"{m}_x" in channels for m in (ankle, heel, toe)):
+    needed = (heel, toe) + ((ankle,) if anchor == "ankle" else ())
+    if all(f"{m}_x" in channels for m in needed):
         ang = np.arctan2(channels[f"{toe}_y"] - channels[f"{heel}_y"], channels[f"{toe}_x"] - channels[f"{heel}_x"])
         dang = np.gradient(ang, t)
         flat = (fy > 0.5 * fy.max()) & (np.abs(dang) < 0.5)
         if flat.sum() < 3:
             raise TrialError(f"{path}: cannot find foot-flat frames (F_y > 50 % max, still foot) "
                              "to calibrate foot_angle")
-        channels["ankle_x"] = channels[f"{ankle}_x"]
-        channels["ankle_y"] = channels[f"{ankle}_y"]
-        channels["foot_angle"] = -(ang - np.median(ang[flat]))
-        vx = np.gradient(channels[f"{ankle}_x"], t)
-        meta["ground_speed"] = float(np.median(vx[flat]))
+        theta = -(ang - np.median(ang[flat]))
+        channels["foot_angle"] = theta
         meta["foot_angle_offset"] = float(np.median(ang[flat]))
+        meta["anchor"] = anchor
+        if anchor == "ankle":
+            ax, ay = channels[f"{ankle}_x"], channels[f"{ankle}_y"]
+        else:
+            ax, ay, info = _anchor_heel(t, channels[f"{heel}_x"], channels[f"{heel}_y"], theta, fy, cop, flat,
+                                        min_force=min_force, heel_offset=heel_offset,
+                                        heel_height=heel_height, path=path)
+            meta.update(info)
+            if f"{ankle}_x" in channels:
+                c, s_ = np.cos(theta), np.sin(theta)
+                dx, dy = ax - channels[f"{ankle}_x"], ay - channels[f"{ankle}_y"]
+                # world -> foot frame: l = Rot^T d with Rot = [[c, s], [-s, c]]
+                meta["ankle_from_marker"] = [float(np.mean(c * dx - s_ * dy)), float(np.mean(s_ * dx + c * dy))]
+        channels["ankle_x"] = ax
+        channels["ankle_y"] = ay
+        # belt speed: the foot markers' x velocity in foot flat (the shank marker RLM is biased by
+        # the shank's rotation: -0.94 vs -0.98 m/s in the CSU file)
+        vx = np.gradient(0.5 * (channels[f"{heel}_x"] + channels[f"{toe}_x"]), t)
+        meta["ground_speed"] = float(np.median(vx[flat]))
     units = {k: ("N" if k.startswith("ground_force_v") else "N*m" if "moment" in k else
                  "rad" if k == "foot_angle" else "m") for k in channels}
     return Trial(t, channels, units=units, meta=meta)

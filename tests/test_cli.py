@@ -70,6 +70,41 @@ def test_simulate_round_trip_through_files(tmp_path):
 
 
 def test_every_command_has_help():
-    for cmd in ([], ["models"], ["info"], ["id"], ["simulate"], ["demo"], ["view"], ["batch"]):
+    for cmd in ([], ["models"], ["info"], ["id"], ["simulate"], ["demo"], ["view"], ["batch"], ["so"], ["fso"],
+                ["diagnose"], ["synth"]):
         r = subprocess.run([sys.executable, "-m", "pinmsk.cli", *cmd, "--help"], capture_output=True, text=True)
         assert r.returncode == 0 and "usage: pinmsk" in r.stdout, (cmd, r.stderr)
+
+
+def test_so_and_fso_write_forces_matching_library(tmp_path):
+    from pinmsk.solvers.analytical import gaussian_elbow_trial
+    from pinmsk.solvers.static import StaticOptimization
+    src = tmp_path / "gauss.csv"
+    trial = gaussian_elbow_trial()
+    write_trial(trial, src)
+    out = tmp_path / "so.sto"
+    assert main(["so", "forearm", str(src), "-o", str(out), "--exponent", "3"]) == 0
+    got = read_trial(out)
+    ref = StaticOptimization(exponent=3).fit(pinmsk.load_model("forearm"), read_trial(src)).result_
+    for m in ("BRD", "TRILH"):
+        assert np.allclose(got[f"{m}_force"], ref[f"{m}_force"], atol=1e-6)
+    fso = tmp_path / "fso.csv"
+    assert main(["fso", "forearm", str(src), "-o", str(fso)]) == 0
+    f = read_trial(fso)
+    assert "BICLH_force" in f.names and f.n_frames >= 100
+
+
+def test_synth_then_diagnose_json(tmp_path, capsys):
+    import json
+    src = tmp_path / "syn.csv"
+    assert main(["synth", "forearm", "--effect", "joint_damping:elbow_flexion:c=0.3", "--duration", "8",
+                 "--seed", "3", "-o", str(src)]) == 0
+    js = tmp_path / "d.json"
+    assert main(["diagnose", "forearm", str(src), "--add", "joint_damping", "--json", str(js)]) == 0
+    d = json.loads(js.read_text())
+    assert set(d) == {"rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added"}
+    assert d["added"][0]["effect"] == "joint_damping"
+    assert d["added"][0]["params"]["c"] == pytest.approx(0.3, rel=0.15)
+    assert d["verdict"] == "at_noise_floor"
+    assert main(["diagnose", "forearm", str(src), "--add", "joint_dampng"]) == 2
+    assert "joint_damping" in capsys.readouterr().err

@@ -92,23 +92,30 @@ def site_frames(model, side: str | None = None) -> dict[str, str]:
 
 def foot_contacts(model, kind: str = "hypervolumetric", *, side: str | None = None,
                   relax: bool = False, ground_speed: float = 0.0, values=None,
-                  smoothing: float = 1e-4) -> list:
+                  smoothing: float = 1e-4, center="auto") -> list:
     """Three contact elements of type ``kind`` at the heel, metatarsal and toe of ``model``.
 
     Defaults are the thesis optima (Tables 4.2-4.4), radius/rest-length bounds
     per site as in the tables, friction (mu_f, v_s) of Table 4.4 where given.
     ``relax=True`` frees the centre offsets dx, dy (Sec. 4.1.4, +-20 mm).
     ``values`` optionally maps site -> {parameter: value}.
+    ``center`` (see :class:`SphereContact`): ``"auto"`` (default) is ``None`` for
+    foot2d (``side=None``: the thesis places the centres at H, P, T, and the
+    driving kinematics put them a radius above the belt) and ``"sole"`` for a
+    sided model such as gait2d, whose ``heel_r, metatarsal_r, toe_r`` lie on the
+    sole (on the ground when standing), so each centre sits one radius above its site.
     """
     if kind not in KINDS:
         raise ModelError(f"unknown contact model '{kind}'; choose one of {', '.join(KINDS)}")
     cls = KINDS[kind]
     frames = site_frames(model, side)
+    if isinstance(center, str) and center == "auto":
+        center = "sole" if side else None
     out = []
     for site, frame in frames.items():
         vals = dict(THESIS_VALUES[kind][site])
         vals.update((values or {}).get(site, {}))
-        c = cls(frame, ground_speed=ground_speed, smoothing=smoothing,
+        c = cls(frame, ground_speed=ground_speed, smoothing=smoothing, center=center,
                 bounds={cls.radius_name: (0.001, RADIUS_UPPER[site])}, **vals)
         if relax:
             from .sphere import _replace

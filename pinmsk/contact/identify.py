@@ -23,7 +23,6 @@ when the reader set it (a treadmill belt, see :mod:`pinmsk.csu`).
 """
 from __future__ import annotations
 
-import contextlib
 import json
 import math
 import time
@@ -32,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.optimize import least_squares
+from threadpoolctl import threadpool_limits
 
 from ..errors import ModelError, SolverError, TrialError
 from ..filtering import differentiate
@@ -41,6 +41,7 @@ from .foot import (KINDS, SITES, Foot2dGeometry, foot2d_site_kinematics, foot_co
 DRIVE = ("ankle_x", "ankle_y", "foot_angle")
 GRF = ("ground_force_vy", "ground_force_vx", "ground_force_px")
 N_FOURIER = 11
+TOE_MODES = ("kinematic", "fit", "flat", "channel")
 #: parameters sampled log-uniformly in the multi-start (scale-like, >= 0)
 _LOG_PARAMS = {"k_s", "a_s", "k_v", "a_v", "k_h", "a_h", "v_s"}
 
@@ -56,6 +57,27 @@ def fourier_basis(t: np.ndarray, period: float):
         B[:, 2 * k - 1], dB[:, 2 * k - 1] = np.sin(w * t), w * np.cos(w * t)
         B[:, 2 * k], dB[:, 2 * k] = np.cos(w * t), -w * np.sin(w * t)
     return B, dB
+
+
+def toe_from_kinematics(geom: Foot2dGeometry, q: np.ndarray, *, max_extension: float = 1.2) -> np.ndarray:
+    """Toe angle (rad, (N,)) from the driving kinematics ``q[:, :3]``: the toes are rigid and
+    extend only as much as keeps the toe site T from sinking below its foot-flat height.
+
+    With the toes in line with the foot (mtp = 0), T is ``PT sin(theta)`` below the MTP joint
+    P (theta = foot angle, + = toes down).  ``h0`` = the 5th percentile of P's height over the
+    frames (its height in foot flat).  Where T would go below ``h0`` the toes turn up to put it
+    there, ``mtp = arcsin((h_P - h0) / PT) - theta``; elsewhere (heel strike, swing) ``mtp = 0``.
+    Clipped at ``-max_extension``.  Uses kinematics only (no force data): the "toe angle
+    identified beforehand" of the thesis procedure, for data without a toe marker.
+    """
+    q0 = np.zeros((q.shape[0], 4))
+    q0[:, :3] = q[:, :3]
+    kin = foot2d_site_kinematics(geom, q0, np.zeros_like(q0))
+    h_p = kin["metatarsal"].position[:, 1] + (geom.mtp - geom.metatarsal)[1]
+    h0 = float(np.percentile(h_p, 5))
+    pt = float(np.hypot(geom.toe[0], geom.toe[1]))
+    phi = np.arcsin(np.clip((h_p - h0) / pt, -1.0, 1.0))
+    return np.clip(np.minimum(0.0, phi - q[:, 2]), -max_extension, 0.0)
 
 
 def stance_cycle(trial, *, threshold: float = 20.0) -> tuple[float, float]:
@@ -100,10 +122,15 @@ class ContactFit:
     initial        ``{site: {param: value}}`` overriding the thesis initial values
     bounds         ``{site: {param: (lo, hi)}}`` overriding the bounds
     fixed          names of parameters to hold at their initial value (all sites)
-    toe            toe angle: ``"fit"`` (the Eq. 4.1 series is fitted with the contact
-                   parameters, as the issue asks), ``"flat"`` (the series is fixed to its
-                   least-squares fit of "toes flat on the ground while the heel is up",
+    toe            toe angle (the 11-term series of Eq. 4.1 in every mode but ``"channel"``):
+                   ``"kinematic"`` (default; the thesis procedure: the toe angle is
+                   identified beforehand from the kinematics, :func:`toe_from_kinematics`,
+                   and held fixed during the contact fit), ``"fit"`` (the series is fitted
+                   with the contact parameters, the issue's Eq. 4.1 setting, each coefficient
+                   bounded to +-``toe_range`` rad around the kinematic estimate so the toe
+                   cannot act as a free force generator), ``"flat"`` (legacy: the series of
                    ``mtp = -max(foot_angle, 0)``), or ``"channel"`` (the trial's ``mtp``)
+    toe_range      +- bound (rad) of each toe coefficient around its kinematic value (``toe="fit"``)
     ground_speed   ground x-velocity (m/s); default ``trial.meta["ground_speed"]`` or 0
     cop_threshold  COP term only where f_n^e > cop_threshold * max f_n^e
     n_jobs         processes for the multi-start (fork; 1 = serial)
@@ -118,9 +145,9 @@ class ContactFit:
 
     def __init__(self, *, contact: str = "hypervolumetric", relax: bool = False, window=None,
                  cutoff: float | None = 12.0, n_starts: int = 6, initial=None, bounds=None,
-                 fixed=(), toe: str = "fit", ground_speed: float | None = None,
+                 fixed=(), toe: str = "kinematic", ground_speed: float | None = None,
                  cop_threshold: float = 0.05, seed: int = 0, max_nfev: int = 400, ftol: float = 1e-10,
-                 relax_range: float = 0.02, n_jobs: int = 1):
+                 relax_range: float = 0.02, n_jobs: int = 1, toe_range: float = 0.05):
         self.contact = contact
         self.relax = relax
         self.window = window
@@ -137,6 +164,7 @@ class ContactFit:
         self.ftol = ftol
         self.relax_range = relax_range
         self.n_jobs = n_jobs
+        self.toe_range = toe_range
 
     # -- setup ------------------------------------------------------------
     def _contacts(self, model, ground_speed):
@@ -256,8 +284,11 @@ class ContactFit:
     def fit(self, model, trial) -> "ContactFit":
         """Identify the parameters; returns self."""
         t_start = time.perf_counter()
-        if self.toe not in ("fit", "flat", "channel"):
-            raise ModelError(f"ContactFit: toe must be 'fit', 'flat' or 'channel', got {self.toe!r}")
+        if self.toe not in TOE_MODES:
+            raise ModelError(f"ContactFit: toe must be one of {', '.join(map(repr, TOE_MODES))}, got {self.toe!r}")
+        if not self.toe_range > 0:
+            raise ModelError(f"ContactFit: toe_range must be > 0 rad (the +- bound of the toe coefficients), "
+                             f"got {self.toe_range}; use toe='kinematic' to hold the toe angle fixed")
         if model is None:
             model = load_foot2d()
         gs = self.ground_speed
@@ -266,9 +297,14 @@ class ContactFit:
         self.ground_speed_ = gs
         contacts = self._contacts(model, gs)
         prob = self._problem(model, trial, gs)
-        # Fourier initial guess: toes flat on the ground when the heel is up
-        fourier0 = np.linalg.lstsq(prob.B, -np.maximum(prob.q[:, 2], 0.0), rcond=None)[0]
+        # toe angle from the kinematics (held fixed for "kinematic", the centre of the bounds for "fit")
         if self.toe == "flat":
+            mtp_kin = -np.maximum(prob.q[:, 2], 0.0)
+        else:
+            mtp_kin = toe_from_kinematics(prob.geom, prob.q)
+        fourier0 = np.linalg.lstsq(prob.B, mtp_kin, rcond=None)[0]
+        self.toe_kinematic_ = fourier0
+        if self.toe in ("flat", "kinematic"):
             prob.q[:, 3], prob.v[:, 3] = prob.B @ fourier0, prob.dB @ fourier0
         self._check_contact(prob, contacts, fourier0)
 
@@ -284,11 +320,11 @@ class ContactFit:
         hi = np.array([contacts[i]._params[n].max for i, n in slots])
         typ = np.array([_typical(contacts[i], n) for i, n in slots])
         if self._fit_toe:
+            # regularised: each coefficient within +-toe_range of its kinematic value
             p0 = np.concatenate([p0, fourier0])
-            lo = np.concatenate([lo, np.full(N_FOURIER, -2.0)])
-            hi = np.concatenate([hi, np.full(N_FOURIER, 2.0)])
+            lo = np.concatenate([lo, fourier0 - self.toe_range])
+            hi = np.concatenate([hi, fourier0 + self.toe_range])
             typ = np.concatenate([typ, np.full(N_FOURIER, 0.1)])
-            p0[nfree:] = np.clip(p0[nfree:], -1.99, 1.99)
         w = np.repeat(np.sqrt(prob.weights), prob.t.size)
 
         def unpack(x):
@@ -319,15 +355,17 @@ class ContactFit:
             starts.append(np.clip(s, lo + 1e-12 * np.abs(lo), hi - 1e-12 * np.abs(hi)))
         def solve(s):
             try:
-                with _fast_svd():
-                    res = least_squares(fun, s / typ, bounds=(lo / typ, hi / typ), method="trf",
-                                        x_scale=1.0, ftol=self.ftol, xtol=1e-10, gtol=1e-10,
-                                        max_nfev=self.max_nfev, diff_step=1e-6)
+                res = least_squares(fun, s / typ, bounds=(lo / typ, hi / typ), method="trf",
+                                    x_scale=1.0, ftol=self.ftol, xtol=1e-10, gtol=1e-10,
+                                    max_nfev=self.max_nfev, diff_step=1e-6)
             except ValueError as exc:
                 raise SolverError(f"ContactFit: least_squares failed: {exc}") from None
             return res
 
-        with _single_thread_blas():
+        # The linear algebra is tiny (~300 x 35): threaded BLAS only adds overhead (OpenBLAS's
+        # threaded gesdd, used by 'trf', measured 40 ms per SVD vs 0.46 ms on one thread), and
+        # with forked multi-start workers it oversubscribes the cores.  Forked workers inherit the limit.
+        with threadpool_limits(limits=1):
             results = _map_starts(solve, starts, self.n_jobs)
         self.starts_ = [float(2 * r.cost) for r in results]
         nfev = sum(int(r.nfev) for r in results)
@@ -336,7 +374,9 @@ class ContactFit:
             raise SolverError("ContactFit: no start produced a finite solution")
         vals, four = unpack(best.x)
         self.contacts_ = [c.with_params(v) for c, v in zip(contacts, vals)]
-        self.fourier_ = four if four is not None else (fourier0 if self.toe == "flat" else None)
+        self.fourier_ = four if four is not None else (None if self.toe == "channel" else fourier0)
+        self.toe_deviation_ = (float(np.max(np.abs(prob.B @ (self.fourier_ - fourier0))))
+                               if self.fourier_ is not None else 0.0)
         self.result_ = best
         self.nfev_ = nfev
         self.n_free_ = best.x.size
@@ -409,6 +449,7 @@ class ContactFit:
                 "objective": self.objective_, "objective_full": self.objective_full_,
                 "terms": self.terms_, "params": self.params_(),
                 "toe_fourier": None if self.fourier_ is None else [float(x) for x in self.fourier_],
+                "toe_max_deviation": self.toe_deviation_,
                 "rmse": self.rmse_, "seconds": self.seconds_, "n_free": int(self.n_free_),
                 "aic": self.aic_, "bic": self.bic_, "converged": bool(self.result_.status > 0),
                 "nfev": int(self.nfev_), "starts": self.starts_, "ground_speed": self.ground_speed_,
@@ -486,41 +527,6 @@ class ContactFit:
 _JOB = None
 
 
-@contextlib.contextmanager
-def _single_thread_blas():
-    """Run with OpenBLAS on one thread (restored on exit); a no-op where it cannot be found.
-
-    The fit's linear algebra is tiny (~300 x 35); threaded BLAS only adds
-    overhead, and with forked multi-start workers it oversubscribes the cores
-    (measured: 8 starts took 220 s on 2 processes vs 56 s serial).  Works like
-    threadpoolctl, without the dependency: the setters of the OpenBLAS builds
-    loaded by numpy and scipy are called through ctypes.
-    """
-    import ctypes
-    calls = []
-    try:
-        with open("/proc/self/maps") as fh:
-            paths = {ln.split()[-1] for ln in fh if "openblas" in ln and ln.split()[-1].startswith("/")}
-        for path in paths:
-            lib = ctypes.CDLL(path)
-            for suffix in ("", "64_"):
-                get = getattr(lib, f"scipy_openblas_get_num_threads{suffix}", None) or \
-                    getattr(lib, f"openblas_get_num_threads{suffix}", None)
-                set_ = getattr(lib, f"scipy_openblas_set_num_threads{suffix}", None) or \
-                    getattr(lib, f"openblas_set_num_threads{suffix}", None)
-                if get is not None and set_ is not None:
-                    calls.append((set_, int(get())))
-    except (OSError, AttributeError):  # pragma: no cover - not Linux / unusual BLAS
-        calls = []
-    for set_, _ in calls:
-        set_(1)
-    try:
-        yield
-    finally:
-        for set_, n in calls:
-            set_(n)
-
-
 def _run_job(i):
     fn, starts = _JOB
     return fn(starts[i])
@@ -543,63 +549,6 @@ def _map_starts(fn, starts, n_jobs: int):
             return list(ex.map(_run_job, range(len(starts))))
     finally:
         _JOB = None
-
-
-@contextlib.contextmanager
-def _single_thread_blas():
-    """Run with OpenBLAS on one thread (restored on exit); a no-op where it cannot be found.
-
-    The fit's linear algebra is tiny (~300 x 35); threaded BLAS only adds
-    overhead, and with forked multi-start workers it oversubscribes the cores
-    (measured: 8 starts took 220 s on 2 processes vs 56 s serial).  Works like
-    threadpoolctl, without the dependency: the setters of the OpenBLAS builds
-    loaded by numpy and scipy are called through ctypes.
-    """
-    import ctypes
-    calls = []
-    try:
-        with open("/proc/self/maps") as fh:
-            paths = {ln.split()[-1] for ln in fh if "openblas" in ln and ln.split()[-1].startswith("/")}
-        for path in paths:
-            lib = ctypes.CDLL(path)
-            for suffix in ("", "64_"):
-                get = getattr(lib, f"scipy_openblas_get_num_threads{suffix}", None) or \
-                    getattr(lib, f"openblas_get_num_threads{suffix}", None)
-                set_ = getattr(lib, f"scipy_openblas_set_num_threads{suffix}", None) or \
-                    getattr(lib, f"openblas_set_num_threads{suffix}", None)
-                if get is not None and set_ is not None:
-                    calls.append((set_, int(get())))
-    except (OSError, AttributeError):  # pragma: no cover - not Linux / unusual BLAS
-        calls = []
-    for set_, _ in calls:
-        set_(1)
-    try:
-        yield
-    finally:
-        for set_, n in calls:
-            set_(n)
-
-
-@contextlib.contextmanager
-def _fast_svd():
-    """Let scipy's 'trf' use LAPACK gesvd instead of gesdd while fitting.
-
-    On small dense Jacobians (~300 x 30) scipy's threaded gesdd costs ~13 ms per
-    call against ~0.2 ms for gesvd on the machines we measured, which made the
-    SVD 45 % of a fit.  Restored on exit; a no-op if scipy's internals differ.
-    """
-    try:
-        from scipy.optimize._lsq import trf as _trf
-        import scipy.linalg as _sl
-        orig = _trf.svd
-    except (ImportError, AttributeError):  # pragma: no cover
-        yield
-        return
-    _trf.svd = lambda a, full_matrices=False: _sl.svd(a, full_matrices=full_matrices, lapack_driver="gesvd")
-    try:
-        yield
-    finally:
-        _trf.svd = orig
 
 
 def _typical(c, name: str) -> float:

@@ -184,6 +184,13 @@ class SphereContact(Component):
     ``bounds``        per-element parameter bounds ``{name: (lo, hi)}`` that
                       replace the class defaults (e.g. Table 4.2's radius bound
                       differs between heel, metatarsal and toe).
+    ``center``        where the sphere centre sits relative to the site, in the
+                      site's frame (the fitted dx, dy add to it): ``None`` (at the
+                      site, the thesis foot2d convention: sites H, P, T are the
+                      centres), ``"sole"`` (``(0, +R)``: the site is the sphere's
+                      lowest point when the frame is level, so a site on the sole
+                      touches the ground without penetrating; follows the fitted
+                      radius / rest length), or a fixed ``(x, y)`` in m.
     """
 
     kind: ClassVar[str] = "contact"
@@ -194,7 +201,7 @@ class SphereContact(Component):
     stiffness_name: ClassVar[str] = "k"
 
     def __init__(self, target: str, *, ground_speed: float = 0.0, smoothing: float = 1e-4,
-                 bounds: Mapping[str, tuple[float, float]] | None = None, **values: float):
+                 bounds: Mapping[str, tuple[float, float]] | None = None, center=None, **values: float):
         if target is None:
             raise ModelError(f"{self.family}: give the frame the sphere is fixed to, e.g. 'heel_r'")
         values = dict(values)
@@ -218,6 +225,17 @@ class SphereContact(Component):
             raise ModelError(f"{self.label}: smoothing must be > 0 (m), got {smoothing}")
         self.ground_speed = float(ground_speed)
         self.smoothing = float(smoothing)
+        if center is None or (isinstance(center, str) and center == "sole"):
+            self.center = center
+        else:
+            try:
+                cx, cy = (float(x) for x in center)
+            except (TypeError, ValueError):
+                raise ModelError(f"{self.label}: center must be None, 'sole' or (x, y) in m in the site frame, "
+                                 f"got {center!r}") from None
+            if not (math.isfinite(cx) and math.isfinite(cy)):
+                raise ModelError(f"{self.label}: center {center!r} is not finite")
+            self.center = (cx, cy)
         if values:
             self._params = self.with_params(values)._params
 
@@ -232,6 +250,11 @@ class SphereContact(Component):
         p = self._p(params)
         R = p[self.radius_name]
         off = np.array([p["dx"], p["dy"], 0.0], dtype=float)
+        if self.center == "sole":
+            off[1] += R
+        elif self.center is not None:
+            off[0] += self.center[0]
+            off[1] += self.center[1]
         centre, vcentre = kin.point(off)
         h = centre[:, 1]
         delta = R - h

@@ -3,7 +3,8 @@
 One gait cycle of foot2d on a treadmill, from toe-off to toe-off (period 1 s):
 swing (0-0.4 s), heel strike, a heel rocker about the heel sphere's centre,
 foot flat, then heel rise about the metatarsal sphere's centre, the toes
-following the 11-term Fourier series of Eq. 4.1 (known coefficients).  The
+following the 11-term Fourier series of Eq. 4.1 fitted to the kinematic toe
+angle of :func:`pinmsk.contact.toe_from_kinematics` (known coefficients).  The
 pivoting sphere's centre sits ``clearance`` m above the belt in stance and
 lifts off before the cycle ends; in the lab frame the foot moves backwards with
 the belt at ``ground_speed`` during stance and forwards in swing (periodic).
@@ -19,7 +20,7 @@ import numpy as np
 from ..filtering import differentiate
 from ..trial import Trial
 from .foot import SITES, Foot2dGeometry, foot2d_site_kinematics, foot_contacts, ground_reaction, load_foot2d
-from .identify import fourier_basis
+from .identify import fourier_basis, toe_from_kinematics
 
 
 def _smoothstep(u):
@@ -65,11 +66,12 @@ def synthetic_foot_trial(*, contact: str = "hypervolumetric", values=None, rate:
     # world = A + R(-th) l with R(-th) = [[c, s], [-s, c]]
     ax = x_piv - (c * lpiv[:, 0] + s * lpiv[:, 1])
     ay = y_piv - (-s * lpiv[:, 0] + c * lpiv[:, 1])
-    # toes: Eq. 4.1 series fitted to "toes flat when the heel is up"
+    # toes: Eq. 4.1 series fitted to the kinematic toe angle (toes flat on the ground when the heel
+    # is up, neutral in swing; :func:`toe_from_kinematics`, what ContactFit's default toe mode uses)
     B, dB = fourier_basis(t - t[0], t[-1] - t[0])
-    four = np.linalg.lstsq(B, -np.maximum(th, 0.0), rcond=None)[0]
-    mtp = B @ four
     Q = np.column_stack([ax, ay, th])
+    four = np.linalg.lstsq(B, toe_from_kinematics(geom, Q), rcond=None)[0]
+    mtp = B @ four
     qs, vs, _ = differentiate(t, Q)
     q = np.column_stack([qs, mtp])
     v = np.column_stack([vs, dB @ four])

@@ -653,6 +653,10 @@ class DynamicOptimization:
 
     def simulate(self, X) -> dict:
         """Batched simulation of decision vectors ``X`` (B, npar): dict of (N, B, ...) arrays."""
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            return self._simulate(X)
+
+    def _simulate(self, X) -> dict:
         C = self._coeffs(X)
         self.n_sim_ += C.shape[0]
         if self.design == "ff":
@@ -760,6 +764,13 @@ class DynamicOptimization:
                     None if self._c_size == 0 else -np.ones(self._c_size))
         f = float(self._objective_of(self._terms(sim))[0])
         c = self._constraints_of(sim)
+        if not np.isfinite(f) or (c is not None and not np.all(np.isfinite(c))):
+            # the simulation blew up (state went non-finite): penalize like a failure
+            if self._c_size is None:
+                raise SolverError("the simulation of the initial guess is not finite; "
+                                  "reduce the step or change the start")
+            return (1e6 * getattr(self, "_f_ref", 1.0),
+                    None if self._c_size == 0 else -np.ones(self._c_size))
         self._c_size = 0 if c is None else c.shape[1]
         out = (f, None if c is None else c[0])
         if len(self._cache) > 64:
@@ -789,6 +800,9 @@ class DynamicOptimization:
         else:
             g = (f - f0) / h
             dc = None if c is None else ((c - c0[None, :]) / h[:, None]).T
+        if not np.all(np.isfinite(g)) or (dc is not None and not np.all(np.isfinite(dc))):
+            raise SolverError("a finite-difference simulation blew up (non-finite state); "
+                              "reduce the step")
         self._gcache.clear()
         self._gcache[key] = (g, dc)
         if self.progress is not None:
@@ -847,8 +861,8 @@ class DynamicOptimization:
         span = hi - lo
         u1 = np.clip(u, lo + 0.02 * span, hi - 0.02 * span)
         guesses.append(par.fit(t, u1).ravel())
-        guesses.append(par.fit(t, np.clip(act, lo + 0.02 * span, hi - 0.02 * span)).ravel())
         guesses.append(par.constant(lo + 0.05 * span, mu.m).ravel())
+        guesses.append(par.fit(t, np.clip(act, lo + 0.02 * span, hi - 0.02 * span)).ravel())
         return guesses[: self.n_starts]
 
     # -- solve -------------------------------------------------------------------
@@ -860,9 +874,25 @@ class DynamicOptimization:
         self._setup()
         starts = [np.asarray(x0, dtype=float).ravel()] if x0 is not None else self.initial_guesses()
         self._A_lin = None
-        if self.design == "ff":
-            Bd = self.parametrization.basis(np.linspace(self._t[0], self._t[-1], self.bound_points))
-            self._A_lin = np.kron(Bd, np.eye(self._n_sig))  # rows (time, muscle); x is (p, s) row-major
+        if True:
+            # Linear constraints on the signals over a dense grid: FF 0 <= u <= 1 (Eq. 3.8);
+            # IFM 0 <= F <= 1.5 F_max (a pulling muscle below the eccentric plateau; keeps
+            # the inverse model's tendon within its range at wild iterates); IFT the
+            # torque range those forces span.
+            nb = self.bound_points
+            Bd = self.parametrization.basis(np.linspace(self._t[0], self._t[-1], nb))
+            self._A_lin = np.kron(Bd, np.eye(self._n_sig))  # rows (time, signal); x is (p, s) row-major
+            if self.design == "ff":
+                self._lin_lo = np.full(self._A_lin.shape[0], self._lo)
+                self._lin_hi = np.full(self._A_lin.shape[0], self._hi)
+            elif self.design == "ifm":
+                self._lin_lo = np.zeros(self._A_lin.shape[0])
+                self._lin_hi = np.tile(1.5 * self._mu.f_max / self._scale, nb)
+            else:   # IFT: the torque the muscles can give, 1.5 F_max each
+                r = self._mu.R[:, 0]
+                cap = 1.5 * self._mu.f_max * np.abs(r)
+                self._lin_lo = np.full(nb, -cap[r < 0].sum() / self._scale[0])
+                self._lin_hi = np.full(nb, cap[r > 0].sum() / self._scale[0])
         # Objective scaled by its value at the first start (SLSQP's ftol is absolute).
         self._f_ref = max(abs(self._value(starts[0])[0]), 1e-6)
         if self.n_jobs > 1 and len(starts) > 1 and sys.platform != "win32":
@@ -907,7 +937,7 @@ class DynamicOptimization:
         cons = []
         A = self._A_lin
         if A is not None:
-            lo, hi = self._lo, self._hi
+            lo, hi = self._lin_lo, self._lin_hi
             AA = np.vstack([A, -A])
             cons.append({"type": "ineq", "fun": lambda x: np.concatenate([A @ x - lo, hi - A @ x]),
                          "jac": lambda x: AA})
@@ -960,8 +990,8 @@ class DynamicOptimization:
         viol = 0.0
         if A_lin is not None:
             ub = A_lin @ x
-            viol = max(viol, float(np.max(np.maximum(self._lo - ub, 0))),
-                       float(np.max(np.maximum(ub - self._hi, 0))))
+            viol = max(viol, float(np.max(np.maximum(self._lin_lo - ub, 0))),
+                       float(np.max(np.maximum(ub - self._lin_hi, 0))))
         c = self._value(x)[1]
         if c is not None:
             viol = max(viol, float(np.max(np.maximum(-c, 0.0))))
@@ -975,7 +1005,7 @@ class DynamicOptimization:
         f = float(self._objective_of(terms)[0])
         u = sim["u_raw"][:, 0]
         bound_viol = float(max(np.max(np.maximum(self._lo - u, 0)), np.max(np.maximum(u - self._hi, 0))))
-        if A_lin is not None:
+        if A_lin is not None and self.design == "ff":
             ub = A_lin @ x
             bound_viol = max(bound_viol, float(np.max(np.maximum(self._lo - ub, 0))),
                              float(np.max(np.maximum(ub - self._hi, 0))))

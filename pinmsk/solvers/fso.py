@@ -55,7 +55,9 @@ import pinocchio as pin
 from scipy.interpolate import CubicHermiteSpline
 
 from ..components import Motion
+from ..dynamics import skeleton_with_inertias
 from ..errors import InfeasibleError, ModelError, SolverError
+from ..skeleton import integrate
 from ..trial import Trial
 from . import qp as _qp
 from .static import MODES, WEIGHTS, _muscle_property, as_motion, check_model
@@ -89,6 +91,17 @@ class ForwardStaticOptimization:
     reserves, reserve_weight, tol : as StaticOptimization; here every
         coordinate of the model must be balanced, so coordinates that no muscle
         spans need ``reserves=True``.
+    rtol, atol : solve_ivp tolerances (integrators other than rk4).
+
+    Attributes (after ``fit``, also available as ``run``)
+    -----------------------------------------------------
+    t_ (K,) control points; t_hold_ (K,) middles of the hold intervals; q_, v_
+    (K, nv) simulated state; q_desired_, v_desired_; acc_desired_ ``a*``;
+    tracking_error_ ``q_ - q_desired_``; forces_, activations_ (K, m) held
+    from each control point; reserves_; cost_; trajectory_ (a Trial on the
+    integration grid); n_qp_, n_iter_; time_ (s); result_ (a Trial with
+    ``<coord>``, ``<coord>_speed``, ``<coord>_desired``, ``<coord>_error``,
+    ``<muscle>_force``, ``<muscle>_activation``, ``cost``).
     """
 
     def __init__(self, *, mode: str = "force", exponent: float = 2, weights: str = "none",
@@ -198,7 +211,6 @@ class ForwardStaticOptimization:
             raise SolverError("reserves are for enforce='constraint'; in cost mode the tracking "
                               "term already absorbs what the muscles cannot do")
         # skeleton with inertial components, other components as forces
-        from ..dynamics import skeleton_with_inertias
         pm = skeleton_with_inertias(model)
         pd = pm.createData()
         comps = [c for c in model.components if not getattr(c, "inertial", False)]
@@ -309,7 +321,6 @@ class ForwardStaticOptimization:
                 grid = np.linspace(ti, tc[kk + 1], int(self.substeps) + 1)
             else:
                 grid = np.array([ti, tc[kk + 1]])
-            from ..skeleton import integrate
             Qg, Vg, _ = integrate(pm, q, v, grid, tau_fn, method=meth, rtol=float(self.rtol),
                                   atol=float(self.atol), data=pd)
             # PID integral of (q_d - q), trapezoid over the substeps
@@ -386,7 +397,7 @@ class ForwardStaticOptimization:
             f"as a {self.enforce}",
             f"  control points {self.t_.size} over {self.t_[0]:.4g}-{self.t_[-1]:.4g} s, integrator "
             f"{self.integrator}" + (f" ({self.substeps} steps per interval)" if str(self.integrator).lower() == "rk4" else ""),
-            f"  tracking error max |q - q_d| = " + ", ".join(
+            "  tracking error max |q - q_d| = " + ", ".join(
                 f"{c} {np.rad2deg(e):.3g} deg (rms {np.rad2deg(r):.3g})"
                 for c, e, r in zip(self.coordinates_, err.max(axis=0), rms)),
             f"  solver         {self.n_qp_} proxsuite QPs, {self.n_iter_} iterations",

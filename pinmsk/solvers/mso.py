@@ -158,10 +158,11 @@ class ModifiedStaticOptimization:
             if not sol.solved:
                 prob_k = _bounded(prob, k, lo, hi)
                 deficit = diagnose_infeasible(prob_k, [k], minmax=False, tol=tol)
-                raise InfeasibleError(
-                    "MSO: " + infeasible_message(prob, np.array([k]), deficit) +
-                    " (in MSO the activation dynamics limit how fast activations can change: "
-                    f"a in [{', '.join(f'{v:.3g}' for v in lo)}] .. [{', '.join(f'{v:.3g}' for v in hi)}])")
+                note = ("In MSO the activation dynamics limit how fast activations change: at this "
+                        f"frame a_i must lie in [{', '.join(f'{v:.3g}' for v in lo)}] .. "
+                        f"[{', '.join(f'{v:.3g}' for v in hi)}] (tau_rise {self.tau_rise:g} s, "
+                        f"tau_fall {self.tau_fall:g} s).")
+                raise InfeasibleError("MSO: " + infeasible_message(prob, np.array([k]), deficit, note=note))
             x[k] = np.clip(sol.x, lo, hi)      # proxsuite's answer is inside to ~1e-16
             rho[k] = sol.rho
             prev = x[k]

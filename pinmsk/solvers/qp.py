@@ -2,7 +2,7 @@
 
 Every solver here works on the *scaled* per-frame problem
 
-    minimise    sum_i w_i x_i^P  + reserve cost  (+ 1/2 x'Qx + q'x, FSO only)
+    minimise    sum_i w_i x_i^P  + reserve cost
     subject to  A x + rho = b          (nd balanced dofs; rho only with reserves)
                 lo <= x <= hi          (x = F / F_max or x = a, so O(1))
 
@@ -12,7 +12,8 @@ The min/max criterion (thesis Eq. 2.13) replaces the cost by ``max_i u_i x_i``
 (an epigraph LP in ``(x, t)``).  The reserve cost is the exact-penalty form
 ``W sum_j (|rho_j| + rho_j^2)``: zero reserve whenever the muscles can
 balance the dof with multipliers below ``W``, strictly convex so the answer
-is unique.
+is unique.  (FSO's tracking cost uses the same slot as a soft equality,
+``W rho^2``.)
 
 Three independent ways to solve it live here:
 
@@ -22,10 +23,14 @@ Three independent ways to solve it live here:
     ``WARM_START_WITH_PREVIOUS_RESULT``.  P = 1 and min/max are LPs, P = 2 a
     QP, P > 2 sequential QP (Newton steps on the convex objective with the
     linear constraints, each step a proxsuite QP, Armijo line search, stopped
-    when the step is below the tolerance).  Crashes seen with warm starts
-    after failed solves are avoided by construction: dimensions never change,
-    and after any status other than ``PROXQP_SOLVED`` the QP object is thrown
-    away and the next solve starts cold on a fresh one.
+    when the step is below ``sqp_tol`` or the predicted decrease below
+    ``SQP_RTOL`` of the cost).  Each frame is rescaled (variables by its
+    largest moment, objective to a unit gradient) before proxsuite sees it.
+    Crashes seen with warm starts after failed solves are avoided by
+    construction: dimensions never change, warm starts only follow a
+    ``PROXQP_SOLVED`` of the same object, and after any other status the QP
+    object is thrown away and the next solve starts cold on a fresh one.
+    All bounds are finite (proxsuite misjudged feasibility with 1e20 ones).
 
 :func:`dual_newton`
     For P >= 2 (any weights, reserves or not), all frames at once in numpy.
@@ -37,7 +42,8 @@ Three independent ways to solve it live here:
     the tolerance (for P = 2 this is the primal-dual active-set method: it
     stops at the exact active set).  A frame counts as solved only when its
     residual is below the tolerance, which *is* the KKT verification; the
-    others go to :class:`FrameQP`.
+    others go to :class:`FrameQP`.  Used up to P = 4: beyond, ``x ~ s^(1/(P-1))``
+    makes the dual too steep near zero forces.
 
 :func:`lp_verify` / :func:`lp_basis_from`
     For LPs (P = 1, min/max): guess an optimal basis from another frame's
@@ -279,7 +285,8 @@ class FrameQP:
         Af[:self.nd, :self.m] = A
         bs = self._bfull
         bs[:self.nd] = b / beta
-        attempts = ("warm", "cold") if (self._qp is not None and self._warm) else ("cold",)
+        attempts = ["warm", "cold"] if (self._qp is not None and self._warm) else ["cold"]
+        attempts.append("loose")
         for how in attempts:
             if how == "warm":
                 qp = self._qp
@@ -287,6 +294,11 @@ class FrameQP:
                 qp.update(H=Hs, g=gs, A=Af, b=bs, l_box=lbs, u_box=ubs, update_preconditioner=False)
             else:
                 qp = self._fresh()
+                if how == "loose":
+                    # last resort: a looser tolerance (still far below the SO tolerance in
+                    # the default settings); badly scaled frames stall at the tight one
+                    qp.settings.eps_abs = min(self.eps * 1e3, 1e-8)
+                    qp.settings.max_iter = 5 * self.max_iter
                 self._qp = qp
                 qp.init(Hs, gs, Af, bs, None, None, None, lbs, ubs)
             qp.solve()
@@ -300,6 +312,8 @@ class FrameQP:
                 self._last_y = out.y
                 return out, True
             self._warm = False   # never warm start from a failed solve
+            if how == "cold" and out.status == "PROXQP_PRIMAL_INFEASIBLE":
+                break            # a cold verdict of infeasibility: do not insist
         return out, False
 
     def solve(self, A, b, lo, hi, *, Q=None, q=None, x0=None) -> FrameSolution:
@@ -486,6 +500,8 @@ def dual_newton(A, b, w, P, lo, hi, *, reserve_weight=None, lam0=None, tol: floa
         # start from the problem without bounds at P = 2 ...
         D0 = 1.0 / (2.0 * w)
         H0 = np.matmul(A * D0[:, None, :], np.swapaxes(A, 1, 2)) + 1e-12 * eye
+        if W is not None:   # a dof with reserves only: lam = W (1 + 2 b) at the optimum
+            H0 = H0 + eye / (2.0 * W)
         lam = np.linalg.solve(H0, b[..., None])[..., 0]
         if P != 2.0:
             # ... and, for P > 2, match its activations in the KKT relation s = P w x^(P-1)

@@ -23,13 +23,14 @@ largest value.  ``tol`` is then the largest accepted moment residual as a
 fraction of ``s_j`` and proxsuite's absolute tolerance.
 
 How frames are solved (``method="auto"``): 2 <= P <= 4 -- all frames at
-once by the batched dual Newton method, each frame's optimality verified by
+once by the batched dual Newton method (every 8th frame first, the others
+from multipliers interpolated in time), each frame's optimality verified by
 its residual, proxsuite for the few that fail; P = 1 and min/max -- proxsuite
-on a frame, then the basis of its vertex tried on all remaining frames at
-once (kept where primal feasible, so optimal), repeated until every frame is
-solved; P > 4 -- proxsuite SQP frame by frame, each frame starting from the
-previous answer.  ``method="proxsuite"`` solves every frame with proxsuite
-(the reference path).
+on a frame, then the basis of its vertex tried on the following unsolved
+frames at once (kept where primal feasible, so optimal), repeated until every
+frame is solved; P > 4 -- proxsuite SQP frame by frame, starting from the
+P = 2 solution of the frame.  ``method="proxsuite"`` solves every frame with
+proxsuite (the reference path).  See :mod:`pinmsk.solvers.qp`.
 
 Infeasible frames (muscles too weak for the moment) raise
 :class:`~pinmsk.errors.InfeasibleError` listing frames, dof and moment deficit,
@@ -72,8 +73,13 @@ STATUS = {
 #: dual becomes too steep near zero forces (x ~ s^(1/(P-1))) and SQP is used.
 DUAL_MAX_EXPONENT = 4.0
 
+#: The batched dual Newton method first solves every COARSE-th frame, then the
+#: others from multipliers interpolated in time (a warm start that vectorises).
+COARSE = 8
+
 #: LP basis guesses are verified on this many following unsolved frames; after
-#: a guess that helps no other frame, the next LP_SKIP frames go straight to proxsuite.
+#: a guess that helps no other frame, the next LP_SKIP frames go straight to
+#: proxsuite (doubling after each further failure, back to LP_SKIP on success).
 LP_WINDOW = 64
 LP_SKIP = 8
 
@@ -336,18 +342,35 @@ def solve_frames(prob: SOProblem, *, minmax: bool = False, reserve_weight: float
     batched = 0
     todo = sel
     if method == "auto" and not minmax and 2.0 <= P <= DUAL_MAX_EXPONENT:
-        bs = _qp.dual_newton(prob.A[sel], prob.b[sel], prob.w, P, prob.lo[sel], prob.hi[sel],
-                             reserve_weight=reserve_weight, tol=tol)
-        ok = bs.converged
-        x[sel[ok]] = bs.x[ok]
-        rho[sel[ok]] = bs.rho[ok]
-        solved[sel[ok]] = True
-        path[sel[ok]] = 0
-        iters += int(bs.iterations.sum())
-        batched += int(ok.sum())
-        todo = sel[~ok]
+        ok_all = np.zeros(sel.size, dtype=bool)
+        # two passes: every COARSE-th frame from scratch, then the others starting from
+        # the multipliers interpolated in time between their solved neighbours
+        passes = [np.arange(sel.size)]
+        if sel.size > 4 * COARSE:
+            first = np.arange(0, sel.size, COARSE)
+            passes = [first, np.setdiff1d(np.arange(sel.size), first)]
+        lam_known = np.full((sel.size, nd), np.nan)
+        for ip in passes:
+            lam0 = None
+            if not np.isnan(lam_known).all():
+                good = np.flatnonzero(~np.isnan(lam_known[:, 0])) if nd else np.zeros(0, int)
+                if good.size >= 2:
+                    lam0 = np.column_stack([np.interp(ip, good, lam_known[good, j]) for j in range(nd)])
+            fr = sel[ip]
+            bs = _qp.dual_newton(prob.A[fr], prob.b[fr], prob.w, P, prob.lo[fr], prob.hi[fr],
+                                 reserve_weight=reserve_weight, tol=tol, lam0=lam0)
+            ok = bs.converged
+            lam_known[ip[ok]] = bs.lam[ok]
+            ok_all[ip[ok]] = True
+            x[fr[ok]] = bs.x[ok]
+            rho[fr[ok]] = bs.rho[ok]
+            iters += int(bs.iterations.sum())
+        solved[sel[ok_all]] = True
+        path[sel[ok_all]] = 0
+        batched += int(ok_all.sum())
+        todo = sel[~ok_all]
         if progress is not None:
-            progress.update(int(ok.sum()))
+            progress.update(int(ok_all.sum()))
     fq = _frame_qp(prob, exponent=P, minmax=minmax, reserve_weight=reserve_weight, tol=tol)
     use_lp = (method == "auto" and (minmax or P == 1.0) and reserve_weight is None)
     if use_lp:
@@ -355,6 +378,7 @@ def solve_frames(prob: SOProblem, *, minmax: bool = False, reserve_weight: float
     remaining = np.zeros(N, dtype=bool)
     remaining[todo] = True
     skip = 0
+    skip_next = LP_SKIP
     for k in todo:
         if not remaining[k]:
             continue
@@ -385,8 +409,11 @@ def solve_frames(prob: SOProblem, *, minmax: bool = False, reserve_weight: float
                 remaining[acc] = False
                 batched += int(acc.size) + int(okv[0])
                 done_now += int(acc.size)
-                if acc.size == 0:          # degenerate or changing bases: stop guessing
-                    skip = LP_SKIP          # for a while (min/max is rarely a vertex)
+                if acc.size == 0:          # degenerate or changing bases: stop guessing for a
+                    skip = skip_next        # while, twice as long after each failure (min/max
+                    skip_next = min(2 * skip_next, 512)   # with several dofs is rarely a vertex)
+                else:
+                    skip_next = LP_SKIP
         if progress is not None:
             progress.update(done_now)
     x = np.where(np.isfinite(x), np.clip(x, prob.lo, prob.hi), x)   # proxsuite: inside to ~1e-16
@@ -438,7 +465,7 @@ def diagnose_infeasible(prob: SOProblem, frames, *, minmax: bool, tol: float):
     return out
 
 
-def infeasible_message(prob: SOProblem, frames, deficits, *, limit: int = 8) -> str:
+def infeasible_message(prob: SOProblem, frames, deficits, *, limit: int = 8, note: str = "") -> str:
     lines = []
     for i, k in enumerate(frames[:limit]):
         parts = []
@@ -451,7 +478,7 @@ def infeasible_message(prob: SOProblem, frames, deficits, *, limit: int = 8) -> 
         lines.append(f"  frame {k} (t = {prob.time[k]:.4g} s): " + "; ".join(parts))
     more = f"\n  ... and {len(frames) - limit} more frames" if len(frames) > limit else ""
     return (f"the muscles cannot produce the required moments at {len(frames)} of "
-            f"{prob.n_frames} frames:\n" + "\n".join(lines) + more +
+            f"{prob.n_frames} frames:\n" + "\n".join(lines) + more + (f"\n{note}" if note else "") +
             "\nPass reserves=True (CLI --reserves) to add ideal actuators with a high cost and see "
             "their use per dof and frame, or check the model's strength and the inverse dynamics.")
 
@@ -490,6 +517,18 @@ class StaticOptimization:
     method : "auto" | "proxsuite"
         "auto" uses the batched paths with proxsuite as fallback;
         "proxsuite" solves every frame with proxsuite.
+
+    Attributes (after ``fit``)
+    --------------------------
+    forces_ (N, m) N; activations_ (N, m) -- in force mode ``F / F_max`` (the
+    activation the force needs at optimal length and zero velocity);
+    reserves_ (N, nd) N m or None; status_ (N,) codes of :data:`STATUS`;
+    cost_ (N,) the criterion per frame in physical units (Eq. 2.11 / 2.14, or
+    ``max F/N`` for min/max); violation_ (N,) ``max_j |R^T F + r - tau|`` in
+    N m; dofs_, muscles_; n_iter_, n_qp_, n_batched_; timing_; problem_ (the
+    scaled :class:`SOProblem`); result_ (a Trial with ``<muscle>_force``,
+    ``<muscle>_activation``, ``<coord>_reserve`` with reserves, ``status``,
+    ``cost``, ``violation``; write it with :func:`pinmsk.write_trial`).
     """
 
     def __init__(self, *, mode: str = "force", exponent: float = 2, weights: str = "none",
@@ -657,7 +696,8 @@ class StaticOptimization:
             for j, d in enumerate(prob.dofs):
                 if used[:, j].any():
                     parts.append(f"{d}: {used[:, j].sum()} frames, max {np.max(np.abs(self.reserves_[:, j])):.4g} N m")
-            lines.append("  reserves       " + ("; ".join(parts) if parts else "not used"))
+            lines.append("  reserves       " + ("; ".join(parts) if parts else "not used")
+                         + (" (N for translational dofs)" if parts else ""))
         if hasattr(self, "timing_"):
             t = self.timing_
             lines.append(f"  time           {t['total_s'] * 1e3:.1f} ms (setup {t['setup_s'] * 1e3:.1f} ms, "

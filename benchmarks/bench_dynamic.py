@@ -1,0 +1,71 @@
+"""Dynamic optimization speed against the thesis (Sec. 3.3.6): one command, ratios from this run.
+
+Thesis CPU times to the accepted optimum (GA + SQP + pattern search, MATLAB):
+finger tapping 15 min, forearm with Fourier series 30 min, forearm with
+polynomials 50 min; one model call 0.4 s (finger) and 0.9 s (forearm).
+
+Run:  python benchmarks/bench_dynamic.py [--jobs 2] [--skip-polynomial]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
+
+import pinmsk  # noqa: E402
+from pinmsk.solvers.dynamic import simulate_ff  # noqa: E402
+
+
+def sim_time(model, T, steps, reps=5):
+    t = np.linspace(0, T, steps + 1)
+    tm = 0.5 * (t[1:] + t[:-1])
+    u = np.full((t.size, model.n_muscles), 0.1)
+    um = np.full((tm.size, model.n_muscles), 0.1)
+    simulate_ff(model, t, u, um, [0.3], [0.0])
+    t0 = time.perf_counter()
+    for _ in range(reps):
+        simulate_ff(model, t, u, um, [0.3], [0.0])
+    return (time.perf_counter() - t0) / reps
+
+
+def main(argv=None):
+    import finger_tapping as ft
+    import forearm_dynamic_optimization as fa
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--skip-polynomial", action="store_true")
+    args = ap.parse_args(argv)
+    try:
+        load = os.getloadavg()[0]
+    except OSError:  # pragma: no cover
+        load = float("nan")
+    print(f"cores {os.cpu_count()}, load average {load:.2f}, multi-start workers {args.jobs}")
+    finger = pinmsk.load_model("finger")
+    forearm = pinmsk.load_model("forearm")
+    print(f"one FF simulation: finger 6 Hz period (200 RK4 steps) {1e3 * sim_time(finger, 1 / 6, 200):.1f} ms "
+          f"(thesis 400 ms); forearm 1.9 s (200 steps) {1e3 * sim_time(forearm, 1.9, 200):.1f} ms "
+          "(thesis 900 ms)")
+    rows = []
+    res, sec = ft.solve(finger, 6.0, jobs=args.jobs)
+    rows.append(("finger tapping 6 Hz, 6th-order polynomials (14 par.)", sec, 15 * 60, 10, res))
+    res, sec = fa.solve(forearm, "J4", "fourier", jobs=args.jobs)
+    rows.append(("forearm J4, 11-term Fourier series (77 par.)", sec, 30 * 60, 60, res))
+    if not args.skip_polynomial:
+        res, sec = fa.solve(forearm, "J4", "polynomial", jobs=args.jobs)
+        rows.append(("forearm J4, 10th-order polynomials (77 par.)", sec, 50 * 60, 60, res))
+    print(f"{'problem':55s} {'seconds':>8s} {'thesis s':>9s} {'ratio':>7s} {'target':>7s}  result")
+    for name, sec, thesis, target, res in rows:
+        flag = "converged" if res.converged else "NOT CONVERGED"
+        print(f"{name:55s} {sec:8.1f} {thesis:9d} {thesis / sec:6.0f}x {'<=' + str(target) + ' s':>7s}  "
+              f"{flag}, J = {res.objective:.4g}, {res.nit} it.")
+    return rows
+
+
+if __name__ == "__main__":
+    main()
