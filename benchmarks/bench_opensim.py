@@ -244,8 +244,7 @@ def so_moment_balance(osim, model_file: Path, coords_file: Path, id_file: Path, 
     Moment arms from OpenSim (``Muscle.computeMomentArm``) at the IK coordinates, forces from the
     SO force file, moments from OpenSim's ID (same cutoff), rows matched by time.
     """
-    _, q_deg = read_sto(coords_file)
-    qn, _ = read_sto(coords_file)
+    qn, q_deg = read_sto(coords_file)
     fn, F = read_sto(force_file)
     tn, tau = read_sto(id_file)
     with quiet(osim):
@@ -285,13 +284,17 @@ def run_opensim(osim, models: Path, tmp: Path, repeat: int) -> dict:
     out["arm_id"] = (min(times), read_sto(sto)[1].shape[0])
     out["arm_id_check"] = compare_sto(sto, ref / ARM26_ID_REFERENCE / "arm26_InverseDynamics.sto")
     _, sto_u = opensim_id(osim, arm / "arm26_Setup_InverseDynamics.xml", cutoff=-1.0, results=tmp / "arm_id_u")
-    out["arm_id_check_unfiltered"] = compare_sto(sto_u, ref / "InverseDynamics_Unfiltered" / "arm26_InverseDynamics.sto")
+    out["arm_id_check_unfiltered"] = compare_sto(sto_u, ref / "InverseDynamics_Unfiltered"
+                                                 / "arm26_InverseDynamics.sto")
     times = []
     for r in range(repeat):
         dt, act, frc = opensim_so(osim, arm / "arm26_Setup_StaticOptimization.xml", results=tmp / f"arm_so_{r}")
         times.append(dt)
     out["arm_so"] = (min(times), read_sto(act)[1].shape[0])
-    out["arm_so_vs_reference"] = compare_sto(act, ref / ARM26_SO_REFERENCE / "arm26_StaticOptimization_activation.sto")
+    ref_act = ref / ARM26_SO_REFERENCE / "arm26_StaticOptimization_activation.sto"
+    out["arm_so_vs_reference"] = compare_sto(act, ref_act)
+    a_ours, a_ref = read_sto(act)[1][:, 1:], read_sto(ref_act)[1][:, 1:]
+    out["arm_so_floor"] = (float(np.min(a_ours)), int(np.sum(a_ref < 0.0099)), a_ref.size)
     out["arm_so_balance"] = so_moment_balance(osim, arm / "arm26.osim", arm / "arm26_InverseKinematics.mot", sto, frc)
 
     gait = stage(models / "Gait10dof18musc", tmp / "Gait10dof18musc")
@@ -343,12 +346,9 @@ def gait2d_inputs(model, ik: pinmsk.Trial, grf: pinmsk.Trial):
     from pinmsk.pipeline import opensim_to_gait2d
     from pinmsk.resample import to_time
 
-    # opensim_to_gait2d follows Rajagopal's knee (knee_angle + = flexion); gait10dof18musc, like
-    # gait2392, has knee_angle + = extension (range [-120, 10] deg), so flip it first -- without
-    # this gait2d's knees hyperextend by ~70 deg and the passive moments reach 3e5 N m.
-    flipped = {n: (-np.asarray(ik[n]) if n.startswith("knee_angle_") else np.asarray(ik[n])) for n in ik.names}
-    kin = opensim_to_gait2d(pinmsk.Trial(ik.time, flipped, meta=dict(ik.meta)), model,
-                            hip_offset=SUBJECT01_HIP_OFFSET)
+    # gait10dof18musc, like gait2392, counts knee flexion negative (range [-120, 10] deg);
+    # opensim_to_gait2d's knee_sign="auto" detects that and flips it
+    kin = opensim_to_gait2d(ik, model, hip_offset=SUBJECT01_HIP_OFFSET, knee_sign="auto")
     g = to_time(uniform_grf(grf), kin.time)
     # subject01_walk_grf.xml: ground_force_* -> calcn_r, 1_ground_force_* -> calcn_l
     ext = external_forces(model, g, planar=True, frames={None: "foot_r", "1": "foot_l"})
@@ -494,8 +494,11 @@ def main(argv=None) -> int:
     print(f"  Arm26 SO forces balance OpenSim's ID moments (OpenSim moment arms): max residual "
           f"{o['arm_so_balance']:.1e} of max |tau|")
     se, ss = o["arm_so_vs_reference"]
+    amin, nlow, ntot = o["arm_so_floor"]
     print(f"  Arm26 SO activations vs reference_outputs/{ARM26_SO_REFERENCE}: max |diff| {se:.3f} "
-          f"(max activation {ss:.3f}) -- the reference was made by an older OpenSim; not reproduced")
+          f"(max activation {ss:.3f}) -- NOT reproduced: the reference (an older OpenSim) has {nlow} of {ntot}")
+    print(f"    activations below 0.01; OpenSim 4.6's Thelen2003Muscle bounds a >= minimum_activation = 0.01 "
+          f"(it refuses lower values), our run's smallest is {amin:.4f}, so SO's solution shifts.")
     print(f"pinmsk: forearm SO max moment violation {p['arm_so_violation']:.1e} N m; gait2d SO used reserves "
           f"in {p['gait_so_reserve_frames']} of {p['gait_so'][1]} frames")
     return 0

@@ -213,13 +213,15 @@ def _rebuild(name, pm, muscles, effects, contacts, meta):
 # -- loading ---------------------------------------------------------------
 
 def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
-               tendon: str | None = None) -> Model:
+               tendon: str | None = None, gravity=None) -> Model:
     """Load a built-in model by name (``finger``, ``forearm``, ``gait2d``, ``human3d``)
     or a user's model from a sidecar ``.toml`` (which names its URDF) or a bare ``.urdf``.
 
     ``moment_arms`` picks a path variant declared in the sidecar (e.g.
     ``"constant"`` or ``"angle"``); ``tendon`` overrides the sidecar's
-    default tendon (``"rigid"`` or ``"compliant"``).
+    default tendon (``"rigid"`` or ``"compliant"``).  ``gravity`` (3 numbers,
+    m/s^2) overrides the sidecar's; a bare URDF otherwise keeps the URDF/ROS
+    convention ``[0, 0, -9.81]`` (z up).
     """
     from . import builtin_models
 
@@ -227,7 +229,11 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
     if p.suffix.lower() == ".urdf":
         if not p.exists():
             raise ModelError(f"URDF file not found: {p}")
-        pm = pin.buildModelFromUrdf(str(p))
+        try:
+            pm = pin.buildModelFromUrdf(str(p))
+        except Exception as exc:  # pinocchio raises bare ValueError/RuntimeError
+            raise ModelError(f"Pinocchio could not load URDF {p}: {exc}") from None
+        _set_gravity(pm, gravity, p)
         return Model(name=p.stem, pin_model=pm, meta={"urdf": str(p)})
     if p.suffix.lower() == ".toml":
         if not p.exists():
@@ -243,10 +249,19 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
                 "or pass the path of a .toml sidecar or a .urdf file"
             )
         sidecar = builtin_models.builtin_sidecar(str(name_or_path))
-    return _load_sidecar(sidecar, moment_arms=moment_arms, tendon=tendon)
+    return _load_sidecar(sidecar, moment_arms=moment_arms, tendon=tendon, gravity=gravity)
 
 
-def _load_sidecar(sidecar: Path, *, moment_arms: str | None, tendon: str | None) -> Model:
+def _set_gravity(pm: pin.Model, gravity, where) -> None:
+    if gravity is None:
+        return
+    g = np.asarray(gravity, dtype=float)
+    if g.shape != (3,) or not np.all(np.isfinite(g)):
+        raise ModelError(f"{where}: gravity must be 3 finite numbers (m/s^2), got {gravity}")
+    pm.gravity = pin.Motion(np.concatenate([g, np.zeros(3)]))
+
+
+def _load_sidecar(sidecar: Path, *, moment_arms: str | None, tendon: str | None, gravity=None) -> Model:
     from . import builtin_models
     from .effects import registry
     from .muscles.paths import MomentArmPath
@@ -264,11 +279,8 @@ def _load_sidecar(sidecar: Path, *, moment_arms: str | None, tendon: str | None)
         pm = pin.buildModelFromUrdf(str(urdf))
     except Exception as exc:  # pinocchio raises bare ValueError/RuntimeError
         raise ModelError(f"{sidecar}: Pinocchio could not load URDF {urdf}: {exc}") from None
-    if "gravity" in mspec:
-        g = np.asarray(mspec["gravity"], dtype=float)
-        if g.shape != (3,):
-            raise ModelError(f"{sidecar}: [model] gravity must be 3 numbers, got {mspec['gravity']}")
-        pm.gravity = pin.Motion(np.concatenate([g, np.zeros(3)]))
+    _set_gravity(pm, mspec.get("gravity"), f"{sidecar}: [model]")
+    _set_gravity(pm, gravity, "load_model")
     name = mspec.get("name", sidecar.stem)
     coords = tuple(pm.names[j] for j in range(1, pm.njoints))
     order = mspec.get("coordinate_order")

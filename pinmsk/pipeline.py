@@ -94,14 +94,18 @@ def _col(trial: Trial, coord: str) -> np.ndarray:
     raise TrialError(f"{trial.meta.get('source', 'trial')}: no column for OpenSim coordinate {coord!r}")
 
 
-def opensim_to_gait2d(coords: Trial, model, *, hip_offset=RAJAGOPAL_HIP_OFFSET) -> Trial:
+def opensim_to_gait2d(coords: Trial, model, *, hip_offset=RAJAGOPAL_HIP_OFFSET,
+                      knee_sign: str | int = "auto") -> Trial:
     """gait2d coordinates from an OpenSim full-body model's coordinates (sagittal plane).
 
     Sign conventions (OpenSim: rotations about +z, z to the right):
 
     * ``torso_angle = -pelvis_tilt`` (OpenSim + = posterior tilt; gait2d + = forward lean);
       the HAT is taken as rigid with the pelvis (lumbar extension is ignored);
-    * ``hip = -hip_flexion`` (gait2d + = extension), ``knee = knee_angle`` (both + = flexion),
+    * ``hip = -hip_flexion`` (gait2d + = extension), ``knee = knee_angle`` (Rajagopal: both
+      + = flexion; gait2392 and Gait10dof18musc count knee flexion negative, so ``knee_sign``
+      ``"auto"`` flips it when the knee angle is mostly negative, as flexion must be over a
+      stride; or pass ``+1`` / ``-1``),
       ``ankle = -ankle_angle`` (OpenSim + = dorsiflexion; gait2d + = plantarflexion), ``mtp = 0``;
     * ``torso_x, torso_y`` = the gait2d HAT centre of mass placed so that gait2d's hip joint
       lies on the OpenSim hip centre ``pelvis_t[xy] + R(pelvis_tilt) hip_offset``
@@ -124,9 +128,16 @@ def opensim_to_gait2d(coords: Trial, model, *, hip_offset=RAJAGOPAL_HIP_OFFSET) 
         "torso_y": hy + above * np.cos(ta),
         "torso_angle": ta,
     }
+    knees = {s: _col(coords, f"knee_angle_{s}") for s in "rl"}
+    if knee_sign == "auto":
+        sign = -1.0 if np.median(np.concatenate(list(knees.values()))) < 0 else 1.0
+    elif knee_sign in (1, -1):
+        sign = float(knee_sign)
+    else:
+        raise TrialError(f"knee_sign must be 'auto', 1 or -1, not {knee_sign!r}")
     for s in "rl":
         ch[f"hip_{s}"] = -_col(coords, f"hip_flexion_{s}")
-        ch[f"knee_{s}"] = _col(coords, f"knee_angle_{s}")
+        ch[f"knee_{s}"] = sign * knees[s]
         ch[f"ankle_{s}"] = -_col(coords, f"ankle_angle_{s}")
         ch[f"mtp_{s}"] = np.zeros_like(tilt)
     ordered = {c: ch[c] for c in model.coordinate_order}

@@ -2,7 +2,19 @@
 
 Every function builds a :class:`matplotlib.figure.Figure` on the Agg canvas
 directly -- no pyplot, no global backend switch, no display -- and either
-returns it or saves it as PNG.  Diagnosis figures:
+returns it or saves it as PNG (every ``plot_*`` takes ``path=``; ``save_*``
+functions write files).  Trials and results:
+
+* :func:`plot_channels` / :func:`save_channels` -- channels of any Trial against time;
+* :func:`plot_moments` -- the ``<coord>_moment`` channels of a Trial;
+* :func:`plot_muscles` -- muscle forces or activations over time, optionally
+  against EMG (``<muscle>_emg`` channels, or a separate EMG Trial), with the
+  correlation in the legend (:func:`emg_correlations`);
+* :func:`plot_results_comparison` -- two results (e.g. SO vs FSO) on one time
+  base, and their difference (:func:`align_results`);
+* :func:`save_results_figures` -- all of these for one result.
+
+Diagnosis figures:
 
 * :func:`plot_comparison` -- model vs measurement per channel, with the noise
   floor as a band around the model, and the residual beneath;
@@ -25,7 +37,11 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-__all__ = ["new_figure", "figure_png", "save_figure", "save_channels", "plot_comparison",
+from .errors import PinmskError
+
+__all__ = ["new_figure", "figure_png", "save_figure", "save_channels", "plot_channels", "plot_moments",
+           "muscles_in", "emg_source", "emg_correlations", "plot_muscles", "align_results",
+           "plot_results_comparison", "find_emg", "results_figures", "save_results_figures", "plot_comparison",
            "plot_residual_heatmap", "plot_ranking", "plot_error_steps", "plot_effect_contribution",
            "save_diagnosis_figures"]
 
@@ -51,6 +67,7 @@ def figure_png(fig: Figure) -> bytes:
 
 
 def save_figure(fig: Figure, path) -> Path:
+    """Write ``fig`` as PNG to ``path`` (parent folders created); returns the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, format="png")
@@ -59,27 +76,325 @@ def save_figure(fig: Figure, path) -> Path:
 
 # -- trials ----------------------------------------------------------------------------------
 
+def plot_channels(trial, channels: Sequence[str], *, ylabel: str = "", title: str | None = None,
+                  path=None) -> Figure:
+    """``channels`` of a Trial against time, one panel each (missing channels are left out)."""
+    chans = [c for c in channels if c in trial]
+    if not chans:
+        raise PinmskError(f"none of the channels {list(channels)[:6]} is in the trial "
+                          f"(it has {', '.join(trial.names[:8])}{' ...' if trial.n_channels > 8 else ''})")
+    t = np.asarray(trial.time)
+    fig = new_figure(8.0, 1.6 + 1.4 * len(chans))
+    axes = fig.subplots(len(chans), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, c in zip(axes, chans):
+        ax.plot(t, trial[c], lw=1.0, color=_SIG)
+        ax.set_ylabel(ylabel or trial.units.get(c, "") or c, fontsize=8)
+        ax.set_title(c, fontsize=9, loc="left")
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("time (s)")
+    if title:
+        fig.suptitle(title, fontsize=10)
+    if path is not None:
+        save_figure(fig, path)
+    return fig
+
+
 def save_channels(trial, channels: Sequence[str], out_dir, *, stem: str = "channels",
                   ylabel: str = "", per_figure: int = 8) -> list[Path]:
     """Plot ``channels`` of a Trial against time; one PNG per ``per_figure`` channels."""
     chans = [c for c in channels if c in trial]
     out = []
-    t = np.asarray(trial.time)
-    for k in range(0, max(len(chans), 1), per_figure):
-        group = chans[k:k + per_figure]
-        if not group:
-            break
-        fig = new_figure(8.0, 1.6 + 1.4 * len(group))
-        axes = fig.subplots(len(group), 1, sharex=True, squeeze=False)[:, 0]
-        for ax, c in zip(axes, group):
-            ax.plot(t, trial[c], lw=1.0, color=_SIG)
-            ax.set_ylabel(ylabel or c, fontsize=8)
-            ax.set_title(c, fontsize=9, loc="left")
-            ax.grid(alpha=0.3)
-        axes[-1].set_xlabel("time (s)")
+    for k in range(0, len(chans), per_figure):
+        fig = plot_channels(trial, chans[k:k + per_figure], ylabel=ylabel)
         name = f"{stem}.png" if len(chans) <= per_figure else f"{stem}_{k // per_figure + 1}.png"
         out.append(save_figure(fig, Path(out_dir) / name))
     return out
+
+
+def moment_channels_in(trial, coordinates=None) -> list[str]:
+    """The ``<coord>_moment`` channels of a Trial (of ``coordinates`` if given), in order."""
+    if coordinates is None:
+        return [c for c in trial.names if c.endswith("_moment")]
+    return [f"{c}_moment" for c in coordinates if f"{c}_moment" in trial]
+
+
+def plot_moments(trial, coordinates=None, *, title: str | None = None, path=None) -> Figure:
+    """Joint moments (the ``<coord>_moment`` channels) against time."""
+    chans = moment_channels_in(trial, coordinates)
+    if not chans:
+        raise PinmskError("the trial has no <coord>_moment channels to plot; run inverse dynamics "
+                          "first (pinmsk.inverse_dynamics or `pinmsk id`)")
+    return plot_channels(trial, chans, ylabel="moment (N m)", title=title or "joint moments", path=path)
+
+
+# -- muscles, EMG, comparisons -----------------------------------------------------------------
+
+_QUANTITIES = {"force": ("_force", "force (N)"), "activation": ("_activation", "activation")}
+
+
+def _suffix(quantity: str) -> tuple[str, str]:
+    if quantity not in _QUANTITIES:
+        raise PinmskError(f"quantity must be one of {', '.join(_QUANTITIES)}; got {quantity!r}")
+    return _QUANTITIES[quantity]
+
+
+def muscles_in(results, quantity: str = "force", muscles=None) -> list[str]:
+    """Muscles with a ``<muscle>_<quantity>`` channel in ``results`` (restricted to ``muscles``)."""
+    suf, _ = _suffix(quantity)
+    have = [c[: -len(suf)] for c in results.names if c.endswith(suf) and len(c) > len(suf)]
+    if muscles is None:
+        return have
+    missing = [m for m in muscles if m not in have]
+    if missing:
+        raise PinmskError(f"no {quantity} channel for muscle(s) {missing} in the results "
+                          f"(muscles with {quantity}: {', '.join(have) or 'none'})")
+    return list(muscles)
+
+
+def emg_source(results, emg=True, muscles=None) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """EMG per muscle as ``{muscle: (time, values)}`` (muscles without EMG left out).
+
+    ``emg``: True -- the ``<muscle>_emg`` channels of ``results``; a Trial --
+    its ``<muscle>_emg`` channels, or channels named ``<muscle>`` (as
+    :func:`pinmsk.emg.envelopes` writes them); None or False -- no EMG.
+    ``muscles`` default to those with a force or activation channel in ``results``.
+    """
+    if emg is None or emg is False:
+        return {}
+    if muscles is None:
+        muscles = list(dict.fromkeys(muscles_in(results, "activation") + muscles_in(results, "force")))
+    src = results if emg is True else emg
+    if not hasattr(src, "names") or not hasattr(src, "time"):
+        raise PinmskError(f"emg must be True (the <muscle>_emg channels of the results), a Trial or None; "
+                          f"got {type(emg).__name__}")
+    names = ("{}_emg",) if emg is True else ("{}_emg", "{}")
+    out = {}
+    for m in muscles:
+        for pattern in names:
+            if pattern.format(m) in src:
+                out[m] = (np.asarray(src.time, dtype=float), np.asarray(src[pattern.format(m)], dtype=float))
+                break
+    return out
+
+
+def _on_base(t, t_src, x):
+    """``x(t_src)`` linearly interpolated at the ``t`` inside ``t_src``'s span; (mask, values)."""
+    inside = (t >= t_src[0] - 1e-12) & (t <= t_src[-1] + 1e-12)
+    return inside, np.interp(t[inside], t_src, x)
+
+
+def _pearson(a, b) -> float:
+    a = np.asarray(a, float) - np.mean(a)
+    b = np.asarray(b, float) - np.mean(b)
+    den = np.sqrt(np.sum(a * a) * np.sum(b * b))
+    return float(np.sum(a * b) / den) if len(a) > 1 and den > 0 else float("nan")
+
+
+def emg_correlations(results, emg=True, *, quantity: str = "activation", muscles=None) -> dict[str, float]:
+    """Pearson r between each muscle's ``quantity`` and its EMG (``emg`` as in :func:`emg_source`).
+
+    The EMG is interpolated linearly onto the result's time base, over the
+    frames where both exist.  NaN where either signal is constant.
+    """
+    mus = muscles_in(results, quantity, muscles)
+    suf, _ = _suffix(quantity)
+    t = np.asarray(results.time, dtype=float)
+    out = {}
+    for m, (te, x) in emg_source(results, emg, mus).items():
+        inside, xe = _on_base(t, te, x)
+        out[m] = _pearson(np.asarray(results[m + suf])[inside], xe) if inside.sum() > 1 else float("nan")
+    return out
+
+
+def _colors(n):
+    from matplotlib import colormaps
+    cmap = colormaps["tab10" if n <= 10 else "tab20"]
+    return [cmap(i % cmap.N) for i in range(n)]
+
+
+def _grid(fig, n, ncols):
+    ncols = min(ncols, n)
+    nrows = -(-n // ncols)
+    axes = fig.subplots(nrows, ncols, sharex=True, squeeze=False).ravel()
+    for ax in axes[n:]:
+        ax.set_visible(False)
+    return axes[:n], nrows, ncols
+
+
+def plot_muscles(results, *, quantity: str = "force", muscles=None, emg=None, normalize_emg: bool = True,
+                 max_overlaid: int = 10, title: str | None = None, path=None) -> Figure:
+    """Muscle forces or activations over time, optionally against EMG.
+
+    Without EMG (``emg=None``) the muscles share one panel (up to
+    ``max_overlaid``, else one small panel each).  With EMG (``emg=True``: the
+    ``<muscle>_emg`` channels of ``results``; or a separate EMG Trial with
+    ``<muscle>_emg`` or ``<muscle>`` channels; see :func:`emg_source`) each muscle that has
+    EMG gets a panel with the EMG on the result's axis -- divided by its peak
+    times the peak of the result (``normalize_emg``) so the shapes compare --
+    and the correlation r (:func:`emg_correlations`) in the legend.
+    """
+    suf, unit = _suffix(quantity)
+    mus = muscles_in(results, quantity, muscles)
+    if not mus:
+        raise PinmskError(f"the results have no <muscle>{suf} channels to plot "
+                          f"(channels: {', '.join(results.names[:8])})")
+    t = np.asarray(results.time, dtype=float)
+    src = emg_source(results, emg, mus)
+    if emg is not None and emg is not False and not src:
+        raise PinmskError(f"no EMG found for the muscles {', '.join(mus)}: expected channels "
+                          f"<muscle>_emg{' or <muscle>' if emg is not True else ''} "
+                          f"in the {'results' if emg is True else 'EMG trial'}")
+    colors = dict(zip(mus, _colors(len(mus))))
+    if src:
+        r = emg_correlations(results, emg, quantity=quantity, muscles=list(src))
+        fig = new_figure(10.0, 0.8 + 2.0 * -(-len(src) // 2))
+        axes, _, _ = _grid(fig, len(src), 2)
+        for ax, (m, (te, x)) in zip(axes, src.items()):
+            y = np.asarray(results[m + suf])
+            ax.plot(t, y, color=colors[m], lw=1.4, label=f"{m} {quantity}")
+            inside, xe = _on_base(t, te, x)
+            peak = np.max(np.abs(xe)) if xe.size else 0.0
+            scale = (np.max(np.abs(y)) / peak if peak > 0 and np.max(np.abs(y)) > 0 else 1.0) \
+                if normalize_emg else 1.0
+            ax.plot(t[inside], xe * scale, color="k", lw=0.9, ls="--",
+                    label=f"EMG{' (scaled to peak)' if normalize_emg else ''}, r = {r[m]:.2f}")
+            ax.set_title(m, fontsize=9, loc="left")
+            ax.set_ylabel(unit, fontsize=8)
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=7, loc="upper right")
+        default = f"muscle {quantity} vs EMG"
+    elif len(mus) <= max_overlaid:
+        fig = new_figure(9.0, 4.0)
+        ax = fig.subplots()
+        for m in mus:
+            ax.plot(t, results[m + suf], color=colors[m], lw=1.2, label=m)
+        ax.set_ylabel(unit)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, ncol=min(len(mus), 4), loc="upper right")
+        axes = [ax]
+        default = f"muscle {quantity}"
+    else:
+        fig = new_figure(12.0, 0.8 + 1.6 * -(-len(mus) // 4))
+        axes, _, _ = _grid(fig, len(mus), 4)
+        for ax, m in zip(axes, mus):
+            ax.plot(t, results[m + suf], color=_SIG, lw=1.0)
+            ax.set_title(m, fontsize=8, loc="left")
+            ax.tick_params(labelsize=7)
+            ax.grid(alpha=0.3)
+        default = f"muscle {quantity} ({unit})"
+    for ax in axes[-2:]:
+        ax.set_xlabel("time (s)")
+    fig.suptitle(title or default, fontsize=10)
+    if path is not None:
+        save_figure(fig, path)
+    return fig
+
+
+def align_results(first, second, *, quantity: str = "force", muscles=None):
+    """Two results on one time base: ``(t, muscles, A, B)``.
+
+    ``t`` is the time of ``first`` inside the span of ``second``; ``A`` (N, m)
+    are ``first``'s values there and ``B`` ``second``'s, interpolated linearly;
+    ``muscles`` are those both results have (or ``muscles``).
+    """
+    suf, _ = _suffix(quantity)
+    if muscles is None:
+        other = set(muscles_in(second, quantity))
+        mus = [m for m in muscles_in(first, quantity) if m in other]
+    else:
+        mus = muscles_in(first, quantity, muscles)
+        muscles_in(second, quantity, muscles)
+    if not mus:
+        raise PinmskError(f"the two results have no muscle {quantity} channel in common")
+    t1 = np.asarray(first.time, float)
+    t2 = np.asarray(second.time, float)
+    inside = (t1 >= t2[0] - 1e-12) & (t1 <= t2[-1] + 1e-12)
+    if inside.sum() < 2:
+        raise PinmskError(f"the results do not overlap in time ({t1[0]:.4g}-{t1[-1]:.4g} s vs "
+                          f"{t2[0]:.4g}-{t2[-1]:.4g} s); compare results of the same trial")
+    t = t1[inside]
+    A = np.stack([np.asarray(first[m + suf])[inside] for m in mus], axis=1)
+    B = np.stack([np.interp(t, t2, np.asarray(second[m + suf])) for m in mus], axis=1)
+    return t, mus, A, B
+
+
+def plot_results_comparison(first, second, *, labels: Sequence[str] = ("SO", "FSO"),
+                            quantity: str = "force", muscles=None, title: str | None = None,
+                            path=None) -> Figure:
+    """Two results (e.g. SO vs FSO) on one time base (:func:`align_results`), and the difference.
+
+    Top: ``first`` solid, ``second`` dashed, one colour per muscle.  Bottom:
+    ``second - first`` per muscle, with its RMS in the legend.
+    """
+    la, lb = labels
+    suf, unit = _suffix(quantity)
+    t, mus, A, B = align_results(first, second, quantity=quantity, muscles=muscles)
+    fig = new_figure(9.0, 6.5)
+    ax, axd = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 2]})
+    for j, (m, c) in enumerate(zip(mus, _colors(len(mus)))):
+        ax.plot(t, A[:, j], color=c, lw=1.4, label=m)
+        ax.plot(t, B[:, j], color=c, lw=1.0, ls="--")
+        rms = float(np.sqrt(np.mean((B[:, j] - A[:, j]) ** 2)))
+        axd.plot(t, B[:, j] - A[:, j], color=c, lw=1.0, label=f"{m} (rms {rms:.3g})")
+    ax.plot([], [], color="k", lw=1.4, label=la)
+    ax.plot([], [], color="k", lw=1.0, ls="--", label=lb)
+    ax.set_ylabel(unit)
+    ax.set_title(f"muscle {quantity}: {la} (solid) vs {lb} (dashed)", fontsize=9, loc="left")
+    ax.legend(fontsize=7, ncol=4, loc="upper right")
+    ax.grid(alpha=0.3)
+    axd.axhline(0.0, color="k", lw=0.6)
+    axd.set_ylabel(f"{lb} - {la}")
+    axd.set_xlabel("time (s)")
+    axd.set_title("difference", fontsize=9, loc="left")
+    axd.legend(fontsize=7, ncol=4, loc="upper right")
+    axd.grid(alpha=0.3)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    if path is not None:
+        save_figure(fig, path)
+    return fig
+
+
+def find_emg(results, trial=None):
+    """Where EMG is for :func:`results_figures`: True if ``results`` has ``<muscle>_emg``
+    channels, else ``trial`` if it has them for the result's muscles, else None."""
+    if emg_source(results, True):
+        return True
+    if trial is not None and emg_source(results, trial):
+        return trial
+    return None
+
+
+def results_figures(results, *, trial=None, emg=None, coordinates=None) -> dict[str, Figure]:
+    """The standard figures of one result, ``{name: Figure}``.
+
+    ``moments`` (from ``results``, else ``trial``, when either has
+    ``<coord>_moment`` channels), ``forces``, ``activations``, and
+    ``activations_vs_emg`` (or ``forces_vs_emg`` without activations) when
+    there is EMG: ``emg`` (True or a Trial, as in :func:`emg_source`), by
+    default :func:`find_emg` of ``results`` and ``trial``.
+    """
+    figs = {}
+    for src in (results, trial):
+        if src is not None and moment_channels_in(src, coordinates):
+            figs["moments"] = plot_moments(src, coordinates)
+            break
+    for q, name in (("force", "forces"), ("activation", "activations")):
+        if muscles_in(results, q):
+            figs[name] = plot_muscles(results, quantity=q)
+    if emg is None:
+        emg = find_emg(results, trial)
+    for q, name in (("activation", "activations_vs_emg"), ("force", "forces_vs_emg")):
+        if muscles_in(results, q) and emg_source(results, emg, muscles_in(results, q)):
+            figs[name] = plot_muscles(results, quantity=q, emg=emg)
+            break
+    return figs
+
+
+def save_results_figures(results, out_dir, *, trial=None, emg=None, coordinates=None) -> dict[str, Path]:
+    """:func:`results_figures` as ``<out_dir>/<name>.png``; returns ``{name: path}``."""
+    return {name: save_figure(fig, Path(out_dir) / f"{name}.png")
+            for name, fig in results_figures(results, trial=trial, emg=emg, coordinates=coordinates).items()}
 
 
 # -- diagnosis -------------------------------------------------------------------------------

@@ -20,7 +20,7 @@ def test_finger_tapping_quick(tmp_path):
     assert all(data["converged"])
     assert all(j2 < 0.01 for j2 in data["J2"])          # our finger tracks 2 and 6 Hz
     assert (tmp_path / "finger_2Hz.png").exists() and (tmp_path / "finger_table.png").exists()
-    assert data["half_mass_2Hz"]["peak_excitation_ratio_half_to_full"] < 1.0
+    assert data["half_mass_2Hz"]["converged"] and data["half_mass_2Hz"]["J2"] < 0.01
 
 
 @pytest.mark.slow

@@ -42,6 +42,8 @@ DRIVE = ("ankle_x", "ankle_y", "foot_angle")
 GRF = ("ground_force_vy", "ground_force_vx", "ground_force_px")
 N_FOURIER = 11
 TOE_MODES = ("kinematic", "fit", "flat", "channel")
+#: swing frames (toes off the ground) for :func:`toe_from_kinematics`: measured f_n below this x its peak
+SWING = 0.02
 #: parameters sampled log-uniformly in the multi-start (scale-like, >= 0)
 _LOG_PARAMS = {"k_s", "a_s", "k_v", "a_v", "k_h", "a_h", "v_s"}
 
@@ -59,24 +61,30 @@ def fourier_basis(t: np.ndarray, period: float):
     return B, dB
 
 
-def toe_from_kinematics(geom: Foot2dGeometry, q: np.ndarray, *, max_extension: float = 1.2) -> np.ndarray:
+def toe_from_kinematics(geom: Foot2dGeometry, q: np.ndarray, *, swing=None, clearance: float = 0.05,
+                        max_extension: float = 1.2) -> np.ndarray:
     """Toe angle (rad, (N,)) from the driving kinematics ``q[:, :3]``: the toes are rigid and
-    extend only as much as keeps the toe site T from sinking below its foot-flat height.
+    extend only as much as keeps the toe site T from sinking below a floor height.
 
     With the toes in line with the foot (mtp = 0), T is ``PT sin(theta)`` below the MTP joint
-    P (theta = foot angle, + = toes down).  ``h0`` = the 5th percentile of P's height over the
-    frames (its height in foot flat).  Where T would go below ``h0`` the toes turn up to put it
-    there, ``mtp = arcsin((h_P - h0) / PT) - theta``; elsewhere (heel strike, swing) ``mtp = 0``.
-    Clipped at ``-max_extension``.  Uses kinematics only (no force data): the "toe angle
-    identified beforehand" of the thesis procedure, for data without a toe marker.
+    P (theta = foot angle, + = toes down).  The floor is ``h0`` in stance -- the 5th percentile
+    of P's height over the stance frames (where the foot rolls over its forefoot) -- and
+    ``max(h0, clearance)`` in the ``swing`` frames (bool mask, e.g. the measured vertical force
+    below 2 % of its peak; default: no swing frames): swing means the toes are off the ground.
+    Where T would go below the floor the toes turn up to put it there,
+    ``mtp = arcsin((h_P - floor) / PT) - theta``; elsewhere (heel strike, foot flat, late swing)
+    ``mtp = 0``.  Clipped at ``-max_extension``.  No toe marker is needed: this is the "toe angle
+    identified beforehand" of the thesis procedure for data with heel and metatarsal markers only.
     """
     q0 = np.zeros((q.shape[0], 4))
     q0[:, :3] = q[:, :3]
     kin = foot2d_site_kinematics(geom, q0, np.zeros_like(q0))
     h_p = kin["metatarsal"].position[:, 1] + (geom.mtp - geom.metatarsal)[1]
-    h0 = float(np.percentile(h_p, 5))
+    swing = np.zeros(q.shape[0], dtype=bool) if swing is None else np.asarray(swing, dtype=bool)
+    h0 = float(np.percentile(h_p[~swing] if (~swing).sum() >= 3 else h_p, 5))
+    floor = np.where(swing, max(h0, clearance), h0)
     pt = float(np.hypot(geom.toe[0], geom.toe[1]))
-    phi = np.arcsin(np.clip((h_p - h0) / pt, -1.0, 1.0))
+    phi = np.arcsin(np.clip((h_p - floor) / pt, -1.0, 1.0))
     return np.clip(np.minimum(0.0, phi - q[:, 2]), -max_extension, 0.0)
 
 
@@ -147,7 +155,7 @@ class ContactFit:
                  cutoff: float | None = 12.0, n_starts: int = 6, initial=None, bounds=None,
                  fixed=(), toe: str = "kinematic", ground_speed: float | None = None,
                  cop_threshold: float = 0.05, seed: int = 0, max_nfev: int = 400, ftol: float = 1e-10,
-                 relax_range: float = 0.02, n_jobs: int = 1, toe_range: float = 0.05):
+                 relax_range: float = 0.02, n_jobs: int = 1, toe_range: float = 0.02):
         self.contact = contact
         self.relax = relax
         self.window = window
@@ -301,7 +309,7 @@ class ContactFit:
         if self.toe == "flat":
             mtp_kin = -np.maximum(prob.q[:, 2], 0.0)
         else:
-            mtp_kin = toe_from_kinematics(prob.geom, prob.q)
+            mtp_kin = toe_from_kinematics(prob.geom, prob.q, swing=prob.meas[0] < SWING * prob.scale[0])
         fourier0 = np.linalg.lstsq(prob.B, mtp_kin, rcond=None)[0]
         self.toe_kinematic_ = fourier0
         if self.toe in ("flat", "kinematic"):
@@ -449,7 +457,7 @@ class ContactFit:
                 "objective": self.objective_, "objective_full": self.objective_full_,
                 "terms": self.terms_, "params": self.params_(),
                 "toe_fourier": None if self.fourier_ is None else [float(x) for x in self.fourier_],
-                "toe_max_deviation": self.toe_deviation_,
+                "toe_max_deviation": self.toe_deviation_, "load_shares": self.load_shares(),
                 "rmse": self.rmse_, "seconds": self.seconds_, "n_free": int(self.n_free_),
                 "aic": self.aic_, "bic": self.bic_, "converged": bool(self.result_.status > 0),
                 "nfev": int(self.nfev_), "starts": self.starts_, "ground_speed": self.ground_speed_,
@@ -481,6 +489,41 @@ class ContactFit:
             out[s] = {"peak_percent": float(100 * (gr.normal.max() / base.max() - 1)),
                       "mean_percent": float(100 * (gr.normal.sum() / base.sum() - 1))}
         return out
+
+    def load_shares(self) -> dict:
+        """``{site: fraction}`` of the model's normal impulse over the window carried by each sphere."""
+        tot = float(np.sum(self.reaction_.normal))
+        return {s: float(np.sum(o.normal) / tot) if tot > 0 else float("nan")
+                for s, o in zip(SITES, self.outputs_)}
+
+    def double_hump(self) -> dict:
+        """The vertical GRF's double hump, measured vs model, at the measured events.
+
+        Peaks: the largest measured f_n in the first and second half of the loaded frames;
+        valley: the smallest between them.  ``depth`` = 1 - valley / mean(peaks) (0 = no
+        hump), for the measurement and for the model sampled at the same three frames, plus
+        the model's own depth (its peaks/valley searched in the same halves).
+        """
+        prob = self.problem_
+        fm, fe = prob.meas[0], self.reaction_.normal
+        idx = np.flatnonzero(fm > 0.5 * fm.max())
+        if idx.size < 5:
+            raise SolverError("double_hump: fewer than 5 frames above half the peak vertical force")
+        mid = (idx[0] + idx[-1]) // 2
+        a, b = np.arange(idx[0], mid + 1), np.arange(mid, idx[-1] + 1)
+
+        def depth(f, i1, i2, iv):
+            return float(1 - f[iv] / (0.5 * (f[i1] + f[i2])))
+
+        i1, i2 = a[np.argmax(fm[a])], b[np.argmax(fm[b])]
+        iv = i1 + int(np.argmin(fm[i1:i2 + 1]))
+        j1, j2 = a[np.argmax(fe[a])], b[np.argmax(fe[b])]
+        jv = j1 + int(np.argmin(fe[j1:j2 + 1])) if j2 > j1 else j1
+        t = prob.t
+        return {"measured_depth": depth(fm, i1, i2, iv), "model_depth_at_measured_events": depth(fe, i1, i2, iv),
+                "model_depth": depth(fe, j1, j2, jv) if j2 > j1 else 0.0,
+                "measured_events_s": [float(t[i1]), float(t[iv]), float(t[i2])],
+                "model_events_s": [float(t[j1]), float(t[jv]), float(t[j2])]}
 
     def plot(self, out_dir) -> list[Path]:
         """GRF (vertical, horizontal) and COP vs measured, as PNGs in ``out_dir``."""

@@ -20,7 +20,7 @@ import numpy as np
 from ..filtering import differentiate
 from ..trial import Trial
 from .foot import SITES, Foot2dGeometry, foot2d_site_kinematics, foot_contacts, ground_reaction, load_foot2d
-from .identify import fourier_basis, toe_from_kinematics
+from .identify import SWING, fourier_basis, toe_from_kinematics
 
 
 def _smoothstep(u):
@@ -70,15 +70,22 @@ def synthetic_foot_trial(*, contact: str = "hypervolumetric", values=None, rate:
     # is up, neutral in swing; :func:`toe_from_kinematics`, what ContactFit's default toe mode uses)
     B, dB = fourier_basis(t - t[0], t[-1] - t[0])
     Q = np.column_stack([ax, ay, th])
-    four = np.linalg.lstsq(B, toe_from_kinematics(geom, Q), rcond=None)[0]
-    mtp = B @ four
     qs, vs, _ = differentiate(t, Q)
-    q = np.column_stack([qs, mtp])
-    v = np.column_stack([vs, dB @ four])
     cs = foot_contacts(model, contact, ground_speed=ground_speed, values=values)
-    kin = foot2d_site_kinematics(geom, q, v)
-    outs = [cc.evaluate_kinematics(kin[site]) for site, cc in zip(SITES, cs)]
-    gr = ground_reaction(outs)
+    # swing = the force below SWING x its peak, as ContactFit decides it; iterate to a fixed point
+    swing = t < 0.4
+    for _ in range(5):
+        four = np.linalg.lstsq(B, toe_from_kinematics(geom, Q, swing=swing), rcond=None)[0]
+        q = np.column_stack([qs, B @ four])
+        v = np.column_stack([vs, dB @ four])
+        kin = foot2d_site_kinematics(geom, q, v)
+        outs = [cc.evaluate_kinematics(kin[site]) for site, cc in zip(SITES, cs)]
+        gr = ground_reaction(outs)
+        new = gr.normal < SWING * np.max(np.abs(gr.normal))
+        if np.array_equal(new, swing):
+            break
+        swing = new
+    mtp = q[:, 3]
     fy, fx, px = gr.normal.copy(), gr.friction.copy(), gr.cop[:, 0].copy()
     if noise:
         rng = np.random.default_rng(seed)

@@ -73,16 +73,15 @@ import sys
 import time as _time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import pinocchio as pin
 
 from ..errors import ConvergenceError, ModelError, SolverError, TrialError
-from ..muscles.activation import activation_rate, excitation_from_activation
+from ..muscles.activation import excitation_from_activation
 from ..muscles.tendon import thelen_tendon_force
 from ..muscles.thelen2003 import (GAMMA, K_PE, PASSIVE_STRAIN0, thelen_contraction_rate,
-                                  thelen_force_velocity, thelen_passive_force_length)
+                                  thelen_passive_force_length)
 from .parametrization import Fourier, Parametrization, Polynomial, Spline
 
 __all__ = ["BatchSkeleton", "simulate_ff", "simulate_skeleton", "muscle_inverse",
@@ -499,7 +498,7 @@ class DynamicResult:
 
 
 # =============================================================================== problem
-_OBJ_KEYS = {"kind", "exponent", "weights", "normalize", "model", "tracking_weight"}
+_OBJ_KEYS = {"kind", "exponent", "weights", "normalize", "model"}
 
 
 class DynamicOptimization:
@@ -1110,7 +1109,7 @@ def load_task(task_path) -> dict:
 
 def build_from_task(spec: dict, *, base_dir=None, progress=None) -> DynamicOptimization:
     """A :class:`DynamicOptimization` from a validated task dict."""
-    from ..model import Model, load_model
+    from ..model import load_model
     ms = spec["model"]
     name = ms["name"]
     if base_dir is not None and str(name).endswith((".toml", ".urdf")) and not Path(name).is_absolute():
