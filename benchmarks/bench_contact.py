@@ -81,13 +81,23 @@ def main(argv=None):
     else:
         from pinmsk.contact import synthetic_foot_trial
         trial, window, cutoff, what = synthetic_foot_trial(), None, None, "synthetic cycle (real data absent)"
-    fit = ContactFit(contact="hypervolumetric", window=window, cutoff=cutoff, n_starts=args.starts,
-                     n_jobs=args.jobs).fit(None, trial)
-    print(f"hyper-volumetric identification on the {what}: {fit.seconds_:.1f} s with {args.starts} starts on "
-          f"{args.jobs} processes ({os.cpu_count()} cores), {fit.nfev_} evaluations, J = {fit.objective_:.4f} "
-          f"(target <= 60 s: {'OK' if fit.seconds_ <= 60 else 'MISSED'})")
-    fit1 = ContactFit(contact="hypervolumetric", window=window, cutoff=cutoff, n_starts=1).fit(None, trial)
-    print(f"  one start, serial: {fit1.seconds_:.1f} s, J = {fit1.objective_:.4f}")
+    # the SVD inside scipy's 'trf' (LAPACK gesdd) on a Jacobian of this size, threaded vs one thread
+    import scipy.linalg as sl
+    from threadpoolctl import threadpool_limits
+    a = np.random.default_rng(1).normal(size=(360, 29))
+    t_thr = best_of(lambda: sl.svd(a, full_matrices=False), repeat=3, number=20)
+    with threadpool_limits(limits=1):
+        t_one = best_of(lambda: sl.svd(a, full_matrices=False), repeat=3, number=20)
+    print(f"gesdd SVD 360 x 29 (one 'trf' iteration): BLAS threaded {t_thr * 1e3:.2f} ms, "
+          f"threadpool_limits(1) {t_one * 1e3:.2f} ms (the fit runs with the latter)")
+    for toe in ("kinematic", "fit"):
+        fit = ContactFit(contact="hypervolumetric", window=window, cutoff=cutoff, n_starts=args.starts,
+                         n_jobs=args.jobs, toe=toe).fit(None, trial)
+        print(f"hyper-volumetric identification (toe={toe}, {fit.n_free_} free) on the {what}: {fit.seconds_:.1f} s "
+              f"with {args.starts} starts on {args.jobs} processes ({os.cpu_count()} cores), {fit.nfev_} "
+              f"evaluations, J = {fit.objective_:.4f} (target <= 60 s: {'OK' if fit.seconds_ <= 60 else 'MISSED'})")
+        fit1 = ContactFit(contact="hypervolumetric", window=window, cutoff=cutoff, n_starts=1, toe=toe).fit(None, trial)
+        print(f"  one start, serial: {fit1.seconds_:.1f} s, {fit1.nfev_} evaluations, J = {fit1.objective_:.4f}")
 
 
 if __name__ == "__main__":

@@ -60,6 +60,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 import pinmsk  # noqa: E402
+from pinmsk.datasets import shared_data_dir  # noqa: E402
 
 #: Cutoff (Hz) of every setup used here (the Arm26 and Gait10dof18musc setups all say 6 Hz).
 CUTOFF = 6.0
@@ -76,15 +77,6 @@ ARM26_SO_REFERENCE = "StaticOptimization_Physiological"
 # ---------------------------------------------------------------------------
 # Locating things
 # ---------------------------------------------------------------------------
-
-def data_dir(explicit=None) -> Path | None:
-    """``../shared/data`` (or ``$PINMSK_SHARED_DATA`` or ``explicit``), if it exists."""
-    if explicit:
-        return Path(explicit)
-    env = os.environ.get("PINMSK_SHARED_DATA")
-    cand = Path(env) if env else Path(pinmsk.__file__).resolve().parents[1].parent / "shared" / "data"
-    return cand if cand.is_dir() else None
-
 
 def import_opensim():
     """``(opensim module, None)`` or ``(None, reason)``."""
@@ -464,7 +456,7 @@ def main(argv=None) -> int:
     if osim is None:
         print(f"bench_opensim: {why} -- nothing to compare")
         return 0
-    d = data_dir(a.data)
+    d = Path(a.data) if a.data else shared_data_dir()
     models = None if d is None else d / "opensim-models"
     if models is None or not (models / "Arm26").is_dir() or not (models / "Gait10dof18musc").is_dir():
         print("bench_opensim: ../shared/data/opensim-models (Arm26, Gait10dof18musc) is absent -- nothing to compare")

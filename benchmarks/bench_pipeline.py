@@ -38,6 +38,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 import pinmsk  # noqa: E402
+from pinmsk.datasets import shared_data_dir  # noqa: E402
 from pinmsk.grf import external_forces  # noqa: E402
 from pinmsk.ik import InverseKinematics, markers_trial  # noqa: E402
 from pinmsk.markers import load_marker_set, read_trc  # noqa: E402
@@ -46,14 +47,6 @@ from pinmsk.resample import to_time  # noqa: E402
 from pinmsk.solvers.static import StaticOptimization  # noqa: E402
 
 TARGET_S = 2.0
-
-
-def data_dir(explicit=None) -> Path | None:
-    if explicit:
-        return Path(explicit)
-    env = os.environ.get("PINMSK_SHARED_DATA")
-    cand = Path(env) if env else Path(pinmsk.__file__).resolve().parents[1].parent / "shared" / "data"
-    return cand if cand.is_dir() else None
 
 
 def prepare(folder: Path):
@@ -137,7 +130,7 @@ def main(argv=None) -> int:
     p.add_argument("--repeat", type=int, default=3)
     p.add_argument("--data", default=None)
     a = p.parse_args(argv)
-    d = data_dir(a.data)
+    d = Path(a.data) if a.data else shared_data_dir()
     folder = None if d is None else d / "real" / "opensim-moco-walk-emg"
     if folder is None or not folder.is_dir():
         print("bench_pipeline: ../shared/data/real/opensim-moco-walk-emg is absent; nothing to time")

@@ -32,7 +32,7 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 import pinmsk  # noqa: E402
-from pinmsk.components import Motion  # noqa: E402
+from pinmsk.diagnose.synth import walking_motion  # noqa: E402
 from pinmsk.solvers import FSO, StaticOptimization  # noqa: E402
 from pinmsk.solvers.analytical import gaussian_elbow_motion  # noqa: E402
 from pinmsk.solvers.static import solve_frame_slsqp  # noqa: E402
@@ -50,27 +50,6 @@ def best_of(fn, repeat=5):
         out = fn()
         best = min(best, time.perf_counter() - t0)
     return best, out
-
-
-def walking_motion(model, n=1000, duration=2.0):
-    t = np.linspace(0.0, duration, n)
-    w = 2 * np.pi / 1.0
-
-    def coords(tt):
-        q = np.zeros((tt.size, model.nv))
-        ix = model.coordinate_index
-        q[:, ix("torso_x")] = 1.2 * tt
-        q[:, ix("torso_y")] = 1.0 + 0.02 * np.cos(2 * w * tt)
-        q[:, ix("torso_angle")] = 0.05 + 0.02 * np.sin(2 * w * tt)
-        for side, ph in (("r", 0.0), ("l", np.pi)):
-            q[:, ix(f"hip_{side}")] = -0.1 + 0.35 * np.sin(w * tt + ph)
-            q[:, ix(f"knee_{side}")] = 0.6 + 0.5 * np.sin(w * tt + ph - 1.2)
-            q[:, ix(f"ankle_{side}")] = 0.05 + 0.2 * np.sin(w * tt + ph + 0.5)
-        return q
-
-    h = 1e-5
-    return Motion(t, coords(t), (coords(t + h) - coords(t - h)) / (2 * h),
-                  (coords(t + h) - 2 * coords(t) + coords(t - h)) / h ** 2)
 
 
 def plain_proxsuite(prob, frames, minmax=False):
@@ -134,7 +113,7 @@ def main():
     results = {}
     print("\nStatic optimization (best of repeats; SLSQP on a subset of frames, ftol 1e-14)")
     fa1000 = gaussian_elbow_motion(n_frames=1000)
-    walk = walking_motion(gait, n=1000)
+    walk = walking_motion(gait, n_frames=1000, duration=2.0)
     cases = [(2, False), (1, False), (3, False), (2, True), (10, False)]
     for P, mm in cases:
         results[("forearm", P, mm)] = so_row(forearm, fa1000, "forearm 1000 frames", P, mm, n_ref)

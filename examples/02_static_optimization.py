@@ -21,7 +21,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import pinmsk  # noqa: E402
-from pinmsk.components import Motion  # noqa: E402
+from pinmsk.diagnose.synth import walking_motion  # noqa: E402
 from pinmsk.solvers import StaticOptimization  # noqa: E402
 from pinmsk.solvers.analytical import gaussian_elbow_motion, one_dof_forces  # noqa: E402
 
@@ -92,26 +92,8 @@ plt.close(fig)
 
 # gait2d: a walking-like motion, the coordinates spanned by muscles balanced
 gait = pinmsk.load_model("gait2d")
-t = np.linspace(0.0, 2.0, 400)
-w = 2 * np.pi
-
-
-def coords(tt):
-    q = np.zeros((tt.size, gait.nv))
-    ix = gait.coordinate_index
-    q[:, ix("torso_x")] = 1.2 * tt
-    q[:, ix("torso_y")] = 1.0 + 0.02 * np.cos(2 * w * tt)
-    q[:, ix("torso_angle")] = 0.05 + 0.02 * np.sin(2 * w * tt)
-    for side, ph in (("r", 0.0), ("l", np.pi)):
-        q[:, ix(f"hip_{side}")] = -0.1 + 0.35 * np.sin(w * tt + ph)
-        q[:, ix(f"knee_{side}")] = 0.6 + 0.5 * np.sin(w * tt + ph - 1.2)
-        q[:, ix(f"ankle_{side}")] = 0.05 + 0.2 * np.sin(w * tt + ph + 0.5)
-    return q
-
-
-h = 1e-5
-walk = Motion(t, coords(t), (coords(t + h) - coords(t - h)) / (2 * h),
-              (coords(t + h) - 2 * coords(t) + coords(t - h)) / h ** 2)
+walk = walking_motion(gait, n_frames=400, duration=2.0)
+t = walk.t
 so = StaticOptimization(exponent=2).fit(gait, walk)
 print()
 print(so.report())

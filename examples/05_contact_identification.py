@@ -1,14 +1,23 @@
 """Foot contact identification (thesis Ch. 4) on real treadmill walking.
 
-Drives foot2d with the measured ankle (lateral malleolus) position and foot
-angle of the CSU treadmill trial, fits the point (Eq. 4.4), linear volumetric
-(Eq. 4.5-4.8), hyper-volumetric (Eq. 4.9-4.15) and relaxed hyper-volumetric
-(Sec. 4.1.4) contact models to the measured GRF and COP (Eq. 4.2) over one
-cycle from toe-off to toe-off, prints the table of fitted parameters and
-errors, writes GRF/COP figures, and repeats the sensitivity study of Fig. 4.11.
+Drives foot2d with the foot located by its heel and 5th-metatarsal markers in
+the CSU treadmill trial (:func:`pinmsk.csu.read_csu`, ``anchor="heel"``: foot
+angle from the marker line, heel sphere site at a calibrated offset from the
+heel marker), fits the point (Eq. 4.4), linear volumetric (Eq. 4.5-4.8),
+hyper-volumetric (Eq. 4.9-4.15) and relaxed hyper-volumetric (Sec. 4.1.4)
+contact models to the measured GRF and COP (Eq. 4.2) over one cycle from
+toe-off to toe-off, prints the table of errors, load shares and the double
+hump of the vertical force, writes GRF/COP figures, and repeats the
+sensitivity study of Fig. 4.11 for the volumetric models.
+
+The toe angle is, by default, identified beforehand from the kinematics and
+held fixed (``--toe kinematic``, the thesis procedure); ``--toe fit`` fits the
+Eq. 4.1 series with the contact parameters, each coefficient within
++-``--toe-range`` rad of the kinematic estimate.
 
     python examples/05_contact_identification.py [--data rawdata.txt] [--out DIR]
                                                  [--starts 4] [--jobs 2] [--quick]
+                                                 [--toe kinematic fit] [--anchor heel|ankle]
 
 Without the real data (``../shared/data/real/csu-treadmill-leg2d``) it runs on
 the project's synthetic foot trial.  ``--quick`` does one short start per model
@@ -42,9 +51,15 @@ def main(argv=None) -> dict:
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--relax-range", type=float, default=0.02,
                     help="+- bound of the relaxed sphere offsets dx, dy (m; thesis: 0.015-0.02)")
-    ap.add_argument("--toe", nargs="+", default=["fit", "flat"], choices=["fit", "flat"],
-                    help="toe angle: Fourier series fitted with the contact parameters (Eq. 4.1, as the "
-                         "issue asks) and/or fixed to 'toes flat while the heel is up'")
+    ap.add_argument("--toe", nargs="+", default=["kinematic", "fit"], choices=["kinematic", "fit", "flat"],
+                    help="toe angle: identified from the kinematics and held fixed (thesis procedure), "
+                         "and/or the Eq. 4.1 series fitted with the contact parameters within --toe-range, "
+                         "and/or (legacy) fixed to 'toes flat while the heel is up'")
+    ap.add_argument("--toe-range", type=float, default=0.02,
+                    help="+- bound (rad) of each toe Fourier coefficient around its kinematic value (--toe fit)")
+    ap.add_argument("--anchor", default="heel", choices=["heel", "ankle"],
+                    help="locate the foot from the heel + MT5 markers (heel) or hang it from the malleolus marker")
+    ap.add_argument("--max-nfev", type=int, default=400)
     args = ap.parse_args(argv)
 
     data = args.data
@@ -54,7 +69,7 @@ def main(argv=None) -> dict:
         data = DEFAULT_DATA
     if data.exists():
         from pinmsk.csu import read_csu
-        trial = read_csu(data, body_mass=67.2)
+        trial = read_csu(data, body_mass=67.2, anchor=args.anchor)
         window = stance_cycle(trial)
         source = f"CSU treadmill trial {data}"
         cutoff = 12.0
@@ -64,35 +79,46 @@ def main(argv=None) -> dict:
         source = "synthetic foot trial (real data not found)"
         cutoff = None
     print(f"data: {source}; window {window}; belt speed {trial.meta.get('ground_speed', 0.0):.3f} m/s")
-    opts = dict(n_starts=1, max_nfev=30) if args.quick else dict(n_starts=args.starts, n_jobs=args.jobs)
+    opts = (dict(n_starts=1, max_nfev=30) if args.quick
+            else dict(n_starts=args.starts, n_jobs=args.jobs, max_nfev=args.max_nfev))
 
     args.out.mkdir(parents=True, exist_ok=True)
     fits = {}
     for toe in args.toe:
         for kind, relax in VARIANTS:
-            name = f"{kind}{' relaxed' if relax else ''}" + ("" if toe == "fit" else f" (toe {toe})")
+            name = f"{kind}{' relaxed' if relax else ''} (toe {toe})"
             fit = ContactFit(contact=kind, relax=relax, window=window, cutoff=cutoff, toe=toe,
-                             relax_range=args.relax_range, **opts).fit(None, trial)
+                             relax_range=args.relax_range, toe_range=args.toe_range, **opts).fit(None, trial)
             fit.plot(args.out / f"toe_{toe}")
             fits[name] = fit
             print(fit.report())
 
-    print("\nTable (Eq. 4.2 error J, minimised terms; J_all = all three terms; RMSE normal/friction N, COP mm)")
-    print(f"{'model':<36}{'J':>9}{'J_all':>9}{'fn':>8}{'ff':>8}{'cop':>8}{'s':>8}")
+    print("\nTable: Eq. 4.2 error J (minimised terms; the point contact tracks f_n only), J_all (all three "
+          "terms) and its terms;\nRMSE normal / friction (N), COP (mm); share of the normal impulse H/P/T; "
+          "double-hump depth 1 - valley/mean(peaks) of the model at the measured events (measured: see below)")
+    print(f"{'model':<38}{'J':>8}{'J_all':>8}{'J_fn':>8}{'J_ff':>8}{'J_cop':>8}{'fn':>7}{'ff':>7}{'cop':>7}"
+          f"{'H/P/T':>16}{'hump':>7}{'s':>7}")
+    hump = {}
     for name, f in fits.items():
-        r = f.rmse_
-        print(f"{name:<36}{f.objective_:>9.4f}{f.objective_full_:>9.4f}{r['normal_force']:>8.1f}"
-              f"{r['friction_force']:>8.1f}{1000 * r['cop']:>8.1f}{f.seconds_:>8.1f}")
+        r, T, sh = f.rmse_, f.terms_, f.load_shares()
+        hump[name] = f.double_hump()
+        print(f"{name:<38}{f.objective_:>8.4f}{f.objective_full_:>8.4f}{T['normal_force']:>8.4f}"
+              f"{T['friction_force']:>8.4f}{T['cop']:>8.4f}{r['normal_force']:>7.1f}{r['friction_force']:>7.1f}"
+              f"{1000 * r['cop']:>7.1f}{sh['heel']:>6.2f}/{sh['metatarsal']:.2f}/{sh['toe']:.2f}"
+              f"{hump[name]['model_depth_at_measured_events']:>7.3f}{f.seconds_:>7.1f}")
+    if hump:
+        print(f"measured double-hump depth: {next(iter(hump.values()))['measured_depth']:.3f}")
 
     sens = {}
-    for name in [n for n in fits if n.startswith("hypervolumetric relaxed")]:
+    for name in [n for n in fits if n.startswith(("volumetric", "hypervolumetric"))]:
         sens[name] = fits[name].sensitivity(factor=1.1)
-        print(f"\nFig. 4.11 ({name}): +10 % k_h at one sphere -> change of the peak total normal force")
+        print(f"\nFig. 4.11 ({name}): +10 % stiffness at one sphere -> change of the peak total normal force")
         for s, v in sens[name].items():
             print(f"  {s:<11} {v['peak_percent']:6.2f} %  (mean {v['mean_percent']:5.2f} %; "
                   f"thesis {THESIS_SENSITIVITY[s]} %)")
-    summary = {"source": source, "window": window,
-               "fits": {n: f.to_dict() for n, f in fits.items()}, "sensitivity": sens}
+    summary = {"source": source, "window": window, "anchor": trial.meta.get("anchor"),
+               "heel_offset": trial.meta.get("heel_offset"),
+               "fits": {n: f.to_dict() for n, f in fits.items()}, "sensitivity": sens, "double_hump": hump}
     (args.out / "contact_summary.json").write_text(json.dumps(summary, indent=2))
     print(f"\nfigures and contact_summary.json in {args.out}")
     return summary

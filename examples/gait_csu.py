@@ -22,9 +22,7 @@ anthropometry, not the subject's (no static calibration), so the marker RMS erro
 """
 from __future__ import annotations
 
-import argparse
 import json
-import os
 import sys
 from pathlib import Path
 
@@ -36,16 +34,10 @@ from pinmsk.grf import external_forces, torso_residuals
 from pinmsk.ik import InverseKinematics
 from pinmsk.markers import load_marker_set
 
+from _common import data_file_main
+
 BODY_MASS = 67.2   # kg, test.m of GaitAnalysisToolKit
 CUTOFF = 6.0       # Hz
-
-
-def data_dir(explicit=None) -> Path | None:
-    if explicit:
-        return Path(explicit)
-    env = os.environ.get("PINMSK_SHARED_DATA")
-    cand = Path(env) if env else Path(pinmsk.__file__).resolve().parents[1].parent / "shared" / "data"
-    return cand if cand.is_dir() else None
 
 
 def run(path: Path, out: Path, *, plots: bool = True) -> dict:
@@ -122,18 +114,8 @@ def run(path: Path, out: Path, *, plots: bool = True) -> dict:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", default="out/csu")
-    p.add_argument("--data", default=None)
-    p.add_argument("--no-plots", action="store_true")
-    a = p.parse_args(argv)
-    d = data_dir(a.data)
-    path = None if d is None else d / "real" / "csu-treadmill-leg2d" / "rawdata.txt"
-    if path is None or not path.exists():
-        print("gait_csu: ../shared/data/real/csu-treadmill-leg2d/rawdata.txt is absent; nothing to do")
-        return 0
-    run(path, Path(a.out), plots=not a.no_plots)
-    return 0
+    return data_file_main(argv, description=__doc__.splitlines()[0], name="gait_csu", out="out/csu",
+                          relative="real/csu-treadmill-leg2d/rawdata.txt", run=run)
 
 
 if __name__ == "__main__":

@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import warnings
 from pathlib import Path
@@ -39,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 import pinmsk
+from pinmsk.datasets import shared_data_dir
 from pinmsk.emg import on_off, onset_times
 from pinmsk.grf import external_forces, torso_residuals
 from pinmsk.markers import read_trc
@@ -61,14 +61,6 @@ GROUPS = {
 
 ON_THRESHOLD = 0.25
 MAX_LAG_S = 0.15   # EMG-to-force delays searched, s
-
-
-def data_dir(explicit=None) -> Path | None:
-    if explicit:
-        return Path(explicit)
-    env = os.environ.get("PINMSK_SHARED_DATA")
-    cand = Path(env) if env else Path(pinmsk.__file__).resolve().parents[1].parent / "shared" / "data"
-    return cand if cand.is_dir() else None
 
 
 def load(folder: Path, model):
@@ -250,7 +242,7 @@ def main(argv=None) -> int:
     p.add_argument("--no-diagnose", action="store_true")
     p.add_argument("--no-plots", action="store_true")
     a = p.parse_args(argv)
-    d = data_dir(a.data)
+    d = Path(a.data) if a.data else shared_data_dir()
     folder = None if d is None else d / "real" / "opensim-moco-walk-emg"
     if folder is None or not folder.is_dir():
         print("gait_rajagopal: data folder ../shared/data/real/opensim-moco-walk-emg is absent; nothing to do")

@@ -20,9 +20,7 @@ Movement*, 4th ed., Appendix A, Table A.1, via BMClab/BMC, CC BY 4.0), read from
 """
 from __future__ import annotations
 
-import argparse
 import json
-import os
 import sys
 from pathlib import Path
 
@@ -32,18 +30,12 @@ import pinmsk
 from pinmsk.ik import InverseKinematics
 from pinmsk.markers import load_marker_set
 
+from _common import data_file_main
+
 NAMES = ("RIB_CAGE", "RIGHT_HIP", "RIGHT_KNEE", "RIGHT_FIBULA", "RIGHT_ANKLE", "RIGHT_HEEL", "RIGHT_MT5",
          "RIGHT_TOE")
 SWING = (69, 95)       # 0-based: right toe-off (frame 70, 1-based) .. the frame before heel contact (~97)
 CUTOFFS = (3.0, 4.0, 6.0, 8.0, 10.0, 15.0, None)
-
-
-def data_dir(explicit=None) -> Path | None:
-    if explicit:
-        return Path(explicit)
-    env = os.environ.get("PINMSK_SHARED_DATA")
-    cand = Path(env) if env else Path(pinmsk.__file__).resolve().parents[1].parent / "shared" / "data"
-    return cand if cand.is_dir() else None
 
 
 def read_table_a1(path: Path) -> pinmsk.Trial:
@@ -137,18 +129,8 @@ def run(path: Path, out: Path, *, plots: bool = True) -> dict:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", default="out/winter")
-    p.add_argument("--data", default=None)
-    p.add_argument("--no-plots", action="store_true")
-    a = p.parse_args(argv)
-    d = data_dir(a.data)
-    path = None if d is None else d / "real" / "winter-gait-bmc" / "WinterTableA1.txt"
-    if path is None or not path.exists():
-        print("gait_winter: ../shared/data/real/winter-gait-bmc/WinterTableA1.txt is absent; nothing to do")
-        return 0
-    run(path, Path(a.out), plots=not a.no_plots)
-    return 0
+    return data_file_main(argv, description=__doc__.splitlines()[0], name="gait_winter", out="out/winter",
+                          relative="real/winter-gait-bmc/WinterTableA1.txt", run=run)
 
 
 if __name__ == "__main__":

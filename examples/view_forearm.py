@@ -8,13 +8,12 @@ flexor/extensor pattern that follows it), so the example needs no data.  The
 "simulated" motion lags the measured one by 0.1 s and is drawn as a ghost
 beside it; its elbow residual is the coloured ball at the elbow.
 """
-import argparse
-import sys
-
 import numpy as np
 
 import pinmsk
 from pinmsk.viewer import Viewer
+
+from _common import serve_or_close, viewer_arguments
 
 
 def synthetic_trials(model, duration=4.0, rate=100.0):
@@ -34,23 +33,13 @@ def synthetic_trials(model, duration=4.0, rate=100.0):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--no-block", action="store_true", help="set the scene up, print the URL and exit")
-    parser.add_argument("--block", action="store_true",
-                        help="keep serving even without a terminal (default: serve only in a terminal)")
-    parser.add_argument("--timeout", type=float, default=None, help="stop after this many seconds")
-    args = parser.parse_args(argv)
+    args = viewer_arguments(argv, description=__doc__.splitlines()[0])
 
     model = pinmsk.load_model("forearm")
     measured, results, simulated = synthetic_trials(model)
     viewer = Viewer(model)                                      # prints the URL
     viewer.play(measured, results=results, ghost=simulated, ghost_offset=0.35)
-    if args.no_block or not (args.block or sys.stdin.isatty()):
-        if not args.no_block:
-            print("no terminal: not serving; pass --block to keep the viewer up")
-        viewer.close()
-    else:
-        viewer.serve(timeout=args.timeout)
+    serve_or_close(viewer, args)
 
 
 if __name__ == "__main__":

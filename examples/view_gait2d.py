@@ -8,13 +8,12 @@ reaction force under the stance foot), so the example needs no data.  The
 second ("simulated") motion walks beside it as a translucent ghost, and the
 joints are coloured by a made-up residual.
 """
-import argparse
-import sys
-
 import numpy as np
 
 import pinmsk
 from pinmsk.viewer import Viewer
+
+from _common import serve_or_close, viewer_arguments
 
 STANDING_HEIGHT = 1.068  # torso_y with heels on the ground at q = 0 (urdf/gait2d.urdf)
 
@@ -49,23 +48,13 @@ def synthetic_gait(model, *, cycles=2, period=1.1, rate=100.0, speed=1.2):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--no-block", action="store_true", help="set the scene up, print the URL and exit")
-    parser.add_argument("--block", action="store_true",
-                        help="keep serving even without a terminal (default: serve only in a terminal)")
-    parser.add_argument("--timeout", type=float, default=None, help="stop after this many seconds")
-    args = parser.parse_args(argv)
+    args = viewer_arguments(argv, description=__doc__.splitlines()[0])
 
     model = pinmsk.load_model("gait2d")
     measured, results, simulated = synthetic_gait(model)
     viewer = Viewer(model)                                      # prints the URL
     viewer.play(measured, results=results, ghost=simulated, ghost_offset=0.6)
-    if args.no_block or not (args.block or sys.stdin.isatty()):
-        if not args.no_block:
-            print("no terminal: not serving; pass --block to keep the viewer up")
-        viewer.close()
-    else:
-        viewer.serve(timeout=args.timeout)
+    serve_or_close(viewer, args)
 
 
 if __name__ == "__main__":

@@ -5,13 +5,12 @@
 
 The motion is synthetic; a ghost with smaller amplitude stands beside it.
 """
-import argparse
-import sys
-
 import numpy as np
 
 import pinmsk
 from pinmsk.viewer import Viewer
+
+from _common import serve_or_close, viewer_arguments
 
 
 def synthetic_swing(model, *, duration=2.0, rate=60.0):
@@ -30,23 +29,13 @@ def synthetic_swing(model, *, duration=2.0, rate=60.0):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--no-block", action="store_true", help="set the scene up, print the URL and exit")
-    parser.add_argument("--block", action="store_true",
-                        help="keep serving even without a terminal (default: serve only in a terminal)")
-    parser.add_argument("--timeout", type=float, default=None, help="stop after this many seconds")
-    args = parser.parse_args(argv)
+    args = viewer_arguments(argv, description=__doc__.splitlines()[0])
 
     model = pinmsk.load_model("human3d")
     measured, smaller = synthetic_swing(model)
     viewer = Viewer(model)                                      # prints the URL
     viewer.play(measured, ghost=smaller, ghost_offset=0.8)
-    if args.no_block or not (args.block or sys.stdin.isatty()):
-        if not args.no_block:
-            print("no terminal: not serving; pass --block to keep the viewer up")
-        viewer.close()
-    else:
-        viewer.serve(timeout=args.timeout)
+    serve_or_close(viewer, args)
 
 
 if __name__ == "__main__":

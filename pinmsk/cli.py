@@ -124,33 +124,31 @@ def _report_results(args, model, trial, result, title, text):
         print(f"wrote {args.report}")
 
 
-def cmd_so(args) -> int:
+def _run_solver(args, solver, total: int | None, label: str, title: str) -> int:
+    """Fit a muscle-redundancy solver on the trial with a progress bar, then write and report."""
     from .progress import Progress
-    from .solvers.static import StaticOptimization
     model = _model(args)
     trial = _read(args.trial, model)
-    so = StaticOptimization(**_so_options(args), minmax=args.minmax)
-    with Progress(trial.n_frames, "SO") as bar:
-        so.fit(model, trial, cutoff=args.cutoff, progress=bar)
-    print(so.report())
-    _write(so.result_, args.output)
-    _report_results(args, model, trial, so.result_, "static_optimization", so.report())
+    with Progress(trial.n_frames if total is None else total, label) as bar:
+        solver.fit(model, trial, cutoff=args.cutoff, progress=bar)
+    text = solver.report()
+    print(text)
+    _write(solver.result_, args.output)
+    _report_results(args, model, trial, solver.result_, title, text)
     return 0
+
+
+def cmd_so(args) -> int:
+    from .solvers.static import StaticOptimization
+    so = StaticOptimization(**_so_options(args), minmax=args.minmax)
+    return _run_solver(args, so, None, "SO", "static_optimization")
 
 
 def cmd_fso(args) -> int:
-    from .progress import Progress
     from .solvers.fso import ForwardStaticOptimization
-    model = _model(args)
-    trial = _read(args.trial, model)
     fso = ForwardStaticOptimization(**_so_options(args), tracking=args.tracking, enforce=args.enforce,
                                     control_points=args.control_points, integrator=args.integrator)
-    with Progress(args.control_points, "FSO") as bar:
-        fso.fit(model, trial, cutoff=args.cutoff, progress=bar)
-    print(fso.report())
-    _write(fso.result_, args.output)
-    _report_results(args, model, trial, fso.result_, "forward_static_optimization", fso.report())
-    return 0
+    return _run_solver(args, fso, args.control_points, "FSO", "forward_static_optimization")
 
 
 def cmd_diagnose(args) -> int:

@@ -51,6 +51,7 @@ as the ground's tangential velocity.  ``meta["body_mass"]`` is ``body_mass`` if 
 """
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -196,9 +197,17 @@ def read_csu(path, *, plate: str = "FP2", belt_height: float = 0.0, min_force: f
         if anchor == "ankle":
             ax, ay = channels[f"{ankle}_x"], channels[f"{ankle}_y"]
         else:
-            ax, ay, info = _anchor_heel(t, channels[f"{heel}_x"], channels[f"{heel}_y"], theta, fy, cop, flat,
-                                        min_force=min_force, heel_offset=heel_offset,
-                                        heel_height=heel_height, path=path)
+            try:
+                ax, ay, info = _anchor_heel(t, channels[f"{heel}_x"], channels[f"{heel}_y"], theta, fy, cop, flat,
+                                            min_force=min_force, heel_offset=heel_offset,
+                                            heel_height=heel_height, path=path)
+            except TrialError as exc:
+                if f"{ankle}_x" not in channels:
+                    raise
+                # readers of the markers only (IK pipelines) must not fail on the foot2d channels
+                warnings.warn(f"{exc}; ankle_x/ankle_y fall back to the {ankle} marker (anchor='ankle')",
+                              stacklevel=2)
+                ax, ay, info = channels[f"{ankle}_x"], channels[f"{ankle}_y"], {"anchor": "ankle"}
             meta.update(info)
             if f"{ankle}_x" in channels:
                 c, s_ = np.cos(theta), np.sin(theta)

@@ -1,5 +1,4 @@
-"""Shared test helpers: where the optional real data lives, and headless matplotlib."""
-import os
+"""Shared test helpers: where the optional real data lives, headless matplotlib, the forearm on its Gaussian motion."""
 from pathlib import Path
 
 import matplotlib
@@ -7,14 +6,11 @@ import pytest
 
 matplotlib.use("Agg")
 
+from pinmsk import load_model  # noqa: E402  (after the headless backend is chosen)
+from pinmsk.datasets import shared_data_dir  # noqa: E402
+from pinmsk.solvers.analytical import gaussian_elbow_motion  # noqa: E402
+
 REPO = Path(__file__).resolve().parents[1]
-
-
-def shared_data_dir() -> Path | None:
-    """``../shared/data`` beside the repository (or $PINMSK_SHARED_DATA), if present."""
-    env = os.environ.get("PINMSK_SHARED_DATA")
-    cand = Path(env) if env else REPO.parent / "shared" / "data"
-    return cand if cand.is_dir() else None
 
 
 @pytest.fixture
@@ -23,3 +19,15 @@ def shared_data():
     if d is None:
         pytest.skip("real data folder ../shared/data is absent")
     return d
+
+
+@pytest.fixture(scope="module")
+def forearm():
+    """The built-in forearm model (modules that need another forearm define their own)."""
+    return load_model("forearm")
+
+
+@pytest.fixture(scope="module")
+def motion():
+    """The Gaussian 0 -> 120 deg elbow flexion of thesis Fig. 3.13 (the solver tests' forearm motion)."""
+    return gaussian_elbow_motion()

@@ -300,3 +300,74 @@ def test_dropped_foot_comes_to_rest_on_its_spheres(foot):
     gr = ground_reaction([c.evaluate(foot, mo) for c in cs])
     assert gr.normal[0] == pytest.approx(foot.mass * 9.81, rel=1e-3)
     assert abs(gr.friction[0]) < 1e-6
+
+
+# -- sphere centre offset and sidecar specs ------------------------------------------
+
+@pytest.mark.parametrize("cls", [Volumetric, HyperVolumetric, HuntCrossley])
+def test_center_offsets_the_sphere_in_the_site_frame(cls):
+    h = np.array([0.0, 0.01, 0.03])
+    sole = cls("s", center="sole")
+    R = sole.values[sole.radius_name]
+    plain = cls("s")
+    # "sole": the centre is R above the site, i.e. the same as the plain sphere R higher
+    np.testing.assert_allclose(sole.evaluate_kinematics(_kin_at_heights(h)).normal,
+                               plain.evaluate_kinematics(_kin_at_heights(h + R)).normal, rtol=1e-12, atol=1e-12)
+    # follows the radius
+    big = sole.with_params({sole.radius_name: R * 0.9})
+    np.testing.assert_allclose(big.evaluate_kinematics(_kin_at_heights(h)).penetration,
+                               -h, atol=1e-12)
+    fixed = cls("s", center=(0.0, 0.02))
+    np.testing.assert_allclose(fixed.evaluate_kinematics(_kin_at_heights(h)).penetration, R - h - 0.02, atol=1e-12)
+    assert pickle.loads(pickle.dumps(sole)).center == "sole"
+    with pytest.raises(ModelError, match="center must be None, 'sole' or"):
+        cls("s", center="top")
+
+
+def test_from_spec_builds_components_and_names_bad_entries():
+    from pinmsk.contact import from_spec
+    c = from_spec({"type": "hypervolumetric", "frame": "heel_r", "radius": 0.048, "k_h": 9e5,
+                   "params": {"mu_f": 0.3}, "bounds": {"k_h": [1e4, 1e7]}, "fixed": ["mu_f"]})
+    assert isinstance(c, HyperVolumetric) and c.target == "heel_r" and c.center == "sole"
+    assert c.values["R"] == 0.048 and c.values["k_h"] == 9e5 and c.values["mu_f"] == 0.3
+    assert c.values["H"] == 0.74  # thesis heel value (Table 4.4) for the unspecified ones
+    assert (c.params["k_h"].min, c.params["k_h"].max) == (1e4, 1e7) and c.params["R"].max == 0.055
+    assert not c.params["mu_f"].vary and c.params["k_h"].vary
+    p = from_spec({"type": "hunt_crossley", "frame": "toe", "radius": 0.04})
+    assert isinstance(p, HuntCrossley) and p.values["L0"] == 0.04 and p.center is None
+    v = from_spec({"type": "volumetric", "frame": "calcn", "center": [0.01, 0.02]})
+    assert v.center == (0.01, 0.02) and v.values["k_v"] == Volumetric("x").values["k_v"]
+    bad = [({"frame": "heel_r"}, "'type' must be one of"),
+           ({"type": "elastic", "frame": "heel_r"}, "'type' must be one of"),
+           ({"type": "volumetric"}, "give 'frame'"),
+           ({"type": "volumetric", "frame": "heel_r", "k_h": 1.0}, "unknown key 'k_h'"),
+           ({"type": "volumetric", "frame": "heel_r", "params": {"zz": 1}}, "no parameter 'zz'"),
+           ({"type": "volumetric", "frame": "heel_r", "radius": 0.05, "R": 0.05}, "give the radius once"),
+           ({"type": "volumetric", "frame": "heel_r", "center": "up"}, "center must be"),
+           ({"type": "volumetric", "frame": "heel_r", "radius": 0.09}, "heel_r"),
+           ({"type": "volumetric", "frame": "heel_r", "bounds": {"R": 3}}, "must be \\[lo, hi\\]"),
+           ({"type": "volumetric", "frame": "heel_r", "fixed": ["zz"]}, "unknown parameter 'zz'")]
+    for spec, msg in bad:
+        with pytest.raises(ModelError, match=msg):
+            from_spec(spec, where="gait2d.toml [[contacts]] #1")
+
+
+@pytest.mark.parametrize("c", ALL, ids=lambda c: c.family)
+def test_no_pulling_force_when_leaving_the_ground_fast(c):
+    """The damping terms would make the force negative at fast lift-off; the ground cannot pull."""
+    R = c.values[c.radius_name]
+    c = c.with_params({k: v for k, v in (("a_s", 100.0), ("a_v", 100.0), ("a_h", 1e9)) if k in c.values})
+    out = c.evaluate_kinematics(_kin_at_heights(np.full(3, R - 0.004), vy=np.array([0.0, 0.5, 5.0])))
+    assert out.normal[0] > 1.0 and np.all(out.normal >= 0) and out.normal[2] == 0.0
+    assert np.all(out.friction[2] == 0.0)
+
+
+def test_no_adhesion_is_c1_and_exact_above_eps():
+    from pinmsk.contact.sphere import ADHESION_EPS, no_adhesion
+    e = ADHESION_EPS
+    x = np.linspace(-2 * e, 3 * e, 2001)
+    g = no_adhesion(x)
+    assert np.all(g[x <= 0] == 0) and np.array_equal(g[x >= e], x[x >= e])
+    assert np.all(np.diff(g) >= 0)
+    dg = np.gradient(g, x)
+    assert np.max(np.abs(np.diff(dg))) < 0.02  # no jump in slope

@@ -87,6 +87,52 @@ def test_point_fit_tracks_normal_force_only():
     assert fit.objective_ <= fit.objective_full_
 
 
+def test_toe_from_kinematics_keeps_the_toe_tip_on_its_floor(synth):
+    from pinmsk.contact import load_foot2d, toe_from_kinematics
+    from pinmsk.contact.foot import Foot2dGeometry, foot2d_site_kinematics
+    geom = Foot2dGeometry.from_model(load_foot2d())
+    q = np.column_stack([synth["ankle_x"], synth["ankle_y"], synth["foot_angle"], np.zeros(synth.n_frames)])
+    swing = synth.time < 0.4
+    mtp = toe_from_kinematics(geom, q, swing=swing)
+    assert np.all(mtp <= 0) and np.all(mtp >= -1.2)
+    q[:, 3] = mtp
+    kin = foot2d_site_kinematics(geom, q, np.zeros_like(q))
+    hT, hP = kin["toe"].position[:, 1], kin["metatarsal"].position[:, 1]
+    floor = np.percentile(hP[~swing], 5)
+    stance = ~swing
+    assert np.all(hT[stance] >= floor - 1e-9)
+    up = stance & (mtp < -1e-6)  # extended toes: the tip is exactly on the floor
+    assert up.sum() > 5 and np.allclose(hT[up], floor, atol=1e-9)
+    assert np.all(hT[swing] >= min(0.05, hT[swing].max()) - 1e-9)  # toes clear in swing
+
+
+def test_toe_fit_is_bounded_around_the_kinematic_estimate(synth):
+    fit = ContactFit(toe="fit", cutoff=None, n_starts=1, max_nfev=20, toe_range=0.01,
+                     initial={"heel": {"k_h": 6e5}}).fit(None, synth)
+    assert np.all(np.abs(fit.fourier_ - fit.toe_kinematic_) <= 0.01 + 1e-12)
+    assert fit.toe_deviation_ <= 11 * 0.01
+    assert ContactFit().toe == "kinematic"
+    with pytest.raises(ModelError, match="toe_range must be > 0"):
+        ContactFit(toe="fit", toe_range=0.0).fit(None, synth)
+
+
+def test_fit_leaves_blas_threads_as_it_found_them(synth):
+    from threadpoolctl import threadpool_info
+    before = [d["num_threads"] for d in threadpool_info()]
+    ContactFit(cutoff=None, n_starts=2, n_jobs=2, max_nfev=3).fit(None, synth)
+    assert [d["num_threads"] for d in threadpool_info()] == before
+
+
+def test_double_hump_and_load_shares(synth):
+    fit = ContactFit(cutoff=None, n_starts=1, max_nfev=3).fit(None, synth)
+    sh = fit.load_shares()
+    assert set(sh) == {"heel", "metatarsal", "toe"} and sum(sh.values()) == pytest.approx(1.0)
+    dh = fit.double_hump()
+    assert dh["measured_depth"] == pytest.approx(dh["model_depth_at_measured_events"], abs=0.02)
+    t1, tv, t2 = dh["measured_events_s"]
+    assert t1 <= tv <= t2
+
+
 def test_toe_channel_and_flat_modes(synth):
     true = synth.meta["true_params"]
     keys = ("k_h", "R", "H")
@@ -195,12 +241,44 @@ def test_csu_reader_bad_file(tmp_path):
         read_csu(p)
 
 
+def test_csu_reader_locates_the_foot_from_heel_and_mt5_markers(shared_data):
+    """anchor='heel': the heel site follows the heel marker at a constant foot-frame offset, sits at
+    heel_height in foot flat and above the measured COP during heel-only loading."""
+    from pinmsk.contact import load_foot2d
+    from pinmsk.contact.foot import Foot2dGeometry, foot2d_site_kinematics
+    from pinmsk.csu import read_csu
+    tr = read_csu(shared_data / CSU)
+    assert tr.meta["anchor"] == "heel" and tr.meta["heel_calibration_frames"] >= 5
+    ox, oy = tr.meta["heel_offset"]
+    assert 0.02 < ox < 0.07 and -0.04 < oy < 0.0  # ahead of and below the skin marker on the heel
+    geom = Foot2dGeometry.from_model(load_foot2d())
+    th = np.asarray(tr["foot_angle"])
+    q = np.column_stack([tr["ankle_x"], tr["ankle_y"], th, np.zeros_like(th)])
+    H = foot2d_site_kinematics(geom, q, np.zeros_like(q))["heel"].position
+    c, s = np.cos(th), np.sin(th)
+    np.testing.assert_allclose(H[:, 0], tr["RHEE_x"] + c * ox + s * oy, atol=1e-12)
+    np.testing.assert_allclose(H[:, 1], tr["RHEE_y"] - s * ox + c * oy, atol=1e-12)
+    fy = np.asarray(tr["ground_force_vy"])
+    flat = fy > 0.5 * fy.max()
+    assert np.median(H[flat, 1]) == pytest.approx(0.045, abs=2e-3)
+    # the malleolus marker is not the ankle joint: the foot2d ankle sits several cm from it
+    assert np.hypot(*tr.meta["ankle_from_marker"]) > 0.02
+    # given offset, and the old hanging-from-the-malleolus mode
+    tr2 = read_csu(shared_data / CSU, heel_offset=(ox, oy))
+    np.testing.assert_allclose(tr2["ankle_x"], tr["ankle_x"], atol=1e-12)
+    tr3 = read_csu(shared_data / CSU, anchor="ankle")
+    np.testing.assert_allclose(tr3["ankle_x"], tr3["RLM_x"])
+    with pytest.raises(TrialError, match="anchor must be 'heel'"):
+        read_csu(shared_data / CSU, anchor="knee")
+
+
 @pytest.mark.slow
 def test_real_data_hypervolumetric_identification(shared_data):
     from pinmsk.csu import read_csu
     tr = read_csu(shared_data / CSU, body_mass=67.2)
     fit = ContactFit(contact="hypervolumetric", window=stance_cycle(tr), n_starts=2, n_jobs=2).fit(None, tr)
-    assert fit.objective_ < 0.05
+    assert fit.objective_ < 0.15  # fixed marker-driven kinematics: the friction term dominates (see issue note)
+    assert fit.load_shares()["heel"] > 0.2  # the heel sphere carries load
     assert fit.seconds_ < 60
 
 
@@ -215,8 +293,9 @@ def test_example_05_runs_headless(tmp_path):
         sys.argv = argv
     summary = json.loads((tmp_path / "contact_summary.json").read_text())
     assert len(summary["fits"]) == 4 and all("(toe flat)" in k for k in summary["fits"])
-    (sens,) = summary["sensitivity"].values()
-    assert set(sens) == {"heel", "metatarsal", "toe"}
+    assert len(summary["sensitivity"]) == 3  # volumetric, hyper-volumetric, relaxed
+    assert all(set(v) == {"heel", "metatarsal", "toe"} for v in summary["sensitivity"].values())
+    assert set(summary["double_hump"]) == set(summary["fits"])
     assert (tmp_path / "toe_flat" / "grf_hypervolumetric_relaxed.png").exists()
 
 

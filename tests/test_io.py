@@ -1,6 +1,5 @@
 """Tests of pinmsk.io: CSV and OpenSim .sto/.mot reading and atomic writing."""
 
-import os
 import re
 import warnings
 from pathlib import Path
@@ -9,20 +8,14 @@ import numpy as np
 import pytest
 
 import pinmsk.io as pio
+from pinmsk.datasets import shared_data_dir
 from pinmsk.errors import TrialError
 from pinmsk.io import read_sto_header, read_trial, write_trial
 from pinmsk.trial import Trial, parse_ground_reaction
 
 
-def shared_data() -> Path | None:
-    """The shared OpenSim example data: $PINMSK_SHARED_DATA or <repo>/../shared/data."""
-    env = os.environ.get("PINMSK_SHARED_DATA")
-    root = Path(env) if env else Path(__file__).resolve().parents[2] / "shared" / "data"
-    return root if root.is_dir() else None
-
-
 def shared_file(relative: str) -> Path:
-    root = shared_data()
+    root = shared_data_dir()
     if root is None or not (root / relative).is_file():
         pytest.skip(f"shared data file {relative} not available (set PINMSK_SHARED_DATA)")
     return root / relative

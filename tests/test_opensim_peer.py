@@ -12,8 +12,9 @@ import pytest
 
 import pinmsk
 from pinmsk import skeleton
+from pinmsk.datasets import shared_data_dir
 
-from conftest import REPO, shared_data_dir
+from conftest import REPO
 
 try:
     import opensim as osim

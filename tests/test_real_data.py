@@ -45,14 +45,19 @@ def test_real_trc_files(real, rel, rate, n_markers, frames):
     assert 0.5 < np.nanmax(ys) < 2.0
 
 
-def test_real_wrong_sign_force_plate_is_detected(real):
+def _read_moco(real, name: str) -> pinmsk.Trial:
+    """``opensim-moco-walk-emg/<name>``, read leniently (the Moco headers are sloppy); skip when absent."""
     folder = real / "opensim-moco-walk-emg"
     if not folder.is_dir():
         pytest.skip("opensim-moco-walk-emg absent")
-    from pinmsk.grf import check_vertical_force
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        grf = pinmsk.read_trial(folder / "grf_walk.mot", strict=False)
+        return pinmsk.read_trial(folder / name, strict=False)
+
+
+def test_real_wrong_sign_force_plate_is_detected(real):
+    from pinmsk.grf import check_vertical_force
+    grf = _read_moco(real, "grf_walk.mot")
     check_vertical_force(grf, body_mass=84.0)
     d = grf.to_dict(); d.pop("time")
     d["ground_force_l_vy"] = -d["ground_force_l_vy"]
@@ -61,13 +66,8 @@ def test_real_wrong_sign_force_plate_is_detected(real):
 
 
 def test_real_emg_rate_checks(real):
-    folder = real / "opensim-moco-walk-emg"
-    if not folder.is_dir():
-        pytest.skip("opensim-moco-walk-emg absent")
     from pinmsk.resample import check_rate
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        emg = pinmsk.read_trial(folder / "electromyography.sto", strict=False)
+    emg = _read_moco(real, "electromyography.sto")
     assert check_rate(emg, 2000.0, what="EMG") == pytest.approx(2000.0, rel=1e-6)
     with pytest.raises(TrialError, match="stated to be sampled at 1000 Hz"):
         check_rate(emg, 1000.0, what="EMG")

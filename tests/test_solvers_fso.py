@@ -3,20 +3,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pinmsk import load_model
 from pinmsk.errors import InfeasibleError, SolverError
 from pinmsk.solvers import FSO, StaticOptimization
 from pinmsk.solvers.analytical import gaussian_elbow_motion
-
-
-@pytest.fixture(scope="module")
-def forearm():
-    return load_model("forearm")
-
-
-@pytest.fixture(scope="module")
-def motion():
-    return gaussian_elbow_motion()
 
 
 @pytest.mark.parametrize("P", [2, 3])

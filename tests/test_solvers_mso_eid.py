@@ -3,21 +3,9 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from pinmsk import load_model
 from pinmsk.muscles.activation import activation_rate
 from pinmsk.solvers import EID, ModifiedStaticOptimization, StaticOptimization
-from pinmsk.solvers.analytical import gaussian_elbow_motion
 from pinmsk.solvers.mso import activation_bounds, step_excitation
-
-
-@pytest.fixture(scope="module")
-def forearm():
-    return load_model("forearm")
-
-
-@pytest.fixture(scope="module")
-def motion():
-    return gaussian_elbow_motion()
 
 
 def _integrate(u, a0, dt):

@@ -10,51 +10,17 @@ import pytest
 
 from pinmsk import Trial, load_model, read_trial, write_trial
 from pinmsk.components import Motion
+from pinmsk.diagnose.synth import walking_motion
 from pinmsk.dynamics import inverse_dynamics_array
 from pinmsk.errors import InfeasibleError, ModelError, SolverError, TrialError
 from pinmsk.solvers import StaticOptimization
-from pinmsk.solvers.analytical import (gaussian_elbow_motion, gaussian_elbow_trial, one_dof_activations,
-                                       one_dof_forces)
+from pinmsk.solvers.analytical import gaussian_elbow_trial, one_dof_activations, one_dof_forces
 from pinmsk.solvers.static import build_problem, solve_frame_slsqp
-
-
-@pytest.fixture(scope="module")
-def forearm():
-    return load_model("forearm")
-
-
-@pytest.fixture(scope="module")
-def motion():
-    return gaussian_elbow_motion()
 
 
 @pytest.fixture(scope="module")
 def gait2d():
     return load_model("gait2d")
-
-
-def walking_motion(model, n=200, duration=1.0):
-    """A smooth periodic hip/knee/ankle motion (both legs, half a period apart) with exact derivatives."""
-    t = np.linspace(0.0, duration, n)
-    w = 2 * np.pi / duration
-
-    def coords(tt):
-        q = np.zeros((tt.size, model.nv))
-        ix = model.coordinate_index
-        q[:, ix("torso_x")] = 1.2 * tt
-        q[:, ix("torso_y")] = 1.0 + 0.02 * np.cos(2 * w * tt)
-        q[:, ix("torso_angle")] = 0.05 + 0.02 * np.sin(2 * w * tt)
-        for side, ph in (("r", 0.0), ("l", np.pi)):
-            q[:, ix(f"hip_{side}")] = -0.1 + 0.35 * np.sin(w * tt + ph)
-            q[:, ix(f"knee_{side}")] = 0.6 + 0.5 * np.sin(w * tt + ph - 1.2)
-            q[:, ix(f"ankle_{side}")] = 0.05 + 0.2 * np.sin(w * tt + ph + 0.5)
-        return q
-
-    h = 1e-5
-    q = coords(t)
-    v = (coords(t + h) - coords(t - h)) / (2 * h)
-    a = (coords(t + h) - 2 * q + coords(t - h)) / h ** 2
-    return Motion(t, q, v, a)
 
 
 def _rel_err(F, Fa, f_max):
@@ -136,7 +102,7 @@ def test_trial_input_with_inverse_dynamics(forearm):
 # -- multi-dof, bi-articular: gait2d against SLSQP ---------------------------------
 
 def test_gait2d_default_dofs_are_the_spanned_ones(gait2d):
-    mo = walking_motion(gait2d, n=50)
+    mo = walking_motion(gait2d, n_frames=50)
     so = StaticOptimization().fit(gait2d, mo)
     assert set(so.dofs_) == {"hip_l", "knee_l", "ankle_l", "hip_r", "knee_r", "ankle_r"}
     with pytest.raises(ModelError, match="mtp_r"):
@@ -146,7 +112,7 @@ def test_gait2d_default_dofs_are_the_spanned_ones(gait2d):
 @pytest.mark.parametrize("P,minmax,mode", [(2, False, "force"), (3, False, "force"), (1, False, "force"),
                                            (2, False, "activation"), (2, True, "force")])
 def test_gait2d_matches_slsqp(gait2d, P, minmax, mode):
-    mo = walking_motion(gait2d, n=120)
+    mo = walking_motion(gait2d, n_frames=120)
     so = StaticOptimization(exponent=P, minmax=minmax, mode=mode).fit(gait2d, mo)
     prob = so.problem_
     x = so.forces_ / prob.f_max if mode == "force" else so.activations_
@@ -162,7 +128,7 @@ def test_gait2d_matches_slsqp(gait2d, P, minmax, mode):
 
 
 def test_auto_and_proxsuite_paths_agree(gait2d):
-    mo = walking_motion(gait2d, n=60)
+    mo = walking_motion(gait2d, n_frames=60)
     for P in (2, 3, 1):
         a = StaticOptimization(exponent=P).fit(gait2d, mo)
         b = StaticOptimization(exponent=P, method="proxsuite").fit(gait2d, mo)

@@ -339,6 +339,19 @@ def finger_urdf(b) -> str:
     return render_urdf("finger", header, items)
 
 
+def model_table(name: str, description: str) -> list[str]:
+    """The ``[model]`` table of a built-in model's TOML (``<name>.urdf``, y up, constant paths by default)."""
+    return [
+        "[model]",
+        f"name = {toml_str(name)}",
+        f"urdf = {toml_str(name + '.urdf')}",
+        "gravity = [0.0, -9.81, 0.0]",
+        'up_axis = "y"',
+        f"description = {toml_str(description)}",
+        'default_paths = "constant"',
+    ]
+
+
 def finger_toml(b) -> str:
     out = [
         comment_block(
@@ -365,13 +378,7 @@ motion, Eq. 3.1) with a rigid tendon.  volume = F_max l_opt / sigma, sigma = 0.2
 {SCHEMA_NOTE}
 """
         ),
-        "[model]",
-        'name = "finger"',
-        'urdf = "finger.urdf"',
-        "gravity = [0.0, -9.81, 0.0]",
-        'up_axis = "y"',
-        'description = "1-dof index finger (MCP flexion) with one flexor and one extensor, thesis Sec. 3.2.2"',
-        'default_paths = "constant"',
+        *model_table("finger", "1-dof index finger (MCP flexion) with one flexor and one extensor, thesis Sec. 3.2.2"),
         "",
         "[muscle_model]",
         'type = "thelen2003"',
@@ -621,13 +628,7 @@ TRIMH and TRILT that is about +-50 % of l_opt (Table 3.2 has long tendons for th
 {SCHEMA_NOTE}
 """
         ),
-        "[model]",
-        'name = "forearm"',
-        'urdf = "forearm.urdf"',
-        "gravity = [0.0, -9.81, 0.0]",
-        'up_axis = "y"',
-        'description = "1-dof elbow (flexion) with seven muscles, thesis Sec. 3.3.2 (Tables 3.2, 3.5)"',
-        'default_paths = "constant"',
+        *model_table("forearm", "1-dof elbow (flexion) with seven muscles, thesis Sec. 3.3.2 (Tables 3.2, 3.5)"),
         "",
         "[muscle_model]",
         'type = "thelen2003"',
@@ -913,13 +914,7 @@ volume = F_max l_opt / sigma with sigma = 0.25 MPa (thesis Eq. B.3).
 {SCHEMA_NOTE}
 """
         ),
-        "[model]",
-        'name = "gait2d"',
-        'urdf = "gait2d.urdf"',
-        "gravity = [0.0, -9.81, 0.0]",
-        'up_axis = "y"',
-        'description = "Sagittal 9-segment, 11-dof gait model with 8 muscle groups per leg, thesis Sec. 5.1"',
-        'default_paths = "constant"',
+        *model_table("gait2d", "Sagittal 9-segment, 11-dof gait model with 8 muscle groups per leg, thesis Sec. 5.1"),
         "# The order pinmsk presents coordinates in (Eq. 5.1).  Pinocchio keeps its own depth-first",
         "# joint order (torso_x, torso_y, torso_angle, hip_l, knee_l, ankle_l, mtp_l, hip_r, knee_r,",
         "# ankle_r, mtp_r): subtrees must be contiguous there, so Eq. 5.1's interleaved order can only",

@@ -1,20 +1,27 @@
 """Kinematically driven identification of foot contact parameters (thesis Sec. 4.1.2, Eq. 4.1-4.2).
 
-The foot2d model is driven by the measured ankle position and foot angle
-(channels ``ankle_x``, ``ankle_y``, ``foot_angle``); the toe angle is the
-11-term Fourier series of Eq. 4.1 over the analysed window (period = window
-length), fitted together with the contact parameters of the three spheres at
-H, P, T.  The objective is Eq. 4.2 sampled uniformly,
+The foot2d model is driven by the measured foot (channels ``ankle_x``, ``ankle_y``,
+``foot_angle``; for the CSU data :func:`pinmsk.csu.read_csu` derives them from the heel
+and 5th-metatarsal markers, so the heel sphere follows the measured heel).  The toe
+angle is the 11-term Fourier series of Eq. 4.1 over the analysed window (period =
+window length).  By default (``toe="kinematic"``, the thesis procedure) its
+coefficients are identified beforehand from the kinematics
+(:func:`toe_from_kinematics`) and held fixed; ``toe="fit"`` fits them with the
+contact parameters (the issue's Eq. 4.1 setting), each within ``+-toe_range`` of the
+kinematic estimate so the toe cannot act as a free force generator.  The objective is
+Eq. 4.2 sampled uniformly,
 
     J = 1/N sum_t [ (f_n^m - f_n^e)/max|f_n^e| ]^2 + [ (f_f^m - f_f^e)/max|f_f^e| ]^2
                  + [ (X^m - X^e)/max|X^e| ]^2
 
 with the COP term over the frames where the measured vertical force exceeds
 ``cop_threshold`` x its maximum (the measured COP is undefined elsewhere).  As in
-the thesis the point-contact model tracks the vertical force only.  Solved by
-bounded trust-region least squares (``scipy.optimize.least_squares``, 'trf',
-finite-difference Jacobian on the vectorised residual) from ``n_starts``
-starting points (the thesis optimum of Tables 4.2-4.4 plus random draws).
+the thesis the point-contact model tracks the vertical force only (``terms=`` changes
+that).  Solved by bounded trust-region least squares (``scipy.optimize.least_squares``,
+'trf', finite-difference Jacobian on the vectorised residual) from ``n_starts``
+starting points (the thesis optimum of Tables 4.2-4.4 plus random draws), with BLAS
+limited to one thread (``threadpoolctl``): the problem is ~360 x 30, where OpenBLAS's
+threaded gesdd took 40 ms per SVD against 0.5 ms on one thread.
 
 Channels: ``ground_force_vx`` (friction, N), ``ground_force_vy`` (normal, N),
 ``ground_force_px`` (COP x, m; NaN allowed where the vertical force is small).
@@ -139,13 +146,17 @@ class ContactFit:
                    cannot act as a free force generator), ``"flat"`` (legacy: the series of
                    ``mtp = -max(foot_angle, 0)``), or ``"channel"`` (the trial's ``mtp``)
     toe_range      +- bound (rad) of each toe coefficient around its kinematic value (``toe="fit"``)
+    terms          the Eq. 4.2 terms minimised, a subset of ``("normal_force", "friction_force",
+                   "cop")``; default ``None``: all three, except the point contact, which as in
+                   the thesis tracks the vertical force only (pass all three to compare on equal terms)
     ground_speed   ground x-velocity (m/s); default ``trial.meta["ground_speed"]`` or 0
     cop_threshold  COP term only where f_n^e > cop_threshold * max f_n^e
     n_jobs         processes for the multi-start (fork; 1 = serial)
     seed, max_nfev, ftol
 
     Learned attributes end in ``_``: ``contacts_`` (fitted components),
-    ``fourier_`` (11 toe coefficients), ``objective_`` (the minimised Eq. 4.2
+    ``fourier_`` (11 toe coefficients used; ``toe_kinematic_`` the kinematic estimate,
+    ``toe_deviation_`` the largest |difference| of the two toe angles, rad), ``objective_`` (the minimised Eq. 4.2
     value), ``objective_full_`` (all three terms), ``terms_``, ``rmse_``,
     ``starts_`` (objective of every start), ``seconds_``, ``nfev_``, ``aic_``, ``bic_``,
     ``reaction_`` (the model's GroundReaction), ``outputs_`` (per-sphere ContactForces).
@@ -155,7 +166,7 @@ class ContactFit:
                  cutoff: float | None = 12.0, n_starts: int = 6, initial=None, bounds=None,
                  fixed=(), toe: str = "kinematic", ground_speed: float | None = None,
                  cop_threshold: float = 0.05, seed: int = 0, max_nfev: int = 400, ftol: float = 1e-10,
-                 relax_range: float = 0.02, n_jobs: int = 1, toe_range: float = 0.02):
+                 relax_range: float = 0.02, n_jobs: int = 1, toe_range: float = 0.02, terms=None):
         self.contact = contact
         self.relax = relax
         self.window = window
@@ -173,6 +184,7 @@ class ContactFit:
         self.relax_range = relax_range
         self.n_jobs = n_jobs
         self.toe_range = toe_range
+        self.terms = terms
 
     # -- setup ------------------------------------------------------------
     def _contacts(self, model, ground_speed):
@@ -200,7 +212,8 @@ class ContactFit:
                     raise ModelError(f"ContactFit: {c.label} has no parameter '{name}' ({sorted(params)})")
                 params[name] = _replace(params[name], value=float(val))
             for name, p in params.items():
-                if self.contact == "point" and name in ("mu_f", "v_s"):
+                if (self.contact == "point" and name in ("mu_f", "v_s")
+                        and (self.terms is None or "friction_force" not in self.terms)):
                     params[name] = p = _replace(p, vary=False)
                 if name in self.fixed:
                     params[name] = p = _replace(p, vary=False)
@@ -253,7 +266,14 @@ class ContactFit:
         meas[2] = np.where(cop_mask, meas[2], 0.0)
         scale = np.array([fmax, max(np.max(np.abs(meas[1])), 1e-9),
                           max(np.max(np.abs(meas[2][cop_mask])), 1e-9)])
-        weights = np.array([1.0, 0.0, 0.0]) if self.contact == "point" else np.ones(3)
+        names = ("normal_force", "friction_force", "cop")
+        if self.terms is None:
+            weights = np.array([1.0, 0.0, 0.0]) if self.contact == "point" else np.ones(3)
+        else:
+            bad = [x for x in self.terms if x not in names]
+            if bad or not self.terms:
+                raise ModelError(f"ContactFit: terms must be a non-empty subset of {names}, got {self.terms!r}")
+            weights = np.array([1.0 if x in self.terms else 0.0 for x in names])
         period = t[-1] - t[0]
         B, dB = fourier_basis(t - t[0], period)
         q = np.zeros((t.size, 4))

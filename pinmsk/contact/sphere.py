@@ -58,6 +58,23 @@ def smooth_positive(x, eps: float):
     return 0.5 * (x + np.sqrt(x * x + eps * eps))
 
 
+#: force scale (N) below which :func:`no_adhesion` blends the normal force smoothly into zero
+ADHESION_EPS = 1e-3
+
+
+def no_adhesion(f, eps: float = ADHESION_EPS):
+    """The normal force with the pulling part removed, C1: ``f`` for ``f >= eps``, 0 for ``f <= 0``,
+    and ``2 f^2 / eps - f^3 / eps^2`` in between (value and slope match at both ends).
+
+    The damping terms of Eq. 4.4, 4.8 and 4.15 turn the force negative when a sphere leaves the
+    ground faster than ``1 / a``; the ground cannot pull, so that part is removed (measured on the
+    CSU data before this: up to -280 N at lift-off, which a fit could use as a free force).
+    """
+    f = np.asarray(f, dtype=float)
+    x = np.clip(f, 0.0, eps)
+    return np.where(f >= eps, f, x * x * (2.0 / eps - x / (eps * eps)))
+
+
 def cap_volume(depth, radius):
     """Volume of a spherical cap of height ``depth`` cut from a sphere of ``radius`` (Eq. 4.5).
 
@@ -261,6 +278,7 @@ class SphereContact(Component):
         delta_s = smooth_positive(delta, self.smoothing)
         rate = -vcentre[:, 1]
         fn, vol, zbar = self.normal_law(delta_s, rate, p)
+        fn = no_adhesion(fn)
         # application point: zbar below the centre; velocity of that body point
         r = np.zeros_like(centre)
         r[:, 1] = -zbar

@@ -51,7 +51,7 @@ from ..effects._base import SignalEffect, unactuated_coordinates
 from ..muscles.activation import excitation_from_activation
 from ..trial import Trial
 
-__all__ = ["make_trial", "NOISE", "effect_from_text", "write_compact"]
+__all__ = ["make_trial", "NOISE", "effect_from_text", "walking_motion", "write_compact"]
 
 #: realistic noise levels (see the module docstring)
 NOISE = {"angle": np.deg2rad(0.2), "translation": 0.0005, "moment": 0.02, "grf": 0.01, "cop": 0.002,
@@ -73,6 +73,38 @@ def _load(model):
         from ..model import load_model
         return load_model(model)
     return model
+
+
+def walking_motion(model, *, n_frames: int = 200, duration: float = 1.0, period: float = 1.0,
+                   speed: float = 1.2) -> Motion:
+    """A walking-like gait2d motion with exact derivatives (no data, no noise): the SO test and benchmark motion.
+
+    The torso moves forward at ``speed`` (m/s) and bobs at twice the stride
+    frequency; hips, knees and ankles swing sinusoidally with period ``period``
+    (s), the left leg half a period behind the right.  ``n_frames`` uniform
+    samples over ``[0, duration]``; velocities and accelerations by central
+    differences (step 1e-5 s) of the closed-form coordinates.
+    """
+    t = np.linspace(0.0, duration, n_frames)
+    w = 2 * np.pi / period
+
+    def coords(tt):
+        q = np.zeros((tt.size, model.nv))
+        ix = model.coordinate_index
+        q[:, ix("torso_x")] = speed * tt
+        q[:, ix("torso_y")] = 1.0 + 0.02 * np.cos(2 * w * tt)
+        q[:, ix("torso_angle")] = 0.05 + 0.02 * np.sin(2 * w * tt)
+        for side, ph in (("r", 0.0), ("l", np.pi)):
+            q[:, ix(f"hip_{side}")] = -0.1 + 0.35 * np.sin(w * tt + ph)
+            q[:, ix(f"knee_{side}")] = 0.6 + 0.5 * np.sin(w * tt + ph - 1.2)
+            q[:, ix(f"ankle_{side}")] = 0.05 + 0.2 * np.sin(w * tt + ph + 0.5)
+        return q
+
+    h = 1e-5
+    q = coords(t)
+    v = (coords(t + h) - coords(t - h)) / (2 * h)
+    a = (coords(t + h) - 2 * q + coords(t - h)) / h ** 2
+    return Motion(t, q, v, a)
 
 
 def make_trial(model, effects: Sequence = (), *, duration: float = 10.0, rate: float = 100.0,

@@ -134,6 +134,23 @@ class SignalEffect(Component):
         """Transforms for P parameter sets at once: ``params`` maps names to (P,) arrays -> (P, N, m)."""
         raise NotImplementedError  # pragma: no cover
 
+    @staticmethod
+    def broadcast_batch(u: np.ndarray, mask, *values):
+        """The common start of :meth:`transform_batch`: P parameter sets against the signals.
+
+        ``u`` is (N, m), or (P, N, m) for one signal per set; ``values`` are the
+        parameter values (scalars or (P,) arrays).  Returns ``(values, ub, cols,
+        out)``: each value broadcast to (P,), ``u`` broadcast to (P, N, m), the
+        columns of the muscles in ``mask`` (all without one), and a copy of
+        ``ub`` for the result.
+        """
+        vals = np.broadcast_arrays(*(np.atleast_1d(np.asarray(v, dtype=float)) for v in values))
+        P = max(vals[0].size, u.shape[0] if u.ndim == 3 else 1)
+        vals = [np.broadcast_to(v, (P,)) for v in vals]
+        ub = np.broadcast_to(u, (P,) + u.shape[-2:])
+        cols = np.arange(ub.shape[2]) if mask is None else np.flatnonzero(mask)
+        return vals, ub, cols, ub.copy()
+
     @classmethod
     def candidates(cls, model, context) -> list:
         if context.mode != "muscle" or model.muscles is None:

@@ -48,15 +48,8 @@ class ActivationDynamics(SignalEffect):
         """Activations for P parameter sets; ``u`` is (N, m), or (P, N, m) for one signal per set."""
         t = np.asarray(t, dtype=float)
         u = np.asarray(u, dtype=float)
-        tr = np.atleast_1d(np.asarray(params["tau_rise"], dtype=float))
-        tf = np.atleast_1d(np.asarray(params["tau_fall"], dtype=float))
-        tr, tf = np.broadcast_arrays(tr, tf)
-        P = max(tr.size, u.shape[0] if u.ndim == 3 else 1)
-        tr, tf = np.broadcast_to(tr, (P,)), np.broadcast_to(tf, (P,))
-        ub = np.broadcast_to(u, (P,) + u.shape[-2:])
-        n, m = ub.shape[1:]
-        cols = np.arange(m) if mask is None else np.flatnonzero(mask)
-        out = ub.copy()
+        (tr, tf), ub, cols, out = self.broadcast_batch(u, mask, params["tau_rise"], params["tau_fall"])
+        n = ub.shape[1]
         if n < 2 or cols.size == 0:
             return out
         us = np.ascontiguousarray(np.moveaxis(ub[:, :, cols], 1, 0))         # (N, P, k)

@@ -48,13 +48,8 @@ class ElectromechanicalDelay(SignalEffect):
         """Delayed signals for P delays; ``u`` is (N, m), or (P, N, m) for one signal per delay."""
         t = np.asarray(t, dtype=float)
         u = np.asarray(u, dtype=float)
-        d = np.atleast_1d(np.asarray(params["delay"], dtype=float))
-        P = max(d.size, u.shape[0] if u.ndim == 3 else 1)
-        d = np.broadcast_to(d, (P,))
-        ub = np.broadcast_to(u, (P,) + u.shape[-2:])
-        n, m = ub.shape[1:]
-        cols = np.arange(m) if mask is None else np.flatnonzero(mask)
-        out = ub.copy()
+        (d,), ub, cols, out = self.broadcast_batch(u, mask, params["delay"])
+        n = ub.shape[1]
         if n < 2 or cols.size == 0:
             return out
         dt = float(np.median(np.diff(t)))

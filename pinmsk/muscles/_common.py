@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import ModelError, TrialError
 
-__all__ = ["as_array", "check_finite", "locate", "muscle_parameter", "where_first"]
+__all__ = ["as_array", "check_active", "check_finite", "locate", "muscle_parameter", "where_first"]
 
 
 def as_array(x, what: str) -> np.ndarray:
@@ -69,6 +69,18 @@ def check_finite(names: Sequence[str] | None = None, **arrays) -> None:
                 f"{what} is {float(value)} for {locate(frame, muscle, names)} "
                 f"({int(bad.sum())} non-finite value(s) in total); remove or interpolate the "
                 "gaps in the kinematics/forces before calling the muscle model")
+
+
+def check_active(a: np.ndarray, l_ce: np.ndarray, names: Sequence[str] | None = None) -> None:
+    """Raise :class:`TrialError` at the first activation ``a <= 0`` (contraction dynamics needs ``a > 0``).
+
+    ``a`` broadcasts against the fibre lengths ``l_ce``; the message names the muscle and frame.
+    """
+    if not (a > 0).all():
+        frame, muscle = where_first(~(np.broadcast_to(a, np.broadcast_shapes(a.shape, l_ce.shape)) > 0))
+        raise TrialError(f"contraction dynamics needs activation > 0, got a <= 0 at "
+                         f"{locate(frame, muscle, names)}; clip activation to a minimum "
+                         "such as 0.01")
 
 
 def muscle_parameter(value, what: str, m: int, *, names: Sequence[str] | None = None,

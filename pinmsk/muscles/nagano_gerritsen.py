@@ -26,10 +26,10 @@ from typing import Sequence
 
 import numpy as np
 
+from ._common import check_active
 from ._solve import compliant_equilibrium
 from .pennation import check_along_positive, pennation_height
 from .tendon import TENDON_STRAIN0, winters_tendon_force, winters_tendon_stiffness, winters_tendon_strain
-from ..errors import TrialError
 
 __all__ = [
     "A_REL", "B_REL", "F_HAT", "GAMMA_SLOPE",
@@ -233,12 +233,7 @@ def ng_contraction_rate(l_ce, l_mt, a, *, l_opt, l_slack, pennation, width,
     l_ce = np.asarray(l_ce, dtype=float)
     a = np.asarray(a, dtype=float)
     l_opt = np.asarray(l_opt, dtype=float)
-    if not (a > 0).all():
-        from ._common import locate, where_first
-        frame, muscle = where_first(~(np.broadcast_to(a, np.broadcast_shapes(a.shape, l_ce.shape)) > 0))
-        raise TrialError(f"contraction dynamics needs activation > 0, got a <= 0 at "
-                         f"{locate(frame, muscle, names)}; clip activation to a minimum "
-                         "such as 0.01")
+    check_active(a, l_ce, names)
     h = pennation_height(l_opt, pennation)
     x = np.sqrt(np.maximum(l_ce * l_ce - h * h, 0.0))
     check_along_positive(x, l_mt, names, what="contraction dynamics")

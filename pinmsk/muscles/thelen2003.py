@@ -32,10 +32,11 @@ from typing import Sequence
 
 import numpy as np
 
+from ._common import check_active
 from ._solve import compliant_equilibrium, safeguarded_newton
 from .pennation import check_along_positive, pennation_height
 from .tendon import TENDON_STRAIN0, thelen_tendon_force, thelen_tendon_stiffness, thelen_tendon_strain
-from ..errors import ConvergenceError, TrialError
+from ..errors import ConvergenceError
 
 __all__ = [
     "K_PE", "PASSIVE_STRAIN0", "GAMMA", "A_F", "F_HAT", "FV_EXTRAPOLATION",
@@ -296,12 +297,7 @@ def thelen_contraction_rate(l_ce, l_mt, a, *, l_opt, l_slack, pennation, v_max=N
     a = np.asarray(a, dtype=float)
     l_opt = np.asarray(l_opt, dtype=float)
     v_max = 10.0 * l_opt if v_max is None else np.asarray(v_max, dtype=float)
-    if not (a > 0).all():
-        from ._common import locate, where_first
-        frame, muscle = where_first(~(np.broadcast_to(a, np.broadcast_shapes(a.shape, l_ce.shape)) > 0))
-        raise TrialError(f"contraction dynamics needs activation > 0, got a <= 0 at "
-                         f"{locate(frame, muscle, names)}; clip activation to a minimum "
-                         "such as 0.01")
+    check_active(a, l_ce, names)
     h = pennation_height(l_opt, pennation)
     x2 = l_ce * l_ce - h * h
     x = np.sqrt(np.maximum(x2, 0.0))

@@ -458,6 +458,7 @@ class DynamicResult:
     starts: list = field(default_factory=list)
     coordinates: tuple = ()
     muscles: tuple = ()
+    x: np.ndarray | None = None
 
     def summary(self) -> dict:
         return {"converged": bool(self.converged), "status": self.status,
@@ -866,12 +867,20 @@ class DynamicOptimization:
 
     # -- solve -------------------------------------------------------------------
     def fit(self, x0=None):
-        """Solve from ``x0`` (decision vector) or from the multi-start guesses; returns ``self``.
+        """Solve from ``x0`` -- a decision vector, or (k, n) for k starts (e.g. the ``x`` of
+        another result as a warm start) -- or from the multi-start guesses; returns ``self``.
 
         With ``n_jobs > 1`` the starts run in parallel worker processes (fork)."""
         t0 = _time.perf_counter()
         self._setup()
-        starts = [np.asarray(x0, dtype=float).ravel()] if x0 is not None else self.initial_guesses()
+        if x0 is None:
+            starts = self.initial_guesses()
+        else:
+            x0 = np.asarray(x0, dtype=float)
+            starts = [x0.ravel()] if x0.ndim == 1 else [row for row in x0]
+            if any(xs.size != self._npar for xs in starts):
+                raise ModelError(f"x0 must hold {self._npar} values per start "
+                                 f"(n_params x n_signals); got shape {x0.shape}")
         self._A_lin = None
         if True:
             # Linear constraints on the signals over a dense grid: FF 0 <= u <= 1 (Eq. 3.8);
@@ -1026,7 +1035,7 @@ class DynamicOptimization:
             coeffs=self._coeffs(x)[0], parametrization=self.parametrization, design=self.design,
             time=self._t.copy(), q=sim["q"][:, 0], v=sim["v"][:, 0], a=sim["a"][:, 0], u=u,
             force=sim["force"][:, 0], target=qd, seconds=seconds, nit=int(rec["nit"]),
-            nfev=int(rec["nfev"]), starts=records, coordinates=self.model.coordinates,
+            nfev=int(rec["nfev"]), starts=records, x=np.array(x), coordinates=self.model.coordinates,
             muscles=self.model.muscle_names)
 
 

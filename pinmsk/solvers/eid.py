@@ -31,8 +31,7 @@ import scipy.sparse as sp
 
 from ..errors import ConvergenceError, InfeasibleError, SolverError
 from . import qp as _qp
-from .mso import TAU_FALL, TAU_RISE, excitations, result_trial
-from .static import WEIGHTS, as_motion, build_problem
+from .mso import TAU_FALL, TAU_RISE, activation_problem, set_results
 
 #: P = 1: proxsuite's sparse solver reported feasible whole-trial LPs as
 #: infeasible; a proximal term ``LP_REGULARISATION * w a^2`` (activations are
@@ -69,13 +68,8 @@ class ExtendedInverseDynamics:
 
     def fit(self, model, trial, *, moments=None, cutoff: float | None = None, progress=None):
         """Solve the whole trial at once; returns ``self``."""
-        if self.weights not in WEIGHTS:
-            raise SolverError(f"weights must be one of {', '.join(WEIGHTS)}; got {self.weights!r}")
-        P = _qp.check_exponent(self.exponent)
         t0 = _time.perf_counter()
-        motion = as_motion(model, trial, cutoff)
-        prob = build_problem(model, motion, mode="activation", weights=self.weights, exponent=P,
-                             dofs=self.dofs, moments=moments, reserves=self.reserves)
+        P, prob = activation_problem(self, model, trial, moments=moments, cutoff=cutoff)
         N, nd, m = prob.A.shape
         if N < 2:
             raise SolverError("EID needs at least 2 frames (a single frame is static optimization)")
@@ -200,25 +194,12 @@ class ExtendedInverseDynamics:
         rho = (z[na:na + N * nd] - z[na + N * nd:]).reshape(N, nd) if nr else np.zeros((N, nd))
         if progress is not None:
             progress.update(N)
-        self.problem_ = prob
-        F = prob.forces(a)
-        self.activations_ = a
-        self.forces_ = F
-        self.excitations_ = excitations(t, a, tau_rise=self.tau_rise, tau_fall=self.tau_fall)
-        self.reserves_ = rho * prob.scale if nr else None
-        moment = prob.moments(F) + (self.reserves_ if nr else 0.0)
-        self.violation_ = np.max(np.abs(moment - prob.tau), axis=1)
-        self.cost_ = prob.cost(a, False)
-        self.objective_ = float(np.sum(np.diff(t) * 0.5 * (self.cost_[1:] + self.cost_[:-1])))
         self.n_iter_ = iters
         self.n_qp_ = nqp
         self.n_variables_ = n
         self.n_constraints_ = (Aeq.shape[0], C.shape[0])
-        self.time_ = _time.perf_counter() - t0
-        self.model_name_ = model.name
-        self.result_ = result_trial(prob, F, a, self.excitations_, self.reserves_, self.cost_,
-                                    self.violation_, meta={"analysis": "extended_inverse_dynamics",
-                                                           **{k: str(v) for k, v in self.get_params().items()}})
+        set_results(self, model, prob, a, rho, t0=t0, analysis="extended_inverse_dynamics")
+        self.objective_ = float(np.sum(np.diff(t) * 0.5 * (self.cost_[1:] + self.cost_[:-1])))
         return self
 
     def _fail(self, status, prob):

@@ -124,13 +124,8 @@ class ModifiedStaticOptimization:
 
     def fit(self, model, trial, *, moments=None, cutoff: float | None = None, progress=None):
         """Solve frame after frame; returns ``self`` (results as StaticOptimization's, plus excitations)."""
-        if self.weights not in WEIGHTS:
-            raise SolverError(f"weights must be one of {', '.join(WEIGHTS)}; got {self.weights!r}")
-        P = _qp.check_exponent(self.exponent)
         t0 = _time.perf_counter()
-        motion = as_motion(model, trial, cutoff)
-        prob = build_problem(model, motion, mode="activation", weights=self.weights, exponent=P,
-                             dofs=self.dofs, moments=moments, reserves=self.reserves)
+        P, prob = activation_problem(self, model, trial, moments=moments, cutoff=cutoff)
         N, nd, m = prob.A.shape
         tol = float(self.tol)
         W = float(self.reserve_weight) if self.reserves else None
@@ -168,23 +163,10 @@ class ModifiedStaticOptimization:
             prev = x[k]
             if progress is not None:
                 progress.update(1)
-        self.problem_ = prob
-        F = prob.forces(x)
-        self.activations_ = x
-        self.forces_ = F
-        self.excitations_ = excitations(prob.time, x, tau_rise=self.tau_rise, tau_fall=self.tau_fall)
-        self.reserves_ = rho * prob.scale if W is not None else None
         self.bounds_ = (lo_all, hi_all)
-        moment = prob.moments(F) + (self.reserves_ if W is not None else 0.0)
-        self.violation_ = np.max(np.abs(moment - prob.tau), axis=1)
-        self.cost_ = prob.cost(x, False)
         self.n_iter_ = iters
         self.n_qp_ = nqp
-        self.time_ = _time.perf_counter() - t0
-        self.model_name_ = model.name
-        self.result_ = result_trial(prob, F, x, self.excitations_, self.reserves_, self.cost_,
-                                    self.violation_, meta={"analysis": "modified_static_optimization",
-                                                           **{k: str(v) for k, v in self.get_params().items()}})
+        set_results(self, model, prob, x, rho, t0=t0, analysis="modified_static_optimization")
         return self
 
     def report(self) -> str:
@@ -215,6 +197,39 @@ def _bounded(prob, k, lo, hi):
     p2.lo[k] = lo
     p2.hi[k] = hi
     return p2
+
+
+def activation_problem(est, model, trial, *, moments, cutoff):
+    """``(P, prob)``: the activation-mode SO problem of ``trial`` for MSO or EID ``est``, options checked."""
+    if est.weights not in WEIGHTS:
+        raise SolverError(f"weights must be one of {', '.join(WEIGHTS)}; got {est.weights!r}")
+    P = _qp.check_exponent(est.exponent)
+    motion = as_motion(model, trial, cutoff)
+    prob = build_problem(model, motion, mode="activation", weights=est.weights, exponent=P,
+                         dofs=est.dofs, moments=moments, reserves=est.reserves)
+    return P, prob
+
+
+def set_results(est, model, prob, a, rho, *, t0: float, analysis: str) -> None:
+    """Store the activations ``a`` (N, m) and scaled reserves ``rho`` (N, nd) of MSO or EID ``est``.
+
+    Sets ``problem_``, ``activations_``, ``forces_``, ``excitations_``,
+    ``reserves_`` (None without reserves), ``violation_``, ``cost_``,
+    ``time_`` (since ``t0``), ``model_name_`` and ``result_``.
+    """
+    est.problem_ = prob
+    F = prob.forces(a)
+    est.activations_ = a
+    est.forces_ = F
+    est.excitations_ = excitations(prob.time, a, tau_rise=est.tau_rise, tau_fall=est.tau_fall)
+    est.reserves_ = rho * prob.scale if est.reserves else None
+    moment = prob.moments(F) + (est.reserves_ if est.reserves else 0.0)
+    est.violation_ = np.max(np.abs(moment - prob.tau), axis=1)
+    est.cost_ = prob.cost(a, False)
+    est.time_ = _time.perf_counter() - t0
+    est.model_name_ = model.name
+    est.result_ = result_trial(prob, F, a, est.excitations_, est.reserves_, est.cost_, est.violation_,
+                               meta={"analysis": analysis, **{k: str(v) for k, v in est.get_params().items()}})
 
 
 def result_trial(prob, F, a, u, reserves, cost, violation, *, meta) -> Trial:
