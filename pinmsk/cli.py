@@ -173,6 +173,23 @@ def cmd_synth(args) -> int:
     return 0
 
 
+def cmd_contact_fit(args) -> int:
+    from .contact import fit_cli_run
+    out = fit_cli_run(args.model, args.trial, contact=args.contact, relax=args.relax,
+                      json_path=args.json, plot_dir=args.plot, n_starts=args.starts)
+    rm = out["rmse"]
+    print(f"{args.contact}{' (relaxed centres)' if args.relax else ''} contact fitted in {out['seconds']:.1f} s: "
+          f"objective (Eq. 4.2) {out['objective']:.4g}")
+    print(f"  rmse: normal force {rm['normal_force']:.4g} N, friction force {rm['friction_force']:.4g} N, "
+          f"COP {1000 * rm['cop']:.3g} mm")
+    for site, params in out["params"].items():
+        print(f"  {site}: " + ", ".join(f"{k} = {v:.4g}" for k, v in params.items()))
+    for path in [args.json, *out.get("figures", [])]:
+        if path:
+            print(f"wrote {path}")
+    return 0
+
+
 def cmd_view(args) -> int:
     from .viewer import view_cli
     view_cli(args.model, args.trial, args.results, open_browser=args.open,
@@ -293,6 +310,20 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-noise", action="store_true", help="noise-free channels")
     s.add_argument("-o", "--output", required=True, help="output .csv or .sto")
     s.set_defaults(func=cmd_synth)
+
+    s = sub.add_parser("contact", help="foot-ground contact models (thesis Ch. 4)")
+    csub = s.add_subparsers(dest="contact_command", metavar="SUBCOMMAND")
+    csub.required = True
+    c = csub.add_parser("fit", help="identify contact parameters against measured GRF and COP (Eq. 4.2)")
+    c.add_argument("model", help="model with heel/metatarsal/toe sites, e.g. foot2d")
+    c.add_argument("trial", help="trial with foot kinematics and GRF (.csv/.sto/.mot or the CSU leg2d text)")
+    c.add_argument("--contact", choices=["point", "volumetric", "hypervolumetric"], default="hypervolumetric")
+    c.add_argument("--relax", action="store_true", help="also fit the sphere centres (dx, dy; Sec. 4.1.4)")
+    c.add_argument("--starts", type=int, default=6, help="multi-start count (default 6)")
+    c.add_argument("--json", metavar="OUT.json", default=None,
+                   help="write objective, params, rmse and seconds as JSON")
+    c.add_argument("--plot", metavar="DIR", default=None, help="write GRF and COP figures (PNG) to DIR")
+    c.set_defaults(func=cmd_contact_fit)
 
     s = sub.add_parser("view", help="meshcat viewer: the model, optionally playing a trial with results")
     s.add_argument("model")

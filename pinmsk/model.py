@@ -300,9 +300,11 @@ def _load_sidecar(sidecar: Path, *, moment_arms: str | None, tendon: str | None,
         meta["moment_arms"] = variant
         path = MomentArmPath.from_sidecar(entries, coords, variant)
         muscles = _build_muscles(entries, mm, path, tendon or mm.get("tendon", "rigid"), sidecar)
-    effects = []
-    for e in spec.get("effects", []):
-        effects.append(registry.from_spec(e))
+    effects = [registry.from_spec(e) for e in spec.get("effects", [])]
+    if spec.get("contacts"):
+        from .contact import from_spec as contact_from_spec
+        effects += [contact_from_spec(c, where=f"{sidecar} [[contacts]] #{i + 1}")
+                    for i, c in enumerate(spec["contacts"])]
     model = Model(name=name, pin_model=pm, muscles=muscles, meta=meta)
     return model.with_effect(*effects) if effects else model
 

@@ -71,7 +71,7 @@ def test_simulate_round_trip_through_files(tmp_path):
 
 def test_every_command_has_help():
     for cmd in ([], ["models"], ["info"], ["id"], ["simulate"], ["demo"], ["view"], ["batch"], ["so"], ["fso"],
-                ["diagnose"], ["synth"]):
+                ["diagnose"], ["synth"], ["contact", "fit"]):
         r = subprocess.run([sys.executable, "-m", "pinmsk.cli", *cmd, "--help"], capture_output=True, text=True)
         assert r.returncode == 0 and "usage: pinmsk" in r.stdout, (cmd, r.stderr)
 

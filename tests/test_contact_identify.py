@@ -51,7 +51,7 @@ def test_synthetic_trial_is_sane(synth):
 
 
 def test_hypervolumetric_fit_recovers_known_parameters(synth):
-    """All 18 contact parameters and the 11 toe coefficients from a start 20 % off."""
+    """All 18 contact parameters from a start 20 % off (toe angle from the kinematics, as generated)."""
     true = synth.meta["true_params"]
     keys = ("k_h", "a_h", "R", "H", "mu_f", "v_s")
     fit = ContactFit(contact="hypervolumetric", cutoff=None, n_starts=1,

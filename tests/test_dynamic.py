@@ -225,3 +225,14 @@ def test_task_file_errors(tmp_path):
         load_task(bad)
     with pytest.raises(ModelError, match="not found"):
         load_task(tmp_path / "nope.toml")
+
+
+def test_shipped_task_files_are_valid():
+    from pathlib import Path
+
+    from pinmsk.solvers.dynamic import build_from_task
+    tasks = sorted((Path(__file__).resolve().parents[1] / "data" / "tasks").glob("*.toml"))
+    assert len(tasks) >= 3
+    for task in tasks:
+        prob = build_from_task(load_task(task), base_dir=task.parent)
+        assert prob.parametrization.n_params in (7, 11)

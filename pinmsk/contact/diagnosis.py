@@ -40,7 +40,9 @@ class ContactCandidate:
 
     @property
     def n_params(self) -> int:
-        return sum(sum(p.vary for p in c.params.values()) for c in self.components)
+        # as ContactFit fits them: the point contact tracks f_n only, its friction stays fixed
+        skip = ("mu_f", "v_s") if self.kind == "point" else ()
+        return sum(sum(p.vary for n, p in c.params.items() if n not in skip) for c in self.components)
 
     def fit(self, model, trial, **options) -> ContactFit:
         """Run the identification of this candidate (see :class:`ContactFit`)."""

@@ -515,8 +515,11 @@ class DynamicOptimization:
     - ``tracking_weight`` (``1 - mu`` of Eq. 3.3) or ``tracking_tolerance`` (Eq. 3.7, rad);
     - ``excitation_bounds`` (0, 1), ``bound_points`` (dense constraint grid);
     - ``tendon``: ``"rigid"``/``"compliant"`` for FF (IFM/IFT always compliant);
-    - ``maxiter``, ``tol`` (SLSQP ``ftol``), ``constraint_tol``, ``n_starts``,
-      ``fd_step``, ``progress`` (object with ``update(n)``), ``verbose``.
+    - ``maxiter``, ``tol`` (SLSQP ``ftol`` on the objective scaled by its value at
+      the first start), ``constraint_tol``, ``n_starts``, ``n_jobs`` (parallel
+      starts), ``restarts`` (SLSQP restarts after a line-search failure), ``fd``
+      (``"central"`` or ``"forward"``), ``fd_step`` (relative), ``progress``
+      (object with ``update(n)``), ``verbose``.
     """
 
     def __init__(self, model, *, parametrization: Parametrization, target: Target,
@@ -526,7 +529,7 @@ class DynamicOptimization:
                  excitation_bounds=(0.0, 1.0), bound_points: int = 200,
                  tracking_points: int = 200, tendon: str = "rigid", maxiter: int = 200, tol: float = 1e-7,
                  constraint_tol: float = 1e-5, n_starts: int = 3, fd_step: float = 1e-6,
-                 fd: str = "central", n_jobs: int = 1,
+                 fd: str = "central", n_jobs: int = 1, restarts: int = 3,
                  progress=None, verbose: bool = False):
         self.model = model
         self.parametrization = parametrization
@@ -549,6 +552,7 @@ class DynamicOptimization:
         self.fd_step = fd_step
         self.fd = fd
         self.n_jobs = n_jobs
+        self.restarts = restarts
         self.progress = progress
         self.verbose = verbose
 
@@ -958,11 +962,19 @@ class DynamicOptimization:
             res = minimize(lambda x: fs * self._value(x)[0], xs, jac=lambda x: fs * self._gradient(x)[0],
                            method="SLSQP", constraints=cons, options=opts)
             nit, nfev = res.nit, res.nfev
-            if not res.success and res.status in (4, 8):   # line-search trouble: one restart
+            # Line-search trouble (status 8) or incompatible linearized constraints (4):
+            # restart with a fresh quasi-Newton Hessian while that still improves the
+            # objective, at most ``restarts`` times.
+            for _ in range(self.restarts):
+                if res.success or res.status not in (4, 8):
+                    break
+                f_before = float(res.fun)
                 res = minimize(lambda x: fs * self._value(x)[0], res.x,
                                jac=lambda x: fs * self._gradient(x)[0], method="SLSQP",
                                constraints=cons, options=opts)
                 nit, nfev = nit + res.nit, nfev + res.nfev
+                if not res.success and float(res.fun) > f_before - self.tol:
+                    break
         except (SolverError, FloatingPointError, ValueError) as exc:
             return None, {"start": k, "ok": False, "success": False, "message": f"failed: {exc}",
                           "objective": float("nan"), "violation": float("inf"), "nit": 0,
@@ -1070,7 +1082,8 @@ TASK_SCHEMA = {
                     "tracking_tolerance": "rad (Eq. 3.7)", "bound_points": "constraint grid size"},
     "solver": {"step": "RK4 step (s)", "maxiter": "SLSQP iterations", "tol": "SLSQP ftol",
                "constraint_tol": "accepted constraint violation", "n_starts": "multi-start count",
-               "fd_step": "relative finite-difference step"},
+               "fd_step": "relative finite-difference step",
+               "n_jobs": "parallel worker processes for the starts"},
 }
 
 
@@ -1171,7 +1184,7 @@ def build_from_task(spec: dict, *, base_dir=None, progress=None) -> DynamicOptim
         bound_points=co.get("bound_points", 200), tendon=ms.get("tendon", "rigid"),
         maxiter=so.get("maxiter", 200), tol=so.get("tol", 1e-7),
         constraint_tol=so.get("constraint_tol", 1e-5), n_starts=so.get("n_starts", 3),
-        fd_step=so.get("fd_step", 1e-6), progress=progress)
+        fd_step=so.get("fd_step", 1e-6), n_jobs=so.get("n_jobs", 1), progress=progress)
 
 
 def scale_masses(model, factor: float):
