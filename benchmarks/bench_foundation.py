@@ -83,8 +83,19 @@ def bench_muscles(n=20000):
     return n * ms.n / t_vec, n * ms.n / t_sca
 
 
+def cpu_name() -> str:
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "cpu"
+
+
 def main():
-    print(f"machine: {platform.machine()}, {platform.processor() or 'cpu'}, {os.cpu_count()} cores, "
+    print(f"machine: {platform.machine()}, {cpu_name()}, {os.cpu_count()} cores, "
           f"python {platform.python_version()}, pinocchio {pin.__version__}, numpy {np.__version__}")
     print("batch inverse dynamics (frames/s)                    pinmsk     bare pin.rnea loop   ratio")
     for name in ("forearm", "gait2d", "human3d"):

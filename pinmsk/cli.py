@@ -156,7 +156,7 @@ def cmd_diagnose(args) -> int:
     model = _model(args)
     trial = _read(args.trial, model)
     r = run(model, trial, add=args.add or [], json_path=args.json, report_path=args.report,
-            plot_dir=args.plot, mode=args.mode, cutoff=args.cutoff, frames=args.frame or None)
+            plot_dir=args.plot, mode=args.mode, cutoff=args.cutoff or None, frames=args.frame or None)
     print(r.summary_text())
     for path in (args.json, args.report):
         if path:
@@ -289,10 +289,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", metavar="OUT.json", default=None, help="write the summary as JSON")
     s.add_argument("--report", metavar="OUT.html", default=None, help="write a self-contained HTML report")
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
-    s.add_argument("--mode", default="auto", choices=["auto", "torque", "motion", "muscle"],
+    s.add_argument("--mode", default="auto", choices=["auto", "torque", "motion", "muscle", "contact"],
                    help="comparison level (default: chosen from the trial's channels)")
     s.add_argument("--cutoff", type=float, default=6.0,
-                   help="low-pass cut-off (Hz) for differentiating the coordinates (default 6)")
+                   help="low-pass cut-off (Hz) for differentiating the coordinates (default 6; 0 = no "
+                        "filter, right for noise-free synthetic kinematics; about 12 for foot markers "
+                        "in contact mode)")
     s.add_argument("--frame", action="append", metavar="FRAME",
                    help="frames to try frame effects (e.g. a payload) at, besides the defaults")
     s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)

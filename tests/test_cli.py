@@ -69,11 +69,15 @@ def test_simulate_round_trip_through_files(tmp_path):
     assert np.max(np.abs(got["elbow_flexion"] - q)) < 1e-3
 
 
-def test_every_command_has_help():
+def test_every_command_has_help(capsys):
     for cmd in ([], ["models"], ["info"], ["id"], ["simulate"], ["demo"], ["view"], ["batch"], ["so"], ["fso"],
                 ["diagnose"], ["synth"], ["contact", "fit"]):
-        r = subprocess.run([sys.executable, "-m", "pinmsk.cli", *cmd, "--help"], capture_output=True, text=True)
-        assert r.returncode == 0 and "usage: pinmsk" in r.stdout, (cmd, r.stderr)
+        with pytest.raises(SystemExit) as exc:
+            main([*cmd, "--help"])
+        assert exc.value.code == 0, cmd
+        assert "usage: pinmsk" in capsys.readouterr().out, cmd
+    r = subprocess.run([sys.executable, "-m", "pinmsk", "--help"], capture_output=True, text=True)
+    assert r.returncode == 0 and "usage: pinmsk" in r.stdout, r.stderr
 
 
 def test_so_and_fso_write_forces_matching_library(tmp_path):

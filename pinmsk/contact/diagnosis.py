@@ -68,3 +68,71 @@ def contact_candidates(model, trial=None, *, side: str | None = None) -> list[Co
         comps = foot_contacts(model, kind, side=side, relax=relax) if relax else sets[kind]
         out.append(ContactCandidate(f"{kind}{'_relaxed' if relax else ''}", kind, relax, comps, drivable))
     return out
+
+
+# -- glue for the diagnosis's contact mode (pinmsk.diagnose.contact) ------------------------------
+
+#: the Eq. 4.2 terms, all compared by the diagnosis (the point contact too)
+ALL_TERMS = ("normal_force", "friction_force", "cop")
+
+
+def drivable(model, trial=None) -> bool:
+    """True if ``model`` has foot2d's sites and driving coordinates (and ``trial`` the driving and GRF channels)."""
+    try:
+        foot_contacts(model, "point")
+    except ModelError:
+        return False
+    if not all(c in model.coordinates for c in DRIVE + ("mtp",)):
+        return False
+    return trial is None or all(c in trial for c in DRIVE + GRF)
+
+
+def contact_problem(model, trial, *, cutoff=None, window=None, toe: str = "kinematic",
+                    ground_speed: float | None = None, cop_threshold: float = 0.05):
+    """The parameter-independent part of a contact identification, exactly as :class:`ContactFit`
+    builds it with these options (kinematics, toe angle, measured GRF, COP mask): ``(problem, ground_speed)``.
+
+    Every candidate fitted with the same options sees the same kinematics, so a model's own
+    contacts can be evaluated on them (:func:`predict_reaction`) and compared like for like.
+    """
+    import numpy as np
+    from .identify import SWING, toe_from_kinematics
+
+    gs = ground_speed
+    if gs is None:
+        gs = float(trial.meta.get("ground_speed", 0.0)) if hasattr(trial, "meta") else 0.0
+    cf = ContactFit(contact="hypervolumetric", cutoff=cutoff, window=window, toe=toe,
+                    cop_threshold=cop_threshold, terms=ALL_TERMS)
+    prob = cf._problem(model, trial, gs)
+    if toe in ("kinematic", "fit"):
+        mtp = toe_from_kinematics(prob.geom, prob.q, swing=prob.meas[0] < SWING * prob.scale[0])
+        four = np.linalg.lstsq(prob.B, mtp, rcond=None)[0]
+        prob.q[:, 3], prob.v[:, 3] = prob.B @ four, prob.dB @ four
+    elif toe == "flat":
+        four = np.linalg.lstsq(prob.B, -np.maximum(prob.q[:, 2], 0.0), rcond=None)[0]
+        prob.q[:, 3], prob.v[:, 3] = prob.B @ four, prob.dB @ four
+    return prob, gs
+
+
+def site_kinematics_of(problem) -> dict:
+    """``{site: SiteKinematics}`` of foot2d over the problem's frames."""
+    from .foot import foot2d_site_kinematics
+    return foot2d_site_kinematics(problem.geom, problem.q, problem.v)
+
+
+def predict_reaction(problem, contacts):
+    """The :class:`GroundReaction` of ``contacts`` (components on foot2d's heel/metatarsal/toe frames)
+    over the problem's kinematics; ``None`` when ``contacts`` is empty."""
+    from .foot import SITES, ground_reaction
+
+    contacts = list(contacts)
+    if not contacts:
+        return None
+    kin = site_kinematics_of(problem)
+    outs = []
+    for c in contacts:
+        if c.target not in SITES:
+            raise ModelError(f"contact {c.label}: the contact diagnosis evaluates spheres on foot2d's sites "
+                             f"({', '.join(SITES)}), not on frame '{c.target}'")
+        outs.append(c.evaluate_kinematics(kin[c.target]))
+    return ground_reaction(outs)

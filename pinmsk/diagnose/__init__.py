@@ -15,7 +15,8 @@ The loop, in a notebook::
 
 and as the CLI does it: ``dx.run(model, trial, add=["payload:hand"], json_path=...,
 report_path=..., plot_dir=...)``.  Modules: :mod:`.compare` (residuals, modes,
-noise floor), :mod:`.fit` (fitting and cross-validation), :mod:`.diagnosis`
+noise floor), :mod:`.contact` (the contact mode: a driven foot's GRF, the contact
+models as candidates, BIC), :mod:`.fit` (fitting and cross-validation), :mod:`.diagnosis`
 (ranking, verdict, the loop), :mod:`.synth` (hidden-effect trials).
 """
 from .compare import DEFAULT_CUTOFF, Comparison, NoiseFloor, compare, external_forces_from_trial

@@ -15,6 +15,13 @@ Three comparison modes (:func:`compare`, ``mode=``):
     ``tau_mus = R(q)^T (a F_active(q, qdot) + F_passive(q))`` with ``a`` the
     signal after the model's muscle-level effects (``a = u`` without any),
     against inverse dynamics.
+``"contact"``
+    A kinematically driven foot's ground reaction force (normal, friction,
+    COP) from its contact spheres against the measured GRF; chosen by
+    ``"auto"`` for a foot2d-like model and a trial with GRF but no
+    ``<coord>_moment`` channels.  Noise floor, candidates and scoring (BIC, a
+    single stance being too short for blocked cross-validation) in
+    :mod:`pinmsk.diagnose.contact`.
 ``"motion"``
     Forward simulation driven by the measured ``<coord>_moment`` against the
     measured coordinates, restarted from the measured state at the start of
@@ -71,7 +78,7 @@ __all__ = ["DEFAULT_CUTOFF", "MODES", "Comparison", "EquationError", "NoiseFloor
            "catalog_context", "external_forces_from_trial", "white_noise_sigma"]
 
 DEFAULT_CUTOFF = 6.0
-MODES = ("torque", "motion", "muscle")
+MODES = ("torque", "motion", "muscle", "contact")
 _N_PROPAGATE = 3
 
 
@@ -172,6 +179,12 @@ class _Plan:
 def _plan(model, trial, mode: str) -> _Plan:
     if mode not in ("auto",) + MODES:
         raise ModelError(f"unknown comparison mode {mode!r}; use one of auto, {', '.join(MODES)}")
+    from . import contact as _contact
+    if mode == "contact" or (mode == "auto" and _contact.applicable(model, trial)):
+        why = _contact._why_not(model, trial)
+        if why:
+            raise TrialError(f"contact-level comparison impossible: {why}")
+        return _Plan("contact", (), (), None)        # no coordinate is compared: joint effects do not apply
     unact = unactuated_coordinates(model)
     grf = _has_grf(trial)
     with_moment = [c for c in model.coordinates if f"{c}_moment" in trial]
@@ -374,6 +387,7 @@ class Comparison:
     states: dict = field(default_factory=dict)
     options: dict = field(default_factory=dict)
     eq_noise: NoiseFloor | None = None
+    mask: np.ndarray | None = None          # (n, C) frames where a channel is defined (contact: the COP)
 
     def __post_init__(self):
         if self.eq_noise is None:
@@ -383,19 +397,29 @@ class Comparison:
     def residual(self) -> np.ndarray:
         return self.measured - self.modelled
 
+    def _channel_rms(self) -> np.ndarray:
+        if self.mask is None:
+            return np.sqrt(np.mean(self.residual ** 2, axis=0))
+        r2 = np.where(self.mask, self.residual ** 2, 0.0)
+        return np.sqrt(np.sum(r2, axis=0) / np.maximum(self.mask.sum(axis=0), 1))
+
     def rmse(self) -> dict[str, float]:
-        r = np.sqrt(np.mean(self.residual ** 2, axis=0))
+        r = self._channel_rms()
         out = {c: float(v) for c, v in zip(self.channels, r)}
         out["total"] = float(np.sqrt(np.mean(r ** 2)))
         return out
 
     def ratio(self) -> float:
         """RMS over channels of ``rmse / noise floor`` (1 = at the floor)."""
-        r = np.sqrt(np.mean(self.residual ** 2, axis=0))
+        r = self._channel_rms()
         return float(np.sqrt(np.mean((r / self.noise.sigma) ** 2)))
 
     def with_model(self, model) -> "Comparison":
         """The same comparison (frames, noise floor) for another model, e.g. with an effect added."""
+        if self.mode == "contact":
+            from .contact import compare_contact
+            return compare_contact(model, self.trial, cutoff=self.cutoff, noise_floor=self.noise,
+                                   problem=self.eq.problem, options=self.options)
         return compare(model, self.trial, mode=self.mode, cutoff=self.cutoff,
                        noise_floor=self.noise, _motion=self.eq.motion, **self.options)
 
@@ -407,6 +431,10 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
     if not isinstance(trial, Trial):
         raise TrialError(f"compare needs a Trial, got {type(trial).__name__}; read one with pinmsk.read_trial")
     plan = _plan(model, trial, mode)
+    if plan.mode == "contact":
+        from .contact import compare_contact
+        return compare_contact(model, trial, cutoff=cutoff, noise_floor=noise_floor,
+                               options={"grf_frames": grf_frames, "sim_window": sim_window})
     t = np.asarray(trial.time, dtype=float)
     if t.size < 30:
         raise TrialError(f"the trial has {t.size} samples; the diagnosis needs at least 30 "

@@ -105,6 +105,9 @@ class EffectScore:
             "explained_fraction": float(self.explained_fraction),
             "significant": bool(self.significant),
             "stderr": {k: _finite(v) for k, v in self.stderr.items()},
+            **({"bic_change": float(self.fit.bic_change), "n_params": int(self.fit.n_params),
+                "worst_windows": [dict(w) for w in getattr(self, "worst_windows", [])]}
+               if getattr(self.effect, "kind", None) == "contact" else {}),
         }
 
 
@@ -183,6 +186,9 @@ class Diagnosis:
         Raises :class:`~pinmsk.errors.ConvergenceError` if the fit does not
         converge within ``max_nfev`` evaluations.
         """
+        if self.comparison.mode == "contact":
+            from .contact import resolve
+            return resolve(self, effect, target).fit
         comp = _resolve(effect, target, self)
         plain = isinstance(effect, str) and not parse_effect(effect)[2]
         for s in self.ranking:
@@ -208,8 +214,8 @@ class Diagnosis:
             if self.best is None:
                 raise ModelError("no significant effect to add: the verdict is "
                                  f"{self.verdict}; name one explicitly")
-            return self.model.with_effect(self.best.effect)
-        return self.model.with_effect(self.fit(effect, target).effect)
+            return _model_plus(self.model, self.best.fit)
+        return _model_plus(self.model, self.fit(effect, target))
 
     # -- reporting -----------------------------------------------------------------------
     def to_json_dict(self, added: Sequence = ()) -> dict:
@@ -252,7 +258,21 @@ class Diagnosis:
             for ch, cors in self.correlations.items():
                 if cors:
                     lines.append(f"  {ch:<{w}}  " + ", ".join(f"{s} (r = {r:+.2f})" for s, r in cors[:3]))
-        if self.ranking:
+        if self.ranking and c.mode == "contact":
+            lines.append(f"ranking (contact models identified by Eq. 4.2, scored by BIC = chi2 + k ln n with the "
+                         f"noise floor as sigma; significant when BIC falls by > {self.settings['delta_bic']:g}; "
+                         "explained = in-sample share of chi2):")
+            lw = max(len(s.label) for s in self.ranking)
+            for k, s in enumerate(self.ranking, 1):
+                sig = "yes" if s.significant else "no "
+                ww = s.worst_windows[0] if s.worst_windows else None
+                where = (f"  worst {ww['channel']} {ww['start']:.2f}-{ww['end']:.2f} s" if ww else "")
+                lines.append(f"  {k:>2}. {s.label:<{lw}}  k = {s.fit.n_params:>2}  dBIC {s.fit.bic_change:10.1f}  "
+                             f"explained {100 * s.explained_fraction:6.1f}%  rmse after "
+                             + ", ".join(f"{ch} {s.rmse_after[ch]:.3g}" for ch in c.channels)
+                             + f"  significant {sig}{where}" + (f"  [{s.note}]" if s.note else ""))
+                lines.append(f"      {s.describe_params()}")
+        elif self.ranking:
             lines.append(f"ranking ({self.settings['folds']}-fold blocked cross-validation; explained = "
                          "held-out share of the residual's mean square):")
             lw = max(len(s.label) for s in self.ranking)
@@ -275,6 +295,10 @@ class Diagnosis:
                     f"(worst channel {worst:.2f}x; <= {self.settings['at_floor']:g}x); nothing to add")
         where = (f"the error is {self.ratio:.1f}x the noise floor" if len(self.channel_ratios) == 1
                  else f"the error is {self.ratio:.1f}x the noise floor over all channels, {worst:.1f}x on {ch}")
+        if self.best is not None and self.comparison.mode == "contact":
+            return (f"verdict: missing_effect -- {where}; best explanation: the {self.best.label} contact model "
+                    f"(BIC {self.best.fit.bic_change:+.4g}, fitted parameters above); add it with "
+                    f"--add {self.best.label}")
         if self.best is not None:
             return (f"verdict: missing_effect -- {where}; best explanation: {self.best.label} "
                     f"({self.best.describe_params()}); add it with --add {self.best.label}")
@@ -287,8 +311,18 @@ class Diagnosis:
                 f"{self.ratio:.2f}x floor, {self.verdict}>")
 
 
+def _model_plus(model, fit):
+    """``model`` with a fitted effect; a contact model replaces the contacts on its frames."""
+    if getattr(fit.effect, "kind", None) == "contact" and hasattr(fit, "components"):
+        from .contact import model_with_contacts
+        return model_with_contacts(model, fit)
+    return model.with_effect(fit.effect)
+
+
 def _unit(c: Comparison) -> str:
     from ..effects._base import is_prismatic
+    if c.mode == "contact":
+        return "N and m"
     lin = [is_prismatic(c.model, x) for x in c.coordinates]
     if c.mode == "motion":
         return "m and rad" if any(lin) and not all(lin) else ("m" if all(lin) else "rad")
@@ -373,8 +407,14 @@ def _targets(cls, model) -> str:
 
 
 def _worst_windows(c: Comparison, window: float, k: int = 5) -> list:
-    t = c.time
-    res = c.residual
+    if c.mode == "contact":
+        from .contact import contact_window
+        window = contact_window(c, window)
+    return _windows_of(c.time, c.residual, c.channels, c.noise.as_dict(), window, k=k, mask=c.mask)
+
+
+def _windows_of(t, res, channels, floor: dict, window: float, k: int = 5, mask=None) -> list:
+    """The ``k`` (channel, time window) pairs with the largest RMS residual / noise floor."""
     dur = t[-1] - t[0]
     if dur / window < 3:
         window = dur / 5
@@ -390,11 +430,15 @@ def _worst_windows(c: Comparison, window: float, k: int = 5) -> list:
         sel = (t >= a) & (t < a + window)
         if sel.sum() < 5:
             continue
-        r = np.sqrt(np.mean(res[sel] ** 2, axis=0))
-        for ch, v in zip(c.channels, r):
+        if mask is None:
+            r = np.sqrt(np.mean(res[sel] ** 2, axis=0))
+        else:
+            m = mask[sel]
+            r = np.sqrt(np.sum(np.where(m, res[sel] ** 2, 0.0), axis=0) / np.maximum(m.sum(axis=0), 1))
+            r = np.where(m.sum(axis=0) >= 3, r, 0.0)
+        for ch, v in zip(channels, r):
             out.append({"channel": ch, "start": float(a), "end": float(min(a + window, t[-1])),
                         "rmse": float(v)})
-    floor = c.noise.as_dict()
     out.sort(key=lambda w: -w["rmse"] / floor[w["channel"]])
     return out[:k]
 
@@ -460,7 +504,8 @@ def _motion_rmse_after(c: Comparison, effect) -> dict:
 def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT_CUTOFF,
              candidates=None, frames: Sequence[str] | None = None, folds: int = 5,
              threshold: float = THRESHOLD, at_floor: float = AT_FLOOR, window: float = 1.0,
-             grf_frames=None, sim_window: float = 0.5, comparison: Comparison | None = None) -> Diagnosis:
+             grf_frames=None, sim_window: float = 0.5, comparison: Comparison | None = None,
+             delta_bic: float | None = None, _fits=None) -> Diagnosis:
     """Compare ``model`` with ``trial``, locate the failure and rank the missing effects.
 
     ``candidates``: effects to rank (Components, or family names / ``family:target``
@@ -468,11 +513,19 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
     ``frames`` names frames for frame effects (a payload).  See the module
     docstring for the scoring and :func:`pinmsk.diagnose.compare.compare` for
     ``mode``, ``cutoff`` and the noise floor.
+
+    In contact mode (:mod:`pinmsk.diagnose.contact`) the candidates are the
+    contact models of the foot, scored by BIC with the noise floor as sigma
+    (significant below ``-delta_bic``, default
+    :data:`~pinmsk.diagnose.contact.DELTA_BIC`); ``folds`` and ``threshold``
+    do not apply.
     """
     if folds < 2:
         raise ModelError(f"folds must be >= 2 for cross-validation, got {folds}")
     c = comparison if comparison is not None else compare(
         model, trial, mode=mode, cutoff=cutoff, grf_frames=grf_frames, sim_window=sim_window)
+    if c.mode == "contact":
+        return _diagnose_contact(c, candidates, folds, threshold, at_floor, window, cutoff, delta_bic, _fits)
     n = c.eq.rows.size
     if n < folds * _MIN_BLOCK:
         raise TrialError(
@@ -510,6 +563,25 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
     windows = _worst_windows(c, window)
     cors = _correlations(c)
     return Diagnosis(c, ranking, windows, cors, settings, skipped)
+
+
+def _diagnose_contact(c, candidates, folds, threshold, at_floor, window, cutoff, delta_bic, fits) -> Diagnosis:
+    from .contact import DELTA_BIC, rank_contacts
+    if candidates is not None:
+        raise ModelError("contact mode ranks the contact models of the foot (point, volumetric, "
+                         "hypervolumetric, hypervolumetric_relaxed); candidates= does not apply")
+    settings = {"folds": folds, "threshold": threshold, "at_floor": at_floor, "guard": 0, "window": window,
+                "cutoff": cutoff, "delta_bic": DELTA_BIC if delta_bic is None else float(delta_bic),
+                "criterion": "bic"}
+    ranking, skipped, fits = rank_contacts(c, settings, fits)
+    d = Diagnosis(c, ranking, _worst_windows(c, window), _correlations(c), settings, skipped)
+    d.contact_fits = fits
+    return d
+
+
+def _order_by_bic(ranking: list) -> list:
+    """Converged first, then lowest BIC (largest fall of BIC against the model as given)."""
+    return sorted(ranking, key=lambda s: (not s.converged, s.fit.bic_change))
 
 
 def _order(ranking: list, tie: float = 0.05) -> list:
@@ -601,9 +673,11 @@ def run(model, trial, *, add: Sequence = (), json_path=None, report_path=None, p
             fit = steps[-1].fit(fam, tgt)
         else:
             fit = steps[-1].fit(entry)
-        new_model = steps[-1].model.with_effect(fit.effect)
+        new_model = _model_plus(steps[-1].model, fit)
         comp = steps[-1].comparison.with_model(new_model)
         opts = {k: v for k, v in options.items() if k not in ("mode", "cutoff", "grf_frames", "sim_window")}
+        if comp.mode == "contact":
+            opts["_fits"] = getattr(steps[-1], "contact_fits", None)   # the fits depend on the trial only
         steps.append(diagnose(new_model, trial, comparison=comp, cutoff=steps[-1].settings["cutoff"], **opts))
         added.append(fit)
     result = DiagnosisRun(steps, added)
