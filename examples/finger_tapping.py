@@ -119,24 +119,35 @@ def figure(res, path, title):
     plt.close(fig)
 
 
-def table_figure(freqs, J, J1, J2, fmax, path, extra=None):
+def table_figure(freqs, J, J1, J2, fmax, path, extra=None, solved=None):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(7, 4))
-    ax.plot(freqs, J2, "o-", label="J2 (pinmsk)")
-    ax.plot(freqs, J1, "s-", label="J1 (pinmsk)")
+    if solved:
+        fs = sorted(solved)
+        ax.plot(fs, [max(solved[f], 1e-7) for f in fs], ".-", color="C0", alpha=0.5,
+                label="J2 (pinmsk, scan)")
+    ax.plot(freqs, J2, "o", color="C0", label="J2 (pinmsk)")
+    ax.plot(freqs, J1, "s-", color="C1", label="J1 (pinmsk)")
     ax.plot(THESIS["frequencies"], THESIS["J2"], "o--", color="gray", label="J2 (thesis Table 3.1)")
+    ax.plot(THESIS["frequencies"], THESIS["J1"], "s--", color="silver", label="J1 (thesis Table 3.1)")
     if extra is not None:
-        ax.plot(extra["frequencies"], extra["J2"], "^-", label="J2, v_max = 0.1 m/s variant")
+        ax.plot(extra["frequencies"], extra["J2"], "^-", color="C2",
+                label="J2, v_max = 0.1 m/s variant")
     ax.axhline(J2_LIMIT, color="k", lw=0.8, ls=":")
     if fmax:
         ax.axvline(fmax, color="C0", lw=0.8, ls=":")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    from matplotlib.ticker import NullFormatter, ScalarFormatter
+    ax.xaxis.set_major_formatter(ScalarFormatter())
+    ax.xaxis.set_minor_formatter(NullFormatter())
+    ax.set_xticks([2, 4, 6, 10, 20, 40, 80])
     ax.set_xlabel("tapping frequency (Hz)")
     ax.set_ylabel("cost")
-    ax.set_yscale("symlog", linthresh=1e-3)
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3, which="both")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -192,7 +203,7 @@ def main(argv=None):
         figure(vr[7.0], out / "finger_7Hz_slow_muscles.png",
                "finger tapping, f = 7 Hz, v_max = 0.1 m/s variant")
     table_figure(freqs, [r[0] for r in rows], [r[1] for r in rows], [r[2] for r in rows], fmax,
-                 out / "finger_table.png", variant)
+                 out / "finger_table.png", variant, solved)
     summary = {
         "frequencies": freqs, "J": [r[0] for r in rows], "J1": [r[1] for r in rows],
         "J2": [r[2] for r in rows], "max_frequency": fmax, "seconds": seconds,

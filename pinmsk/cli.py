@@ -190,6 +190,19 @@ def cmd_contact_fit(args) -> int:
     return 0
 
 
+def cmd_optimize(args) -> int:
+    from .solvers.dynamic import optimize_task
+    res = optimize_task(args.task, args.output)
+    print(res.report())
+    if args.output:
+        print(f"wrote {args.output} and {args.output}.json")
+    if not res.converged:
+        print("pinmsk: the optimizer stopped before converging; the result above is NOT a solution",
+              file=sys.stderr)
+        return 1
+    return 0
+
+
 def cmd_view(args) -> int:
     from .viewer import view_cli
     view_cli(args.model, args.trial, args.results, open_browser=args.open,
@@ -326,6 +339,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="write objective, params, rmse and seconds as JSON")
     c.add_argument("--plot", metavar="DIR", default=None, help="write GRF and COP figures (PNG) to DIR")
     c.set_defaults(func=cmd_contact_fit)
+
+    s = sub.add_parser("optimize", help="dynamic optimization from a task file (model, motion, "
+                                        "parametrization, objective, constraints)")
+    s.add_argument("task", help="TOML task file (examples in data/tasks/)")
+    s.add_argument("-o", "--output", default=None, help="result trial (.sto/.csv), plus OUT.json")
+    s.set_defaults(func=cmd_optimize)
 
     s = sub.add_parser("view", help="meshcat viewer: the model, optionally playing a trial with results")
     s.add_argument("model")

@@ -71,7 +71,7 @@ def test_simulate_round_trip_through_files(tmp_path):
 
 def test_every_command_has_help(capsys):
     for cmd in ([], ["models"], ["info"], ["id"], ["simulate"], ["demo"], ["view"], ["batch"], ["so"], ["fso"],
-                ["diagnose"], ["synth"], ["contact", "fit"]):
+                ["diagnose"], ["synth"], ["contact", "fit"], ["optimize"]):
         with pytest.raises(SystemExit) as exc:
             main([*cmd, "--help"])
         assert exc.value.code == 0, cmd

@@ -517,7 +517,9 @@ class DynamicOptimization:
     - ``tendon``: ``"rigid"``/``"compliant"`` for FF (IFM/IFT always compliant);
     - ``maxiter``, ``tol`` (SLSQP ``ftol`` on the objective scaled by its value at
       the first start), ``constraint_tol``, ``n_starts``, ``n_jobs`` (parallel
-      starts), ``restarts`` (SLSQP restarts after a line-search failure), ``fd``
+      starts; once one converges the others get ``budget_factor`` times its run
+      time more, then stop and count as unconverged starts), ``restarts`` (SLSQP
+      restarts after a line-search failure), ``fd``
       (``"central"`` or ``"forward"``), ``fd_step`` (relative), ``progress``
       (object with ``update(n)``), ``verbose``.
     """
@@ -530,6 +532,7 @@ class DynamicOptimization:
                  tracking_points: int = 200, tendon: str = "rigid", maxiter: int = 200, tol: float = 1e-7,
                  constraint_tol: float = 1e-5, n_starts: int = 3, fd_step: float = 1e-6,
                  fd: str = "central", n_jobs: int = 1, restarts: int = 3,
+                 budget_factor: float = 2.0,
                  progress=None, verbose: bool = False):
         self.model = model
         self.parametrization = parametrization
@@ -553,6 +556,7 @@ class DynamicOptimization:
         self.fd = fd
         self.n_jobs = n_jobs
         self.restarts = restarts
+        self.budget_factor = budget_factor
         self.progress = progress
         self.verbose = verbose
 
@@ -911,13 +915,18 @@ class DynamicOptimization:
             import multiprocessing as mp
             global _ACTIVE
             _ACTIVE = self
+            ctx = mp.get_context("fork")
+            # Shared wall-clock deadline: when a start converges, the others get at most
+            # ``budget_factor`` times its run time more (their SLSQP callback stops them).
+            self._deadline = ctx.Value("d", float("inf"))
             prog, self.progress = self.progress, None
             try:
-                with mp.get_context("fork").Pool(min(self.n_jobs, len(starts))) as pool:
+                with ctx.Pool(min(self.n_jobs, len(starts))) as pool:
                     outs = pool.map(_run_start, list(enumerate(starts)))
             finally:
                 _ACTIVE = None
                 self.progress = prog
+                self._deadline = None
         else:
             outs = [self._solve_start(k, xs) for k, xs in enumerate(starts)]
         best = None
@@ -958,20 +967,28 @@ class DynamicOptimization:
                          "jac": lambda x: self._gradient(x)[1]})
         opts = {"maxiter": self.maxiter, "ftol": self.tol}
         ts = _time.perf_counter()
+        deadline = getattr(self, "_deadline", None)
+        stopped = []
+
+        def callback(xk):
+            if deadline is not None and _time.time() > deadline.value:
+                stopped.append(True)
+                raise StopIteration
+
         try:
             res = minimize(lambda x: fs * self._value(x)[0], xs, jac=lambda x: fs * self._gradient(x)[0],
-                           method="SLSQP", constraints=cons, options=opts)
+                           method="SLSQP", constraints=cons, options=opts, callback=callback)
             nit, nfev = res.nit, res.nfev
             # Line-search trouble (status 8) or incompatible linearized constraints (4):
             # restart with a fresh quasi-Newton Hessian while that still improves the
             # objective, at most ``restarts`` times.
             for _ in range(self.restarts):
-                if res.success or res.status not in (4, 8):
+                if res.success or res.status not in (4, 8) or stopped:
                     break
                 f_before = float(res.fun)
                 res = minimize(lambda x: fs * self._value(x)[0], res.x,
                                jac=lambda x: fs * self._gradient(x)[0], method="SLSQP",
-                               constraints=cons, options=opts)
+                               constraints=cons, options=opts, callback=callback)
                 nit, nfev = nit + res.nit, nfev + res.nfev
                 if not res.success and float(res.fun) > f_before - self.tol:
                     break
@@ -982,8 +999,15 @@ class DynamicOptimization:
         x = res.x
         viol = self._violation(x, A)
         f = float(self._value(x)[0])
-        ok = bool(res.success) and viol <= self.constraint_tol and bool(np.isfinite(f))
-        return x, {"start": k, "ok": ok, "success": bool(res.success), "message": str(res.message),
+        success = bool(res.success) and not stopped
+        message = (f"stopped after {nit} iterations: another start converged first and this one "
+                   f"ran past {self.budget_factor:g}x its time" if stopped else str(res.message))
+        ok = success and viol <= self.constraint_tol and bool(np.isfinite(f))
+        if ok and deadline is not None:
+            with deadline.get_lock():
+                elapsed = _time.perf_counter() - ts
+                deadline.value = min(deadline.value, _time.time() + self.budget_factor * elapsed)
+        return x, {"start": k, "ok": ok, "success": success, "message": message,
                    "objective": f, "violation": viol, "nit": int(nit), "nfev": int(nfev),
                    "seconds": _time.perf_counter() - ts}
 
