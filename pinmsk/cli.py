@@ -44,6 +44,14 @@ def _named_values(items, model, what) -> np.ndarray:
     return out
 
 
+def _plot(args, trial, channels, stem, ylabel) -> None:
+    """``--plot DIR``: PNG figures of ``channels`` over time."""
+    if getattr(args, "plot", None):
+        from . import plots
+        for path in plots.save_channels(trial, channels, args.plot, stem=stem, ylabel=ylabel):
+            print(f"wrote {path}")
+
+
 # -- commands ------------------------------------------------------------------
 
 def cmd_models(args) -> int:
@@ -72,11 +80,7 @@ def cmd_id(args) -> int:
     trial = _read(args.trial, model)
     out = inverse_dynamics(model, trial, cutoff=args.cutoff)
     _write(out, args.output)
-    if args.plot:
-        from . import plots
-        for path in plots.save_channels(out, [f"{c}_moment" for c in model.coordinates], args.plot,
-                                        stem="inverse_dynamics", ylabel="moment (N m)"):
-            print(f"wrote {path}")
+    _plot(args, out, [f"{c}_moment" for c in model.coordinate_order], "inverse_dynamics", "moment (N m)")
     return 0
 
 
@@ -95,6 +99,7 @@ def cmd_simulate(args) -> int:
     v0 = _named_values(args.v0, model, "--v0")
     out = simulate(model, t=t, q0=q0, v0=v0, moments=moments, method=args.method)
     _write(out, args.output)
+    _plot(args, out, list(model.coordinate_order), "simulation", "coordinate (rad or m)")
     return 0
 
 
@@ -194,6 +199,12 @@ def cmd_optimize(args) -> int:
     from .solvers.dynamic import optimize_task
     res = optimize_task(args.task, args.output)
     print(res.report())
+    result = res.to_trial()
+    _plot(args, result, [n for n in result.names if n.endswith(("_excitation", "_activation"))],
+          "optimize_controls", "excitation / activation")
+    _plot(args, result, [n for n in result.names if n.endswith("_desired")]
+          + [n[: -len("_desired")] for n in result.names if n.endswith("_desired")],
+          "optimize_motion", "coordinate (rad)")
     if args.output:
         print(f"wrote {args.output} and {args.output}.json")
     if not res.converged:
@@ -256,6 +267,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--v0", nargs="*", metavar="COORD=RAD_S", help="initial speeds (default 0)")
     s.add_argument("--method", default="rk4", help="rk4 (fixed step) or a solve_ivp method, e.g. RK45")
     s.add_argument("-o", "--output", required=True, help="output .sto or .csv")
+    s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
     s.set_defaults(func=cmd_simulate)
 
     s = sub.add_parser("demo", help="the diagnosis loop on a shipped forearm trial with a hidden effect")
@@ -344,6 +356,7 @@ def build_parser() -> argparse.ArgumentParser:
                                         "parametrization, objective, constraints)")
     s.add_argument("task", help="TOML task file (examples in data/tasks/)")
     s.add_argument("-o", "--output", default=None, help="result trial (.sto/.csv), plus OUT.json")
+    s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
     s.set_defaults(func=cmd_optimize)
 
     s = sub.add_parser("view", help="meshcat viewer: the model, optionally playing a trial with results")
