@@ -119,8 +119,7 @@ def _so_options(args) -> dict:
 def _report_results(args, model, trial, result, title, text):
     if args.plot:
         from . import plots
-        chans = [f"{m}_force" for m in model.muscle_names if f"{m}_force" in result]
-        for path in plots.save_channels(result, chans, args.plot, stem=title, ylabel="force (N)"):
+        for path in plots.save_results_figures(result, args.plot, trial=trial).values():
             print(f"wrote {path}")
     if args.report:
         from .report import write_results_report

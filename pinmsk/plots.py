@@ -519,7 +519,9 @@ def plot_effect_contribution(diag, path=None, *, score=None) -> Figure:
         ax.plot(t, e[:, j], color="k", lw=0.7, label="equation error")
         if s is not None and s.fit.delta is not None:
             ax.plot(t, -s.fit.delta[:, j], color=_MODEL, lw=1.2, label=f"{s.label} (fitted)")
-        ax.set_title(f"{c.eq.coordinates[j]}_moment", fontsize=9, loc="left")
+        name = c.eq.coordinates[j]
+        # contact-mode equations are the GRF channels themselves; otherwise generalized forces
+        ax.set_title(name if c.mode == "contact" else f"{name}_moment", fontsize=9, loc="left")
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=7)
     axes[-1].set_xlabel("time (s)")

@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import base64
 import html
+import os
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["write_report", "render_report"]
+__all__ = ["write_report", "render_report", "write_results_report", "render_results_report"]
 
 _CSS = """
 body{font-family:system-ui,-apple-system,'Segoe UI',sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}
@@ -113,7 +115,10 @@ def render_report(run, *, title: str | None = None) -> str:
             parts.append(_table(["channel", "states"], [[ch, ", ".join(f"{s} ({r:+.2f})" for s, r in cors[:3])]
                                                         for ch, cors in d.correlations.items()], left=2))
         if d.ranking:
-            parts.append("<p>Ranked effects (blocked cross-validation; explained = held-out share):</p>")
+            how = ("contact models scored by BIC with the noise floor as sigma; explained = 1 - chi2 after / before"
+                   if d.comparison.mode == "contact" else
+                   "blocked cross-validation; explained = held-out share")
+            parts.append(f"<p>Ranked effects ({how}):</p>")
             parts.append(_table(["#", "effect", "explained", "rmse after", "significant", "parameters"],
                                 [[i + 1, s.label, f"{100 * s.explained_fraction:.1f}%", _g(s.rmse_after["total"]),
                                   "yes" if s.significant else "no", s.describe_params()]
@@ -155,9 +160,7 @@ def write_report(run, path=None, *, model=None, trial=None, title: str | None = 
             return out
     else:
         out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(render_report(run, title=title), encoding="utf-8")
-    return out
+    return _atomic_write(out, render_report(run, title=title))
 
 
 def _failure_page(model, trial, exc, title) -> str:
@@ -176,3 +179,167 @@ def _failure_page(model, trial, exc, title) -> str:
             "<h2>Model</h2><pre>" + _e(model.describe()) + "</pre><h2>Data</h2>"
             + _table(["item", "value"], [("frames", trial.n_frames), ("channels", ", ".join(trial.names))])
             + _img(fig) + "</body></html>")
+
+
+# -- results (SO, FSO, any Trial of muscle forces) --------------------------------------------
+
+def _atomic_write(path, text: str) -> Path:
+    """Write ``text`` to ``path`` through a temporary file in the same folder and os.replace."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)          # mkstemp creates 0600; a report is an ordinary file
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def _img_any(fig, caption: str) -> str:
+    """A Figure, PNG bytes or a PNG file path as an embedded <figure>."""
+    if isinstance(fig, (bytes, bytearray)):
+        data = bytes(fig)
+    elif isinstance(fig, (str, Path)):
+        data = Path(fig).read_bytes()
+    else:
+        from .plots import figure_png
+        data = figure_png(fig)
+    b64 = base64.b64encode(data).decode("ascii")
+    return (f'<figure><img alt="{_e(caption)}" src="data:image/png;base64,{b64}">'
+            f"<figcaption class='small'>{_e(caption)}</figcaption></figure>")
+
+
+def channel_stats(trial) -> list[list]:
+    """Rows ``[channel, unit, min, max, mean, RMS]`` of every channel of a Trial."""
+    v = np.asarray(trial.values, dtype=float)
+    rows = []
+    for j, c in enumerate(trial.names):
+        x = v[:, j]
+        rows.append([c, trial.units.get(c, ""), float(np.min(x)), float(np.max(x)), float(np.mean(x)),
+                     float(np.sqrt(np.mean(x * x)))])
+    return rows
+
+
+def muscle_stats(results) -> list[list]:
+    """Rows ``[muscle, peak force (N), time of peak (s), mean force (N), mean activation, peak activation]``
+    (means over frames; NaN where the channel is missing)."""
+    from .plots import muscles_in
+    mus = list(dict.fromkeys(muscles_in(results, "force") + muscles_in(results, "activation")))
+    t = np.asarray(results.time)
+    nan = float("nan")
+    rows = []
+    for m in mus:
+        f = np.asarray(results[f"{m}_force"]) if f"{m}_force" in results else None
+        a = np.asarray(results[f"{m}_activation"]) if f"{m}_activation" in results else None
+        rows.append([m,
+                     float(np.max(f)) if f is not None else nan,
+                     float(t[np.argmax(f)]) if f is not None else nan,
+                     float(np.mean(f)) if f is not None else nan,
+                     float(np.mean(a)) if a is not None else nan,
+                     float(np.max(a)) if a is not None else nan])
+    return rows
+
+
+def status_counts(results) -> list[list]:
+    """Rows ``[code, frames, meaning]`` of the ``status`` channel (empty without one)."""
+    if "status" not in results:
+        return []
+    codes, counts = np.unique(np.asarray(results["status"]), return_counts=True)
+    meaning = {}
+    if results.meta.get("analysis") == "static_optimization":
+        from .solvers.static import STATUS
+        meaning = STATUS
+    return [[f"{c:g}", int(n), meaning.get(int(c), "") if float(c).is_integer() else ""]
+            for c, n in zip(codes, counts)]
+
+
+def render_results_report(*, model, trial, results, title: str | None = None, text: str | None = None,
+                          tables=None, extra_figures=None, emg=None) -> str:
+    """The results report as an HTML string (see :func:`write_results_report`)."""
+    from . import plots
+
+    title = title or f"pinmsk results: {model.name}"
+    parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{_e(title)}</title>"
+             f"<style>{_CSS}</style></head><body>", f"<h1>{_e(title)}</h1>"]
+    parts.append("<h2>Model</h2><pre>" + _e(model.describe()) + "</pre>")
+    parts.append("<h2>Data</h2>")
+    for label, tr in (("trial", trial), ("results", results)):
+        if tr is None:
+            continue
+        t = np.asarray(tr.time)
+        rate = (tr.n_frames - 1) / (t[-1] - t[0]) if tr.n_frames > 1 and t[-1] > t[0] else float("nan")
+        parts.append(f"<p><b>{label}</b></p>")
+        parts.append(_table(["item", "value"], [
+            ("source", tr.meta.get("source") or tr.meta.get("analysis") or "-"),
+            ("frames", tr.n_frames), ("duration (s)", f"{tr.duration:.4g}"),
+            ("time (s)", f"{t[0]:.4g} to {t[-1]:.4g}"), ("rate (Hz)", _g(rate)),
+            ("channels", f"{tr.n_channels}: " + ", ".join(tr.names)),
+        ], left=2))
+    if emg is None:
+        emg = plots.find_emg(results, trial)
+    figs = plots.results_figures(results, trial=trial, emg=emg, coordinates=model.coordinates)
+    captions = {"moments": "joint moments", "forces": "muscle forces", "activations": "muscle activations",
+                "activations_vs_emg": "activations vs EMG", "forces_vs_emg": "forces vs EMG"}
+    parts.append("<h2>Figures</h2>")
+    for name, fig in figs.items():
+        parts.append(_img_any(fig, captions.get(name, name)))
+    for cap, fig in dict(extra_figures or {}).items():
+        parts.append(_img_any(fig, cap))
+    parts.append("<h2>Muscles</h2>")
+    rows = muscle_stats(results)
+    if rows:
+        parts.append(_table(["muscle", "peak force (N)", "time of peak (s)", "mean force (N)",
+                             "mean activation", "peak activation"],
+                            [[r[0]] + [_g(x) for x in r[1:]] for r in rows]))
+    else:
+        parts.append("<p>No muscle force or activation channels in the results.</p>")
+    if emg is not None:
+        q = "activation" if plots.muscles_in(results, "activation") else "force"
+        r = plots.emg_correlations(results, emg, quantity=q)
+        if r:
+            parts.append(f"<p>Correlation of {q} with EMG (Pearson r):</p>")
+            parts.append(_table(["muscle", "r"], [[m, _g(v)] for m, v in r.items()]))
+    st = status_counts(results)
+    if st:
+        parts.append("<h2>Solver status</h2>")
+        parts.append(_table(["status", "frames", "meaning"], st, left={0, 2}))
+    parts.append("<h2>Result channels</h2>")
+    parts.append(_table(["channel", "unit", "min", "max", "mean", "RMS"],
+                        [r[:2] + [_g(x) for x in r[2:]] for r in channel_stats(results)], left=2))
+    for cap, tab in dict(tables or {}).items():
+        header, trows = tab
+        parts.append(f"<h2>{_e(cap)}</h2>")
+        parts.append(_table(list(header), [[_g(x) if isinstance(x, float) else x for x in r] for r in trows]))
+    if text:
+        parts.append("<h2>Solver report</h2><pre>" + _e(text) + "</pre>")
+    parts.append('<p class="small">Generated by pinmsk. Figures are embedded PNGs; this file needs no network.</p>')
+    parts.append("</body></html>")
+    return "\n".join(parts)
+
+
+def write_results_report(path, *, model, trial, results, title: str | None = None, text: str | None = None,
+                         tables=None, extra_figures=None, emg=None) -> Path:
+    """Write one self-contained HTML report of a result (SO, FSO, ...) to ``path``; returns the path.
+
+    Sections: model (``model.describe()``), data (frames, duration, rate,
+    channels of ``trial`` and ``results``), figures (:func:`pinmsk.plots.results_figures`:
+    moments when ``<coord>_moment`` channels exist, muscle forces and
+    activations, vs EMG when ``<muscle>_emg`` channels are in ``results`` or
+    ``trial`` or ``emg`` -- True or an EMG Trial -- is given), then
+    ``extra_figures`` (``{caption: Figure | PNG bytes | PNG path}``); tables:
+    per muscle peak force, its time, mean force, mean and peak activation; EMG
+    correlation; solver status counts (``status`` channel); per channel
+    min/max/mean/RMS; ``tables`` (``{caption: (header, rows)}``); ``text``
+    (e.g. a solver's ``report()``) in a <pre>.  PNGs are base64-embedded; the
+    file is written to a temporary file and moved into place (os.replace).
+    """
+    return _atomic_write(path, render_results_report(model=model, trial=trial, results=results, title=title,
+                                                     text=text, tables=tables, extra_figures=extra_figures,
+                                                     emg=emg))

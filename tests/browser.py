@@ -78,7 +78,7 @@ def _run(args: list[str], *, timeout: float) -> subprocess.CompletedProcess:
     exe = find_chromium()
     if exe is None:
         raise BrowserError("no Chromium executable found")
-    with tempfile.TemporaryDirectory(prefix="pinmsk-chromium-") as profile:
+    with tempfile.TemporaryDirectory(prefix="pinmsk-chromium-", ignore_cleanup_errors=True) as profile:
         cmd = [exe, *FLAGS, f"--user-data-dir={profile}", *args]
         try:
             return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
@@ -152,7 +152,7 @@ class Chrome:
         exe = find_chromium()
         if exe is None:
             raise BrowserError("no Chromium executable found")
-        self._profile = tempfile.TemporaryDirectory(prefix="pinmsk-chromium-")
+        self._profile = tempfile.TemporaryDirectory(prefix="pinmsk-chromium-", ignore_cleanup_errors=True)
         self._loop = asyncio.new_event_loop()
         self._id = 0
         self._ws = None
@@ -283,6 +283,7 @@ class Chrome:
                 self.proc.wait(timeout=10)
         if not self._loop.is_closed():
             self._loop.close()
+        _remove_profile(self._profile.name)
         self._profile.cleanup()
 
     def __enter__(self):
@@ -318,3 +319,19 @@ MESHCAT_ANIMATION_JS = """
 IMAGES_JS = """
 Array.from(document.images).map(i => [i.src.slice(0, 22), i.complete, i.naturalWidth, i.naturalHeight])
 """
+
+
+def _remove_profile(path: str, attempts: int = 20) -> None:
+    """Delete a Chromium profile folder; its helper processes may still write to it for a moment
+    after the browser exits, so retry briefly instead of failing the test on cleanup."""
+    import shutil
+    import time
+    for _ in range(attempts):
+        try:
+            shutil.rmtree(path)
+            return
+        except FileNotFoundError:
+            return
+        except OSError:
+            time.sleep(0.1)
+    shutil.rmtree(path, ignore_errors=True)

@@ -33,7 +33,8 @@ def check_html_in_browser(path, *, min_images: int = 1, screenshot=None) -> list
 
     Returns the images as ``[src prefix, complete, width, height]``.
     """
-    with browser.chrome_or_skip(width=1000, height=800) as page:
+    page = browser.chrome_or_skip(width=1000, height=800)
+    with page:
         page.send("Network.enable")
         page.navigate(path.resolve().as_uri())
         images = page.wait_for(f"""(() => {{ const im = {browser.IMAGES_JS.strip()};
@@ -101,3 +102,24 @@ def test_pinmsk_report_in_browser(tmp_path):
     except TypeError as exc:
         pytest.skip(f"pinmsk.report.{make.__name__} takes other arguments than (path, model=, trial=): {exc}")
     check_html_in_browser(out, min_images=1)
+
+
+def test_results_report_of_static_optimization_in_browser(tmp_path):
+    """A results report of a real SO on the forearm: every <img> loads in Chromium."""
+    browser.chromium_or_skip()
+    import pinmsk
+    from pinmsk.report import write_results_report
+    from pinmsk.solvers.analytical import gaussian_elbow_trial
+    from pinmsk.solvers.static import StaticOptimization
+
+    model = pinmsk.load_model("forearm")
+    trial = gaussian_elbow_trial(n_frames=101)
+    so = StaticOptimization().fit(model, trial)
+    trial = trial.with_channels(BRD_emg=np.asarray(so.result_["BRD_activation"]) ** 0.5)
+    out = write_results_report(tmp_path / "so.html", model=model, trial=trial, results=so.result_,
+                               title="static optimization", text=so.report())
+    images = check_html_in_browser(out, min_images=3, screenshot=tmp_path / "so.png")
+    assert len(images) == 3 and all(i[0].startswith("data:image/png") for i in images)
+    assert [i[2:] for i in images][:2] == [[900, 400], [900, 400]]     # forces, activations
+    rgb = browser.read_png(tmp_path / "so.png")
+    assert browser.distinct_colors(rgb) > 8                              # figures drawn, not blank
