@@ -23,10 +23,76 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["RHO_MUSCLE", "SIGMA_MUSCLE", "muscle_mass", "stimulation_time",
-           "bhargava2004", "umberger2003", "metabolic_rate"]
+           "bhargava2004", "umberger2003", "metabolic_rate", "smooth_step", "smooth_relu",
+           "smooth_clip", "smooth_power", "SMOOTH_WIDTH"]
 
 RHO_MUSCLE = 1059.7      # kg/m^3, muscle density (Eq. B.3)
 SIGMA_MUSCLE = 0.25e6    # Pa, specific tension (Eq. B.3)
+
+
+SMOOTH_WIDTH = 0.01     # default width of the C1 switches used inside optimizations
+
+
+# -- C1 (in fact C-infinity) versions of the switches --------------------------------------
+# The heat-rate models are piecewise: ``u > a`` (B.17), ``v <= 0`` (B.11, B.15-B.16),
+# ``l_ce <= l_opt`` (B.15-B.16), the pieces of psi_H (B.9), the 100 W/kg cap and 1 W/kg
+# floor (B.13-B.21) and the clipping of u and a to [0, 1].  A gradient-based optimizer
+# (SLSQP) stalls on their kinks, so ``smooth=w > 0`` replaces every switch by a C1 blend of
+# width ``w``: a step ``x > 0`` by the logistic ``smooth_step(x, w)``; ``max(x, 0)`` by a
+# one-sided quadratic corner ``smooth_relu`` (exact for x <= 0, x^2/(2w) on [0, w],
+# x - w/2 above), so that resting muscles (u = a = 0) keep their exact heat rate;
+# ``clip(x, 0, 1)`` by ``smooth_clip`` (exact inside [0, 1], quadratic corners outside);
+# and ``beta^p`` (p = 0.6, 0.2: infinite slope at 0) by ``smooth_power``, exact for
+# ``beta >= w`` and the C1 quadratic through 0 below.  Arguments of the switches are
+# normalized so that one ``w`` fits them all: u, a, l_ce / l_opt and v_ce / l_opt (1/s)
+# switch with width w; the cap and the floor, in W/kg, with width w times their threshold
+# (100 and 1 W/kg).  ``smooth=0`` is the exact model; as ``w -> 0`` the smooth models
+# converge to it, with errors O(w) (O(w^p) within beta < w) (tests/test_energy.py).
+
+def smooth_step(x, w):
+    """Logistic step ``1 / (1 + exp(-x / w))`` (the Heaviside ``x > 0`` when ``w = 0``)."""
+    x = np.asarray(x, dtype=float)
+    if w <= 0:
+        return (x > 0).astype(float)
+    return 0.5 * (1.0 + np.tanh(0.5 * x / w))
+
+
+def smooth_relu(x, w):
+    """C1 ``max(x, 0)``: 0 for x <= 0, ``x^2/(2w)`` on [0, w], ``x - w/2`` above (exact at w = 0)."""
+    x = np.asarray(x, dtype=float)
+    if w <= 0:
+        return np.maximum(x, 0.0)
+    xc = np.clip(x, 0.0, w)
+    return xc * xc / (2.0 * w) + np.maximum(x - w, 0.0)
+
+
+def smooth_clip(x, lo, hi, w):
+    """C1 ``clip(x, lo, hi)``: exact inside [lo, hi]; outside, a quadratic corner of width
+    ``w`` levels off at ``lo - w/2`` and ``hi + w/2`` (``np.clip`` when ``w = 0``)."""
+    x = np.asarray(x, dtype=float)
+    if w <= 0:
+        return np.clip(x, lo, hi)
+    return x + smooth_relu(lo - x, w) - smooth_relu(x - hi, w)
+
+
+def smooth_power(b, p, w):
+    """C1 ``max(b, 0)^p`` for 0 < p < 1: exact for ``b >= w``; below, the quadratic
+    ``w^p ((2 - p) b/w + (p - 1) (b/w)^2)`` that matches value and slope at ``w`` and is 0
+    at 0 (negative for b < 0; callers floor the total).  ``w = 0``: exact."""
+    b = np.asarray(b, dtype=float)
+    if w <= 0:
+        return np.maximum(b, 0.0) ** p
+    r = b / w
+    low = w ** p * ((2.0 - p) * r + (p - 1.0) * r * r)
+    return np.where(b >= w, np.maximum(b, w) ** p, low)
+
+
+def _blend(cond_arg, when_true, when_false, w):
+    """``where(cond_arg > 0, when_true, when_false)``, a logistic blend when ``w > 0``."""
+    if w <= 0:
+        return np.where(np.asarray(cond_arg) > 0, when_true, when_false)
+    s = smooth_step(cond_arg, w)
+    return s * when_true + (1.0 - s) * when_false
 
 
 def muscle_mass(l_opt, f_max):
@@ -34,14 +100,14 @@ def muscle_mass(l_opt, f_max):
     return RHO_MUSCLE * np.asarray(l_opt, dtype=float) * np.asarray(f_max, dtype=float) / SIGMA_MUSCLE
 
 
-def stimulation_time(t, u, threshold: float = 0.1):
+def stimulation_time(t, u, threshold: float = 0.1, *, smooth: float = 0.0):
     """Running total time (s) during which ``u > threshold`` (``t_stim`` of Eq. B.7), (N, m).
 
     Trapezoid of the indicator: each interval counts the mean of its two end
-    indicators times its length.
+    indicators times its length.  ``smooth = w > 0``: logistic indicator of width w.
     """
     t = np.asarray(t, dtype=float)
-    on = (np.asarray(u, dtype=float) > threshold).astype(float)
+    on = smooth_step(np.asarray(u, dtype=float) - threshold, smooth)
     if on.ndim == 1:
         on = on[:, None]
     out = np.zeros_like(on)
@@ -50,7 +116,7 @@ def stimulation_time(t, u, threshold: float = 0.1):
 
 
 def bhargava2004(*, u, a, l_ce, v_ce, f_ce, f_isom, l_opt, f_max, fast_fraction, t_stim,
-                 tau_phi: float = 0.045):
+                 tau_phi: float = 0.045, smooth: float = 0.0):
     """Bhargava et al. (2004) energy rate, thesis Eq. B.4-B.12 (W per muscle).
 
     ``A' = phi m (f_fast 133 u_fast + f_slow 40 u_slow)`` with
@@ -61,7 +127,12 @@ def bhargava2004(*, u, a, l_ce, v_ce, f_ce, f_isom, l_opt, f_max, fast_fraction,
     and ``0.157 F_ce`` when lengthening, ``F_iso = a f_isom F_max`` the
     isometric force at the current activation and length (B.10-B.11);
     ``B' = 0.0225 m`` (B.12, W/kg times kg); ``W' = -F_ce v_ce`` (B.2).
+
+    ``smooth = w > 0`` gives the C1 version used inside optimizations (switches
+    blended over width w, see the module notes; ``t_stim`` should then come from
+    ``stimulation_time(..., smooth=w)``); ``w = 0`` is the exact model.
     """
+    w = float(smooth)
     u = np.asarray(u, dtype=float)
     m = muscle_mass(l_opt, f_max)
     ff = np.asarray(fast_fraction, dtype=float)
@@ -71,13 +142,18 @@ def bhargava2004(*, u, a, l_ce, v_ce, f_ce, f_isom, l_opt, f_max, fast_fraction,
     phi = 0.06 + np.exp(-np.asarray(t_stim, dtype=float) * u / tau_phi)
     act = phi * m * (ff * 133.0 * u_fast + fs * 40.0 * u_slow)
     ln = np.asarray(l_ce, dtype=float) / np.asarray(l_opt, dtype=float)
-    psi = np.where(ln <= 0.5, 0.5 * ln, np.where(ln <= 1.0, ln,
-                                                   np.where(ln <= 1.5, -2.0 * ln + 3.0, 0.0)))
+    if w <= 0:
+        psi = np.where(ln <= 0.5, 0.5 * ln, np.where(ln <= 1.0, ln,
+                                                       np.where(ln <= 1.5, -2.0 * ln + 3.0, 0.0)))
+    else:   # the same pieces, switched on one after the other by logistic steps
+        p0, p1, p2 = 0.5 * ln, ln, -2.0 * ln + 3.0
+        psi = (p0 + smooth_step(ln - 0.5, w) * (p1 - p0) + smooth_step(ln - 1.0, w) * (p2 - p1)
+               + smooth_step(ln - 1.5, w) * (0.0 - p2))
     maint = psi * m * (ff * 111.0 * u_fast + fs * 74.0 * u_slow)
     v = np.asarray(v_ce, dtype=float)
     f_ce = np.asarray(f_ce, dtype=float)
     f_iso = np.asarray(a, dtype=float) * np.asarray(f_isom, dtype=float) * np.asarray(f_max, dtype=float)
-    alpha = np.where(v <= 0, 0.16 * f_iso + 0.18 * f_ce, 0.157 * f_ce)
+    alpha = _blend(v / np.asarray(l_opt, dtype=float), 0.157 * f_ce, 0.16 * f_iso + 0.18 * f_ce, w)
     short = -alpha * v
     basal = 0.0225 * m * np.ones_like(short)
     work = -f_ce * v
@@ -87,7 +163,8 @@ def bhargava2004(*, u, a, l_ce, v_ce, f_ce, f_isom, l_opt, f_max, fast_fraction,
 
 
 def umberger2003(*, u, a, l_ce, v_ce, f_ce, f_isom, l_opt, f_max, fast_fraction,
-                 xi: float = 1.0, v_max_slow: float = 4.0, v_max_fast: float = 10.0):
+                 xi: float = 1.0, v_max_slow: float = 4.0, v_max_fast: float = 10.0,
+                 smooth: float = 0.0):
     """Umberger et al. (2003) energy rate, thesis Eq. B.13-B.21 (W per muscle).
 
     Mass-specific heat rate ``h'`` (W/kg): with ``beta`` = ``u`` if ``u > a``
@@ -105,30 +182,41 @@ def umberger2003(*, u, a, l_ce, v_ce, f_ce, f_isom, l_opt, f_max, fast_fraction,
     the total ``h'`` is floored at 1.0 W/kg.  ``H' = m h'`` (B.13),
     ``E' = H' + W'`` with ``W' = -F_ce v_ce``.  ``xi = 1.0`` (anaerobic-type
     movement) as for the thesis's forearm; 1.5 for gait.
+
+    ``smooth = w > 0`` gives the C1 version used inside optimizations: the
+    ``u > a``, ``v~ <= 0`` and ``l_ce > l_opt`` switches are logistic blends, the
+    cap and the floor quadratic corners, and ``beta^0.6``, ``beta^0.2`` are
+    ``smooth_power`` (finite slopes at 0; see the module notes); ``w = 0`` is
+    the exact model.
     """
+    w = float(smooth)
     u = np.asarray(u, dtype=float)
     a = np.asarray(a, dtype=float)
     m = muscle_mass(l_opt, f_max)
     ff = np.asarray(fast_fraction, dtype=float)
     fs = 1.0 - ff
-    beta = np.where(u > a, u, 0.5 * (u + a))
-    beta = np.maximum(beta, 0.0)
+    if w <= 0:
+        beta = np.where(u > a, u, 0.5 * (u + a))
+        beta = np.maximum(beta, 0.0)
+    else:   # u if u > a else (u + a)/2  ==  (u + a)/2 + max(u - a, 0)/2
+        beta = 0.5 * (u + a) + 0.5 * smooth_relu(u - a, w)
     h_am = 128.0 * ff + 25.0
     a_st = 100.0 / v_max_slow
     a_ft = 153.0 / v_max_fast
     a_l = 4.0 * a_st
     l_opt = np.asarray(l_opt, dtype=float)
     vt = np.asarray(v_ce, dtype=float) / l_opt
-    long = np.asarray(l_ce, dtype=float) > l_opt
+    dl = np.asarray(l_ce, dtype=float) / l_opt - 1.0          # > 0: long fibre
     fl = np.asarray(f_isom, dtype=float)
-    am_scale = np.where(long, 0.4 + 0.6 * fl, 1.0)
-    sl_scale = np.where(long, fl, 1.0)
-    maint = h_am * beta ** 0.6 * xi * am_scale
-    slow_term = np.minimum(-a_st * fs * vt, 100.0)          # capped at 100 W/kg (thesis)
-    shorten = (slow_term - a_ft * ff * vt) * beta ** 0.2 * xi
+    am_scale = _blend(dl, 0.4 + 0.6 * fl, 1.0, w)
+    sl_scale = _blend(dl, fl, 1.0, w)
+    maint = h_am * smooth_power(beta, 0.6, w) * xi * am_scale
+    x_slow = -a_st * fs * vt                                    # capped at 100 W/kg (thesis)
+    slow_term = x_slow - smooth_relu(x_slow - 100.0, 100.0 * w)
+    shorten = (slow_term - a_ft * ff * vt) * smooth_power(beta, 0.2, w) * xi
     lengthen = a_l * vt * beta * xi
-    sl = np.where(vt <= 0, shorten, lengthen) * sl_scale
-    h = np.maximum(maint + sl, 1.0)
+    sl = _blend(vt, lengthen, shorten, w) * sl_scale
+    h = 1.0 + smooth_relu(maint + sl - 1.0, 1.0 * w)           # floored at 1 W/kg (thesis)
     heat = m * h
     f_ce = np.asarray(f_ce, dtype=float)
     work = -f_ce * np.asarray(v_ce, dtype=float)

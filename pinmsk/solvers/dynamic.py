@@ -520,7 +520,9 @@ class DynamicOptimization:
       starts; once one converges the others get ``budget_factor`` times its run
       time more, then stop and count as unconverged starts), ``restarts`` (SLSQP
       restarts after a line-search failure), ``fd``
-      (``"central"`` or ``"forward"``), ``fd_step`` (relative), ``progress``
+      (``"central"`` or ``"forward"``), ``fd_step`` (relative), ``smooth`` (width
+      of the C1 switches of the metabolic models inside the optimization, see
+      :mod:`pinmsk.energy`; 0 = exact), ``progress``
       (object with ``update(n)``), ``verbose``.
     """
 
@@ -532,7 +534,7 @@ class DynamicOptimization:
                  tracking_points: int = 200, tendon: str = "rigid", maxiter: int = 200, tol: float = 1e-7,
                  constraint_tol: float = 1e-5, n_starts: int = 3, fd_step: float = 1e-6,
                  fd: str = "central", n_jobs: int = 1, restarts: int = 3,
-                 budget_factor: float = 2.0,
+                 budget_factor: float = 2.0, smooth: float = 0.01,
                  progress=None, verbose: bool = False):
         self.model = model
         self.parametrization = parametrization
@@ -557,6 +559,7 @@ class DynamicOptimization:
         self.n_jobs = n_jobs
         self.restarts = restarts
         self.budget_factor = budget_factor
+        self.smooth = smooth
         self.progress = progress
         self.verbose = verbose
 
@@ -708,12 +711,12 @@ class DynamicOptimization:
         T = self._t[-1] - self._t[0]
         return np.trapezoid(y, self._t, axis=0) / T
 
-    def _terms(self, sim) -> dict:
+    def _terms(self, sim, exact: bool = False) -> dict:
         a = sim["a"]
         if self._kind == "effort":
             phys = self._integral(np.maximum(a, 0.0) ** self._P) @ self._S
         else:
-            E = self._energy(sim)                     # (N, B, m)
+            E = self._energy(sim, 0.0 if exact else float(self.smooth))   # (N, B, m)
             if self._E_norm is None:
                 self._E_norm = float(np.sum(np.max(E[:, 0, :], axis=0)))
             phys = self._integral(E).sum(axis=-1) / self._E_norm
@@ -721,15 +724,19 @@ class DynamicOptimization:
         track = self._integral(err ** 2) / self.target.peak_square(self._t)
         return {"physiological": phys, "tracking": track, "max_error": np.max(np.abs(err), axis=0)}
 
-    def _energy(self, sim):
+    def _energy(self, sim, w: float = 0.0):
+        """Metabolic rates (N, B, m): exact (``w = 0``, reported) or with the C1 switches
+        of width ``w`` (optimized; :mod:`pinmsk.energy`), u and a clipped to [0, 1] alike."""
         from .. import energy
         mu = self._mu
-        kw = dict(u=np.clip(sim["u"], 0, 1), a=np.clip(sim["a"], 0, 1), l_ce=sim["l_ce"],
+        kw = dict(u=energy.smooth_clip(sim["u"], 0.0, 1.0, w),
+                  a=energy.smooth_clip(sim["a"], 0.0, 1.0, w), l_ce=sim["l_ce"],
                   v_ce=sim["v_ce"], f_ce=sim["f_ce"], f_isom=sim["f_isom"], l_opt=mu.l_opt,
-                  f_max=mu.f_max, fast_fraction=mu.ms.fast_fraction)
+                  f_max=mu.f_max, fast_fraction=mu.ms.fast_fraction, smooth=w)
         if self._metab == "bhargava2004":
             n, B, m = sim["u"].shape
-            ts = energy.stimulation_time(self._t, sim["u"].reshape(n, B * m)).reshape(n, B, m)
+            ts = energy.stimulation_time(self._t, sim["u"].reshape(n, B * m),
+                                         smooth=w).reshape(n, B, m)
             return energy.bhargava2004(**kw, t_stim=ts)["total"]
         return energy.umberger2003(**kw)["total"]
 
@@ -1045,8 +1052,9 @@ class DynamicOptimization:
         A_lin = self._A_lin
         ok = rec["ok"]
         sim = self.simulate(x[None, :])
-        terms = self._terms(sim)
+        terms = self._terms(sim, exact=True)      # reported with the exact (piecewise) models
         f = float(self._objective_of(terms)[0])
+        f_opt = float(self._objective_of(self._terms(sim))[0])
         u = sim["u_raw"][:, 0]
         bound_viol = float(max(np.max(np.maximum(self._lo - u, 0)), np.max(np.maximum(u - self._hi, 0))))
         if A_lin is not None and self.design == "ff":
@@ -1064,7 +1072,8 @@ class DynamicOptimization:
         qd = np.zeros((self._t.size, nq))
         qd[:, self._jc] = self._qd
         tn = {"J": f, "physiological": float(terms["physiological"][0]),
-              "tracking": float(terms["tracking"][0]), "integration_error": ierr}
+              "tracking": float(terms["tracking"][0]), "integration_error": ierr,
+              "J_optimized": f_opt}
         return DynamicResult(
             converged=bool(ok), status=status, objective=f, terms=tn,
             max_bound_violation=bound_viol, max_tracking_error=err,
