@@ -39,14 +39,12 @@ SMOOTH_WIDTH = 0.01     # default width of the C1 switches used inside optimizat
 # floor (B.13-B.21) and the clipping of u and a to [0, 1].  A gradient-based optimizer
 # (SLSQP) stalls on their kinks, so ``smooth=w > 0`` replaces every switch by a C1 blend of
 # width ``w``: a step ``x > 0`` by the logistic ``smooth_step(x, w)``; ``max(x, 0)`` by a
-# one-sided quadratic corner ``smooth_relu`` (exact for x <= 0, x^2/(2w) on [0, w],
-# x - w/2 above), so that resting muscles (u = a = 0) keep their exact heat rate;
+# quadratic corner ``smooth_relu`` (exact for |x| >= w/2, error <= w/8);
 # ``clip(x, 0, 1)`` by ``smooth_clip`` (exact inside [0, 1], quadratic corners outside);
 # and ``beta^p`` (p = 0.6, 0.2: infinite slope at 0) by ``smooth_power``, exact for
 # ``beta >= w`` and the C1 quadratic through 0 below.  Arguments of the switches are
 # normalized so that one ``w`` fits them all: u, a, l_ce / l_opt and v_ce / l_opt (1/s)
-# switch with width w; the cap and the floor, in W/kg, with width w times their threshold
-# (100 and 1 W/kg).  ``smooth=0`` is the exact model; as ``w -> 0`` the smooth models
+# switch with width w; the cap (100 W/kg) and the floor (1 W/kg) with width w x 100 W/kg.  ``smooth=0`` is the exact model; as ``w -> 0`` the smooth models
 # converge to it, with errors O(w) (O(w^p) within beta < w) (tests/test_energy.py).
 
 def smooth_step(x, w):
@@ -57,13 +55,19 @@ def smooth_step(x, w):
     return 0.5 * (1.0 + np.tanh(0.5 * x / w))
 
 
+def _corner(x, w):
+    """One-sided C1 ``max(x, 0)``: 0 for x <= 0, ``x^2/(2w)`` on [0, w], ``x - w/2`` above."""
+    xc = np.clip(x, 0.0, w)
+    return xc * xc / (2.0 * w) + np.maximum(x - w, 0.0)
+
+
 def smooth_relu(x, w):
-    """C1 ``max(x, 0)``: 0 for x <= 0, ``x^2/(2w)`` on [0, w], ``x - w/2`` above (exact at w = 0)."""
+    """C1 ``max(x, 0)``: exact for ``|x| >= w/2``, ``(x + w/2)^2 / (2w)`` between (error
+    <= w/8 at 0); ``np.maximum(x, 0)`` when ``w = 0``."""
     x = np.asarray(x, dtype=float)
     if w <= 0:
         return np.maximum(x, 0.0)
-    xc = np.clip(x, 0.0, w)
-    return xc * xc / (2.0 * w) + np.maximum(x - w, 0.0)
+    return _corner(x + 0.5 * w, w)
 
 
 def smooth_clip(x, lo, hi, w):
@@ -72,7 +76,7 @@ def smooth_clip(x, lo, hi, w):
     x = np.asarray(x, dtype=float)
     if w <= 0:
         return np.clip(x, lo, hi)
-    return x + smooth_relu(lo - x, w) - smooth_relu(x - hi, w)
+    return x + _corner(lo - x, w) - _corner(x - hi, w)
 
 
 def smooth_power(b, p, w):
@@ -212,11 +216,11 @@ def umberger2003(*, u, a, l_ce, v_ce, f_ce, f_isom, l_opt, f_max, fast_fraction,
     sl_scale = _blend(dl, fl, 1.0, w)
     maint = h_am * smooth_power(beta, 0.6, w) * xi * am_scale
     x_slow = -a_st * fs * vt                                    # capped at 100 W/kg (thesis)
-    slow_term = x_slow - smooth_relu(x_slow - 100.0, 100.0 * w)
+    slow_term = x_slow - smooth_relu(x_slow - 100.0, 100.0 * w)   # widths: w x 100 W/kg
     shorten = (slow_term - a_ft * ff * vt) * smooth_power(beta, 0.2, w) * xi
     lengthen = a_l * vt * beta * xi
     sl = _blend(vt, lengthen, shorten, w) * sl_scale
-    h = 1.0 + smooth_relu(maint + sl - 1.0, 1.0 * w)           # floored at 1 W/kg (thesis)
+    h = 1.0 + smooth_relu(maint + sl - 1.0, 100.0 * w)         # floored at 1 W/kg (thesis)
     heat = m * h
     f_ce = np.asarray(f_ce, dtype=float)
     work = -f_ce * np.asarray(v_ce, dtype=float)

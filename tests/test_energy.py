@@ -112,3 +112,102 @@ def test_stimulation_time_and_dispatch():
     assert ts[4, 0] == 0.0
     with pytest.raises(ModelError, match="umberger2003, bhargava2004"):
         metabolic_rate("margaria", u=0.1)
+
+
+# -- C1 versions of the switches used inside optimizations (smooth=w > 0) -------------------
+
+def _thelen_fl(l_ce, l_opt=0.1):
+    return np.exp(-((np.asarray(l_ce) / l_opt - 1.0) ** 2) / 0.45)
+
+
+def _states(n=4000, seed=3):
+    rng = np.random.default_rng(seed)
+    l_ce = rng.uniform(0.03, 0.17, n)
+    return dict(u=rng.uniform(0, 1, n), a=rng.uniform(0, 1, n), l_ce=l_ce,
+                v_ce=rng.uniform(-1.2, 1.2, n), f_ce=rng.uniform(0, 500, n), f_isom=_thelen_fl(l_ce),
+                l_opt=0.1, f_max=500.0, fast_fraction=0.4)
+
+
+@pytest.mark.parametrize("name", ["umberger2003", "bhargava2004"])
+def test_smooth_converges_to_exact(name):
+    s = _states()
+    if name == "bhargava2004":
+        s["t_stim"] = np.full_like(s["u"], 0.05)
+    # stay 1e-3 away from the switch points, where a blend of width w < 1e-4 is exact
+    ln, vt = s["l_ce"] / 0.1, s["v_ce"] / 0.1
+    far = (np.abs(ln - 1.0) > 1e-3) & (np.abs(vt) > 1e-3) & (np.abs(s["u"] - s["a"]) > 1e-3)
+    far &= np.abs(ln - 0.5) > 1e-3
+    exact = metabolic_rate(name, **s)["total"]
+    errs = []
+    for w in (1e-2, 1e-3, 1e-4, 1e-5):
+        smooth = metabolic_rate(name, **s, smooth=w)["total"]
+        errs.append(np.max(np.abs(smooth - exact)[far]))
+    scale = np.max(np.abs(exact))
+    assert errs[0] < 0.05 * scale                      # w = 0.01: a few per cent at most
+    assert all(e2 <= e1 + 1e-12 for e1, e2 in zip(errs, errs[1:]))
+    assert errs[-1] < 1e-4 * scale
+    assert np.array_equal(metabolic_rate(name, **s, smooth=0.0)["total"], exact)
+
+
+def _sweep_slopes(fun, x):
+    f = fun(x)
+    g = np.gradient(f, x)
+    return np.max(np.abs(np.diff(g[1:-1]))), np.max(np.abs(g[1:-1]))
+
+
+W = 0.01
+UMB = dict(u=0.5, a=0.3, l_ce=0.09, v_ce=-0.1, f_ce=200.0, l_opt=0.1, f_max=500.0,
+           fast_fraction=0.4)
+BHA = dict(UMB, t_stim=0.05)
+# (model, swept argument, centre of the sweep = the switch point, fixed overrides)
+SWEEPS = [
+    ("umberger2003", "u", 0.3, {}),                         # u > a (B.17)
+    ("umberger2003", "v_ce", 0.0, {}),                      # shortening / lengthening (B.15)
+    ("umberger2003", "l_ce", 0.1, {"v_ce": 0.05, "f_isom": 0.8}),   # l_ce <= l_opt (B.15/B.16)
+    ("umberger2003", "v_ce", -100.0 / (25.0 * 0.6) * 0.1, {}),      # 100 W/kg cap
+    ("umberger2003", "u", 0.0, {"a": 0.0, "v_ce": 0.0}),    # beta = 0, beta^p and 1 W/kg floor
+    ("bhargava2004", "v_ce", 0.0, {}),                      # alpha switch (B.11)
+    ("bhargava2004", "l_ce", 0.1, {}),                      # psi_H pieces (B.9)
+    ("bhargava2004", "l_ce", 0.15, {}),
+]
+
+
+@pytest.mark.parametrize("name,arg,x0,over", SWEEPS)
+def test_smooth_is_c1_by_finite_differences(name, arg, x0, over):
+    """Finite-difference slopes across each switch: the exact model's slope jumps, the
+    smooth one's changes by a small fraction of that on a grid much finer than w."""
+    base = dict(UMB if name == "umberger2003" else BHA, **over)
+    x = np.linspace(x0 - 5 * W * (0.1 if arg in ("l_ce", "v_ce") else 1.0),
+                    x0 + 5 * W * (0.1 if arg in ("l_ce", "v_ce") else 1.0), 2001)
+
+    def fun(xx, w):
+        kw = dict(base, **{arg: xx})
+        if "f_isom" not in over:
+            kw["f_isom"] = _thelen_fl(kw["l_ce"])
+        return metabolic_rate(name, **kw, smooth=w)["total"] * np.ones_like(xx)
+
+    jump_s, slope_s = _sweep_slopes(lambda xx: fun(xx, W), x)
+    jump_e, slope_e = _sweep_slopes(lambda xx: fun(xx, 0.0), x)
+    assert np.all(np.isfinite([jump_s, slope_s]))
+    assert jump_s < 0.05 * max(slope_s, slope_e)       # slope continuous on the fine grid
+    assert jump_e > 5 * jump_s                          # ... where the exact one kinks
+
+
+def test_smooth_helpers():
+    from pinmsk.energy import smooth_clip, smooth_power, smooth_relu, smooth_step
+    x = np.linspace(-1, 2, 3001)
+    for w in (0.1, 0.01):
+        assert np.max(np.abs(smooth_relu(x, w) - np.maximum(x, 0))) <= w / 8 + 1e-15
+        assert np.max(np.abs(smooth_clip(x, 0, 1, w) - np.clip(x, 0, 1))) <= w / 2 + 1e-15
+        inside = (x >= 0) & (x <= 1)
+        assert np.array_equal(smooth_clip(x, 0, 1, w)[inside], x[inside])   # exact when feasible
+        assert np.array_equal(smooth_power(x[x >= w], 0.2, w), x[x >= w] ** 0.2)
+        assert smooth_power(0.0, 0.6, w) == 0.0
+        for f in (lambda y: smooth_relu(y, w), lambda y: smooth_power(y, 0.2, w),
+                  lambda y: smooth_step(y, w)):
+            g = np.gradient(f(x), x)
+            assert np.max(np.abs(np.diff(g))) < 0.1 * np.max(np.abs(g)) + 1e-12
+    assert np.array_equal(smooth_step(x, 0.0), (x > 0).astype(float))
+    t = np.linspace(0, 1, 11)
+    u = np.linspace(0.01, 0.21, 11)[:, None]
+    assert np.allclose(stimulation_time(t, u, smooth=1e-6), stimulation_time(t, u))
