@@ -6,7 +6,9 @@ cycle of 1.9 s within 0.1 rad (tracking constraint Eq. 3.7) with ``0 <= u <= 1``
 77 parameters) and then a 10th-order polynomial (Eq. 3.2, 77 parameters).
 Objectives (Table 3.3): J1 (S = 1, P = 2), J2 (S = 1, P = 3), J3 (S = V, P = 2),
 J4 (S = V, P = 3) of Eq. 3.5 and J5, metabolic energy Eq. 3.6 with the
-Umberger 2003 heat rates (App. B.2), started from the J4 and J1 optima.
+Umberger 2003 heat rates (App. B.2), started from the J4 and J1 optima.  For J5
+the optimizer sees the heat-rate model with C1-smoothed switches (width 0.01,
+``pinmsk.energy``); the reported objective is the exact piecewise model.
 
 The measured average motion of the thesis (Fig. 3.6) is not available; the target
 is the smooth cycle ``0.3 + 0.8 (1 - cos(2 pi t / 1.9))`` rad (0.3 -> 1.9 -> 0.3 rad).
@@ -116,6 +118,9 @@ def main(argv=None):
             "max_tracking_error": res.max_tracking_error,
             "max_bound_violation": res.max_bound_violation, "seconds": sec,
             "integration_error": res.terms["integration_error"],
+            # J5: SLSQP minimizes the C1-smoothed heat-rate model (width `smooth`, pinmsk.energy);
+            # "objective" is the exact piecewise model at the solution, this the smoothed one
+            "objective_optimized": res.terms["J_optimized"],
             "peak_excitation": dict(zip(res.muscles, np.max(res.u, axis=0).tolist())),
             "n_parameters": int(res.coeffs.size)}
         print(f"{k} {kind:10s} J {res.objective:.5g}  err {res.max_tracking_error:.4f} rad  "

@@ -96,7 +96,9 @@ def _blend(cond_arg, when_true, when_false, w):
     if w <= 0:
         return np.where(np.asarray(cond_arg) > 0, when_true, when_false)
     s = smooth_step(cond_arg, w)
-    return s * when_true + (1.0 - s) * when_false
+    with np.errstate(invalid="ignore"):   # a saturated step must not turn inf * 0 into nan
+        mixed = s * when_true + (1.0 - s) * when_false
+    return np.where(s == 1.0, when_true, np.where(s == 0.0, when_false, mixed))
 
 
 def muscle_mass(l_opt, f_max):

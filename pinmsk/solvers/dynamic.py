@@ -47,9 +47,14 @@ Objectives (``objective=``)
     drops ``1/sum S_i``, which is the ``J_1`` of Eq. 3.3).
 ``{"kind": "metabolic", "model": "umberger2003"|"bhargava2004"}``
     ``J = 1/sum max(E_i') 1/tau sum_i int E_i' dt`` (Eq. 3.6).  The normalizer
-    ``sum_i max_t E_i'`` is taken from the first start's initial guess and then
-    held fixed, so that ``J`` stays proportional to the energy (the thesis's
-    self-normalizing form would reward spikes).
+    ``sum_i max_t E_i'`` is taken (exact model) from the first start's initial
+    guess and then held fixed, so that ``J`` stays proportional to the energy
+    (the thesis's self-normalizing form would reward spikes).  The heat-rate
+    models switch on ``u > a``, the sign of ``v_ce``, ``l_ce > l_opt``, ... and
+    SLSQP stalls on those kinks (line-search failures), so the optimizer sees
+    their C1 versions of width ``smooth`` (default 0.01; :mod:`pinmsk.energy`);
+    the result reports the exact piecewise value as ``objective`` and the
+    smoothed one as ``terms["J_optimized"]``.
 ``tracking_weight = 1 - mu`` (Eq. 3.3) adds
     ``(1 - mu) 1/(tau max theta_d^2) int (theta_s - theta_d)^2 dt`` and scales the
     physiological term by ``mu``; ``tracking_tolerance = eps`` instead imposes
@@ -522,7 +527,10 @@ class DynamicOptimization:
       restarts after a line-search failure), ``fd``
       (``"central"`` or ``"forward"``), ``fd_step`` (relative), ``smooth`` (width
       of the C1 switches of the metabolic models inside the optimization, see
-      :mod:`pinmsk.energy`; 0 = exact), ``progress``
+      :mod:`pinmsk.energy`; 0 = exact), ``free_period`` (Fourier only: the
+      period tau is one more decision variable, for non-periodic motions, Sec.
+      3.3.6; the last entry of ``x`` is ``tau / tau_0``, kept within
+      ``period_bounds`` times the parametrization's ``tau_0``), ``progress``
       (object with ``update(n)``), ``verbose``.
     """
 
@@ -535,6 +543,7 @@ class DynamicOptimization:
                  constraint_tol: float = 1e-5, n_starts: int = 3, fd_step: float = 1e-6,
                  fd: str = "central", n_jobs: int = 1, restarts: int = 3,
                  budget_factor: float = 2.0, smooth: float = 0.01,
+                 free_period: bool = False, period_bounds=(0.5, 2.0),
                  progress=None, verbose: bool = False):
         self.model = model
         self.parametrization = parametrization
@@ -560,6 +569,8 @@ class DynamicOptimization:
         self.restarts = restarts
         self.budget_factor = budget_factor
         self.smooth = smooth
+        self.free_period = free_period
+        self.period_bounds = period_bounds
         self.progress = progress
         self.verbose = verbose
 
@@ -639,6 +650,16 @@ class DynamicOptimization:
             tau_cap = float(np.abs(self._mu.R[:, 0] * self._mu.f_max).sum())
             self._n_sig, self._scale = 1, np.array([0.1 * tau_cap])
         self._npar = par.n_params * self._n_sig
+        self._nx = self._npar
+        if self.free_period:
+            if not isinstance(par, Fourier):
+                raise ModelError(f"free_period needs a Fourier parametrization, not {par!r}")
+            plo, phi = map(float, self.period_bounds)
+            if not 0 < plo <= 1 <= phi:
+                raise ModelError(f"period_bounds {self.period_bounds} must satisfy "
+                                 "0 < lower <= 1 <= upper (factors on the nominal period)")
+            self._nx = self._npar + 1
+        self._rows_period = None
         if self.design == "ift":
             r = self._mu.R[:, 0]
             w = self._mu.f_max ** 2
@@ -653,14 +674,33 @@ class DynamicOptimization:
     # -- evaluation ------------------------------------------------------------
     def _coeffs(self, X):
         """(B, npar) decision vectors -> (B, n_params, n_sig) coefficients."""
-        X = np.atleast_2d(X)
+        X = np.atleast_2d(X)[:, : self._npar]
         return X.reshape(X.shape[0], self.parametrization.n_params, self._n_sig) * self._scale
 
-    def _signals(self, C, deriv=0, where="grid"):
-        Bm = {"grid": self._B, "mid": self._Bm}[where] if deriv == 0 else \
-            self.parametrization.basis(self._t if where == "grid" else
-                                       0.5 * (self._t[1:] + self._t[:-1]), deriv)
-        return np.einsum("np,bps->nbs", Bm, C)
+    def _periods(self, X):
+        """(B,) Fourier periods of the decision vectors with ``free_period``, else None."""
+        if not self.free_period:
+            return None
+        plo, phi = map(float, self.period_bounds)
+        # SLSQP may step outside the (linear) period bounds: keep such iterates finite
+        f = np.clip(np.atleast_2d(X)[:, self._npar], 0.5 * plo, 2.0 * phi)
+        return f * self.parametrization.period
+
+    def _signals(self, C, deriv=0, where="grid", t=None):
+        periods = self._rows_period
+        if t is None:
+            t = self._t if where == "grid" else 0.5 * (self._t[1:] + self._t[:-1])
+            if deriv == 0 and periods is None:
+                return np.einsum("np,bps->nbs", {"grid": self._B, "mid": self._Bm}[where], C)
+        if periods is None:
+            return np.einsum("np,bps->nbs", self.parametrization.basis(t, deriv), C)
+        # free period: one basis per distinct period (a gradient batch has at most three)
+        out = np.empty((t.size, C.shape[0], C.shape[2]))
+        for tau in np.unique(periods):
+            rows = periods == tau
+            Bt = self.parametrization.with_period(float(tau)).basis(t, deriv)
+            out[:, rows] = np.einsum("np,bps->nbs", Bt, C[rows])
+        return out
 
     def simulate(self, X) -> dict:
         """Batched simulation of decision vectors ``X`` (B, npar): dict of (N, B, ...) arrays."""
@@ -669,6 +709,7 @@ class DynamicOptimization:
 
     def _simulate(self, X) -> dict:
         C = self._coeffs(X)
+        self._rows_period = self._periods(X)
         self.n_sim_ += C.shape[0]
         if self.design == "ff":
             sim = simulate_ff(self.model, self._t, self._signals(C), self._signals(C, where="mid"),
@@ -717,8 +758,9 @@ class DynamicOptimization:
             phys = self._integral(np.maximum(a, 0.0) ** self._P) @ self._S
         else:
             E = self._energy(sim, 0.0 if exact else float(self.smooth))   # (N, B, m)
-            if self._E_norm is None:
-                self._E_norm = float(np.sum(np.max(E[:, 0, :], axis=0)))
+            if self._E_norm is None:   # from the exact model, so J does not depend on `smooth`
+                E0 = E if exact else self._energy(sim, 0.0)
+                self._E_norm = float(np.sum(np.max(E0[:, 0, :], axis=0)))
             phys = self._integral(E).sum(axis=-1) / self._E_norm
         err = sim["q"][:, :, self._jc] - self._qd[:, None]
         track = self._integral(err ** 2) / self.target.peak_square(self._t)
@@ -890,12 +932,15 @@ class DynamicOptimization:
         self._setup()
         if x0 is None:
             starts = self.initial_guesses()
+            if self.free_period:   # start at the nominal period
+                starts = [np.append(xs, 1.0) for xs in starts]
         else:
             x0 = np.asarray(x0, dtype=float)
             starts = [x0.ravel()] if x0.ndim == 1 else [row for row in x0]
-            if any(xs.size != self._npar for xs in starts):
-                raise ModelError(f"x0 must hold {self._npar} values per start "
-                                 f"(n_params x n_signals); got shape {x0.shape}")
+            if any(xs.size != self._nx for xs in starts):
+                raise ModelError(f"x0 must hold {self._nx} values per start (n_params x "
+                                 f"n_signals{', + 1 period factor' if self.free_period else ''}); "
+                                 f"got shape {x0.shape}")
         self._A_lin = None
         if True:
             # Linear constraints on the signals over a dense grid: FF 0 <= u <= 1 (Eq. 3.8);
@@ -903,7 +948,13 @@ class DynamicOptimization:
             # the inverse model's tendon within its range at wild iterates); IFT the
             # torque range those forces span.
             nb = self.bound_points
-            Bd = self.parametrization.basis(np.linspace(self._t[0], self._t[-1], nb))
+            if self.free_period:
+                # the grid of times moves with the period: bound the signals over all the
+                # phases of one period instead (linear and period-independent; conservative
+                # when the motion lasts less than a period)
+                Bd = self.parametrization.basis(np.linspace(0.0, self.parametrization.period, nb))
+            else:
+                Bd = self.parametrization.basis(np.linspace(self._t[0], self._t[-1], nb))
             self._A_lin = np.kron(Bd, np.eye(self._n_sig))  # rows (time, signal); x is (p, s) row-major
             if self.design == "ff":
                 self._lin_lo = np.full(self._A_lin.shape[0], self._lo)
@@ -916,6 +967,13 @@ class DynamicOptimization:
                 cap = 1.5 * self._mu.f_max * np.abs(r)
                 self._lin_lo = np.full(nb, -cap[r < 0].sum() / self._scale[0])
                 self._lin_hi = np.full(nb, cap[r > 0].sum() / self._scale[0])
+            if self.free_period:   # one more column (the period factor) and its bounds
+                A = self._A_lin
+                self._A_lin = np.vstack([np.hstack([A, np.zeros((A.shape[0], 1))]),
+                                         np.eye(1, A.shape[1] + 1, A.shape[1])])
+                plo, phi = map(float, self.period_bounds)
+                self._lin_lo = np.append(self._lin_lo, plo)
+                self._lin_hi = np.append(self._lin_hi, phi)
         # Objective scaled by its value at the first start (SLSQP's ftol is absolute).
         self._f_ref = max(abs(self._value(starts[0])[0]), 1e-6)
         if self.n_jobs > 1 and len(starts) > 1 and sys.platform != "win32":
@@ -1018,12 +1076,18 @@ class DynamicOptimization:
                    "objective": f, "violation": viol, "nit": int(nit), "nfev": int(nfev),
                    "seconds": _time.perf_counter() - ts}
 
+    def _parametrization_at(self, x):
+        """The parametrization with the period of ``x`` when the period is free."""
+        if not self.free_period:
+            return self.parametrization
+        return self.parametrization.with_period(float(self._periods(x[None, :])[0]))
+
     def _integration_error(self, x, sim) -> float:
         """Max |q| difference (rad) against a simulation on a grid twice as fine (a check)."""
         t_f = np.linspace(self._t[0], self._t[-1], 2 * self._t.size - 1)
         tm_f = 0.5 * (t_f[1:] + t_f[:-1])
         C = self._coeffs(x[None, :])
-        par = self.parametrization
+        par = self._parametrization_at(x)
         sig = np.einsum("np,bps->nbs", par.basis(t_f), C)
         sig_m = np.einsum("np,bps->nbs", par.basis(tm_f), C)
         if self.design == "ff":
@@ -1059,6 +1123,7 @@ class DynamicOptimization:
         bound_viol = float(max(np.max(np.maximum(self._lo - u, 0)), np.max(np.maximum(u - self._hi, 0))))
         if A_lin is not None and self.design == "ff":
             ub = A_lin @ x
+            ub = ub[:-1] if self.free_period else ub      # the last row bounds the period
             bound_viol = max(bound_viol, float(np.max(np.maximum(self._lo - ub, 0))),
                              float(np.max(np.maximum(ub - self._hi, 0))))
         err = float(terms["max_error"][0])
@@ -1077,7 +1142,7 @@ class DynamicOptimization:
         return DynamicResult(
             converged=bool(ok), status=status, objective=f, terms=tn,
             max_bound_violation=bound_viol, max_tracking_error=err,
-            coeffs=self._coeffs(x)[0], parametrization=self.parametrization, design=self.design,
+            coeffs=self._coeffs(x)[0], parametrization=self._parametrization_at(x), design=self.design,
             time=self._t.copy(), q=sim["q"][:, 0], v=sim["v"][:, 0], a=sim["a"][:, 0], u=u,
             force=sim["force"][:, 0], target=qd, seconds=seconds, nit=int(rec["nit"]),
             nfev=int(rec["nfev"]), starts=records, x=np.array(x), coordinates=self.model.coordinates,
@@ -1116,7 +1181,8 @@ TASK_SCHEMA = {
     "solver": {"step": "RK4 step (s)", "maxiter": "SLSQP iterations", "tol": "SLSQP ftol",
                "constraint_tol": "accepted constraint violation", "n_starts": "multi-start count",
                "fd_step": "relative finite-difference step",
-               "n_jobs": "parallel worker processes for the starts"},
+               "n_jobs": "parallel worker processes for the starts",
+               "smooth": "width of the C1 switches of the metabolic models (0 = exact)"},
 }
 
 
@@ -1217,7 +1283,8 @@ def build_from_task(spec: dict, *, base_dir=None, progress=None) -> DynamicOptim
         bound_points=co.get("bound_points", 200), tendon=ms.get("tendon", "rigid"),
         maxiter=so.get("maxiter", 200), tol=so.get("tol", 1e-7),
         constraint_tol=so.get("constraint_tol", 1e-5), n_starts=so.get("n_starts", 3),
-        fd_step=so.get("fd_step", 1e-6), n_jobs=so.get("n_jobs", 1), progress=progress)
+        fd_step=so.get("fd_step", 1e-6), n_jobs=so.get("n_jobs", 1),
+        smooth=so.get("smooth", 0.01), progress=progress)
 
 
 def scale_masses(model, factor: float):
