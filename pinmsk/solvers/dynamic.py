@@ -819,8 +819,9 @@ class DynamicOptimization:
             self._last_failure = str(exc)
             return (1e6 * getattr(self, "_f_ref", 1.0),
                     None if self._c_size == 0 else -np.ones(self._c_size))
-        f = float(self._objective_of(self._terms(sim))[0])
-        c = self._constraints_of(sim)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # blow-ups are caught below
+            f = float(self._objective_of(self._terms(sim))[0])
+            c = self._constraints_of(sim)
         if not np.isfinite(f) or (c is not None and not np.all(np.isfinite(c))):
             # the simulation blew up (state went non-finite): penalize like a failure
             if self._c_size is None:
