@@ -19,7 +19,6 @@ y up).  ``meta["markers"]`` lists the marker names in file order.
 """
 from __future__ import annotations
 
-import sys
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,12 +27,8 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from .errors import ModelError, TrialError
+from .tomlfile import read_toml
 from .trial import Trial
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
 
 __all__ = ["read_trc", "fill_gaps", "find_gaps", "Gap", "marker_names", "marker_array",
            "ModelMarker", "MarkerSet", "load_marker_set", "UNIT_SCALE", "DEFAULT_MAX_GAP"]
@@ -407,12 +402,7 @@ def load_marker_set(path) -> MarkerSet:
         from .builtin_models import builtin_dir
 
         p = builtin_dir() / f"markers_{path}.toml"
-    if not p.exists():
-        raise ModelError(f"marker set file not found: {p}")
-    try:
-        doc = tomllib.loads(p.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise ModelError(f"{p}: not valid TOML ({exc})") from None
+    doc = read_toml(p, what="marker set file")
     entries = doc.get("markers")
     if not entries:
         raise ModelError(f"{p}: no [[markers]] table")

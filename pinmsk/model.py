@@ -14,7 +14,6 @@ Built-in models are a URDF plus a TOML sidecar in ``urdf/`` (schema in
 from __future__ import annotations
 
 import difflib
-import sys
 from pathlib import Path
 from typing import Iterable, Sequence
 
@@ -23,11 +22,8 @@ import pinocchio as pin
 
 from .components import Component, Motion
 from .errors import ModelError
+from .tomlfile import read_toml
 
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
 
 
 class Model:
@@ -266,11 +262,7 @@ def _load_sidecar(sidecar: Path, *, moment_arms: str | None, tendon: str | None,
     from .effects import registry
     from .muscles.paths import MomentArmPath
 
-    try:
-        with open(sidecar, "rb") as fh:
-            spec = tomllib.load(fh)
-    except tomllib.TOMLDecodeError as exc:
-        raise ModelError(f"{sidecar}: invalid TOML: {exc}") from None
+    spec = read_toml(sidecar, what="model sidecar")
     mspec = spec.get("model")
     if not isinstance(mspec, dict) or "urdf" not in mspec:
         raise ModelError(f"{sidecar}: needs a [model] table with a 'urdf' entry")

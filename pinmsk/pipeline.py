@@ -53,7 +53,6 @@ import concurrent.futures as cf
 import csv
 import json
 import os
-import sys
 import time as _time
 import traceback
 from pathlib import Path
@@ -62,12 +61,8 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .errors import PinmskError, TrialError
+from .tomlfile import read_toml
 from .trial import Trial
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
 
 __all__ = ["opensim_to_gait2d", "frame_positions", "transferred_cops", "run_trial", "batch",
            "batch_cli", "load_config", "RAJAGOPAL_HIP_OFFSET", "KINDS"]
@@ -355,12 +350,7 @@ def _figures(model, d: Path, idt: Trial, res: Trial) -> int:
 def load_config(path) -> dict:
     """Parse and check a batch config (see the module docstring)."""
     path = Path(path)
-    if not path.exists():
-        raise TrialError(f"batch config not found: {path}")
-    try:
-        cfg = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise TrialError(f"{path}: not valid TOML ({exc})") from None
+    cfg = read_toml(path, what="batch config", error=TrialError)
     trials = cfg.get("trials")
     if not trials:
         raise TrialError(f"{path}: no [[trials]] entries")

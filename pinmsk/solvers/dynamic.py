@@ -1208,14 +1208,8 @@ def load_task(task_path) -> dict:
     if p.suffix.lower() == ".json":
         spec = json.loads(p.read_text())
     else:
-        try:
-            import tomllib
-        except ImportError:  # pragma: no cover
-            import tomli as tomllib
-        try:
-            spec = tomllib.loads(p.read_text())
-        except tomllib.TOMLDecodeError as exc:
-            raise ModelError(f"{p}: invalid TOML: {exc}") from None
+        from ..tomlfile import read_toml
+        spec = read_toml(p, what="task file")
     for k in spec:
         if k not in TASK_SCHEMA:
             raise ModelError(f"{p}: unknown section '{k}'; valid sections: {', '.join(TASK_SCHEMA)}")
