@@ -7,7 +7,7 @@ import pytest
 
 import pinmsk
 from pinmsk.errors import ModelError
-from pinmsk.solvers.dynamic import (BatchSkeleton, DynamicOptimization, Target, _Muscles,
+from pinmsk.solvers.dynamic import (BatchSkeleton, DynamicOptimization, Target, BatchMuscles,
                                     load_task, muscle_inverse, optimize_task, scale_masses,
                                     simulate_ff, simulate_skeleton)
 from pinmsk.solvers.parametrization import Fourier, Polynomial
@@ -33,7 +33,7 @@ def test_batch_skeleton_closed_form_equals_pinocchio_aba(name):
 @pytest.mark.parametrize("name", ["finger", "forearm"])
 def test_fast_rigid_muscle_force_equals_thelen2003(name):
     model = pinmsk.load_model(name)
-    mu = _Muscles(model)
+    mu = BatchMuscles(model)
     rng = np.random.default_rng(1)
     q = rng.uniform(0, 2, (40, 1))
     v = rng.normal(size=(40, 1)) * 3
