@@ -388,3 +388,52 @@ def test_contraction_rate_requires_activation():
     a[2, 3] = 0.0
     with pytest.raises(TrialError, match=r"activation > 0.*muscle 3 \('TRILH'\) at frame 2"):
         mus.contraction_rate(mus.fiber_kinematics_rigid(l_mt, 0.0)[0], l_mt, a)
+
+
+def test_force_velocity_smooth_blend_is_c2_and_local():
+    """The C2 blend of the slope jump at w = 0 (5 concentric, 10 eccentric): identical
+    outside |w| < width, continuous slope across 0, derivative = FD of the value,
+    increasing, and within 1.2 % of Eq. A.9 inside the band."""
+    width = 0.02
+    w = np.linspace(-0.06, 0.06, 4801)
+    exact = thelen_force_velocity(w)
+    sm = thelen_force_velocity(w, smooth=width)
+    dsm = thelen_force_velocity_derivative(w, smooth=width)
+    out = np.abs(w) >= width
+    assert np.array_equal(sm[out], exact[out])
+    assert np.max(np.abs(sm - exact)) < 0.012
+    assert np.all(np.diff(sm) > 0)
+    np.testing.assert_allclose(dsm, fd(lambda x: thelen_force_velocity(x, smooth=width), w, 1e-7),
+                               rtol=1e-5, atol=1e-6)
+    # the slope is continuous (the exact curve jumps from 5 to 10 at 0)
+    assert thelen_force_velocity_derivative(-1e-9) == pytest.approx(5.0)
+    assert thelen_force_velocity_derivative(1e-9) == pytest.approx(10.0)
+    assert np.max(np.abs(np.diff(dsm))) < 0.1
+    # and the second derivative too (C2): FD of the slope has no jump at the band edges
+    d2 = np.diff(dsm) / np.diff(w)
+    assert np.max(np.abs(np.diff(d2))) < 0.02 * np.max(np.abs(d2))
+    f, dv, da, _ = thelen_fiber_force_partials(0.004, 0.3, 0.8, smooth=width)
+    s = 0.25 + 0.75 * 0.3
+    assert f == pytest.approx(0.3 * 0.8 * thelen_force_velocity(0.004 / s, smooth=width))
+    assert da == pytest.approx(fd(lambda x: thelen_fiber_force_partials(0.004, x, 0.8, smooth=width)[0],
+                                  0.3), rel=1e-6)
+    with pytest.raises(ValueError, match="smoothing width"):
+        thelen_force_velocity(w, smooth=0.05)
+
+
+def test_inverse_excitation_is_continuous_across_fibre_reversal_with_smoothing():
+    """Eq. 5.4 contains df/dv: with the printed Thelen curve the recovered excitation jumps
+    where the fibre velocity changes sign; with ``fv_smooth`` it is continuous."""
+    from pinmsk.muscles.inverse import inverse_thelen2003
+    t = np.linspace(0.0, 0.5, 20001)
+    w = 2 * np.pi * 2.0
+    l_mt = 0.20 + 0.004 * np.sin(w * t)              # m; the fibre reverses at the extremes
+    dl, ddl = 0.004 * w * np.cos(w * t), -0.004 * w * w * np.sin(w * t)
+    F = np.full_like(t, 300.0)
+    kw = dict(f_max=1000.0, l_opt=0.08, l_slack=0.12, pennation=0.1, ddF_mt=np.zeros_like(t))
+    exact = inverse_thelen2003(F, np.zeros_like(t), l_mt, dl, ddl, **kw)["u"]
+    smooth = inverse_thelen2003(F, np.zeros_like(t), l_mt, dl, ddl, fv_smooth=0.02, **kw)["u"]
+    assert np.max(np.abs(np.diff(exact))) > 0.01        # a jump of > 0.01 in one 25 us step
+    assert np.max(np.abs(np.diff(smooth))) < 1e-3
+    far = np.abs(dl) > 0.5 * np.max(np.abs(dl))         # away from reversals: the same model
+    np.testing.assert_allclose(smooth[far], exact[far], rtol=1e-12)

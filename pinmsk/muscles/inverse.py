@@ -131,11 +131,15 @@ def inverse_muscle(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, *, ddF_mt=0.0, f_max, l_opt
 def inverse_thelen2003(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, *, ddF_mt=0.0, f_max, l_opt, l_slack,
                        pennation, v_max=None, tendon_strain0: float = TENDON_STRAIN0,
                        tau_rise: float = TAU_RISE, tau_fall: float = TAU_FALL,
-                       names: Sequence[str] | None = None) -> dict:
+                       names: Sequence[str] | None = None, fv_smooth: float = 0.0) -> dict:
     """Inverse Thelen 2003 muscle (compliant Thelen tendon + parallel element), Fig. 5.6 / Eq. 5.2-5.4.
 
     Activation from Eq. A.9 by vectorised Newton (the activation scaling of
-    v_max makes it nonlinear in ``a``).  See :func:`inverse_muscle`.
+    v_max makes it nonlinear in ``a``).  See :func:`inverse_muscle`.  ``fv_smooth``
+    blends the force-velocity slope jump at zero velocity (width in ``v/v_max``
+    units, :func:`~pinmsk.muscles.thelen2003.thelen_fiber_force_partials`): without
+    it the excitation jumps wherever a fibre reverses, because Eq. 5.4 contains
+    ``df/dv``; dynamic optimization of the IFM/IFT designs needs it continuous.
     """
     l_opt = np.asarray(l_opt, dtype=float)
     v_max = 10.0 * l_opt if v_max is None else np.asarray(v_max, dtype=float)
@@ -148,8 +152,9 @@ def inverse_thelen2003(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, *, ddF_mt=0.0, f_max, l
             e, strain0=tendon_strain0),
         force_length=lambda l: (thelen_active_force_length(l),
                                 thelen_active_force_length_derivative(l)),
-        force_partials=thelen_fiber_force_partials,
-        activation_from_force=lambda f, fi, v: thelen_activation_from_force(f, fi, v, names=names),
+        force_partials=lambda v, a, fi: thelen_fiber_force_partials(v, a, fi, smooth=fv_smooth),
+        activation_from_force=lambda f, fi, v: thelen_activation_from_force(
+            f, fi, v, names=names, smooth=fv_smooth),
         passive=lambda l: (thelen_passive_force_length(l),
                            thelen_passive_force_length_derivative(l)),
         tau_rise=tau_rise, tau_fall=tau_fall, names=names)

@@ -94,14 +94,48 @@ def thelen_active_force_length_derivative(l_norm, *, gamma: float = GAMMA):
     return (-2.0 / gamma) * d * np.exp(-(d * d) / gamma)
 
 
-def thelen_force_velocity(v_norm):
+FV_SMOOTH_MAX = 0.03     # widest blend: the eccentric hyperbola has its pole at w = -1/_C = -0.04
+
+
+def _fv_blend(w, fv, dfv, smooth):
+    """Replace ``fv, dfv`` within ``|w| < smooth`` by a C2 blend of the two hyperbolas.
+
+    The Thelen curve's slope jumps at ``w = 0`` (5 concentric, 10 eccentric).  The
+    inverse muscle model's activation rate (Eq. 5.4) contains ``df/dv``, so with the
+    kink the recovered excitation jumps whenever a fibre reverses.  The blend
+    ``(1 - S) fv_con + S fv_ecc`` with the quintic smoothstep ``S`` of
+    ``(w + smooth) / (2 smooth)`` matches each piece to the second derivative at the
+    band edges; it is increasing for ``smooth <= FV_SMOOTH_MAX``.
+    """
+    if not 0.0 < smooth <= FV_SMOOTH_MAX:
+        raise ValueError(f"force-velocity smoothing width must be in (0, {FV_SMOOTH_MAX}], "
+                         f"got {smooth}")
+    wb = np.clip(w, -smooth, smooth)
+    s = (wb + smooth) / (2.0 * smooth)
+    S = s * s * s * (10.0 + s * (-15.0 + 6.0 * s))
+    dS = 30.0 * s * s * (1.0 - s) ** 2 / (2.0 * smooth)
+    den = 1.0 - wb / A_F
+    con, dcon = (1.0 + wb) / den, (1.0 + 1.0 / A_F) / (den * den)
+    ec = 1.0 + _C * wb
+    ecc, decc = 1.0 + _C * (F_HAT - 1.0) * wb / ec, _C * (F_HAT - 1.0) / (ec * ec)
+    inside = np.abs(w) < smooth
+    return (np.where(inside, con + S * (ecc - con), fv),
+            np.where(inside, dcon + S * (decc - dcon) + dS * (ecc - con), dfv))
+
+
+def thelen_force_velocity(v_norm, *, smooth: float = 0.0):
     """Normalized force-velocity multiplier ``f_V(v/v_max)`` at full activation (Eq. A.9 inverted).
 
     ``f_V(0) = 1``, ``f_V(-1) = 0`` (maximum shortening velocity), increasing,
     ``-> 1.4`` for lengthening until the linear tail at ``0.95 * 1.4``.  At
     activation ``a`` the active fibre force is ``a f_isom f_V(v_norm / (0.25 + 0.75 a))``;
     "activation-mode" static optimization uses ``f_V(v_norm)`` (the a = 1 curve).
+    ``smooth > 0`` blends the slope jump at 0 over ``|w| < smooth`` (see :func:`_fv_blend`).
     """
+    if smooth:
+        w = np.asarray(v_norm, dtype=float)
+        return _fv_blend(w, thelen_force_velocity(w), thelen_force_velocity_derivative(w),
+                         smooth)[0]
     w = np.asarray(v_norm, dtype=float)
     w1 = np.clip(w, -1.0, 0.0)
     w2 = np.clip(w, 0.0, _W_THR)
@@ -113,9 +147,13 @@ def thelen_force_velocity(v_norm):
             + _K_ECC * np.maximum(w - _W_THR, 0.0))
 
 
-def thelen_force_velocity_derivative(v_norm):
-    """d f_V / d v_norm (left derivative at 0, where the Thelen curve has a kink: 5 vs 10)."""
+def thelen_force_velocity_derivative(v_norm, *, smooth: float = 0.0):
+    """d f_V / d v_norm (left derivative at 0, where the Thelen curve has a kink: 5 vs 10;
+    continuous with ``smooth > 0``, see :func:`_fv_blend`)."""
     w = np.asarray(v_norm, dtype=float)
+    if smooth:
+        return _fv_blend(w, thelen_force_velocity(w), thelen_force_velocity_derivative(w),
+                         smooth)[1]
     w1 = np.clip(w, -1.0, 0.0)
     w2 = np.clip(w, 0.0, _W_THR)
     con = (1.0 + 1.0 / A_F) / (1.0 - w1 / A_F) ** 2
@@ -165,16 +203,19 @@ def thelen_fiber_force(v_ce, a, f_isom, *, v_max=1.0):
     return a * f_isom * thelen_force_velocity(w)
 
 
-def thelen_fiber_force_partials(v_norm, a, f_isom):
+def thelen_fiber_force_partials(v_norm, a, f_isom, *, smooth: float = 0.0):
     """``(f, df/dv_norm, df/da, df/df_isom)`` of ``f = a f_isom f_V(v_norm / s(a))``.
 
     ``s = 0.25 + 0.75 a``; used by the inverse model's activation rate (thesis Eq. 5.4).
+    ``smooth``: width of the C2 blend at ``w = 0`` (:func:`_fv_blend`; 0 = Eq. A.9 as is).
     """
     a = np.asarray(a, dtype=float)
     s = _speed_scale(a)
     w = np.asarray(v_norm, dtype=float) / s
     fv = thelen_force_velocity(w)
     dfv = thelen_force_velocity_derivative(w)
+    if smooth:
+        fv, dfv = _fv_blend(w, fv, dfv, smooth)
     f = a * f_isom * fv
     df_dv = a * f_isom * dfv / s
     # dw/da = -0.75 w / s
@@ -183,14 +224,16 @@ def thelen_fiber_force_partials(v_norm, a, f_isom):
 
 
 def thelen_activation_from_force(f_ce, f_isom, v_norm, *, tol: float = 1e-13,
-                                 max_iter: int = 100, names: Sequence[str] | None = None):
+                                 max_iter: int = 100, names: Sequence[str] | None = None,
+                                 smooth: float = 0.0):
     """Activation ``a`` with ``a f_isom f_V(v_norm/(0.25 + 0.75 a)) = f_ce`` (thesis Eq. 5.2 for a).
 
     Closed form at v = 0 (``a = f_ce/f_isom``); otherwise the activation scaling of
     v_max makes it nonlinear and it is solved by vectorised safeguarded Newton
     (``a`` in ``[0, a_hi]``, residual increasing in ``a`` for ``f_ce > 0``).
     Where ``f_ce <= 0`` (the passive force alone meets or exceeds the demand)
-    ``a = 0``.  ``a > 1`` is returned as is: the muscle is too weak.
+    ``a = 0``.  ``a > 1`` is returned as is: the muscle is too weak.  ``smooth``: the
+    force-velocity blend of :func:`thelen_fiber_force_partials` (0 = Eq. A.9 as is).
     """
     f_ce = np.asarray(f_ce, dtype=float)
     f_isom = np.asarray(f_isom, dtype=float)
@@ -206,7 +249,7 @@ def thelen_activation_from_force(f_ce, f_isom, v_norm, *, tol: float = 1e-13,
     a0 = np.broadcast_to(np.where(positive, a0, 1.0), shape)
 
     def residual(a):
-        f, _, df_da, _ = thelen_fiber_force_partials(v_norm, a, f_isom)
+        f, _, df_da, _ = thelen_fiber_force_partials(v_norm, a, f_isom, smooth=smooth)
         return f - target, df_da
 
     # Upper bracket: grow until the muscle can produce the force.

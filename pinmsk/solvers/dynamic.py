@@ -18,12 +18,26 @@ Simulation designs (Sec. 5.1)
     excitations come from the inverse muscle model (Fig. 5.6, Eq. 5.2-5.4,
     compliant tendon) fed with the *analytic* ``F, F', F''`` of the
     parametrization and ``l_mt, l_mt', l_mt''`` of the simulated kinematics.
+    The forces are kept above a smooth passive floor (:func:`passive_floor`,
+    linear constraints on the grid of the excitation bounds): below it the
+    inverse model switches to ``a = 0``, a kink no gradient method crosses.
 ``"ift"`` (inverse-forward from joint torques)
     the signals are joint torques; only the skeleton is integrated; muscle
-    forces come from the closed-form minimum ``sum (F_i/F_max,i)^2`` sharing
-    among the agonists (1-dof models with constant moment arms, where the
-    sharing matrix is constant so ``F' = S tau'`` and ``F'' = S tau''`` are
-    exact), then the inverse muscle model as in IFM.
+    forces are the passive floor plus the torque above it shared among the
+    agonists in the minimum ``sum (F_i/F_max,i)^2`` ratios, blended across zero
+    torque by a softplus so that ``F, F', F''`` are exact and smooth
+    (:meth:`DynamicOptimization._ift_forces`; 1-dof models with constant
+    moment arms), then the inverse muscle model as in IFM.  The sharing is
+    fixed, so the excitation bounds can be infeasible where IFM meets them
+    (the optimizer then reports the violated bound, never a solution).
+
+In IFM and IFT the recovered excitation contains ``df/dv`` (Eq. 5.4), and
+Thelen's force-velocity slope jumps at zero velocity (5 concentric, 10
+eccentric): the excitation would jump at every fibre reversal and the bound
+constraints with it.  These designs therefore use the force-velocity curve
+blended over ``|v/v_max| < fv_smooth`` (C2, within 1.2 % of Eq. A.9 in the
+band; :func:`~pinmsk.muscles.thelen2003.thelen_force_velocity`), in the
+optimization and in the reported result alike.
 
 Integration is classical RK4 on a fixed grid of step ``step`` (excitations
 and forces are evaluated analytically at the grid points and midpoints), with
@@ -62,9 +76,13 @@ Objectives (``objective=``)
 Excitation bounds ``0 <= u <= 1`` (Eq. 3.8) are imposed on a dense grid of
 ``bound_points`` times (linear constraints in FF, where they are exact).
 
-Derivatives: forward finite differences of the whole batched simulation, one
-batch of ``n + 1`` simulations per gradient (every parameter perturbed at
-once), which costs about as much as a handful of single simulations.
+Derivatives: central finite differences of the whole batched simulation, one
+batch of ``2 n`` simulations per gradient (every parameter perturbed at
+once), which costs about as much as three single simulations.  SLSQP works in
+variables preconditioned by the Gauss-Newton Hessian of the tracking term at
+the start (:meth:`DynamicOptimization._preconditioner`): its quasi-Newton
+Hessian starts as the identity, and without that its first steps throw an
+open-loop simulation far off the target.
 
 An optimizer that stops without converging, or converges to a point that
 violates the constraints by more than ``constraint_tol``, is flagged in the
@@ -84,7 +102,7 @@ import pinocchio as pin
 
 from ..errors import ConvergenceError, ModelError, SolverError, TrialError
 from ..muscles.activation import excitation_from_activation
-from ..muscles.thelen2003 import GAMMA, thelen_passive_force_length
+from ..muscles.thelen2003 import GAMMA, K_PE, PASSIVE_STRAIN0, thelen_passive_force_length
 from .designs import BatchMuscles, BatchSkeleton, muscle_inverse, simulate_ff, simulate_skeleton
 from .parametrization import Fourier, Parametrization, Polynomial, Spline
 
@@ -93,6 +111,31 @@ __all__ = ["BatchSkeleton", "simulate_ff", "simulate_skeleton", "muscle_inverse"
            "load_task", "TASK_SCHEMA"]
 
 DESIGNS = ("ff", "ifm", "ift")
+FLOOR = 0.005   # IFM/IFT: muscle forces stay this fraction of F_max above the passive floor
+
+
+def passive_floor(mu: BatchMuscles, l_mt, dl_mt=None, ddl_mt=None):
+    """Smooth upper bound of a muscle-tendon unit's passive force, with its time derivatives.
+
+    ``F_max (FLOOR + exp(K_PE (l - 1)/eps0) / (exp(K_PE) - 1))`` at the rigid-tendon fibre
+    length ``l = sqrt((l_mt - l_slack)^2 + h^2) / l_opt``.  It exceeds the Thelen
+    passive force (Eq. A.7) everywhere, because the compliant fibre is never longer
+    than the rigid one and ``cos(alpha) <= 1``, and unlike Eq. A.7 it is C-infinity.
+    A force above it leaves a positive contractile force, so the inverse muscle model
+    (Fig. 5.6) returns ``a > 0`` and no switch to ``a = 0`` (a kink the optimizer of
+    the IFM/IFT designs cannot cross).  Returns ``(F, F', F'')`` (the derivatives
+    need ``dl_mt``, ``ddl_mt``; None otherwise).
+    """
+    x = l_mt - mu.l_slack
+    l = np.sqrt(x * x + mu.h2)
+    k = K_PE / PASSIVE_STRAIN0 / mu.l_opt            # d exponent / d l (1/m)
+    e = mu.f_max * np.exp(K_PE / PASSIVE_STRAIN0 * (l / mu.l_opt - 1.0)) / np.expm1(K_PE)
+    F = mu.f_max * FLOOR + e
+    if dl_mt is None:
+        return F, None, None
+    dl = x * dl_mt / l
+    ddl = (dl_mt * dl_mt + x * ddl_mt - dl * dl) / l
+    return F, e * k * dl, e * k * (ddl + k * dl * dl)
 
 
 # =============================================================================== target
@@ -240,7 +283,10 @@ class DynamicOptimization:
       :mod:`pinmsk.energy`; 0 = exact), ``free_period`` (Fourier only: the
       period tau is one more decision variable, for non-periodic motions, Sec.
       3.3.6; the last entry of ``x`` is ``tau / tau_0``, kept within
-      ``period_bounds`` times the parametrization's ``tau_0``), ``progress``
+      ``period_bounds`` times the parametrization's ``tau_0``), ``fv_smooth``
+      (IFM/IFT: width of the force-velocity blend at zero velocity, in
+      ``v/v_max``; see the module docstring), ``precondition`` (SLSQP in the
+      variables of :meth:`_preconditioner`), ``progress``
       (object with ``update(n)``), ``verbose``.
     """
 
@@ -253,7 +299,8 @@ class DynamicOptimization:
                  constraint_tol: float = 1e-5, n_starts: int = 3, fd_step: float = 1e-6,
                  fd: str = "central", n_jobs: int = 1, restarts: int = 3,
                  budget_factor: float = 2.0, smooth: float = 0.01,
-                 free_period: bool = False, period_bounds=(0.5, 2.0),
+                 free_period: bool = False, period_bounds=(0.5, 2.0), fv_smooth: float = 0.02,
+                 precondition: bool = True,
                  progress=None, verbose: bool = False):
         self.model = model
         self.parametrization = parametrization
@@ -281,6 +328,8 @@ class DynamicOptimization:
         self.smooth = smooth
         self.free_period = free_period
         self.period_bounds = period_bounds
+        self.fv_smooth = fv_smooth
+        self.precondition = precondition
         self.progress = progress
         self.verbose = verbose
 
@@ -348,17 +397,22 @@ class DynamicOptimization:
         if self.tracking_tolerance is not None and not self.tracking_tolerance > 0:
             raise ModelError(f"tracking_tolerance must be > 0 rad, got {self.tracking_tolerance} "
                              "(the problem would be infeasible)")
-        # signal scaling (decision variables are O(1))
+        # signal scaling: decision variables are O(1) at the scale of what the motion needs
+        # (the inverse dynamics of the target), not of what the muscles could give
+        tau_peak = float(np.max(np.abs(self._target_torque()[:, self._jc])))
         if self.design == "ff":
             self._n_sig, self._scale = m, np.ones(m)
         elif self.design == "ifm":
-            self._n_sig, self._scale = m, np.asarray(self._mu.f_max, dtype=float) * 0.1
+            r_max = float(np.max(np.abs(self._mu.path.moment_arms(self._q0[None])[0])))
+            floor = np.max(self._force_floor(self._t), axis=0)
+            self._n_sig, self._scale = m, floor + tau_peak / max(r_max, 1e-9)
         else:
             if nv != 1 or not self._mu.constant_arms:
                 raise ModelError("design 'ift' is implemented for 1-dof models with constant "
                                  "moment arms (exact analytic force derivatives); use 'ifm'")
             tau_cap = float(np.abs(self._mu.R[:, 0] * self._mu.f_max).sum())
-            self._n_sig, self._scale = 1, np.array([0.1 * tau_cap])
+            self._n_sig, self._scale = 1, np.array([max(tau_peak, 1e-3 * tau_cap)])
+            self._soft = 0.01 * tau_cap       # softplus width of the agonist sharing (N m)
         self._npar = par.n_params * self._n_sig
         self._nx = self._npar
         if self.free_period:
@@ -438,24 +492,64 @@ class DynamicOptimization:
             tau, taum = self._signals(C), self._signals(C, where="mid")
             q, v, acc = simulate_skeleton(self.model, self._t, tau, taum, self._q0, self._v0,
                                           skeleton=self._sk)
-            share = np.where(tau >= 0, self._S_pos, self._S_neg)   # (N, B, m)
-            F = share * tau
-            dF = share * self._signals(C, 1)
-            ddF = share * self._signals(C, 2)
+            F, dF, ddF = self._ift_forces(q, v, acc, tau, self._signals(C, 1),
+                                          self._signals(C, 2))
         flat = lambda x: x.reshape(n * B, -1)   # noqa: E731
-        inv = muscle_inverse(self.model, flat(q), flat(v), flat(acc), flat(F), flat(dF),
-                             flat(ddF), muscles=self._mu)
+        mu = self._mu
+        qf, vf = flat(q), flat(v)
+        inv = mu.mtu.inverse(flat(F), flat(dF), mu.lengths(qf), mu.velocities(qf, vf),
+                             mu.path.accelerations(qf, vf, flat(acc)), flat(ddF),
+                             fv_smooth=self.fv_smooth)
         sim = {"q": q, "v": v, "acc": acc, "force": F}
         for k in ("a", "u", "l_ce", "v_ce"):
             sim[k] = inv[k].reshape(n, B, -1)
         sim["u_raw"] = sim["u"]
-        mu = self._mu
         d = sim["l_ce"] / mu.l_opt - 1.0
         sim["f_isom"] = np.exp(d * d * (-1.0 / GAMMA))
         x = np.sqrt(np.maximum(sim["l_ce"] ** 2 - mu.h2, 1e-12))
         sim["f_ce"] = np.maximum(F * sim["l_ce"] / x
                                  - mu.f_max * thelen_passive_force_length(sim["l_ce"] / mu.l_opt), 0)
         return sim
+
+    def _ift_forces(self, q, v, acc, tau, dtau, ddtau):
+        """IFT muscle forces ``F, F', F''`` (N, B, m) from the joint torque and its exact derivatives.
+
+        ``F = F_floor(q) + S+ phi(tau') + S- (tau' - phi(tau'))`` with ``tau' = tau - r.F_floor``
+        and ``phi(x) = c log(1 + exp(x/c))``: the torque above the passive floor
+        (:func:`passive_floor`) goes to the agonists in the minimum ``sum (F_i/F_max,i)^2``
+        ratios ``S+`` (flexion) or ``S-`` (extension), blended by the softplus ``phi``
+        of width ``c`` (a co-contraction of ``c log 2`` at zero torque) so that ``F`` is
+        C-infinity in ``tau``; ``r.F = tau`` exactly.  1-dof, constant moment arms ``r``.
+        """
+        mu, r, c = self._mu, self._mu.R[:, 0], self._soft
+        shp = q.shape[:2]
+        flat = lambda x: x.reshape(-1, x.shape[-1])   # noqa: E731
+        Fl, dFl, ddFl = passive_floor(mu, mu.lengths(flat(q)), mu.velocities(flat(q), flat(v)),
+                                      -(flat(acc) @ mu.R.T))
+        Fl, dFl, ddFl = (x.reshape(shp + (mu.m,)) for x in (Fl, dFl, ddFl))
+        x = (tau - Fl @ r[:, None]) / c
+        dx = (dtau - dFl @ r[:, None]) / c
+        ddx = (ddtau - ddFl @ r[:, None]) / c
+        sig = 0.5 * (1.0 + np.tanh(0.5 * x))                 # phi'(x c) = sigmoid(x)
+        phi = c * np.logaddexp(0.0, x)
+        Sp, Sn = self._S_pos, self._S_neg
+        F = Fl + Sp * phi + Sn * (c * x - phi)
+        dF = dFl + c * (Sp * sig + Sn * (1.0 - sig)) * dx
+        ddF = ddFl + c * (Sp * sig + Sn * (1.0 - sig)) * ddx + c * (Sp - Sn) * sig * (1.0 - sig) * dx * dx
+        return F, dF, ddF
+
+    def _force_floor(self, t):
+        """IFM lower bounds (N, m): :func:`passive_floor` at the worst angle within the
+        tracking band ``q_d(t) +- tolerance`` (0.1 rad with a tracking weight)."""
+        band = self.tracking_tolerance if self.tracking_tolerance is not None else 0.1
+        qd = self.target(np.clip(t, self._t[0], self._t[-1]))
+        out = None
+        for dq in np.linspace(-band, band, 5):
+            Q = np.tile(self._q0, (t.size, 1))
+            Q[:, self._jc] = qd + dq
+            F = passive_floor(self._mu, self._mu.lengths(Q))[0]
+            out = F if out is None else np.maximum(out, F)
+        return out
 
     def _integral(self, y):
         """(1/tau) int y dt over the grid, y (N, B, ...) -> (B, ...)."""
@@ -583,25 +677,31 @@ class DynamicOptimization:
         return f, g, c, dc
 
     # -- initial guesses (Sec. 3.5.3) -------------------------------------------
+    def _target_states(self):
+        """``(q, v, a)`` (N, nv) of the target motion on the grid (other coordinates at rest)."""
+        t, nv = self._t, self.model.nv
+        q = np.tile(self._q0, (t.size, 1))
+        v, acc = np.zeros((t.size, nv)), np.zeros((t.size, nv))
+        q[:, self._jc] = self._qd
+        v[:, self._jc] = self.target(t, 1)
+        acc[:, self._jc] = self.target(t, 2)
+        return q, v, acc
+
+    def _target_torque(self):
+        """Inverse dynamics (N, nv) of the target motion: what the muscles must supply."""
+        from ..skeleton import inverse_dynamics
+        return inverse_dynamics(self.model, *self._target_states())
+
     def initial_guesses(self) -> list[np.ndarray]:
         """Cheap starts: inverse dynamics of the target, minimum-effort sharing, inverse
         activation dynamics with analytic derivatives -> least-squares fits of the parametrization."""
         par, mu, t = self.parametrization, self._mu, self._t
-        nv = self.model.nv
-        q = np.zeros((t.size, nv))
-        v = np.zeros_like(q)
-        a_ = np.zeros_like(q)
-        q[:, self._jc] = self._qd
-        v[:, self._jc] = self.target(t, 1)
-        a_[:, self._jc] = self.target(t, 2)
-        from ..skeleton import inverse_dynamics
-        tau = inverse_dynamics(self.model, q, v, a_)
+        tau = self._target_torque()
+        q, v = self._target_states()[:2]
         guesses = []
         if self.design == "ift":
-            c = par.fit(t, tau) / self._scale
-            guesses.append(c.ravel())
-            guesses.append((0.5 * c).ravel())
-            return guesses[: self.n_starts]
+            # one start: the torque is fixed by the motion, only the fit error is left
+            return [(par.fit(t, tau) / self._scale).ravel()]
         # minimum sum (a/.)^2 sharing among agonists with a rigid tendon (closed form, 1 dof)
         l_mt = mu.lengths(q)
         v_mt = mu.velocities(q, v)
@@ -617,9 +717,20 @@ class DynamicOptimization:
         lam = need[:, 0] / np.maximum(np.sum(np.where(ag, R * Fa * g, 0.0), axis=1), 1e-12)
         act = np.clip(np.where(ag, lam[:, None] * g, 0.0), 0.0, 1.0)
         if self.design == "ifm":
-            Fg = act * Fa + F0
-            c = par.fit(t, Fg) / self._scale
-            return [c.ravel(), (1.1 * c).ravel(), (0.9 * c).ravel()][: self.n_starts]
+            # forces above the passive floor (the active region of the inverse model), the
+            # agonists' share of the rest of the moment, then 0, 2 and 5 % co-contraction
+            # of zero net moment: every start tracks the target equally well
+            Fl = self._force_floor(t)
+            need = tau[:, [0]] - np.sum(R * Fl, axis=1, keepdims=True)
+            ag = np.sign(R) == np.sign(need)
+            lam = need[:, 0] / np.maximum(np.sum(np.where(ag, R * Fa * g, 0.0), axis=1), 1e-12)
+            Fg = Fl + np.where(ag, lam[:, None] * g, 0.0) * Fa
+            tr = R * mu.f_max
+            pos = np.where(R > 0, mu.f_max / np.sum(np.where(R > 0, tr, 0.0), axis=1, keepdims=True), 0.0)
+            neg = np.where(R < 0, mu.f_max / np.sum(np.where(R < 0, -tr, 0.0), axis=1, keepdims=True), 0.0)
+            cap = np.sum(np.abs(tr), axis=1, keepdims=True)
+            return [(par.fit(t, Fg + gam * cap * (pos + neg)) / self._scale).ravel()
+                    for gam in (0.0, 0.02, 0.05)][: self.n_starts]
         ca = par.fit(t, act)
         a_fit = par.evaluate(ca, t)
         adot = par.evaluate(ca, t, 1)
@@ -671,7 +782,9 @@ class DynamicOptimization:
                 self._lin_lo = np.full(self._A_lin.shape[0], self._lo)
                 self._lin_hi = np.full(self._A_lin.shape[0], self._hi)
             elif self.design == "ifm":
-                self._lin_lo = np.zeros(self._A_lin.shape[0])
+                tb = (np.linspace(0.0, self.parametrization.period, nb) if self.free_period
+                      else np.linspace(self._t[0], self._t[-1], nb))
+                self._lin_lo = (self._force_floor(tb) / self._scale).ravel()
                 self._lin_hi = np.tile(1.5 * self._mu.f_max / self._scale, nb)
             else:   # IFT: the torque the muscles can give, 1.5 F_max each
                 r = self._mu.R[:, 0]
@@ -727,20 +840,67 @@ class DynamicOptimization:
                   "the result is not a solution", file=sys.stderr)
         return self
 
+    def _preconditioner(self, xs):
+        """``M`` with ``x = xs + M y``: SLSQP works on ``y``.
+
+        SLSQP's quasi-Newton Hessian starts as the identity, but the tracking error of
+        an open-loop simulation is far more sensitive to some coefficient directions
+        than to others (torques and forces are integrated twice in IFT/IFM), so its
+        first steps throw the motion off the target.  ``M = L^-T`` with
+        ``L L^T = I + H_t``, ``H_t`` the Gauss-Newton Hessian of the tracking term at
+        the start (scaled like the objective with a tracking weight; with a tracking
+        tolerance ``eps``, scaled so that a unit step moves the RMS error by ``eps``),
+        makes that Hessian the identity; directions the tracking ignores keep their
+        scale."""
+        n = xs.size
+        h = self.fd_step * np.maximum(1.0, np.abs(xs))
+        try:
+            sim = self.simulate(np.vstack([xs + np.diag(h), xs - np.diag(h)]))
+        except (TrialError, ConvergenceError):
+            return np.eye(n)
+        q = sim["q"][self._ibt, :, self._jc]                    # (nt, 2n)
+        J = (q[:, :n] - q[:, n:]) / (2.0 * h)
+        if not np.all(np.isfinite(J)):
+            return np.eye(n)
+        if self.tracking_weight is not None:
+            peak = self.target.peak_square(self._t)
+            Ht = (self.tracking_weight * 2.0 / (peak * self._f_ref * J.shape[0])) * (J.T @ J)
+        else:
+            Ht = (J.T @ J) / (J.shape[0] * self.tracking_tolerance ** 2)
+        L = np.linalg.cholesky(np.eye(n) + Ht)
+        return np.linalg.inv(L).T
+
     def _solve_start(self, k, xs):
-        """One SLSQP run (plus one restart after a line-search failure): ``(x, record)``."""
+        """One SLSQP run in preconditioned variables (:meth:`_preconditioner`), with
+        restarts after line-search failures: ``(x, record)``."""
         from scipy.optimize import minimize
         fs = 1.0 / self._f_ref
+        M = self._preconditioner(xs) if self.precondition else np.eye(xs.size)
+
+        def X(y):
+            return xs + M @ y
+
         cons = []
         A = self._A_lin
         if A is not None:
             lo, hi = self._lin_lo, self._lin_hi
-            AA = np.vstack([A, -A])
-            cons.append({"type": "ineq", "fun": lambda x: np.concatenate([A @ x - lo, hi - A @ x]),
-                         "jac": lambda x: AA})
+            AM = A @ M
+            AMM = np.vstack([AM, -AM])
+            Ax = A @ xs
+            cons.append({"type": "ineq", "fun": lambda y: np.concatenate([Ax + AM @ y - lo,
+                                                                          hi - Ax - AM @ y]),
+                         "jac": lambda y: AMM})
         if self.tracking_tolerance is not None or self.design != "ff":
-            cons.append({"type": "ineq", "fun": lambda x: self._value(x)[1],
-                         "jac": lambda x: self._gradient(x)[1]})
+            cons.append({"type": "ineq", "fun": lambda y: self._value(X(y))[1],
+                         "jac": lambda y: self._gradient(X(y))[1] @ M})
+
+        def fun(y):
+            return fs * self._value(X(y))[0]
+
+        def jac(y):
+            return fs * (self._gradient(X(y))[0] @ M)
+
+        y0 = np.zeros(xs.size)
         opts = {"maxiter": self.maxiter, "ftol": self.tol}
         ts = _time.perf_counter()
         deadline = getattr(self, "_deadline", None)
@@ -752,8 +912,8 @@ class DynamicOptimization:
                 raise StopIteration
 
         try:
-            res = minimize(lambda x: fs * self._value(x)[0], xs, jac=lambda x: fs * self._gradient(x)[0],
-                           method="SLSQP", constraints=cons, options=opts, callback=callback)
+            res = minimize(fun, y0, jac=jac, method="SLSQP", constraints=cons, options=opts,
+                           callback=callback)
             nit, nfev = res.nit, res.nfev
             # Line-search trouble (status 8) or incompatible linearized constraints (4):
             # restart with a fresh quasi-Newton Hessian while that still improves the
@@ -762,9 +922,8 @@ class DynamicOptimization:
                 if res.success or res.status not in (4, 8) or stopped:
                     break
                 f_before = float(res.fun)
-                res = minimize(lambda x: fs * self._value(x)[0], res.x,
-                               jac=lambda x: fs * self._gradient(x)[0], method="SLSQP",
-                               constraints=cons, options=opts, callback=callback)
+                res = minimize(fun, res.x, jac=jac, method="SLSQP", constraints=cons,
+                               options=opts, callback=callback)
                 nit, nfev = nit + res.nit, nfev + res.nfev
                 if not res.success and float(res.fun) > f_before - self.tol:
                     break
@@ -772,7 +931,7 @@ class DynamicOptimization:
             return None, {"start": k, "ok": False, "success": False, "message": f"failed: {exc}",
                           "objective": float("nan"), "violation": float("inf"), "nit": 0,
                           "nfev": 0, "seconds": _time.perf_counter() - ts}
-        x = res.x
+        x = X(res.x)
         viol = self._violation(x, A)
         f = float(self._value(x)[0])
         success = bool(res.success) and not stopped
@@ -882,6 +1041,8 @@ TASK_SCHEMA = {
                         "design": "'ff' | 'ifm' | 'ift'", "order": "polynomial order",
                         "n_harmonics": "Fourier K (2K + 1 terms)",
                         "period": "Fourier period tau (s; default the duration)",
+                        "free_period": "true: tau is a decision variable (Sec. 3.3.6)",
+                        "period_bounds": "[lower, upper] factors on tau with free_period",
                         "n_params": "spline coefficients"},
     "objective": {"kind": "'effort' | 'metabolic'", "exponent": "P of Eq. 3.5",
                   "weights": "'none' | 'volume'", "normalize": "divide by sum S_i (Eq. 3.5)",
@@ -893,7 +1054,8 @@ TASK_SCHEMA = {
                "constraint_tol": "accepted constraint violation", "n_starts": "multi-start count",
                "fd_step": "relative finite-difference step",
                "n_jobs": "parallel worker processes for the starts",
-               "smooth": "width of the C1 switches of the metabolic models (0 = exact)"},
+               "smooth": "width of the C1 switches of the metabolic models (0 = exact)",
+               "fv_smooth": "IFM/IFT: force-velocity blend width at zero velocity (v/v_max)"},
 }
 
 
@@ -964,6 +1126,8 @@ def build_from_task(spec: dict, *, base_dir=None, progress=None) -> DynamicOptim
     duration = float(mo.get("duration", target.period))
     pa = dict(spec.get("parametrization", {}))
     design = pa.pop("design", "ff")
+    free_period = bool(pa.pop("free_period", False))
+    period_bounds = tuple(pa.pop("period_bounds", (0.5, 2.0)))
     pk = pa.pop("kind", "fourier")
     if pk == "polynomial":
         par = Polynomial(pa.get("order", 6), duration=duration)
@@ -989,7 +1153,8 @@ def build_from_task(spec: dict, *, base_dir=None, progress=None) -> DynamicOptim
         maxiter=so.get("maxiter", 200), tol=so.get("tol", 1e-7),
         constraint_tol=so.get("constraint_tol", 1e-5), n_starts=so.get("n_starts", 3),
         fd_step=so.get("fd_step", 1e-6), n_jobs=so.get("n_jobs", 1),
-        smooth=so.get("smooth", 0.01), progress=progress)
+        smooth=so.get("smooth", 0.01), fv_smooth=so.get("fv_smooth", 0.02),
+        free_period=free_period, period_bounds=period_bounds, progress=progress)
 
 
 def scale_masses(model, factor: float):
