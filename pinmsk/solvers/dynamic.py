@@ -18,9 +18,10 @@ Simulation designs (Sec. 5.1)
     excitations come from the inverse muscle model (Fig. 5.6, Eq. 5.2-5.4,
     compliant tendon) fed with the *analytic* ``F, F', F''`` of the
     parametrization and ``l_mt, l_mt', l_mt''`` of the simulated kinematics.
-    The forces are kept above a smooth passive floor (:func:`passive_floor`,
-    linear constraints on the grid of the excitation bounds): below it the
-    inverse model switches to ``a = 0``, a kink no gradient method crosses.
+    The contractile force the fibre must supply is constrained to at least
+    ``F_CE_MIN`` (0.2 % of F_max) on the grid of the excitation bounds: below
+    zero the inverse model switches to ``a = 0``, a kink no gradient method
+    crosses.
 ``"ift"`` (inverse-forward from joint torques)
     the signals are joint torques; only the skeleton is integrated; muscle
     forces are the passive floor plus the torque above it shared among the
@@ -78,11 +79,11 @@ Excitation bounds ``0 <= u <= 1`` (Eq. 3.8) are imposed on a dense grid of
 
 Derivatives: central finite differences of the whole batched simulation, one
 batch of ``2 n`` simulations per gradient (every parameter perturbed at
-once), which costs about as much as three single simulations.  SLSQP works in
-variables preconditioned by the Gauss-Newton Hessian of the tracking term at
-the start (:meth:`DynamicOptimization._preconditioner`): its quasi-Newton
-Hessian starts as the identity, and without that its first steps throw an
-open-loop simulation far off the target.
+once), which costs about as much as three single simulations.  In IFM and IFT,
+SLSQP works in variables preconditioned by the Gauss-Newton Hessian of the
+tracking term at the start (:meth:`DynamicOptimization._preconditioner`): its
+quasi-Newton Hessian starts as the identity, and without that its first steps
+throw the open-loop skeleton far off the target.
 
 An optimizer that stops without converging, or converges to a point that
 violates the constraints by more than ``constraint_tol``, is flagged in the
@@ -111,7 +112,8 @@ __all__ = ["BatchSkeleton", "simulate_ff", "simulate_skeleton", "muscle_inverse"
            "load_task", "TASK_SCHEMA"]
 
 DESIGNS = ("ff", "ifm", "ift")
-FLOOR = 0.005   # IFM/IFT: muscle forces stay this fraction of F_max above the passive floor
+FLOOR = 0.005   # IFT: muscle forces stay this fraction of F_max above the passive floor
+F_CE_MIN = 0.002  # IFM: least contractile force (/ F_max), keeps the inverse model active
 
 
 def passive_floor(mu: BatchMuscles, l_mt, dl_mt=None, ddl_mt=None):
@@ -286,7 +288,9 @@ class DynamicOptimization:
       ``period_bounds`` times the parametrization's ``tau_0``), ``fv_smooth``
       (IFM/IFT: width of the force-velocity blend at zero velocity, in
       ``v/v_max``; see the module docstring), ``precondition`` (SLSQP in the
-      variables of :meth:`_preconditioner`), ``progress``
+      variables of :meth:`_preconditioner`; default: IFM and IFT, whose open-loop
+      skeleton makes the tracking error stiff in the coefficients, not FF,
+      where the muscles' force-length-velocity damps it), ``progress``
       (object with ``update(n)``), ``verbose``.
     """
 
@@ -300,7 +304,7 @@ class DynamicOptimization:
                  fd: str = "central", n_jobs: int = 1, restarts: int = 3,
                  budget_factor: float = 2.0, smooth: float = 0.01,
                  free_period: bool = False, period_bounds=(0.5, 2.0), fv_smooth: float = 0.02,
-                 precondition: bool = True,
+                 precondition: bool | None = None,
                  progress=None, verbose: bool = False):
         self.model = model
         self.parametrization = parametrization
@@ -507,8 +511,10 @@ class DynamicOptimization:
         d = sim["l_ce"] / mu.l_opt - 1.0
         sim["f_isom"] = np.exp(d * d * (-1.0 / GAMMA))
         x = np.sqrt(np.maximum(sim["l_ce"] ** 2 - mu.h2, 1e-12))
-        sim["f_ce"] = np.maximum(F * sim["l_ce"] / x
-                                 - mu.f_max * thelen_passive_force_length(sim["l_ce"] / mu.l_opt), 0)
+        # normalized contractile force demanded of the fibre (Fig. 5.6 step 3), unclipped
+        sim["f_ce_raw"] = (F * sim["l_ce"] / x) / mu.f_max \
+            - thelen_passive_force_length(sim["l_ce"] / mu.l_opt)
+        sim["f_ce"] = mu.f_max * np.maximum(sim["f_ce_raw"], 0.0)
         return sim
 
     def _ift_forces(self, q, v, acc, tau, dtau, ddtau):
@@ -539,8 +545,9 @@ class DynamicOptimization:
         return F, dF, ddF
 
     def _force_floor(self, t):
-        """IFM lower bounds (N, m): :func:`passive_floor` at the worst angle within the
-        tracking band ``q_d(t) +- tolerance`` (0.1 rad with a tracking weight)."""
+        """IFM starting forces (N, m): :func:`passive_floor` at the worst angle within the
+        tracking band ``q_d(t) +- tolerance`` (0.1 rad with a tracking weight), so that the
+        starts lie in the active region of the inverse model."""
         band = self.tracking_tolerance if self.tracking_tolerance is not None else 0.1
         qd = self.target(np.clip(t, self._t[0], self._t[-1]))
         out = None
@@ -599,6 +606,9 @@ class DynamicOptimization:
             u = sim["u"][self._ib]                           # (nb, B, m)
             cons += [np.moveaxis(u - self._lo, 1, 0).reshape(u.shape[1], -1),
                      np.moveaxis(self._hi - u, 1, 0).reshape(u.shape[1], -1)]
+        if self.design == "ifm":  # active region of the inverse model: f_ce >= F_CE_MIN (smooth)
+            f = sim["f_ce_raw"][self._ib] - F_CE_MIN
+            cons.append(np.moveaxis(10.0 * f, 1, 0).reshape(f.shape[1], -1))
         if self.tracking_tolerance is not None:
             err = sim["q"][self._ibt, :, self._jc] - self._qd[self._ibt, None]
             eps = self.tracking_tolerance        # scaled to O(1): 1 - |err|/eps >= 0
@@ -782,9 +792,7 @@ class DynamicOptimization:
                 self._lin_lo = np.full(self._A_lin.shape[0], self._lo)
                 self._lin_hi = np.full(self._A_lin.shape[0], self._hi)
             elif self.design == "ifm":
-                tb = (np.linspace(0.0, self.parametrization.period, nb) if self.free_period
-                      else np.linspace(self._t[0], self._t[-1], nb))
-                self._lin_lo = (self._force_floor(tb) / self._scale).ravel()
+                self._lin_lo = np.zeros(self._A_lin.shape[0])
                 self._lin_hi = np.tile(1.5 * self._mu.f_max / self._scale, nb)
             else:   # IFT: the torque the muscles can give, 1.5 F_max each
                 r = self._mu.R[:, 0]
@@ -875,7 +883,8 @@ class DynamicOptimization:
         restarts after line-search failures: ``(x, record)``."""
         from scipy.optimize import minimize
         fs = 1.0 / self._f_ref
-        M = self._preconditioner(xs) if self.precondition else np.eye(xs.size)
+        pre = self.design != "ff" if self.precondition is None else self.precondition
+        M = self._preconditioner(xs) if pre else np.eye(xs.size)
 
         def X(y):
             return xs + M @ y
