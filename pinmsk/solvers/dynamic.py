@@ -759,7 +759,15 @@ class DynamicOptimization:
         """Solve from ``x0`` -- a decision vector, or (k, n) for k starts (e.g. the ``x`` of
         another result as a warm start) -- or from the multi-start guesses; returns ``self``.
 
-        With ``n_jobs > 1`` the starts run in parallel worker processes (fork)."""
+        With ``n_jobs > 1`` the starts run in parallel worker processes (fork).  BLAS runs
+        on one thread: its products here are small (a few hundred rows), where threads only
+        add overhead -- and oversubscribe the cores when the starts run in parallel -- and
+        one thread makes the result the same on every machine."""
+        from threadpoolctl import threadpool_limits
+        with threadpool_limits(limits=1):
+            return self._fit(x0)
+
+    def _fit(self, x0):
         t0 = _time.perf_counter()
         self._setup()
         if x0 is None:
