@@ -22,15 +22,15 @@ import pinmsk  # noqa: E402
 from pinmsk.solvers.dynamic import simulate_ff  # noqa: E402
 
 
-def sim_time(model, T, steps, reps=5):
+def sim_time(model, T, steps, reps=5, tendon="rigid"):
     t = np.linspace(0, T, steps + 1)
     tm = 0.5 * (t[1:] + t[:-1])
     u = np.full((t.size, model.n_muscles), 0.1)
     um = np.full((tm.size, model.n_muscles), 0.1)
-    simulate_ff(model, t, u, um, [0.3], [0.0])
+    simulate_ff(model, t, u, um, [0.3], [0.0], tendon=tendon)
     t0 = time.perf_counter()
     for _ in range(reps):
-        simulate_ff(model, t, u, um, [0.3], [0.0])
+        simulate_ff(model, t, u, um, [0.3], [0.0], tendon=tendon)
     return (time.perf_counter() - t0) / reps
 
 
@@ -48,9 +48,11 @@ def main(argv=None):
     print(f"cores {os.cpu_count()}, load average {load:.2f}, multi-start workers {args.jobs}")
     finger = pinmsk.load_model("finger")
     forearm = pinmsk.load_model("forearm")
-    print(f"one FF simulation: finger 6 Hz period (200 RK4 steps) {1e3 * sim_time(finger, 1 / 6, 200):.1f} ms "
-          f"(thesis 400 ms); forearm 1.9 s (200 steps) {1e3 * sim_time(forearm, 1.9, 200):.1f} ms "
-          "(thesis 900 ms)")
+    print(f"one FF simulation as the optimizer runs it: finger 6 Hz period (200 RK4 steps) "
+          f"{1e3 * sim_time(finger, 1 / 6, 200):.1f} ms (thesis 400 ms); forearm 1.9 s (100 steps) "
+          f"{1e3 * sim_time(forearm, 1.9, 100):.1f} ms (thesis 900 ms); with a compliant tendon "
+          f"(IMEX) {1e3 * sim_time(finger, 1 / 6, 200, tendon='compliant'):.0f} / "
+          f"{1e3 * sim_time(forearm, 1.9, 100, tendon='compliant'):.0f} ms")
     rows = []
     res, sec = ft.solve(finger, 6.0, jobs=args.jobs)
     rows.append(("finger tapping 6 Hz, 6th-order polynomials (14 par.)", sec, 15 * 60, 10, res))

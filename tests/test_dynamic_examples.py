@@ -33,3 +33,7 @@ def test_forearm_quick(tmp_path):
     assert r["max_tracking_error"] <= 0.1 + 1e-3
     assert r["n_parameters"] == 77
     assert (tmp_path / "forearm_excitations_fourier.png").exists()
+    d = data["designs"]["ift"]
+    assert d["converged"] and d["max_tracking_error"] <= 0.1 + 1e-3
+    assert d["max_bound_violation"] < 1e-4
+    assert (tmp_path / "forearm_designs.png").exists()
