@@ -194,6 +194,14 @@ def cmd_contact_fit(args) -> int:
     return 0
 
 
+_OPTIMIZE_EPILOG = (
+    "[parametrization] design: 'ff' excitations (fully forward; [model] tendon = 'rigid' |\n"
+    "  'compliant'), 'ifm' muscle-tendon forces, 'ift' joint torque (1-dof models);\n"
+    "  kind: 'polynomial' | 'fourier' | 'spline'; free_period = true frees the Fourier period.\n"
+    "Every key of every section: pinmsk.solvers.dynamic.TASK_SCHEMA (unknown keys are errors).\n"
+    "Examples: data/tasks/*.toml")
+
+
 def cmd_optimize(args) -> int:
     from .solvers.dynamic import optimize_task
     res = optimize_task(args.task, args.output)
@@ -351,8 +359,12 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--plot", metavar="DIR", default=None, help="write GRF and COP figures (PNG) to DIR")
     c.set_defaults(func=cmd_contact_fit)
 
-    s = sub.add_parser("optimize", help="dynamic optimization from a task file (model, motion, "
-                                        "parametrization, objective, constraints)")
+    s = sub.add_parser(
+        "optimize", help="dynamic optimization from a task file (model, motion, "
+                         "parametrization, objective, constraints)",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Dynamic optimization with globally parametrized controls (thesis Ch. 3, 5.1).",
+        epilog=_OPTIMIZE_EPILOG)
     s.add_argument("task", help="TOML task file (examples in data/tasks/)")
     s.add_argument("-o", "--output", default=None, help="result trial (.sto/.csv), plus OUT.json")
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")

@@ -372,3 +372,30 @@ def test_finger_tapping_ifm_converges_and_ift_bounds_are_flagged(finger, capsys)
     res = DynamicOptimization(finger, design="ift", excitation_bounds=(-1.0, 2.0), **kw).fit().result_
     assert res.converged, res.status
     assert res.max_tracking_error < 0.005
+
+
+def test_shipped_ift_task_runs_from_the_cli(tmp_path, capsys):
+    """``pinmsk optimize`` on the shipped IFT task (Sec. 5.1): converged, tracking within the
+    task's 0.1 rad, the recovered excitations within [0, 1], written as a trial + JSON."""
+    from pathlib import Path
+
+    from pinmsk.cli import main
+    task = Path(__file__).resolve().parents[1] / "data" / "tasks" / "forearm_ift_j1.toml"
+    out = tmp_path / "ift.sto"
+    assert main(["optimize", str(task), "-o", str(out)]) == 0
+    summary = json.loads(out.with_suffix(".sto.json").read_text())
+    assert summary["converged"] and summary["design"] == "ift"
+    assert summary["max_tracking_error"] <= 0.1 + 1e-3 and summary["max_bound_violation"] < 1e-5
+    tr = pinmsk.io.read_trial(out)
+    u = np.column_stack([tr[f"{n}_excitation"] for n in ("BRD", "BICLH", "TRILH")])
+    assert u.min() >= -1e-5 and u.max() <= 1 + 1e-5 and u.max() > 0.05
+
+
+def test_free_period_from_a_task_file(tmp_path):
+    from pinmsk.solvers.dynamic import build_from_task
+    task = tmp_path / "t.toml"
+    task.write_text(TASK.replace('kind = "polynomial"', 'kind = "fourier"\nfree_period = true\n'
+                                 'period_bounds = [0.8, 1.5]').replace("order = 3", "n_harmonics = 1"))
+    prob = build_from_task(load_task(task))
+    assert prob.free_period and prob.period_bounds == (0.8, 1.5)
+    assert isinstance(prob.parametrization, Fourier)
