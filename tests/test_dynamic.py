@@ -365,6 +365,14 @@ def test_finger_tapping_ifm_converges_and_ift_bounds_are_flagged(finger, capsys)
     res = DynamicOptimization(finger, design="ifm", **kw).fit().result_
     assert res.converged, res.status
     assert res.max_bound_violation < 1e-5 and res.max_tracking_error < 0.02
+    # 7 Hz: SLSQP wanders off from every start and converges after restarting from its
+    # best point with shorter steps
+    T7 = 1.0 / 7.0
+    res = DynamicOptimization(finger, design="ifm", **{**kw, "parametrization": Polynomial(6, duration=T7),
+                                                       "target": Target("sine", amplitude=0.21, frequency=7.0),
+                                                       "step": T7 / 200}).fit().result_
+    assert res.converged, res.status
+    assert res.max_bound_violation < 1e-5 and res.max_tracking_error < 0.1
     res = DynamicOptimization(finger, design="ift", **kw).fit().result_
     assert not res.converged and res.max_bound_violation > 1e-3
     assert res.u.min() < -1e-3                                 # the lower bound is what fails

@@ -54,7 +54,7 @@ def inverse_muscle(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, *, ddF_mt=0.0, f_max, l_opt
                    force_length: Callable, force_partials: Callable,
                    activation_from_force: Callable, passive: Callable | None = None,
                    tau_rise: float = TAU_RISE, tau_fall: float = TAU_FALL,
-                   names: Sequence[str] | None = None) -> dict:
+                   names: Sequence[str] | None = None, fibre_floor=None) -> dict:
     """Generic inverse Hill muscle of thesis Fig. 5.6 (see the module docstring).
 
     Model pieces (all normalized): ``tendon_strain(f)``, ``tendon_stiffness(eps)``
@@ -62,6 +62,11 @@ def inverse_muscle(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, *, ddF_mt=0.0, f_max, l_opt
     ``force_partials(v_norm, a, f_isom) -> (f, df/dv_norm, df/da, df/df_isom)``;
     ``activation_from_force(f_ce, f_isom, v_norm) -> a``;
     ``passive(l_norm) -> (f_pe, df_pe)`` or None.  ``v_norm = v_ce / v_scale``.
+    ``fibre_floor`` (m, per muscle): where the unit is shorter than its tendon there is no
+    fibre state and this raises, unless a floor is given: the fibre's projection ``x`` is
+    then replaced by the smooth ``x_f (log(1 + exp(x / x_f)) + 1e-6)`` (``x`` wherever
+    ``x >> x_f``), so that an optimizer's wild iterate yields a finite, grossly infeasible
+    state instead of an exception.
 
     Returns a dict of ``(N, m)`` arrays: ``a, adot, u`` (activation, its rate,
     excitation), ``l_ce, v_ce, dv_ce`` (fibre length, velocity, acceleration)
@@ -89,9 +94,17 @@ def inverse_muscle(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, *, ddF_mt=0.0, f_max, l_opt
 
     # 2. pennation geometry, differentiated twice
     x = np.asarray(l_mt, dtype=float) - l_t
-    check_along_positive(x, l_mt, names, what="inverse muscle model")
     dx = np.asarray(dl_mt, dtype=float) - l_slack * deps
     ddx = np.asarray(ddl_mt, dtype=float) - l_slack * ddeps
+    if fibre_floor is not None:
+        # x_f (softplus(x / x_f) + 1e-6): x itself wherever x >> x_f, smooth, and never
+        # below 1e-6 x_f (the softplus alone underflows to 0 far below)
+        z = x / fibre_floor
+        sig = 0.5 * (1.0 + np.tanh(0.5 * z))
+        x = fibre_floor * (np.logaddexp(0.0, z) + 1e-6)
+        ddx = sig * ddx + sig * (1.0 - sig) / fibre_floor * dx * dx
+        dx = sig * dx
+    check_along_positive(x, l_mt, names, what="inverse muscle model")
     h = np.asarray(height, dtype=float)
     l_ce = np.sqrt(x * x + h * h)
     v_ce = x * dx / l_ce
@@ -131,7 +144,8 @@ def inverse_muscle(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, *, ddF_mt=0.0, f_max, l_opt
 def inverse_thelen2003(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, *, ddF_mt=0.0, f_max, l_opt, l_slack,
                        pennation, v_max=None, tendon_strain0: float = TENDON_STRAIN0,
                        tau_rise: float = TAU_RISE, tau_fall: float = TAU_FALL,
-                       names: Sequence[str] | None = None, fv_smooth: float = 0.0) -> dict:
+                       names: Sequence[str] | None = None, fv_smooth: float = 0.0,
+                       fibre_floor=None) -> dict:
     """Inverse Thelen 2003 muscle (compliant Thelen tendon + parallel element), Fig. 5.6 / Eq. 5.2-5.4.
 
     Activation from Eq. A.9 by vectorised Newton (the activation scaling of
@@ -140,6 +154,7 @@ def inverse_thelen2003(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, *, ddF_mt=0.0, f_max, l
     units, :func:`~pinmsk.muscles.thelen2003.thelen_fiber_force_partials`): without
     it the excitation jumps wherever a fibre reverses, because Eq. 5.4 contains
     ``df/dv``; dynamic optimization of the IFM/IFT designs needs it continuous.
+    ``fibre_floor``: see :func:`inverse_muscle`.
     """
     l_opt = np.asarray(l_opt, dtype=float)
     v_max = 10.0 * l_opt if v_max is None else np.asarray(v_max, dtype=float)
@@ -157,7 +172,7 @@ def inverse_thelen2003(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, *, ddF_mt=0.0, f_max, l
             f, fi, v, names=names, smooth=fv_smooth),
         passive=lambda l: (thelen_passive_force_length(l),
                            thelen_passive_force_length_derivative(l)),
-        tau_rise=tau_rise, tau_fall=tau_fall, names=names)
+        tau_rise=tau_rise, tau_fall=tau_fall, names=names, fibre_floor=fibre_floor)
 
 
 def inverse_nagano_gerritsen(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, *, ddF_mt=0.0, f_max, l_opt,

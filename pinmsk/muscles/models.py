@@ -286,19 +286,21 @@ class Thelen2003(_MuscleModel):
                                        pennation=self.pennation, v_max=self.v_max,
                                        tendon_strain0=self.tendon_strain0, names=self.names)
 
-    def inverse(self, F_mt, dF_mt, l_mt, dl_mt, ddl_mt, ddF_mt=0.0, *, fv_smooth: float = 0.0):
+    def inverse(self, F_mt, dF_mt, l_mt, dl_mt, ddl_mt, ddF_mt=0.0, *, fv_smooth: float = 0.0,
+                fibre_floor=None):
         """Activation, its rate and excitation from muscle-tendon force (thesis Fig. 5.6, Eq. 5.2-5.4).
 
         ``ddF_mt`` (the force's second derivative) enters the fibre acceleration;
-        the default 0 neglects it (see :mod:`pinmsk.muscles.inverse`).  ``fv_smooth``:
-        see :func:`~pinmsk.muscles.inverse.inverse_thelen2003`.
+        the default 0 neglects it (see :mod:`pinmsk.muscles.inverse`).  ``fv_smooth`` and
+        ``fibre_floor``: see :func:`~pinmsk.muscles.inverse.inverse_thelen2003`.
         Returns ``{"a", "adot", "u", "l_ce", "v_ce", "dv_ce", "l_t"}``.
         """
         return inverse_thelen2003(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, ddF_mt=ddF_mt,
                                   f_max=self.f_max, l_opt=self.l_opt, l_slack=self.l_slack,
                                   pennation=self.pennation, v_max=self.v_max,
                                   tendon_strain0=self.tendon_strain0, tau_rise=self.tau_rise,
-                                  tau_fall=self.tau_fall, names=self.names, fv_smooth=fv_smooth)
+                                  tau_fall=self.tau_fall, names=self.names, fv_smooth=fv_smooth,
+                                  fibre_floor=fibre_floor)
 
 
 class NaganoGerritsen(_MuscleModel):

@@ -114,6 +114,7 @@ __all__ = ["BatchSkeleton", "simulate_ff", "simulate_skeleton", "muscle_inverse"
 DESIGNS = ("ff", "ifm", "ift")
 FLOOR = 0.005   # IFT: muscle forces stay this fraction of F_max above the passive floor
 F_CE_MIN = 0.002  # IFM: least contractile force (/ F_max), keeps the inverse model active
+U_STEP = 0.1      # IFM/IFT preconditioning: excitation change (RMS) of a unit step
 
 
 def passive_floor(mu: BatchMuscles, l_mt, dl_mt=None, ddl_mt=None):
@@ -503,7 +504,7 @@ class DynamicOptimization:
         qf, vf = flat(q), flat(v)
         inv = mu.mtu.inverse(flat(F), flat(dF), mu.lengths(qf), mu.velocities(qf, vf),
                              mu.path.accelerations(qf, vf, flat(acc)), flat(ddF),
-                             fv_smooth=self.fv_smooth)
+                             fv_smooth=self.fv_smooth, fibre_floor=1e-3 * mu.l_opt)
         sim = {"q": q, "v": v, "acc": acc, "force": F}
         for k in ("a", "u", "l_ce", "v_ce"):
             sim[k] = inv[k].reshape(n, B, -1)
@@ -650,8 +651,34 @@ class DynamicOptimization:
         self._cache[key] = out
         return out
 
+    def _rows(self, X):
+        """Objective and constraints ``(f (B,), c (B, nc) or None)`` of decision vectors ``X``,
+        one batch; non-finite where a simulation failed or blew up (then row by row, so that
+        one bad perturbation does not spoil the others)."""
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            try:
+                sim = self.simulate(X)
+                return self._objective_of(self._terms(sim)), self._constraints_of(sim)
+            except (TrialError, ConvergenceError):
+                pass
+            f = np.full(X.shape[0], np.nan)
+            c = None if not self._c_size else np.full((X.shape[0], self._c_size), np.nan)
+            for b in range(X.shape[0]):
+                try:
+                    sim = self.simulate(X[b:b + 1])
+                except (TrialError, ConvergenceError):
+                    continue
+                f[b] = self._objective_of(self._terms(sim))[0]
+                if c is not None:
+                    c[b] = self._constraints_of(sim)[0]
+            return f, c
+
     def _gradient(self, x):
-        """``(df/dx, dc/dx)`` by forward differences, all perturbations in one batch."""
+        """``(df/dx, dc/dx)`` by finite differences, all perturbations in one batch.
+
+        Central differences; where one side of a perturbation fails (the inverse muscle
+        model has no fibre state there, or the simulation blows up) the other side is
+        used one-sided, so an iterate near such a region keeps a usable gradient."""
         key = x.tobytes()
         hit = self._gcache.get(key)
         if hit is not None:
@@ -659,22 +686,33 @@ class DynamicOptimization:
         f0, c0 = self._value(x)
         h = self.fd_step * np.maximum(1.0, np.abs(x))
         n = x.size
-        if self.fd == "central":
-            X = np.vstack([x[None, :] + np.diag(h), x[None, :] - np.diag(h)])
-        else:
-            X = x[None, :] + np.diag(h)
-        sim = self.simulate(X)
-        f = self._objective_of(self._terms(sim))
-        c = self._constraints_of(sim)
-        if self.fd == "central":
-            g = (f[:n] - f[n:]) / (2 * h)
-            dc = None if c is None else ((c[:n] - c[n:]) / (2 * h[:, None])).T
-        else:
-            g = (f - f0) / h
-            dc = None if c is None else ((c - c0[None, :]) / h[:, None]).T
-        if not np.all(np.isfinite(g)) or (dc is not None and not np.all(np.isfinite(dc))):
-            raise SolverError("a finite-difference simulation blew up (non-finite state); "
-                              "reduce the step")
+        central = self.fd == "central"
+        X = np.vstack([x + np.diag(h), x - np.diag(h)]) if central else x + np.diag(h)
+        f, c = self._rows(X)
+        fp, fm = f[:n], (f[n:] if central else np.full(n, np.nan))
+        cp = None if c is None else c[:n]
+        cm = None if c is None else (c[n:] if central else np.full_like(cp, np.nan))
+
+        def ok(fv, cv):
+            good = np.isfinite(fv)
+            return good if cv is None else good & np.all(np.isfinite(cv), axis=1)
+
+        okp, okm = ok(fp, cp), ok(fm, cm)
+        base_ok = np.isfinite(f0) and (c0 is None or np.all(np.isfinite(c0)))
+        if not np.all((okp & okm) | ((okp | okm) & base_ok)):
+            raise SolverError("a finite-difference simulation failed on both sides of the "
+                              "current point (non-finite state or no fibre state); reduce "
+                              "the step or change the start")
+        both = okp & okm
+        w = np.where(both, 2.0 * h, h)                    # (f+ - f-)/2h, (f+ - f0)/h, (f0 - f-)/h
+        hi = np.where(okp, fp, f0)
+        lo = np.where(both | ~okp, np.where(okm, fm, f0), f0)
+        g = (hi - lo) / w
+        dc = None
+        if c is not None:
+            chi = np.where(okp[:, None], cp, c0[None, :])
+            clo = np.where((both | ~okp)[:, None], np.where(okm[:, None], cm, c0[None, :]), c0[None, :])
+            dc = ((chi - clo) / w[:, None]).T
         self._gcache.clear()
         self._gcache[key] = (g, dc)
         if self.progress is not None:
@@ -883,72 +921,96 @@ class DynamicOptimization:
             Ht = (self.tracking_weight * 2.0 / (peak * self._f_ref * J.shape[0])) * (J.T @ J)
         else:
             Ht = (J.T @ J) / (J.shape[0] * self.tracking_tolerance ** 2)
+        if self.design != "ff":
+            # the recovered excitations contain F'' (Eq. 5.4): as stiff in the coefficients
+            # as the tracking, so a unit step should move them by U_STEP RMS at most
+            u = sim["u"][self._ib].reshape(self._ib.size, 2 * n, -1)
+            Ju = np.moveaxis((u[:, :n] - u[:, n:]) / (2.0 * h[:, None]), 1, 2).reshape(-1, n)
+            if np.all(np.isfinite(Ju)):
+                Ht = Ht + (Ju.T @ Ju) / (Ju.shape[0] * U_STEP ** 2)
         L = np.linalg.cholesky(np.eye(n) + Ht)
         return np.linalg.inv(L).T
 
     def _solve_start(self, k, xs):
-        """One SLSQP run in preconditioned variables (:meth:`_preconditioner`), with
-        restarts after line-search failures: ``(x, record)``."""
+        """SLSQP in preconditioned variables (:meth:`_preconditioner`) from ``xs``: ``(x, record)``.
+
+        After a line-search failure (status 8) or incompatible linearized constraints (4)
+        SLSQP restarts -- with a fresh quasi-Newton Hessian, from the best point seen
+        (feasible and lowest, else least infeasible) -- while that still improves it, at
+        most ``restarts`` times; when the failed run had wandered off (ended worse than
+        that best point) the restart takes steps a third as large."""
         from scipy.optimize import minimize
         fs = 1.0 / self._f_ref
         pre = self.design != "ff" if self.precondition is None else self.precondition
-        M = self._preconditioner(xs) if pre else np.eye(xs.size)
-
-        def X(y):
-            return xs + M @ y
-
-        cons = []
         A = self._A_lin
-        if A is not None:
-            lo, hi = self._lin_lo, self._lin_hi
-            AM = A @ M
-            AMM = np.vstack([AM, -AM])
-            Ax = A @ xs
-            cons.append({"type": "ineq", "fun": lambda y: np.concatenate([Ax + AM @ y - lo,
-                                                                          hi - Ax - AM @ y]),
-                         "jac": lambda y: AMM})
-        if self.tracking_tolerance is not None or self.design != "ff":
-            cons.append({"type": "ineq", "fun": lambda y: self._value(X(y))[1],
-                         "jac": lambda y: self._gradient(X(y))[1] @ M})
-
-        def fun(y):
-            return fs * self._value(X(y))[0]
-
-        def jac(y):
-            return fs * (self._gradient(X(y))[0] @ M)
-
-        y0 = np.zeros(xs.size)
         opts = {"maxiter": self.maxiter, "ftol": self.tol}
         ts = _time.perf_counter()
         deadline = getattr(self, "_deadline", None)
         stopped = []
+        best = {"key": (True, np.inf), "x": xs}
 
-        def callback(xk):
+        def rank(x):
+            f = self._value(x)[0]
+            viol = self._violation(x, A)
+            bad = not viol <= self.constraint_tol
+            return (bad, viol if bad else f)
+
+        def callback(yk):
             if deadline is not None and _time.time() > deadline.value:
                 stopped.append(True)
                 raise StopIteration
 
+        def run(xc, M):
+            def X(y):
+                return xc + M @ y
+
+            cons = []
+            if A is not None:
+                lo, hi = self._lin_lo, self._lin_hi
+                AM = A @ M
+                AMM = np.vstack([AM, -AM])
+                Ax = A @ xc
+                cons.append({"type": "ineq", "fun": lambda y: np.concatenate([Ax + AM @ y - lo,
+                                                                              hi - Ax - AM @ y]),
+                             "jac": lambda y: AMM})
+            if self.tracking_tolerance is not None or self.design != "ff":
+                cons.append({"type": "ineq", "fun": lambda y: self._value(X(y))[1],
+                             "jac": lambda y: self._gradient(X(y))[1] @ M})
+
+            def fun(y):
+                x = X(y)
+                key = rank(x)
+                if key < best["key"]:
+                    best["key"], best["x"] = key, x
+                return fs * self._value(x)[0]
+
+            def jac(y):
+                return fs * (self._gradient(X(y))[0] @ M)
+
+            res = minimize(fun, np.zeros(xc.size), jac=jac, method="SLSQP", constraints=cons,
+                           options=opts, callback=callback)
+            return res, X(res.x)
+
         try:
-            res = minimize(fun, y0, jac=jac, method="SLSQP", constraints=cons, options=opts,
-                           callback=callback)
+            M = self._preconditioner(xs) if pre else np.eye(xs.size)
+            res, x = run(xs, M)
             nit, nfev = res.nit, res.nfev
-            # Line-search trouble (status 8) or incompatible linearized constraints (4):
-            # restart with a fresh quasi-Newton Hessian while that still improves the
-            # objective, at most ``restarts`` times.
             for _ in range(self.restarts):
                 if res.success or res.status not in (4, 8) or stopped:
                     break
-                f_before = float(res.fun)
-                res = minimize(fun, res.x, jac=jac, method="SLSQP", constraints=cons,
-                               options=opts, callback=callback)
+                before = best["key"]
+                if rank(x) > before:         # wandered off: restart nearer, with shorter steps
+                    M = M / 3.0
+                res, x = run(best["x"], M)
                 nit, nfev = nit + res.nit, nfev + res.nfev
-                if not res.success and float(res.fun) > f_before - self.tol:
+                if not res.success and not best["key"] < before:
                     break
+            if not res.success and best["key"] < rank(x):
+                x = best["x"]
         except (SolverError, FloatingPointError, ValueError) as exc:
             return None, {"start": k, "ok": False, "success": False, "message": f"failed: {exc}",
                           "objective": float("nan"), "violation": float("inf"), "nit": 0,
                           "nfev": 0, "seconds": _time.perf_counter() - ts}
-        x = X(res.x)
         viol = self._violation(x, A)
         f = float(self._value(x)[0])
         success = bool(res.success) and not stopped
