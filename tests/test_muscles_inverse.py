@@ -207,3 +207,25 @@ def test_bad_inputs():
         mus.inverse(F, 0.0, L, 0.0, 0.0)
     with pytest.raises(TrialError, match=r"no room for the fibre at muscle 0 \('Gl'\)"):
         mus.inverse(np.full(3, 500.0), 0.0, mus.l_slack * 0.9, 0.0, 0.0)
+
+
+def test_fibre_floor_keeps_wild_states_finite_and_normal_ones_exact():
+    """``fibre_floor`` (for optimizers): a unit shorter than its tendon gives a finite,
+    grossly infeasible state instead of an error; a normal state is unchanged."""
+    mus = Thelen2003(f_max=1000.0, l_opt=0.1, l_slack=0.2, pennation=0.1)
+    t = np.linspace(0, 1, 51)
+    l_mt = 0.29 + 0.01 * np.sin(2 * np.pi * t)
+    dl, ddl = 0.02 * np.pi * np.cos(2 * np.pi * t), -0.04 * np.pi ** 2 * np.sin(2 * np.pi * t)
+    F, dF, ddF = 300 + 50 * np.sin(2 * np.pi * t), 100 * np.pi * np.cos(2 * np.pi * t), 0 * t
+    a = mus.inverse(F, dF, l_mt, dl, ddl, ddF)
+    b = mus.inverse(F, dF, l_mt, dl, ddl, ddF, fibre_floor=1e-3 * 0.1)
+    for k in ("a", "adot", "u", "l_ce", "v_ce"):
+        np.testing.assert_array_equal(a[k], b[k])
+    from pinmsk.muscles import thelen_tendon_strain
+    F = np.full_like(t, 300.0)
+    short = 0.2 * (1 + thelen_tendon_strain(0.3)) - 2e-4 + 0 * t    # 0.2 mm shorter than the tendon
+    with pytest.raises(TrialError, match="no room for the fibre"):
+        mus.inverse(F, 0 * t, short, 0 * t, 0 * t, ddF)
+    wild = mus.inverse(F, 0 * t, short, 0 * t, 0 * t, ddF, fibre_floor=1e-4)
+    assert all(np.all(np.isfinite(wild[k])) for k in ("a", "adot", "u"))
+    assert np.min(wild["u"]) > 100          # far outside the bounds 0 <= u <= 1

@@ -64,9 +64,9 @@ def inverse_muscle(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, *, ddF_mt=0.0, f_max, l_opt
     ``passive(l_norm) -> (f_pe, df_pe)`` or None.  ``v_norm = v_ce / v_scale``.
     ``fibre_floor`` (m, per muscle): where the unit is shorter than its tendon there is no
     fibre state and this raises, unless a floor is given: the fibre's projection ``x`` is
-    then replaced by the smooth ``x_f (log(1 + exp(x / x_f)) + 1e-6)`` (``x`` wherever
-    ``x >> x_f``), so that an optimizer's wild iterate yields a finite, grossly infeasible
-    state instead of an exception.
+    then replaced by the smooth ``x_f (log(1 + exp(x / x_f)) + 1e-6 sigmoid(-x / x_f))``
+    (``x`` itself where ``x > 30 x_f``), so that an optimizer's wild iterate yields a finite,
+    grossly infeasible state instead of an exception.
 
     Returns a dict of ``(N, m)`` arrays: ``a, adot, u`` (activation, its rate,
     excitation), ``l_ce, v_ce, dv_ce`` (fibre length, velocity, acceleration)
@@ -97,13 +97,17 @@ def inverse_muscle(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, *, ddF_mt=0.0, f_max, l_opt
     dx = np.asarray(dl_mt, dtype=float) - l_slack * deps
     ddx = np.asarray(ddl_mt, dtype=float) - l_slack * ddeps
     if fibre_floor is not None:
-        # x_f (softplus(x / x_f) + 1e-6): x itself wherever x >> x_f, smooth, and never
-        # below 1e-6 x_f (the softplus alone underflows to 0 far below)
+        # x_f g(x / x_f), g(z) = softplus(z) + 1e-6 sigmoid(-z): smooth, never below
+        # 1e-6 x_f, and x itself (to 1e-13 x_f) where z > 30, where x is taken as is
         z = x / fibre_floor
         sig = 0.5 * (1.0 + np.tanh(0.5 * z))
-        x = fibre_floor * (np.logaddexp(0.0, z) + 1e-6)
-        ddx = sig * ddx + sig * (1.0 - sig) / fibre_floor * dx * dx
-        dx = sig * dx
+        s1 = sig * (1.0 - sig)
+        g1 = sig - 1e-6 * s1
+        g2 = s1 - 1e-6 * s1 * (1.0 - 2.0 * sig)
+        far = z > 30.0
+        x = np.where(far, x, fibre_floor * (np.logaddexp(0.0, z) + 1e-6 * (1.0 - sig)))
+        ddx = np.where(far, ddx, g1 * ddx + g2 / fibre_floor * dx * dx)
+        dx = np.where(far, dx, g1 * dx)
     check_along_positive(x, l_mt, names, what="inverse muscle model")
     h = np.asarray(height, dtype=float)
     l_ce = np.sqrt(x * x + h * h)
