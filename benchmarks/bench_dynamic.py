@@ -4,7 +4,11 @@ Thesis CPU times to the accepted optimum (GA + SQP + pattern search, MATLAB):
 finger tapping 15 min, forearm with Fourier series 30 min, forearm with
 polynomials 50 min; one model call 0.4 s (finger) and 0.9 s (forearm).
 
-Run:  python benchmarks/bench_dynamic.py [--jobs 2] [--skip-polynomial]
+Run:  python benchmarks/bench_dynamic.py [--jobs 2] [--skip-polynomial] [--designs]
+
+``--designs`` adds the robustness sweep of the inverse-forward designs (Sec. 5.1): IFM
+and IFT on the forearm for J1-J5 with both parametrizations, and IFM finger tapping at
+2-7 Hz, each from the automatic guesses (about 2.5 min).
 """
 from __future__ import annotations
 
@@ -40,6 +44,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--skip-polynomial", action="store_true")
+    ap.add_argument("--designs", action="store_true", help="IFM/IFT robustness sweep")
     args = ap.parse_args(argv)
     try:
         load = os.getloadavg()[0]
@@ -66,7 +71,38 @@ def main(argv=None):
         flag = "converged" if res.converged else "NOT CONVERGED"
         print(f"{name:55s} {sec:8.1f} {thesis:9d} {thesis / sec:6.0f}x {'<=' + str(target) + ' s':>7s}  "
               f"{flag}, J = {res.objective:.4g}, {res.nit} it.")
+    if args.designs:
+        design_sweep(forearm, finger, fa, jobs=args.jobs)
     return rows
+
+
+def design_sweep(forearm, finger, fa, *, jobs):
+    """IFM/IFT from the automatic guesses: converged or not, objective, seconds."""
+    from pinmsk.solvers.dynamic import DynamicOptimization, Target
+    from pinmsk.solvers.parametrization import Polynomial
+    n_ok = n = 0
+    print(f"{'design':6s} {'controls':10s} {'obj.':4s} {'J':>10s} {'seconds':>8s}  result")
+    for design in ("ifm", "ift"):
+        for kind in ("fourier", "polynomial"):
+            for J in fa.OBJECTIVES:
+                res, sec = fa.solve(forearm, J, kind, jobs=jobs, design=design)
+                n, n_ok = n + 1, n_ok + res.converged
+                print(f"{design:6s} {kind:10s} {J:4s} {res.objective:10.4g} {sec:8.1f}  "
+                      f"{'converged' if res.converged else 'NOT CONVERGED: ' + res.status}")
+    for hz in (2.0, 4.0, 5.0, 6.0, 7.0):
+        T = 1.0 / hz
+        prob = DynamicOptimization(
+            finger, parametrization=Polynomial(6, duration=T), design="ifm",
+            target=Target("sine", amplitude=0.21, frequency=hz), step=T / 200,
+            objective={"kind": "effort", "exponent": 2, "normalize": False},
+            tracking_weight=0.9, n_starts=3, n_jobs=jobs, tol=1e-6)
+        t0 = time.perf_counter()
+        res = prob.fit().result_
+        n, n_ok = n + 1, n_ok + res.converged
+        print(f"finger IFM {hz:3.0f} Hz: J {res.objective:.4g} (J2 {res.terms['tracking']:.3g}) "
+              f"{time.perf_counter() - t0:6.1f} s  "
+              f"{'converged' if res.converged else 'NOT CONVERGED: ' + res.status}")
+    print(f"inverse-forward designs: {n_ok} of {n} problems converged from the automatic guesses")
 
 
 if __name__ == "__main__":
