@@ -376,6 +376,7 @@ def test_finger_tapping_ifm_converges_and_ift_bounds_are_flagged(finger, capsys)
     res = DynamicOptimization(finger, design="ift", **kw).fit().result_
     assert not res.converged and res.max_bound_violation > 1e-3
     assert res.u.min() < -1e-3                                 # the lower bound is what fails
+    assert "below its lower bound 0" in res.status and "excitation of '" in res.status
     assert "did not converge" in capsys.readouterr().err
     res = DynamicOptimization(finger, design="ift", excitation_bounds=(-1.0, 2.0), **kw).fit().result_
     assert res.converged, res.status
@@ -407,3 +408,34 @@ def test_free_period_from_a_task_file(tmp_path):
     prob = build_from_task(load_task(task))
     assert prob.free_period and prob.period_bounds == (0.8, 1.5)
     assert isinstance(prob.parametrization, Fourier)
+
+
+@pytest.mark.parametrize("arms", ["constant", "angle"])
+def test_ift_sharing_is_exact_and_its_derivatives_analytic(arms):
+    """IFT forces (angle-dependent arms too): r(q).F = tau exactly, every force above the
+    passive floor, and F', F'' equal the time derivatives of F along a motion (finite
+    differences on a fine grid)."""
+    from pinmsk.solvers.dynamic import passive_floor
+    fa = pinmsk.load_model("forearm", moment_arms=arms)
+    prob = DynamicOptimization(fa, parametrization=Fourier(2, period=1.9), design="ift",
+                               target=Target("cycle", amplitude=1.6, period=1.9, offset=0.3),
+                               step=0.01, tracking_tolerance=0.1)
+    prob._setup()
+    t = np.linspace(0.0, 1.0, 20001)
+    w = 2 * np.pi / 1.9
+    q = 0.3 + 0.8 * (1 - np.cos(w * t))
+    v, a = 0.8 * w * np.sin(w * t), 0.8 * w * w * np.cos(w * t)
+    tau = 3.0 * np.sin(3 * t) - 1.0                   # N m, crosses zero
+    dtau, ddtau = 9.0 * np.cos(3 * t), -27.0 * np.sin(3 * t)
+    col = lambda x: x[:, None, None]                   # noqa: E731  (N, B=1, 1)
+    F, dF, ddF = (y[:, 0] for y in prob._ift_forces(col(q), col(v), col(a), col(tau), col(dtau),
+                                                     col(ddtau)))
+    r = fa.muscles.path.moment_arms(q[:, None])[:, :, 0]
+    np.testing.assert_allclose(np.sum(r * F, axis=1), tau, rtol=0, atol=1e-9)
+    assert np.all(F >= passive_floor(prob._mu, prob._mu.lengths(q[:, None]))[0] * (1 - 1e-12))
+    h = t[1] - t[0]
+    num1 = np.gradient(F, h, axis=0)
+    num2 = np.gradient(dF, h, axis=0)
+    inner = slice(10, -10)
+    np.testing.assert_allclose(dF[inner], num1[inner], rtol=0, atol=1e-5 * np.abs(dF).max())
+    np.testing.assert_allclose(ddF[inner], num2[inner], rtol=0, atol=1e-4 * np.abs(ddF).max())

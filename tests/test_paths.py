@@ -65,6 +65,20 @@ def test_moment_arm_is_minus_dlength_dq(path):
         np.testing.assert_allclose(r[:, :, j], fd, rtol=0, atol=1e-8)
 
 
+def test_moment_arm_derivatives_are_finite_differences(path):
+    q = _random_q(path, 7, 2)
+    h = 1e-5
+    for order in (1, 2):
+        d = path.moment_arm_derivative(q, order)
+        lower = path.moment_arms if order == 1 else (lambda x: path.moment_arm_derivative(x, 1))
+        for j in range(path.nv):
+            dq = np.zeros(path.nv)
+            dq[j] = h
+            fd = (lower(q + dq) - lower(q - dq))[:, :, j] / (2 * h)
+            np.testing.assert_allclose(d[:, :, j], fd, rtol=0, atol=1e-7)
+    assert path.moment_arm_derivative(q[0], 3).shape == (path.n_muscles, path.nv)
+
+
 def _trajectory(path, t):
     """q(t) = q0 + A sin(w t + phi) with its exact first and second derivatives."""
     rng = np.random.default_rng(3)

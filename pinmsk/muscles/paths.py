@@ -256,6 +256,17 @@ class MomentArmPath:
         out = _horner(self._coeffs, q)
         return out[0] if single else out
 
+    def moment_arm_derivative(self, q, order: int = 1) -> np.ndarray:
+        """``d^order r_ij / dq_j^order`` (each arm depends on its own coordinate only):
+        (N, m, nv), or (m, nv) for one frame."""
+        (q,), single = self._frames(q=q)
+        c = np.asarray(self._coeffs)
+        for _ in range(int(order)):
+            K = c.shape[2]
+            c = c[:, :, 1:] * np.arange(1, K) if K > 1 else np.zeros(c.shape[:2] + (1,))
+        out = _horner(c, q)
+        return out[0] if single else out
+
     def velocities(self, q, v) -> np.ndarray:
         """Lengthening velocities dl/dt = -sum_j r_j v_j: (N, m), or (m,)."""
         (q, v), single = self._frames(q=q, v=v)

@@ -27,8 +27,9 @@ Simulation designs (Sec. 5.1)
     forces are the passive floor plus the torque above it shared among the
     agonists in the minimum ``sum (F_i/F_max,i)^2`` ratios, blended across zero
     torque by a softplus so that ``F, F', F''`` are exact and smooth
-    (:meth:`DynamicOptimization._ift_forces`; 1-dof models with constant
-    moment arms), then the inverse muscle model as in IFM.  The sharing is
+    (:meth:`DynamicOptimization._ift_forces`; 1-dof models, moment arms
+    constant or angle-dependent with a fixed sign), then the inverse muscle
+    model as in IFM.  The sharing is
     fixed, so the excitation bounds can be infeasible where IFM meets them
     (the optimizer then reports the violated bound, never a solution).
 
@@ -412,10 +413,11 @@ class DynamicOptimization:
             floor = np.max(self._force_floor(self._t), axis=0)
             self._n_sig, self._scale = m, floor + tau_peak / max(r_max, 1e-9)
         else:
-            if nv != 1 or not self._mu.constant_arms:
-                raise ModelError("design 'ift' is implemented for 1-dof models with constant "
-                                 "moment arms (exact analytic force derivatives); use 'ifm'")
-            tau_cap = float(np.abs(self._mu.R[:, 0] * self._mu.f_max).sum())
+            if nv != 1:
+                raise ModelError(f"design 'ift' shares one joint torque among the muscles: it "
+                                 f"needs a 1-dof model ('{model.name}' has {nv}); use 'ifm'")
+            self._ift_arms()
+            tau_cap = float(np.sum(self._r_max * self._mu.f_max))
             self._n_sig, self._scale = 1, np.array([max(tau_peak, 1e-3 * tau_cap)])
             self._soft = 0.01 * tau_cap       # softplus width of the agonist sharing (N m)
         self._npar = par.n_params * self._n_sig
@@ -429,12 +431,6 @@ class DynamicOptimization:
                                  "0 < lower <= 1 <= upper (factors on the nominal period)")
             self._nx = self._npar + 1
         self._rows_period = None
-        if self.design == "ift":
-            r = self._mu.R[:, 0]
-            w = self._mu.f_max ** 2
-            pos, neg = r > 0, r < 0
-            self._S_pos = np.where(pos, r * w, 0.0) / np.sum((r * r * w)[pos])
-            self._S_neg = np.where(neg, r * w, 0.0) / np.sum((r * r * w)[neg])
         self._cache = {}
         self._gcache = {}
         self._c_size = None
@@ -518,32 +514,87 @@ class DynamicOptimization:
         sim["f_ce"] = mu.f_max * np.maximum(sim["f_ce_raw"], 0.0)
         return sim
 
+    def _ift_arms(self):
+        """Agonist groups of IFT: each muscle's moment-arm sign, which must hold over the
+        reachable angles (target +- 0.5 rad), and its largest arm there (m)."""
+        qd = self.target(self._t)
+        Q = np.tile(self._q0, (qd.size * 3, 1))
+        Q[:, self._jc] = np.concatenate([qd - 0.5, qd, qd + 0.5])
+        r = self._mu.path.moment_arms(Q)[:, :, 0]
+        sign = np.sign(r[qd.size])                        # at the start of the motion
+        flips = np.any(np.sign(r) != sign, axis=0) | (sign == 0)
+        if np.any(flips):
+            bad = ", ".join(n for n, f in zip(self.model.muscle_names, flips) if f)
+            raise ModelError(f"design 'ift': the moment arm of {bad} changes sign (or is 0) within "
+                             "0.5 rad of the motion, so no fixed agonist sharing exists; use 'ifm'")
+        if not (np.any(sign > 0) and np.any(sign < 0)):
+            raise ModelError("design 'ift' needs agonists on both sides of the joint (moment "
+                             "arms of both signs); use 'ifm'")
+        self._pos = sign > 0
+        self._r_max = np.max(np.abs(r), axis=0)
+
+    def _ift_share(self, q, v, acc):
+        """Sharing ratios ``S(q) = w r / sum_agonists w r^2`` (``w = F_max^2``: minimum
+        ``sum (F/F_max)^2``), for both agonist groups in one array, with ``dS/dt`` and
+        ``d2S/dt2`` along the motion; also ``r, dr/dt, d2r/dt2``.  Inputs (K,) angles etc."""
+        path, w = self._mu.path, self._mu.f_max ** 2
+        Q = q[:, None]
+        r = path.moment_arms(Q)[:, :, 0]
+        r1 = path.moment_arm_derivative(Q, 1)[:, :, 0]
+        r2 = path.moment_arm_derivative(Q, 2)[:, :, 0]
+        g = self._pos[None, :]
+        D = {k: np.sum(np.where(g == k, x, 0.0), axis=1, keepdims=True)
+             for k, x in ((True, w * r * r), (False, w * r * r))}
+        D = np.where(g, D[True], D[False])                  # each muscle's group sum
+        Dg1 = 2.0 * w * r * r1
+        Dg2 = 2.0 * w * (r1 * r1 + r * r2)
+        D1 = np.where(g, np.sum(np.where(g, Dg1, 0), 1, keepdims=True),
+                      np.sum(np.where(g, 0, Dg1), 1, keepdims=True))
+        D2 = np.where(g, np.sum(np.where(g, Dg2, 0), 1, keepdims=True),
+                      np.sum(np.where(g, 0, Dg2), 1, keepdims=True))
+        S = w * r / D
+        Sq = w * (r1 * D - r * D1) / D ** 2
+        Sqq = w * ((r2 * D - r * D2) / D ** 2 - 2.0 * (r1 * D - r * D1) * D1 / D ** 3)
+        vv, aa = v[:, None], acc[:, None]
+        return (S, Sq * vv, Sqq * vv * vv + Sq * aa,
+                r, r1 * vv, r2 * vv * vv + r1 * aa)
+
     def _ift_forces(self, q, v, acc, tau, dtau, ddtau):
         """IFT muscle forces ``F, F', F''`` (N, B, m) from the joint torque and its exact derivatives.
 
-        ``F = F_floor(q) + S+ phi(tau') + S- (tau' - phi(tau'))`` with ``tau' = tau - r.F_floor``
+        ``F = F_floor + S+ phi(tau') + S- (tau' - phi(tau'))`` with ``tau' = tau - r.F_floor``
         and ``phi(x) = c log(1 + exp(x/c))``: the torque above the passive floor
         (:func:`passive_floor`) goes to the agonists in the minimum ``sum (F_i/F_max,i)^2``
-        ratios ``S+`` (flexion) or ``S-`` (extension), blended by the softplus ``phi``
+        ratios ``S+(q)`` (flexion) or ``S-(q)`` (extension), blended by the softplus ``phi``
         of width ``c`` (a co-contraction of ``c log 2`` at zero torque) so that ``F`` is
-        C-infinity in ``tau``; ``r.F = tau`` exactly.  1-dof, constant moment arms ``r``.
+        C-infinity in ``tau``; ``r(q).F = tau`` exactly.  1-dof; the moment arms may depend
+        on the angle (their derivatives enter ``F'`` and ``F''`` through ``q', q''``).
         """
-        mu, r, c = self._mu, self._mu.R[:, 0], self._soft
+        mu, c, m = self._mu, self._soft, self._mu.m
         shp = q.shape[:2]
-        flat = lambda x: x.reshape(-1, x.shape[-1])   # noqa: E731
-        Fl, dFl, ddFl = passive_floor(mu, mu.lengths(flat(q)), mu.velocities(flat(q), flat(v)),
-                                      -(flat(acc) @ mu.R.T))
-        Fl, dFl, ddFl = (x.reshape(shp + (mu.m,)) for x in (Fl, dFl, ddFl))
-        x = (tau - Fl @ r[:, None]) / c
-        dx = (dtau - dFl @ r[:, None]) / c
-        ddx = (ddtau - ddFl @ r[:, None]) / c
-        sig = 0.5 * (1.0 + np.tanh(0.5 * x))                 # phi'(x c) = sigmoid(x)
-        phi = c * np.logaddexp(0.0, x)
-        Sp, Sn = self._S_pos, self._S_neg
-        F = Fl + Sp * phi + Sn * (c * x - phi)
-        dF = dFl + c * (Sp * sig + Sn * (1.0 - sig)) * dx
-        ddF = ddFl + c * (Sp * sig + Sn * (1.0 - sig)) * ddx + c * (Sp - Sn) * sig * (1.0 - sig) * dx * dx
-        return F, dF, ddF
+        qf, vf, af = (x[..., 0].reshape(-1) for x in (q, v, acc))
+        Fl, dFl, ddFl = passive_floor(mu, mu.lengths(qf[:, None]), mu.velocities(qf[:, None], vf[:, None]),
+                                      mu.path.accelerations(qf[:, None], vf[:, None], af[:, None]))
+        S, dS, ddS, r, dr, ddr = self._ift_share(qf, vf, af)
+        pos = self._pos
+        Sp, Sn = np.where(pos, S, 0.0), np.where(pos, 0.0, S)
+        dSp, dSn = np.where(pos, dS, 0.0), np.where(pos, 0.0, dS)
+        ddSp, ddSn = np.where(pos, ddS, 0.0), np.where(pos, 0.0, ddS)
+        t0, t1, t2 = (x.reshape(-1) for x in (tau[..., 0], dtau[..., 0], ddtau[..., 0]))
+        x = (t0 - np.sum(r * Fl, axis=1)) / c
+        dx = (t1 - np.sum(dr * Fl + r * dFl, axis=1)) / c
+        ddx = (t2 - np.sum(ddr * Fl + 2.0 * dr * dFl + r * ddFl, axis=1)) / c
+        sig = (0.5 * (1.0 + np.tanh(0.5 * x)))[:, None]   # phi'(x c) = sigmoid(x)
+        phi = (c * np.logaddexp(0.0, x))[:, None]
+        psi = c * x[:, None] - phi
+        x, dx, ddx = x[:, None], dx[:, None], ddx[:, None]
+        d2 = sig * (1.0 - sig) * dx * dx
+        F = Fl + Sp * phi + Sn * psi
+        dF = dFl + dSp * phi + dSn * psi + c * (Sp * sig + Sn * (1.0 - sig)) * dx
+        ddF = (ddFl + ddSp * phi + ddSn * psi
+               + 2.0 * c * (dSp * sig + dSn * (1.0 - sig)) * dx
+               + c * (Sp * sig + Sn * (1.0 - sig)) * ddx + c * (Sp - Sn) * d2)
+        return tuple(y.reshape(shp + (m,)) for y in (F, dF, ddF))
 
     def _force_floor(self, t):
         """IFM starting forces (N, m): :func:`passive_floor` at the worst angle within the
@@ -840,11 +891,10 @@ class DynamicOptimization:
             elif self.design == "ifm":
                 self._lin_lo = np.zeros(self._A_lin.shape[0])
                 self._lin_hi = np.tile(1.5 * self._mu.f_max / self._scale, nb)
-            else:   # IFT: the torque the muscles can give, 1.5 F_max each
-                r = self._mu.R[:, 0]
-                cap = 1.5 * self._mu.f_max * np.abs(r)
-                self._lin_lo = np.full(nb, -cap[r < 0].sum() / self._scale[0])
-                self._lin_hi = np.full(nb, cap[r > 0].sum() / self._scale[0])
+            else:   # IFT: the torque the muscles can give, 1.5 F_max each at their largest arm
+                cap = 1.5 * self._mu.f_max * self._r_max
+                self._lin_lo = np.full(nb, -cap[~self._pos].sum() / self._scale[0])
+                self._lin_hi = np.full(nb, cap[self._pos].sum() / self._scale[0])
             if self.free_period:   # one more column (the period factor) and its bounds
                 A = self._A_lin
                 self._A_lin = np.vstack([np.hstack([A, np.zeros((A.shape[0], 1))]),
@@ -1061,6 +1111,27 @@ class DynamicOptimization:
             viol = max(viol, float(np.max(np.maximum(-c, 0.0))))
         return viol
 
+    def _worst_violation(self, sim, u, err) -> str:
+        """The most violated constraint of a simulated result, in words (or '')."""
+        t, names = self._t, self.model.muscle_names
+        cands = []
+        lo, hi = self._lo - u, u - self._hi
+        for d, side in ((lo, f"below its lower bound {self._lo:g}"), (hi, f"above its upper bound {self._hi:g}")):
+            i, j = np.unravel_index(np.argmax(d), d.shape)
+            cands.append((float(d[i, j]), f"the excitation of '{names[j]}' is {side} by "
+                                          f"{d[i, j]:.3g} at t = {t[i]:.4g} s"))
+        if self.tracking_tolerance is not None:
+            cands.append((float(err - self.tracking_tolerance) / self.tracking_tolerance,
+                          f"the tracking error reaches {err:.4g} rad (tolerance "
+                          f"{self.tracking_tolerance:g} rad)"))
+        if self.design == "ifm":
+            f = F_CE_MIN - sim["f_ce_raw"][:, 0]
+            i, j = np.unravel_index(np.argmax(f), f.shape)
+            cands.append((float(f[i, j]), f"'{names[j]}' must supply {-f[i, j] + F_CE_MIN:.3g} F_max of "
+                                          f"contractile force at t = {t[i]:.4g} s (least {F_CE_MIN:g})"))
+        v, what = max(cands)
+        return what if v > 0 else ""
+
     def _result(self, x, rec, records, seconds):
         A_lin = self._A_lin
         ok = rec["ok"]
@@ -1081,6 +1152,10 @@ class DynamicOptimization:
             ok, status = False, f"tracking error {err:.4g} rad exceeds the tolerance on the full grid"
         if not ok and rec["success"]:
             status = f"constraints violated by {self._violation(x, A_lin):.3g} ({status})"
+        if not ok:
+            worst = self._worst_violation(sim, u, err)
+            if worst:
+                status = f"{status}; worst: {worst}"
         ierr = self._integration_error(x, sim)
         nq = self.model.nv
         qd = np.zeros((self._t.size, nq))
