@@ -52,7 +52,7 @@ def main(argv=None):
         load = float("nan")
     print(f"cores {os.cpu_count()}, load average {load:.2f}, multi-start workers {args.jobs}")
     finger = pinmsk.load_model("finger")
-    forearm = pinmsk.load_model("forearm")
+    forearm = pinmsk.load_model("forearm", moment_arms="angle")   # as the example (thesis Fig. 3.5)
     print(f"one FF simulation as the optimizer runs it: finger 6 Hz period (200 RK4 steps) "
           f"{1e3 * sim_time(finger, 1 / 6, 200):.1f} ms (thesis 400 ms); forearm 1.9 s (100 steps) "
           f"{1e3 * sim_time(forearm, 1.9, 100):.1f} ms (thesis 900 ms); with a compliant tendon "

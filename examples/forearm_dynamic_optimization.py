@@ -1,6 +1,8 @@
 """Forearm dynamic optimization with Fourier-series and polynomial excitations (thesis Sec. 3.3).
 
-The 1-dof elbow with seven Thelen muscles (Table 3.2) tracks a flexion-extension
+The 1-dof elbow with seven Thelen muscles (Table 3.2), moment arms as functions of
+the elbow angle as in the thesis (Fig. 3.5; ``--moment-arms constant`` for Table 3.5's
+constant arms), tracks a flexion-extension
 cycle of 1.9 s within 0.1 rad (tracking constraint Eq. 3.7) with ``0 <= u <= 1``
 (Eq. 3.8).  Each excitation is an 11-term Fourier series (Eq. 3.4, K = 5,
 77 parameters) and then a 10th-order polynomial (Eq. 3.2, 77 parameters).
@@ -9,14 +11,14 @@ J4 (S = V, P = 3) of Eq. 3.5 and J5, metabolic energy Eq. 3.6 with the
 Umberger 2003 heat rates (App. B.2), started from the J4 and J1 optima.  Then
 J4 with Fourier series in each simulation design of Sec. 5.1: fully forward
 with a rigid or a compliant tendon, inverse-forward from muscle forces (IFM)
-and from the elbow torque (IFT).  For J5
-the optimizer sees the heat-rate model with C1-smoothed switches (width 0.01,
+and from the elbow torque (IFT).  For J5 the optimizer sees the heat-rate model with C1-smoothed switches (width 0.01,
 ``pinmsk.energy``); the reported objective is the exact piecewise model.
 
 The measured average motion of the thesis (Fig. 3.6) is not available; the target
 is the smooth cycle ``0.3 + 0.8 (1 - cos(2 pi t / 1.9))`` rad (0.3 -> 1.9 -> 0.3 rad).
 
 Run:  python examples/forearm_dynamic_optimization.py --out out/forearm  [--quick]
+      [--moment-arms angle|constant]
 Writes forearm_do.json (per objective and parametrization; "designs": J4 per design)
 and PNG figures.
 """
@@ -138,10 +140,13 @@ def main(argv=None):
     ap.add_argument("--out", default="out/forearm")
     ap.add_argument("--quick", action="store_true", help="J4 with Fourier series only, FF and IFT (tests)")
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--moment-arms", default="angle", choices=("angle", "constant"),
+                    help="moment arms as functions of the elbow angle (as the thesis, Fig. 3.5; "
+                         "default) or constant (Table 3.5)")
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    model = pinmsk.load_model("forearm")
+    model = pinmsk.load_model("forearm", moment_arms=args.moment_arms)
     runs = [("J4", "fourier")] if args.quick else \
         [(k, p) for p in ("fourier", "polynomial") for k in OBJECTIVES]
     results, summary = {}, {}
@@ -174,6 +179,7 @@ def main(argv=None):
     summary["designs"] = compare_designs(model, names, jobs=args.jobs, steps=60 if args.quick else 100,
                                          path=out / "forearm_designs.png")
     summary["target"] = "0.3 + 0.8 (1 - cos(2 pi t / 1.9)) rad (synthetic; thesis data unavailable)"
+    summary["moment_arms"] = args.moment_arms
     summary["thesis"] = {"J4_final_objective": {"fourier": 0.10, "polynomial": 0.12},
                          "minutes": {"fourier": 30, "polynomial": 50}}
     (out / "forearm_do.json").write_text(json.dumps(summary, indent=2, default=float))
