@@ -149,6 +149,14 @@ def test_bad_problems_are_named(finger):
     with pytest.raises(ModelError, match="unknown objective key"):
         DynamicOptimization(finger, parametrization=par, target=tg, tracking_weight=1,
                             objective={"kind": "effort", "power": 2}).fit()
+    gait = pinmsk.load_model("gait2d")
+    with pytest.raises(ModelError, match="has components .*riener_edrich_1999:r"):
+        DynamicOptimization(gait, parametrization=par, target=tg, tracking_weight=1,
+                            coordinate="knee_r").fit()
+    gait = gait.without("riener_edrich_1999:r").without("riener_edrich_1999:l")
+    with pytest.raises(ModelError, match="Thelen 2003 muscles only; model 'gait2d' uses nagano"):
+        DynamicOptimization(gait, parametrization=par, target=tg, tracking_weight=1,
+                            coordinate="knee_r").fit()
 
 
 def test_effort_objective_is_eq_3_5(finger):
