@@ -320,13 +320,6 @@ def _imex_ars443(f_exp, fibre, y0, l0, t, inputs, inputs_mid, *, dl_max, n_newto
     return Y, Lc
 
 
-def _batch3(x, b):
-    x = np.asarray(x, dtype=float)
-    if x.ndim == 2:
-        x = np.broadcast_to(x[:, None, :], (x.shape[0], b, x.shape[1]))
-    return x
-
-
 def simulate_ff(model, t, u, u_mid, q0, v0, *, a0=None, l_ce0=None, tendon: str = "rigid",
                 skeleton: BatchSkeleton | None = None, muscles: BatchMuscles | None = None) -> dict:
     """Fully forward simulation (Sec. 5.1 design 1) of excitations on the grid ``t``.

@@ -770,11 +770,6 @@ class DynamicOptimization:
             self.progress.update(1)
         return g, dc
 
-    def _evaluate(self, x):
-        f, c = self._value(x)
-        g, dc = self._gradient(x)
-        return f, g, c, dc
-
     # -- initial guesses (Sec. 3.5.3) -------------------------------------------
     def _target_states(self):
         """``(q, v, a)`` (N, nv) of the target motion on the grid (other coordinates at rest)."""
