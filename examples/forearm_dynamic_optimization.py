@@ -5,7 +5,8 @@ the elbow angle as in the thesis (Fig. 3.5; ``--moment-arms constant`` for Table
 constant arms), tracks a flexion-extension
 cycle of 1.9 s within 0.1 rad (tracking constraint Eq. 3.7) with ``0 <= u <= 1``
 (Eq. 3.8).  Each excitation is an 11-term Fourier series (Eq. 3.4, K = 5,
-77 parameters) and then a 10th-order polynomial (Eq. 3.2, 77 parameters).
+77 parameters), then a 10th-order polynomial (Eq. 3.2, 77 parameters), then -- the
+local baseline -- a clamped cubic B-spline with 11 coefficients (77 parameters).
 Objectives (Table 3.3): J1 (S = 1, P = 2), J2 (S = 1, P = 3), J3 (S = V, P = 2),
 J4 (S = V, P = 3) of Eq. 3.5 and J5, metabolic energy Eq. 3.6 with the
 Umberger 2003 heat rates (App. B.2), started from the J4 and J1 optima.  Then
@@ -33,10 +34,11 @@ import numpy as np
 
 import pinmsk
 from pinmsk.solvers.dynamic import DynamicOptimization, Target
-from pinmsk.solvers.parametrization import Fourier, Polynomial
+from pinmsk.solvers.parametrization import Fourier, Polynomial, Spline
 
 PERIOD = 1.9
 TOL = 0.1
+PARAMETRIZATIONS = ("fourier", "polynomial", "spline")   # global (Sec. 3.1) and the local baseline
 OBJECTIVES = {
     "J1": {"kind": "effort", "exponent": 2, "weights": "none"},
     "J2": {"kind": "effort", "exponent": 3, "weights": "none"},
@@ -55,7 +57,9 @@ def solve(model, objective, kind, *, jobs=2, steps=100, n_starts=2, maxiter=400,
     """One problem of Table 3.3.  100 RK4 steps of 19 ms: the result's integration check
     (against twice as many steps) is ~3e-5 rad, against the 0.1 rad tolerance; bounds and
     tracking are imposed at every grid point."""
-    par = Fourier(5, period=PERIOD) if kind == "fourier" else Polynomial(10, duration=PERIOD)
+    par = {"fourier": lambda: Fourier(5, period=PERIOD),
+           "polynomial": lambda: Polynomial(10, duration=PERIOD),
+           "spline": lambda: Spline(11, duration=PERIOD)}[kind]()   # 11 coefficients per muscle each
     prob = DynamicOptimization(model, parametrization=par, target=target(), step=PERIOD / steps,
                                objective=OBJECTIVES[objective], tracking_tolerance=TOL,
                                n_starts=n_starts, n_jobs=jobs, maxiter=maxiter, tol=1e-7,
@@ -148,7 +152,7 @@ def main(argv=None):
     out.mkdir(parents=True, exist_ok=True)
     model = pinmsk.load_model("forearm", moment_arms=args.moment_arms)
     runs = [("J4", "fourier")] if args.quick else \
-        [(k, p) for p in ("fourier", "polynomial") for k in OBJECTIVES]
+        [(k, p) for p in PARAMETRIZATIONS for k in OBJECTIVES]
     results, summary = {}, {}
     for k, kind in runs:
         x0 = None
@@ -171,7 +175,7 @@ def main(argv=None):
               f"bound viol {res.max_bound_violation:.2g}  "
               f"{'ok' if res.converged else 'NOT CONVERGED'}  {sec:.1f} s")
     plot_tracking(results, out / "forearm_tracking.png")
-    for kind in ("fourier", "polynomial"):
+    for kind in PARAMETRIZATIONS:
         if any(p == kind for _, p in runs):
             plot_excitations([(f"{kind}, {k}", results[(k, kind)]) for k in OBJECTIVES
                               if (k, kind) in results], out / f"forearm_excitations_{kind}.png")
