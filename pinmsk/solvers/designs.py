@@ -188,7 +188,7 @@ class BatchMuscles:
     def compliant(self, a, l_mt, l_ce):
         """``(F, v_ce, f_ce, f_isom)`` from the fibre-length state (Eq. 3.9)."""
         a = np.maximum(a, A_MIN)
-        l_ce = np.maximum(l_ce, 1.0001 * np.sqrt(self.h2) + 1e-6 * self.l_opt)
+        l_ce = np.maximum(l_ce, self._fibre_bounds())
         x = np.sqrt(np.maximum(l_ce * l_ce - self.h2, 0.0))
         F = self.f_max * thelen_tendon_force((l_mt - x) / self.l_slack - 1.0, strain0=self.strain0)
         v_ce = thelen_contraction_rate(l_ce, np.maximum(l_mt, x + 1e-9), a, l_opt=self.l_opt,
@@ -494,14 +494,16 @@ def simulate_skeleton(model, t, tau, tau_mid, q0, v0, *, skeleton=None, muscles=
     return (q.reshape(n, B, nv), v.reshape(n, B, nv), acc.reshape(n, B, nv))
 
 
-def muscle_inverse(model, q, v, acc, F, dF, ddF, *, muscles=None) -> dict:
+def muscle_inverse(model, q, v, acc, F, dF, ddF, *, muscles=None, fv_smooth: float = 0.0,
+                   fibre_floor=None) -> dict:
     """Inverse muscle model (Fig. 5.6, Eq. 5.2-5.4) over frames: ``a, adot, u, l_ce, v_ce``.
 
     ``q, v, acc`` (N, nv) kinematics; ``F, dF, ddF`` (N, m) muscle-tendon force and its
-    exact time derivatives.  Compliant Thelen tendon.
+    exact time derivatives.  Compliant Thelen tendon.  ``fv_smooth`` and ``fibre_floor``:
+    see :func:`~pinmsk.muscles.inverse.inverse_thelen2003`.
     """
     mu = muscles or BatchMuscles(model)
     l_mt = mu.lengths(q)
     dl = mu.velocities(q, v)
     ddl = mu.path.accelerations(q, v, acc)
-    return mu.mtu.inverse(F, dF, l_mt, dl, ddl, ddF)
+    return mu.mtu.inverse(F, dF, l_mt, dl, ddl, ddF, fv_smooth=fv_smooth, fibre_floor=fibre_floor)

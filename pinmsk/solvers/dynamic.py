@@ -405,13 +405,14 @@ class DynamicOptimization:
                              "(the problem would be infeasible)")
         # signal scaling: decision variables are O(1) at the scale of what the motion needs
         # (the inverse dynamics of the target), not of what the muscles could give
-        tau_peak = float(np.max(np.abs(self._target_torque()[:, self._jc])))
+        self._tau_target = self._target_torque()
+        tau_peak = float(np.max(np.abs(self._tau_target[:, self._jc])))
         if self.design == "ff":
             self._n_sig, self._scale = m, np.ones(m)
         elif self.design == "ifm":
             r_max = float(np.max(np.abs(self._mu.path.moment_arms(self._q0[None])[0])))
-            floor = np.max(self._force_floor(self._t), axis=0)
-            self._n_sig, self._scale = m, floor + tau_peak / max(r_max, 1e-9)
+            self._floor = self._force_floor(self._t)          # (N, m), also the starts' base
+            self._n_sig, self._scale = m, self._floor.max(axis=0) + tau_peak / max(r_max, 1e-9)
         else:
             if nv != 1:
                 raise ModelError(f"design 'ift' shares one joint torque among the muscles: it "
@@ -497,10 +498,8 @@ class DynamicOptimization:
                                           self._signals(C, 2))
         flat = lambda x: x.reshape(n * B, -1)   # noqa: E731
         mu = self._mu
-        qf, vf = flat(q), flat(v)
-        inv = mu.mtu.inverse(flat(F), flat(dF), mu.lengths(qf), mu.velocities(qf, vf),
-                             mu.path.accelerations(qf, vf, flat(acc)), flat(ddF),
-                             fv_smooth=self.fv_smooth, fibre_floor=1e-3 * mu.l_opt)
+        inv = muscle_inverse(self.model, flat(q), flat(v), flat(acc), flat(F), flat(dF), flat(ddF),
+                             muscles=mu, fv_smooth=self.fv_smooth, fibre_floor=1e-3 * mu.l_opt)
         sim = {"q": q, "v": v, "acc": acc, "force": F}
         for k in ("a", "u", "l_ce", "v_ce"):
             sim[k] = inv[k].reshape(n, B, -1)
@@ -543,15 +542,14 @@ class DynamicOptimization:
         r1 = path.moment_arm_derivative(Q, 1)[:, :, 0]
         r2 = path.moment_arm_derivative(Q, 2)[:, :, 0]
         g = self._pos[None, :]
-        D = {k: np.sum(np.where(g == k, x, 0.0), axis=1, keepdims=True)
-             for k, x in ((True, w * r * r), (False, w * r * r))}
-        D = np.where(g, D[True], D[False])                  # each muscle's group sum
-        Dg1 = 2.0 * w * r * r1
-        Dg2 = 2.0 * w * (r1 * r1 + r * r2)
-        D1 = np.where(g, np.sum(np.where(g, Dg1, 0), 1, keepdims=True),
-                      np.sum(np.where(g, 0, Dg1), 1, keepdims=True))
-        D2 = np.where(g, np.sum(np.where(g, Dg2, 0), 1, keepdims=True),
-                      np.sum(np.where(g, 0, Dg2), 1, keepdims=True))
+
+        def group_sum(x):   # each muscle gets the sum over its own agonist group
+            return np.where(g, np.sum(np.where(g, x, 0.0), axis=1, keepdims=True),
+                            np.sum(np.where(g, 0.0, x), axis=1, keepdims=True))
+
+        D = group_sum(w * r * r)
+        D1 = group_sum(2.0 * w * r * r1)
+        D2 = group_sum(2.0 * w * (r1 * r1 + r * r2))
         S = w * r / D
         Sq = w * (r1 * D - r * D1) / D ** 2
         Sqq = w * ((r2 * D - r * D2) / D ** 2 - 2.0 * (r1 * D - r * D1) * D1 / D ** 3)
@@ -790,7 +788,7 @@ class DynamicOptimization:
         """Cheap starts: inverse dynamics of the target, minimum-effort sharing, inverse
         activation dynamics with analytic derivatives -> least-squares fits of the parametrization."""
         par, mu, t = self.parametrization, self._mu, self._t
-        tau = self._target_torque()
+        tau = self._tau_target
         q, v = self._target_states()[:2]
         guesses = []
         if self.design == "ift":
@@ -814,7 +812,7 @@ class DynamicOptimization:
             # forces above the passive floor (the active region of the inverse model), the
             # agonists' share of the rest of the moment, then 0, 2 and 5 % co-contraction
             # of zero net moment: every start tracks the target equally well
-            Fl = self._force_floor(t)
+            Fl = self._floor
             need = tau[:, [0]] - np.sum(R * Fl, axis=1, keepdims=True)
             ag = np.sign(R) == np.sign(need)
             lam = need[:, 0] / np.maximum(np.sum(np.where(ag, R * Fa * g, 0.0), axis=1), 1e-12)
