@@ -7,7 +7,9 @@ and exit with status 2, never a traceback.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -151,7 +153,8 @@ def cmd_so(args) -> int:
 def cmd_fso(args) -> int:
     from .solvers.fso import ForwardStaticOptimization
     fso = ForwardStaticOptimization(**_so_options(args), tracking=args.tracking, enforce=args.enforce,
-                                    control_points=args.control_points, integrator=args.integrator)
+                                    control_points=args.control_points, integrator=args.integrator,
+                                    allow_divergence=args.allow_divergence)
     return _run_solver(args, fso, args.control_points, "FSO", "forward_static_optimization")
 
 
@@ -234,7 +237,8 @@ def cmd_batch(args) -> int:
     n = len(summary["rows"])
     print(f"{n - len(summary['failed'])}/{n} trials done; summary table {summary['table']}")
     for name in summary["failed"]:
-        print(f"  failed: {name}", file=sys.stderr)
+        reason = summary.get("reasons", {}).get(name, "failed").removeprefix("failed: ")
+        print(f"  failed: {name}: {reason}", file=sys.stderr)
     return 1 if summary["failed"] else 0
 
 
@@ -309,8 +313,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="tracking term: Eq. 3.16 (q), 3.17 (qv), 3.18 (qva) or the PID form 3.19")
     s.add_argument("--enforce", choices=["constraint", "cost"], default="constraint",
                    help="tracking as a QP constraint or as a weighted cost term (Eq. 3.15)")
-    s.add_argument("--control-points", type=int, default=100, help="number of control points (default 100)")
+    s.add_argument("--control-points", type=int, default=None,
+                   help="number of control points (default 100, more if the PID loop needs them to be stable)")
     s.add_argument("--integrator", default="rk4", help="rk4 (fixed step) or a solve_ivp method such as RK45")
+    s.add_argument("--allow-divergence", action="store_true",
+                   help="write the result even if the tracking error exceeds 1 deg (flagged: 'diverged' channel)")
     s.set_defaults(func=cmd_fso)
 
     s = sub.add_parser("diagnose", help="where the model fails and which physical effect is missing")
@@ -389,20 +396,66 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv=None) -> int:
+#: Arguments naming output files, and output folders, of any command (checked before it runs).
+_OUTPUT_FILES = ("output", "json", "report")
+_OUTPUT_FOLDERS = ("plot", "out")
+
+
+def _check_outputs(args) -> None:
+    """Refuse, before any work, outputs whose folder is missing or read-only; create --plot folders."""
+    from .io import check_output_file, output_folder
+    for name in _OUTPUT_FILES:
+        if getattr(args, name, None):
+            check_output_file(getattr(args, name))
+    for name in _OUTPUT_FOLDERS:
+        if getattr(args, name, None):
+            output_folder(getattr(args, name))
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Warnings as one line ``pinmsk: warning: ...`` on stderr (no source line)."""
+    print(f"pinmsk: warning: {message}", file=sys.stderr if file is None else file)
+
+
+def _run(argv) -> int:
+    from .io import output_transaction
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            with output_transaction():
+                _check_outputs(args)
+                return int(args.func(args) or 0)
     except PinmskError as exc:
         print(f"pinmsk: error: {exc}", file=sys.stderr)
         return 2
-    except (FileNotFoundError, IsADirectoryError, PermissionError) as exc:
-        print(f"pinmsk: error: {exc.strerror}: {exc.filename}", file=sys.stderr)
+    except (FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError) as exc:
+        where = f": {exc.filename}" if exc.filename else ""
+        print(f"pinmsk: error: {exc.strerror or exc}{where}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("pinmsk: interrupted", file=sys.stderr)
         return 130
+
+
+def main(argv=None) -> int:
+    """Run the command line; returns the exit status (2 for errors pinmsk recognises).
+
+    A closed output pipe (``pinmsk models | head -1``) ends the command quietly
+    with status 1, as the Python documentation recommends for ``SIGPIPE``
+    (library/signal.html, "Note on SIGPIPE"): stdout is pointed at devnull so
+    the interpreter's final flush cannot fail again.
+    """
+    try:
+        try:
+            return _run(argv)
+        finally:
+            sys.stdout.flush()
+    except BrokenPipeError:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

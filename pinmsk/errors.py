@@ -28,3 +28,10 @@ class InfeasibleError(SolverError):
 
 class ConvergenceError(SolverError):
     """An iterative solver stopped before meeting its tolerance."""
+
+
+class OutputError(PinmskError, OSError):
+    """An output file or folder cannot be written (missing folder, read-only place, full disk).
+
+    Also an ``OSError``, so code that catches file-system errors still catches it.
+    """

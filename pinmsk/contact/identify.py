@@ -30,7 +30,6 @@ when the reader set it (a treadmill belt, see :mod:`pinmsk.csu`).
 """
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import dataclass
@@ -551,8 +550,9 @@ class ContactFit:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
+        from ..plots import save_figure
+
         out_dir = Path(out_dir)
-        out_dir.mkdir(parents=True, exist_ok=True)
         prob, gr = self.problem_, self.reaction_
         t = prob.t
         title = f"{self.contact}{' relaxed' if self.relax else ''}"
@@ -570,7 +570,7 @@ class ContactFit:
         ax[1].set_xlabel("time (s)")
         fig.tight_layout()
         p1 = out_dir / f"grf_{self.contact}{'_relaxed' if self.relax else ''}.png"
-        fig.savefig(p1, dpi=110)
+        save_figure(fig, p1, dpi=110)
         plt.close(fig)
         fig, ax = plt.subplots(figsize=(6, 3.2))
         m = prob.cop_mask
@@ -582,7 +582,7 @@ class ContactFit:
         ax.legend(fontsize=7)
         fig.tight_layout()
         p2 = out_dir / f"cop_{self.contact}{'_relaxed' if self.relax else ''}.png"
-        fig.savefig(p2, dpi=110)
+        save_figure(fig, p2, dpi=110)
         plt.close(fig)
         return [p1, p2]
 
@@ -670,6 +670,6 @@ def fit_cli_run(model, trial, *, contact: str = "hypervolumetric", relax: bool =
     if plot_dir is not None:
         out["figures"] = [str(p) for p in fit.plot(plot_dir)]
     if json_path is not None:
-        Path(json_path).parent.mkdir(parents=True, exist_ok=True)
-        Path(json_path).write_text(json.dumps(out, indent=2))
+        from ..io import write_json
+        write_json(json_path, out, parents=True)
     return out

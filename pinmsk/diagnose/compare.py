@@ -80,6 +80,9 @@ __all__ = ["DEFAULT_CUTOFF", "MODES", "Comparison", "EquationError", "NoiseFloor
 DEFAULT_CUTOFF = 6.0
 MODES = ("torque", "motion", "muscle", "contact")
 _N_PROPAGATE = 3
+#: Largest |value| accepted in a measured channel (SI: N m, N, m, or excitation): far above any
+#: human moment or ground force, so a larger finite value is a fill value or a unit error.
+MEASURED_LIMIT = 1e6
 
 
 @dataclass(frozen=True)
@@ -143,6 +146,17 @@ def _subset_external(external, rows):
 
 def _has_grf(trial) -> bool:
     return any(parse_ground_reaction(n) is not None for n in trial.names)
+
+
+def _check_measured(model, trial) -> None:
+    """Refuse measured channels the diagnosis compares with (moments, excitations/EMG, GRF)
+    that are NaN, infinite or beyond :data:`MEASURED_LIMIT`, by channel, row and time."""
+    names = [f"{c}_moment" for c in model.coordinates if f"{c}_moment" in trial]
+    names += [f"{m}_{kind}" for m in model.muscle_names for kind in ("excitation", "emg")
+              if f"{m}_{kind}" in trial]
+    names += [n for n in trial.names if parse_ground_reaction(n) is not None]
+    trial.check_finite(names, limit=MEASURED_LIMIT,
+                       what="before the diagnosis, which compares the model with them")
 
 
 def _excitations(model, trial):
@@ -431,6 +445,7 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
     if not isinstance(trial, Trial):
         raise TrialError(f"compare needs a Trial, got {type(trial).__name__}; read one with pinmsk.read_trial")
     plan = _plan(model, trial, mode)
+    _check_measured(model, trial)
     if plan.mode == "contact":
         from .contact import compare_contact
         return compare_contact(model, trial, cutoff=cutoff, noise_floor=noise_floor,

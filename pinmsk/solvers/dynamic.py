@@ -1209,16 +1209,8 @@ TASK_SCHEMA = {
 
 
 def _check_keys(table: dict, section: str, where: str):
-    if not isinstance(table, dict):
-        raise ModelError(f"{where}: [{section}] must be a table")
-    valid = TASK_SCHEMA[section]
-    for k in table:
-        if k not in valid:
-            import difflib
-            close = difflib.get_close_matches(k, list(valid), n=1)
-            hint = f" (did you mean '{close[0]}'?)" if close else ""
-            raise ModelError(f"{where}: unknown key '{k}' in [{section}]{hint}; valid keys: "
-                             f"{', '.join(valid)}")
+    from ..tomlfile import check_keys
+    check_keys(table, TASK_SCHEMA[section], where=where, section=f"[{section}]")
 
 
 def load_task(task_path) -> dict:
@@ -1328,8 +1320,8 @@ def optimize_task(task_path, out_path=None, progress=None) -> DynamicResult:
     prob = build_from_task(spec, base_dir=Path(task_path).parent, progress=progress)
     res = prob.fit().result_
     if out_path is not None:
-        from ..io import write_trial
+        from ..io import write_json, write_trial
         out = Path(out_path)
         write_trial(res.to_trial(), out)
-        out.with_suffix(out.suffix + ".json").write_text(json.dumps(res.summary(), indent=2))
+        write_json(out.with_suffix(out.suffix + ".json"), res.summary())
     return res
