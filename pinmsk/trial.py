@@ -664,22 +664,25 @@ class Trial:
         self._indices(names, what="coordinate channel(s)")
         return names
 
-    def check_finite(self, names=None, *, limit: float | None = None, what: str = "") -> Trial:
+    def check_finite(self, names=None, *, limit: float | None = None, nan_ok: bool = False,
+                     what: str = "") -> Trial:
         """Check that channels (all, or ``names``) are finite and, with ``limit``, within ±limit.
 
         Raises TrialError naming, for each bad channel (up to 5), the number of
         bad values, the first rows and the time of the first; ``what`` (e.g.
-        "the diagnosis needs measured values") is added to the message.  A
-        ``limit`` catches fill values such as 1e300 that are finite but not
-        measurements.  Returns the trial unchanged.
+        "before the diagnosis") is added to the message.  A ``limit`` catches
+        fill values such as 1e300 that are finite but not measurements;
+        ``nan_ok`` accepts NaN (a centre of pressure while a plate is unloaded)
+        but not infinity.  Returns the trial unchanged.
         """
-        self._check_finite(self._names if names is None else _as_names(names), hint=what, limit=limit)
+        self._check_finite(self._names if names is None else _as_names(names), hint=what, limit=limit,
+                           nan_ok=nan_ok)
         return self
 
-    def _check_finite(self, names, hint: str = "", limit: float | None = None) -> None:
+    def _check_finite(self, names, hint: str = "", limit: float | None = None, nan_ok: bool = False) -> None:
         idx = self._indices(tuple(names))
         block = self._values[:, idx]
-        bad = ~np.isfinite(block)
+        bad = np.isinf(block) if nan_ok else ~np.isfinite(block)
         if limit is not None:
             with np.errstate(invalid="ignore"):
                 bad |= np.abs(block) > limit

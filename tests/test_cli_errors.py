@@ -69,6 +69,22 @@ def test_diagnose_refuses_bad_measured_moment_by_channel_row_and_time(tmp_path, 
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.csv"]
 
 
+def test_check_finite_limit_and_unloaded_centre_of_pressure():
+    t = np.arange(6) / 100.0
+    cop = np.array([np.nan, np.nan, 0.1, 0.2, np.nan, np.nan])        # undefined while unloaded
+    tr = Trial(t, {"ground_force_px": cop, "ground_force_vy": np.array([0, 0, 500.0, 600, 0, 0])})
+    assert tr.check_finite(["ground_force_px"], limit=1e6, nan_ok=True) is tr
+    with pytest.raises(TrialError, match=r"'ground_force_px' has 4 non-finite value\(s\) \(NaN first\) at rows "
+                                         r"0, 1, 4, 5 \(time 0 s\)"):
+        tr.check_finite(["ground_force_px"])
+    cop[3] = np.inf
+    with pytest.raises(TrialError, match=r"1 non-finite value\(s\) \(inf first\) at rows 3 \(time 0.03 s\)"):
+        Trial(t, {"ground_force_px": cop}).check_finite(nan_ok=True)
+    with pytest.raises(TrialError, match=r"'ground_force_vy' has 1 implausible value\(s\) \(2e\+07 first, "
+                                         r"beyond ±1e\+06\) at rows 2 \(time 0.02 s\)"):
+        tr.with_channels(ground_force_vy=np.array([0, 0, 2e7, 600, 0, 0])).check_finite(limit=1e6, nan_ok=True)
+
+
 def test_json_refuses_nan_and_infinity_naming_the_key(tmp_path):
     target = tmp_path / "s.json"
     for bad, key in ((float("nan"), "ranking[1].rmse_after"), (np.float64("inf"), "ranking[1].rmse_after"),

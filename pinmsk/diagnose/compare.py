@@ -150,13 +150,18 @@ def _has_grf(trial) -> bool:
 
 def _check_measured(model, trial) -> None:
     """Refuse measured channels the diagnosis compares with (moments, excitations/EMG, GRF)
-    that are NaN, infinite or beyond :data:`MEASURED_LIMIT`, by channel, row and time."""
+    that are NaN, infinite or beyond :data:`MEASURED_LIMIT`, by channel, row and time.
+
+    A centre of pressure may be NaN (undefined while its plate is unloaded), not infinite."""
     names = [f"{c}_moment" for c in model.coordinates if f"{c}_moment" in trial]
     names += [f"{m}_{kind}" for m in model.muscle_names for kind in ("excitation", "emg")
               if f"{m}_{kind}" in trial]
-    names += [n for n in trial.names if parse_ground_reaction(n) is not None]
-    trial.check_finite(names, limit=MEASURED_LIMIT,
-                       what="before the diagnosis, which compares the model with them")
+    grf = {n: parse_ground_reaction(n) for n in trial.names}
+    names += [n for n, g in grf.items() if g is not None and g.quantity != "point"]
+    what = "before the diagnosis, which compares the model with them"
+    trial.check_finite(names, limit=MEASURED_LIMIT, what=what)
+    trial.check_finite([n for n, g in grf.items() if g is not None and g.quantity == "point"],
+                       limit=MEASURED_LIMIT, nan_ok=True, what=what)
 
 
 def _excitations(model, trial):
