@@ -13,6 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import PinmskError
+from .kinematics import DEFAULT_CUTOFF
+from .trial import parse_ground_reaction
 
 
 def _model(args):
@@ -29,6 +31,17 @@ def _write(trial, path):
     from .io import write_trial
     write_trial(trial, path)
     print(f"wrote {path}")
+
+
+def _inputs(args) -> dict:
+    """The trial-preparation options every analysis takes (see :func:`pinmsk.kinematics.prepare`)."""
+    return dict(cutoff=args.cutoff, grf=args.grf, external_loads=args.external_loads,
+                ground_reaction="ignore" if args.no_grf else "auto",
+                grf_cutoff="same" if args.grf_cutoff is None else args.grf_cutoff)
+
+
+def _warn(text: str) -> None:
+    print(f"pinmsk: warning: {text}", file=sys.stderr)
 
 
 def _named_values(items, model, what) -> np.ndarray:
@@ -75,10 +88,14 @@ def cmd_info(args) -> int:
 
 
 def cmd_id(args) -> int:
-    from .dynamics import inverse_dynamics
+    from .dynamics import inverse_dynamics_result
     model = _model(args)
     trial = _read(args.trial, model)
-    out = inverse_dynamics(model, trial, cutoff=args.cutoff)
+    res = inverse_dynamics_result(model, trial, **_inputs(args))
+    print(res.report())
+    if res.residuals.warning():
+        _warn(res.residuals.warning())
+    out = res.trial
     _write(out, args.output)
     _plot(args, out, [f"{c}_moment" for c in model.coordinate_order], "inverse_dynamics", "moment (N m)")
     return 0
@@ -133,10 +150,16 @@ def _run_solver(args, solver, total: int | None, label: str, title: str) -> int:
     from .progress import Progress
     model = _model(args)
     trial = _read(args.trial, model)
+    kw = _inputs(args)
+    if getattr(args, "moments", None):
+        kw["moments"] = args.moments
     with Progress(trial.n_frames if total is None else total, label) as bar:
-        solver.fit(model, trial, cutoff=args.cutoff, progress=bar)
+        solver.fit(model, trial, progress=bar, **kw)
     text = solver.report()
     print(text)
+    res = getattr(solver, "residuals_", None)
+    if res is not None and res.warning():
+        _warn(res.warning())
     _write(solver.result_, args.output)
     _report_results(args, model, trial, solver.result_, title, text)
     return 0
@@ -144,7 +167,8 @@ def _run_solver(args, solver, total: int | None, label: str, title: str) -> int:
 
 def cmd_so(args) -> int:
     from .solvers.static import StaticOptimization
-    so = StaticOptimization(**_so_options(args), minmax=args.minmax)
+    dofs = [d.strip() for d in args.dofs.split(",") if d.strip()] if args.dofs else None
+    so = StaticOptimization(**_so_options(args), minmax=args.minmax, dofs=dofs)
     return _run_solver(args, so, None, "SO", "static_optimization")
 
 
@@ -159,8 +183,11 @@ def cmd_diagnose(args) -> int:
     from .diagnose import run
     model = _model(args)
     trial = _read(args.trial, model)
+    kw = _inputs(args)
+    if kw.pop("ground_reaction") == "ignore":
+        trial = trial.drop([n for n in trial.names if parse_ground_reaction(n) is not None])
     r = run(model, trial, add=args.add or [], json_path=args.json, report_path=args.report,
-            plot_dir=args.plot, mode=args.mode, cutoff=args.cutoff or None, frames=args.frame or None)
+            plot_dir=args.plot, mode=args.mode, frames=args.frame or None, **kw)
     print(r.summary_text())
     for path in (args.json, args.report):
         if path:
@@ -240,6 +267,25 @@ def cmd_batch(args) -> int:
 
 # -- parser ----------------------------------------------------------------------
 
+def input_flags(s) -> None:
+    """The flags of every command that analyses a trial: filter and external loads."""
+    s.add_argument("--cutoff", type=float, default=DEFAULT_CUTOFF, metavar="HZ",
+                   help=f"zero-lag Butterworth low-pass (Hz) of the coordinates and the GRF before "
+                        f"differentiating (default {DEFAULT_CUTOFF:g}; 0 = no filter, right for noise-free "
+                        "synthetic data)")
+    s.add_argument("--grf-cutoff", type=float, default=None, metavar="HZ",
+                   help="low-pass of the GRF (default: the same as --cutoff, which avoids artificial residual "
+                        "peaks; 0 = unfiltered, as OpenSim's ID tool)")
+    s.add_argument("--grf", metavar="FILE", default=None,
+                   help="ground reaction forces at their own rate (.mot/.sto/.csv with [side_]ground_force_v[xyz], "
+                        "_p[xyz], ground_torque_[xyz]); default: the trial's own GRF channels")
+    s.add_argument("--external-loads", metavar="XML", default=None,
+                   help="an OpenSim ExternalLoads .xml: which columns act on which body (reads its datafile "
+                        "unless --grf or the trial gives the data)")
+    s.add_argument("--no-grf", action="store_true",
+                   help="leave the ground reaction forces out on purpose (recorded in the output)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="pinmsk", description="Human musculoskeletal dynamics on Pinocchio.")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
@@ -258,8 +304,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("model")
     s.add_argument("trial", help="trial file (.csv with a time column, .sto or .mot)")
     s.add_argument("-o", "--output", required=True, help="output .sto or .csv")
-    s.add_argument("--cutoff", type=float, default=None,
-                   help="zero-lag Butterworth low-pass cut-off (Hz) before differentiation")
+    input_flags(s)
     s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
     s.set_defaults(func=cmd_id)
@@ -291,16 +336,22 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--weights", choices=["none", "fmax", "pcsa", "volume"], default="none",
                        help="normaliser N_i of each muscle (thesis Eq. 2.11-2.14)")
         s.add_argument("--reserves", action="store_true",
-                       help="ideal reserve actuators per dof at high cost instead of failing on infeasible frames")
+                       help="ideal reserve actuators per dof at high cost instead of failing on infeasible frames; "
+                            "coordinates no muscle spans (a floating base) get reserves equal to the force they need")
         s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
-        s.add_argument("--cutoff", type=float, default=None,
-                       help="low-pass cut-off (Hz) before differentiating the coordinates")
+        input_flags(s)
         s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
         s.add_argument("--report", metavar="OUT.html", default=None, help="write a self-contained HTML report")
 
     s = sub.add_parser("so", help="static optimization: muscle forces and activations frame by frame")
     so_flags(s)
     s.add_argument("--minmax", action="store_true", help="min/max criterion (thesis Eq. 2.13) as an epigraph LP")
+    s.add_argument("--moments", choices=["id", "measured"], default="id",
+                   help="moments to balance: 'id' inverse dynamics with the trial's GRF (default) or "
+                        "'measured', the trial's own <coord>_moment channels")
+    s.add_argument("--dofs", metavar="COORD,COORD", default=None,
+                   help="balance only these coordinates (default: every coordinate a muscle spans; the "
+                        "others must need no force, or --reserves)")
     s.set_defaults(func=cmd_so)
 
     s = sub.add_parser("fso", help="forward static optimization: track a motion forward in time (thesis Sec. 3.4)")
@@ -323,10 +374,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
     s.add_argument("--mode", default="auto", choices=["auto", "torque", "motion", "muscle", "contact"],
                    help="comparison level (default: chosen from the trial's channels)")
-    s.add_argument("--cutoff", type=float, default=6.0,
-                   help="low-pass cut-off (Hz) for differentiating the coordinates (default 6; 0 = no "
-                        "filter, right for noise-free synthetic kinematics; about 12 for foot markers "
-                        "in contact mode)")
+    input_flags(s)
     s.add_argument("--frame", action="append", metavar="FRAME",
                    help="frames to try frame effects (e.g. a payload) at, besides the defaults")
     s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)

@@ -8,7 +8,7 @@
     jobs = 2                    # local worker processes (default: all cores)
 
     [defaults]                  # any trial key, applied to every trial
-    cutoff = 6.0                # Hz, low-pass of the coordinates before differentiating
+    cutoff = 6.0                # Hz, low-pass of the coordinates and the GRF (the default; 0 = off)
     so = { mode = "activation", exponent = 2, reserves = true }
 
     [[trials]]
@@ -270,6 +270,7 @@ def run_trial(spec: dict, *, model="gait2d", out_dir=None, base_dir=".") -> dict
     """
     from .dynamics import inverse_dynamics
     from .grf import torso_residuals
+    from .kinematics import DEFAULT_CUTOFF, cutoff_value
 
     t0 = _time.perf_counter()
     name = spec.get("name", "trial")
@@ -279,8 +280,10 @@ def run_trial(spec: dict, *, model="gait2d", out_dir=None, base_dir=".") -> dict
         base = Path(base_dir)
         kin, ext, info = _kinematics(m, spec, base)
         t1 = _time.perf_counter()
-        cutoff = spec.get("cutoff")
+        # inverse_dynamics low-passes the GRF wrenches like the kinematics (pinmsk.kinematics)
+        cutoff = cutoff_value(spec.get("cutoff", DEFAULT_CUTOFF))
         idt = inverse_dynamics(m, kin, cutoff=cutoff, external=ext)
+        row["lowpass_cutoff_hz"] = cutoff or 0.0
         t2 = _time.perf_counter()
         bm = info.get("body_mass")
         res, rsum = torso_residuals(m, idt, body_mass=bm)
