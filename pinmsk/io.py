@@ -426,6 +426,30 @@ def read_trial(path, *, angular=None, strict: bool = True) -> Trial:
 # ---------------------------------------------------------------------------
 
 
+#: Trial metadata keys that describe a file read in, not an analysis: never written back.
+_READ_META = {"source", "format", "name", "in_degrees", "header", "converted_to_radians", "read_notes"}
+
+
+def _meta_lines(meta) -> str:
+    """``key=value`` header lines of a Trial's analysis metadata (what filter, loads, model...).
+
+    OpenSim readers keep unknown ``key=value`` header fields, so the record of
+    what was applied travels with the file; only scalar values on one line are
+    written.
+    """
+    out = []
+    for key, value in meta.items():
+        if key in _READ_META or key in ("version", "nRows", "nColumns", "inDegrees"):
+            continue
+        if not isinstance(value, (str, int, float, bool)) or not _KEY_VALUE.match(f"{key}=x"):
+            continue
+        text = str(value)
+        if "\n" in text or "\r" in text:
+            continue
+        out.append(f"{key}={text}\n")
+    return "".join(out)
+
+
 def _write_rows(fh, table: np.ndarray, delimiter: str) -> None:
     """Write the (N, 1 + C) numeric table, one line per frame."""
     np.savetxt(fh, table, fmt=_FLOAT_FORMAT, delimiter=delimiter)
@@ -511,7 +535,7 @@ def write_trial(trial: Trial, path, *, in_degrees: bool = False, angular=None) -
             title = path.stem
         head = (
             f"{title}\nversion=1\nnRows={trial.n_frames}\nnColumns={trial.n_channels + 1}\n"
-            f"inDegrees={'yes' if in_degrees else 'no'}\nendheader\n"
+            f"inDegrees={'yes' if in_degrees else 'no'}\n" + _meta_lines(trial.meta) + "endheader\n"
             + "\t".join((TIME,) + names)
             + "\n"
         )

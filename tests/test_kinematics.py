@@ -266,3 +266,23 @@ def test_grf_cutoff_zero_leaves_the_grf_unfiltered_as_opensim(gait2d):
     assert raw.filtering.cutoff == 6.0 and raw.filtering.grf_cutoff is None
     assert "ground reaction none" in raw.describe()[0] and raw.meta()["grf_lowpass_cutoff_hz"] == 0.0
     np.testing.assert_allclose(raw.external[0].force, external_forces(gait2d, tr)[0].force)
+
+
+@pytest.mark.parametrize("rel", ["opensim-models/Gait10dof18musc/ExperimentalData/subject01_walk_grf.xml",
+                                 "opensim-models/Moco2DWalking/referenceGRF.xml"])
+def test_real_opensim_external_loads_files(shared_data, rel, gait2d):
+    path = shared_data / rel
+    if not path.exists():
+        pytest.skip(f"{rel} absent")
+    loads = read_external_loads(path)
+    assert [s.body for s in loads.loads] == ["calcn_r", "calcn_l"]
+    grf = pinmsk.read_trial(loads.datafile)
+    for spec in loads.loads:
+        for kind in ("force", "point", "torque"):
+            assert all(c in grf for c in spec.columns(kind)), (spec.name, kind)
+    # the plates land on gait2d's feet, and the loaded vertical force is about body weight
+    from pinmsk.grf import plate_wrench, plates
+    pl = plates(gait2d, grf, external_loads=loads)
+    assert [p.body for p in pl] == ["foot_r", "foot_l"]
+    fy = sum(plate_wrench(grf, p, planar=True)[0][:, 1] for p in pl)
+    assert 500 < np.median(fy[fy > 100]) < 1200
