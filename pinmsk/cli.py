@@ -22,9 +22,39 @@ def _model(args):
     return load_model(args.model, moment_arms=getattr(args, "moment_arms", None))
 
 
-def _read(path, model=None):
-    from .io import read_trial
-    return read_trial(path, angular=None if model is None else model.rotational_coordinates)
+def _read(path, model=None, args=None, *, coordinates: bool = True):
+    """Read a trial as ``--lenient`` / ``--map`` ask (:func:`pinmsk.channel_map.read_mapped`).
+
+    Each repair of a lenient read is one ``pinmsk: warning:`` line, each choice a map made
+    one ``pinmsk: note:`` line.
+    """
+    import warnings
+
+    from .channel_map import read_mapped
+    from .errors import RepairWarning
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", RepairWarning)
+        trial = read_mapped(path, model=model, cmap=getattr(args, "map", None),
+                            strict=not getattr(args, "lenient", False), require_coordinates=coordinates)
+    for w in caught:
+        if issubclass(w.category, RepairWarning):
+            print(f"pinmsk: warning: {w.message}", file=sys.stderr)
+        else:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+    for note in trial.meta.get("channel_map", {}).get("notes", ()):
+        print(f"pinmsk: note: {note}", file=sys.stderr)
+    return trial
+
+
+def _add_read_flags(s) -> None:
+    """``--lenient`` and ``--map`` on a command that reads a trial (read by :func:`_read`)."""
+    s.add_argument("--lenient", action="store_true",
+                   help="read files whose header row/column counts disagree with the data, or that "
+                        "repeat a time stamp; prints one warning per repair")
+    s.add_argument("--map", metavar="MAP", default=None,
+                   help="rename columns first: a TOML map file ([rename] old = \"new\", optional "
+                        "[scale], [offset]) or a built-in map: opensim-gait2d, rajagopal-gait2d, "
+                        "gait10dof-gait2d (see pinmsk.channel_map)")
 
 
 def _write(trial, path):
@@ -90,7 +120,7 @@ def cmd_info(args) -> int:
 def cmd_id(args) -> int:
     from .dynamics import inverse_dynamics_result
     model = _model(args)
-    trial = _read(args.trial, model)
+    trial = _read(args.trial, model, args)
     res = inverse_dynamics_result(model, trial, **_inputs(args))
     print(res.report())
     if res.residuals.warning():
@@ -104,7 +134,7 @@ def cmd_id(args) -> int:
 def cmd_simulate(args) -> int:
     from .dynamics import simulate
     model = _model(args)
-    moments = _read(args.moments, model) if args.moments else None
+    moments = _read(args.moments, model, args, coordinates=False) if args.moments else None
     if args.duration is None and moments is None:
         raise PinmskError("simulate needs --duration (s) or --moments TRIAL to set the time span")
     if moments is not None and args.duration is None:
@@ -149,7 +179,7 @@ def _run_solver(args, solver, total: int | None, label: str, title: str) -> int:
     """Fit a muscle-redundancy solver on the trial with a progress bar, then write and report."""
     from .progress import Progress
     model = _model(args)
-    trial = _read(args.trial, model)
+    trial = _read(args.trial, model, args)
     kw = _inputs(args)
     if getattr(args, "moments", None):
         kw["moments"] = args.moments
@@ -182,7 +212,7 @@ def cmd_fso(args) -> int:
 def cmd_diagnose(args) -> int:
     from .diagnose import run
     model = _model(args)
-    trial = _read(args.trial, model)
+    trial = _read(args.trial, model, args)
     kw = _inputs(args)
     if kw.pop("ground_reaction") == "ignore":
         trial = trial.drop([n for n in trial.names if parse_ground_reaction(n) is not None])
@@ -250,7 +280,8 @@ def cmd_optimize(args) -> int:
 
 def cmd_view(args) -> int:
     from .viewer import view_cli
-    view_cli(args.model, args.trial, args.results, open_browser=args.open,
+    trial = _read(args.trial, _model(args), args) if args.trial else None
+    view_cli(args.model, trial, args.results, open_browser=args.open,
              block=not args.no_block, timeout=args.timeout)
     return 0
 
@@ -307,6 +338,7 @@ def build_parser() -> argparse.ArgumentParser:
     input_flags(s)
     s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
+    _add_read_flags(s)
     s.set_defaults(func=cmd_id)
 
     s = sub.add_parser("simulate", help="forward dynamics driven by <coord>_moment channels (or none)")
@@ -320,6 +352,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--method", default="rk4", help="rk4 (fixed step) or a solve_ivp method, e.g. RK45")
     s.add_argument("-o", "--output", required=True, help="output .sto or .csv")
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
+    _add_read_flags(s)
     s.set_defaults(func=cmd_simulate)
 
     s = sub.add_parser("demo", help="the diagnosis loop on a shipped forearm trial with a hidden effect")
@@ -342,6 +375,7 @@ def build_parser() -> argparse.ArgumentParser:
         input_flags(s)
         s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
         s.add_argument("--report", metavar="OUT.html", default=None, help="write a self-contained HTML report")
+        _add_read_flags(s)
 
     s = sub.add_parser("so", help="static optimization: muscle forces and activations frame by frame")
     so_flags(s)
@@ -378,6 +412,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--frame", action="append", metavar="FRAME",
                    help="frames to try frame effects (e.g. a payload) at, besides the defaults")
     s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
+    _add_read_flags(s)
     s.set_defaults(func=cmd_diagnose)
 
     s = sub.add_parser("synth", help="write a synthetic trial of a model with hidden effects and noise")
@@ -426,6 +461,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--open", action="store_true", help="open a browser tab (if a display exists)")
     s.add_argument("--no-block", action="store_true", help="return at once instead of serving until Ctrl-C")
     s.add_argument("--timeout", type=float, default=None, help="serve for this many seconds, then stop")
+    _add_read_flags(s)
     s.set_defaults(func=cmd_view)
 
     s = sub.add_parser("batch", help="run IK -> ID -> SO -> report over the trials of a config file")

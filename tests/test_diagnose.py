@@ -121,7 +121,7 @@ def test_two_hidden_effects_in_two_add_steps(tmp_path):
     assert totals[2] <= 1.5 * final.noise_floor["total"]
     assert [c.label for c in final.model.components] == ["payload:hand", "joint_damping:elbow_flexion"]
     data = json.loads((tmp_path / "d.json").read_text())
-    assert set(data) == {"rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added"}
+    assert set(data) == {"inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added"}
     assert data["verdict"] == "at_noise_floor"
     assert [(a["effect"], a["target"]) for a in data["added"]] == [("payload", "hand"),
                                                                   ("joint_damping", "elbow_flexion")]
@@ -137,7 +137,7 @@ def test_json_shape_and_summary():
     trial = make_trial(m, ["joint_damping:elbow_flexion:c=0.3"], seed=5)
     r = run(m, trial)
     js = r.to_json_dict()
-    assert list(js) == ["rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added"]
+    assert list(js) == ["inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added"]
     assert set(js["rmse"]) == {"elbow_flexion_moment", "total"} == set(js["noise_floor"])
     for w in js["worst_windows"]:
         assert set(w) == {"channel", "start", "end", "rmse"} and w["end"] > w["start"]

@@ -219,7 +219,9 @@ class Diagnosis:
 
     # -- reporting -----------------------------------------------------------------------
     def to_json_dict(self, added: Sequence = ()) -> dict:
+        inputs = self.comparison.inputs
         return {
+            "inputs": inputs.meta() if inputs is not None else {},
             "rmse": dict(self.rmse),
             "noise_floor": dict(self.noise_floor),
             "worst_windows": [dict(w) for w in self.worst_windows],
@@ -238,6 +240,8 @@ class Diagnosis:
                          f"({dur:.2f} s, {c.trial.n_frames} frames), {c.mode}-level comparison")
             if self.model.components:
                 lines.append("model effects: " + ", ".join(x.label for x in self.model.components))
+            if c.inputs is not None:
+                lines.extend(c.inputs.describe())
             lines.append(f"noise floor: {c.noise.method}")
         unit = _unit(c)
         w = max([len(ch) for ch in c.channels] + [8])
