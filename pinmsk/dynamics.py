@@ -78,7 +78,8 @@ def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, ex
         gc = inputs.filtering.grf_cutoff
         ext = lowpass_external(external, rate=1.0 / float(np.median(np.diff(inputs.motion.t))), cutoff=gc)
         inputs = replace(inputs, external=ext, filtering=replace(inputs.filtering, has_grf=True),
-                         notes=inputs.notes + (f"{len(ext)} external wrench(es) given by the caller",))
+                         notes=inputs.notes + ("external wrenches given by the caller on "
+                                               + ", ".join(e.frame for e in ext),))
     motion = inputs.motion
     tau = inverse_dynamics_array(model, motion, external=ext, components=components)
     residuals = floating_base_residuals(model, motion, tau, ext)
@@ -86,6 +87,8 @@ def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, ex
     chans = {c: motion.q[:, i] for c, i in zip(model.coordinate_order, idx)}
     chans.update({moment_channels([c])[0]: tau[:, i] for c, i in zip(model.coordinate_order, idx)})
     meta = {"analysis": "inverse_dynamics", "model": model.name, **inputs.meta()}
+    if external:
+        meta["ground_reaction"] = "given by the caller: " + ", ".join(e.frame for e in ext)
     if residuals.coordinates:
         meta["residuals"] = "; ".join(
             f"{c} peak {p:.4g} {u} (threshold {th:.4g})" for c, p, u, th in

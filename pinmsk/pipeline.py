@@ -242,6 +242,7 @@ def run_trial(spec: dict, *, model="gait2d", out_dir=None, base_dir=".") -> dict
         cutoff = cutoff_value(spec.get("cutoff", DEFAULT_CUTOFF))
         idt = inverse_dynamics(m, kin, cutoff=cutoff, external=ext)
         row["lowpass_cutoff_hz"] = cutoff or 0.0
+        row["ground_reaction"] = ", ".join(f"{e.frame}" for e in ext) or "none"
         t2 = _time.perf_counter()
         bm = info.get("body_mass")
         res, rsum = torso_residuals(m, idt, body_mass=bm)
