@@ -35,3 +35,11 @@ class OutputError(PinmskError, OSError):
 
     Also an ``OSError``, so code that catches file-system errors still catches it.
     """
+
+
+class MissingDependencyError(PinmskError, ImportError):
+    """An optional dependency needed for this input is not installed (the message says how to)."""
+
+
+class RepairWarning(UserWarning):
+    """A lenient read (``read_trial(strict=False)``, ``--lenient``) repaired the file; the message says how."""
