@@ -72,10 +72,6 @@ def _inputs(args) -> dict:
                 grf_cutoff="same" if args.grf_cutoff is None else args.grf_cutoff)
 
 
-def _warn(text: str) -> None:
-    print(f"pinmsk: warning: {text}", file=sys.stderr)
-
-
 def _named_values(items, model, what) -> np.ndarray:
     out = np.zeros(model.nv)
     for item in items or []:
@@ -125,8 +121,6 @@ def cmd_id(args) -> int:
     trial = _read(args.trial, model, args)
     res = inverse_dynamics_result(model, trial, **_inputs(args))
     print(res.report())
-    if res.residuals.warning():
-        _warn(res.residuals.warning())
     out = res.trial
     _write(out, args.output)
     _plot(args, out, [f"{c}_moment" for c in model.coordinate_order], "inverse_dynamics", "moment (N m)")
@@ -189,9 +183,6 @@ def _run_solver(args, solver, total: int | None, label: str, title: str) -> int:
         solver.fit(model, trial, progress=bar, **kw)
     text = solver.report()
     print(text)
-    res = getattr(solver, "residuals_", None)
-    if res is not None and res.warning():
-        _warn(res.warning())
     _write(solver.result_, args.output)
     _report_results(args, model, trial, solver.result_, title, text)
     return 0

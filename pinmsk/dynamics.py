@@ -16,6 +16,7 @@ on the acceleration), and inverse dynamics through their generalized force.
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, replace
 from typing import Callable, Sequence
 
@@ -24,7 +25,7 @@ import pinocchio as pin
 
 from . import skeleton
 from .components import Motion
-from .errors import TrialError
+from .errors import ResidualWarning, TrialError
 from .kinematics import DEFAULT_CUTOFF, TrialInputs, lowpass_external, prepare
 from .residuals import ResidualReport, floating_base_residuals
 from .trial import Trial, moment_channels
@@ -94,6 +95,8 @@ def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, ex
             f"{c} peak {p:.4g} {u} (threshold {th:.4g})" for c, p, u, th in
             zip(residuals.coordinates, residuals.peak, residuals.units, residuals.thresholds))
     out = Trial(motion.t, chans, meta=meta)
+    if residuals.warning():
+        warnings.warn(residuals.warning(), ResidualWarning, stacklevel=3)
     return InverseDynamicsResult(out, inputs, residuals)
 
 

@@ -43,3 +43,7 @@ class MissingDependencyError(PinmskError, ImportError):
 
 class RepairWarning(UserWarning):
     """A lenient read (``read_trial(strict=False)``, ``--lenient``) repaired the file; the message says how."""
+
+
+class ResidualWarning(UserWarning):
+    """A floating base without external loads: its residuals carry the body weight."""
