@@ -230,11 +230,28 @@ def cmd_synth(args) -> int:
 
 def cmd_contact_fit(args) -> int:
     from .contact import fit_cli_run
-    out = fit_cli_run(args.model, args.trial, contact=args.contact, relax=args.relax,
-                      json_path=args.json, plot_dir=args.plot, n_starts=args.starts)
-    rm = out["rmse"]
-    print(f"{args.contact}{' (relaxed centres)' if args.relax else ''} contact fitted in {out['seconds']:.1f} s: "
-          f"objective (Eq. 4.2) {out['objective']:.4g}")
+    from .contact.identify import settings_lines
+    opts = {}   # only what the user gave: the rest are ContactFit's defaults (printed below)
+    if args.contact:
+        opts["contact"] = args.contact
+    if args.relax:
+        opts["relax"] = True
+    if args.starts is not None:
+        opts["n_starts"] = args.starts
+    if args.terms:
+        opts["terms"] = tuple(args.terms)
+    if args.toe:
+        opts["toe"] = args.toe
+    if args.cutoff is not None:
+        opts["cutoff"] = args.cutoff or None
+    out = fit_cli_run(args.model, args.trial, json_path=args.json, plot_dir=args.plot, **opts)
+    print("\n".join(settings_lines(out["settings"])))
+    for k, (label, j) in enumerate(zip(out["start_labels"], out["starts"])):
+        print(f"  start {k + 1}, {label}: J {j:.5g}{' (best)' if k == out['best_start'] else ''}")
+    rm, tm = out["rmse"], out["terms"]
+    print(f"{out['contact']}{' (relaxed centres)' if out['relax'] else ''} contact fitted in {out['seconds']:.1f} s: "
+          f"objective (Eq. 4.2) {out['objective']:.4g} (normal {tm['normal_force']:.4g}, friction "
+          f"{tm['friction_force']:.4g}, COP {tm['cop']:.4g})")
     print(f"  rmse: normal force {rm['normal_force']:.4g} N, friction force {rm['friction_force']:.4g} N, "
           f"COP {1000 * rm['cop']:.3g} mm")
     for site, params in out["params"].items():
@@ -432,9 +449,17 @@ def build_parser() -> argparse.ArgumentParser:
     c = csub.add_parser("fit", help="identify contact parameters against measured GRF and COP (Eq. 4.2)")
     c.add_argument("model", help="model with heel/metatarsal/toe sites, e.g. foot2d")
     c.add_argument("trial", help="trial with foot kinematics and GRF (.csv/.sto/.mot or the CSU leg2d text)")
-    c.add_argument("--contact", choices=["point", "volumetric", "hypervolumetric"], default="hypervolumetric")
+    c.add_argument("--contact", choices=["point", "volumetric", "hypervolumetric"], default=None,
+                   help="contact model (default hypervolumetric)")
     c.add_argument("--relax", action="store_true", help="also fit the sphere centres (dx, dy; Sec. 4.1.4)")
-    c.add_argument("--starts", type=int, default=6, help="multi-start count (default 6)")
+    c.add_argument("--starts", type=int, default=None,
+                   help="starting points: the thesis values, the contained models' optima, then random (default 4)")
+    c.add_argument("--terms", nargs="+", choices=["normal_force", "friction_force", "cop"], default=None,
+                   help="Eq. 4.2 terms minimised (default all three, for every model)")
+    c.add_argument("--toe", choices=["kinematic", "fit", "flat", "channel"], default=None,
+                   help="toe angle: from the kinematics, held fixed (default); fitted; legacy flat; the mtp channel")
+    c.add_argument("--cutoff", type=float, default=None, metavar="HZ",
+                   help="low-pass of the driving kinematics (default 12 Hz; 0 = none)")
     c.add_argument("--json", metavar="OUT.json", default=None,
                    help="write objective, params, rmse and seconds as JSON")
     c.add_argument("--plot", metavar="DIR", default=None, help="write GRF and COP figures (PNG) to DIR")
