@@ -528,6 +528,8 @@ class ForwardStaticOptimization:
                 ch[f"{c}_reserve"] = self.reserves_[:, j]
         ch["cost"] = self.cost_
         meta = {"analysis": "forward_static_optimization", **{k: str(v) for k, v in self.get_params().items()}}
+        if getattr(self, "inputs_", None) is not None:
+            meta.update(self.inputs_.meta())
         if self.allow_divergence:
             ch["diverged"] = np.any(np.abs(self.tracking_error_) > float(self.max_tracking_error),
                                     axis=1).astype(float)
@@ -552,6 +554,8 @@ class ForwardStaticOptimization:
             f"  solver         {self.n_qp_} proxsuite QPs, {self.n_iter_} iterations",
             f"  time           {self.time_ * 1e3:.1f} ms",
         ]
+        if getattr(self, "inputs_", None) is not None:
+            lines += [f"  {ln}" for ln in self.inputs_.describe()]
         if self.reserves_ is not None:
             lines.append(f"  reserves       max {np.max(np.abs(self.reserves_)):.4g} N m")
         if self.diverged_:
