@@ -42,9 +42,10 @@ def component_forces(model, motion: Motion) -> dict[str, np.ndarray]:
 
 
 def inverse_dynamics_array(model, motion: Motion, *, external: Sequence[skeleton.ExternalForce] = (),
-                           components: bool = True) -> np.ndarray:
+                           components: bool = True, progress=None) -> np.ndarray:
     """Actuator generalized forces ``(N, nv)`` for a Motion (see :func:`inverse_dynamics`)."""
-    tau = skeleton.inverse_dynamics(model, motion.q, motion.v, motion.a, external=external)
+    tau = skeleton.inverse_dynamics(model, motion.q, motion.v, motion.a, external=external,
+                                    progress=progress)
     if components:
         for f in component_forces(model, motion).values():
             tau -= f
@@ -52,16 +53,19 @@ def inverse_dynamics_array(model, motion: Motion, *, external: Sequence[skeleton
 
 
 def inverse_dynamics(model, trial, *, cutoff: float | None = None,
-                     external: Sequence[skeleton.ExternalForce] = (), components: bool = True) -> Trial:
+                     external: Sequence[skeleton.ExternalForce] = (), components: bool = True,
+                     progress=None) -> Trial:
     """Inverse dynamics of a trial: the actuator moments ``<coord>_moment`` (N m or N).
 
     ``tau = M(q) a + h(q, v) - J^T f_ext - sum_k Q_k(q, v, a)``: what muscles
     (or motors) must supply once the model's effects and contacts are
     accounted for.  Velocities and accelerations come from the trial's
-    coordinates (``cutoff`` Hz zero-lag low-pass first, if given).
+    coordinates (``cutoff`` Hz zero-lag low-pass first, if given).  ``progress``
+    (an object with ``update(n)``) is told the frames done, a chunk at a time.
     """
     motion = _as_motion(model, trial, cutoff)
-    tau = inverse_dynamics_array(model, motion, external=external, components=components)
+    tau = inverse_dynamics_array(model, motion, external=external, components=components,
+                                 progress=progress)
     idx = [model.coordinate_index(c) for c in model.coordinate_order]
     chans = {c: motion.q[:, i] for c, i in zip(model.coordinate_order, idx)}
     chans.update({f"{c}_moment": tau[:, i] for c, i in zip(model.coordinate_order, idx)})

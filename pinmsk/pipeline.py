@@ -398,7 +398,7 @@ def batch(trials: Sequence[dict], *, model="gait2d", out=None, base_dir=".", job
     rows: list = [None] * len(trials)
     args = [dict(model=model, out_dir=None if out is None else str(out / t["name"]), base_dir=str(base_dir))
             for t in trials]
-    with Progress(len(trials), "batch", force=bool(progress)) as bar:
+    with Progress(len(trials), "batch", unit="trials", force=progress) as bar:
         if jobs == 1 and not scheduler:
             for i, t in enumerate(trials):
                 rows[i] = run_trial(t, **args[i])
