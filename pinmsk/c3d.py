@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import TrialError
+from .errors import MissingDependencyError, TrialError
 from .markers import UNIT_SCALE, fill_gaps, DEFAULT_MAX_GAP
 from .trial import Trial
 
@@ -30,11 +30,11 @@ __all__ = ["read_c3d", "C3DData", "remap_axes", "require_ezc3d"]
 
 
 def require_ezc3d():
-    """Import ezc3d or raise ImportError telling how to install it."""
+    """Import ezc3d or raise :class:`~pinmsk.errors.MissingDependencyError` (an ImportError) telling how to install it."""
     try:
         import ezc3d  # noqa: F401
     except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise ImportError(
+        raise MissingDependencyError(
             "reading C3D files needs the optional dependency 'ezc3d'; install it with "
             "`pip install pinmsk[c3d]` (or `pip install ezc3d` / `conda install -c conda-forge ezc3d`)"
         ) from exc
@@ -66,7 +66,10 @@ def read_c3d(path, *, max_gap: int = DEFAULT_MAX_GAP, platforms: bool = True) ->
     path = Path(path)
     if not path.exists():
         raise TrialError(f"C3D file not found: {path}")
-    c = ezc3d.c3d(str(path), extract_forceplat_data=platforms)
+    try:
+        c = ezc3d.c3d(str(path), extract_forceplat_data=platforms)
+    except (OSError, RuntimeError, ValueError) as exc:   # ezc3d's errors on a broken file or platform
+        raise TrialError(f"{path}: cannot read it as a C3D file ({exc})") from None
     P = c["parameters"]
     out = C3DData(None, None, [], {"source": str(path)})
     pts = c["data"]["points"]            # (4, M, N)

@@ -13,6 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import PinmskError
+from .kinematics import DEFAULT_CUTOFF
+from .trial import parse_ground_reaction
 
 
 def _model(args):
@@ -20,9 +22,39 @@ def _model(args):
     return load_model(args.model, moment_arms=getattr(args, "moment_arms", None))
 
 
-def _read(path, model=None):
-    from .io import read_trial
-    return read_trial(path, angular=None if model is None else model.rotational_coordinates)
+def _read(path, model=None, args=None, *, coordinates: bool = True):
+    """Read a trial as ``--lenient`` / ``--map`` ask (:func:`pinmsk.channel_map.read_mapped`).
+
+    Each repair of a lenient read is one ``pinmsk: warning:`` line, each choice a map made
+    one ``pinmsk: note:`` line.
+    """
+    import warnings
+
+    from .channel_map import read_mapped
+    from .errors import RepairWarning
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", RepairWarning)
+        trial = read_mapped(path, model=model, cmap=getattr(args, "map", None),
+                            strict=not getattr(args, "lenient", False), require_coordinates=coordinates)
+    for w in caught:
+        if issubclass(w.category, RepairWarning):
+            print(f"pinmsk: warning: {w.message}", file=sys.stderr)
+        else:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+    for note in trial.meta.get("channel_map", {}).get("notes", ()):
+        print(f"pinmsk: note: {note}", file=sys.stderr)
+    return trial
+
+
+def _add_read_flags(s) -> None:
+    """``--lenient`` and ``--map`` on a command that reads a trial (read by :func:`_read`)."""
+    s.add_argument("--lenient", action="store_true",
+                   help="read files whose header row/column counts disagree with the data, or that "
+                        "repeat a time stamp; prints one warning per repair")
+    s.add_argument("--map", metavar="MAP", default=None,
+                   help="rename columns first: a TOML map file ([rename] old = \"new\", optional "
+                        "[scale], [offset]) or a built-in map: opensim-gait2d, rajagopal-gait2d, "
+                        "gait10dof-gait2d (see pinmsk.channel_map)")
 
 
 def _write(trial, path, precision=None):
@@ -51,6 +83,17 @@ def _progress(total, label, unit=""):
     """A progress line on stderr for a step that may take long (drawn on a terminal only)."""
     from .progress import Progress
     return Progress(total, label, unit=unit)
+
+
+def _inputs(args) -> dict:
+    """The trial-preparation options every analysis takes (see :func:`pinmsk.kinematics.prepare`)."""
+    return dict(cutoff=args.cutoff, grf=args.grf, external_loads=args.external_loads,
+                ground_reaction="ignore" if args.no_grf else "auto",
+                grf_cutoff="same" if args.grf_cutoff is None else args.grf_cutoff)
+
+
+def _warn(text: str) -> None:
+    print(f"pinmsk: warning: {text}", file=sys.stderr)
 
 
 def _named_values(items, model, what) -> np.ndarray:
@@ -97,11 +140,15 @@ def cmd_info(args) -> int:
 
 
 def cmd_id(args) -> int:
-    from .dynamics import inverse_dynamics
+    from .dynamics import inverse_dynamics_result
     model = _model(args)
-    trial = _read(args.trial, model)
+    trial = _read(args.trial, model, args)
     with _progress(trial.n_frames, "ID", "frames") as bar:
-        out = inverse_dynamics(model, trial, cutoff=args.cutoff, progress=bar)
+        res = inverse_dynamics_result(model, trial, **_inputs(args), progress=bar)
+    print(res.report())
+    if res.residuals.warning():
+        _warn(res.residuals.warning())
+    out = res.trial
     _write(out, args.output, args.precision)
     _plot(args, out, [f"{c}_moment" for c in model.coordinate_order], "inverse_dynamics", "moment (N m)")
     return 0
@@ -110,7 +157,7 @@ def cmd_id(args) -> int:
 def cmd_simulate(args) -> int:
     from .dynamics import simulate
     model = _model(args)
-    moments = _read(args.moments, model) if args.moments else None
+    moments = _read(args.moments, model, args, coordinates=False) if args.moments else None
     if args.duration is None and moments is None:
         raise PinmskError("simulate needs --duration (s) or --moments TRIAL to set the time span")
     if moments is not None and args.duration is None:
@@ -154,12 +201,18 @@ def _report_results(args, model, trial, result, title, text):
 def _run_solver(args, solver, total: int | None, label: str, title: str) -> int:
     """Fit a muscle-redundancy solver on the trial with a progress bar, then write and report."""
     model = _model(args)
-    trial = _read(args.trial, model)
+    trial = _read(args.trial, model, args)
+    kw = _inputs(args)
+    if getattr(args, "moments", None):
+        kw["moments"] = args.moments
     with _progress(trial.n_frames if total is None else total, label,
                    "frames" if total is None else "steps") as bar:
-        solver.fit(model, trial, cutoff=args.cutoff, progress=bar)
+        solver.fit(model, trial, progress=bar, **kw)
     text = solver.report()
     print(text)
+    res = getattr(solver, "residuals_", None)
+    if res is not None and res.warning():
+        _warn(res.warning())
     _write(solver.result_, args.output, args.precision)
     _report_results(args, model, trial, solver.result_, title, text)
     return 0
@@ -167,7 +220,8 @@ def _run_solver(args, solver, total: int | None, label: str, title: str) -> int:
 
 def cmd_so(args) -> int:
     from .solvers.static import StaticOptimization
-    so = StaticOptimization(**_so_options(args), minmax=args.minmax)
+    dofs = [d.strip() for d in args.dofs.split(",") if d.strip()] if args.dofs else None
+    so = StaticOptimization(**_so_options(args), minmax=args.minmax, dofs=dofs)
     return _run_solver(args, so, None, "SO", "static_optimization")
 
 
@@ -181,9 +235,12 @@ def cmd_fso(args) -> int:
 def cmd_diagnose(args) -> int:
     from .diagnose import run
     model = _model(args)
-    trial = _read(args.trial, model)
+    trial = _read(args.trial, model, args)
+    kw = _inputs(args)
+    if kw.pop("ground_reaction") == "ignore":
+        trial = trial.drop([n for n in trial.names if parse_ground_reaction(n) is not None])
     r = run(model, trial, add=args.add or [], json_path=args.json, report_path=args.report,
-            plot_dir=args.plot, mode=args.mode, cutoff=args.cutoff or None, frames=args.frame or None)
+            plot_dir=args.plot, mode=args.mode, frames=args.frame or None, **kw)
     print(r.summary_text())
     for path in (args.json, args.report):
         if path:
@@ -247,7 +304,8 @@ def cmd_optimize(args) -> int:
 
 def cmd_view(args) -> int:
     from .viewer import view_cli
-    view_cli(args.model, args.trial, args.results, open_browser=args.open,
+    trial = _read(args.trial, _model(args), args) if args.trial else None
+    view_cli(args.model, trial, args.results, open_browser=args.open,
              block=not args.no_block, timeout=args.timeout)
     return 0
 
@@ -274,6 +332,25 @@ def _version() -> str:
         return __version__
 
 
+def input_flags(s) -> None:
+    """The flags of every command that analyses a trial: filter and external loads."""
+    s.add_argument("--cutoff", type=float, default=DEFAULT_CUTOFF, metavar="HZ",
+                   help=f"zero-lag Butterworth low-pass (Hz) of the coordinates and the GRF before "
+                        f"differentiating (default {DEFAULT_CUTOFF:g}; 0 = no filter, right for noise-free "
+                        "synthetic data)")
+    s.add_argument("--grf-cutoff", type=float, default=None, metavar="HZ",
+                   help="low-pass of the GRF (default: the same as --cutoff, which avoids artificial residual "
+                        "peaks; 0 = unfiltered, as OpenSim's ID tool)")
+    s.add_argument("--grf", metavar="FILE", default=None,
+                   help="ground reaction forces at their own rate (.mot/.sto/.csv with [side_]ground_force_v[xyz], "
+                        "_p[xyz], ground_torque_[xyz]); default: the trial's own GRF channels")
+    s.add_argument("--external-loads", metavar="XML", default=None,
+                   help="an OpenSim ExternalLoads .xml: which columns act on which body (reads its datafile "
+                        "unless --grf or the trial gives the data)")
+    s.add_argument("--no-grf", action="store_true",
+                   help="leave the ground reaction forces out on purpose (recorded in the output)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="pinmsk", description="Human musculoskeletal dynamics on Pinocchio.")
     p.add_argument("--version", action="version", version=f"pinmsk {_version()}")
@@ -294,10 +371,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("trial", help="trial file (.csv with a time column, .sto or .mot)")
     s.add_argument("-o", "--output", required=True, help="output .sto or .csv")
     _precision_flag(s)
-    s.add_argument("--cutoff", type=float, default=None,
-                   help="zero-lag Butterworth low-pass cut-off (Hz) before differentiation")
+    input_flags(s)
     s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
+    _add_read_flags(s)
     s.set_defaults(func=cmd_id)
 
     s = sub.add_parser("simulate", help="forward dynamics driven by <coord>_moment channels (or none)")
@@ -312,6 +389,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-o", "--output", required=True, help="output .sto or .csv")
     _precision_flag(s)
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
+    _add_read_flags(s)
     s.set_defaults(func=cmd_simulate)
 
     s = sub.add_parser("demo", help="the diagnosis loop on a shipped forearm trial with a hidden effect")
@@ -329,16 +407,23 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--weights", choices=["none", "fmax", "pcsa", "volume"], default="none",
                        help="normaliser N_i of each muscle (thesis Eq. 2.11-2.14)")
         s.add_argument("--reserves", action="store_true",
-                       help="ideal reserve actuators per dof at high cost instead of failing on infeasible frames")
+                       help="ideal reserve actuators per dof at high cost instead of failing on infeasible frames; "
+                            "coordinates no muscle spans (a floating base) get reserves equal to the force they need")
         s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
-        s.add_argument("--cutoff", type=float, default=None,
-                       help="low-pass cut-off (Hz) before differentiating the coordinates")
+        input_flags(s)
         s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
         s.add_argument("--report", metavar="OUT.html", default=None, help="write a self-contained HTML report")
+        _add_read_flags(s)
 
     s = sub.add_parser("so", help="static optimization: muscle forces and activations frame by frame")
     so_flags(s)
     s.add_argument("--minmax", action="store_true", help="min/max criterion (thesis Eq. 2.13) as an epigraph LP")
+    s.add_argument("--moments", choices=["id", "measured"], default="id",
+                   help="moments to balance: 'id' inverse dynamics with the trial's GRF (default) or "
+                        "'measured', the trial's own <coord>_moment channels")
+    s.add_argument("--dofs", metavar="COORD,COORD", default=None,
+                   help="balance only these coordinates (default: every coordinate a muscle spans; the "
+                        "others must need no force, or --reserves)")
     s.set_defaults(func=cmd_so)
 
     s = sub.add_parser("fso", help="forward static optimization: track a motion forward in time (thesis Sec. 3.4)")
@@ -361,13 +446,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
     s.add_argument("--mode", default="auto", choices=["auto", "torque", "motion", "muscle", "contact"],
                    help="comparison level (default: chosen from the trial's channels)")
-    s.add_argument("--cutoff", type=float, default=6.0,
-                   help="low-pass cut-off (Hz) for differentiating the coordinates (default 6; 0 = no "
-                        "filter, right for noise-free synthetic kinematics; about 12 for foot markers "
-                        "in contact mode)")
+    input_flags(s)
     s.add_argument("--frame", action="append", metavar="FRAME",
                    help="frames to try frame effects (e.g. a payload) at, besides the defaults")
     s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
+    _add_read_flags(s)
     s.set_defaults(func=cmd_diagnose)
 
     s = sub.add_parser("synth", help="write a synthetic trial of a model with hidden effects and noise")
@@ -418,6 +501,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--open", action="store_true", help="open a browser tab (if a display exists)")
     s.add_argument("--no-block", action="store_true", help="return at once instead of serving until Ctrl-C")
     s.add_argument("--timeout", type=float, default=None, help="serve for this many seconds, then stop")
+    _add_read_flags(s)
     s.set_defaults(func=cmd_view)
 
     s = sub.add_parser("batch", help="run IK -> ID -> SO -> report over the trials of a config file")

@@ -16,6 +16,7 @@ on the acceleration), and inverse dynamics through their generalized force.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -24,15 +25,9 @@ import pinocchio as pin
 from . import skeleton
 from .components import Motion
 from .errors import TrialError
-from .trial import Trial
-
-
-def _as_motion(model, data, cutoff) -> Motion:
-    if isinstance(data, Motion):
-        return data
-    if isinstance(data, Trial):
-        return model.motion(data, cutoff=cutoff)
-    raise TrialError(f"expected a Trial or a Motion, got {type(data).__name__}")
+from .kinematics import DEFAULT_CUTOFF, TrialInputs, lowpass_external, prepare
+from .residuals import ResidualReport, floating_base_residuals
+from .trial import Trial, moment_channels
 
 
 def component_forces(model, motion: Motion) -> dict[str, np.ndarray]:
@@ -52,24 +47,78 @@ def inverse_dynamics_array(model, motion: Motion, *, external: Sequence[skeleton
     return tau
 
 
-def inverse_dynamics(model, trial, *, cutoff: float | None = None,
+@dataclass(frozen=True)
+class InverseDynamicsResult:
+    """Inverse dynamics of a trial: the moments, the inputs used and the floating-base residuals."""
+
+    trial: Trial
+    inputs: TrialInputs
+    residuals: ResidualReport
+
+    def report(self) -> str:
+        lines = [f"Inverse dynamics of model '{self.trial.meta.get('model', '?')}': "
+                 f"{self.trial.n_frames} frames ({self.trial.time[0]:.4g}-{self.trial.time[-1]:.4g} s)"]
+        lines += [f"  {ln}" for ln in self.inputs.describe()]
+        lines += [f"  {ln}" for ln in self.residuals.lines()]
+        return "\n".join(lines)
+
+
+def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, external_loads=None,
+                            frames=None, ground_reaction: str = "auto", grf_cutoff="same",
+                            external: Sequence[skeleton.ExternalForce] = (),
+                            components: bool = True, progress=None) -> InverseDynamicsResult:
+    """Inverse dynamics with its inputs and residual report (see :func:`inverse_dynamics`)."""
+    inputs = prepare(model, trial, cutoff=cutoff, grf=grf, external_loads=external_loads, frames=frames,
+                     ground_reaction=ground_reaction, grf_cutoff=grf_cutoff)
+    if external and inputs.external:
+        raise TrialError("external= was given and the trial has its own ground reaction forces; "
+                         "pass one source of external loads")
+    ext = inputs.external
+    if external:
+        # explicit wrenches on the motion's time base get the same low-pass as the kinematics
+        gc = inputs.filtering.grf_cutoff
+        ext = lowpass_external(external, rate=1.0 / float(np.median(np.diff(inputs.motion.t))), cutoff=gc)
+        inputs = replace(inputs, external=ext, filtering=replace(inputs.filtering, has_grf=True),
+                         notes=inputs.notes + (f"{len(ext)} external wrench(es) given by the caller",))
+    motion = inputs.motion
+    tau = inverse_dynamics_array(model, motion, external=ext, components=components, progress=progress)
+    residuals = floating_base_residuals(model, motion, tau, ext)
+    idx = [model.coordinate_index(c) for c in model.coordinate_order]
+    chans = {c: motion.q[:, i] for c, i in zip(model.coordinate_order, idx)}
+    chans.update({moment_channels([c])[0]: tau[:, i] for c, i in zip(model.coordinate_order, idx)})
+    meta = {"analysis": "inverse_dynamics", "model": model.name, **inputs.meta()}
+    if residuals.coordinates:
+        meta["residuals"] = "; ".join(
+            f"{c} peak {p:.4g} {u} (threshold {th:.4g})" for c, p, u, th in
+            zip(residuals.coordinates, residuals.peak, residuals.units, residuals.thresholds))
+    out = Trial(motion.t, chans, meta=meta)
+    return InverseDynamicsResult(out, inputs, residuals)
+
+
+def inverse_dynamics(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, external_loads=None, frames=None,
+                     ground_reaction: str = "auto", grf_cutoff="same",
                      external: Sequence[skeleton.ExternalForce] = (), components: bool = True,
                      progress=None) -> Trial:
     """Inverse dynamics of a trial: the actuator moments ``<coord>_moment`` (N m or N).
 
     ``tau = M(q) a + h(q, v) - J^T f_ext - sum_k Q_k(q, v, a)``: what muscles
-    (or motors) must supply once the model's effects and contacts are
-    accounted for.  Velocities and accelerations come from the trial's
-    coordinates (``cutoff`` Hz zero-lag low-pass first, if given).  ``progress``
+    (or motors) must supply once the external loads and the model's effects
+    and contacts are accounted for.  The trial goes through
+    :func:`pinmsk.kinematics.prepare`: its coordinates and its ground reaction
+    forces (its own channels, ``grf=`` at their own rate, or an OpenSim
+    ``external_loads=`` file) are low-passed at ``cutoff`` Hz (default 6;
+    0 = off; ``grf_cutoff`` sets the GRF's apart) and the GRF enter as world
+    wrenches on the feet.  ``external`` gives explicit
+    :class:`~pinmsk.skeleton.ExternalForce` s on the trial's time base instead
+    (low-passed like the GRF).  The
+    output's metadata says which filter and loads were applied; the residuals
+    at a floating base are in :func:`inverse_dynamics_result`.  ``progress``
     (an object with ``update(n)``) is told the frames done, a chunk at a time.
     """
-    motion = _as_motion(model, trial, cutoff)
-    tau = inverse_dynamics_array(model, motion, external=external, components=components,
-                                 progress=progress)
-    idx = [model.coordinate_index(c) for c in model.coordinate_order]
-    chans = {c: motion.q[:, i] for c, i in zip(model.coordinate_order, idx)}
-    chans.update({f"{c}_moment": tau[:, i] for c, i in zip(model.coordinate_order, idx)})
-    return Trial(motion.t, chans, meta={"analysis": "inverse_dynamics", "model": model.name})
+    return inverse_dynamics_result(model, trial, cutoff=cutoff, grf=grf, external_loads=external_loads,
+                                   frames=frames, ground_reaction=ground_reaction, grf_cutoff=grf_cutoff,
+                                   external=external, components=components,
+                                   progress=progress).trial
 
 
 def skeleton_with_inertias(model) -> pin.Model:

@@ -28,3 +28,11 @@ class InfeasibleError(SolverError):
 
 class ConvergenceError(SolverError):
     """An iterative solver stopped before meeting its tolerance."""
+
+
+class MissingDependencyError(PinmskError, ImportError):
+    """An optional dependency needed for this input is not installed (the message says how to)."""
+
+
+class RepairWarning(UserWarning):
+    """A lenient read (``read_trial(strict=False)``, ``--lenient``) repaired the file; the message says how."""

@@ -36,14 +36,24 @@ __all__ = ["lowpass", "differentiate", "filter_padlen", "UNIFORM_TOLERANCE"]
 UNIFORM_TOLERANCE = 0.1
 
 
-def filter_padlen(order: int) -> int:
+def filter_padlen(order: int, *, rate: float | None = None, cutoff: float | None = None,
+                  n: int | None = None) -> int:
     """Samples of odd extension added at each end by :func:`lowpass`.
 
-    This is scipy's default for ``sosfiltfilt`` on a Butterworth low-pass of
-    this ``order`` (``3 * (2 * n_sections + 1)``); the signal must be longer.
+    Without ``rate`` and ``cutoff``: scipy's default for ``sosfiltfilt`` on a
+    Butterworth filter of this ``order`` (``3 * (2 * n_sections + 1)``), the
+    fewest samples a signal must exceed.  With them: at least two periods of
+    the cut-off, ``ceil(2 * rate / cutoff)`` samples (capped at ``n - 1``),
+    because scipy's default is 15 samples whatever the rate: at 1 kHz and
+    6 Hz that is 15 ms against a filter response of about 300 ms, and the end
+    transients then reach far into the trial (0.05 rad on a walk's hip angle).
     """
     n_sections = (int(order) + 1) // 2
-    return 3 * (2 * n_sections + 1)
+    base = 3 * (2 * n_sections + 1)
+    if rate is None or cutoff is None:
+        return base
+    pad = max(base, int(np.ceil(2.0 * float(rate) / float(cutoff))))
+    return pad if n is None else min(pad, int(n) - 1)
 
 
 def _check_finite(x: np.ndarray, what: str) -> None:
@@ -82,9 +92,10 @@ def lowpass(x, *, rate: float, cutoff: float, order: int = 4) -> np.ndarray:
 
     Notes
     -----
-    ``sosfiltfilt`` with ``padtype="odd"`` and ``padlen=filter_padlen(order)``:
-    each end is extended by a point reflection about the end sample, which
-    keeps the end value and slope and limits start-up transients.
+    ``sosfiltfilt`` with ``padtype="odd"`` and
+    ``padlen=filter_padlen(order, rate=rate, cutoff=cutoff, n=N)`` (two periods
+    of the cut-off): each end is extended by a point reflection about the end
+    sample, which keeps the end value and slope and limits start-up transients.
     """
     x = np.asarray(x, dtype=float)
     if x.ndim == 0:
@@ -102,15 +113,16 @@ def lowpass(x, *, rate: float, cutoff: float, order: int = 4) -> np.ndarray:
     if int(order) != order or order < 1:
         raise TrialError(f"filter order must be a positive integer, got {order!r}")
     order = int(order)
-    padlen = filter_padlen(order)
     n = x.shape[0]
-    if n <= padlen:
+    if n <= filter_padlen(order):
+        padlen = filter_padlen(order)
         raise TrialError(
             f"{n} samples are too few for an order-{order} Butterworth low-pass "
             f"(cutoff {cutoff:g} Hz, rate {rate:g} Hz): zero-lag filtering pads "
             f"{padlen} samples at each end and needs N > {padlen}; use a longer "
             "trial or a lower order"
         )
+    padlen = filter_padlen(order, rate=rate, cutoff=cutoff, n=n)
     _check_finite(x, "lowpass input")
     from scipy.signal import butter, sosfiltfilt   # here, not at import: scipy.signal costs ~1 s
 

@@ -27,6 +27,7 @@
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -35,7 +36,8 @@ from .errors import TrialError
 from .skeleton import ExternalForce
 from .trial import Trial, parse_ground_reaction
 
-__all__ = ["cop_from_plate", "check_vertical_force", "external_forces", "grf_channels",
+__all__ = ["cop_from_plate", "check_vertical_force", "external_forces", "grf_channels", "Plate", "plates",
+           "plate_wrench", "BODY_ALIASES",
            "transfer_cop", "torso_residuals", "stance_mask", "FOOT_FRAMES"]
 
 #: Default body receiving each side's ground reaction (first present in the model).
@@ -151,63 +153,201 @@ def check_vertical_force(trial: Trial, *, min_force: float = 20.0, body_mass: fl
                     f"weight ({body_mass * 9.81:.0f} N); check the axis mapping (y up) and the units")
 
 
-def _foot_frame(model, side, frames: Mapping | None) -> str:
-    if frames and side in frames:
-        model.frame_id(frames[side])
-        return frames[side]
-    if side is not None:
+#: Side prefixes and the words models use for them in body names.
+_SIDE_WORDS = {"r": ("r", "right"), "l": ("l", "left"), "right": ("r", "right"), "left": ("l", "left")}
+
+#: OpenSim body names and the pinmsk body of the same segment (the calcaneus is the foot).
+BODY_ALIASES = {"calcn_{s}": "foot_{s}", "foot_{s}": "calcn_{s}"}
+
+
+@dataclass(frozen=True)
+class Plate:
+    """One source of ground reaction: its columns and the body it acts on (and why).
+
+    ``columns`` maps ``(quantity, axis)`` (quantity ``force``, ``point`` or
+    ``torque``) to the trial's channel; ``body`` is a frame of the model;
+    ``reason`` says how the body was chosen, for reports.
+    """
+
+    name: str
+    columns: Mapping
+    body: str
+    reason: str
+
+    def describe(self) -> str:
+        force = [self.columns[("force", a)] for a in "xyz" if ("force", a) in self.columns]
+        stem = force[0][:-1] + "[xyz]" if force else "?"
+        return f"{self.name} ({stem}) -> {self.body} ({self.reason})"
+
+
+def _frame_for_side(model, side) -> str | None:
+    words = _SIDE_WORDS.get(str(side).lower(), (side,)) if side is not None else ()
+    for word in words:
         for pat in FOOT_FRAMES:
-            cand = pat.format(s=side)
+            cand = pat.format(s=word)
             if cand in model.frame_names:
                 return cand
-    raise TrialError(f"cannot tell which body receives the ground reaction of side {side!r}; pass "
-                     f"frames={{{side!r}: '<frame>'}}")
+    return None
+
+
+def _body_in_model(model, body: str) -> tuple[str, str] | None:
+    """``(frame, note)`` for a body name, trying the OpenSim-to-pinmsk aliases."""
+    if body in model.frame_names:
+        return body, ""
+    for src, dst in BODY_ALIASES.items():
+        for word in ("r", "l"):
+            if body == src.format(s=word) and dst.format(s=word) in model.frame_names:
+                return dst.format(s=word), f", the model's body for OpenSim's {body!r}"
+    return None
+
+
+def _nearest_foot(model, q, plate_cols, trial, min_force) -> tuple[str, str]:
+    """The foot nearest to a plate's COP during its stance (whole-plate assignment)."""
+    import pinocchio as pin
+    feet = [f for f in (_frame_for_side(model, s) for s in ("r", "l")) if f is not None]
+    if not feet:
+        raise TrialError("the model has no foot body (foot_r, calcn_r, ...) to receive the ground reaction")
+    fy = np.asarray(trial[plate_cols[("force", "y")]])
+    loaded = np.flatnonzero(fy >= min_force)
+    if q is None or loaded.size == 0 or ("point", "x") not in plate_cols:
+        raise TrialError(f"cannot tell which foot the plate {plate_cols[('force', 'y')]!r} acts on; name the "
+                         "side in the columns (r_ground_force_vy) or pass an ExternalLoads .xml / frames=")
+    rows = loaded[:: max(1, loaded.size // 50)]
+    cop = np.column_stack([np.asarray(trial[plate_cols[("point", a)]])[rows] if ("point", a) in plate_cols
+                           else np.zeros(rows.size) for a in "xyz"])
+    pm = model.pin
+    pd = pm.createData()
+    dist = np.zeros((rows.size, len(feet)))
+    ids = [pm.getFrameId(f) for f in feet]
+    for i, k in enumerate(rows):
+        pin.framesForwardKinematics(pm, pd, q[k])
+        for j, fid in enumerate(ids):
+            d = pd.oMf[fid].translation - cop[i]
+            dist[i, j] = np.hypot(d[0], d[2])
+    votes = np.bincount(np.argmin(dist, axis=1), minlength=len(feet))
+    j = int(np.argmax(votes))
+    share = votes[j] / rows.size
+    return feet[j], f"nearest foot to the COP in {100 * share:.0f} % of its loaded frames"
+
+
+def plates(model, trial: Trial, *, external_loads=None, frames: Mapping | None = None, q=None,
+           min_force: float = 20.0) -> list[Plate]:
+    """The ground-reaction sources of ``trial`` and the body each acts on.
+
+    Bodies are chosen, in order: ``frames[side]``; the ExternalLoads entry's
+    ``applied_to_body`` (``calcn_r`` is taken as ``foot_r`` on a model that
+    has no calcn); the side prefix (``r_ground_force_vy`` -> ``foot_r``,
+    ``calcn_r``, ``right_foot``, ...); else the foot nearest to the plate's COP
+    during its stance (``q``, the trial's coordinates, needed).  A body the
+    model lacks is an error naming it.
+    """
+    out = []
+    if external_loads is not None:
+        for spec in external_loads.loads:
+            cols = {}
+            for kind in ("force", "point", "torque"):
+                names = spec.columns(kind)
+                if names is None:
+                    continue
+                present = [n for n in names if n in trial]
+                if kind == "force" and len(present) < 3:
+                    missing = [n for n in names if n not in trial]
+                    raise TrialError(f"{external_loads.path}: ExternalForce {spec.name!r} needs the columns "
+                                     f"{', '.join(missing)}, which the GRF data lacks (it has "
+                                     f"{', '.join(n for n in trial.names if 'ground' in n) or 'no ground columns'})")
+                cols.update({(kind, n[-1]): n for n in present})
+            if frames and spec.name in frames:
+                body, reason = frames[spec.name], "given"
+                model.frame_id(body)
+            else:
+                found = _body_in_model(model, spec.body)
+                if found is None:
+                    raise TrialError(f"{external_loads.path}: ExternalForce {spec.name!r} acts on body "
+                                     f"{spec.body!r}, which model '{model.name}' lacks; pass frames="
+                                     f"{{{spec.name!r}: '<body>'}} (bodies: {', '.join(model.frame_names[:12])} ...)")
+                body, note = found
+                reason = f"ExternalLoads applied_to_body{note}"
+            out.append(Plate(spec.name, cols, body, reason))
+        return out
+    for side, cols in sorted(_sides(trial).items(), key=lambda kv: str(kv[0])):
+        if ("force", "y") not in cols:
+            raise TrialError(f"ground reaction of side {side!r} has no vertical force ..._vy channel")
+        name = f"side {side!r}" if side is not None else "plate"
+        if frames and side in frames:
+            model.frame_id(frames[side])
+            out.append(Plate(name, cols, frames[side], "given"))
+            continue
+        body = _frame_for_side(model, side) if side is not None else None
+        if body is not None:
+            out.append(Plate(name, cols, body, "by the side in the column names"))
+            continue
+        if str(side).lower() in _SIDE_WORDS:
+            tried = ", ".join(p.format(s=w) for w in _SIDE_WORDS[str(side).lower()] for p in FOOT_FRAMES)
+            raise TrialError(f"ground reaction {name} ({cols[('force', 'y')]}): model '{model.name}' has no body "
+                             f"to receive it (tried {tried}); pass frames={{{side!r}: '<body>'}}, or leave "
+                             "the GRF out on purpose (ground_reaction='ignore', CLI --no-grf)")
+        body, reason = _nearest_foot(model, q, cols, trial, min_force)
+        out.append(Plate(name, cols, body, reason))
+    return out
+
+
+def plate_wrench(trial: Trial, plate: Plate, *, min_force: float = 20.0, planar: bool = False,
+                 cop: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """World wrench of one plate about the world origin: force ``(N, 3)`` and moment ``(N, 3)``.
+
+    ``M = p x F + T`` with ``p`` the COP and ``T`` the free moment.  Samples with
+    vertical force below ``min_force`` N are zero (an unloaded plate's COP means
+    nothing).  ``planar`` (models in the x-y plane) keeps F_x, F_y and M_z.
+    This is the one conversion of plate data to loads on the model.
+    """
+    ch = plate.columns
+    need = [("force", "x"), ("force", "y")] + ([] if planar else [("force", "z")])
+    if cop is None:
+        need += [("point", "x")] + ([] if planar else [("point", "z")])
+    missing = [f"{q}_{a}" for q, a in need if (q, a) not in ch]
+    if missing:
+        raise TrialError(f"ground reaction {plate.name} lacks {', '.join(missing)} channels "
+                         "(need ground_force_v[xyz] and ground_force_p[xyz])")
+    zero = np.zeros(trial.n_frames)
+    F = np.column_stack([trial[ch[("force", a)]] if ("force", a) in ch else zero for a in "xyz"])
+    P = (np.asarray(cop, dtype=float) if cop is not None else
+         np.column_stack([trial[ch[("point", a)]] if ("point", a) in ch else zero for a in "xyz"]))
+    T = np.column_stack([trial[ch[("torque", a)]] if ("torque", a) in ch else zero for a in "xyz"])
+    on = F[:, 1] >= min_force
+    bad = on & ~(np.isfinite(F).all(axis=1) & np.isfinite(T).all(axis=1))
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise TrialError(f"ground reaction {plate.name} is not finite at frame {k} (t = {trial.time[k]:.6g} s)")
+    F = np.where(on[:, None], F, 0.0)
+    P = np.where(on[:, None] & np.isfinite(P), P, 0.0)
+    T = np.where(on[:, None], T, 0.0)
+    if planar:
+        F[:, 2] = 0.0
+        P[:, 2] = 0.0
+        T[:, :2] = 0.0
+    return F, np.cross(P, F) + T
 
 
 def external_forces(model, trial: Trial, *, frames: Mapping[str, str] | None = None,
                     min_force: float = 20.0, planar: bool = False, check_sign: bool = True,
                     cop: Mapping[str, np.ndarray] | None = None) -> list[ExternalForce]:
-    """Per-foot world-frame wrenches of the trial's ground reaction channels.
+    """Per-plate world-frame wrenches of the trial's ground reaction channels (unfiltered).
 
     ``frames`` maps a side (``"r"``) to the receiving body (default ``foot_<side>``,
-    ``calcn_<side>``, ...).  Samples with vertical force below ``min_force`` N get a
-    zero wrench.  ``planar`` keeps only F_x, F_y and the free moment about z (2-D
-    models in the x-y plane).  ``cop`` overrides a side's COP ``(N, 3)`` (e.g. from
-    :func:`transfer_cop`).  The trial must be on the motion's time base (see
-    :mod:`pinmsk.resample`).
+    ``calcn_<side>``, ...; see :func:`plates`).  Samples with vertical force below
+    ``min_force`` N get a zero wrench.  ``planar`` keeps only F_x, F_y and the moment
+    about z (2-D models in the x-y plane).  ``cop`` overrides a side's COP ``(N, 3)``
+    (e.g. from :func:`transfer_cop`).  The trial must be on the motion's time base.
+    Analyses use :func:`pinmsk.kinematics.prepare`, which also filters.
     """
     if check_sign:
         check_vertical_force(trial, min_force=min_force)
-    groups = _sides(trial)
     out = []
-    for side, ch in sorted(groups.items(), key=lambda kv: str(kv[0])):
-        need = [("force", "x"), ("force", "y")] + ([] if planar else [("force", "z")])
-        if not (cop is not None and side in cop):
-            need += [("point", "x")] + ([] if planar else [("point", "z")])
-        missing = [f"{q}_{a}" for q, a in need if (q, a) not in ch]
-        if missing:
-            raise TrialError(f"ground reaction of side {side!r} lacks {', '.join(missing)} channels "
-                             "(need ground_force_v[xyz] and ground_force_p[xyz])")
-        n = trial.n_frames
-        zero = np.zeros(n)
-        F = np.column_stack([trial[ch[("force", a)]] if ("force", a) in ch else zero for a in "xyz"])
-        if cop is not None and side in cop:
-            P = np.asarray(cop[side], dtype=float)
-        else:
-            P = np.column_stack([trial[ch[("point", a)]] if ("point", a) in ch else zero for a in "xyz"])
-        T = np.column_stack([trial[ch[("torque", a)]] if ("torque", a) in ch else zero for a in "xyz"])
-        on = F[:, 1] >= min_force
-        F = np.where(on[:, None], F, 0.0)
-        P = np.where(on[:, None] & np.isfinite(P), P, 0.0)
-        T = np.where(on[:, None], T, 0.0)
-        if planar:
-            F[:, 2] = 0.0
-            T[:, :2] = 0.0
-            P[:, 2] = 0.0
-        bad = on & ~np.isfinite(F).all(axis=1)
-        if bad.any():
-            raise TrialError(f"ground reaction of side {side!r} is not finite at frame {int(np.flatnonzero(bad)[0])}")
-        out.append(ExternalForce(_foot_frame(model, side, frames), F, P, T))
+    for plate, side in zip(plates(model, trial, frames=frames, min_force=min_force),
+                           sorted(_sides(trial), key=str)):
+        c = None if cop is None else cop.get(side)
+        F, M = plate_wrench(trial, plate, min_force=min_force, planar=planar, cop=c)
+        out.append(ExternalForce(plate.body, F, np.zeros_like(F), M))
     return out
 
 

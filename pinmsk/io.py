@@ -1,4 +1,4 @@
-"""Reading and writing Trials: CSV and OpenSim ``.sto`` / ``.mot`` files.
+"""Reading and writing Trials: CSV and OpenSim ``.sto`` / ``.mot`` files (and reading ``.c3d``).
 
 Formats (chosen by suffix, case-insensitive):
 
@@ -13,6 +13,14 @@ Formats (chosen by suffix, case-insensitive):
   comments.  Then a column-label line starting with ``time`` and the data.
   Columns are tab separated, or comma separated, or separated by whitespace,
   chosen from the label line; trailing separators are ignored.
+* ``.c3d`` (read only, with the optional ``ezc3d``: ``pip install pinmsk[c3d]``):
+  the markers, the analog channels or the force platforms, one time base
+  per Trial (``read_trial(path, part=...)``).
+
+Lenient reading: a header row or column count that disagrees with the data,
+or a row repeating the time stamp of the row before, is an error unless
+``strict=False`` (``--lenient`` on the command line); then each repair is a
+:class:`pinmsk.errors.RepairWarning` saying exactly what was done.
 
 Degrees: when a file says ``inDegrees=yes`` the angular channels are
 converted to radians at read (``meta["converted_to_radians"]`` lists them).
@@ -50,10 +58,11 @@ from pathlib import Path
 
 import numpy as np
 
-from pinmsk.errors import TrialError
+from pinmsk.errors import RepairWarning, TrialError
 from pinmsk.trial import TIME, Trial, is_angular_name
 
-__all__ = ["read_trial", "write_trial", "read_sto_header", "StoHeader", "FORMATS"]
+__all__ = ["read_trial", "write_trial", "read_sto_header", "StoHeader", "FORMATS", "C3D_PARTS",
+           "state_path_coordinate"]
 
 #: File suffix -> format name.
 FORMATS = {".csv": "csv", ".sto": "sto", ".mot": "mot"}
@@ -64,13 +73,11 @@ _KEY_VALUE = re.compile(r"^([A-Za-z_][\w.\-]*)\s*=\s*(.*)$")
 _OLD_KEY = re.compile(r"^(datarows|datacolumns)\s+(\S+)$", re.IGNORECASE)
 
 
-def _format_of(path: Path) -> str:
+def _format_of(path: Path, *, reading: bool = False) -> str:
     kind = FORMATS.get(path.suffix.lower())
     if kind is None:
-        raise TrialError(
-            f"file {str(path)!r}: unsupported file type {path.suffix!r}; "
-            f"use one of {', '.join(FORMATS)}"
-        )
+        kinds = ", ".join(FORMATS) + (" (or .c3d)" if reading else "")
+        raise TrialError(f"file {str(path)!r}: unsupported file type {path.suffix!r}; use one of {kinds}")
     return kind
 
 
@@ -207,9 +214,9 @@ def _table(
 ):
     """Check labels and rows; return (time, names, values (N, C)).
 
-    A *repeated frame* has the time of the previous row and values equal to
-    it within 1e-8 relative (files printed with rounding repeat the last frame
-    so); with ``strict=False`` such rows are dropped, with a note in ``notes``.
+    A row with the time stamp of the row before (files printed with rounding
+    repeat the last frame so) is an error; with ``strict=False`` such rows are
+    dropped, keeping the first of each time stamp, with a note in ``notes``.
     """
     src = str(path)
     labels = [lab.strip() for lab in labels]
@@ -263,32 +270,27 @@ def _table(
     if bad.size:
         k = int(bad[0])
         raise TrialError(f"file {src!r}, line {linenos[k]}: time is {float(time[k])!r}; it must be finite")
-    same = np.abs(values[1:] - values[:-1]) <= 1e-8 * np.maximum(np.abs(values[1:]), np.abs(values[:-1]))
-    repeated = np.flatnonzero((values[1:, 0] == values[:-1, 0]) & np.all(same, axis=1)) + 1
-    if not strict and repeated.size:
-        notes.append(
-            f"file {src!r}: dropped {repeated.size} repeated frame(s) (lines "
-            + ", ".join(str(linenos[k]) for k in repeated[:5])
-            + (", ..." if repeated.size > 5 else "")
-            + ")"
-        )
+    dup = np.flatnonzero(values[1:, 0] == values[:-1, 0]) + 1   # rows repeating the time before
+    if not strict and dup.size:
+        notes.append(_dropped_duplicates(src, labels, values, dup, linenos, len(rows)))
         keep = np.ones(len(rows), dtype=bool)
-        keep[repeated] = False
+        keep[dup] = False
         values = values[keep]
         linenos = [n for n, k in zip(linenos, keep) if k]
         time = values[:, 0]
     back = np.flatnonzero(np.diff(time) <= 0)
     if back.size:
         k = int(back[0]) + 1
-        exact = (
-            "; it repeats the previous frame, pass strict=False to drop repeated frames"
-            if k in set(repeated.tolist())
+        fix = (
+            f"; it repeats the time stamp of the line before{_LENIENT_FIX} (rows repeating a time "
+            "stamp are dropped, keeping the first of each)"
+            if time[k] == time[k - 1]
             else ""
         )
         raise TrialError(
             f"file {src!r}, line {linenos[k]} (data row {k}): time {float(time[k])!r} is not greater "
             f"than {float(time[k - 1])!r} on line {linenos[k - 1]}; time must be strictly increasing "
-            f"({back.size} such row(s){exact})"
+            f"({back.size} such row(s)){fix}"
         )
     return time, labels[1:], values[:, 1:]
 
@@ -299,10 +301,43 @@ def _split_sto(line: str, delimiter: str | None) -> list[str]:
     return _strip_trailing_empty(line.rstrip().split(delimiter))
 
 
-def _mismatch(message: str, notes: list[str], strict: bool) -> None:
+#: How to ask for a lenient read, appended to the errors it would repair.
+_LENIENT_FIX = "; to read the file anyway, pass --lenient (command line) or strict=False (Python)"
+
+#: A lenient read refuses files where more than this fraction of the rows (and more than 5)
+#: repeat a time stamp: that is a time column printed with too few digits, which dropping rows
+#: would not repair.
+_MAX_DUPLICATE_FRACTION = 0.1
+
+
+def _dropped_duplicates(src, labels, values, dup, linenos, n_rows) -> str:
+    """The note for dropping rows ``dup`` (each repeating the time stamp before), or raise."""
+    if dup.size > max(_MAX_DUPLICATE_FRACTION * n_rows, 5):
+        raise TrialError(
+            f"file {src!r}: {dup.size} of {n_rows} rows repeat the time stamp of the row before "
+            f"(first on line {linenos[int(dup[0])]}); the time column looks printed with too few "
+            "digits, which dropping rows cannot repair; write the time with more digits"
+        )
+    lines = ", ".join(str(linenos[k]) for k in dup[:5]) + (", ..." if dup.size > 5 else "")
+    now, before = values[dup, 1:], values[dup - 1, 1:]
+    diff = np.abs(now - before)
+    same = (diff <= 1e-8 * np.maximum(np.abs(now), np.abs(before))) | (np.isnan(now) & np.isnan(before))
+    differ = ~np.all(same, axis=1)
+    if not differ.any():
+        how = "each repeated the row before"
+    else:
+        r, c = np.unravel_index(int(np.argmax(np.where(same, -1.0, np.nan_to_num(diff, nan=np.inf)))), diff.shape)
+        how = (f"{int(differ.sum())} had other values than the row before, by up to "
+               f"{float(diff[r, c]):.6g} in {labels[c + 1]!r} on line {linenos[int(dup[r])]}")
+    s = "" if dup.size == 1 else "s"
+    return f"{src}: dropped {dup.size} duplicated time stamp{s} at line{s} {lines} (kept the first of each; {how})"
+
+
+def _mismatch(message: str, repair: str, notes: list[str], strict: bool) -> None:
+    """Raise ``message`` (strict) or note ``repair`` (what the lenient read did instead)."""
     if strict:
-        raise TrialError(message + "; if the data are complete, pass strict=False to read them anyway")
-    notes.append(message)
+        raise TrialError(message + _LENIENT_FIX)
+    notes.append(repair)
 
 
 def _read_sto(path: Path, lines: list[str], notes: list[str], strict: bool):
@@ -334,6 +369,8 @@ def _read_sto(path: Path, lines: list[str], notes: list[str], strict: bool):
             f"file {src!r}: header says {key}={n_columns} (line {header.lines.get(key)}) but the "
             f"column-label line {label_idx + 1} has {len(labels)} columns ({shown}); fix the header "
             "or the labels",
+            f"{src}: header says {key}={n_columns} (line {header.lines.get(key)}), data has "
+            f"{len(labels)} columns; used the data's {len(labels)}",
             notes,
             strict,
         )
@@ -345,6 +382,8 @@ def _read_sto(path: Path, lines: list[str], notes: list[str], strict: bool):
             f"file {src!r}: header says {key}={n_rows} (line {header.lines.get(key)}) but there are "
             f"{len(rows)} data rows (lines {linenos[0]}-{linenos[-1]}); the file may be truncated, "
             "or fix the header",
+            f"{src}: header says {key}={n_rows} (line {header.lines.get(key)}), data has "
+            f"{len(rows)} rows (lines {linenos[0]}-{linenos[-1]}); used the data's {len(rows)}",
             notes,
             strict,
         )
@@ -365,34 +404,103 @@ def _read_csv(path: Path, lines: list[str], notes: list[str], strict: bool):
     return _table(path, rows[0], linenos[0], rows[1:], linenos[1:], notes, strict)
 
 
-def read_trial(path, *, angular=None, strict: bool = True) -> Trial:
-    """Read a Trial from a ``.csv``, ``.sto`` or ``.mot`` file.
+def state_path_coordinate(name: str) -> tuple[str, str] | None:
+    """``(coordinate, quantity)`` of an OpenSim 4 state path such as ``/jointset/knee_r/knee_angle_r/value``.
+
+    ``quantity`` is the last part (``value``, ``speed``, ``accel`` or
+    ``acceleration``); other names give ``None``.
+    """
+    if not isinstance(name, str) or "/" not in name:
+        return None
+    parts = [p for p in name.split("/") if p]
+    if len(parts) < 2 or parts[-1] not in ("value", "speed", "accel", "acceleration"):
+        return None
+    return parts[-2], parts[-1]
+
+
+#: What ``read_trial(path.c3d, part=...)`` returns.
+C3D_PARTS = ("markers", "analogs", "platforms")
+
+
+def _read_c3d_part(path: Path, part: str) -> Trial:
+    """One time base of a C3D file as a Trial (see :func:`read_trial`)."""
+    from .c3d import read_c3d
+
+    if part not in C3D_PARTS:
+        raise TrialError(f"file {str(path)!r}: part={part!r}; a C3D part is one of {', '.join(C3D_PARTS)}")
+    data = read_c3d(path, platforms=part == "platforms")
+    have = {
+        "markers": 0 if data.markers is None else len(data.markers.meta["markers"]),
+        "analogs": 0 if data.analogs is None else data.analogs.n_channels,
+        "platforms": len(data.platforms),
+    }
+    if not have[part]:
+        others = [f"{n} {k}" for k, n in have.items() if n and k != part]
+        hint = f"; it has {' and '.join(others)}: pass part={next(k for k, n in have.items() if n)!r}" if others else ""
+        raise TrialError(f"file {str(path)!r} has no {part}{hint}")
+    if part == "markers":
+        trial = data.markers
+    elif part == "analogs":
+        trial = data.analogs
+    else:
+        plates = data.platforms
+        channels = {}
+        for k, plate in enumerate(plates):
+            prefix = f"{k + 1}_" if len(plates) > 1 else ""
+            channels.update({prefix + n: plate[n] for n in plate.names})
+        trial = Trial(plates[0].time, channels, meta={"platforms": len(plates)})
+    return trial.with_meta(source=str(path), format="c3d", part=part, read_notes=())
+
+
+def read_trial(path, *, angular=None, strict: bool = True, part: str | None = None) -> Trial:
+    """Read a Trial from a ``.csv``, ``.sto``, ``.mot`` or ``.c3d`` file.
 
     Parameters
     ----------
     path : str or Path
     angular : iterable of str, optional
         Channels that are angles, converted from degrees when the file says
-        ``inDegrees=yes``; names that are not columns of the file are ignored
-        (so a model's rotational coordinates can be passed for any file).
-        Default: the channels :func:`is_angular_name` accepts.
+        ``inDegrees=yes``; a name also matches an OpenSim 4 state path of that
+        coordinate (``/jointset/<joint>/<name>/value``); names that are not
+        columns of the file are ignored (so a model's rotational coordinates
+        can be passed for any file).  Default: the channels
+        :func:`is_angular_name` accepts.
     strict : bool
         If True (default), a header ``nRows``/``nColumns`` that disagrees with
-        the data, or a frame repeated exactly, is an error.  If False, the
-        disagreement is a warning (also kept in ``meta["read_notes"]``) and
-        exact repeated frames are dropped; other problems still raise.
+        the data, or a row repeating the time stamp of the row before, is an
+        error whose message says how to read the file leniently.  If False,
+        the file is read anyway and each repair is a
+        :class:`~pinmsk.errors.RepairWarning` saying what was done (also kept
+        in ``meta["read_notes"]``): the data's own row and column counts are
+        used, and rows repeating a time stamp are dropped, keeping the first
+        of each (refused when more than 10 % of the rows, and more than 5,
+        repeat one: a time column printed with too few digits).  Other
+        problems still raise.
+    part : str, optional
+        ``.c3d`` only (needs ``pip install pinmsk[c3d]``): which of the
+        file's time bases to return, as read by :func:`pinmsk.c3d.read_c3d`:
+        ``"markers"`` (default; ``<label>_{x,y,z}`` in m at the point rate),
+        ``"analogs"`` (every analog channel by label at the analog rate) or
+        ``"platforms"`` (``ground_force_v[xyz]``, ``ground_force_p[xyz]``,
+        ``ground_torque_[xyz]`` at the analog rate, prefixed ``1_``, ``2_``
+        ... by platform number when there are several).  No axis change is
+        made (see :func:`pinmsk.c3d.remap_axes`).
 
     Returns
     -------
     Trial
-        ``meta`` holds ``source`` (the path), ``format`` (csv/sto/mot),
+        ``meta`` holds ``source`` (the path), ``format`` (csv/sto/mot/c3d),
         ``name`` (first header line), ``in_degrees`` (as declared; ``None``
         if not declared, ``False`` for CSV), ``header`` (the key=value
         fields), ``converted_to_radians`` (channel names) and ``read_notes``
-        (what ``strict=False`` let through).
+        (the repairs ``strict=False`` made).
     """
     path = Path(path)
-    kind = _format_of(path)
+    if path.suffix.lower() == ".c3d":
+        return _read_c3d_part(path, "markers" if part is None else part)
+    if part is not None:
+        raise TrialError(f"file {str(path)!r}: part={part!r} applies to .c3d files only")
+    kind = _format_of(path, reading=True)
     lines = _read_lines(path)
     notes: list[str] = []
     if kind == "csv":
@@ -405,7 +513,9 @@ def read_trial(path, *, angular=None, strict: bool = True) -> Trial:
         angular_names = tuple(n for n in names if is_angular_name(n))
     else:
         wanted = {angular} if isinstance(angular, str) else set(angular)
-        angular_names = tuple(n for n in names if n in wanted)
+        angular_names = tuple(
+            n for n in names if n in wanted or (state_path_coordinate(n) or ("",))[0] in wanted
+        )
     converted: tuple[str, ...] = ()
     if in_degrees:
         idx = [names.index(a) for a in angular_names]
@@ -421,13 +531,37 @@ def read_trial(path, *, angular=None, strict: bool = True) -> Trial:
         "read_notes": tuple(notes),
     }
     for note in notes:
-        warnings.warn(note, stacklevel=2)
+        warnings.warn(RepairWarning(note), stacklevel=2)
     return Trial.from_array(time, names, values, meta=meta)
 
 
 # ---------------------------------------------------------------------------
 # Writing
 # ---------------------------------------------------------------------------
+
+
+#: Trial metadata keys that describe a file read in, not an analysis: never written back.
+_READ_META = {"source", "format", "name", "in_degrees", "header", "converted_to_radians", "read_notes"}
+
+
+def _meta_lines(meta) -> str:
+    """``key=value`` header lines of a Trial's analysis metadata (what filter, loads, model...).
+
+    OpenSim readers keep unknown ``key=value`` header fields, so the record of
+    what was applied travels with the file; only scalar values on one line are
+    written.
+    """
+    out = []
+    for key, value in meta.items():
+        if key in _READ_META or key in ("version", "nRows", "nColumns", "inDegrees"):
+            continue
+        if not isinstance(value, (str, int, float, bool)) or not _KEY_VALUE.match(f"{key}=x"):
+            continue
+        text = str(value)
+        if "\n" in text or "\r" in text:
+            continue
+        out.append(f"{key}={text}\n")
+    return "".join(out)
 
 
 #: Values formatted per block: the formatter's scratch arrays then stay in the CPU cache.
@@ -744,7 +878,7 @@ def write_trial(trial: Trial, path, *, in_degrees: bool = False, angular=None,
             title = path.stem
         head = (
             f"{title}\nversion=1\nnRows={trial.n_frames}\nnColumns={trial.n_channels + 1}\n"
-            f"inDegrees={'yes' if in_degrees else 'no'}\nendheader\n"
+            f"inDegrees={'yes' if in_degrees else 'no'}\n" + _meta_lines(trial.meta) + "endheader\n"
             + "\t".join((TIME,) + names)
             + "\n"
         )

@@ -22,6 +22,7 @@ import pinocchio as pin
 
 from .components import Component, Motion
 from .errors import ModelError
+from .kinematics import DEFAULT_CUTOFF, cutoff_value
 from .tomlfile import read_toml
 
 
@@ -167,15 +168,17 @@ class Model:
                      effects=self.effects, contacts=self.contacts, meta=self.meta)
 
     # -- trials ---------------------------------------------------------
-    def motion(self, trial, *, cutoff: float | None = None, signals: Iterable[str] | None = None) -> Motion:
+    def motion(self, trial, *, cutoff=DEFAULT_CUTOFF, signals: Iterable[str] | None = None) -> Motion:
         """The model's :class:`Motion` (q, v, a in coordinate order) from a Trial.
 
         Velocities and accelerations come from the trial's coordinates by
-        ``Trial.kinematics`` (optional zero-lag low-pass at ``cutoff`` Hz, then
-        quintic-spline derivatives).  All other channels are passed as signals.
+        ``Trial.kinematics``: zero-lag low-pass at ``cutoff`` Hz (default
+        :data:`pinmsk.kinematics.DEFAULT_CUTOFF` = 6 Hz; 0 or None: none), then
+        quintic-spline derivatives.  All other channels are passed as signals.
+        Analyses use :func:`pinmsk.kinematics.prepare`, which adds the GRF.
         """
         trial.require(self.coordinates)
-        q, v, a = trial.kinematics(self.coordinates, cutoff=cutoff)
+        q, v, a = trial.kinematics(self.coordinates, cutoff=cutoff_value(cutoff))
         names = [n for n in trial.names if n not in self.coordinates] if signals is None else list(signals)
         sig = {n: trial[n] for n in names}
         return Motion(np.asarray(trial.time, dtype=float), q, v, a, sig)

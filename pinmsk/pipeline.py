@@ -8,7 +8,7 @@
     jobs = 2                    # local worker processes (default: all cores)
 
     [defaults]                  # any trial key, applied to every trial
-    cutoff = 6.0                # Hz, low-pass of the coordinates before differentiating
+    cutoff = 6.0                # Hz, low-pass of the coordinates and the GRF (the default; 0 = off)
     so = { mode = "activation", exponent = 2, reserves = true }
 
     [[trials]]
@@ -39,6 +39,8 @@ picklable arguments, so any ``concurrent.futures``-style executor can run it):
 one folder ``<out>/<name>/`` with ``kinematics.sto``, ``inverse_dynamics.sto``,
 ``residuals.sto``, ``activations.sto`` (if the model has muscles), ``summary.json`` and
 ``moments.png`` / ``residuals.png`` (``plots = false`` in a trial or ``[defaults]`` skips them); :func:`batch` writes ``<out>/summary.csv`` (one row per trial).
+OpenSim ``.sto``/``.mot`` inputs are read leniently (``strict=False``); the repairs made
+are listed under ``info.read_repairs`` in ``summary.json``.
 
 Parallelism: local trials go to a :class:`concurrent.futures.ProcessPoolExecutor`
 with ``jobs`` workers and a progress bar (:class:`pinmsk.progress.Progress`).  With
@@ -60,16 +62,13 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from .channel_map import RAJAGOPAL_HIP_OFFSET, apply_channel_map, opensim_gait2d_map
 from .errors import PinmskError, TrialError
 from .tomlfile import read_toml
 from .trial import Trial
 
 __all__ = ["opensim_to_gait2d", "frame_positions", "transferred_cops", "run_trial", "batch",
            "batch_cli", "load_config", "RAJAGOPAL_HIP_OFFSET", "KINDS"]
-
-#: Hip joint centre in the pelvis frame of the Rajagopal et al. (2016) model (unscaled, m;
-#: x forward, y up): ``hip_r`` location_in_parent (-0.056276, -0.07849, 0.07726).
-RAJAGOPAL_HIP_OFFSET = (-0.056276, -0.07849)
 
 KINDS = ("csu", "opensim", "trc")
 
@@ -78,66 +77,23 @@ KINDS = ("csu", "opensim", "trc")
 # OpenSim coordinates -> gait2d
 # ---------------------------------------------------------------------------
 
-def _col(trial: Trial, coord: str) -> np.ndarray:
-    """Channel of an OpenSim coordinate, by bare name or ``/jointset/<j>/<coord>/value`` path."""
-    if coord in trial:
-        return np.asarray(trial[coord])
-    for n in trial.names:
-        parts = n.split("/")
-        if len(parts) >= 2 and parts[-1] == "value" and parts[-2] == coord:
-            return np.asarray(trial[n])
-    raise TrialError(f"{trial.meta.get('source', 'trial')}: no column for OpenSim coordinate {coord!r}")
-
-
 def opensim_to_gait2d(coords: Trial, model, *, hip_offset=RAJAGOPAL_HIP_OFFSET,
                       knee_sign: str | int = "auto") -> Trial:
     """gait2d coordinates from an OpenSim full-body model's coordinates (sagittal plane).
 
-    Sign conventions (OpenSim: rotations about +z, z to the right):
-
-    * ``torso_angle = -pelvis_tilt`` (OpenSim + = posterior tilt; gait2d + = forward lean);
-      the HAT is taken as rigid with the pelvis (lumbar extension is ignored);
-    * ``hip = -hip_flexion`` (gait2d + = extension), ``knee = knee_angle`` (Rajagopal: both
-      + = flexion; gait2392 and Gait10dof18musc count knee flexion negative, so ``knee_sign``
-      ``"auto"`` flips it when the knee angle is mostly negative, as flexion must be over a
-      stride; or pass ``+1`` / ``-1``),
-      ``ankle = -ankle_angle`` (OpenSim + = dorsiflexion; gait2d + = plantarflexion), ``mtp = 0``;
-    * ``torso_x, torso_y`` = the gait2d HAT centre of mass placed so that gait2d's hip joint
-      lies on the OpenSim hip centre ``pelvis_t[xy] + R(pelvis_tilt) hip_offset``
-      (``hip_offset``: the hip in the pelvis frame; default the unscaled Rajagopal model's).
-
+    The built-in column map :func:`pinmsk.channel_map.opensim_gait2d_map` (signs, the
+    ``knee_sign="auto"`` rule and the hip placement are documented in
+    :mod:`pinmsk.channel_map`) applied to ``coords``, keeping only the model's coordinates
+    in ``model.coordinate_order``.  ``hip_offset``: the OpenSim hip centre in the pelvis
+    frame (default the unscaled Rajagopal model's); ``knee_sign``: ``"auto"``, ``+1``
+    (Rajagopal, + = flexion) or ``-1`` (gait2392, Gait10dof18musc).
     Out-of-plane coordinates (list, rotation, adduction, pelvis_tz, arms) are dropped.
     """
-    tilt = _col(coords, "pelvis_tilt")
-    tx, ty = _col(coords, "pelvis_tx"), _col(coords, "pelvis_ty")
-    ox, oy = hip_offset
-    hx = tx + np.cos(tilt) * ox - np.sin(tilt) * oy
-    hy = ty + np.sin(tilt) * ox + np.cos(tilt) * oy
-    ta = -tilt
-    # distance from the hip joint up to the HAT COM in gait2d (the hip's placement in the HAT frame)
-    pm = model.pin
-    jr = pm.getJointId("hip_r")
-    above = -float(pm.jointPlacements[jr].translation[1])
-    ch = {
-        "torso_x": hx + above * np.sin(ta),
-        "torso_y": hy + above * np.cos(ta),
-        "torso_angle": ta,
-    }
-    knees = {s: _col(coords, f"knee_angle_{s}") for s in "rl"}
-    if knee_sign == "auto":
-        sign = -1.0 if np.median(np.concatenate(list(knees.values()))) < 0 else 1.0
-    elif knee_sign in (1, -1):
-        sign = float(knee_sign)
-    else:
-        raise TrialError(f"knee_sign must be 'auto', 1 or -1, not {knee_sign!r}")
-    for s in "rl":
-        ch[f"hip_{s}"] = -_col(coords, f"hip_flexion_{s}")
-        ch[f"knee_{s}"] = sign * knees[s]
-        ch[f"ankle_{s}"] = -_col(coords, f"ankle_angle_{s}")
-        ch[f"mtp_{s}"] = np.zeros_like(tilt)
-    ordered = {c: ch[c] for c in model.coordinate_order}
-    return Trial(coords.time, ordered, meta={"source": coords.meta.get("source"),
-                                             "mapping": "opensim_to_gait2d", "hip_offset": tuple(hip_offset)})
+    cmap = opensim_gait2d_map(knee_sign=knee_sign, hip_offset=hip_offset)
+    kin = apply_channel_map(coords, cmap, model=model)
+    return Trial(coords.time, {c: kin[c] for c in model.coordinate_order},
+                 meta={"source": coords.meta.get("source"), "mapping": "opensim_to_gait2d",
+                       "hip_offset": tuple(hip_offset), "map_notes": kin.meta["channel_map"]["notes"]})
 
 
 def frame_positions(model, q: np.ndarray, frames: Sequence[str]) -> dict:
@@ -229,6 +185,7 @@ def _kinematics(model, spec: dict, base: Path):
             warnings.simplefilter("ignore")
             coords = read_trial(_path(base, spec["coordinates"]), strict=False)
             grf = read_trial(_path(base, spec["grf"]), strict=False)
+        info["read_repairs"] = [*coords.meta["read_notes"], *grf.meta["read_notes"]]
         kin = opensim_to_gait2d(coords, model, hip_offset=tuple(spec.get("hip_offset", RAJAGOPAL_HIP_OFFSET)))
         if "t0" in spec or "t1" in spec:
             kin = kin.slice_time(spec.get("t0"), spec.get("t1"))
@@ -254,6 +211,7 @@ def _kinematics(model, spec: dict, base: Path):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 grf = read_trial(_path(base, spec["grf"]), strict=False)
+            info["read_repairs"] = list(grf.meta["read_notes"])
             grf = to_time(grf, kin.time)
             ext = external_forces(model, grf, planar=True)
         info["body_mass"] = spec.get("body_mass")
@@ -270,6 +228,7 @@ def run_trial(spec: dict, *, model="gait2d", out_dir=None, base_dir=".") -> dict
     """
     from .dynamics import inverse_dynamics
     from .grf import torso_residuals
+    from .kinematics import DEFAULT_CUTOFF, cutoff_value
 
     t0 = _time.perf_counter()
     name = spec.get("name", "trial")
@@ -279,8 +238,10 @@ def run_trial(spec: dict, *, model="gait2d", out_dir=None, base_dir=".") -> dict
         base = Path(base_dir)
         kin, ext, info = _kinematics(m, spec, base)
         t1 = _time.perf_counter()
-        cutoff = spec.get("cutoff")
+        # inverse_dynamics low-passes the GRF wrenches like the kinematics (pinmsk.kinematics)
+        cutoff = cutoff_value(spec.get("cutoff", DEFAULT_CUTOFF))
         idt = inverse_dynamics(m, kin, cutoff=cutoff, external=ext)
+        row["lowpass_cutoff_hz"] = cutoff or 0.0
         t2 = _time.perf_counter()
         bm = info.get("body_mass")
         res, rsum = torso_residuals(m, idt, body_mass=bm)

@@ -855,6 +855,8 @@ def view_cli(model_name, trial_path=None, results_path=None, *, open_browser: bo
              block: bool = True, timeout: float | None = None) -> Viewer:
     """``pinmsk view MODEL [TRIAL] [--results RESULTS]``: start the viewer and print its URL.
 
+    ``trial_path`` is a file or a :class:`~pinmsk.trial.Trial` already read.
+
     Loads the model (built-in name or file), shows the neutral pose, or plays
     the trial with the results' activations/forces/residuals/GRF.  With
     ``block`` it then waits (Ctrl-C, or ``timeout`` seconds) and stops the
@@ -862,11 +864,12 @@ def view_cli(model_name, trial_path=None, results_path=None, *, open_browser: bo
     """
     from .io import read_trial
     from .model import load_model
+    from .trial import Trial
 
-    if results_path and not trial_path:
+    if results_path and trial_path is None:
         raise TrialError("--results needs a TRIAL with the motion to show them on")
     model = load_model(model_name)
-    trial = read_trial(trial_path) if trial_path else None
+    trial = trial_path if isinstance(trial_path, Trial) else (read_trial(trial_path) if trial_path else None)
     results = read_trial(results_path) if results_path else None
     viewer = Viewer(model, open_browser=open_browser)
     if trial is not None:
@@ -875,7 +878,7 @@ def view_cli(model_name, trial_path=None, results_path=None, *, open_browser: bo
         except BaseException:
             viewer.close()
             raise
-        print(f"pinmsk viewer: playing {trial_path} ({trial.time[-1] - trial.time[0]:.2f} s); "
+        print(f"pinmsk viewer: playing {trial.meta.get('source') or 'the trial'} ({trial.time[-1] - trial.time[0]:.2f} s); "
               "open 'Open Controls' > Animations for the time slider", flush=True)
     if block:
         viewer.serve(timeout=timeout)

@@ -61,7 +61,7 @@ def test_bare_foot_misses_a_volumetric_contact(first):
     assert point.rmse_after["ground_force_vy"] > 5 * first.noise_floor["ground_force_vy"]
     assert point.fit.bic_change > first.score("volumetric").fit.bic_change + 10
     out = first.to_json_dict()
-    assert set(out) == {"rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added"}
+    assert set(out) == {"inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added"}
     for entry in out["ranking"]:
         assert {"effect", "target", "params", "rmse_after", "explained_fraction", "significant"} <= set(entry)
         assert entry["target"] == "heel,metatarsal,toe"
@@ -118,7 +118,7 @@ def test_cli_diagnose_json(tmp_path, foot, capsys):
     text = capsys.readouterr().out
     assert "contact-level comparison" in text and "step 1: added volumetric" in text
     d = json.loads(out.read_text())
-    assert set(d) == {"rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added"}
+    assert set(d) == {"inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added"}
     assert set(d["rmse"]) == set(CHANNELS) | {"total"}
     assert d["added"][0]["effect"] == "volumetric"
     assert d["verdict"] == "at_noise_floor"

@@ -52,9 +52,23 @@ def test_lowpass_is_vectorised_over_columns_and_uses_documented_padding():
     assert y.shape == x.shape
     np.testing.assert_allclose(y[:, 1], lowpass(x[:, 1], rate=100.0, cutoff=8.0), rtol=0, atol=1e-14)
     sos = butter(4, 8.0 / 50.0, output="sos")
-    assert filter_padlen(4) == 15
-    # documented padding = scipy's default odd extension for this filter
-    np.testing.assert_allclose(y, sosfiltfilt(sos, x, axis=0), rtol=0, atol=1e-14)
+    assert filter_padlen(4) == 15                                  # scipy's minimum for order 4
+    assert filter_padlen(4, rate=100.0, cutoff=8.0) == 25          # two periods of the cut-off
+    assert filter_padlen(4, rate=1000.0, cutoff=6.0, n=200) == 199  # capped by the signal
+    # documented padding = odd extension over two periods of the cut-off
+    np.testing.assert_allclose(y, sosfiltfilt(sos, x, axis=0, padtype="odd", padlen=25), rtol=0, atol=1e-14)
+
+
+def test_lowpass_end_transients_are_small_at_high_rates():
+    """A slow ramp-and-curve at 1 kHz filtered at 6 Hz keeps its ends (scipy's 15-sample pad does not)."""
+    rate = 1000.0
+    t = np.arange(0.0, 1.35, 1.0 / rate)
+    x = 1.2 * t + 0.3 * np.sin(2 * np.pi * 0.9 * t + 0.4)
+    y = lowpass(x, rate=rate, cutoff=6.0)
+    sos = butter(4, 6.0 / 500.0, output="sos")
+    short = sosfiltfilt(sos, x, padtype="odd", padlen=15)
+    assert np.max(np.abs(y - x)) < 0.2 * np.max(np.abs(short - x))
+    assert np.max(np.abs(y - x)) < 5e-3
 
 
 def test_lowpass_rejects_cutoff_at_or_above_nyquist():

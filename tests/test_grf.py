@@ -89,8 +89,10 @@ def test_unloaded_samples_get_zero_force(gait2d):
     d = tr.to_dict(); d.pop("time"); d["ground_force_r_px"] = np.array([np.nan, 123.0, 0.2])
     ext = external_forces(gait2d, Trial(tr.time, d))
     np.testing.assert_array_equal(ext[0].force[:2], 0.0)
-    assert np.all(np.isfinite(ext[0].point))
-    assert ext[0].point[2, 0] == 0.2
+    np.testing.assert_array_equal(ext[0].torque[:2], 0.0)       # the NaN / wild COP of unloaded frames never enters
+    assert np.all(np.isfinite(ext[0].point)) and np.all(np.isfinite(ext[0].torque))
+    # the wrench about the origin: M = p x F with the COP x = 0.2 m and F_y = 300 N
+    assert ext[0].torque[2, 2] == pytest.approx(0.2 * 300.0)
 
 
 def test_torso_residuals_vanish_when_grf_matches_weight(gait2d):

@@ -9,7 +9,7 @@ import pytest
 
 import pinmsk.io as pio
 from pinmsk.datasets import shared_data_dir
-from pinmsk.errors import TrialError
+from pinmsk.errors import RepairWarning, TrialError
 from pinmsk.io import read_sto_header, read_trial, write_trial
 from pinmsk.trial import Trial, parse_ground_reaction
 
@@ -222,25 +222,27 @@ def test_duplicate_columns_are_named(tmp_path):
 
 def test_nrows_and_ncolumns_mismatch(tmp_path):
     rows = _write(tmp_path / "rows.sto", "x\nversion=1\nnRows=3\nnColumns=2\ninDegrees=no\nendheader\ntime\ta\n0\t1\n1\t2\n")
-    _error(rows, r"rows.sto': header says nRows=3 \(line 3\) but there are 2 data rows \(lines 8-9\).*strict=False")
+    _error(rows, r"rows.sto': header says nRows=3 \(line 3\) but there are 2 data rows \(lines 8-9\).*"
+                 r"pass --lenient \(command line\) or strict=False \(Python\)")
     cols = _write(tmp_path / "cols.sto", "x\nversion=1\nnRows=2\nnColumns=3\ninDegrees=no\nendheader\ntime\ta\n0\t1\n1\t2\n")
     _error(cols, r"cols.sto': header says nColumns=3 \(line 4\) but the column-label line 7 has 2 columns \(time, a\)")
-    with pytest.warns(UserWarning, match="nRows=3"):
+    with pytest.warns(RepairWarning, match=r"rows.sto: header says nRows=3 \(line 3\), data has 2 rows \(lines 8-9\); "
+                                           r"used the data's 2$"):
         tr = read_trial(rows, strict=False)
     assert tr.n_frames == 2 and "nRows=3" in tr.meta["read_notes"][0]
 
 
-def test_repeated_last_frame_needs_strict_false(tmp_path):
+def test_repeated_time_stamps_need_strict_false(tmp_path):
     path = _write(tmp_path / "rep.sto", "x\nendheader\ntime\ta\n0\t1\n1\t2.0000000001\n1\t2.0000000002\n")
-    _error(path, r"line 6 \(data row 2\): time 1.0 is not greater than 1.0 on line 5.*it repeats the previous frame")
-    with pytest.warns(UserWarning, match=r"dropped 1 repeated frame\(s\) \(lines 6\)"):
+    _error(path, r"line 6 \(data row 2\): time 1.0 is not greater than 1.0 on line 5.*it repeats the time stamp "
+                 r"of the line before; to read the file anyway, pass --lenient")
+    with pytest.warns(RepairWarning, match=r"rep.sto: dropped 1 duplicated time stamp at line 6 \(kept the first "
+                                           r"of each; each repeated the row before\)"):
         tr = read_trial(path, strict=False)
     assert tr.n_frames == 2
     different = _write(tmp_path / "diff.sto", "x\nendheader\ntime\ta\n0\t1\n1\t2\n1\t3\n")
     with pytest.raises(TrialError, match="not greater"):
-        read_trial(different, strict=False)
-
-
+        read_trial(different)
 def test_empty_and_header_only_files(tmp_path):
     _error(_write(tmp_path / "e.csv", ""), r"e.csv' is empty")
     _error(_write(tmp_path / "e.sto", "\n\n"), r"e.sto' is empty")

@@ -101,10 +101,26 @@ def test_trial_input_with_inverse_dynamics(forearm):
 
 # -- multi-dof, bi-articular: gait2d against SLSQP ---------------------------------
 
-def test_gait2d_default_dofs_are_the_spanned_ones(gait2d):
+GAIT2D_SPANNED = ("hip_l", "knee_l", "ankle_l", "hip_r", "knee_r", "ankle_r")
+
+
+def test_gait2d_default_dofs_are_the_spanned_ones_and_the_rest_is_reported(gait2d):
     mo = walking_motion(gait2d, n_frames=50)
-    so = StaticOptimization().fit(gait2d, mo)
-    assert set(so.dofs_) == {"hip_l", "knee_l", "ankle_l", "hip_r", "knee_r", "ankle_r"}
+    # a floating base without GRF needs body weight at torso_y: refused by name without reserves
+    with pytest.raises(InfeasibleError, match=r"no muscle spans torso_x, torso_y, torso_angle.*torso_y \(peak"):
+        StaticOptimization().fit(gait2d, mo)
+    so = StaticOptimization(reserves=True).fit(gait2d, mo)
+    assert set(so.dofs_) == set(GAIT2D_SPANNED)
+    # the reserve at an unspanned coordinate is exactly the force inverse dynamics needs there
+    tau = inverse_dynamics_array(gait2d, mo)
+    j = gait2d.coordinate_index("torso_y")
+    np.testing.assert_allclose(so.result_["torso_y_reserve"], tau[:, j], rtol=1e-12)
+    assert np.max(np.abs(tau[:, j])) > 0.9 * gait2d.mass * 9.81      # holds the body up
+    assert "torso_y" in so.report() and "ideal reserves" in so.report()
+    # explicit dofs: the others are left out on purpose, and reported as such
+    so2 = StaticOptimization(dofs=GAIT2D_SPANNED).fit(gait2d, mo)
+    np.testing.assert_allclose(so2.forces_, so.forces_, atol=1e-6 * so.problem_.f_max.max())
+    assert "left out by request" in so2.report()
     with pytest.raises(ModelError, match="mtp_r"):
         StaticOptimization(dofs=["hip_r", "mtp_r"]).fit(gait2d, mo)
 
@@ -113,7 +129,7 @@ def test_gait2d_default_dofs_are_the_spanned_ones(gait2d):
                                            (2, False, "activation"), (2, True, "force")])
 def test_gait2d_matches_slsqp(gait2d, P, minmax, mode):
     mo = walking_motion(gait2d, n_frames=120)
-    so = StaticOptimization(exponent=P, minmax=minmax, mode=mode).fit(gait2d, mo)
+    so = StaticOptimization(exponent=P, minmax=minmax, mode=mode, dofs=GAIT2D_SPANNED).fit(gait2d, mo)
     prob = so.problem_
     x = so.forces_ / prob.f_max if mode == "force" else so.activations_
     for k in range(0, prob.n_frames, 12):
@@ -130,8 +146,8 @@ def test_gait2d_matches_slsqp(gait2d, P, minmax, mode):
 def test_auto_and_proxsuite_paths_agree(gait2d):
     mo = walking_motion(gait2d, n_frames=60)
     for P in (2, 3, 1):
-        a = StaticOptimization(exponent=P).fit(gait2d, mo)
-        b = StaticOptimization(exponent=P, method="proxsuite").fit(gait2d, mo)
+        a = StaticOptimization(exponent=P, dofs=GAIT2D_SPANNED).fit(gait2d, mo)
+        b = StaticOptimization(exponent=P, method="proxsuite", dofs=GAIT2D_SPANNED).fit(gait2d, mo)
         assert a.n_batched_ > 0 and b.n_batched_ == 0
         np.testing.assert_allclose(a.forces_, b.forces_, atol=1e-5 * a.problem_.f_max.max())
 

@@ -69,6 +69,7 @@ import numpy as np
 from ..components import Motion
 from ..errors import ModelError, TrialError
 from ..filtering import differentiate
+from ..kinematics import TrialInputs, prepare
 from ..skeleton import ExternalForce
 from ..trial import Trial, parse_ground_reaction
 from ..effects._base import SignalEffect, is_prismatic, unactuated_coordinates
@@ -141,6 +142,21 @@ def _subset_external(external, rows):
                           None if e.torque is None else np.asarray(e.torque)[rows]) for e in external]
 
 
+def _check_measured_finite(trial: Trial) -> None:
+    """Measured moments, forces and signals must be finite numbers of a sane size (no NaN, no 1e300)."""
+    for name in trial.names:
+        if name.endswith(("_moment", "_emg", "_excitation")) or parse_ground_reaction(name) is not None:
+            x = np.asarray(trial[name], dtype=float)
+            bad = ~np.isfinite(x) | (np.abs(x) > 1e12)
+            if parse_ground_reaction(name) is not None and parse_ground_reaction(name).quantity == "point":
+                bad = np.isinf(x) | (np.abs(np.nan_to_num(x)) > 1e12)      # an unloaded plate's COP may be NaN
+            if bad.any():
+                k = int(np.flatnonzero(bad)[0])
+                raise TrialError(f"channel {name!r} is {x[k]!r} at row {k} (t = {trial.time[k]:.6g} s)"
+                                 f"{f' and {int(bad.sum()) - 1} more rows' if bad.sum() > 1 else ''}; "
+                                 "a measured value must be a finite number: fill or cut the gap")
+
+
 def _has_grf(trial) -> bool:
     return any(parse_ground_reaction(n) is not None for n in trial.names)
 
@@ -176,7 +192,7 @@ class _Plan:
     excitation_kind: str | None
 
 
-def _plan(model, trial, mode: str) -> _Plan:
+def _plan(model, trial, mode: str, *, has_grf: bool | None = None) -> _Plan:
     if mode not in ("auto",) + MODES:
         raise ModelError(f"unknown comparison mode {mode!r}; use one of auto, {', '.join(MODES)}")
     from . import contact as _contact
@@ -186,7 +202,7 @@ def _plan(model, trial, mode: str) -> _Plan:
             raise TrialError(f"contact-level comparison impossible: {why}")
         return _Plan("contact", (), (), None)        # no coordinate is compared: joint effects do not apply
     unact = unactuated_coordinates(model)
-    grf = _has_grf(trial)
+    grf = _has_grf(trial) if has_grf is None else has_grf
     with_moment = [c for c in model.coordinates if f"{c}_moment" in trial]
     actuated_moment = [c for c in with_moment if c not in unact]
     base_rows = [c for c in unact if grf or c in with_moment]
@@ -388,6 +404,7 @@ class Comparison:
     options: dict = field(default_factory=dict)
     eq_noise: NoiseFloor | None = None
     mask: np.ndarray | None = None          # (n, C) frames where a channel is defined (contact: the COP)
+    inputs: TrialInputs | None = None        # the filtered motion and loads (what was applied)
 
     def __post_init__(self):
         if self.eq_noise is None:
@@ -421,16 +438,25 @@ class Comparison:
             return compare_contact(model, self.trial, cutoff=self.cutoff, noise_floor=self.noise,
                                    problem=self.eq.problem, options=self.options)
         return compare(model, self.trial, mode=self.mode, cutoff=self.cutoff,
-                       noise_floor=self.noise, _motion=self.eq.motion, **self.options)
+                       noise_floor=self.noise, _inputs=self.inputs, **self.options)
 
 
 def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = DEFAULT_CUTOFF,
-            grf_frames: Mapping[str, str] | None = None, sim_window: float = 0.5,
-            noise_floor: NoiseFloor | None = None, _motion: Motion | None = None) -> Comparison:
-    """Compare ``model`` with ``trial`` (see the module docstring for the modes and the noise floor)."""
+            grf_frames: Mapping[str, str] | None = None, grf=None, external_loads=None,
+            grf_cutoff="same", sim_window: float = 0.5, noise_floor: NoiseFloor | None = None,
+            _inputs: TrialInputs | None = None) -> Comparison:
+    """Compare ``model`` with ``trial`` (see the module docstring for the modes and the noise floor).
+
+    Kinematics and ground reaction forces (the trial's own, ``grf=`` at its own
+    rate or an OpenSim ``external_loads=`` file; ``grf_frames`` overrides which
+    body takes a plate) go through :func:`pinmsk.kinematics.prepare`, so the GRF
+    is low-passed at the same ``cutoff`` as the kinematics.
+    """
     if not isinstance(trial, Trial):
         raise TrialError(f"compare needs a Trial, got {type(trial).__name__}; read one with pinmsk.read_trial")
-    plan = _plan(model, trial, mode)
+    _check_measured_finite(trial)
+    external_given = grf is not None or external_loads is not None
+    plan = _plan(model, trial, mode, has_grf=_has_grf(trial) or external_given)
     if plan.mode == "contact":
         from .contact import compare_contact
         return compare_contact(model, trial, cutoff=cutoff, noise_floor=noise_floor,
@@ -439,13 +465,16 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
     if t.size < 30:
         raise TrialError(f"the trial has {t.size} samples; the diagnosis needs at least 30 "
                          "(and several seconds for cross-validation)")
-    motion = _motion if _motion is not None else model.motion(trial, cutoff=cutoff)
+    inputs = _inputs if _inputs is not None else prepare(
+        model, trial, cutoff=cutoff, grf=grf, external_loads=external_loads, frames=grf_frames,
+        grf_cutoff=grf_cutoff)
+    motion = inputs.motion
     rows = _rows_for(t, cutoff)
     if rows.size < 30:
         edge = f"{1.5 / cutoff:.3g} s (filter edge effects at {cutoff:g} Hz)" if cutoff else "5 frames"
         raise TrialError(f"only {rows.size} samples remain after leaving out {edge} at each end; "
                          "the diagnosis needs at least 30: record a longer trial")
-    external = external_forces_from_trial(model, trial, grf_frames=grf_frames) if _has_grf(trial) else []
+    external = list(inputs.external)
     measured_tau = None
     excitation = None
     if plan.mode in ("torque", "motion"):
@@ -460,14 +489,15 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
         eq_coords = tuple(c for c in plan.coordinates if f"{c}_moment" in trial)
     eq = EquationError(model=model, motion=motion, rows=rows, coordinates=eq_coords, mode=plan.mode,
                        measured_tau=measured_tau, external=external, excitation=excitation)
-    options = {"grf_frames": grf_frames, "sim_window": sim_window}
+    options = {"grf_frames": grf_frames, "grf": grf, "external_loads": external_loads, "grf_cutoff": grf_cutoff,
+               "sim_window": sim_window}
     states = _states(model, trial, motion, rows, eq_coords, excitation, plan.excitation_kind, external)
     if plan.mode == "motion":
         meas, mod, floor = _motion_level(model, trial, motion, rows, sim_window, eq, noise_floor, cutoff)
         channels = tuple(plan.coordinates)
         eq_floor = _torque_floor(model, trial, motion, eq, cutoff, tuple(f"{c}_moment" for c in eq_coords))
         return Comparison("motion", model, trial, cutoff, t[rows], channels, tuple(plan.coordinates),
-                          meas, mod, floor, eq, states, options, eq_floor)
+                          meas, mod, floor, eq, states, options, eq_floor, inputs=inputs)
     channels = tuple(f"{c}_moment" for c in eq_coords)
     if plan.mode == "muscle":
         # the measured side's noise passes through the model's own muscle-level chain: recompute it
@@ -476,7 +506,7 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
         floor = noise_floor if noise_floor is not None else _torque_floor(model, trial, motion, eq, cutoff,
                                                                          channels)
     return Comparison(plan.mode, model, trial, cutoff, t[rows], channels, eq_coords, eq.actuation.copy(),
-                      eq.tau_id.copy(), floor, eq, states, options)
+                      eq.tau_id.copy(), floor, eq, states, options, inputs=inputs)
 
 
 def _torque_floor(model, trial, motion, eq, cutoff, channels) -> NoiseFloor:

@@ -219,7 +219,9 @@ class Diagnosis:
 
     # -- reporting -----------------------------------------------------------------------
     def to_json_dict(self, added: Sequence = ()) -> dict:
+        inputs = self.comparison.inputs
         return {
+            "inputs": inputs.meta() if inputs is not None else {},
             "rmse": dict(self.rmse),
             "noise_floor": dict(self.noise_floor),
             "worst_windows": [dict(w) for w in self.worst_windows],
@@ -238,6 +240,8 @@ class Diagnosis:
                          f"({dur:.2f} s, {c.trial.n_frames} frames), {c.mode}-level comparison")
             if self.model.components:
                 lines.append("model effects: " + ", ".join(x.label for x in self.model.components))
+            if c.inputs is not None:
+                lines.extend(c.inputs.describe())
             lines.append(f"noise floor: {c.noise.method}")
         unit = _unit(c)
         w = max([len(ch) for ch in c.channels] + [8])
@@ -504,7 +508,8 @@ def _motion_rmse_after(c: Comparison, effect) -> dict:
 def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT_CUTOFF,
              candidates=None, frames: Sequence[str] | None = None, folds: int = 5,
              threshold: float = THRESHOLD, at_floor: float = AT_FLOOR, window: float = 1.0,
-             grf_frames=None, sim_window: float = 0.5, comparison: Comparison | None = None,
+             grf_frames=None, grf=None, external_loads=None, grf_cutoff="same", sim_window: float = 0.5,
+             comparison: Comparison | None = None,
              delta_bic: float | None = None, _fits=None) -> Diagnosis:
     """Compare ``model`` with ``trial``, locate the failure and rank the missing effects.
 
@@ -523,7 +528,8 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
     if folds < 2:
         raise ModelError(f"folds must be >= 2 for cross-validation, got {folds}")
     c = comparison if comparison is not None else compare(
-        model, trial, mode=mode, cutoff=cutoff, grf_frames=grf_frames, sim_window=sim_window)
+        model, trial, mode=mode, cutoff=cutoff, grf_frames=grf_frames, grf=grf, external_loads=external_loads,
+        grf_cutoff=grf_cutoff, sim_window=sim_window)
     if c.mode == "contact":
         return _diagnose_contact(c, candidates, folds, threshold, at_floor, window, cutoff, delta_bic, _fits)
     n = c.eq.rows.size
@@ -675,7 +681,8 @@ def run(model, trial, *, add: Sequence = (), json_path=None, report_path=None, p
             fit = steps[-1].fit(entry)
         new_model = _model_plus(steps[-1].model, fit)
         comp = steps[-1].comparison.with_model(new_model)
-        opts = {k: v for k, v in options.items() if k not in ("mode", "cutoff", "grf_frames", "sim_window")}
+        opts = {k: v for k, v in options.items() if k not in ("mode", "cutoff", "grf_frames", "grf", "grf_cutoff",
+                                                                    "external_loads", "sim_window")}
         if comp.mode == "contact":
             opts["_fits"] = getattr(steps[-1], "contact_fits", None)   # the fits depend on the trial only
         steps.append(diagnose(new_model, trial, comparison=comp, cutoff=steps[-1].settings["cutoff"], **opts))

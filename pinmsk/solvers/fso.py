@@ -60,10 +60,37 @@ from ..errors import InfeasibleError, ModelError, SolverError
 from ..skeleton import integrate
 from ..trial import Trial
 from . import qp as _qp
+from ..kinematics import DEFAULT_CUTOFF, prepare
+from ..skeleton import ExternalForce, external_generalized_force
 from .static import MODES, WEIGHTS, _muscle_property, as_motion, check_model
 
 TRACKING = ("q", "qv", "qva", "pid")
 ENFORCE = ("constraint", "cost")
+
+
+def _external_drive(model, t, external):
+    """``f(t, q) -> (nv,)``: the generalized force ``J(q)^T f_ext(t)`` of the measured loads, or None.
+
+    The wrenches (world frame, about the origin) are interpolated linearly in
+    time and applied at the simulated configuration, so the feet carry the
+    measured ground reaction wherever the simulation puts them.
+    """
+    if not external:
+        return None
+    frames = [e.frame for e in external]
+    W = [np.hstack([np.asarray(e.force, dtype=float), np.asarray(e.torque, dtype=float)
+                    + np.cross(np.asarray(e.point, dtype=float), np.asarray(e.force, dtype=float))])
+         for e in external]
+    zero = np.zeros((1, 3))
+
+    def drive(ti, q):
+        loads = []
+        for name, w in zip(frames, W):
+            wi = np.array([np.interp(ti, t, w[:, j]) for j in range(6)])
+            loads.append(ExternalForce(name, wi[None, :3], zero, wi[None, 3:]))
+        return external_generalized_force(model, q[None, :], loads)[0]
+
+    return drive
 
 
 class ForwardStaticOptimization:
@@ -160,12 +187,22 @@ class ForwardStaticOptimization:
         return 3.0 * w, 3.0 * w * w, w ** 3
 
     # -- running -------------------------------------------------------------
-    def fit(self, model, trial, *, cutoff: float | None = None, progress=None):
-        """Simulate the model tracking ``trial`` (a Trial or a Motion); returns ``self``."""
+    def fit(self, model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, external_loads=None, frames=None,
+            ground_reaction: str = "auto", grf_cutoff="same", progress=None):
+        """Simulate the model tracking ``trial`` (a Trial or a Motion); returns ``self``.
+
+        The trial goes through :func:`pinmsk.kinematics.prepare` (coordinates and
+        GRF low-passed at ``cutoff`` Hz, default 6, 0 = off); its ground reaction
+        forces act on the simulated feet as world wrenches interpolated in time.
+        """
         self._check_params()
         t_start = _time.perf_counter()
         muscles = check_model(model)
-        ref = as_motion(model, trial, cutoff)
+        inputs = prepare(model, trial, cutoff=cutoff, grf=grf, external_loads=external_loads, frames=frames,
+                         ground_reaction=ground_reaction, grf_cutoff=grf_cutoff)
+        self.inputs_ = inputs
+        ref = as_motion(model, inputs.motion)
+        external_force = _external_drive(model, ref.t, inputs.external)
         if ref.n_frames < 2:
             raise SolverError("FSO needs a reference motion of at least 2 frames")
         nv, m = model.nv, muscles.n
@@ -216,10 +253,11 @@ class ForwardStaticOptimization:
         comps = [c for c in model.components if not getattr(c, "inertial", False)]
 
         def comp_force(ti, q, v):
+            total = 0.0 if external_force is None else external_force(ti, q)
             if not comps:
-                return 0.0
+                return total
             mo = Motion(np.array([ti]), q[None, :], v[None, :], np.zeros((1, nv)))
-            return sum(c.generalized_force(model, mo, cache=c.prepare(model, mo))[0] for c in comps)
+            return total + sum(c.generalized_force(model, mo, cache=c.prepare(model, mo))[0] for c in comps)
 
         alpha, beta, gamma = self._pid_gains()
         q = ref.q[0].copy()

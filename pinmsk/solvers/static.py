@@ -55,8 +55,11 @@ import numpy as np
 
 from ..components import Motion
 from ..errors import ConvergenceError, InfeasibleError, ModelError, SolverError, TrialError
+from ..kinematics import DEFAULT_CUTOFF, prepare
+from ..residuals import floating_base_residuals
 from ..trial import Trial
 from . import qp as _qp
+from .moments import plan_moments
 
 MODES = ("force", "activation")
 WEIGHTS = ("none", "fmax", "pcsa", "volume")
@@ -562,21 +565,36 @@ class StaticOptimization:
             raise SolverError(f"reserve_weight must be > 0; got {self.reserve_weight!r}")
 
     # -- fitting -----------------------------------------------------------
-    def fit(self, model, trial, *, moments=None, cutoff: float | None = None, progress=None):
+    def fit(self, model, trial, *, moments=None, cutoff=DEFAULT_CUTOFF, grf=None, external_loads=None,
+            frames=None, ground_reaction: str = "auto", grf_cutoff="same", progress=None):
         """Solve every frame of ``trial`` (a Trial or a Motion); returns ``self``.
 
-        ``moments``: the moments to balance -- a Trial with ``<coord>_moment``
-        channels, or an (N, nv) / (N, n_dofs) array; default inverse dynamics
-        of the trial (``cutoff`` Hz low-pass of the coordinates first, if given).
+        The trial goes through :func:`pinmsk.kinematics.prepare` (coordinates and
+        GRF low-passed at ``cutoff`` Hz, default 6, 0 = off; the GRF -- the
+        trial's own, ``grf=`` or ``external_loads=`` -- on the feet).
+        ``moments``: ``"id"`` (default, inverse dynamics), ``"measured"`` (the
+        trial's ``<coord>_moment`` channels), a Trial or an (N, nv) / (N, n_dofs)
+        array.  Coordinates no muscle spans are handled by
+        :func:`pinmsk.solvers.moments.plan_moments`: an error without reserves
+        where they need a force, a reported reserve with them.
         ``progress``: an object with ``update(n)`` (e.g. pinmsk.progress.Progress).
         """
         self._check_params()
         t0 = _time.perf_counter()
-        motion = as_motion(model, trial, cutoff)
+        check_model(model)
+        inputs = prepare(model, trial, cutoff=cutoff, grf=grf, external_loads=external_loads, frames=frames,
+                         ground_reaction=ground_reaction, grf_cutoff=grf_cutoff)
+        motion = as_motion(model, inputs.motion)
+        plan = plan_moments(model, trial, inputs, moments=moments, dofs=self.dofs, reserves=self.reserves)
         prob = build_problem(model, motion, mode=self.mode, weights=self.weights,
-                             exponent=self.exponent, dofs=self.dofs, moments=moments,
+                             exponent=self.exponent, dofs=plan.dofs, moments=plan.tau,
                              reserves=self.reserves)
         t1 = _time.perf_counter()
+        self.inputs_ = inputs
+        self.plan_ = plan
+        self.residuals_ = (floating_base_residuals(model, motion, plan.tau_full, inputs.external)
+                           if plan.tau_full is not None else None)
+        self._model_rot = tuple(model.rotational_coordinates)
         self._solve(prob, progress=progress)
         t2 = _time.perf_counter()
         self.timing_ = {"setup_s": t1 - t0, "solve_s": t2 - t1, "total_s": t2 - t0}
@@ -586,6 +604,7 @@ class StaticOptimization:
     def fit_problem(self, prob: SOProblem, progress=None):
         """Solve an already built :class:`SOProblem` (used by benchmarks and FSO)."""
         self._check_params()
+        self.plan_ = self.inputs_ = self.residuals_ = None
         t0 = _time.perf_counter()
         self._solve(prob, progress=progress)
         self.timing_ = {"setup_s": 0.0, "solve_s": _time.perf_counter() - t0,
@@ -643,13 +662,25 @@ class StaticOptimization:
         if self.reserves_ is not None:
             for j, dof in enumerate(prob.dofs):
                 ch[f"{dof}_reserve"] = self.reserves_[:, j]
+        plan = getattr(self, "plan_", None)
+        units = {f"{n}_force": "N" for n in prob.muscles}
+        if self.reserves_ is not None:
+            units.update({f"{d}_reserve": "N*m" for d in prob.dofs})
+        if plan is not None:
+            # what no muscle can supply: a reserve with reserves, else the left-over (residual) force
+            kind = "reserve" if self.reserves else "residual"
+            for j, c in enumerate(plan.unspanned):
+                if np.isfinite(plan.unspanned_tau[:, j]).all():
+                    ch[f"{c}_{kind}"] = plan.unspanned_tau[:, j]
+                    units[f"{c}_{kind}"] = "N*m" if c in self._model_rot else "N"
         ch["status"] = self.status_.astype(float)
         ch["cost"] = self.cost_
         ch["violation"] = self.violation_
         meta = {"analysis": "static_optimization", **{k: str(v) for k, v in self.get_params().items()}}
-        units = {f"{n}_force": "N" for n in prob.muscles}
-        if self.reserves_ is not None:
-            units.update({f"{d}_reserve": "N*m" for d in prob.dofs})
+        if plan is not None:
+            meta.update(self.inputs_.meta())
+            meta["balanced_moments"] = plan.source
+            meta["balanced_dofs"] = ", ".join(plan.dofs)
         units["violation"] = "N*m"
         return Trial(prob.time, ch, units=units, meta=meta)
 
@@ -690,6 +721,18 @@ class StaticOptimization:
             f"  violation      max |R^T F - tau| = {np.max(self.violation_):.3g} N m "
             f"(capacity {', '.join(f'{d} {s:.4g}' for d, s in zip(prob.dofs, prob.scale))} N m)",
         ]
+        plan = getattr(self, "plan_", None)
+        if plan is not None:
+            lines.append(f"  moments        {plan.source}")
+            lines += [f"  {ln}" for ln in self.inputs_.describe()]
+            lines += [f"  note           {n}" for n in plan.notes]
+            if plan.unspanned:
+                how = ("left out by request (dofs=)" if plan.by_request else
+                       "ideal reserves (no muscle can share them)" if self.reserves else "need no force")
+                lines.append(f"  not spanned by any muscle: {', '.join(plan.unspanned)} -- {how}; force needed:")
+                lines += ["  " + ln for ln in plan.table_lines(self.problem_.time, self._model_rot)]
+            if self.residuals_ is not None and self.residuals_.coordinates:
+                lines += [f"  {ln}" for ln in self.residuals_.lines()]
         if self.reserves_ is not None:
             used = np.abs(self.reserves_) > 1e-6 * prob.scale
             parts = []

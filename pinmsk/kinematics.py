@@ -1,0 +1,300 @@
+"""The one stage from a measured trial to what analyses use: q, v, a and the external loads.
+
+Every analysis (inverse dynamics, SO, FSO, diagnosis, batch) goes through
+:func:`prepare`, so they all apply the same filter to the same inputs:
+
+* **Kinematics** are low-passed by a zero-lag 4th-order Butterworth filter at
+  :data:`DEFAULT_CUTOFF` = 6 Hz unless told otherwise (the usual choice for
+  gait and most movements; Winter, *Biomechanics and Motor Control of Human
+  Movement*, Ch. 2), then differentiated by quintic spline
+  (:func:`pinmsk.filtering.differentiate`).  ``cutoff=0`` (or ``None``) turns
+  filtering off explicitly, which is right for noise-free synthetic data.
+* **Ground reaction forces** are used whenever the trial (or ``grf=``, or an
+  OpenSim ExternalLoads file) has them: each plate goes to a body of the model
+  (:func:`pinmsk.grf.plates` says which and why), becomes a world wrench about
+  the origin (:func:`pinmsk.grf.plate_wrench`), and is low-passed at the
+  **same** cut-off as the kinematics: a mismatch makes artificial residual
+  peaks at heel strike (Kristianslund, Krosshaug & van den Bogert 2012,
+  *J Biomech* 45:666-671).  Filtering the wrench rather than the COP keeps the
+  filter linear and the unloaded frames meaningful.  A GRF file at its own
+  rate is filtered at that rate, then interpolated onto the kinematics' times.
+* A trial that has ground reaction channels but a model with no body to take
+  them is an error, never a silent drop (``ground_reaction="ignore"`` says so
+  explicitly).  A floating-base model without any GRF gets a warning from
+  the residual report (:mod:`pinmsk.residuals`).
+
+The result, :class:`TrialInputs`, carries what was applied
+(:meth:`TrialInputs.meta`, :meth:`TrialInputs.describe`) for every output's
+metadata and every report.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .components import Motion
+from .errors import TrialError
+from .trial import Trial, parse_ground_reaction
+
+if TYPE_CHECKING:   # pinmsk.skeleton imports Pinocchio; the CLI's parser (--help) reads DEFAULT_CUTOFF here
+    from .skeleton import ExternalForce
+
+__all__ = ["DEFAULT_CUTOFF", "FILTER_ORDER", "Filtering", "TrialInputs", "prepare", "cutoff_value",
+           "is_planar", "has_ground_reaction", "lowpass_external"]
+
+#: Default low-pass cut-off (Hz) of kinematics and ground reaction forces.
+DEFAULT_CUTOFF = 6.0
+#: Order of the designed Butterworth filter (run forwards and backwards).
+FILTER_ORDER = 4
+#: Vertical force (N) below which a plate counts as unloaded.
+MIN_FORCE = 20.0
+
+GROUND_REACTION_MODES = ("auto", "ignore")
+
+
+def cutoff_value(cutoff) -> float | None:
+    """``cutoff`` as Hz, or None for no filter (``0`` and ``None`` both mean off)."""
+    if cutoff is None:
+        return None
+    try:
+        c = float(cutoff)
+    except (TypeError, ValueError):
+        raise TrialError(f"cutoff must be a number of Hz (0 = no filter); got {cutoff!r}") from None
+    if not np.isfinite(c) or c < 0:
+        raise TrialError(f"cutoff must be >= 0 Hz (0 = no filter); got {cutoff!r}")
+    return c or None
+
+
+@dataclass(frozen=True)
+class Filtering:
+    """What low-pass was applied: to the coordinates (``cutoff``) and to the GRF (``grf_cutoff``)."""
+
+    cutoff: float | None
+    order: int = FILTER_ORDER
+    grf_cutoff: float | None = None
+    has_grf: bool = False
+
+    @property
+    def applied_to(self) -> tuple[str, ...]:
+        out = ("coordinates",) if self.cutoff is not None else ()
+        if self.has_grf and self.grf_cutoff is not None:
+            out += ("ground reaction",)
+        return out
+
+    def describe(self) -> str:
+        def one(c):
+            return "none" if c is None else f"{c:g} Hz"
+        head = f"zero-lag Butterworth low-pass, order {self.order} (x2 forwards-backwards): "
+        if not self.has_grf:
+            return head + f"coordinates {one(self.cutoff)}" + (" (cutoff 0)" if self.cutoff is None else "")
+        if self.cutoff == self.grf_cutoff:
+            return head + f"coordinates and ground reaction {one(self.cutoff)}"
+        return head + f"coordinates {one(self.cutoff)}, ground reaction {one(self.grf_cutoff)}"
+
+    def meta(self) -> dict:
+        out = {"lowpass_cutoff_hz": 0.0 if self.cutoff is None else float(self.cutoff),
+               "lowpass_order": self.order}
+        if self.has_grf:
+            out["grf_lowpass_cutoff_hz"] = 0.0 if self.grf_cutoff is None else float(self.grf_cutoff)
+        return out
+
+
+@dataclass(frozen=True)
+class TrialInputs:
+    """A trial made ready for analysis: the motion, the external loads and how they were made."""
+
+    motion: Motion
+    external: tuple[ExternalForce, ...]
+    plates: tuple = ()
+    filtering: Filtering = field(default_factory=lambda: Filtering(None))
+    notes: tuple[str, ...] = ()
+    grf_source: str | None = None
+
+    @property
+    def has_external(self) -> bool:
+        return bool(self.external)
+
+    def describe(self) -> list[str]:
+        """Lines for reports: the filter, each plate and its body, and notes."""
+        lines = [f"filter: {self.filtering.describe()}"]
+        if self.plates:
+            src = f" from {self.grf_source}" if self.grf_source else ""
+            lines.append(f"ground reaction{src}: " + "; ".join(p.describe() for p in self.plates))
+        else:
+            lines.append("ground reaction: none")
+        lines.extend(self.notes)
+        return lines
+
+    def meta(self) -> dict:
+        """Flat metadata for written outputs (strings and numbers only)."""
+        out = dict(self.filtering.meta())
+        out["ground_reaction"] = "; ".join(p.describe() for p in self.plates) if self.plates else "none"
+        if self.grf_source:
+            out["ground_reaction_source"] = self.grf_source
+        if self.notes:
+            out["notes"] = " | ".join(self.notes)
+        return out
+
+
+def has_ground_reaction(trial: Trial) -> bool:
+    """Whether the trial has any ground-reaction channel."""
+    return any(parse_ground_reaction(n) is not None for n in trial.names)
+
+
+def is_planar(model) -> bool:
+    """Whether every joint moves in the x-y plane (translations in x, y; rotations about z)."""
+    import pinocchio as pin
+    pm = model.pin
+    if pm.nv == 0:
+        return False
+    pd = pm.createData()
+    # a generic configuration: no joint axis aligned with z by accident of the pose
+    q = pin.randomConfiguration(pm, -np.ones(pm.nq), np.ones(pm.nq))
+    J = np.asarray(pin.computeJointJacobians(pm, pd, q)).reshape(6, pm.nv)
+    return bool(np.max(np.abs(J[[2, 3, 4], :]), initial=0.0) < 1e-9)
+
+
+def _wrench_rate(grf: Trial) -> float:
+    from .resample import measured_rate
+    return measured_rate(grf)
+
+
+def lowpass_wrenches(W: np.ndarray, *, rate: float, cutoff: float | None) -> np.ndarray:
+    """World wrenches ``(N, 6k)`` low-passed like the kinematics (no-op for ``cutoff=None``)."""
+    if cutoff is None or W.size == 0:
+        return W
+    from .filtering import lowpass
+    if cutoff >= 0.5 * rate:
+        raise TrialError(f"cutoff {cutoff:g} Hz is not below the GRF's Nyquist frequency "
+                         f"{0.5 * rate:g} Hz (GRF at {rate:g} Hz)")
+    return lowpass(W, rate=rate, cutoff=cutoff, order=FILTER_ORDER)
+
+
+def lowpass_external(external, *, rate: float, cutoff) -> tuple[ExternalForce, ...]:
+    """:class:`ExternalForce` s with their wrenches (about the origin) low-passed at ``cutoff`` Hz."""
+    from .skeleton import ExternalForce
+
+    c = cutoff_value(cutoff)
+    out = []
+    for e in external:
+        F = np.asarray(e.force, dtype=float)
+        M = np.cross(np.asarray(e.point, dtype=float), F) + (0.0 if e.torque is None else np.asarray(e.torque))
+        W = lowpass_wrenches(np.hstack([F, M]), rate=rate, cutoff=c)
+        out.append(ExternalForce(e.frame, W[:, :3].copy(), np.zeros_like(F), W[:, 3:].copy()))
+    return tuple(out)
+
+
+def _plate_loads(model, grf: Trial, motion: Motion, *, cutoff, external_loads, frames, planar,
+                 q_on_grf_time, same_time: bool):
+    from . import grf as _grf
+    from .skeleton import ExternalForce
+    _grf.check_vertical_force(grf, min_force=MIN_FORCE)
+    plist = _grf.plates(model, grf, external_loads=external_loads, frames=frames, q=q_on_grf_time,
+                        min_force=MIN_FORCE)
+    wrenches = [_grf.plate_wrench(grf, p, min_force=MIN_FORCE, planar=planar) for p in plist]
+    W = np.concatenate([np.hstack([F, M]) for F, M in wrenches], axis=1) if wrenches else np.zeros((grf.n_frames, 0))
+    if cutoff is not None:
+        W = lowpass_wrenches(W, rate=_wrench_rate(grf), cutoff=cutoff)
+    if not same_time:
+        tg = np.asarray(grf.time, dtype=float)
+        t = motion.t
+        if t[0] < tg[0] - 1e-9 or t[-1] > tg[-1] + 1e-9:
+            raise TrialError(f"the GRF covers {tg[0]:.4g}-{tg[-1]:.4g} s but the kinematics "
+                             f"{t[0]:.4g}-{t[-1]:.4g} s; cut the trial to the GRF's time span")
+        W = np.column_stack([np.interp(t, tg, W[:, j]) for j in range(W.shape[1])]) if W.size else np.zeros((t.size, 0))
+    ext = []
+    for i, p in enumerate(plist):
+        F = np.ascontiguousarray(W[:, 6 * i: 6 * i + 3])
+        M = np.ascontiguousarray(W[:, 6 * i + 3: 6 * i + 6])
+        ext.append(ExternalForce(p.body, F, np.zeros_like(F), M))
+    return tuple(plist), tuple(ext)
+
+
+def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | None = None,
+            external_loads=None, frames=None, ground_reaction: str = "auto",
+            grf_cutoff="same") -> TrialInputs:
+    """A trial (or a Motion) made ready for analysis; see the module docstring.
+
+    Parameters (keyword-only after ``trial``)
+    -----------------------------------------
+    cutoff : float or None
+        Low-pass cut-off (Hz) of the coordinates and the GRF; 0 or None: no filter.
+    grf : Trial or path, optional
+        Ground reaction forces at their own rate (instead of the trial's own channels).
+    external_loads : ExternalLoads or path, optional
+        An OpenSim ExternalLoads ``.xml``: which columns act on which body; its
+        ``datafile`` is read unless ``grf`` is given.
+    frames : mapping, optional
+        Side or ExternalForce name -> body, overriding the automatic choice.
+    ground_reaction : "auto" | "ignore"
+        "ignore" leaves all GRF out on purpose (recorded in the metadata).
+    grf_cutoff : "same" or float
+        Low-pass of the GRF; default the kinematics' ``cutoff`` (the consistent
+        choice); 0 leaves the GRF unfiltered, as OpenSim's ID tool does.
+    """
+    from .errors import ModelError
+    if ground_reaction not in GROUND_REACTION_MODES:
+        raise TrialError(f"ground_reaction must be one of {', '.join(GROUND_REACTION_MODES)}; "
+                         f"got {ground_reaction!r}")
+    c = cutoff_value(cutoff)
+    gc = c if isinstance(grf_cutoff, str) and grf_cutoff == "same" else cutoff_value(grf_cutoff)
+    if isinstance(trial, TrialInputs):
+        return trial
+    if isinstance(trial, Motion):
+        if grf is not None or external_loads is not None:
+            raise TrialError("a Motion carries no time-aligned GRF source; pass a Trial with grf=/external_loads=")
+        if trial.q.shape[1] != model.nv:
+            raise TrialError(f"the motion has {trial.q.shape[1]} coordinates; model '{model.name}' has "
+                             f"{model.nv} ({', '.join(model.coordinates)})")
+        return TrialInputs(trial, (), (), Filtering(None), ("a Motion was given: no filter applied",))
+    if not isinstance(trial, Trial):
+        raise TrialError(f"expected a Trial or a Motion, got {type(trial).__name__}")
+    motion = model.motion(trial, cutoff=c)
+    if external_loads is not None and not hasattr(external_loads, "loads"):
+        from .external_loads import read_external_loads
+        external_loads = read_external_loads(external_loads)
+    own = has_ground_reaction(trial)
+    source = None
+    if ground_reaction == "ignore":
+        notes = ("ground reaction: left out on request (ground_reaction='ignore')",) if (
+            own or grf is not None or external_loads is not None) else ()
+        return TrialInputs(motion, (), (), Filtering(c, grf_cutoff=gc), notes)
+    if grf is None and external_loads is not None and external_loads.datafile is not None and not own:
+        grf = external_loads.datafile
+    if grf is not None and own:
+        raise TrialError("the trial has ground reaction channels and a separate GRF source was given "
+                         f"({grf if not isinstance(grf, Trial) else 'grf='}); pass only one")
+    if isinstance(grf, (str, Path)):
+        from .io import read_trial
+        source = str(grf)
+        grf = read_trial(grf)
+    elif grf is not None:
+        source = grf.meta.get("source", "grf trial")
+    elif own:
+        source = None
+    if grf is None and not own:
+        return TrialInputs(motion, (), (), Filtering(c, grf_cutoff=gc))
+    data = grf if grf is not None else trial
+    planar = is_planar(model)
+    if grf is not None:
+        tg = np.asarray(grf.time, dtype=float)
+        q_g = np.column_stack([np.interp(tg, motion.t, motion.q[:, j]) for j in range(model.nq)]) \
+            if model.nq == model.nv else None
+    else:
+        q_g = motion.q if model.nq == model.nv else None
+    try:
+        plist, ext = _plate_loads(model, data, motion, cutoff=gc, external_loads=external_loads, frames=frames,
+                                  planar=planar, q_on_grf_time=q_g, same_time=grf is None)
+    except ModelError as exc:
+        raise TrialError(f"ground reaction: {exc}") from None
+    notes = []
+    if planar:
+        dropped = [n for p in plist for (kind, a), n in p.columns.items()
+                   if (kind in ("force", "point") and a == "z") or (kind == "torque" and a in "xy")]
+        if dropped and any(np.any(np.abs(np.asarray(data[n])) > 0) for n in dropped):
+            notes.append(f"planar model: out-of-plane GRF components ({', '.join(dropped)}) cannot act "
+                         "on it and were left out")
+    return TrialInputs(motion, ext, plist, Filtering(c, grf_cutoff=gc, has_grf=True), tuple(notes), source)

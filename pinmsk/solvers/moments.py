@@ -1,0 +1,173 @@
+"""The moments a muscle-redundancy solver balances, and the coordinates muscles cannot reach.
+
+SO and FSO share this step (:func:`plan_moments`):
+
+* **Which moments.** ``moments="id"`` (default): inverse dynamics of the
+  prepared trial (:func:`pinmsk.kinematics.prepare`: filtered coordinates, the
+  trial's ground reaction forces on the feet, the model's effects).
+  ``moments="measured"``: the trial's own ``<coord>_moment`` channels (from a
+  dynamometer or another pipeline), low-passed at the same cut-off as the
+  kinematics.  A Trial or an array: those values.  A trial that carries
+  measured moments while inverse-dynamics moments are balanced gets a note
+  saying so, never a silent choice.
+* **Which coordinates.** The default balances the coordinates at least one
+  muscle spans.  Every other coordinate (a floating base, a joint without
+  muscles) is *unspanned*: the force it needs is reported.  If any of them
+  needs a force (above a round-off tolerance) and the solver has no reserves,
+  that is an :class:`~pinmsk.errors.InfeasibleError` naming each coordinate
+  and its peak; with reserves, the needed force *is* the reserve (no muscle
+  can share it), reported as a table.  Passing ``dofs=`` explicitly balances
+  those coordinates only; the rest are reported as left out by request.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..components import Motion
+from ..errors import InfeasibleError, TrialError
+from ..kinematics import TrialInputs
+from ..trial import Trial, moment_channels
+
+__all__ = ["MomentPlan", "plan_moments", "spanned_coordinates", "MOMENT_SOURCES"]
+
+MOMENT_SOURCES = ("id", "measured")
+#: An unspanned coordinate needing less than this (N or N m) needs nothing (round-off).
+ZERO_FORCE = 1e-6
+
+
+def spanned_coordinates(muscles, q: np.ndarray, *, chunk: int = 20000) -> np.ndarray:
+    """(nv,) bool: coordinates with a non-zero moment arm of some muscle at some frame."""
+    q = np.asarray(q, dtype=float)
+    out = None
+    for k in range(0, max(q.shape[0], 1), chunk):
+        R = np.asarray(muscles.moment_arms(q[k:k + chunk]), dtype=float)
+        s = np.any(np.abs(R) > 0, axis=(0, 1))
+        out = s if out is None else (out | s)
+    return out
+
+
+@dataclass(frozen=True)
+class MomentPlan:
+    """What a solver balances: the dofs, their moments, and what is left at the other coordinates."""
+
+    source: str                        # "inverse dynamics ..." / "measured <coord>_moment channels" / "given"
+    dofs: tuple[str, ...]              # balanced coordinates
+    tau: np.ndarray                    # (N, nd) moments to balance
+    unspanned: tuple[str, ...]         # coordinates no muscle spans (not balanced)
+    unspanned_tau: np.ndarray          # (N, nu) force they need (NaN where unknown)
+    by_request: bool                   # dofs= given: the others are left out on purpose
+    tau_full: np.ndarray | None        # (N, nv) inverse dynamics, when computed
+    notes: tuple[str, ...] = ()
+
+    def needing(self) -> list[tuple[str, float, int]]:
+        """``(coordinate, peak, frame of the peak)`` of unspanned coordinates that need a force."""
+        out = []
+        for j, c in enumerate(self.unspanned):
+            x = np.abs(self.unspanned_tau[:, j])
+            if np.isfinite(x).any() and np.nanmax(x) > ZERO_FORCE:
+                k = int(np.nanargmax(x))
+                out.append((c, float(x[k]), k))
+        return out
+
+    def table_lines(self, time, rotational) -> list[str]:
+        """Lines: each unspanned coordinate, the force it needs (peak, RMS) and where."""
+        lines = []
+        for j, c in enumerate(self.unspanned):
+            x = self.unspanned_tau[:, j]
+            unit = "N*m" if c in rotational else "N"
+            if not np.isfinite(x).any():
+                lines.append(f"  {c:<14} not known (no measured {c}_moment)")
+                continue
+            k = int(np.nanargmax(np.abs(x)))
+            rms = float(np.sqrt(np.nanmean(x ** 2)))
+            lines.append(f"  {c:<14} peak {abs(x[k]):10.4g} {unit:<4} (t = {time[k]:.4g} s)  rms {rms:10.4g} {unit}")
+        return lines
+
+
+def _measured(model, trial: Trial, motion: Motion, coords, cutoff) -> np.ndarray:
+    cols = moment_channels(coords)
+    missing = [c for c in cols if c not in trial]
+    if missing:
+        raise TrialError(f"moments='measured' needs the trial's {', '.join(missing)} channel(s); it has "
+                         f"{', '.join(n for n in trial.names if n.endswith('_moment')) or 'no _moment channels'}")
+    tau = np.column_stack([np.asarray(trial[c], dtype=float) for c in cols])
+    bad = ~np.isfinite(tau)
+    if bad.any():
+        k, j = np.argwhere(bad)[0]
+        raise TrialError(f"measured moment {cols[j]!r} is {tau[k, j]!r} at row {k} (t = {motion.t[k]:.6g} s)")
+    if cutoff is not None:
+        from ..filtering import lowpass
+        tau = lowpass(tau, rate=1.0 / float(np.median(np.diff(motion.t))), cutoff=cutoff)
+    return tau
+
+
+def plan_moments(model, trial, inputs: TrialInputs, *, moments=None, dofs=None, reserves: bool = False,
+                 what: str = "static optimization") -> MomentPlan:
+    """Decide the balanced dofs and their moments (see the module docstring)."""
+    from ..dynamics import inverse_dynamics_array
+    motion = inputs.motion
+    spanned = spanned_coordinates(model.muscles, motion.q)
+    coords = model.coordinates
+    if dofs is None:
+        idx = np.flatnonzero(spanned)
+        by_request = False
+    else:
+        names = [dofs] if isinstance(dofs, str) else list(dofs)
+        idx = np.array([model.coordinate_index(d) for d in names], dtype=int)
+        if len(set(idx.tolist())) != idx.size:
+            raise TrialError(f"dofs lists a coordinate twice: {names}")
+        by_request = True
+    rest = np.array([j for j in range(model.nv) if j not in set(idx.tolist())], dtype=int)
+    notes = []
+    tau_full = None
+    src = moments if moments is not None else "id"
+    if isinstance(src, str):
+        if src not in MOMENT_SOURCES:
+            raise TrialError(f"moments must be one of {', '.join(MOMENT_SOURCES)}, a Trial or an array; got {src!r}")
+        if src == "measured":
+            if not isinstance(trial, Trial):
+                raise TrialError("moments='measured' needs a Trial with <coord>_moment channels")
+            tau = _measured(model, trial, motion, [coords[j] for j in idx], inputs.filtering.cutoff)
+            have = [j for j in rest if moment_channels([coords[j]])[0] in trial]
+            un = np.full((motion.n_frames, rest.size), np.nan)
+            if have:
+                vals = _measured(model, trial, motion, [coords[j] for j in have], inputs.filtering.cutoff)
+                for col, j in enumerate(have):
+                    un[:, list(rest).index(j)] = vals[:, col]
+            source = "measured <coord>_moment channels of the trial" + (
+                f", low-passed at {inputs.filtering.cutoff:g} Hz" if inputs.filtering.cutoff else "")
+        else:
+            tau_full = inverse_dynamics_array(model, motion, external=inputs.external)
+            tau = tau_full[:, idx]
+            un = tau_full[:, rest]
+            loads = "with the trial's ground reaction forces" if inputs.external else "without external loads"
+            source = f"inverse dynamics {loads}" + (
+                f" and the model's components ({', '.join(c.label for c in model.components)})"
+                if model.components else "")
+            if isinstance(trial, Trial):
+                measured = [n for n in trial.names if n.endswith("_moment")]
+                if measured:
+                    notes.append(f"the trial's measured {', '.join(measured[:4])}{' ...' if len(measured) > 4 else ''} "
+                                 "were not balanced (inverse dynamics was); pass moments='measured' "
+                                 "(CLI --moments measured) to balance them")
+    else:
+        from .static import required_moments
+        dof_names = tuple(coords[j] for j in idx)
+        tau = required_moments(model, motion, moments, idx, dof_names)
+        un = np.full((motion.n_frames, rest.size), np.nan)
+        source = "given by the caller"
+    plan = MomentPlan(source, tuple(coords[j] for j in idx), np.ascontiguousarray(tau),
+                      tuple(coords[j] for j in rest), un, by_request, tau_full, tuple(notes))
+    need = plan.needing()
+    if need and not reserves and not by_request:
+        parts = ", ".join(f"{c} (peak {pk:.4g} {'N*m' if c in model.rotational_coordinates else 'N'} at "
+                          f"t = {motion.t[k]:.4g} s)" for c, pk, k in need)
+        raise InfeasibleError(
+            f"no muscle spans {', '.join(c for c, _, _ in need)}, but the motion needs a force there: {parts}. "
+            f"{what.capitalize()} cannot balance them; pass reserves=True (CLI --reserves) to give them ideal "
+            "actuators (their use is reported), or dofs=[...] to balance only the muscle-spanned coordinates"
+            + ("" if inputs.external else "; a floating base without ground reaction forces is in free fall: "
+               "give the trial's GRF"))
+    return plan
