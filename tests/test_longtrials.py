@@ -172,3 +172,79 @@ def test_lazy_package_attributes():
     assert set(pinmsk.__all__) <= set(dir(pinmsk))
     with pytest.raises(AttributeError, match="no attribute 'not_a_name'"):
         pinmsk.not_a_name
+
+
+# -- static optimization in chunks ---------------------------------------------------
+
+GAIT_DOFS = ("hip_l", "knee_l", "ankle_l", "hip_r", "knee_r", "ankle_r")
+
+
+@pytest.fixture(scope="module")
+def walk():
+    from pinmsk.diagnose.synth import walking_motion
+    model = pinmsk.load_model("gait2d")
+    return model, walking_motion(model, n_frames=150, duration=0.75)
+
+
+@pytest.mark.parametrize("options", [{}, {"exponent": 3}, {"mode": "activation"}, {"reserves": True}],
+                         ids=["P2", "P3", "activation", "reserves"])
+def test_so_in_chunks_equals_one_piece(walk, options):
+    from pinmsk.solvers.static import ChunkedSOProblem, StaticOptimization
+    model, motion = walk
+    whole = StaticOptimization(dofs=GAIT_DOFS, **options).fit(model, motion)
+    parts = StaticOptimization(dofs=GAIT_DOFS, chunk_size=7, **options).fit(model, motion)
+    assert isinstance(parts.problem_, ChunkedSOProblem) and not isinstance(whole.problem_, ChunkedSOProblem)
+    f_max = whole.problem_.f_max
+    # the batched solve is per frame and its warm starts span chunks: the same numbers
+    np.testing.assert_allclose(parts.forces_, whole.forces_, rtol=0, atol=1e-12 * f_max.max())
+    np.testing.assert_allclose(parts.activations_, whole.activations_, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(parts.cost_, whole.cost_, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(parts.violation_, whole.violation_, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(parts.status_, whole.status_)
+    assert parts.n_iter_ == whole.n_iter_
+    if options.get("reserves"):
+        np.testing.assert_allclose(parts.reserves_, whole.reserves_, rtol=0, atol=1e-12)
+    # the chunked problem still shows its arrays (built on demand) as one piece
+    np.testing.assert_array_equal(parts.problem_.A, whole.problem_.A)
+    np.testing.assert_array_equal(parts.problem_.scale, whole.problem_.scale)
+
+
+@pytest.mark.parametrize("options", [{"exponent": 1}, {"exponent": 10}, {"method": "proxsuite"}],
+                         ids=["LP", "SQP", "proxsuite"])
+def test_so_in_chunks_other_paths_reach_the_same_optimum(walk, options):
+    from pinmsk.solvers.static import StaticOptimization
+    from pinmsk.components import Motion
+    model, full = walk
+    motion = Motion(full.t[:48], full.q[:48], full.v[:48], full.a[:48])
+    whole = StaticOptimization(dofs=GAIT_DOFS, **options).fit(model, motion)
+    parts = StaticOptimization(dofs=GAIT_DOFS, chunk_size=16, **options).fit(model, motion)
+    # LP basis guesses stop at a chunk's end and proxsuite's last digits follow memory
+    # layout, so these agree to the solvers' tolerance rather than to the bit
+    np.testing.assert_allclose(parts.cost_, whole.cost_, rtol=1e-9, atol=0)
+    np.testing.assert_allclose(parts.forces_, whole.forces_, rtol=0, atol=1e-6 * whole.problem_.f_max.max())
+
+
+def test_so_chunk_size_is_checked(walk):
+    from pinmsk.errors import SolverError
+    from pinmsk.solvers.static import StaticOptimization
+    model, motion = walk
+    for bad in (0, 2.5, True):
+        with pytest.raises(SolverError, match="chunk_size must be a whole number of frames >= 1"):
+            StaticOptimization(dofs=GAIT_DOFS, chunk_size=bad).fit(model, motion)
+
+
+def test_so_infeasible_frames_found_across_chunks():
+    from pinmsk.errors import InfeasibleError
+    from pinmsk.solvers.analytical import gaussian_elbow_motion
+    from pinmsk.solvers.static import StaticOptimization
+    model = pinmsk.load_model("forearm")
+    motion = gaussian_elbow_motion(n_frames=60)
+    tau = pinmsk.dynamics.inverse_dynamics_array(model, motion)
+    tau[[5, 33, 47]] = 1e5            # far beyond the muscles
+    messages = []
+    for cs in (20000, 8):
+        with pytest.raises(InfeasibleError) as info:
+            StaticOptimization(chunk_size=cs).fit(model, motion, moments=tau)
+        messages.append(str(info.value))
+    assert "at 3 of 60 frames" in messages[0] and "frame 33" in messages[0]
+    assert messages[0] == messages[1]
