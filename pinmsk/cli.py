@@ -332,6 +332,17 @@ def _version() -> str:
         return __version__
 
 
+class _VersionAction(argparse.Action):
+    """``--version``: looks the version up only when asked (importlib.metadata is not free)."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS, help=None):
+        super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(f"pinmsk {_version()}")
+        parser.exit()
+
+
 def input_flags(s) -> None:
     """The flags of every command that analyses a trial: filter and external loads."""
     s.add_argument("--cutoff", type=float, default=DEFAULT_CUTOFF, metavar="HZ",
@@ -353,7 +364,7 @@ def input_flags(s) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="pinmsk", description="Human musculoskeletal dynamics on Pinocchio.")
-    p.add_argument("--version", action="version", version=f"pinmsk {_version()}")
+    p.add_argument("--version", action=_VersionAction, help="print the version (pinmsk X.Y.Z) and exit")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
 

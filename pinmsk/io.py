@@ -565,7 +565,7 @@ def _meta_lines(meta) -> str:
 
 
 #: Values formatted per block: the formatter's scratch arrays then stay in the CPU cache.
-_BLOCK_VALUES = 24576
+_BLOCK_VALUES = 8192
 
 #: Largest precision of the vectorised formatter: its digits come from
 #: ``|x| * 10^k`` in float64, exact to well below one unit of the last digit
@@ -626,7 +626,8 @@ def _tables() -> dict:
     ``d4`` (10000,) the words ``"d.d.d.d."``, ``nd0/nd1/nd2`` the digits a
     12-digit mantissa keeps when its last non-zero group of four is group 0/1/2,
     ``ew`` (800,) the exponent words of -400 ... 399, ``kind13`` (13 * 800,)
-    ``13 * kind`` by ``800 p + exponent + 400``, and ``pow10`` 10^0 ... 10^308.
+    ``13 * kind`` by ``800 p + exponent + 400``, ``pow10`` 10^0 ... 10^308 and
+    ``pow10_all`` 10^-330 ... 10^330.
     """
     tpl = np.frombuffer(_TEMPLATE, dtype=np.uint8)
     digit = [_DIGIT_AT + 2 * j for j in range(12)]
@@ -674,6 +675,7 @@ def _tables() -> dict:
         "nd0": 4 - tz4, "nd1": 8 - tz4, "nd2": 12 - tz4,
         "ew": _as_words(np.frombuffer(exps, dtype=np.uint8).reshape(800, 8))[:, 0].copy(),
         "kind13": kind13.ravel(), "pow10": np.array([float(f"1e{j}") for j in range(309)]),
+        "pow10_all": np.array([float(f"1e{j}") for j in range(-330, 331)]),   # 10^(i - 330)
     }
 
 
@@ -709,9 +711,13 @@ def _format_block(block: np.ndarray, cols: dict) -> bytes:
     fast = (ax > 1e-290) & (ax < 1e290)     # False for 0, inf, nan and the extremes
     all_fast = bool(fast.all())
     safe = ax if all_fast else np.where(fast, ax, 1.0)
-    ex = np.log10(safe)
-    np.floor(ex, out=ex)
-    ex = ex.astype(np.int64)
+    # decimal exponent floor(log10 |x|) from the binary one (exact but near powers of ten,
+    # where the check below moves it by one)
+    e2 = np.frexp(safe)[1].astype(np.int64)
+    e2 -= 1
+    e2 *= 78913                     # (e * 78913) >> 18 = floor(e log10 2) for |e| < 1650
+    e2 >>= 18
+    ex = e2 + (safe >= t["pow10_all"][e2 + 331])
 
     def scaled(e, rows=slice(None)):
         k = (prec - 1) - e          # within -290 ... 301
@@ -750,16 +756,16 @@ def _format_block(block: np.ndarray, cols: dict) -> bytes:
     e4 = t["ew"][ex + 400]
     e4 |= cols["sep"]
     out[:, 4] = e4.ravel() & t["keep_exp"][code]
-    raw = out.view(np.uint8).ravel()
-    text = np.compress(raw != 0, raw)
+    text = out.tobytes().translate(None, b"\0")
     cells = np.flatnonzero(slow.ravel())
-    if cells.size:
-        # splice Python's text in before each such cell's separator (its only byte so far)
-        ends = np.cumsum(t["lengths"][code])[cells] - 1
-        pieces = [("%.*g" % (int(prec[i % C]), x.flat[i])).encode() for i in cells]
-        at = np.repeat(ends, [len(s) for s in pieces])
-        text = np.insert(text, at, np.frombuffer(b"".join(pieces), dtype=np.uint8))
-    return text.tobytes()
+    if cells.size == 0:
+        return text
+    # splice Python's text in before each such cell's separator (its only byte so far)
+    ends = np.cumsum(t["lengths"][code])[cells] - 1
+    pieces = [("%.*g" % (int(prec[i % C]), x.flat[i])).encode() for i in cells]
+    at = np.repeat(ends, [len(s) for s in pieces])
+    return np.insert(np.frombuffer(text, dtype=np.uint8), at,
+                     np.frombuffer(b"".join(pieces), dtype=np.uint8)).tobytes()
 
 
 def _format_rows(table: np.ndarray, precision: np.ndarray, delimiter: str) -> str:
