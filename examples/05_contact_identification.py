@@ -16,8 +16,12 @@ Eq. 4.1 series with the contact parameters, each coefficient within
 +-``--toe-range`` rad of the kinematic estimate.
 
     python examples/05_contact_identification.py [--data rawdata.txt] [--out DIR]
-                                                 [--starts 4] [--jobs 2] [--quick]
+                                                 [--starts N] [--quick]
                                                  [--toe kinematic fit] [--anchor heel|ankle]
+
+Every other setting is :class:`pinmsk.contact.ContactFit`'s default -- the settings of
+``pinmsk contact fit`` (all three Eq. 4.2 terms, one cycle from toe-off to toe-off, 12 Hz
+kinematics low-pass, 4 starts including the simpler models' optima); each fit prints them.
 
 Without the real data (``../shared/data/real/csu-treadmill-leg2d``) it runs on
 the project's synthetic foot trial.  ``--quick`` does one short start per model
@@ -34,20 +38,19 @@ import matplotlib
 
 matplotlib.use("Agg")
 
-from pinmsk.contact import ContactFit, stance_cycle, synthetic_foot_trial  # noqa: E402
+from pinmsk.contact import synthetic_foot_trial  # noqa: E402
+from pinmsk.contact.identify import VARIANTS, fit_contact_models, settings_lines  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_DATA = HERE.parent.parent / "shared" / "data" / "real" / "csu-treadmill-leg2d" / "rawdata.txt"
 THESIS_SENSITIVITY = {"heel": 2.4, "metatarsal": 6.3, "toe": 1.3}
-VARIANTS = (("point", False), ("volumetric", False), ("hypervolumetric", False), ("hypervolumetric", True))
 
 
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=None)
     ap.add_argument("--out", type=Path, default=Path(os.environ.get("PINMSK_EXAMPLE_OUT", HERE / "out" / "contact")))
-    ap.add_argument("--starts", type=int, default=4)
-    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--starts", type=int, default=None, help="starting points per model (default: ContactFit's)")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--relax-range", type=float, default=0.02,
                     help="+- bound of the relaxed sphere offsets dx, dy (m; thesis: 0.015-0.02)")
@@ -59,7 +62,7 @@ def main(argv=None) -> dict:
                     help="+- bound (rad) of each toe Fourier coefficient around its kinematic value (--toe fit)")
     ap.add_argument("--anchor", default="heel", choices=["heel", "ankle"],
                     help="locate the foot from the heel + MT5 markers (heel) or hang it from the malleolus marker")
-    ap.add_argument("--max-nfev", type=int, default=400)
+    ap.add_argument("--max-nfev", type=int, default=None)
     args = ap.parse_args(argv)
 
     data = args.data
@@ -67,33 +70,37 @@ def main(argv=None) -> dict:
         data = Path(os.environ["PINMSK_SHARED_DATA"]) / "real" / "csu-treadmill-leg2d" / "rawdata.txt"
     if data is None:
         data = DEFAULT_DATA
+    opts = {}
     if data.exists():
         from pinmsk.csu import read_csu
         trial = read_csu(data, body_mass=67.2, anchor=args.anchor)
-        window = stance_cycle(trial)
         source = f"CSU treadmill trial {data}"
-        cutoff = 12.0
     else:
         trial = synthetic_foot_trial()
-        window = None
         source = "synthetic foot trial (real data not found)"
-        cutoff = None
-    print(f"data: {source}; window {window}; belt speed {trial.meta.get('ground_speed', 0.0):.3f} m/s")
-    opts = (dict(n_starts=1, max_nfev=30) if args.quick
-            else dict(n_starts=args.starts, n_jobs=args.jobs, max_nfev=args.max_nfev))
+        opts["cutoff"] = None   # noise-free synthetic kinematics
+    print(f"data: {source}; belt speed {trial.meta.get('ground_speed', 0.0):.3f} m/s")
+    if args.quick:
+        opts.update(n_starts=1, max_nfev=30)
+    for key, val in (("n_starts", args.starts), ("max_nfev", args.max_nfev)):
+        if val is not None:
+            opts[key] = val
 
     args.out.mkdir(parents=True, exist_ok=True)
     fits = {}
     for toe in args.toe:
-        for kind, relax in VARIANTS:
+        models = fit_contact_models(None, trial, VARIANTS, toe=toe, relax_range=args.relax_range,
+                                    toe_range=args.toe_range, **opts)
+        for (kind, relax), fit in models.items():
             name = f"{kind}{' relaxed' if relax else ''} (toe {toe})"
-            fit = ContactFit(contact=kind, relax=relax, window=window, cutoff=cutoff, toe=toe,
-                             relax_range=args.relax_range, toe_range=args.toe_range, **opts).fit(None, trial)
             fit.plot(args.out / f"toe_{toe}")
             fits[name] = fit
+            if len(fits) == 1:
+                print("\n".join(settings_lines(fit.settings_())))
             print(fit.report())
+    window = next(iter(fits.values())).window_
 
-    print("\nTable: Eq. 4.2 error J (minimised terms; the point contact tracks f_n only), J_all (all three "
+    print("\nTable: Eq. 4.2 error J (the minimised terms, the same for every model), J_all (all three "
           "terms) and its terms;\nRMSE normal / friction (N), COP (mm); share of the normal impulse H/P/T; "
           "double-hump depth 1 - valley/mean(peaks) of the model at the measured events (measured: see below)")
     print(f"{'model':<38}{'J':>8}{'J_all':>8}{'J_fn':>8}{'J_ff':>8}{'J_cop':>8}{'fn':>7}{'ff':>7}{'cop':>7}"

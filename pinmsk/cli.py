@@ -7,7 +7,9 @@ and exit with status 2, never a traceback.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -92,10 +94,6 @@ def _inputs(args) -> dict:
                 grf_cutoff="same" if args.grf_cutoff is None else args.grf_cutoff)
 
 
-def _warn(text: str) -> None:
-    print(f"pinmsk: warning: {text}", file=sys.stderr)
-
-
 def _named_values(items, model, what) -> np.ndarray:
     out = np.zeros(model.nv)
     for item in items or []:
@@ -146,8 +144,6 @@ def cmd_id(args) -> int:
     with _progress(trial.n_frames, "ID", "frames") as bar:
         res = inverse_dynamics_result(model, trial, **_inputs(args), progress=bar)
     print(res.report())
-    if res.residuals.warning():
-        _warn(res.residuals.warning())
     out = res.trial
     _write(out, args.output, args.precision)
     _plot(args, out, [f"{c}_moment" for c in model.coordinate_order], "inverse_dynamics", "moment (N m)")
@@ -210,9 +206,6 @@ def _run_solver(args, solver, total: int | None, label: str, title: str) -> int:
         solver.fit(model, trial, progress=bar, **kw)
     text = solver.report()
     print(text)
-    res = getattr(solver, "residuals_", None)
-    if res is not None and res.warning():
-        _warn(res.warning())
     _write(solver.result_, args.output, args.precision)
     _report_results(args, model, trial, solver.result_, title, text)
     return 0
@@ -228,7 +221,8 @@ def cmd_so(args) -> int:
 def cmd_fso(args) -> int:
     from .solvers.fso import ForwardStaticOptimization
     fso = ForwardStaticOptimization(**_so_options(args), tracking=args.tracking, enforce=args.enforce,
-                                    control_points=args.control_points, integrator=args.integrator)
+                                    control_points=args.control_points, integrator=args.integrator,
+                                    allow_divergence=args.allow_divergence)
     return _run_solver(args, fso, args.control_points, "FSO", "forward_static_optimization")
 
 
@@ -259,11 +253,28 @@ def cmd_synth(args) -> int:
 
 def cmd_contact_fit(args) -> int:
     from .contact import fit_cli_run
-    out = fit_cli_run(args.model, args.trial, contact=args.contact, relax=args.relax,
-                      json_path=args.json, plot_dir=args.plot, n_starts=args.starts)
-    rm = out["rmse"]
-    print(f"{args.contact}{' (relaxed centres)' if args.relax else ''} contact fitted in {out['seconds']:.1f} s: "
-          f"objective (Eq. 4.2) {out['objective']:.4g}")
+    from .contact.identify import settings_lines
+    opts = {}   # only what the user gave: the rest are ContactFit's defaults (printed below)
+    if args.contact:
+        opts["contact"] = args.contact
+    if args.relax:
+        opts["relax"] = True
+    if args.starts is not None:
+        opts["n_starts"] = args.starts
+    if args.terms:
+        opts["terms"] = tuple(args.terms)
+    if args.toe:
+        opts["toe"] = args.toe
+    if args.cutoff is not None:
+        opts["cutoff"] = args.cutoff or None
+    out = fit_cli_run(args.model, args.trial, json_path=args.json, plot_dir=args.plot, **opts)
+    print("\n".join(settings_lines(out["settings"])))
+    for k, (label, j) in enumerate(zip(out["start_labels"], out["starts"])):
+        print(f"  start {k + 1}, {label}: J {j:.5g}{' (best)' if k == out['best_start'] else ''}")
+    rm, tm = out["rmse"], out["terms"]
+    print(f"{out['contact']}{' (relaxed centres)' if out['relax'] else ''} contact fitted in {out['seconds']:.1f} s: "
+          f"objective (Eq. 4.2) {out['objective']:.4g} (normal {tm['normal_force']:.4g}, friction "
+          f"{tm['friction_force']:.4g}, COP {tm['cop']:.4g})")
     print(f"  rmse: normal force {rm['normal_force']:.4g} N, friction force {rm['friction_force']:.4g} N, "
           f"COP {1000 * rm['cop']:.3g} mm")
     for site, params in out["params"].items():
@@ -316,7 +327,8 @@ def cmd_batch(args) -> int:
     n = len(summary["rows"])
     print(f"{n - len(summary['failed'])}/{n} trials done; summary table {summary['table']}")
     for name in summary["failed"]:
-        print(f"  failed: {name}", file=sys.stderr)
+        reason = summary.get("reasons", {}).get(name, "failed").removeprefix("failed: ")
+        print(f"  failed: {name}: {reason}", file=sys.stderr)
     return 1 if summary["failed"] else 0
 
 
@@ -443,8 +455,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="tracking term: Eq. 3.16 (q), 3.17 (qv), 3.18 (qva) or the PID form 3.19")
     s.add_argument("--enforce", choices=["constraint", "cost"], default="constraint",
                    help="tracking as a QP constraint or as a weighted cost term (Eq. 3.15)")
-    s.add_argument("--control-points", type=int, default=100, help="number of control points (default 100)")
+    s.add_argument("--control-points", type=int, default=None,
+                   help="number of control points (default 100, more if the PID loop needs them to be stable)")
     s.add_argument("--integrator", default="rk4", help="rk4 (fixed step) or a solve_ivp method such as RK45")
+    s.add_argument("--allow-divergence", action="store_true",
+                   help="write the result even if the tracking error exceeds 1 deg (flagged: 'diverged' channel)")
     s.set_defaults(func=cmd_fso)
 
     s = sub.add_parser("diagnose", help="where the model fails and which physical effect is missing")
@@ -484,9 +499,17 @@ def build_parser() -> argparse.ArgumentParser:
     c = csub.add_parser("fit", help="identify contact parameters against measured GRF and COP (Eq. 4.2)")
     c.add_argument("model", help="model with heel/metatarsal/toe sites, e.g. foot2d")
     c.add_argument("trial", help="trial with foot kinematics and GRF (.csv/.sto/.mot or the CSU leg2d text)")
-    c.add_argument("--contact", choices=["point", "volumetric", "hypervolumetric"], default="hypervolumetric")
+    c.add_argument("--contact", choices=["point", "volumetric", "hypervolumetric"], default=None,
+                   help="contact model (default hypervolumetric)")
     c.add_argument("--relax", action="store_true", help="also fit the sphere centres (dx, dy; Sec. 4.1.4)")
-    c.add_argument("--starts", type=int, default=6, help="multi-start count (default 6)")
+    c.add_argument("--starts", type=int, default=None,
+                   help="starting points: the thesis values, the contained models' optima, then random (default 4)")
+    c.add_argument("--terms", nargs="+", choices=["normal_force", "friction_force", "cop"], default=None,
+                   help="Eq. 4.2 terms minimised (default all three, for every model)")
+    c.add_argument("--toe", choices=["kinematic", "fit", "flat", "channel"], default=None,
+                   help="toe angle: from the kinematics, held fixed (default); fitted; legacy flat; the mtp channel")
+    c.add_argument("--cutoff", type=float, default=None, metavar="HZ",
+                   help="low-pass of the driving kinematics (default 12 Hz; 0 = none)")
     c.add_argument("--json", metavar="OUT.json", default=None,
                    help="write objective, params, rmse and seconds as JSON")
     c.add_argument("--plot", metavar="DIR", default=None, help="write GRF and COP figures (PNG) to DIR")
@@ -524,20 +547,66 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv=None) -> int:
+#: Arguments naming output files, and output folders, of any command (checked before it runs).
+_OUTPUT_FILES = ("output", "json", "report")
+_OUTPUT_FOLDERS = ("plot", "out")
+
+
+def _check_outputs(args) -> None:
+    """Refuse, before any work, outputs whose folder is missing or read-only; create --plot folders."""
+    from .io import check_output_file, output_folder
+    for name in _OUTPUT_FILES:
+        if getattr(args, name, None):
+            check_output_file(getattr(args, name))
+    for name in _OUTPUT_FOLDERS:
+        if getattr(args, name, None):
+            output_folder(getattr(args, name))
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Warnings as one line ``pinmsk: warning: ...`` on stderr (no source line)."""
+    print(f"pinmsk: warning: {message}", file=sys.stderr if file is None else file)
+
+
+def _run(argv) -> int:
+    from .io import output_transaction
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            with output_transaction():
+                _check_outputs(args)
+                return int(args.func(args) or 0)
     except PinmskError as exc:
         print(f"pinmsk: error: {exc}", file=sys.stderr)
         return 2
-    except (FileNotFoundError, IsADirectoryError, PermissionError) as exc:
-        print(f"pinmsk: error: {exc.strerror}: {exc.filename}", file=sys.stderr)
+    except (FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError) as exc:
+        where = f": {exc.filename}" if exc.filename else ""
+        print(f"pinmsk: error: {exc.strerror or exc}{where}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("pinmsk: interrupted", file=sys.stderr)
         return 130
+
+
+def main(argv=None) -> int:
+    """Run the command line; returns the exit status (2 for errors pinmsk recognises).
+
+    A closed output pipe (``pinmsk models | head -1``) ends the command quietly
+    with status 1, as the Python documentation recommends for ``SIGPIPE``
+    (library/signal.html, "Note on SIGPIPE"): stdout is pointed at devnull so
+    the interpreter's final flush cannot fail again.
+    """
+    try:
+        try:
+            return _run(argv)
+        finally:
+            sys.stdout.flush()
+    except BrokenPipeError:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -16,6 +16,7 @@ on the acceleration), and inverse dynamics through their generalized force.
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, replace
 from typing import Callable, Sequence
 
@@ -24,7 +25,7 @@ import pinocchio as pin
 
 from . import skeleton
 from .components import Motion
-from .errors import TrialError
+from .errors import ResidualWarning, TrialError
 from .kinematics import DEFAULT_CUTOFF, TrialInputs, lowpass_external, prepare
 from .residuals import ResidualReport, floating_base_residuals
 from .trial import Trial, moment_channels
@@ -79,7 +80,8 @@ def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, ex
         gc = inputs.filtering.grf_cutoff
         ext = lowpass_external(external, rate=1.0 / float(np.median(np.diff(inputs.motion.t))), cutoff=gc)
         inputs = replace(inputs, external=ext, filtering=replace(inputs.filtering, has_grf=True),
-                         notes=inputs.notes + (f"{len(ext)} external wrench(es) given by the caller",))
+                         notes=inputs.notes + ("external wrenches given by the caller on "
+                                               + ", ".join(e.frame for e in ext),))
     motion = inputs.motion
     tau = inverse_dynamics_array(model, motion, external=ext, components=components, progress=progress)
     residuals = floating_base_residuals(model, motion, tau, ext)
@@ -87,11 +89,15 @@ def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, ex
     chans = {c: motion.q[:, i] for c, i in zip(model.coordinate_order, idx)}
     chans.update({moment_channels([c])[0]: tau[:, i] for c, i in zip(model.coordinate_order, idx)})
     meta = {"analysis": "inverse_dynamics", "model": model.name, **inputs.meta()}
+    if external:
+        meta["ground_reaction"] = "given by the caller: " + ", ".join(e.frame for e in ext)
     if residuals.coordinates:
         meta["residuals"] = "; ".join(
             f"{c} peak {p:.4g} {u} (threshold {th:.4g})" for c, p, u, th in
             zip(residuals.coordinates, residuals.peak, residuals.units, residuals.thresholds))
     out = Trial(motion.t, chans, meta=meta)
+    if residuals.warning():
+        warnings.warn(residuals.warning(), ResidualWarning, stacklevel=3)
     return InverseDynamicsResult(out, inputs, residuals)
 
 

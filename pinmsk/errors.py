@@ -30,9 +30,20 @@ class ConvergenceError(SolverError):
     """An iterative solver stopped before meeting its tolerance."""
 
 
+class OutputError(PinmskError, OSError):
+    """An output file or folder cannot be written (missing folder, read-only place, full disk).
+
+    Also an ``OSError``, so code that catches file-system errors still catches it.
+    """
+
+
 class MissingDependencyError(PinmskError, ImportError):
     """An optional dependency needed for this input is not installed (the message says how to)."""
 
 
 class RepairWarning(UserWarning):
     """A lenient read (``read_trial(strict=False)``, ``--lenient``) repaired the file; the message says how."""
+
+
+class ResidualWarning(UserWarning):
+    """A floating base without external loads: its residuals carry the body weight."""

@@ -37,7 +37,15 @@ temporary file is removed and an existing target is left as it was.  Numbers
 are written as ``%.9g`` (``precision=9`` significant digits, about what
 measured or computed channels carry); ``precision=17`` writes every float64
 exactly, so a write then read gives the same values.  The time column gets
-more digits where 9 would not keep its steps distinct to 1 %.
+more digits where 9 would not keep its steps distinct to 1 %.  Every other
+output of pinmsk (JSON, HTML reports, PNG figures, batch tables) goes
+through the same :func:`atomic_write`;
+:func:`write_json` refuses NaN and Infinity; :func:`check_output_file` and
+:func:`output_folder` check an output place before a command runs; and
+:func:`output_transaction` removes a failed command's earlier outputs.
+
+Time is in seconds; a time column that looks like milliseconds (a median step
+of 0.2 to 100) is refused unless ``time_unit`` says what it is.
 
 Errors are :class:`pinmsk.errors.TrialError` naming the file, line and column.
 """
@@ -48,6 +56,7 @@ import contextlib
 import csv
 import functools
 import io as _io
+import json
 import os
 import re
 import tempfile
@@ -58,17 +67,23 @@ from pathlib import Path
 
 import numpy as np
 
-from pinmsk.errors import RepairWarning, TrialError
+from pinmsk.errors import OutputError, RepairWarning, TrialError
 from pinmsk.trial import TIME, Trial, is_angular_name
 
 __all__ = ["read_trial", "write_trial", "read_sto_header", "StoHeader", "FORMATS", "C3D_PARTS",
-           "state_path_coordinate"]
+           "state_path_coordinate", "atomic_write", "write_json", "check_output_file", "output_folder",
+           "output_transaction"]
 
 #: File suffix -> format name.
 FORMATS = {".csv": "csv", ".sto": "sto", ".mot": "mot"}
 
 #: Significant digits written by default (``write_trial(precision=...)``, CLI ``--precision``).
 DEFAULT_PRECISION = 9
+#: Time units :func:`read_trial` takes (``time_unit``), as factors to seconds.
+TIME_UNITS = {"s": 1.0, "ms": 1e-3}
+#: A median time step above this (s), i.e. a rate below 5 Hz, is not a motion recording in
+#: seconds; with a step of at most 100 it is one in milliseconds (10 Hz - 5 kHz).
+_MS_STEP = (0.2, 100.0)
 _KEY_VALUE = re.compile(r"^([A-Za-z_][\w.\-]*)\s*=\s*(.*)$")
 _OLD_KEY = re.compile(r"^(datarows|datacolumns)\s+(\S+)$", re.IGNORECASE)
 
@@ -404,6 +419,25 @@ def _read_csv(path: Path, lines: list[str], notes: list[str], strict: bool):
     return _table(path, rows[0], linenos[0], rows[1:], linenos[1:], notes, strict)
 
 
+def _check_time_unit(path: Path, time: np.ndarray, time_unit) -> np.ndarray:
+    """Time in seconds: scaled by ``time_unit``; with ``None``, refused if it looks like ms."""
+    if time_unit is not None:
+        if time_unit not in TIME_UNITS:
+            raise TrialError(f"time_unit must be one of {', '.join(TIME_UNITS)}, got {time_unit!r}")
+        return time * TIME_UNITS[time_unit]
+    if time.size < 3:
+        return time
+    step = float(np.median(np.diff(time)))
+    if _MS_STEP[0] < step <= _MS_STEP[1]:
+        raise TrialError(
+            f"file {str(path)!r}: the time column looks like milliseconds: its median step is {step:.6g}, "
+            f"which in seconds would be a {1 / step:.3g} Hz recording ({1000 / step:.4g} Hz if it is ms); "
+            "time must be in seconds: divide the time column by 1000, or read it with "
+            "read_trial(path, time_unit='ms') (time_unit='s' keeps a slow recording in seconds)"
+        )
+    return time
+
+
 def state_path_coordinate(name: str) -> tuple[str, str] | None:
     """``(coordinate, quantity)`` of an OpenSim 4 state path such as ``/jointset/knee_r/knee_angle_r/value``.
 
@@ -452,7 +486,8 @@ def _read_c3d_part(path: Path, part: str) -> Trial:
     return trial.with_meta(source=str(path), format="c3d", part=part, read_notes=())
 
 
-def read_trial(path, *, angular=None, strict: bool = True, part: str | None = None) -> Trial:
+def read_trial(path, *, angular=None, strict: bool = True, part: str | None = None,
+               time_unit: str | None = None) -> Trial:
     """Read a Trial from a ``.csv``, ``.sto``, ``.mot`` or ``.c3d`` file.
 
     Parameters
@@ -485,6 +520,12 @@ def read_trial(path, *, angular=None, strict: bool = True, part: str | None = No
         ``ground_torque_[xyz]`` at the analog rate, prefixed ``1_``, ``2_``
         ... by platform number when there are several).  No axis change is
         made (see :func:`pinmsk.c3d.remap_axes`).
+    time_unit : {None, "s", "ms"}
+        Unit of the time column.  ``None`` (default): seconds, and a file whose
+        median time step is between 0.2 and 100 (below 5 Hz in seconds, but
+        10 Hz to 5 kHz in milliseconds) is refused as "looks like
+        milliseconds".  ``"ms"`` converts from milliseconds; ``"s"`` takes
+        seconds without that check.
 
     Returns
     -------
@@ -509,6 +550,7 @@ def read_trial(path, *, angular=None, strict: bool = True, part: str | None = No
     else:
         header, time, names, values = _read_sto(path, lines, notes, strict)
         name, in_degrees, fields = header.name, header.in_degrees, dict(header.fields)
+    time = _check_time_unit(path, time, time_unit)
     if angular is None:
         angular_names = tuple(n for n in names if is_angular_name(n))
     else:
@@ -798,16 +840,153 @@ def _write_rows(fh, table: np.ndarray, delimiter: str, precision: int = DEFAULT_
             fh.write(_format_block(block, cols).decode("ascii"))
 
 
-def _atomic_write(path: Path, write) -> None:
-    """Call ``write(fh)`` on a temporary file next to ``path``, then replace ``path``."""
+# ---------------------------------------------------------------------------
+# Output files: checks before a command runs, atomic writes, roll-back
+# ---------------------------------------------------------------------------
+
+#: Output transactions open in this process (innermost last); see :func:`output_transaction`.
+_TRANSACTIONS: list[list[tuple[Path, bool]]] = []
+
+
+def _folder_problem(folder: Path) -> str:
+    """Why ``folder`` cannot hold an output (it, or a parent, is missing or a file)."""
+    part = folder
+    while not part.parent.exists() and part.parent != part:
+        part = part.parent
+    if part.exists():
+        return f"{str(part)!r} is a file, not a folder"
+    if not part.parent.is_dir():
+        return f"{str(part.parent)!r} is a file, not a folder"
+    return f"the folder {str(part)!r} does not exist; create it first (mkdir -p {folder})"
+
+
+def _probe(folder: Path, what: str) -> None:
+    """Create and remove a temporary file in ``folder``; OutputError if the OS refuses."""
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=".pinmsk-probe.", dir=folder)
+        os.close(fd)
+        os.unlink(tmp)
+    except OSError as exc:
+        raise OutputError(f"cannot write {what}: {exc.strerror or exc}") from None
+
+
+def check_output_file(path) -> Path:
+    """Check, before any work, that a file can be written at ``path``; return it as a Path.
+
+    The folder must exist (it is not created: a mistyped folder is an error)
+    and accept a new file (a temporary file is created and removed, which also
+    catches read-only file systems where permission bits do not tell);
+    ``path`` must not be a folder.  Raises :class:`~pinmsk.errors.OutputError`
+    naming the path and the missing or read-only folder.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise OutputError(f"cannot write {str(path)!r}: it is a folder; give a file name")
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise OutputError(f"cannot write {str(path)!r}: {_folder_problem(folder)}")
+    _probe(folder, f"{str(path)!r} (folder {str(folder)!r})")
+    return path
+
+
+def output_folder(path) -> Path:
+    """Create the output folder ``path`` (and its parents) if needed and check it is writable.
+
+    Folders it creates are recorded in the open :func:`output_transaction`, so
+    a failed command removes them again (when empty).  Raises
+    :class:`~pinmsk.errors.OutputError` if a part of the path is a file or the
+    folder does not accept files.
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise OutputError(f"cannot write in {str(path)!r}: it is a file, not a folder")
+    created = []
+    part = path
+    while not part.exists() and part.parent != part:
+        created.append(part)
+        part = part.parent
+    if not part.is_dir():
+        raise OutputError(f"cannot write in {str(path)!r}: {_folder_problem(path)}")
+    for d in reversed(created):
+        try:
+            d.mkdir()
+        except FileExistsError:
+            continue
+        except OSError as exc:
+            raise OutputError(f"cannot create the folder {str(d)!r}: {exc.strerror or exc}") from None
+        _record(d, folder=True)
+    _probe(path, f"in {str(path)!r}")
+    return path
+
+
+def _record(path: Path, *, folder: bool = False) -> None:
+    if _TRANSACTIONS:
+        _TRANSACTIONS[-1].append((path, folder))
+
+
+@contextlib.contextmanager
+def output_transaction():
+    """Group the outputs of one command: if the block raises, the files written in it are removed.
+
+    Every :func:`atomic_write` (trials, JSON, reports, figures) and every folder
+    made by :func:`output_folder` inside the block is recorded; on any exception
+    (including ``KeyboardInterrupt``) they are deleted, newest first (folders
+    only when empty), so a command that fails leaves no partial set of
+    outputs.  A file that existed before and was replaced in the block is
+    deleted too (its old content is already gone).  Nested blocks hand their
+    records to the enclosing one when they succeed.  Yields the list of
+    ``(path, is_folder)`` records.
+    """
+    records: list[tuple[Path, bool]] = []
+    _TRANSACTIONS.append(records)
+    try:
+        yield records
+    except BaseException:
+        for path, folder in reversed(records):
+            with contextlib.suppress(OSError):
+                path.rmdir() if folder else path.unlink()
+        raise
+    finally:
+        _TRANSACTIONS.remove(records)
+    if _TRANSACTIONS:
+        _TRANSACTIONS[-1].extend(records)
+
+
+def atomic_write(path, write, *, binary: bool = False, parents: bool = False) -> Path:
+    """Call ``write(fh)`` on a temporary file next to ``path``, then move it over ``path``.
+
+    ``fh`` is a text file (UTF-8, ``\\n`` line ends) or, with ``binary``, a binary
+    one.  The folder must exist unless ``parents`` (then it is created).  On
+    any error the temporary file is removed and an existing ``path`` is left
+    as it was; a new file gets the permissions of any new file (umask), a
+    replaced one keeps its own.  Errors of the file system are raised as
+    :class:`~pinmsk.errors.OutputError` naming the path.  The path is recorded
+    in the open :func:`output_transaction`.  Returns ``path`` as a Path.
+    """
+    path = Path(path)
     directory = path.parent if str(path.parent) else Path(".")
+    if parents and not directory.exists():
+        try:
+            directory.mkdir(parents=True, exist_ok=True)
+        except OSError:
+            raise OutputError(f"cannot write {str(path)!r}: {_folder_problem(directory)}") from None
     if not directory.is_dir():
-        raise FileNotFoundError(f"cannot write {str(path)!r}: directory {str(directory)!r} does not exist")
-    mode = path.stat().st_mode & 0o777 if path.exists() else 0o644
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
+        raise OutputError(f"cannot write {str(path)!r}: {_folder_problem(directory)}")
+    if path.is_dir():
+        raise OutputError(f"cannot write {str(path)!r}: it is a folder")
+    if path.exists():
+        mode = path.stat().st_mode & 0o777
+    else:
+        umask = os.umask(0)
+        os.umask(umask)
+        mode = 0o666 & ~umask
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
+    except OSError as exc:
+        raise OutputError(f"cannot write {str(path)!r}: {exc.strerror or exc}") from None
     try:
         try:
-            fh = os.fdopen(fd, "w", encoding="utf-8", newline="\n")
+            fh = os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", encoding="utf-8", newline="\n")
         except BaseException:
             os.close(fd)
             raise
@@ -817,10 +996,50 @@ def _atomic_write(path: Path, write) -> None:
             os.fsync(fh.fileno())
         os.chmod(tmp, mode)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        if isinstance(exc, OSError) and not isinstance(exc, OutputError):
+            raise OutputError(f"cannot write {str(path)!r}: {exc.strerror or exc}") from exc
         raise
+    _record(path)
+    return path
+
+
+def _first_non_finite(obj, where: str = ""):
+    """``(where, value)`` of the first float in ``obj`` (dicts, lists) that is NaN or infinite."""
+    if isinstance(obj, float):
+        return None if np.isfinite(obj) else (where or "the value", obj)
+    if isinstance(obj, Mapping):
+        items = ((f"{where}.{k}" if where else str(k), v) for k, v in obj.items())
+    elif isinstance(obj, (list, tuple)):
+        items = ((f"{where}[{i}]", v) for i, v in enumerate(obj))
+    elif isinstance(obj, np.ndarray):
+        return _first_non_finite(obj.tolist(), where)
+    elif isinstance(obj, np.generic):
+        return _first_non_finite(obj.item(), where)
+    else:
+        return None
+    for key, value in items:
+        found = _first_non_finite(value, key)
+        if found is not None:
+            return found
+    return None
+
+
+def write_json(path, obj, *, default=None, parents: bool = False) -> Path:
+    """Write ``obj`` as indented JSON to ``path`` atomically (see :func:`atomic_write`).
+
+    JSON has no NaN or Infinity: a non-finite number anywhere in ``obj`` is an
+    :class:`~pinmsk.errors.OutputError` naming its key (``ranking[2].rmse_after``)
+    and nothing is written.
+    """
+    bad = _first_non_finite(obj)
+    if bad is not None:
+        raise OutputError(f"refusing to write {str(path)!r}: {bad[0]} is {bad[1]!r}, and JSON has no "
+                          "NaN or Infinity (a non-finite result upstream)")
+    text = json.dumps(obj, indent=2, default=default, allow_nan=False)
+    return atomic_write(path, lambda fh: fh.write(text), parents=parents)
 
 
 def write_trial(trial: Trial, path, *, in_degrees: bool = False, angular=None,
@@ -894,5 +1113,5 @@ def write_trial(trial: Trial, path, *, in_degrees: bool = False, angular=None,
         fh.write(head)
         _write_rows(fh, table, delimiter, precision)
 
-    _atomic_write(path, write)
+    atomic_write(path, write)
     return path

@@ -331,8 +331,9 @@ def write_trc(trial: Trial, path, *, units: str = "mm", markers: Sequence[str] |
     for k in range(n):
         cells = ["" if not np.isfinite(v) else f"{v:.9g}" for v in xyz[k].ravel()]
         lines.append(f"{k + 1}\t{trial.time[k]:.9g}\t" + "\t".join(cells))
-    path.write_text("\n".join(lines) + "\n")
-    return path
+    from .io import atomic_write
+    text = "\n".join(lines) + "\n"
+    return atomic_write(path, lambda fh: fh.write(text))
 
 
 # ---------------------------------------------------------------------------

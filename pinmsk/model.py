@@ -14,6 +14,7 @@ Built-in models are a URDF plus a TOML sidecar in ``urdf/`` (schema in
 from __future__ import annotations
 
 import difflib
+import warnings
 from pathlib import Path
 from typing import Iterable, Sequence
 
@@ -23,7 +24,36 @@ import pinocchio as pin
 from .components import Component, Motion
 from .errors import ModelError
 from .kinematics import DEFAULT_CUTOFF, cutoff_value
-from .tomlfile import read_toml
+from .tomlfile import check_keys, read_toml
+
+#: Every key a model sidecar may hold (``urdf/README.md``), per table; others are errors.
+#: ``[[effects]]`` keys are the effect's own (type, target, params, its options and
+#: parameters) and ``[[contacts]]`` keys the contact's, checked where they are built.
+SIDECAR_SCHEMA = {
+    "model": {"name": "model name (default: the file name)", "urdf": "the skeleton (required)",
+              "gravity": "[gx, gy, gz] m/s^2, world frame", "up_axis": "'x' | 'y' | 'z' (display)",
+              "description": "one line", "default_paths": "path variant used by default",
+              "coordinate_order": "order of q, v, tau in pinmsk (a permutation of the joints)"},
+    "muscle_model": {"type": "'thelen2003' | 'nagano_gerritsen'",
+                     "tendon": "'rigid' | 'compliant' (default for static analyses)",
+                     "tendon_model": "the type's own tendon law (thelen2003: 'thelen2003'; "
+                                     "nagano_gerritsen: 'winters_quadratic')",
+                     "tendon_strain": "tendon strain at F_max (default 0.04)",
+                     "parallel_elastic": "the type's own choice (thelen2003: true; nagano_gerritsen: false)"},
+    "muscles": {"name": "muscle name", "f_max": "N", "l_opt": "m", "l_slack": "m", "pennation": "rad",
+                "volume": "m^3", "fast_fraction": "0..1", "width": "Nagano & Gerritsen only",
+                "paths": "path variants { l0, moment_arms }", "points": "display polyline"},
+    "effects": None,
+    "contacts": None,
+}
+#: Keys of one path variant, ``paths.<variant> = { ... }`` of a muscle.
+SIDECAR_PATH_KEYS = {"l0": "muscle-tendon length at q = 0 (m)",
+                     "moment_arms": "{ coordinate = [c0, c1, ...] } (m)"}
+#: The tendon law and parallel element each muscle type implements (``[muscle_model]`` may
+#: state them, but not ask for another).
+_MUSCLE_LAWS = {"thelen2003": ("thelen2003", True), "nagano_gerritsen": ("winters_quadratic", False)}
+#: Pinocchio's gravity for a model built from a URDF alone (the URDF/ROS z-up convention).
+PINOCCHIO_GRAVITY = (0.0, 0.0, -9.81)
 
 
 
@@ -219,8 +249,9 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
     ``moment_arms`` picks a path variant declared in the sidecar (e.g.
     ``"constant"`` or ``"angle"``); ``tendon`` overrides the sidecar's
     default tendon (``"rigid"`` or ``"compliant"``).  ``gravity`` (3 numbers,
-    m/s^2) overrides the sidecar's; a bare URDF otherwise keeps the URDF/ROS
-    convention ``[0, 0, -9.81]`` (z up).
+    m/s^2) overrides the sidecar's; a bare URDF (or a sidecar without
+    ``gravity``) otherwise keeps Pinocchio's URDF/ROS convention ``[0, 0, -9.81]``
+    (z up), with a warning saying so.
     """
     from . import builtin_models
 
@@ -232,6 +263,8 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
             pm = pin.buildModelFromUrdf(str(p))
         except Exception as exc:  # pinocchio raises bare ValueError/RuntimeError
             raise ModelError(f"Pinocchio could not load URDF {p}: {exc}") from None
+        if gravity is None:
+            _warn_default_gravity(p)
         _set_gravity(pm, gravity, p)
         return Model(name=p.stem, pin_model=pm, meta={"urdf": str(p)})
     if p.suffix.lower() == ".toml":
@@ -251,6 +284,14 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
     return _load_sidecar(sidecar, moment_arms=moment_arms, tendon=tendon, gravity=gravity)
 
 
+def _warn_default_gravity(where) -> None:
+    warnings.warn(
+        f"{where}: no gravity declared, so Pinocchio's default {list(PINOCCHIO_GRAVITY)} m/s^2 (-z) is "
+        "in use; if the model is y-up (as OpenSim), declare it in a sidecar .toml: [model] urdf = "
+        "\"...\" and gravity = [0.0, -9.81, 0.0] (or load_model(..., gravity=[0, -9.81, 0]))",
+        UserWarning, stacklevel=3)
+
+
 def _set_gravity(pm: pin.Model, gravity, where) -> None:
     if gravity is None:
         return
@@ -266,6 +307,7 @@ def _load_sidecar(sidecar: Path, *, moment_arms: str | None, tendon: str | None,
     from .muscles.paths import MomentArmPath
 
     spec = read_toml(sidecar, what="model sidecar")
+    _check_sidecar(spec, sidecar)
     mspec = spec.get("model")
     if not isinstance(mspec, dict) or "urdf" not in mspec:
         raise ModelError(f"{sidecar}: needs a [model] table with a 'urdf' entry")
@@ -274,6 +316,8 @@ def _load_sidecar(sidecar: Path, *, moment_arms: str | None, tendon: str | None,
         pm = pin.buildModelFromUrdf(str(urdf))
     except Exception as exc:  # pinocchio raises bare ValueError/RuntimeError
         raise ModelError(f"{sidecar}: Pinocchio could not load URDF {urdf}: {exc}") from None
+    if mspec.get("gravity") is None and gravity is None:
+        _warn_default_gravity(sidecar)
     _set_gravity(pm, mspec.get("gravity"), f"{sidecar}: [model]")
     _set_gravity(pm, gravity, "load_model")
     name = mspec.get("name", sidecar.stem)
@@ -295,13 +339,39 @@ def _load_sidecar(sidecar: Path, *, moment_arms: str | None, tendon: str | None,
         meta["moment_arms"] = variant
         path = MomentArmPath.from_sidecar(entries, coords, variant)
         muscles = _build_muscles(entries, mm, path, tendon or mm.get("tendon", "rigid"), sidecar)
-    effects = [registry.from_spec(e) for e in spec.get("effects", [])]
+    effects = [registry.from_spec(e, where=f"{sidecar} [[effects]] #{i + 1}")
+               for i, e in enumerate(spec.get("effects", []))]
     if spec.get("contacts"):
         from .contact import from_spec as contact_from_spec
         effects += [contact_from_spec(c, where=f"{sidecar} [[contacts]] #{i + 1}")
                     for i, c in enumerate(spec["contacts"])]
     model = Model(name=name, pin_model=pm, muscles=muscles, meta=meta)
     return model.with_effect(*effects) if effects else model
+
+
+def _check_sidecar(spec: dict, sidecar: Path) -> None:
+    """Refuse unknown tables and keys of a sidecar (see :data:`SIDECAR_SCHEMA`) with a "did you mean"."""
+    for section in spec:
+        if section not in SIDECAR_SCHEMA:
+            close = difflib.get_close_matches(section, list(SIDECAR_SCHEMA), n=1)
+            hint = f" (did you mean '{close[0]}'?)" if close else ""
+            raise ModelError(f"{sidecar}: unknown table '{section}'{hint}; a model sidecar has "
+                             "[model], [muscle_model], [[muscles]], [[effects]] and [[contacts]]")
+    for section in ("model", "muscle_model"):
+        if section in spec:
+            check_keys(spec[section], SIDECAR_SCHEMA[section], where=str(sidecar), section=f"[{section}]")
+    for section in ("muscles", "effects", "contacts"):
+        if section in spec and not (isinstance(spec[section], list)
+                                    and all(isinstance(e, dict) for e in spec[section])):
+            raise ModelError(f"{sidecar}: '{section}' must be an array of tables, [[{section}]]")
+    for i, entry in enumerate(spec.get("muscles", [])):
+        label = f"[[muscles]] '{entry['name']}'" if entry.get("name") else f"[[muscles]] #{i + 1}"
+        check_keys(entry, SIDECAR_SCHEMA["muscles"], where=str(sidecar), section=label)
+        paths = entry.get("paths", {})
+        if not isinstance(paths, dict):
+            raise ModelError(f"{sidecar}: {label}: 'paths' must be a table of path variants")
+        for variant, table in paths.items():
+            check_keys(table, SIDECAR_PATH_KEYS, where=str(sidecar), section=f"{label} paths.{variant}")
 
 
 def _build_muscles(entries, mm: dict, path, tendon: str, sidecar: Path):
@@ -332,13 +402,25 @@ def _build_muscles(entries, mm: dict, path, tendon: str, sidecar: Path):
         if bad.size:
             raise ModelError(f"{sidecar}: muscle '{names[bad[0]]}' has {key} = {common[key][bad[0]]}; "
                              "it must be > 0")
-    if kind == "thelen2003":
-        mtu = Thelen2003(**common)
-    elif kind == "nagano_gerritsen":
-        mtu = NaganoGerritsen(**common, width=col("width"))
-    else:
+    if kind not in _MUSCLE_LAWS:
         raise ModelError(f"{sidecar}: unknown muscle_model type '{kind}' "
                          "(known: thelen2003, nagano_gerritsen)")
+    law, parallel = _MUSCLE_LAWS[kind]
+    if mm.get("tendon_model", law) != law:
+        raise ModelError(f"{sidecar}: [muscle_model] tendon_model = {mm['tendon_model']!r}, but type '{kind}' "
+                         f"has the {law!r} tendon; remove the key or change the type")
+    if mm.get("parallel_elastic", parallel) is not parallel:
+        raise ModelError(f"{sidecar}: [muscle_model] parallel_elastic = {mm['parallel_elastic']!r}, but type "
+                         f"'{kind}' {'has' if parallel else 'has no'} parallel elastic element; remove the key")
+    strain = mm.get("tendon_strain")
+    if strain is not None:
+        if not (isinstance(strain, (int, float)) and 0 < strain < 1):
+            raise ModelError(f"{sidecar}: [muscle_model] tendon_strain must be a number in (0, 1), got {strain!r}")
+        common["tendon_strain0"] = float(strain)
+    if kind == "thelen2003":
+        mtu = Thelen2003(**common)
+    else:
+        mtu = NaganoGerritsen(**common, width=col("width"))
     volume = col("volume", required=False) if any("volume" in e for e in entries) else None
     ff = col("fast_fraction", 0.5, required=False)
     points = {e["name"]: [tuple(p) for p in e.get("points", [])] for e in entries}

@@ -52,9 +52,11 @@ plus the data paths must be visible to the workers.  Dask is not a dependency.
 from __future__ import annotations
 
 import concurrent.futures as cf
+import contextlib
 import csv
-import json
 import os
+import shutil
+import tempfile
 import time as _time
 import traceback
 from pathlib import Path
@@ -64,6 +66,7 @@ import numpy as np
 
 from .channel_map import RAJAGOPAL_HIP_OFFSET, apply_channel_map, opensim_gait2d_map
 from .errors import PinmskError, TrialError
+from .io import atomic_write, output_folder, write_json
 from .tomlfile import read_toml
 from .trial import Trial
 
@@ -242,6 +245,7 @@ def run_trial(spec: dict, *, model="gait2d", out_dir=None, base_dir=".") -> dict
         cutoff = cutoff_value(spec.get("cutoff", DEFAULT_CUTOFF))
         idt = inverse_dynamics(m, kin, cutoff=cutoff, external=ext)
         row["lowpass_cutoff_hz"] = cutoff or 0.0
+        row["ground_reaction"] = ", ".join(f"{e.frame}" for e in ext) or "none"
         t2 = _time.perf_counter()
         bm = info.get("body_mass")
         res, rsum = torso_residuals(m, idt, body_mass=bm)
@@ -272,17 +276,15 @@ def run_trial(spec: dict, *, model="gait2d", out_dir=None, base_dir=".") -> dict
         row.update({"time_kinematics_s": t1 - t0, "time_id_s": t2 - t1, "time_so_s": t3 - t2,
                     "status": "ok"})
         if out_dir is not None:
-            d = Path(out_dir)
-            d.mkdir(parents=True, exist_ok=True)
-            kin.write(d / "kinematics.sto")
-            idt.write(d / "inverse_dynamics.sto")
-            res.write(d / "residuals.sto")
-            if act is not None:
-                act.write(d / "activations.sto")
-            if spec.get("plots", True):
-                row["figures"] = _figures(m, d, idt, res)
-            (d / "summary.json").write_text(json.dumps({"row": row, "info": info, "residuals": rsum},
-                                                       indent=2, default=str))
+            with _trial_folder(out_dir) as d:
+                kin.write(d / "kinematics.sto")
+                idt.write(d / "inverse_dynamics.sto")
+                res.write(d / "residuals.sto")
+                if act is not None:
+                    act.write(d / "activations.sto")
+                if spec.get("plots", True):
+                    row["figures"] = _figures(m, d, idt, res)
+                write_json(d / "summary.json", {"row": row, "info": info, "residuals": rsum}, default=str)
     except PinmskError as exc:
         row["status"] = f"failed: {exc}"
     except Exception as exc:  # noqa: BLE001 - a batch reports, it does not stop
@@ -290,6 +292,44 @@ def run_trial(spec: dict, *, model="gait2d", out_dir=None, base_dir=".") -> dict
         row["traceback"] = traceback.format_exc(limit=5)
     row["time_total_s"] = _time.perf_counter() - t0
     return row
+
+
+_PARTIAL = ".partial-"
+
+
+@contextlib.contextmanager
+def _trial_folder(out_dir):
+    """A temporary folder next to ``out_dir`` that becomes ``out_dir`` when the block completes.
+
+    So a trial folder is complete or absent: on any exception (``KeyboardInterrupt``
+    included) the temporary folder is removed; an existing ``out_dir`` is replaced
+    only once the new one is complete.
+    """
+    target = Path(out_dir)
+    output_folder(target.parent)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}{_PARTIAL}", dir=target.parent))
+    try:
+        umask = os.umask(0)
+        os.umask(umask)
+        tmp.chmod(0o777 & ~umask)          # mkdtemp makes it private; results are ordinary folders
+        yield tmp
+        old = None
+        if target.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=target.parent))
+            os.replace(target, old / target.name)
+        os.replace(tmp, target)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def _remove_partial_folders(out: Path, names) -> None:
+    """Remove what interrupted trials left (their temporary folders) in ``out``."""
+    for name in names:
+        for d in out.glob(f".{name}{_PARTIAL}*"):
+            shutil.rmtree(d, ignore_errors=True)
 
 
 def _figures(model, d: Path, idt: Trial, res: Trial) -> int:
@@ -351,6 +391,9 @@ def batch(trials: Sequence[dict], *, model="gait2d", out=None, base_dir=".", job
     """Run :func:`run_trial` over ``trials`` in parallel; write ``<out>/summary.csv``; return the rows.
 
     ``jobs=1`` runs in this process (no pool).  Rows keep the order of ``trials``.
+    Each trial's folder is written under a temporary name and renamed when
+    complete, so an interrupted batch (Ctrl-C) leaves complete trial folders or
+    none; the temporary folders of interrupted trials are removed.
     """
     from .progress import Progress
 
@@ -359,37 +402,53 @@ def batch(trials: Sequence[dict], *, model="gait2d", out=None, base_dir=".", job
     rows: list = [None] * len(trials)
     args = [dict(model=model, out_dir=None if out is None else str(out / t["name"]), base_dir=str(base_dir))
             for t in trials]
-    with Progress(len(trials), "batch", unit="trials", force=progress) as bar:
-        if jobs == 1 and not scheduler:
-            for i, t in enumerate(trials):
-                rows[i] = run_trial(t, **args[i])
-                bar.update(1)
-        else:
-            ex, client = _executor(scheduler, jobs)
-            try:
-                futs = {ex.submit(run_trial, t, **a): i for i, (t, a) in enumerate(zip(trials, args))}
-                for f in cf.as_completed(futs):
-                    rows[futs[f]] = f.result()
-                    bar.update(1)
-            finally:
-                ex.shutdown(wait=True)
-                if client is not None:
-                    client.close()
     if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
+        output_folder(out)
+    try:
+        with Progress(len(trials), "batch", unit="trials", force=progress) as bar:
+            if jobs == 1 and not scheduler:
+                for i, t in enumerate(trials):
+                    rows[i] = run_trial(t, **args[i])
+                    bar.update(1)
+            else:
+                ex, client = _executor(scheduler, jobs)
+                try:
+                    futs = {ex.submit(run_trial, t, **a): i for i, (t, a) in enumerate(zip(trials, args))}
+                    for f in cf.as_completed(futs):
+                        rows[futs[f]] = f.result()
+                        bar.update(1)
+                except BaseException:
+                    ex.shutdown(wait=True, cancel_futures=True)
+                    raise
+                finally:
+                    ex.shutdown(wait=True)
+                    if client is not None:
+                        client.close()
+    except BaseException:
+        if out is not None:   # a worker stopped mid-trial may not have cleaned up
+            _remove_partial_folders(out, [t["name"] for t in trials])
+        raise
+    if out is not None:
         keys: list = []
         for r in rows:
             keys += [k for k in r if k not in keys and k != "traceback"]
-        with open(out / "summary.csv", "w", newline="") as fh:
+
+        def write(fh):
             w = csv.DictWriter(fh, fieldnames=keys, extrasaction="ignore")
             w.writeheader()
             for r in rows:
                 w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+
+        atomic_write(out / "summary.csv", write)
     return rows
 
 
 def batch_cli(config_path, *, scheduler: str | None = None, jobs: int | None = None) -> dict:
-    """``pinmsk batch CONFIG``: run the config's trials; returns ``{"rows", "table", "failed"}``."""
+    """``pinmsk batch CONFIG``: run the config's trials; returns ``{"rows", "table", "failed", "reasons"}``.
+
+    ``failed`` lists the names of the trials that failed, ``reasons`` maps each to its status
+    (``"failed: <message>"``).
+    """
     path = Path(config_path).resolve()
     cfg = load_config(path)
     b = cfg["batch"]
@@ -398,4 +457,5 @@ def batch_cli(config_path, *, scheduler: str | None = None, jobs: int | None = N
                  jobs=jobs if jobs is not None else b.get("jobs"), scheduler=scheduler or b.get("scheduler"),
                  progress=None)
     failed = [r["name"] for r in rows if not str(r.get("status", "")).startswith("ok")]
-    return {"rows": rows, "table": str(out / "summary.csv"), "failed": failed}
+    reasons = {r["name"]: str(r.get("status", "failed")) for r in rows if r["name"] in failed}
+    return {"rows": rows, "table": str(out / "summary.csv"), "failed": failed, "reasons": reasons}

@@ -66,12 +66,10 @@ def figure_png(fig: Figure) -> bytes:
     return buf.getvalue()
 
 
-def save_figure(fig: Figure, path) -> Path:
-    """Write ``fig`` as PNG to ``path`` (parent folders created); returns the path."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, format="png")
-    return path
+def save_figure(fig: Figure, path, **savefig) -> Path:
+    """Write ``fig`` as PNG to ``path`` (parent folders created) atomically; returns the path."""
+    from .io import atomic_write
+    return atomic_write(path, lambda fh: fig.savefig(fh, format="png", **savefig), binary=True, parents=True)
 
 
 # -- trials ----------------------------------------------------------------------------------

@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import base64
 import html
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -155,9 +153,7 @@ def write_report(run, path=None, *, model=None, trial=None, title: str | None = 
         try:
             run = run_diagnosis(model, trial, **options)
         except PinmskError as exc:
-            out.parent.mkdir(parents=True, exist_ok=True)
-            out.write_text(_failure_page(model, trial, exc, title), encoding="utf-8")
-            return out
+            return _atomic_write(out, _failure_page(model, trial, exc, title))
     else:
         out = Path(path)
     return _atomic_write(out, render_report(run, title=title))
@@ -184,22 +180,9 @@ def _failure_page(model, trial, exc, title) -> str:
 # -- results (SO, FSO, any Trial of muscle forces) --------------------------------------------
 
 def _atomic_write(path, text: str) -> Path:
-    """Write ``text`` to ``path`` through a temporary file in the same folder and os.replace."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)          # mkstemp creates 0600; a report is an ordinary file
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+    """Write ``text`` to ``path`` (parent folders created) atomically: :func:`pinmsk.io.atomic_write`."""
+    from .io import atomic_write
+    return atomic_write(path, lambda fh: fh.write(text), parents=True)
 
 
 def _img_any(fig, caption: str) -> str:

@@ -664,9 +664,28 @@ class Trial:
         self._indices(names, what="coordinate channel(s)")
         return names
 
-    def _check_finite(self, names, hint: str = "") -> None:
+    def check_finite(self, names=None, *, limit: float | None = None, nan_ok: bool = False,
+                     what: str = "") -> Trial:
+        """Check that channels (all, or ``names``) are finite and, with ``limit``, within ±limit.
+
+        Raises TrialError naming, for each bad channel (up to 5), the number of
+        bad values, the first rows and the time of the first; ``what`` (e.g.
+        "before the diagnosis") is added to the message.  A ``limit`` catches
+        fill values such as 1e300 that are finite but not measurements;
+        ``nan_ok`` accepts NaN (a centre of pressure while a plate is unloaded)
+        but not infinity.  Returns the trial unchanged.
+        """
+        self._check_finite(self._names if names is None else _as_names(names), hint=what, limit=limit,
+                           nan_ok=nan_ok)
+        return self
+
+    def _check_finite(self, names, hint: str = "", limit: float | None = None, nan_ok: bool = False) -> None:
         idx = self._indices(tuple(names))
-        bad = ~np.isfinite(self._values[:, idx])
+        block = self._values[:, idx]
+        bad = np.isinf(block) if nan_ok else ~np.isfinite(block)
+        if limit is not None:
+            with np.errstate(invalid="ignore"):
+                bad |= np.abs(block) > limit
         cols = np.flatnonzero(bad.any(axis=0))
         if cols.size == 0:
             return
@@ -675,9 +694,15 @@ class Trial:
             rows = np.flatnonzero(bad[:, c])
             first = ", ".join(str(r) for r in rows[:5]) + (", ..." if rows.size > 5 else "")
             name = self._names[idx[c]]
-            kind = "NaN" if np.isnan(self._values[rows[0], idx[c]]) else "inf"
+            value = float(self._values[rows[0], idx[c]])
+            if np.isfinite(value):
+                kind = f"{value:.3g} first, beyond ±{limit:.3g}"
+                what = "implausible"
+            else:
+                kind = f"{'NaN' if np.isnan(value) else 'inf'} first"
+                what = "non-finite"
             lines.append(
-                f"channel {name!r} has {rows.size} non-finite value(s) ({kind} first) at rows "
+                f"channel {name!r} has {rows.size} {what} value(s) ({kind}) at rows "
                 f"{first} (time {self._time[rows[0]]:.6g} s)"
             )
         more = f"; and {cols.size - 5} more channels" if cols.size > 5 else ""

@@ -378,7 +378,9 @@ class Viewer:
         if q.shape != (self.model.pin.nq,):
             raise ModelError(f"{what} has {q.size} values; model '{self.model.name}' has nq = "
                              f"{self.model.pin.nq} ({', '.join(self.model.coordinates)})")
-        return q
+        pm = self.model.pin
+        return _require_finite(q, [pm.names[j] for j in range(1, pm.njoints) for _ in range(pm.joints[j].nq)],
+                               what)
 
     def _muscle_values(self, activation, force):
         if activation is None and force is None:
@@ -398,11 +400,12 @@ class Viewer:
             unknown = sorted(set(x) - set(names))
             if unknown:
                 raise ModelError(f"{what}: unknown muscles {unknown} (muscles: {', '.join(names)})")
-            return np.array([float(x.get(n, 0.0)) for n in names])
-        x = np.asarray(x, dtype=float).reshape(-1)
+            x = np.array([float(x.get(n, 0.0)) for n in names])
+        else:
+            x = np.asarray(x, dtype=float).reshape(-1)
         if x.shape != (len(names),):
             raise ModelError(f"{what} has {x.size} values; the model has {len(names)} muscles")
-        return x
+        return _require_finite(x, names, what)
 
     def _per_coordinate(self, x, what) -> np.ndarray:
         coords = self.model.coordinates
@@ -410,11 +413,12 @@ class Viewer:
             unknown = sorted(set(x) - set(coords))
             if unknown:
                 raise ModelError(f"{what}: unknown coordinates {unknown} (coordinates: {', '.join(coords)})")
-            return np.array([float(x.get(c, 0.0)) for c in coords])
-        x = np.asarray(x, dtype=float).reshape(-1)
+            x = np.array([float(x.get(c, 0.0)) for c in coords])
+        else:
+            x = np.asarray(x, dtype=float).reshape(-1)
         if x.shape != (len(coords),):
             raise ModelError(f"{what} has {x.size} values; the model has {len(coords)} coordinates")
-        return x
+        return _require_finite(x, coords, what)
 
     # ---------------------------------------------------------------- play
     def play(self, trial, *, results=None, ghost=None, ghost_offset=0.0, residual=None,
@@ -448,6 +452,11 @@ class Viewer:
             arr = np.asarray(residual, dtype=float)
             if arr.shape != (t_src.size, model.nv):
                 raise TrialError(f"residual must be (N, nv) = ({t_src.size}, {model.nv}), got {arr.shape}")
+            bad = np.argwhere(~np.isfinite(arr))
+            if bad.size:
+                i, j = bad[0]
+                raise TrialError(f"residual of coordinate {model.coordinates[j]!r} is {float(arr[i, j])!r} at "
+                                 f"frame {i} (time {t_src[i]:.6g} s); {_NO_NAN}")
             res = _interp_columns(t, t_src, arr)
         else:
             res = _channels_on(sources, [f"{c}_residual" for c in model.coordinates], t)
@@ -700,8 +709,20 @@ def _interp_columns(t, t_src, values) -> np.ndarray:
     return np.stack([np.interp(t, t_src, values[:, k]) for k in range(values.shape[1])], axis=1)
 
 
+_NO_DRAW = "meshcat cannot draw NaN or infinite values"
+_NO_NAN = f"{_NO_DRAW}: fill or cut the gaps first"
+
+
+def _require_finite(x: np.ndarray, labels, what: str) -> np.ndarray:
+    """``x`` (one value per label) if all finite, else TrialError naming the first bad label."""
+    bad = np.flatnonzero(~np.isfinite(x))
+    if bad.size:
+        raise TrialError(f"{what}: {labels[bad[0]]!r} is {float(x[bad[0]])!r}; {_NO_NAN}")
+    return x
+
+
 def _coordinates_of(trial, model, what: str) -> np.ndarray:
-    """``(N, nq)`` configuration of ``model`` from a trial's coordinate channels."""
+    """``(N, nq)`` configuration of ``model`` from a trial's coordinate channels (finite)."""
     names = set(trial.names)
     missing = [c for c in model.coordinates if c not in names]
     if missing:
@@ -711,6 +732,7 @@ def _coordinates_of(trial, model, what: str) -> np.ndarray:
         raise TrialError(
             f"{what} has no channel for coordinate(s) {', '.join(hints)} of model "
             f"'{model.name}'; a motion to view needs all of: {', '.join(model.coordinates)}")
+    trial.check_finite(model.coordinates, what=f"in the {what} before viewing ({_NO_DRAW})")
     q = np.zeros((len(trial.time), model.pin.nq))
     for c in model.coordinates:
         q[:, model.pin.joints[model.pin.getJointId(c)].idx_q] = np.asarray(trial[c], dtype=float)
@@ -721,6 +743,7 @@ def _channels_on(sources, names, t) -> np.ndarray | None:
     """Channels ``names`` from the first source holding all of them, on times ``t``; else None."""
     for s in sources:
         if all(n in s.names for n in names):
+            s.check_finite(names, what=f"before viewing ({_NO_DRAW})")
             vals = np.stack([np.asarray(s[n], dtype=float) for n in names], axis=1)
             return _interp_columns(t, np.asarray(s.time, dtype=float), vals)
     return None
@@ -740,6 +763,7 @@ def _grf_on(sources, t) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         for side, chans in found.items():
             if side in out or not any(k[0] == "force" for k in chans):
                 continue
+            s.check_finite(list(chans.values()), what=f"before viewing ({_NO_DRAW})")
             arrays = []
             for quantity in ("force", "point"):
                 cols = [np.asarray(s[chans[(quantity, ax)]], dtype=float) if (quantity, ax) in chans
@@ -871,6 +895,8 @@ def view_cli(model_name, trial_path=None, results_path=None, *, open_browser: bo
     model = load_model(model_name)
     trial = trial_path if isinstance(trial_path, Trial) else (read_trial(trial_path) if trial_path else None)
     results = read_trial(results_path) if results_path else None
+    if trial is not None:
+        _coordinates_of(trial, model, "trial")       # refuse a bad motion before starting a server
     viewer = Viewer(model, open_browser=open_browser)
     if trial is not None:
         try:

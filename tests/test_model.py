@@ -94,8 +94,10 @@ def test_user_model_from_sidecar_path(tmp_path):
     (tmp_path / "myarm.toml").write_text(text)
     m = pinmsk.load_model(tmp_path / "myarm.toml")
     assert m.name == "myarm" and m.n_muscles == 7
-    bare = pinmsk.load_model(tmp_path / "myarm.urdf")
+    with pytest.warns(UserWarning, match=r"no gravity declared.*default \[0.0, 0.0, -9.81\].*gravity = "):
+        bare = pinmsk.load_model(tmp_path / "myarm.urdf")
     assert bare.n_muscles == 0 and bare.coordinates == ("elbow_flexion",)
+    np.testing.assert_array_equal(bare.gravity, [0.0, 0.0, -9.81])
 
 
 def test_bad_sidecar_errors_name_the_problem(tmp_path):

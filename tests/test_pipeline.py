@@ -149,3 +149,32 @@ def test_examples_skip_cleanly_without_data(name, tmp_path, capsys):
     assert mod.main(["--out", str(tmp_path / "o"), "--data", str(tmp_path / "no_data")]) == 0
     assert "absent" in capsys.readouterr().out
     assert not (tmp_path / "o").exists()
+
+
+def test_interrupted_batch_leaves_complete_trial_folders_or_none(gait2d, tmp_path, monkeypatch):
+    """Ctrl-C while the second trial writes its files: the first folder stays whole, the second
+    (two .sto files already written) leaves nothing, not even its temporary folder."""
+    _synthetic_trc(gait2d, tmp_path / "a.trc", n=40)
+    trials = [{"name": n, "kind": "trc", "trc": "a.trc", "markers": "csu", "so": False, "plots": False}
+              for n in ("one", "two")]
+    write = Trial.write
+
+    def interrupt_second_trial(self, path, **kw):
+        if path.parent.name.startswith(".two.") and path.name == "residuals.sto":
+            assert (path.parent / "inverse_dynamics.sto").exists()      # mid-trial: half written
+            raise KeyboardInterrupt
+        return write(self, path, **kw)
+
+    monkeypatch.setattr(Trial, "write", interrupt_second_trial)
+    out = tmp_path / "out"
+    with pytest.raises(KeyboardInterrupt):
+        batch(trials, out=out, base_dir=tmp_path, jobs=1)
+    assert sorted(p.name for p in out.iterdir()) == ["one"]   # no "two", no ".two.partial-*", no summary
+    assert sorted(p.name for p in (out / "one").iterdir()) == [
+        "inverse_dynamics.sto", "kinematics.sto", "residuals.sto", "summary.json"]
+    # a rerun replaces the complete folder only once the new one is complete
+    before = (out / "one" / "summary.json").read_text()
+    rows = batch(trials[:1], out=out, base_dir=tmp_path, jobs=1)
+    assert rows[0]["status"] == "ok"
+    assert sorted(p.name for p in out.iterdir()) == ["one", "summary.csv"]
+    assert (out / "one" / "summary.json").read_text() != before          # the new run's timings

@@ -241,6 +241,29 @@ def test_play_names_missing_coordinates(viewer):
         viewer.play(_flexion_trial(viewer.model, n=5), residual=np.zeros((3, 1)))
 
 
+def test_nan_is_refused_by_name_and_nothing_is_sent(viewer, forearm):
+    good = _flexion_trial(forearm, n=11)
+    sent = len(viewer.commands)
+    q = np.array(good["elbow_flexion"])
+    q[3] = np.nan
+    with pytest.raises(TrialError, match=r"channel 'elbow_flexion' has 1 non-finite value\(s\) \(NaN first\) "
+                                         r"at rows 3 \(time 0.6 s\).*meshcat cannot draw NaN"):
+        viewer.play(good.with_channels(elbow_flexion=q))
+    act = np.array(good["BRD_activation"])
+    act[5] = np.inf
+    with pytest.raises(TrialError, match=r"channel 'BRD_activation' .*inf first.* rows 5 \(time 1 s\)"):
+        viewer.play(good, results=pinmsk.Trial(good.time, {"BRD_activation": act}))
+    res = np.zeros((11, 1))
+    res[2, 0] = np.nan
+    with pytest.raises(TrialError, match=r"residual of coordinate 'elbow_flexion' is nan at frame 2 \(time 0.4 s\)"):
+        viewer.play(good, residual=res)
+    assert len(viewer.commands) == sent                       # no NaN (nor anything else) reached meshcat
+    with pytest.raises(TrialError, match=r"q: 'elbow_flexion' is nan"):
+        viewer.display([np.nan])
+    with pytest.raises(TrialError, match=r"activation: 'BICLH' is nan"):
+        viewer.display(activation={"BICLH": np.nan})
+
+
 def test_close_stops_the_server(forearm):
     v = Viewer(forearm, quiet=True)
     proc = v.vis.window.server_proc

@@ -12,7 +12,9 @@ Each reports normal force, friction force and point of application
 free moment.  Their ``generalized_force`` is ``J^T`` of the world wrench.
 
 Feet and fitting: :func:`load_foot2d`, :func:`foot_contacts`, :class:`ContactFit`
-(Eq. 4.2 identification), :func:`fit_cli_run` (what ``pinmsk contact fit`` calls),
+(Eq. 4.2 identification, exact Jacobians through :class:`~pinmsk.contact.dual.Dual`
+numbers), :func:`fit_contact_models` (several models on one trial, each starting from the
+ones it contains), :func:`fit_cli_run` (what ``pinmsk contact fit`` calls),
 :func:`read_contact_trial` (CSU text or .csv/.sto/.mot), :func:`synthetic_foot_trial`,
 :func:`contact_candidates` (diagnosis hook), :func:`from_spec` (a sidecar
 ``[[contacts]]`` entry -> component, see :mod:`pinmsk.contact.spec`).  The CSU reader is :func:`pinmsk.csu.read_csu`.
@@ -24,8 +26,8 @@ from .hunt_crossley import HuntCrossley
 from .volumetric import HyperVolumetric, Volumetric
 from .foot import (KINDS, SITES, GroundReaction, foot_contacts, ground_reaction, load_foot2d,
                    site_frames)
-from .identify import (ContactFit, fit_cli_run, fourier_basis, read_contact_trial, stance_cycle,
-                       toe_from_kinematics)
+from .identify import (ContactFit, fit_cli_run, fit_contact_models, fourier_basis, read_contact_trial,
+                       stance_cycle, toe_from_kinematics)
 from .spec import from_spec
 from .synthetic import synthetic_foot_trial
 from .diagnosis import contact_candidates
@@ -33,7 +35,8 @@ from .diagnosis import contact_candidates
 __all__ = [
     "ContactFit", "ContactForces", "GroundReaction", "HuntCrossley", "HyperVolumetric", "KINDS",
     "SITES", "SiteKinematics", "SphereContact", "Volumetric", "cap_centroid_depth", "cap_volume",
-    "contact_candidates", "fit_cli_run", "from_spec", "foot_contacts", "fourier_basis", "friction_coefficient",
-    "ground_reaction", "load_foot2d", "read_contact_trial", "regularized_coulomb", "site_frames", "site_kinematics",
-    "smooth_positive", "stance_cycle", "synthetic_foot_trial", "toe_from_kinematics", "wrench_generalized_force",
+    "contact_candidates", "fit_cli_run", "fit_contact_models", "from_spec", "foot_contacts", "fourier_basis",
+    "friction_coefficient", "ground_reaction", "load_foot2d", "read_contact_trial", "regularized_coulomb", "site_frames",
+    "site_kinematics", "smooth_positive", "stance_cycle", "synthetic_foot_trial", "toe_from_kinematics",
+    "wrench_generalized_force",
 ]

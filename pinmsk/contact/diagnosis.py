@@ -22,9 +22,7 @@ from dataclasses import dataclass, field
 
 from ..errors import ModelError
 from .foot import KINDS, foot_contacts
-from .identify import DRIVE, GRF, ContactFit
-
-_VARIANTS = (("point", False), ("volumetric", False), ("hypervolumetric", False), ("hypervolumetric", True))
+from .identify import ALL_TERMS, DRIVE, GRF, VARIANTS as _VARIANTS, ContactFit
 
 
 @dataclass
@@ -40,9 +38,8 @@ class ContactCandidate:
 
     @property
     def n_params(self) -> int:
-        # as ContactFit fits them: the point contact tracks f_n only, its friction stays fixed
-        skip = ("mu_f", "v_s") if self.kind == "point" else ()
-        return sum(sum(p.vary for n, p in c.params.items() if n not in skip) for c in self.components)
+        # as ContactFit fits them with its default terms (all three: friction too, for every model)
+        return sum(sum(p.vary for p in c.params.values()) for c in self.components)
 
     def fit(self, model, trial, **options) -> ContactFit:
         """Run the identification of this candidate (see :class:`ContactFit`)."""
@@ -71,10 +68,6 @@ def contact_candidates(model, trial=None, *, side: str | None = None) -> list[Co
 
 
 # -- glue for the diagnosis's contact mode (pinmsk.diagnose.contact) ------------------------------
-
-#: the Eq. 4.2 terms, all compared by the diagnosis (the point contact too)
-ALL_TERMS = ("normal_force", "friction_force", "cop")
-
 
 def drivable(model, trial=None) -> bool:
     """True if ``model`` has foot2d's sites and driving coordinates (and ``trial`` the driving and GRF channels)."""

@@ -22,7 +22,8 @@ of the frames where the COP means something physically.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Sequence
 
@@ -30,6 +31,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import ModelError
+from .dual import vector
 from .hunt_crossley import HuntCrossley
 from .sphere import ContactForces, cross, smooth_positive
 from .volumetric import HyperVolumetric, Volumetric
@@ -128,13 +130,24 @@ def foot_contacts(model, kind: str = "hypervolumetric", *, side: str | None = No
 class GroundReaction:
     """Totals of one foot over N frames: ``force`` (N, 3), ``moment`` (N, 3) about the world
     origin, ``cop`` (N, 3) on the ground plane (regularised, see module doc), ``free_moment``
-    (N,) about the vertical at the COP, and ``loaded`` (N,) where F_y > cop_eps."""
+    (N,) about the vertical at the COP, and ``loaded`` (N,) where F_y > cop_eps.
+
+    ``moment`` and ``free_moment`` are computed on first use from ``outputs`` (the contact
+    outputs summed), so a fit that needs only the force and COP does not pay for them."""
 
     force: np.ndarray
-    moment: np.ndarray
     cop: np.ndarray
-    free_moment: np.ndarray
     loaded: np.ndarray
+    outputs: tuple = field(repr=False, default=())
+
+    @cached_property
+    def moment(self) -> np.ndarray:
+        return sum(cross(o.point, o.force) for o in self.outputs)
+
+    @cached_property
+    def free_moment(self) -> np.ndarray:
+        # about the vertical through the COP: M = cop x F + T y  =>  T = M_y - (cop x F)_y
+        return self.moment[:, 1] - cross(self.cop, self.force)[:, 1]
 
     @property
     def normal(self) -> np.ndarray:
@@ -149,18 +162,15 @@ def ground_reaction(outputs: Sequence[ContactForces], *, cop_eps: float = 1.0) -
     """Total force, moment about the origin, COP and free moment of the contacts of one foot."""
     if not outputs:
         raise ModelError("ground_reaction: no contact outputs given")
+    outputs = tuple(outputs)
     F = sum(o.force for o in outputs)
-    M = sum(cross(o.point, o.force) for o in outputs)
     w = [smooth_positive(o.normal, 1e-3) for o in outputs]
     W = sum(w)
-    pts = np.stack([o.point for o in outputs])  # (k, N, 3)
-    ref = pts.mean(axis=0)
+    ref = sum(o.point for o in outputs) * (1.0 / len(outputs))
     num = sum(wi[:, None] * o.point for wi, o in zip(w, outputs))
     cop = (num + cop_eps * ref) / (W + cop_eps)[:, None]
     cop[:, 1] = 0.0
-    # free moment about the vertical through the COP: M = cop x F + T y  =>  T = M_y - (cop x F)_y
-    free = M[:, 1] - cross(cop, F)[:, 1]
-    return GroundReaction(F, M, cop, free, F[:, 1] > cop_eps)
+    return GroundReaction(F, cop, F[:, 1] > cop_eps, outputs)
 
 
 # -- analytic planar kinematics of foot2d ----------------------------------------
@@ -191,37 +201,33 @@ class Foot2dGeometry:
 def _rot(angle):
     """World rotation of a body turned by ``angle`` about (0, 0, -1): (N, 3, 3)."""
     c, s = np.cos(angle), np.sin(angle)
-    n = np.shape(angle)[0]
-    R = np.zeros((n, 3, 3))
-    R[:, 0, 0] = c
-    R[:, 0, 1] = s
-    R[:, 1, 0] = -s
-    R[:, 1, 1] = c
-    R[:, 2, 2] = 1.0
-    return R
+    z = np.zeros(np.shape(angle))
+    return np.stack([vector(c, s, z), vector(-s, c, z), vector(z, z, z + 1.0)], axis=-2)
 
 
-def foot2d_site_kinematics(geom: Foot2dGeometry, q: np.ndarray, v: np.ndarray) -> dict:
+def _planar(x, y):
+    """(N, 3) vectors ``(x, y, 0)``."""
+    return vector(x, y, 0.0 * x)
+
+
+def foot2d_site_kinematics(geom: Foot2dGeometry, q, v) -> dict:
     """``{site: SiteKinematics}`` of foot2d from ``q, v`` (N, 4), vectorised (no Pinocchio loop).
 
     Same numbers as :func:`pinmsk.contact.sphere.site_kinematics` (tested), without
     the Jacobians; used by the identification where the toe angle changes every iteration.
+    ``q, v`` may also be sequences of the four (N,) columns, some of them
+    :class:`~pinmsk.contact.dual.Dual` (the fitted toe angle): the kinematics then carry derivatives.
     """
     from .sphere import SiteKinematics
 
-    q = np.asarray(q, dtype=float)
-    v = np.asarray(v, dtype=float)
-    n = q.shape[0]
-    A = np.zeros((n, 3))
-    A[:, 0], A[:, 1] = q[:, 0], q[:, 1]
-    vA = np.zeros((n, 3))
-    vA[:, 0], vA[:, 1] = v[:, 0], v[:, 1]
-    Rf = _rot(q[:, 2])
-    wf = np.zeros((n, 3))
-    wf[:, 2] = -v[:, 2]
-    Rt = _rot(q[:, 2] + q[:, 3])
-    wt = np.zeros((n, 3))
-    wt[:, 2] = -(v[:, 2] + v[:, 3])
+    if not isinstance(q, (list, tuple)):
+        q, v = np.asarray(q, dtype=float).T, np.asarray(v, dtype=float).T
+    A, vA = _planar(q[0], q[1]), _planar(v[0], v[1])
+    z = np.zeros(np.shape(q[0]))
+    Rf = _rot(q[2])
+    wf = vector(z, z, -v[2])
+    Rt = _rot(q[2] + q[3])
+    wt = vector(z, z, -(v[2] + v[3]))
     foot = SiteKinematics(A, Rf, vA, wf)
     out = {}
     for site in ("heel", "metatarsal"):

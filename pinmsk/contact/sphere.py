@@ -34,6 +34,7 @@ import pinocchio as pin
 
 from ..components import Component, Motion, Parameter, _replace
 from ..errors import ModelError
+from .dual import asarray, vector
 from .friction import regularized_coulomb
 
 UP = np.array([0.0, 1.0, 0.0])
@@ -41,20 +42,17 @@ UP = np.array([0.0, 1.0, 0.0])
 
 # -- closed-form geometry -----------------------------------------------------
 
-def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross product of (N, 3) arrays (np.cross costs ~10x more on small arrays)."""
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+def cross(a, b):
+    """Row-wise cross product of (N, 3) arrays or :class:`~pinmsk.contact.dual.Dual` s
+    (np.cross costs ~10x more on small arrays)."""
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
     b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    out[..., 0] = a1 * b2 - a2 * b1
-    out[..., 1] = a2 * b0 - a0 * b2
-    out[..., 2] = a0 * b1 - a1 * b0
-    return out
+    return vector(a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0)
 
 
 def smooth_positive(x, eps: float):
     """``(x + sqrt(x^2 + eps^2)) / 2``: a C-infinity positive part (-> max(x, 0) as eps -> 0)."""
-    x = np.asarray(x, dtype=float)
+    x = asarray(x)
     return 0.5 * (x + np.sqrt(x * x + eps * eps))
 
 
@@ -70,7 +68,7 @@ def no_adhesion(f, eps: float = ADHESION_EPS):
     ground faster than ``1 / a``; the ground cannot pull, so that part is removed (measured on the
     CSU data before this: up to -280 N at lift-off, which a fit could use as a free force).
     """
-    f = np.asarray(f, dtype=float)
+    f = asarray(f)
     x = np.clip(f, 0.0, eps)
     return np.where(f >= eps, f, x * x * (2.0 / eps - x / (eps * eps)))
 
@@ -80,7 +78,8 @@ def cap_volume(depth, radius):
 
     ``V = pi d^2 (3R - d) / 3`` for ``0 <= d <= 2R`` (``d`` is clipped to that range).
     """
-    d = np.clip(np.asarray(depth, dtype=float), 0.0, 2.0 * np.asarray(radius, dtype=float))
+    radius = asarray(radius)
+    d = np.clip(asarray(depth), 0.0, 2.0 * radius)
     return math.pi * d * d * (3.0 * radius - d) / 3.0
 
 
@@ -90,7 +89,8 @@ def cap_centroid_depth(depth, radius):
     ``zbar = 3 (2R - d)^2 / (4 (3R - d))``; it tends to R as d -> 0 (the centroid
     starts at the lowest point of the sphere) and to 0 at d = 2R.
     """
-    d = np.clip(np.asarray(depth, dtype=float), 0.0, 2.0 * np.asarray(radius, dtype=float))
+    radius = asarray(radius)
+    d = np.clip(asarray(depth), 0.0, 2.0 * radius)
     return 3.0 * (2.0 * radius - d) ** 2 / (4.0 * (3.0 * radius - d))
 
 
@@ -118,7 +118,8 @@ class SiteKinematics:
 
     def point(self, offset_local: np.ndarray):
         """World position and velocity of the body point at ``offset_local`` (3,) or (N, 3)."""
-        r = np.einsum("nij,...j->ni", self.rotation, offset_local)
+        off = asarray(offset_local)
+        r = np.einsum("nij,j->ni" if off.ndim == 1 else "nij,nj->ni", self.rotation, off)
         return self.position + r, self.velocity + cross(self.omega, r)
 
 
@@ -263,33 +264,35 @@ class SphereContact(Component):
 
     # -- evaluation -------------------------------------------------------
     def evaluate_kinematics(self, kin: SiteKinematics, params: Mapping[str, Any] | None = None) -> ContactForces:
-        """Forces over frames from the site's kinematics (pure numpy; parameters may be arrays)."""
+        """Forces over frames from the site's kinematics (pure numpy; parameters may be arrays).
+
+        Parameters and kinematics may also be :class:`~pinmsk.contact.dual.Dual` s: the outputs
+        then carry their exact derivatives (what :class:`~pinmsk.contact.ContactFit` uses for its
+        Jacobian), from this same code.
+        """
         p = self._p(params)
         R = p[self.radius_name]
-        off = np.array([p["dx"], p["dy"], 0.0], dtype=float)
+        ox, oy = p["dx"], p["dy"]
         if self.center == "sole":
-            off[1] += R
+            oy = oy + R
         elif self.center is not None:
-            off[0] += self.center[0]
-            off[1] += self.center[1]
-        centre, vcentre = kin.point(off)
+            ox, oy = ox + self.center[0], oy + self.center[1]
+        centre, vcentre = kin.point(vector(ox, oy, 0.0 * ox))
         h = centre[:, 1]
         delta = R - h
         delta_s = smooth_positive(delta, self.smoothing)
         rate = -vcentre[:, 1]
         fn, vol, zbar = self.normal_law(delta_s, rate, p)
         fn = no_adhesion(fn)
-        # application point: zbar below the centre; velocity of that body point
-        r = np.zeros_like(centre)
-        r[:, 1] = -zbar
-        point = centre + r
-        vp = vcentre + cross(kin.omega, r)
-        slip = vp.copy()
-        slip[:, 1] = 0.0
-        slip[:, 0] -= self.ground_speed
+        # application point: zbar below the centre (r = -zbar y); velocity of that body point,
+        # v + omega x r, with omega x (0, -zbar, 0) = zbar (omega_z, 0, -omega_x)
+        zero = 0.0 * zbar
+        point = centre + vector(zero, -zbar, zero)
+        om = kin.omega
+        # tangential slip relative to the moving ground (its y component is not a slip)
+        slip = vector(vcentre[:, 0] + zbar * om[:, 2] - self.ground_speed, zero, vcentre[:, 2] - zbar * om[:, 0])
         ff = regularized_coulomb(slip, fn, p["mu_f"], p["v_s"])
-        force = ff.copy()
-        force[:, 1] += fn
+        force = ff + vector(zero, fn, zero)
         return ContactForces(fn, ff, force, point, delta, vol, slip)
 
     def prepare(self, model, motion: Motion) -> SiteKinematics:

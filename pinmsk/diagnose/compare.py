@@ -81,6 +81,9 @@ __all__ = ["DEFAULT_CUTOFF", "MODES", "Comparison", "EquationError", "NoiseFloor
 DEFAULT_CUTOFF = 6.0
 MODES = ("torque", "motion", "muscle", "contact")
 _N_PROPAGATE = 3
+#: Largest |value| accepted in a measured channel (SI: N m, N, m, or excitation): far above any
+#: human moment or ground force, so a larger finite value is a fill value or a unit error.
+MEASURED_LIMIT = 1e6
 
 
 @dataclass(frozen=True)
@@ -142,23 +145,24 @@ def _subset_external(external, rows):
                           None if e.torque is None else np.asarray(e.torque)[rows]) for e in external]
 
 
-def _check_measured_finite(trial: Trial) -> None:
-    """Measured moments, forces and signals must be finite numbers of a sane size (no NaN, no 1e300)."""
-    for name in trial.names:
-        if name.endswith(("_moment", "_emg", "_excitation")) or parse_ground_reaction(name) is not None:
-            x = np.asarray(trial[name], dtype=float)
-            bad = ~np.isfinite(x) | (np.abs(x) > 1e12)
-            if parse_ground_reaction(name) is not None and parse_ground_reaction(name).quantity == "point":
-                bad = np.isinf(x) | (np.abs(np.nan_to_num(x)) > 1e12)      # an unloaded plate's COP may be NaN
-            if bad.any():
-                k = int(np.flatnonzero(bad)[0])
-                raise TrialError(f"channel {name!r} is {x[k]!r} at row {k} (t = {trial.time[k]:.6g} s)"
-                                 f"{f' and {int(bad.sum()) - 1} more rows' if bad.sum() > 1 else ''}; "
-                                 "a measured value must be a finite number: fill or cut the gap")
-
-
 def _has_grf(trial) -> bool:
     return any(parse_ground_reaction(n) is not None for n in trial.names)
+
+
+def _check_measured(model, trial) -> None:
+    """Refuse measured channels the diagnosis compares with (moments, excitations/EMG, GRF)
+    that are NaN, infinite or beyond :data:`MEASURED_LIMIT`, by channel, row and time.
+
+    A centre of pressure may be NaN (undefined while its plate is unloaded), not infinite."""
+    names = [f"{c}_moment" for c in model.coordinates if f"{c}_moment" in trial]
+    names += [f"{m}_{kind}" for m in model.muscle_names for kind in ("excitation", "emg")
+              if f"{m}_{kind}" in trial]
+    grf = {n: parse_ground_reaction(n) for n in trial.names}
+    names += [n for n, g in grf.items() if g is not None and g.quantity != "point"]
+    what = "before the diagnosis, which compares the model with them"
+    trial.check_finite(names, limit=MEASURED_LIMIT, what=what)
+    trial.check_finite([n for n, g in grf.items() if g is not None and g.quantity == "point"],
+                       limit=MEASURED_LIMIT, nan_ok=True, what=what)
 
 
 def _excitations(model, trial):
@@ -454,7 +458,7 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
     """
     if not isinstance(trial, Trial):
         raise TrialError(f"compare needs a Trial, got {type(trial).__name__}; read one with pinmsk.read_trial")
-    _check_measured_finite(trial)
+    _check_measured(model, trial)
     external_given = grf is not None or external_loads is not None
     plan = _plan(model, trial, mode, has_grf=_has_grf(trial) or external_given)
     if plan.mode == "contact":

@@ -30,7 +30,6 @@ diagnose again.
 """
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -650,10 +649,9 @@ class DiagnosisRun:
         return "\n".join(out)
 
     def write_json(self, path) -> Path:
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(self.to_json_dict(), indent=2))
-        return path
+        """The JSON summary (parent folders created); refused if any number is NaN or infinite."""
+        from ..io import write_json
+        return write_json(path, self.to_json_dict(), parents=True)
 
     def __repr__(self) -> str:
         return f"<DiagnosisRun {len(self.added)} added, final {self.final!r}>"

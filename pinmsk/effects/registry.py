@@ -17,6 +17,7 @@ Register a user effect with the :func:`register` decorator on a
 from __future__ import annotations
 
 import difflib
+import inspect
 
 from ..errors import ModelError
 
@@ -51,14 +52,24 @@ def families() -> list[str]:
     return sorted(_REGISTRY)
 
 
-def from_spec(spec: dict):
-    """Build an effect from a sidecar ``[[effects]]`` table: ``type``, optional ``target``, parameters."""
+def from_spec(spec: dict, *, where: str = "[[effects]]"):
+    """Build an effect from a sidecar ``[[effects]]`` table: ``type``, optional ``target``, parameters.
+
+    Keys other than ``type``, ``target``, ``params``, the effect's keyword options and its
+    parameter names are refused with a "did you mean" (``where`` names the entry).
+    """
+    from ..tomlfile import check_keys
+
     spec = dict(spec)
     try:
         family = spec.pop("type")
     except KeyError:
-        raise ModelError(f"an [[effects]] entry has no 'type': {spec}") from None
+        raise ModelError(f"{where}: an [[effects]] entry has no 'type': {spec}") from None
     cls = get(family)
+    options = [n for n, p in inspect.signature(cls.__init__).parameters.items()
+               if p.kind is inspect.Parameter.KEYWORD_ONLY]
+    check_keys(spec, ["target", "params", *options, *(p.name for p in cls.parameters)], where=where,
+               section=f"an effect of type '{family}'")
     target = spec.pop("target", None)
     params = spec.pop("params", {})
     return cls(target, **params, **spec)

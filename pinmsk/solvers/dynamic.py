@@ -118,6 +118,15 @@ F_CE_MIN = 0.002  # IFM: least contractile force (/ F_max), keeps the inverse mo
 U_STEP = 0.1      # IFM/IFT preconditioning: excitation change (RMS) of a unit step
 
 
+class _Unsimulable(SolverError):
+    """A gradient was asked at a point whose own simulation fails (``x``): SLSQP accepted a
+    step into such a region after its line search ran out of backtracks."""
+
+    def __init__(self, message: str, x):
+        super().__init__(message)
+        self.x = x
+
+
 def passive_floor(mu: BatchMuscles, l_mt, dl_mt=None, ddl_mt=None):
     """Smooth upper bound of a muscle-tendon unit's passive force, with its time derivatives.
 
@@ -691,6 +700,7 @@ class DynamicOptimization:
             if self._c_size is None:
                 raise SolverError("the simulation of the initial guess is not finite; "
                                   "reduce the step or change the start")
+            self._last_failure = "the state went non-finite"
             return (1e6 * getattr(self, "_f_ref", 1.0),
                     None if self._c_size == 0 else -np.ones(self._c_size))
         self._c_size = 0 if c is None else c.shape[1]
@@ -733,6 +743,11 @@ class DynamicOptimization:
         if hit is not None:
             return hit
         f0, c0 = self._value(x)
+        if key not in self._cache:
+            # _value caches successes only: x itself did not simulate, and f0, c0 are the
+            # penalty, not values to difference against
+            raise _Unsimulable("the simulation fails at the current point ("
+                               f"{self._last_failure})", x)
         h = self.fd_step * np.maximum(1.0, np.abs(x))
         n = x.size
         central = self.fd == "central"
@@ -747,8 +762,7 @@ class DynamicOptimization:
             return good if cv is None else good & np.all(np.isfinite(cv), axis=1)
 
         okp, okm = ok(fp, cp), ok(fm, cm)
-        base_ok = np.isfinite(f0) and (c0 is None or np.all(np.isfinite(c0)))
-        if not np.all((okp & okm) | ((okp | okm) & base_ok)):
+        if not np.all(okp | okm):
             raise SolverError("a finite-difference simulation failed on both sides of the "
                               "current point (non-finite state or no fibre state); reduce "
                               "the step or change the start")
@@ -977,11 +991,12 @@ class DynamicOptimization:
     def _solve_start(self, k, xs):
         """SLSQP in preconditioned variables (:meth:`_preconditioner`) from ``xs``: ``(x, record)``.
 
-        After a line-search failure (status 8) or incompatible linearized constraints (4)
-        SLSQP restarts -- with a fresh quasi-Newton Hessian, from the best point seen
-        (feasible and lowest, else least infeasible) -- while that still improves it, at
-        most ``restarts`` times; when the failed run had wandered off (ended worse than
-        that best point) the restart takes steps a third as large."""
+        After a line-search failure (status 8; also a step SLSQP accepted into a region
+        where the simulation fails, see :class:`_Unsimulable`) or incompatible linearized
+        constraints (4) SLSQP restarts -- with a fresh quasi-Newton Hessian, from the best
+        point seen (feasible and lowest, else least infeasible) -- while that still improves
+        it, at most ``restarts`` times; when the failed run had wandered off (ended worse
+        than that best point) the restart takes steps a third as large."""
         from scipy.optimize import minimize
         fs = 1.0 / self._f_ref
         pre = self.design != "ff" if self.precondition is None else self.precondition
@@ -1020,7 +1035,10 @@ class DynamicOptimization:
                 cons.append({"type": "ineq", "fun": lambda y: self._value(X(y))[1],
                              "jac": lambda y: self._gradient(X(y))[1] @ M})
 
+            count = {"nit": 0, "nfev": 0}   # SLSQP's own, for a run cut short below
+
             def fun(y):
+                count["nfev"] += 1
                 x = X(y)
                 key = rank(x)
                 if key < best["key"]:
@@ -1030,8 +1048,21 @@ class DynamicOptimization:
             def jac(y):
                 return fs * (self._gradient(X(y))[0] @ M)
 
-            res = minimize(fun, np.zeros(xc.size), jac=jac, method="SLSQP", constraints=cons,
-                           options=opts, callback=callback)
+            def iterate(yk):
+                count["nit"] += 1
+                callback(yk)
+
+            try:
+                res = minimize(fun, np.zeros(xc.size), jac=jac, method="SLSQP",
+                               constraints=cons, options=opts, callback=iterate)
+            except _Unsimulable as exc:
+                if np.array_equal(exc.x, xc):
+                    raise           # the start itself does not simulate
+                # SLSQP's line search gives up after 10 backtracks and accepts the step:
+                # here into a region that does not simulate.  End this run as a
+                # line-search failure; the restarts below go back to the best point.
+                from scipy.optimize import OptimizeResult
+                return OptimizeResult(success=False, status=8, message=str(exc), **count), exc.x
             return res, X(res.x)
 
         try:
@@ -1209,16 +1240,8 @@ TASK_SCHEMA = {
 
 
 def _check_keys(table: dict, section: str, where: str):
-    if not isinstance(table, dict):
-        raise ModelError(f"{where}: [{section}] must be a table")
-    valid = TASK_SCHEMA[section]
-    for k in table:
-        if k not in valid:
-            import difflib
-            close = difflib.get_close_matches(k, list(valid), n=1)
-            hint = f" (did you mean '{close[0]}'?)" if close else ""
-            raise ModelError(f"{where}: unknown key '{k}' in [{section}]{hint}; valid keys: "
-                             f"{', '.join(valid)}")
+    from ..tomlfile import check_keys
+    check_keys(table, TASK_SCHEMA[section], where=where, section=f"[{section}]")
 
 
 def load_task(task_path) -> dict:
@@ -1329,8 +1352,8 @@ def optimize_task(task_path, out_path=None, progress=None, *, precision: int | N
     prob = build_from_task(spec, base_dir=Path(task_path).parent, progress=progress)
     res = prob.fit().result_
     if out_path is not None:
-        from ..io import write_trial
+        from ..io import write_json, write_trial
         out = Path(out_path)
         write_trial(res.to_trial(), out, precision=precision)
-        out.with_suffix(out.suffix + ".json").write_text(json.dumps(res.summary(), indent=2))
+        write_json(out.with_suffix(out.suffix + ".json"), res.summary())
     return res

@@ -27,6 +27,17 @@ the tracking form (``h = t_{k+1} - t_k``, ``e_q = q_d(t+h) - q - h v``,
     ``kappa = 1``; default gains put a triple pole at ``-omega``
     (``alpha = 3 omega``, ``beta = 3 omega^2``, ``gamma = omega^3``, ``omega = 20 rad/s``).
 
+The forces are held over each control interval ``h``, so the PID loop is a
+sampled one: for the error dynamics (a double integrator under a zero-order
+hold) it is stable only while ``omega h`` stays below about 0.67 with the
+default gains (:func:`pid_spectral_radius`).  The default number of control
+points is therefore chosen from the duration, ``omega h <= 0.5`` and at least
+100; a count that makes the loop unstable is refused before simulating.  A
+tracking error above ``max_tracking_error`` (default 1 deg; the same number in
+m for translations) stops the run with a :class:`~pinmsk.errors.ConvergenceError`
+naming the time and coordinate, unless ``allow_divergence=True``, which keeps
+the result but flags it (``diverged`` channel and meta entry, a warning).
+
 ``enforce="constraint"`` imposes ``a(F) = a*`` exactly (equivalently
 ``R^T F = M a* + h - Q_c``, an SO problem at the simulated state);
 ``enforce="cost"`` keeps the tracking term in the cost; ``tracking_weight``
@@ -49,6 +60,7 @@ force-length-velocity state.  Every QP goes through proxsuite
 from __future__ import annotations
 
 import time as _time
+import warnings
 
 import numpy as np
 import pinocchio as pin
@@ -56,7 +68,7 @@ from scipy.interpolate import CubicHermiteSpline
 
 from ..components import Motion
 from ..dynamics import skeleton_with_inertias
-from ..errors import InfeasibleError, ModelError, SolverError
+from ..errors import ConvergenceError, InfeasibleError, ModelError, SolverError
 from ..skeleton import integrate
 from ..trial import Trial
 from . import qp as _qp
@@ -66,6 +78,30 @@ from .static import MODES, WEIGHTS, _muscle_property, as_motion, check_model
 
 TRACKING = ("q", "qv", "qva", "pid")
 ENFORCE = ("constraint", "cost")
+#: ``omega h`` of the default number of PID control points (stable up to about 0.67).
+PID_OMEGA_H = 0.5
+#: Default ``max_tracking_error``: 1 degree (rad; the same number in m for translations).
+MAX_TRACKING_ERROR = float(np.deg2rad(1.0))
+
+
+def pid_spectral_radius(gains, h: float) -> float:
+    """Spectral radius of the sampled PID tracking loop of Eq. 3.19 (below 1: stable).
+
+    The tracking error ``e = q - q_d`` of a double integrator whose acceleration
+    ``-(alpha e' + beta e + gamma int e)`` is held over each interval ``h``
+    (the trapezoid rule for the integral, as :class:`ForwardStaticOptimization`).
+    """
+    alpha, beta, gamma = (float(g) for g in gains)
+    A = np.array([[1.0, h, 0.0], [0.0, 1.0, 0.0], [h, h * h / 2.0, 1.0]])
+    B = np.array([h * h / 2.0, h, h ** 3 / 4.0])
+    K = np.array([-beta, -alpha, -gamma])
+    return float(np.max(np.abs(np.linalg.eigvals(A + np.outer(B, K)))))
+
+
+def _pid_bandwidth(gains) -> float:
+    """``omega`` of the triple pole the gains would place (their largest equivalent)."""
+    alpha, beta, gamma = (abs(float(g)) for g in gains)
+    return max(alpha / 3.0, np.sqrt(beta / 3.0), np.cbrt(gamma), 1e-12)
 
 
 def _external_drive(model, t, external):
@@ -110,8 +146,18 @@ class ForwardStaticOptimization:
         PID gains of Eq. 3.19; default from ``omega`` (triple pole).
     omega : float
         Bandwidth (rad/s) of the default PID gains.
-    control_points : int
+    control_points : int or None
         Number of uniformly spaced QP instants over the trial (thesis: 100).
+        Default: 100, or for ``tracking="pid"`` more if needed for
+        ``omega h <= 0.5`` (a stable sampled loop).
+    max_tracking_error : float
+        Largest accepted ``|q - q_d|`` at a control point (rad, or m for
+        translations; default 1 deg).  Above it the run stops with a
+        ConvergenceError naming the time and coordinate.
+    allow_divergence : bool
+        Keep going past ``max_tracking_error`` (and an unstable PID sampling):
+        the result gets a ``diverged`` channel (1 where the error is above the
+        tolerance) and ``meta["diverged"]``, and a warning is issued.
     integrator : "rk4" | "RK45" | any solve_ivp method
     substeps : int
         RK4 steps per control interval.
@@ -124,7 +170,9 @@ class ForwardStaticOptimization:
     -----------------------------------------------------
     t_ (K,) control points; t_hold_ (K,) middles of the hold intervals; q_, v_
     (K, nv) simulated state; q_desired_, v_desired_; acc_desired_ ``a*``;
-    tracking_error_ ``q_ - q_desired_``; forces_, activations_ (K, m) held
+    tracking_error_ ``q_ - q_desired_``; diverged_ (bool) and divergence_
+    (``{"time", "control_point", "coordinate", "error"}`` of the first
+    tolerance violation, or None); forces_, activations_ (K, m) held
     from each control point; reserves_; cost_; trajectory_ (a Trial on the
     integration grid); n_qp_, n_iter_; time_ (s); result_ (a Trial with
     ``<coord>``, ``<coord>_speed``, ``<coord>_desired``, ``<coord>_error``,
@@ -133,10 +181,11 @@ class ForwardStaticOptimization:
 
     def __init__(self, *, mode: str = "force", exponent: float = 2, weights: str = "none",
                  tracking: str = "pid", enforce: str = "constraint", tracking_weight: float = 1e6,
-                 gains=None, omega: float = 20.0, control_points: int = 100,
+                 gains=None, omega: float = 20.0, control_points: int | None = None,
                  integrator: str = "rk4", substeps: int = 4, reserves: bool = False,
                  reserve_weight: float = 1000.0, tol: float = 1e-9, rtol: float = 1e-6,
-                 atol: float = 1e-8):
+                 atol: float = 1e-8, max_tracking_error: float = MAX_TRACKING_ERROR,
+                 allow_divergence: bool = False):
         self.mode = mode
         self.exponent = exponent
         self.weights = weights
@@ -153,11 +202,14 @@ class ForwardStaticOptimization:
         self.tol = tol
         self.rtol = rtol
         self.atol = atol
+        self.max_tracking_error = max_tracking_error
+        self.allow_divergence = allow_divergence
 
     def get_params(self) -> dict:
         return {k: getattr(self, k) for k in (
             "mode", "exponent", "weights", "tracking", "enforce", "tracking_weight", "gains", "omega",
-            "control_points", "integrator", "substeps", "reserves", "reserve_weight", "tol", "rtol", "atol")}
+            "control_points", "integrator", "substeps", "reserves", "reserve_weight", "tol", "rtol", "atol",
+            "max_tracking_error", "allow_divergence")}
 
     def _check_params(self):
         if self.mode not in MODES:
@@ -169,8 +221,10 @@ class ForwardStaticOptimization:
                               f"3.19); got {self.tracking!r}")
         if self.enforce not in ENFORCE:
             raise SolverError(f"enforce must be one of {', '.join(ENFORCE)}; got {self.enforce!r}")
-        if int(self.control_points) < 2:
+        if self.control_points is not None and int(self.control_points) < 2:
             raise SolverError(f"control_points must be >= 2; got {self.control_points!r}")
+        if not float(self.max_tracking_error) > 0:
+            raise SolverError(f"max_tracking_error must be > 0 (rad, or m); got {self.max_tracking_error!r}")
         if int(self.substeps) < 1:
             raise SolverError(f"substeps must be >= 1; got {self.substeps!r}")
         _qp.check_exponent(self.exponent)
@@ -185,6 +239,27 @@ class ForwardStaticOptimization:
             return g
         w = float(self.omega)
         return 3.0 * w, 3.0 * w * w, w ** 3
+
+    def _control_times(self, t0: float, t1: float) -> np.ndarray:
+        """The control points over [t0, t1]; refuses a count that makes the PID loop unstable."""
+        n = self.control_points
+        if self.tracking != "pid":
+            return np.linspace(t0, t1, 100 if n is None else int(n))
+        gains = self._pid_gains()
+        need = int(np.ceil((t1 - t0) * _pid_bandwidth(gains) / PID_OMEGA_H)) + 1
+        n = max(100, need) if n is None else int(n)
+        h = (t1 - t0) / (n - 1)
+        rho = pid_spectral_radius(gains, h)
+        if rho >= 1.0:
+            msg = (f"FSO: {n} control points over {t1 - t0:.4g} s hold each force for h = {h:.4g} s, too long "
+                   f"for the PID gains (alpha, beta, gamma) = {tuple(round(g, 4) for g in gains)}: the sampled "
+                   f"tracking loop is unstable (spectral radius {rho:.3g} > 1; omega h = "
+                   f"{_pid_bandwidth(gains) * h:.3g}, stable below about 0.67) and would diverge; use "
+                   f"control_points >= {need} (--control-points), or lower omega / the gains")
+            if not self.allow_divergence:
+                raise ConvergenceError(msg)
+            warnings.warn(msg + "; going on (allow_divergence)", stacklevel=3)
+        return np.linspace(t0, t1, n)
 
     # -- running -------------------------------------------------------------
     def fit(self, model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, external_loads=None, frames=None,
@@ -219,7 +294,9 @@ class ForwardStaticOptimization:
         q_s = CubicHermiteSpline(t_ref, ref.q, ref.v, axis=0)
         v_s = CubicHermiteSpline(t_ref, ref.v, ref.a, axis=0)
         a_s = v_s.derivative()
-        tc = np.linspace(t_ref[0], t_ref[-1], int(self.control_points))
+        tc = self._control_times(float(t_ref[0]), float(t_ref[-1]))
+        if progress is not None and hasattr(progress, "total"):
+            progress.total = tc.size
         # cost weights and force map
         f_max = np.asarray(muscles.f_max, dtype=float)
         prop = _muscle_property(muscles, self.weights)
@@ -260,6 +337,9 @@ class ForwardStaticOptimization:
             return total + sum(c.generalized_force(model, mo, cache=c.prepare(model, mo))[0] for c in comps)
 
         alpha, beta, gamma = self._pid_gains()
+        tol_err = float(self.max_tracking_error)
+        rotational = set(model.rotational_coordinates)
+        divergence = None
         q = ref.q[0].copy()
         v = ref.v[0].copy()
         integ = np.zeros(nv)
@@ -371,6 +451,13 @@ class ForwardStaticOptimization:
             fine_v.extend(Vg[1:])
             if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
                 raise SolverError(f"FSO: the simulation diverged after t = {ti:.4g} s")
+            if divergence is None:
+                err = np.abs(q - q_s(tc[kk + 1]))
+                if np.any(err > tol_err):
+                    j = int(np.argmax(err > tol_err))
+                    divergence = self._divergence(model, tc[kk + 1], kk + 1, j, err[j], rotational)
+                    if not self.allow_divergence:
+                        raise ConvergenceError(divergence["message"])
             if progress is not None:
                 progress.update(1)
         if progress is not None:
@@ -388,6 +475,10 @@ class ForwardStaticOptimization:
         self.activations_ = X if self.mode == "activation" else F_out / f_max
         self.reserves_ = RHO if self.reserves else None
         self.tracking_error_ = self.q_ - self.q_desired_
+        self.diverged_ = divergence is not None
+        self.divergence_ = divergence
+        if divergence is not None:
+            warnings.warn(divergence["message"] + "; result kept and flagged (allow_divergence)", stacklevel=2)
         self.trajectory_ = Trial(np.asarray(fine_t), {
             **{c: np.asarray(fine_q)[:, j] for j, c in enumerate(model.coordinates)},
             **{f"{c}_speed": np.asarray(fine_v)[:, j] for j, c in enumerate(model.coordinates)}},
@@ -405,6 +496,22 @@ class ForwardStaticOptimization:
 
     run = fit
 
+    def _divergence(self, model, t, k, j, error, rotational) -> dict:
+        """The first tracking-error violation, with the message of the ConvergenceError."""
+        c = model.coordinates[j]
+        tol = float(self.max_tracking_error)
+        if c in rotational:
+            size = f"{np.rad2deg(error):.3g} deg, above max_tracking_error = {np.rad2deg(tol):.3g} deg"
+        else:
+            size = f"{error:.3g} m, above max_tracking_error = {tol:.3g} m"
+        why = ("the muscles (with reserves, if any) cannot follow the motion, or the control points "
+               "are too sparse; try more control points, lower gains, or enforce='cost'")
+        msg = (f"FSO: the tracking error of '{c}' reached {size} at t = {t:.4g} s (control point {k}): "
+               f"the simulation does not follow the motion ({why}; allow_divergence=True, "
+               "--allow-divergence, keeps such a result, flagged)")
+        return {"time": float(t), "control_point": int(k), "coordinate": c, "error": float(error),
+                "message": msg}
+
     def _result_trial(self) -> Trial:
         ch = {}
         for j, c in enumerate(self.coordinates_):
@@ -420,8 +527,14 @@ class ForwardStaticOptimization:
             for j, c in enumerate(self.coordinates_):
                 ch[f"{c}_reserve"] = self.reserves_[:, j]
         ch["cost"] = self.cost_
-        return Trial(self.t_, ch, meta={"analysis": "forward_static_optimization",
-                                        **{k: str(v) for k, v in self.get_params().items()}})
+        meta = {"analysis": "forward_static_optimization", **{k: str(v) for k, v in self.get_params().items()}}
+        if getattr(self, "inputs_", None) is not None:
+            meta.update(self.inputs_.meta())
+        if self.allow_divergence:
+            ch["diverged"] = np.any(np.abs(self.tracking_error_) > float(self.max_tracking_error),
+                                    axis=1).astype(float)
+            meta["diverged"] = self.divergence_["message"] if self.diverged_ else "no"
+        return Trial(self.t_, ch, meta=meta)
 
     def report(self) -> str:
         if not hasattr(self, "result_"):
@@ -441,8 +554,13 @@ class ForwardStaticOptimization:
             f"  solver         {self.n_qp_} proxsuite QPs, {self.n_iter_} iterations",
             f"  time           {self.time_ * 1e3:.1f} ms",
         ]
+        if getattr(self, "inputs_", None) is not None:
+            lines += [f"  {ln}" for ln in self.inputs_.describe()]
         if self.reserves_ is not None:
             lines.append(f"  reserves       max {np.max(np.abs(self.reserves_)):.4g} N m")
+        if self.diverged_:
+            lines.append(f"  DIVERGED       from t = {self.divergence_['time']:.4g} s "
+                         f"('{self.divergence_['coordinate']}'); the result does not track the motion")
         return "\n".join(lines)
 
 

@@ -49,12 +49,13 @@ the objective, iterations, convergence and constraint violation.
 from __future__ import annotations
 
 import time as _time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..components import Motion
-from ..errors import ConvergenceError, InfeasibleError, ModelError, SolverError, TrialError
+from ..errors import ConvergenceError, InfeasibleError, ModelError, ResidualWarning, SolverError, TrialError
 from ..kinematics import DEFAULT_CUTOFF, prepare
 from ..residuals import floating_base_residuals
 from ..trial import Trial
@@ -785,6 +786,8 @@ class StaticOptimization:
         self.plan_ = plan
         self.residuals_ = (floating_base_residuals(model, motion, plan.tau_full, inputs.external)
                            if plan.tau_full is not None else None)
+        if self.residuals_ is not None and self.residuals_.warning():
+            warnings.warn(self.residuals_.warning(), ResidualWarning, stacklevel=2)
         self._model_rot = tuple(model.rotational_coordinates)
         self._solve(prob, progress=progress)
         t2 = _time.perf_counter()
