@@ -31,13 +31,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .components import Motion
 from .errors import TrialError
-from .skeleton import ExternalForce
 from .trial import Trial, parse_ground_reaction
+
+if TYPE_CHECKING:   # pinmsk.skeleton imports Pinocchio; the CLI's parser (--help) reads DEFAULT_CUTOFF here
+    from .skeleton import ExternalForce
 
 __all__ = ["DEFAULT_CUTOFF", "FILTER_ORDER", "Filtering", "TrialInputs", "prepare", "cutoff_value",
            "is_planar", "has_ground_reaction", "lowpass_external"]
@@ -172,6 +175,8 @@ def lowpass_wrenches(W: np.ndarray, *, rate: float, cutoff: float | None) -> np.
 
 def lowpass_external(external, *, rate: float, cutoff) -> tuple[ExternalForce, ...]:
     """:class:`ExternalForce` s with their wrenches (about the origin) low-passed at ``cutoff`` Hz."""
+    from .skeleton import ExternalForce
+
     c = cutoff_value(cutoff)
     out = []
     for e in external:
@@ -185,6 +190,7 @@ def lowpass_external(external, *, rate: float, cutoff) -> tuple[ExternalForce, .
 def _plate_loads(model, grf: Trial, motion: Motion, *, cutoff, external_loads, frames, planar,
                  q_on_grf_time, same_time: bool):
     from . import grf as _grf
+    from .skeleton import ExternalForce
     _grf.check_vertical_force(grf, min_force=MIN_FORCE)
     plist = _grf.plates(model, grf, external_loads=external_loads, frames=frames, q=q_on_grf_time,
                         min_force=MIN_FORCE)
