@@ -62,8 +62,8 @@ def _frame_joint(pmodel: pin.Model, name: str) -> int:
     raise ModelError(f"model has no frame or body '{name}'{hint}")
 
 
-def _world_wrench_origin(ext: ExternalForce, n: int) -> np.ndarray:
-    """(N, 6) spatial force [f, p x f + tau] about the world origin."""
+def world_wrench(ext: ExternalForce, n: int) -> np.ndarray:
+    """(N, 6) spatial force ``[f, p x f + tau]`` of an :class:`ExternalForce` about the world origin."""
     f = _frames(ext.force, 3, f"external force on '{ext.frame}'")
     p = _frames(ext.point, 3, f"application point on '{ext.frame}'")
     if f.shape[0] != n or p.shape[0] != n:
@@ -108,7 +108,7 @@ def inverse_dynamics(model, q, v, a, *, external: Sequence[ExternalForce] = (),
                 progress.update(min(PROGRESS_CHUNK, n - start))
         return out
     joints = [_frame_joint(pm, e.frame) for e in external]
-    wrenches = [_world_wrench_origin(e, n) for e in external]
+    wrenches = [world_wrench(e, n) for e in external]
     fext = pin.StdVec_Force()
     for _ in range(pm.njoints):
         fext.append(pin.Force.Zero())

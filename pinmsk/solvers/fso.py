@@ -73,7 +73,7 @@ from ..skeleton import integrate
 from ..trial import Trial
 from . import qp as _qp
 from ..kinematics import DEFAULT_CUTOFF, prepare
-from ..skeleton import ExternalForce, external_generalized_force
+from ..skeleton import ExternalForce, external_generalized_force, world_wrench
 from .static import MODES, WEIGHTS, _muscle_property, as_motion, check_model
 
 TRACKING = ("q", "qv", "qva", "pid")
@@ -114,9 +114,7 @@ def _external_drive(model, t, external):
     if not external:
         return None
     frames = [e.frame for e in external]
-    W = [np.hstack([np.asarray(e.force, dtype=float), np.asarray(e.torque, dtype=float)
-                    + np.cross(np.asarray(e.point, dtype=float), np.asarray(e.force, dtype=float))])
-         for e in external]
+    W = [world_wrench(e, len(t)) for e in external]
     zero = np.zeros((1, 3))
 
     def drive(ti, q):
