@@ -2,19 +2,10 @@
 import re
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
-
-
-def run(script, out):
-    res = subprocess.run([sys.executable, str(REPO / "examples" / script), str(out)],
-                         capture_output=True, text=True, timeout=300, env={"MPLBACKEND": "Agg",
-                                                                           **__import__("os").environ})
-    assert res.returncode == 0, res.stderr[-3000:]
-    return res.stdout
+from conftest import REPO, run_example as run
 
 
 def test_example_02_static_optimization(tmp_path):
