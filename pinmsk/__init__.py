@@ -5,22 +5,50 @@
     trial = pinmsk.read_trial("trial.csv")
     tau = pinmsk.inverse_dynamics(model, trial)
 
-Public names are re-exported here; see the submodules for the rest.
+Public names are re-exported here; see the submodules for the rest.  They are
+imported on first use (PEP 562), so ``import pinmsk`` and ``pinmsk --help``
+do not pay for Pinocchio and SciPy until something needs them.
 """
+from __future__ import annotations
+
+import importlib
+import importlib.util
+
 from .errors import (ConvergenceError, InfeasibleError, ModelError, PinmskError, SolverError,
                      TrialError)
-from .components import Component, Motion, Parameter
-from .model import Model, load_model
-from .trial import Trial
-from .io import read_trial, write_trial
-from .skeleton import ExternalForce
-from .dynamics import component_forces, inverse_dynamics, simulate
-from .builtin_models import builtin_names
 
 __version__ = "0.1.0"
+
+#: Public name -> the submodule that defines it (imported when the name is first used).
+_LAZY = {
+    "Component": "components", "Motion": "components", "Parameter": "components",
+    "Model": "model", "load_model": "model",
+    "Trial": "trial",
+    "read_trial": "io", "write_trial": "io",
+    "ExternalForce": "skeleton",
+    "component_forces": "dynamics", "inverse_dynamics": "dynamics", "simulate": "dynamics",
+    "builtin_names": "builtin_models",
+}
 
 __all__ = [
     "Component", "ConvergenceError", "ExternalForce", "InfeasibleError", "Model", "ModelError",
     "Motion", "Parameter", "PinmskError", "SolverError", "Trial", "TrialError", "builtin_names",
     "component_forces", "inverse_dynamics", "load_model", "read_trial", "simulate", "write_trial",
 ]
+
+
+def __getattr__(name: str):
+    module = _LAZY.get(name)
+    if module is not None:
+        value = getattr(importlib.import_module(f".{module}", __name__), name)
+        globals()[name] = value          # later look-ups skip this function
+        return value
+    if not name.startswith("_") and importlib.util.find_spec(f"{__name__}.{name}") is not None:
+        # submodules (pinmsk.dynamics, pinmsk.io, ...) stay reachable as attributes,
+        # as they were when this package imported them eagerly
+        return importlib.import_module(f".{name}", __name__)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))

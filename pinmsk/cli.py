@@ -59,10 +59,32 @@ def _add_read_flags(s) -> None:
                         "gait10dof-gait2d (see pinmsk.channel_map)")
 
 
-def _write(trial, path):
+def _write(trial, path, precision=None):
     from .io import write_trial
-    write_trial(trial, path)
+    write_trial(trial, path, precision=precision)
     print(f"wrote {path}")
+
+
+def _precision(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = None
+    if value is None or not 1 <= value <= 17:
+        raise argparse.ArgumentTypeError(f"expected significant digits from 1 to 17, got {text!r}")
+    return value
+
+
+def _precision_flag(s) -> None:
+    """``--precision N`` on a command that writes a trial."""
+    s.add_argument("--precision", type=_precision, default=None, metavar="N",
+                   help="significant digits written per value (default 9; 17 = exact float64)")
+
+
+def _progress(total, label, unit=""):
+    """A progress line on stderr for a step that may take long (drawn on a terminal only)."""
+    from .progress import Progress
+    return Progress(total, label, unit=unit)
 
 
 def _inputs(args) -> dict:
@@ -119,10 +141,11 @@ def cmd_id(args) -> int:
     from .dynamics import inverse_dynamics_result
     model = _model(args)
     trial = _read(args.trial, model, args)
-    res = inverse_dynamics_result(model, trial, **_inputs(args))
+    with _progress(trial.n_frames, "ID", "frames") as bar:
+        res = inverse_dynamics_result(model, trial, **_inputs(args), progress=bar)
     print(res.report())
     out = res.trial
-    _write(out, args.output)
+    _write(out, args.output, args.precision)
     _plot(args, out, [f"{c}_moment" for c in model.coordinate_order], "inverse_dynamics", "moment (N m)")
     return 0
 
@@ -141,7 +164,7 @@ def cmd_simulate(args) -> int:
     q0 = _named_values(args.q0, model, "--q0")
     v0 = _named_values(args.v0, model, "--v0")
     out = simulate(model, t=t, q0=q0, v0=v0, moments=moments, method=args.method)
-    _write(out, args.output)
+    _write(out, args.output, args.precision)
     _plot(args, out, list(model.coordinate_order), "simulation", "coordinate (rad or m)")
     return 0
 
@@ -173,17 +196,17 @@ def _report_results(args, model, trial, result, title, text):
 
 def _run_solver(args, solver, total: int | None, label: str, title: str) -> int:
     """Fit a muscle-redundancy solver on the trial with a progress bar, then write and report."""
-    from .progress import Progress
     model = _model(args)
     trial = _read(args.trial, model, args)
     kw = _inputs(args)
     if getattr(args, "moments", None):
         kw["moments"] = args.moments
-    with Progress(trial.n_frames if total is None else total, label) as bar:
+    with _progress(trial.n_frames if total is None else total, label,
+                   "frames" if total is None else "steps") as bar:
         solver.fit(model, trial, progress=bar, **kw)
     text = solver.report()
     print(text)
-    _write(solver.result_, args.output)
+    _write(solver.result_, args.output, args.precision)
     _report_results(args, model, trial, solver.result_, title, text)
     return 0
 
@@ -224,7 +247,7 @@ def cmd_synth(args) -> int:
     trial = make_trial(args.model, args.effect or [], duration=args.duration, rate=args.rate,
                        noise=None if args.no_noise else "realistic", seed=args.seed,
                        measure=args.measure or None)
-    _write(trial, args.output)
+    _write(trial, args.output, args.precision)
     return 0
 
 
@@ -272,7 +295,8 @@ _OPTIMIZE_EPILOG = (
 
 def cmd_optimize(args) -> int:
     from .solvers.dynamic import optimize_task
-    res = optimize_task(args.task, args.output)
+    with _progress(None, "optimize", "iterations") as bar:
+        res = optimize_task(args.task, args.output, progress=bar, precision=args.precision)
     print(res.report())
     result = res.to_trial()
     _plot(args, result, [n for n in result.names if n.endswith(("_excitation", "_activation"))],
@@ -310,6 +334,27 @@ def cmd_batch(args) -> int:
 
 # -- parser ----------------------------------------------------------------------
 
+def _version() -> str:
+    """The installed distribution's version, or the package's own when not installed."""
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        return version("pinmsk")
+    except PackageNotFoundError:
+        from . import __version__
+        return __version__
+
+
+class _VersionAction(argparse.Action):
+    """``--version``: looks the version up only when asked (importlib.metadata is not free)."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS, help=None):
+        super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(f"pinmsk {_version()}")
+        parser.exit()
+
+
 def input_flags(s) -> None:
     """The flags of every command that analyses a trial: filter and external loads."""
     s.add_argument("--cutoff", type=float, default=DEFAULT_CUTOFF, metavar="HZ",
@@ -331,6 +376,7 @@ def input_flags(s) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="pinmsk", description="Human musculoskeletal dynamics on Pinocchio.")
+    p.add_argument("--version", action=_VersionAction, help="print the version (pinmsk X.Y.Z) and exit")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
 
@@ -347,6 +393,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("model")
     s.add_argument("trial", help="trial file (.csv with a time column, .sto or .mot)")
     s.add_argument("-o", "--output", required=True, help="output .sto or .csv")
+    _precision_flag(s)
     input_flags(s)
     s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
@@ -363,6 +410,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--v0", nargs="*", metavar="COORD=RAD_S", help="initial speeds (default 0)")
     s.add_argument("--method", default="rk4", help="rk4 (fixed step) or a solve_ivp method, e.g. RK45")
     s.add_argument("-o", "--output", required=True, help="output .sto or .csv")
+    _precision_flag(s)
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
     _add_read_flags(s)
     s.set_defaults(func=cmd_simulate)
@@ -375,6 +423,7 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("model")
         s.add_argument("trial", help="trial with the coordinates (and optionally <coord>_moment)")
         s.add_argument("-o", "--output", required=True, help="output .sto or .csv")
+        _precision_flag(s)
         s.add_argument("--mode", choices=["force", "activation"], default="force",
                        help="unknowns: muscle forces (0..F_max) or activations (F = a F_active + F_passive)")
         s.add_argument("--exponent", type=float, default=2.0, help="P in sum (F/N)^P (1 = LP, 2 = QP, >2 SQP)")
@@ -441,6 +490,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="channel groups to record (default: by model)")
     s.add_argument("--no-noise", action="store_true", help="noise-free channels")
     s.add_argument("-o", "--output", required=True, help="output .csv or .sto")
+    _precision_flag(s)
     s.set_defaults(func=cmd_synth)
 
     s = sub.add_parser("contact", help="foot-ground contact models (thesis Ch. 4)")
@@ -473,6 +523,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=_OPTIMIZE_EPILOG)
     s.add_argument("task", help="TOML task file (examples in data/tasks/)")
     s.add_argument("-o", "--output", default=None, help="result trial (.sto/.csv), plus OUT.json")
+    _precision_flag(s)
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
     s.set_defaults(func=cmd_optimize)
 

@@ -38,9 +38,10 @@ def component_forces(model, motion: Motion) -> dict[str, np.ndarray]:
 
 
 def inverse_dynamics_array(model, motion: Motion, *, external: Sequence[skeleton.ExternalForce] = (),
-                           components: bool = True) -> np.ndarray:
+                           components: bool = True, progress=None) -> np.ndarray:
     """Actuator generalized forces ``(N, nv)`` for a Motion (see :func:`inverse_dynamics`)."""
-    tau = skeleton.inverse_dynamics(model, motion.q, motion.v, motion.a, external=external)
+    tau = skeleton.inverse_dynamics(model, motion.q, motion.v, motion.a, external=external,
+                                    progress=progress)
     if components:
         for f in component_forces(model, motion).values():
             tau -= f
@@ -66,7 +67,7 @@ class InverseDynamicsResult:
 def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, external_loads=None,
                             frames=None, ground_reaction: str = "auto", grf_cutoff="same",
                             external: Sequence[skeleton.ExternalForce] = (),
-                            components: bool = True) -> InverseDynamicsResult:
+                            components: bool = True, progress=None) -> InverseDynamicsResult:
     """Inverse dynamics with its inputs and residual report (see :func:`inverse_dynamics`)."""
     inputs = prepare(model, trial, cutoff=cutoff, grf=grf, external_loads=external_loads, frames=frames,
                      ground_reaction=ground_reaction, grf_cutoff=grf_cutoff)
@@ -82,7 +83,7 @@ def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, ex
                          notes=inputs.notes + ("external wrenches given by the caller on "
                                                + ", ".join(e.frame for e in ext),))
     motion = inputs.motion
-    tau = inverse_dynamics_array(model, motion, external=ext, components=components)
+    tau = inverse_dynamics_array(model, motion, external=ext, components=components, progress=progress)
     residuals = floating_base_residuals(model, motion, tau, ext)
     idx = [model.coordinate_index(c) for c in model.coordinate_order]
     chans = {c: motion.q[:, i] for c, i in zip(model.coordinate_order, idx)}
@@ -102,7 +103,8 @@ def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, ex
 
 def inverse_dynamics(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, external_loads=None, frames=None,
                      ground_reaction: str = "auto", grf_cutoff="same",
-                     external: Sequence[skeleton.ExternalForce] = (), components: bool = True) -> Trial:
+                     external: Sequence[skeleton.ExternalForce] = (), components: bool = True,
+                     progress=None) -> Trial:
     """Inverse dynamics of a trial: the actuator moments ``<coord>_moment`` (N m or N).
 
     ``tau = M(q) a + h(q, v) - J^T f_ext - sum_k Q_k(q, v, a)``: what muscles
@@ -116,12 +118,13 @@ def inverse_dynamics(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, external_
     :class:`~pinmsk.skeleton.ExternalForce` s on the trial's time base instead
     (low-passed like the GRF).  The
     output's metadata says which filter and loads were applied; the residuals
-    at a floating base are in :func:`inverse_dynamics_result`.
+    at a floating base are in :func:`inverse_dynamics_result`.  ``progress``
+    (an object with ``update(n)``) is told the frames done, a chunk at a time.
     """
     return inverse_dynamics_result(model, trial, cutoff=cutoff, grf=grf, external_loads=external_loads,
                                    frames=frames, ground_reaction=ground_reaction, grf_cutoff=grf_cutoff,
-                                   external=external,
-                                   components=components).trial
+                                   external=external, components=components,
+                                   progress=progress).trial
 
 
 def skeleton_with_inertias(model) -> pin.Model:

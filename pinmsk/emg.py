@@ -20,7 +20,6 @@ from __future__ import annotations
 from typing import Mapping, Sequence
 
 import numpy as np
-from scipy.signal import butter, sosfiltfilt
 
 from .errors import TrialError
 from .filtering import filter_padlen, lowpass
@@ -57,6 +56,8 @@ def envelope(x, *, rate: float, band: tuple[float, float] | None = DEFAULT_BAND,
             raise TrialError(f"{n} EMG samples are too few to band-pass")
         if not np.all(np.isfinite(x)):
             raise TrialError("EMG contains NaN/inf; cut or fill the gap before the envelope")
+        from scipy.signal import butter, sosfiltfilt   # here, not at import (slow)
+
         sos = butter(order, [lo / (0.5 * rate), hi / (0.5 * rate)], btype="band", output="sos")
         x = sosfiltfilt(sos, x, axis=0, padtype="odd", padlen=filter_padlen(order))
     env = lowpass(np.abs(x), rate=rate, cutoff=cutoff, order=order)

@@ -24,8 +24,6 @@ cutoff, rate, number of samples or the offending column and row.
 from __future__ import annotations
 
 import numpy as np
-from scipy.interpolate import make_interp_spline
-from scipy.signal import butter, sosfiltfilt
 
 from pinmsk.errors import TrialError
 
@@ -126,6 +124,8 @@ def lowpass(x, *, rate: float, cutoff: float, order: int = 4) -> np.ndarray:
         )
     padlen = filter_padlen(order, rate=rate, cutoff=cutoff, n=n)
     _check_finite(x, "lowpass input")
+    from scipy.signal import butter, sosfiltfilt   # here, not at import: scipy.signal costs ~1 s
+
     sos = butter(order, cutoff / nyquist, btype="low", output="sos")
     return sosfiltfilt(sos, x, axis=0, padtype="odd", padlen=padlen)
 
@@ -185,5 +185,7 @@ def differentiate(time, x, *, cutoff: float | None = None, order: int = 4):
                 "first, e.g. trial.resample(rate)"
             )
         x = lowpass(x, rate=1.0 / step, cutoff=cutoff, order=order)
+    from scipy.interpolate import make_interp_spline
+
     spline = make_interp_spline(t, x, k=5, axis=0)
     return x, spline.derivative(1)(t), spline.derivative(2)(t)

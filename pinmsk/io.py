@@ -34,9 +34,12 @@ force, moment, torque, activation, excitation, emg, length, power, energy).
 Writes are atomic: the file is written to a temporary file in the target
 directory and moved over the target with :func:`os.replace`; on any error the
 temporary file is removed and an existing target is left as it was.  Numbers
-are written with 17 significant digits, so a write then read gives the same
-float64 values.  Every other output of pinmsk (JSON, HTML reports, PNG
-figures, batch tables) goes through the same :func:`atomic_write`;
+are written as ``%.9g`` (``precision=9`` significant digits, about what
+measured or computed channels carry); ``precision=17`` writes every float64
+exactly, so a write then read gives the same values.  The time column gets
+more digits where 9 would not keep its steps distinct to 1 %.  Every other
+output of pinmsk (JSON, HTML reports, PNG figures, batch tables) goes
+through the same :func:`atomic_write`;
 :func:`write_json` refuses NaN and Infinity; :func:`check_output_file` and
 :func:`output_folder` check an output place before a command runs; and
 :func:`output_transaction` removes a failed command's earlier outputs.
@@ -51,6 +54,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import functools
 import io as _io
 import json
 import os
@@ -73,7 +77,8 @@ __all__ = ["read_trial", "write_trial", "read_sto_header", "StoHeader", "FORMATS
 #: File suffix -> format name.
 FORMATS = {".csv": "csv", ".sto": "sto", ".mot": "mot"}
 
-_FLOAT_FORMAT = "%.17g"
+#: Significant digits written by default (``write_trial(precision=...)``, CLI ``--precision``).
+DEFAULT_PRECISION = 9
 #: Time units :func:`read_trial` takes (``time_unit``), as factors to seconds.
 TIME_UNITS = {"s": 1.0, "ms": 1e-3}
 #: A median time step above this (s), i.e. a rate below 5 Hz, is not a motion recording in
@@ -601,9 +606,238 @@ def _meta_lines(meta) -> str:
     return "".join(out)
 
 
-def _write_rows(fh, table: np.ndarray, delimiter: str) -> None:
-    """Write the (N, 1 + C) numeric table, one line per frame."""
-    np.savetxt(fh, table, fmt=_FLOAT_FORMAT, delimiter=delimiter)
+#: Values formatted per block: the formatter's scratch arrays then stay in the CPU cache.
+_BLOCK_VALUES = 8192
+
+#: Largest precision of the vectorised formatter: its digits come from
+#: ``|x| * 10^k`` in float64, exact to well below one unit of the last digit
+#: only while that integer stays far below 2^53.
+_FAST_DIGITS = 12
+
+
+def check_precision(precision) -> int:
+    """``precision`` as an int from 1 to 17, or TrialError naming it."""
+    if isinstance(precision, bool) or not isinstance(precision, (int, np.integer)) \
+            or not 1 <= precision <= 17:
+        raise TrialError(f"precision must be a whole number of significant digits from 1 to 17 "
+                         f"(17 writes float64 exactly); got {precision!r}")
+    return int(precision)
+
+
+def _time_precision(time: np.ndarray, precision: int) -> int:
+    """Digits for the time column: at least ``precision``, enough that each step stays within 1 %."""
+    t = np.asarray(time, dtype=float)
+    if t.size < 2 or precision >= 17:
+        return precision
+    step = np.diff(t)
+    mag = np.maximum(np.abs(t[1:]), np.abs(t[:-1]))
+    with np.errstate(divide="ignore"):
+        e = np.floor(np.log10(np.where(mag > 0, mag, 1.0)))
+    for p in range(precision, 17):
+        if np.all(step > 100.0 * 10.0 ** (e - p + 1)):
+            return p
+    return 17
+
+
+#: The characters of every ``%.{p}g`` text (p <= 12), in five 8-byte words per value:
+#: ``-0.000`` (the sign, and the ``0.000`` of 0.000ddd), twelve digits each followed
+#: by a ``.`` slot, then ``e``, the exponent's sign, three exponent digits and the separator.
+_TEMPLATE = b"-0.000\0\0" + b"0." * 12 + b"e+000\0\0\0"
+_DIGIT_AT = 8
+_EXP_AT = 32
+#: Kinds of text: 0-15 fixed notation with decimal exponent ``kind - 4``; 16 / 17
+#: scientific with a 2- / 3-digit exponent; 18 zero; 19 Python's text (spliced in).
+_KINDS = 20
+_PYTHON = 19
+
+
+def _as_words(b: np.ndarray) -> np.ndarray:
+    """(..., 8 k) uint8 -> (..., k) uint64 over the same bytes."""
+    return np.ascontiguousarray(b).view(np.uint64)
+
+
+@functools.lru_cache(maxsize=None)
+def _tables() -> dict:
+    """Lookup tables of the vectorised ``%g`` formatter (:func:`_format_block`).
+
+    Every text ``%.{p}g`` gives for a finite non-zero value (p <= 12) is a
+    subsequence of ``_TEMPLATE``.  A value keeps the bytes of its ``code =
+    (negative * _KINDS + kind) * 13 + digits kept`` and the others become NUL,
+    which is then deleted.  Tables (by code): ``prefix`` (word 0, masked),
+    ``keep_digits`` (words 1-3), ``keep_exp`` (word 4), ``lengths``; by value:
+    ``d4`` (10000,) the words ``"d.d.d.d."``, ``nd0/nd1/nd2`` the digits a
+    12-digit mantissa keeps when its last non-zero group of four is group 0/1/2,
+    ``ew`` (800,) the exponent words of -400 ... 399, ``kind13`` (13 * 800,)
+    ``13 * kind`` by ``800 p + exponent + 400``, ``pow10`` 10^0 ... 10^308 and
+    ``pow10_all`` 10^-330 ... 10^330.
+    """
+    tpl = np.frombuffer(_TEMPLATE, dtype=np.uint8)
+    digit = [_DIGIT_AT + 2 * j for j in range(12)]
+    e = _EXP_AT
+    keep = np.zeros((2 * _KINDS * 13, tpl.size), dtype=bool)
+    for neg in (0, 1):
+        for kind in range(_KINDS):
+            for nd in range(1, 13):
+                k = keep[(neg * _KINDS + kind) * 13 + nd]
+                k[e + 5] = True                                  # the separator
+                if kind == _PYTHON:
+                    continue
+                k[0] = bool(neg)
+                if kind < 16:
+                    ex = kind - 4
+                    if ex >= 0:
+                        k[digit[:max(ex + 1, nd)]] = True
+                        if nd > ex + 1:
+                            k[digit[ex] + 1] = True
+                    else:
+                        k[list(range(1, 2 - ex))] = True          # "0." and -ex - 1 zeros
+                        k[digit[:nd]] = True
+                elif kind < 18:
+                    k[digit[:nd]] = True
+                    if nd > 1:
+                        k[digit[0] + 1] = True
+                    k[[e, e + 1, e + 3, e + 4] + ([e + 2] if kind == 17 else [])] = True
+                else:
+                    k[1] = True                                  # zero
+    words = _as_words(np.where(keep, tpl, 0).astype(np.uint8))
+    masks = _as_words(np.where(keep, 0xFF, 0).astype(np.uint8))
+    tz4 = np.array([4 if i == 0 else len(f"{i:04d}") - len(f"{i:04d}".rstrip("0")) for i in range(10000)])
+    kind13 = np.zeros((13, 800), dtype=np.int64)
+    for p in range(1, 13):
+        for ex in range(-400, 400):
+            kind = ex + 4 if -4 <= ex < p else (16 if abs(ex) < 100 else 17)
+            kind13[p, ex + 400] = 13 * kind
+    digits = "".join(".".join(f"{i:04d}") + "." for i in range(10000)).encode()
+    exps = b"".join(b"e" + (b"-" if x < 0 else b"+") + b"%03d" % min(abs(x), 999) + b"\0\0\0"
+                    for x in range(-400, 400))
+    return {
+        "prefix": words[:, 0].copy(), "keep_digits": [masks[:, g].copy() for g in (1, 2, 3)],
+        "keep_exp": masks[:, 4].copy(), "lengths": keep.sum(axis=1),
+        "d4": _as_words(np.frombuffer(digits, dtype=np.uint8).reshape(10000, 8))[:, 0].copy(),
+        "nd0": 4 - tz4, "nd1": 8 - tz4, "nd2": 12 - tz4,
+        "ew": _as_words(np.frombuffer(exps, dtype=np.uint8).reshape(800, 8))[:, 0].copy(),
+        "kind13": kind13.ravel(), "pow10": np.array([float(f"1e{j}") for j in range(309)]),
+        "pow10_all": np.array([float(f"1e{j}") for j in range(-330, 331)]),   # 10^(i - 330)
+    }
+
+
+def _columns(precision, separators) -> dict:
+    """Per-column constants of :func:`_format_block`: ``precision`` (C,) <= 12, ``separators`` (C,) bytes."""
+    t = _tables()
+    prec = np.asarray(precision, dtype=np.int64)
+    sep = np.zeros((prec.size, 8), dtype=np.uint8)
+    sep[:, 5] = np.asarray(separators, dtype=np.uint8)
+    return {"prec": prec, "top": t["pow10"][prec], "low": t["pow10"][prec - 1],
+            # distance from an integer beyond which y may be a rounding tie: 1e-6 at p = 9,
+            # far above the float64 error of y (a few 1e-16 y)
+            "tie": 0.5 - 10.0 ** (prec - 15.0), "align": 10 ** (12 - prec),
+            "kind_at": 800 * prec + 400, "sep": _as_words(sep)[:, 0]}
+
+
+def _format_block(block: np.ndarray, cols: dict) -> bytes:
+    """The text of a (B, C) block: cell ``[i, j]`` as ``"%.{p_j}g" % x`` and column j's separator.
+
+    Vectorised over the block (``cols`` from :func:`_columns`): each value's
+    digits come from ``rint(|x| 10^(p - 1 - exponent))`` in float64 and are laid
+    out by :func:`_tables`.  Values within 1e-6 of their last digit's unit from
+    a rounding tie (where float64 cannot tell which way ``%`` rounds; about
+    2e-6 of random values), non-finite ones and those beyond 1e+-290 are
+    formatted by Python instead, so the text is exactly what ``%`` gives.
+    """
+    t = _tables()
+    pow10 = t["pow10"]
+    prec = cols["prec"]
+    B, C = block.shape
+    x = np.asarray(block, dtype=float)
+    ax = np.abs(x)
+    fast = (ax > 1e-290) & (ax < 1e290)     # False for 0, inf, nan and the extremes
+    all_fast = bool(fast.all())
+    safe = ax if all_fast else np.where(fast, ax, 1.0)
+    # decimal exponent floor(log10 |x|) from the binary one (exact but near powers of ten,
+    # where the check below moves it by one)
+    e2 = np.frexp(safe)[1].astype(np.int64)
+    e2 -= 1
+    e2 *= 78913                     # (e * 78913) >> 18 = floor(e log10 2) for |e| < 1650
+    e2 >>= 18
+    ex = e2 + (safe >= t["pow10_all"][e2 + 331])
+
+    def scaled(e, rows=slice(None)):
+        k = (prec - 1) - e          # within -290 ... 301
+        y = safe[rows] * pow10[np.maximum(k, 0)]
+        big = k < 0                 # |x| >= 10^p: divide by the exact power instead
+        if big.any():
+            y[big] = safe[rows][big] / pow10[-k[big]]
+        r = np.rint(y)
+        return r, np.abs(y - r) > cols["tie"]
+
+    r, slow = scaled(ex)            # a tie here may also decide the exponent
+    shift = (r >= cols["top"]).astype(np.int64) - (r < cols["low"])
+    rows = np.flatnonzero(shift.any(axis=1))
+    if rows.size:                   # log10 one off near powers of ten, or 9.99..95 rounding up
+        ex[rows] += shift[rows]
+        r[rows], slow2 = scaled(ex[rows], rows)
+        slow[rows] |= slow2
+    m = r.astype(np.int64)
+    m *= cols["align"]              # 12 digits, left-aligned
+    g0 = m // 100000000
+    g2 = m % 10000
+    g1 = (m // 10000) % 10000
+    nd = np.where(g2 != 0, t["nd2"][g2], np.where(g1 != 0, t["nd1"][g1], t["nd0"][g0]))
+    code = t["kind13"][ex + cols["kind_at"]]
+    code += nd
+    if not all_fast:
+        code[~fast] = np.where(ax[~fast] == 0.0, 18 * 13 + 1, _PYTHON * 13 + 1)
+        slow |= ~fast & (ax != 0.0)
+    code[slow] = _PYTHON * 13 + 1
+    code += np.signbit(x) * (_KINDS * 13)
+    code = code.ravel()
+    out = np.empty((B * C, 5), dtype=np.uint64)
+    out[:, 0] = t["prefix"][code]
+    for g, grp in enumerate((g0, g1, g2)):
+        out[:, 1 + g] = t["d4"][grp.ravel()] & t["keep_digits"][g][code]
+    e4 = t["ew"][ex + 400]
+    e4 |= cols["sep"]
+    out[:, 4] = e4.ravel() & t["keep_exp"][code]
+    text = out.tobytes().translate(None, b"\0")
+    cells = np.flatnonzero(slow.ravel())
+    if cells.size == 0:
+        return text
+    # splice Python's text in before each such cell's separator (its only byte so far)
+    ends = np.cumsum(t["lengths"][code])[cells] - 1
+    pieces = [("%.*g" % (int(prec[i % C]), x.flat[i])).encode() for i in cells]
+    at = np.repeat(ends, [len(s) for s in pieces])
+    return np.insert(np.frombuffer(text, dtype=np.uint8), at,
+                     np.frombuffer(b"".join(pieces), dtype=np.uint8)).tobytes()
+
+
+def _format_rows(table: np.ndarray, precision: np.ndarray, delimiter: str) -> str:
+    """The text of ``table`` (N, C) by Python's ``%`` (precisions above :data:`_FAST_DIGITS`)."""
+    row = delimiter.join(f"%.{int(p)}g" for p in precision) + "\n"
+    return "".join((row * len(chunk)) % tuple(chunk.ravel().tolist())
+                   for chunk in (table[i:i + 1024] for i in range(0, table.shape[0], 1024)))
+
+
+def _write_rows(fh, table: np.ndarray, delimiter: str, precision: int = DEFAULT_PRECISION) -> None:
+    """Write the (N, 1 + C) numeric table, one line per frame, at ``precision`` significant digits."""
+    prec = np.full(table.shape[1], precision, dtype=np.int64)
+    if table.shape[1]:
+        prec[0] = _time_precision(table[:, 0], precision)
+    seps = np.full(table.shape[1], ord(delimiter), dtype=np.uint8)
+    seps[-1:] = ord("\n")
+    fast = prec.max(initial=0) <= _FAST_DIGITS
+    cols = _columns(prec, seps) if fast else None
+    raw = getattr(fh, "buffer", None)     # the ASCII text goes straight to the byte stream
+    if raw is not None:
+        fh.flush()
+    rows = max(1, _BLOCK_VALUES // max(table.shape[1], 1))
+    for start in range(0, table.shape[0], rows):
+        block = table[start:start + rows]
+        if not fast:
+            fh.write(_format_rows(block, prec, delimiter))
+        elif raw is not None:
+            raw.write(_format_block(block, cols))
+        else:
+            fh.write(_format_block(block, cols).decode("ascii"))
 
 
 # ---------------------------------------------------------------------------
@@ -808,7 +1042,8 @@ def write_json(path, obj, *, default=None, parents: bool = False) -> Path:
     return atomic_write(path, lambda fh: fh.write(text), parents=parents)
 
 
-def write_trial(trial: Trial, path, *, in_degrees: bool = False, angular=None) -> Path:
+def write_trial(trial: Trial, path, *, in_degrees: bool = False, angular=None,
+                precision: int | None = None) -> Path:
     """Write ``trial`` to ``path`` (``.csv``, ``.sto`` or ``.mot``), atomically.
 
     Parameters
@@ -822,6 +1057,10 @@ def write_trial(trial: Trial, path, *, in_degrees: bool = False, angular=None) -
         Channels that are angles (used with ``in_degrees=True``; names not in
         the trial are ignored); default: those
         :func:`pinmsk.trial.is_angular_name` accepts.
+    precision : int or None
+        Significant digits of each value, 1 to 17 (None: :data:`DEFAULT_PRECISION`,
+        9, as ``%.9g``; 17 writes every float64 exactly).  The time column gets more where
+        needed to keep its steps distinct to 1 %.
 
     Returns
     -------
@@ -832,6 +1071,7 @@ def write_trial(trial: Trial, path, *, in_degrees: bool = False, angular=None) -
         raise TypeError(f"write_trial needs a Trial, got {type(trial).__name__}")
     path = Path(path)
     kind = _format_of(path)
+    precision = check_precision(DEFAULT_PRECISION if precision is None else precision)
     names = trial.names
     bad = [n for n in names if any(c in n for c in "\t\r\n")]
     if bad:
@@ -871,7 +1111,7 @@ def write_trial(trial: Trial, path, *, in_degrees: bool = False, angular=None) -
 
     def write(fh):
         fh.write(head)
-        _write_rows(fh, table, delimiter)
+        _write_rows(fh, table, delimiter, precision)
 
     atomic_write(path, write)
     return path

@@ -31,13 +31,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .components import Motion
 from .errors import TrialError
-from .skeleton import ExternalForce
 from .trial import Trial, parse_ground_reaction
+
+if TYPE_CHECKING:   # pinmsk.skeleton imports Pinocchio; the CLI's parser (--help) reads DEFAULT_CUTOFF here
+    from .skeleton import ExternalForce
 
 __all__ = ["DEFAULT_CUTOFF", "FILTER_ORDER", "Filtering", "TrialInputs", "prepare", "cutoff_value",
            "is_planar", "has_ground_reaction", "lowpass_external"]
@@ -172,19 +175,20 @@ def lowpass_wrenches(W: np.ndarray, *, rate: float, cutoff: float | None) -> np.
 
 def lowpass_external(external, *, rate: float, cutoff) -> tuple[ExternalForce, ...]:
     """:class:`ExternalForce` s with their wrenches (about the origin) low-passed at ``cutoff`` Hz."""
+    from .skeleton import ExternalForce, world_wrench
+
     c = cutoff_value(cutoff)
     out = []
     for e in external:
-        F = np.asarray(e.force, dtype=float)
-        M = np.cross(np.asarray(e.point, dtype=float), F) + (0.0 if e.torque is None else np.asarray(e.torque))
-        W = lowpass_wrenches(np.hstack([F, M]), rate=rate, cutoff=c)
-        out.append(ExternalForce(e.frame, W[:, :3].copy(), np.zeros_like(F), W[:, 3:].copy()))
+        W = lowpass_wrenches(world_wrench(e, np.shape(e.force)[0]), rate=rate, cutoff=c)
+        out.append(ExternalForce(e.frame, W[:, :3].copy(), np.zeros((W.shape[0], 3)), W[:, 3:].copy()))
     return tuple(out)
 
 
 def _plate_loads(model, grf: Trial, motion: Motion, *, cutoff, external_loads, frames, planar,
                  q_on_grf_time, same_time: bool):
     from . import grf as _grf
+    from .skeleton import ExternalForce
     _grf.check_vertical_force(grf, min_force=MIN_FORCE)
     plist = _grf.plates(model, grf, external_loads=external_loads, frames=frames, q=q_on_grf_time,
                         min_force=MIN_FORCE)
@@ -267,8 +271,6 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
         grf = read_trial(grf)
     elif grf is not None:
         source = grf.meta.get("source", "grf trial")
-    elif own:
-        source = None
     if grf is None and not own:
         return TrialInputs(motion, (), (), Filtering(c, grf_cutoff=gc))
     data = grf if grf is not None else trial

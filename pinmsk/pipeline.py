@@ -405,7 +405,7 @@ def batch(trials: Sequence[dict], *, model="gait2d", out=None, base_dir=".", job
     if out is not None:
         output_folder(out)
     try:
-        with Progress(len(trials), "batch", force=bool(progress)) as bar:
+        with Progress(len(trials), "batch", unit="trials", force=progress) as bar:
             if jobs == 1 and not scheduler:
                 for i, t in enumerate(trials):
                     rows[i] = run_trial(t, **args[i])

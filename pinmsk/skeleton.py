@@ -62,8 +62,8 @@ def _frame_joint(pmodel: pin.Model, name: str) -> int:
     raise ModelError(f"model has no frame or body '{name}'{hint}")
 
 
-def _world_wrench_origin(ext: ExternalForce, n: int) -> np.ndarray:
-    """(N, 6) spatial force [f, p x f + tau] about the world origin."""
+def world_wrench(ext: ExternalForce, n: int) -> np.ndarray:
+    """(N, 6) spatial force ``[f, p x f + tau]`` of an :class:`ExternalForce` about the world origin."""
     f = _frames(ext.force, 3, f"external force on '{ext.frame}'")
     p = _frames(ext.point, 3, f"application point on '{ext.frame}'")
     if f.shape[0] != n or p.shape[0] != n:
@@ -78,11 +78,17 @@ def _world_wrench_origin(ext: ExternalForce, n: int) -> np.ndarray:
     return np.hstack([f, m])
 
 
+#: Frames between two ``progress.update`` calls of the long loops here.
+PROGRESS_CHUNK = 4096
+
+
 def inverse_dynamics(model, q, v, a, *, external: Sequence[ExternalForce] = (),
-                     data: pin.Data | None = None) -> np.ndarray:
+                     data: pin.Data | None = None, progress=None) -> np.ndarray:
     """Joint generalized forces ``tau = M(q) a + h(q, v) - J^T f_ext`` over frames (RNEA).
 
     Returns ``(N, nv)``.  ``external`` lists world-frame wrenches at points.
+    ``progress``: an object with ``update(n)``, called every
+    :data:`PROGRESS_CHUNK` frames (e.g. :class:`pinmsk.progress.Progress`).
     """
     pm = _pin(model)
     q = _frames(q, pm.nq, "q")
@@ -95,21 +101,27 @@ def inverse_dynamics(model, q, v, a, *, external: Sequence[ExternalForce] = (),
     out = np.empty((n, pm.nv))
     rnea = pin.rnea
     if not external:
-        for i in range(n):
-            out[i] = rnea(pm, pd, q[i], v[i], a[i])
+        for start in range(0, n, PROGRESS_CHUNK):
+            for i in range(start, min(start + PROGRESS_CHUNK, n)):
+                out[i] = rnea(pm, pd, q[i], v[i], a[i])
+            if progress is not None:
+                progress.update(min(PROGRESS_CHUNK, n - start))
         return out
     joints = [_frame_joint(pm, e.frame) for e in external]
-    wrenches = [_world_wrench_origin(e, n) for e in external]
+    wrenches = [world_wrench(e, n) for e in external]
     fext = pin.StdVec_Force()
     for _ in range(pm.njoints):
         fext.append(pin.Force.Zero())
-    for i in range(n):
-        pin.forwardKinematics(pm, pd, q[i])
-        for j in range(pm.njoints):
-            fext[j].setZero()
-        for jid, w in zip(joints, wrenches):
-            fext[jid] = fext[jid] + pd.oMi[jid].actInv(pin.Force(w[i]))
-        out[i] = rnea(pm, pd, q[i], v[i], a[i], fext)
+    for start in range(0, n, PROGRESS_CHUNK):
+        for i in range(start, min(start + PROGRESS_CHUNK, n)):
+            pin.forwardKinematics(pm, pd, q[i])
+            for j in range(pm.njoints):
+                fext[j].setZero()
+            for jid, w in zip(joints, wrenches):
+                fext[jid] = fext[jid] + pd.oMi[jid].actInv(pin.Force(w[i]))
+            out[i] = rnea(pm, pd, q[i], v[i], a[i], fext)
+        if progress is not None:
+            progress.update(min(PROGRESS_CHUNK, n - start))
     return out
 
 

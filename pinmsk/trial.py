@@ -807,11 +807,11 @@ class Trial:
 
     # -- files -----------------------------------------------------------------
 
-    def write(self, path, *, in_degrees: bool = False, angular=None):
+    def write(self, path, *, in_degrees: bool = False, angular=None, precision: int | None = None):
         """Write to ``.csv``, ``.sto`` or ``.mot``; see :func:`pinmsk.io.write_trial`."""
         from pinmsk.io import write_trial
 
-        return write_trial(self, path, in_degrees=in_degrees, angular=angular)
+        return write_trial(self, path, in_degrees=in_degrees, angular=angular, precision=precision)
 
 
 def _rebuild(time, names, values, units, meta) -> Trial:

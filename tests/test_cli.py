@@ -41,7 +41,10 @@ def test_id_writes_sto_matching_library(tmp_path):
     assert main(["id", "forearm", str(src), "-o", str(out)]) == 0
     got = read_trial(out)
     ref = pinmsk.inverse_dynamics(pinmsk.load_model("forearm"), read_trial(src))
-    assert np.allclose(got["elbow_flexion_moment"], ref["elbow_flexion_moment"], rtol=1e-12, atol=1e-12)
+    # written at the default 9 significant digits
+    np.testing.assert_allclose(got["elbow_flexion_moment"], ref["elbow_flexion_moment"], rtol=5e-9, atol=1e-12)
+    assert main(["id", "forearm", str(src), "-o", str(out), "--precision", "17"]) == 0
+    np.testing.assert_array_equal(read_trial(out)["elbow_flexion_moment"], ref["elbow_flexion_moment"])
 
 
 def test_id_reports_bad_trial_without_traceback(tmp_path, capsys):

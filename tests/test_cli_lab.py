@@ -27,7 +27,7 @@ def test_id_uses_the_trials_grf_and_filters_by_default(tmp_path, capsys):
     # with the GRF the torso carries only the hidden HAT mass (tens of N), not the body weight
     assert np.max(np.abs(got["torso_y_moment"])) < 0.15 * w
     ref = pinmsk.inverse_dynamics(pinmsk.load_model("gait2d"), read_trial(data("gait2d_hat_mass.csv")))
-    np.testing.assert_allclose(got["knee_r_moment"], ref["knee_r_moment"], rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(got["knee_r_moment"], ref["knee_r_moment"], rtol=5e-9, atol=1e-9)   # %.9g
     # the old behaviour (no filter, no GRF) is only there when asked for, and then named
     assert main(["id", "gait2d", data("gait2d_hat_mass.csv"), "-o", str(out), "--no-grf"]) == 0
     err = capsys.readouterr().err

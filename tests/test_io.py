@@ -53,15 +53,73 @@ def _error(path, match, **kw):
 
 
 @pytest.mark.parametrize("suffix", [".csv", ".sto", ".mot"])
-def test_round_trip_is_exact(trial, tmp_path, suffix):
-    path = write_trial(trial, tmp_path / f"trial{suffix}")
+def test_round_trip_is_exact_at_17_digits(trial, tmp_path, suffix):
+    path = write_trial(trial, tmp_path / f"trial{suffix}", precision=17)
     back = read_trial(path)
     assert back.names == trial.names
-    np.testing.assert_allclose(back.time, trial.time, rtol=1e-12, atol=0)
-    np.testing.assert_allclose(back.values, trial.values, rtol=1e-12, atol=0)
+    np.testing.assert_array_equal(back.time, trial.time)
+    np.testing.assert_array_equal(back.values, trial.values)
     assert back.meta["source"] == str(path)
     assert back.meta["format"] == suffix[1:]
     assert back.meta["converted_to_radians"] == ()
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".sto"])
+def test_default_precision_keeps_9_significant_digits(trial, tmp_path, suffix):
+    path = write_trial(trial, tmp_path / f"trial{suffix}")
+    back = read_trial(path)
+    # each value within half a unit of its 9th significant digit
+    for got, want in ((back.time, trial.time), (back.values, trial.values)):
+        mag = 10.0 ** np.floor(np.log10(np.where(want == 0, 1.0, np.abs(want))))
+        assert np.all(np.abs(got - want) <= 0.5e-8 * mag * (1 + 1e-12))
+    # and the text is exactly %.9g (so the size is that of %.9g, ~60 % of 17 digits)
+    rows = path.read_text().splitlines()[-trial.n_frames:]
+    sep = "," if suffix == ".csv" else "\t"
+    table = np.column_stack([trial.time, trial.values])
+    assert rows == [sep.join("%.9g" % v for v in row) for row in table.tolist()]
+    size17 = write_trial(trial, tmp_path / f"t17{suffix}", precision=17).stat().st_size
+    assert path.stat().st_size < 0.7 * size17
+
+
+def test_precision_is_settable_and_checked(trial, tmp_path):
+    path = write_trial(trial, tmp_path / "p4.csv", precision=4)
+    first = path.read_text().splitlines()[1].split(",")
+    assert first == ["%.4g" % v for v in [trial.time[0], *trial.values[0]]]
+    for bad in (0, 18, 2.5, "9", True):
+        with pytest.raises(TrialError, match="precision must be a whole number .* 1 to 17"):
+            write_trial(trial, tmp_path / "bad.csv", precision=bad)
+    assert not (tmp_path / "bad.csv").exists()
+
+
+def test_time_column_gets_the_digits_its_steps_need(tmp_path):
+    # 1 kHz for 3 days: 9 digits would merge neighbouring time stamps
+    t = 2.5e5 + np.arange(1000) * 1e-3
+    tr = Trial(t, {"x": np.linspace(0.0, 1.0, 1000)})
+    back = read_trial(write_trial(tr, tmp_path / "long.sto"))
+    np.testing.assert_allclose(np.diff(back.time), 1e-3, rtol=1e-2)
+    assert back["x"][1] == float("%.9g" % tr["x"][1])
+
+
+def test_vectorised_formatter_is_exactly_percent_g():
+    rng = np.random.default_rng(3)
+    n = 6000
+    values = np.concatenate([
+        rng.standard_normal(n) * 10.0 ** rng.integers(-30, 30, n),       # every notation
+        rng.integers(-999, 1000, n) / 1000.0,                            # short decimals
+        (rng.integers(1, 10 ** 9, n) + 0.5) * 10.0 ** rng.integers(-12, 3, n),  # near ties
+        np.nextafter(10.0 ** rng.integers(-12, 12, n), 0.0),            # just below powers of ten
+        [0.0, -0.0, np.nan, np.inf, -np.inf, 5e-324, -1e-310, 1.7976931348623157e308,
+         9.9999999995, 0.99999999995, 999999999.5, 1e-5, 1e-4, 123456789.0, 1234567890.0,
+         0.5, 1.5, 2.5, 0.95, 9.5, 1e100, -1e-100],
+    ])
+    values = values[: values.size // 4 * 4].reshape(-1, 4)
+    for p in (1, 3, 6, 9, 12):
+        prec = np.array([min(p + 2, 12), p, p, p])
+        seps = np.frombuffer(b",,\t\n", dtype=np.uint8)
+        got = pio._format_block(values, pio._columns(prec, seps)).decode()
+        want = "".join(",".join("%.*g" % (int(q), v) for q, v in zip(prec[:2], row[:2])) + ","
+                       + "\t".join("%.*g" % (p, v) for v in row[2:]) + "\n" for row in values.tolist())
+        assert got == want
 
 
 def test_sto_header_written_and_read(trial, tmp_path):
@@ -78,7 +136,7 @@ def test_sto_header_written_and_read(trial, tmp_path):
 
 
 def test_write_in_degrees_converts_only_angles_and_reads_back(trial, tmp_path):
-    path = write_trial(trial, tmp_path / "deg.mot", in_degrees=True)
+    path = write_trial(trial, tmp_path / "deg.mot", in_degrees=True, precision=17)
     assert "inDegrees=yes" in path.read_text().splitlines()
     raw = np.loadtxt(path, skiprows=7)
     np.testing.assert_allclose(raw[:, 1], np.rad2deg(trial["r_elbow_flex"]), rtol=1e-15)
@@ -220,7 +278,7 @@ def test_degrees_in_a_radians_file_are_caught_by_validate(tmp_path):
 
 
 def test_failed_write_leaves_no_file_and_no_temp_file(trial, tmp_path, monkeypatch):
-    def fail_midway(fh, table, delimiter):
+    def fail_midway(fh, table, *args):
         fh.write("0\t1\t2\n")  # part of the body reaches the temporary file
         raise OSError("disk full")
 
@@ -235,7 +293,7 @@ def test_failed_write_keeps_the_existing_file(trial, tmp_path, monkeypatch):
     target = write_trial(trial, tmp_path / "keep.sto")
     before = target.read_bytes()
 
-    def fail(fh, table, delimiter):
+    def fail(fh, table, *args):
         raise ValueError("cannot format")
 
     monkeypatch.setattr(pio, "_write_rows", fail)

@@ -140,7 +140,7 @@ def test_cli_lenient_prints_one_warning_per_repair(tmp_path, capsys, monkeypatch
         warnings.simplefilter("ignore", RepairWarning)
         clean = read_trial(tmp_path / "walk.mot", strict=False)           # the file's own digits
     np.testing.assert_allclose(clean["r_elbow_flex"], q, rtol=1e-9)
-    write_trial(Trial(t, {"elbow_flexion": clean["r_elbow_flex"]}), tmp_path / "clean.sto")
+    write_trial(Trial(t, {"elbow_flexion": clean["r_elbow_flex"]}), tmp_path / "clean.sto", precision=17)
     assert _cli(["id", "forearm", "clean.sto", "-o", "ref.sto"], capsys)[0] == 0
     got, ref = read_trial(tmp_path / "out.sto"), read_trial(tmp_path / "ref.sto")
     np.testing.assert_allclose(got["elbow_flexion_moment"], ref["elbow_flexion_moment"], rtol=1e-7, atol=1e-9)

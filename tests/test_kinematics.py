@@ -288,3 +288,12 @@ def test_real_opensim_external_loads_files(shared_data, rel, gait2d):
     assert [p.body for p in pl] == ["foot_r", "foot_l"]
     fy = sum(plate_wrench(grf, p, planar=True)[0][:, 1] for p in pl)
     assert 500 < np.median(fy[fy > 100]) < 1200
+
+
+def test_so_checks_the_unspanned_coordinates_of_given_moments_too(gait2d):
+    tr = bouncing(gait2d, amp=0.0)
+    idt = pinmsk.inverse_dynamics(gait2d, tr, ground_reaction="ignore")       # torso_y carries body weight
+    with pytest.raises(InfeasibleError, match=r"torso_y \(peak"):
+        StaticOptimization().fit(gait2d, tr, moments=idt)
+    so = StaticOptimization(reserves=True).fit(gait2d, tr, moments=idt)
+    np.testing.assert_allclose(so.result_["torso_y_reserve"], idt["torso_y_moment"])

@@ -86,7 +86,7 @@ def test_result_trial_and_files(forearm, motion, tmp_path):
     for suffix in (".sto", ".csv"):
         path = write_trial(r, tmp_path / f"so{suffix}")
         back = read_trial(path)
-        np.testing.assert_allclose(back["BRD_force"], r["BRD_force"], rtol=1e-12)
+        np.testing.assert_allclose(back["BRD_force"], r["BRD_force"], rtol=5e-9)   # %.9g
     text = so.report()
     for word in ("objective", "iterations", "convergence", "violation", "Eq. 2.11"):
         assert word in text

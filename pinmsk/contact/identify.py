@@ -58,6 +58,7 @@ from threadpoolctl import threadpool_limits
 
 from ..errors import ModelError, SolverError, TrialError
 from ..filtering import differentiate
+from ..stats import aic, bic
 from .dual import Dual
 from .foot import (KINDS, SITES, Foot2dGeometry, foot2d_site_kinematics, foot_contacts,
                    ground_reaction, load_foot2d)
@@ -720,12 +721,13 @@ class ContactFit:
         self.terms_ = {name: float(x) for name, x in zip(ALL_TERMS, terms)}
         self.objective_ = float(np.dot(terms, prob.weights))
         self.objective_full_ = float(terms.sum())
-        # information criteria on the minimised residuals (Gaussian errors): n ln(RSS/n) + 2k / + k ln n
+        # information criteria on the minimised residuals, Gaussian errors of unknown variance:
+        # n ln(RSS/n) + 2k / + k ln n (pinmsk.stats; RSS floored at 1e-300 there)
         n_res = int(prob.t.size * np.count_nonzero(prob.weights))
-        rss = max(self.objective_ * prob.t.size, 1e-300)
+        rss = self.objective_ * prob.t.size
         k = int(self.n_free_)
-        self.aic_ = float(n_res * math.log(rss / n_res) + 2 * k)
-        self.bic_ = float(n_res * math.log(rss / n_res) + k * math.log(n_res))
+        self.aic_ = aic(rss, n=n_res, k=k, variance="estimated")
+        self.bic_ = bic(rss, n=n_res, k=k, variance="estimated")
         diff_n = gr.normal - prob.meas[0]
         diff_f = gr.friction - prob.meas[1]
         diff_c = (gr.cop[:, 0] - prob.meas[2])[prob.cop_mask]

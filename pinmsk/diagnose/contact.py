@@ -82,13 +82,13 @@ advantage at the double hump shown on synthetic data
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..components import Parameter
 from ..errors import ConvergenceError, ModelError, PinmskError, SolverError, TrialError
+from ..stats import bic_change, weighted_sse
 from .compare import NoiseFloor, white_noise_sigma
 
 __all__ = ["CHANNELS", "DELTA_BIC", "ContactEquationError", "ContactFitResult", "ContactSet",
@@ -333,7 +333,7 @@ class ContactFitResult:
     @property
     def bic_change(self) -> float:
         """BIC(candidate) - BIC(model as given), ``chi2 + k ln n`` with the noise floor as sigma."""
-        return float(self.sse - self.sse_before + self.n_free * math.log(max(self.n, 1)))
+        return bic_change(self.sse, self.sse_before, n=self.n, k=self.n_free, variance="known")
 
 
 def _fit_candidates(c, cands) -> dict:
@@ -430,7 +430,7 @@ def rank_contacts(c, settings, fits=None):
     sig = c.noise.sigma
     mask = c.mask
     n = int(mask.sum())
-    chi0 = float(np.sum((c.eq.e / sig) ** 2))
+    chi0 = weighted_sse(c.eq.e, sig)
     problem = c.eq.problem
     ranking, skipped = [], []
     for cand in cands:
@@ -443,7 +443,7 @@ def rank_contacts(c, settings, fits=None):
         comps, stderr, polished = polish(c, list(fit.contacts_))
         pred = _reaction_matrix(problem, predict_reaction(problem, comps))
         res = np.where(mask, c.measured - pred, 0.0)
-        chi1 = float(np.sum((res / sig) ** 2))
+        chi1 = weighted_sse(res, sig)
         cs = ContactSet(cand.name, comps)
         conv = bool(fit.result_.status > 0)
         res_fit = ContactFitResult(cs, cs.values, stderr, chi1, chi0, n, conv,

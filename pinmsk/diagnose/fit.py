@@ -37,6 +37,7 @@ from scipy.optimize import least_squares, lsq_linear
 from ..components import Component
 from ..errors import ConvergenceError, ModelError
 from ..effects._base import SignalEffect
+from ..stats import aic_change, bic_change, weighted_sse
 
 __all__ = ["CandidateFit", "EffectFit", "FitResult", "fit_effect"]
 
@@ -62,10 +63,13 @@ class FitResult:
 
     @property
     def bic_change(self) -> float:
-        """BIC(with effect) - BIC(without), Gaussian likelihood with unknown variance."""
-        n = max(self.n, 1)
-        return float(n * np.log(max(self.sse, 1e-300) / max(self.sse_before, 1e-300))
-                     + self.n_params * np.log(n))
+        """BIC(with effect) - BIC(without), Gaussian likelihood with unknown (estimated) variance."""
+        return bic_change(self.sse, self.sse_before, n=self.n, k=self.n_params, variance="estimated")
+
+    @property
+    def aic_change(self) -> float:
+        """AIC(with effect) - AIC(without), Gaussian likelihood with unknown (estimated) variance."""
+        return aic_change(self.sse, self.sse_before, n=self.n, k=self.n_params, variance="estimated")
 
 
 class CandidateFit:
@@ -93,7 +97,7 @@ class CandidateFit:
         self.sigma = self.sigma_full[act]
         self.columns = eq.columns[act]
         rest = np.setdiff1d(np.arange(len(eq.coordinates)), act)
-        self._rest_sq = np.sum((eq.e[:, rest] / self.sigma_full[rest]) ** 2, axis=1)   # per frame
+        self._rest_sq = weighted_sse(eq.e[:, rest], self.sigma_full[rest], axis=1)   # per frame
         if getattr(component, "level", "joint") == "muscle" and eq.mode != "muscle":
             raise ModelError(f"{component.label} acts through muscle excitations; it can only be fitted "
                              "in a muscle-level comparison (a trial with <muscle>_excitation or _emg channels)")
@@ -173,8 +177,7 @@ class CandidateFit:
         """Whitened SSE of ``e + d(x)`` on the ``mask`` rows for each parameter set (P,)."""
         mask = slice(None) if mask is None else mask
         D = self.predict(X)
-        r = (self.e[None] + D) / self.sigma
-        return np.sum(r[:, mask] ** 2, axis=(1, 2))
+        return weighted_sse((self.e[None] + D)[:, mask], self.sigma, axis=(1, 2))
 
     # -- fitting ------------------------------------------------------------------------
     def starts(self, mask) -> list[np.ndarray]:
@@ -254,8 +257,7 @@ class CandidateFit:
         from scipy.optimize import minimize_scalar
 
         g, D = self._grid()
-        r = (self.e[None] + D) / self.sigma
-        sse = np.sum(r[:, mask] ** 2, axis=(1, 2))
+        sse = weighted_sse((self.e[None] + D)[:, mask], self.sigma, axis=(1, 2))
         if not np.all(np.isfinite(sse)):
             bad = g[~np.isfinite(sse)]
             raise ConvergenceError(
@@ -304,8 +306,8 @@ class CandidateFit:
         d = self.predict(x[None])[0] if self.names else np.zeros_like(self.e)
         r = ((self.e + d) / self.sigma)[mask]
         rest = float(np.sum(self._rest_sq[mask]))
-        sse = float(np.sum(r ** 2)) + rest                 # over all channels
-        sse0 = float(np.sum((self.e / self.sigma)[mask] ** 2)) + rest
+        sse = weighted_sse((self.e + d)[mask], self.sigma) + rest      # over all channels
+        sse0 = weighted_sse(self.e[mask], self.sigma) + rest
         n_all = int(np.sum(mask)) * self.eq.e.shape[1]
         n = int(r.size)
         p = len(self.names)
@@ -420,7 +422,6 @@ class EffectFit:
 
     def fit(self, comparison) -> "EffectFit":
         r = fit_effect(comparison, self.effect, strict=self.strict, max_nfev=self.max_nfev)
-        n = max(r.n, 1)
         self.result_ = r
         self.effect_ = r.effect
         self.params_ = dict(r.values)
@@ -428,7 +429,7 @@ class EffectFit:
         self.sse_ = r.sse
         self.n_params_ = r.n_params
         self.bic_change_ = r.bic_change
-        self.aic_change_ = float(n * np.log(max(r.sse, 1e-300) / max(r.sse_before, 1e-300)) + 2 * r.n_params)
+        self.aic_change_ = r.aic_change
         self.converged_ = r.converged
         return self
 

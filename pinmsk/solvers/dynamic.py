@@ -1343,8 +1343,9 @@ def scale_masses(model, factor: float):
                  contacts=model.contacts, meta=model.meta)
 
 
-def optimize_task(task_path, out_path=None, progress=None) -> DynamicResult:
-    """Run the task file ``task_path``; write the result trial to ``out_path`` (.sto/.csv/.mot)
+def optimize_task(task_path, out_path=None, progress=None, *, precision: int | None = None) -> DynamicResult:
+    """Run the task file ``task_path``; write the result trial to ``out_path`` (.sto/.csv/.mot,
+    ``precision`` significant digits, default that of :func:`pinmsk.io.write_trial`)
     and a JSON summary next to it (``<out>.json``).  Returns the :class:`DynamicResult`
     (check ``converged``)."""
     spec = load_task(task_path)
@@ -1353,6 +1354,6 @@ def optimize_task(task_path, out_path=None, progress=None) -> DynamicResult:
     if out_path is not None:
         from ..io import write_json, write_trial
         out = Path(out_path)
-        write_trial(res.to_trial(), out)
+        write_trial(res.to_trial(), out, precision=precision)
         write_json(out.with_suffix(out.suffix + ".json"), res.summary())
     return res

@@ -73,7 +73,7 @@ from ..skeleton import integrate
 from ..trial import Trial
 from . import qp as _qp
 from ..kinematics import DEFAULT_CUTOFF, prepare
-from ..skeleton import ExternalForce, external_generalized_force
+from ..skeleton import ExternalForce, external_generalized_force, world_wrench
 from .static import MODES, WEIGHTS, _muscle_property, as_motion, check_model
 
 TRACKING = ("q", "qv", "qva", "pid")
@@ -114,9 +114,7 @@ def _external_drive(model, t, external):
     if not external:
         return None
     frames = [e.frame for e in external]
-    W = [np.hstack([np.asarray(e.force, dtype=float), np.asarray(e.torque, dtype=float)
-                    + np.cross(np.asarray(e.point, dtype=float), np.asarray(e.force, dtype=float))])
-         for e in external]
+    W = [world_wrench(e, len(t)) for e in external]
     zero = np.zeros((1, 3))
 
     def drive(ti, q):
@@ -528,6 +526,8 @@ class ForwardStaticOptimization:
                 ch[f"{c}_reserve"] = self.reserves_[:, j]
         ch["cost"] = self.cost_
         meta = {"analysis": "forward_static_optimization", **{k: str(v) for k, v in self.get_params().items()}}
+        if getattr(self, "inputs_", None) is not None:
+            meta.update(self.inputs_.meta())
         if self.allow_divergence:
             ch["diverged"] = np.any(np.abs(self.tracking_error_) > float(self.max_tracking_error),
                                     axis=1).astype(float)
@@ -552,6 +552,8 @@ class ForwardStaticOptimization:
             f"  solver         {self.n_qp_} proxsuite QPs, {self.n_iter_} iterations",
             f"  time           {self.time_ * 1e3:.1f} ms",
         ]
+        if getattr(self, "inputs_", None) is not None:
+            lines += [f"  {ln}" for ln in self.inputs_.describe()]
         if self.reserves_ is not None:
             lines.append(f"  reserves       max {np.max(np.abs(self.reserves_)):.4g} N m")
         if self.diverged_:

@@ -156,7 +156,15 @@ def plan_moments(model, trial, inputs: TrialInputs, *, moments=None, dofs=None, 
         from .static import required_moments
         dof_names = tuple(coords[j] for j in idx)
         tau = required_moments(model, motion, moments, idx, dof_names)
+        # what the given moments ask of the unspanned coordinates, where they say it
         un = np.full((motion.n_frames, rest.size), np.nan)
+        if isinstance(moments, Trial):
+            for col, j in enumerate(rest):
+                name = moment_channels([coords[j]])[0]
+                if name in moments and moments.n_frames == motion.n_frames:
+                    un[:, col] = np.asarray(moments[name], dtype=float)
+        elif np.ndim(moments) == 2 and np.shape(moments)[1] == model.nv and model.nv != idx.size:
+            un = np.asarray(moments, dtype=float)[:, rest]
         source = "given by the caller"
     plan = MomentPlan(source, tuple(coords[j] for j in idx), np.ascontiguousarray(tau),
                       tuple(coords[j] for j in rest), un, by_request, tau_full, tuple(notes))

@@ -143,7 +143,12 @@ class SOProblem:
         x = np.maximum(x, 0.0)
         if minmax:
             return np.max(self.u * x, axis=1)
-        return np.sum(self.k * x ** self.exponent, axis=1)
+        if self.exponent == 2.0:
+            np.multiply(x, x, out=x)
+        else:
+            np.power(x, self.exponent, out=x)
+        x *= self.k
+        return np.sum(x, axis=1)
 
 
 def _muscle_property(muscles, which: str) -> np.ndarray:
@@ -254,54 +259,167 @@ def required_moments(model, motion: Motion, moments, idx, dofs) -> np.ndarray:
     return tau
 
 
-def build_problem(model, motion: Motion, *, mode: str = "force", weights: str = "none",
-                  exponent: float = 2.0, dofs=None, moments=None, reserves: bool = False) -> SOProblem:
-    """The scaled SO problem of ``motion`` (moments by inverse dynamics unless given)."""
-    if mode not in MODES:
-        raise SolverError(f"mode must be one of {', '.join(MODES)}; got {mode!r}")
-    P = _qp.check_exponent(exponent)
-    muscles = check_model(model)
-    q, v = motion.q, motion.v
-    R_all = np.asarray(muscles.moment_arms(q), dtype=float)
-    if R_all.shape != (motion.n_frames, muscles.n, model.nv):
-        raise ModelError(f"moment arms have shape {R_all.shape}; expected "
-                         f"{(motion.n_frames, muscles.n, model.nv)}")
-    names, idx = resolve_dofs(model, R_all, dofs, allow_unspanned=reserves)
-    tau = required_moments(model, motion, moments, idx, names)
-    R = np.ascontiguousarray(R_all[:, :, idx])
-    n, m = motion.n_frames, muscles.n
-    f_max = np.asarray(muscles.f_max, dtype=float)
-    prop = _muscle_property(muscles, weights)
-    if np.any(~(prop > 0)):
-        i = int(np.flatnonzero(~(prop > 0))[0])
-        raise ModelError(f"muscle '{muscles.names[i]}' has {weights} = {prop[i]}; weights need "
-                         "positive values")
-    if mode == "force":
-        c = np.broadcast_to(f_max, (n, m)).copy()
-        d = np.zeros((n, m))
-        k = (f_max / prop) ** P
-        u = f_max / prop
-    else:
+#: Frames per chunk in which :class:`StaticOptimization` builds and solves a long motion:
+#: the per-frame arrays of one chunk only are in memory, and the batched solve's
+#: working set stays in the CPU cache (``StaticOptimization(chunk_size=...)``).
+CHUNK_FRAMES = 20000
+
+
+def _frame_capacity(R: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """(n, nd) moment capacity ``sum_i |R_kij| c_ki`` of each frame and dof."""
+    return np.einsum("nmj,nm->nj", np.abs(R), c)
+
+
+class ChunkedSOProblem:
+    """The scaled SO problem of a long motion, its per-frame arrays built a chunk at a time.
+
+    It has the whole-motion parts of :class:`SOProblem` (``time``, ``muscles``,
+    ``dofs``, ``dof_index``, ``mode``, ``tau``, ``scale``, ``k``, ``u``,
+    ``f_max``, ``exponent``; the scale from every frame, so each chunk is the
+    same problem as in one piece) and builds the per-frame ones (``A``, ``b``,
+    ``lo``, ``hi``, ``c``, ``d``, ``R``) for frames ``[start, stop)`` on demand
+    with :meth:`frames`.  :func:`solve_frames` solves it chunk by chunk.  Reading
+    one of the per-frame arrays builds it for the whole motion (cached).
+    """
+
+    _PER_FRAME = ("A", "b", "lo", "hi", "c", "d", "R")
+
+    def __init__(self, model, motion: Motion, *, mode: str, weights: str, exponent: float, dofs,
+                 moments, reserves: bool, chunk_size: int):
+        if mode not in MODES:
+            raise SolverError(f"mode must be one of {', '.join(MODES)}; got {mode!r}")
+        P = _qp.check_exponent(exponent)
+        muscles = check_model(model)
+        n, m = motion.n_frames, muscles.n
+        self.time = np.asarray(motion.t, dtype=float)
+        self.chunk_size = max(int(chunk_size), 1)
+        self._muscle_set = muscles
+        self._q, self._v = motion.q, motion.v
+        self.mode = mode
+        f_max = np.asarray(muscles.f_max, dtype=float)
+        # whole-motion statistics a chunk at a time: which coordinates the muscles
+        # span (max |R|) and each coordinate's moment capacity (the scale)
+        arm_max = np.zeros((m, model.nv))
+        cap_max = np.zeros(model.nv)
+        self._whole = None
+        for start, stop in self.chunks(n):
+            R, c, d = self._arms_and_forces(slice(start, stop))
+            if R.shape != (stop - start, m, model.nv):
+                raise ModelError(f"moment arms have shape {(n,) + R.shape[1:]}; expected {(n, m, model.nv)}")
+            np.maximum(arm_max, np.max(np.abs(R), axis=0, initial=0.0), out=arm_max)
+            np.maximum(cap_max, np.max(_frame_capacity(R, c), axis=0, initial=0.0), out=cap_max)
+            if stop - start == n:
+                self._whole = (R, c, d)       # one chunk: keep it rather than build it again
+        names, idx = resolve_dofs(model, self._whole[0] if self._whole else arm_max[None], dofs,
+                                  allow_unspanned=reserves)
+        tau = required_moments(model, motion, moments, idx, names)
+        prop = _muscle_property(muscles, weights)
+        if np.any(~(prop > 0)):
+            i = int(np.flatnonzero(~(prop > 0))[0])
+            raise ModelError(f"muscle '{muscles.names[i]}' has {weights} = {prop[i]}; weights need "
+                             "positive values")
+        scale = cap_max[idx].copy()
+        for j in np.flatnonzero(~(scale > 0)):
+            scale[j] = max(float(np.max(np.abs(tau[:, j]))), 1.0)
+        self.muscles = tuple(muscles.names)
+        self.dofs = names
+        self.dof_index = idx
+        self.tau = tau
+        self.scale = scale
+        self.k = (f_max / prop) ** P if mode == "force" else prop.copy()
+        self.u = f_max / prop if mode == "force" else prop.copy()
+        self.f_max = f_max
+        self.exponent = P
+        self._full = None
+
+    def _arms_and_forces(self, rows):
+        """Moment arms (n, m, nv) and ``F = c x + d`` coefficients (n, m) of frames ``rows`` (a slice or indices)."""
+        muscles, q, v = self._muscle_set, self._q[rows], self._v[rows]
+        n = q.shape[0]
+        R = np.asarray(muscles.moment_arms(q), dtype=float)
+        if self.mode == "force":
+            f_max = np.asarray(muscles.f_max, dtype=float)
+            return R, np.broadcast_to(f_max, (n, f_max.size)).copy(), np.zeros((n, f_max.size))
         fa, fp = muscles.force_limits(q, v)
         c = np.maximum(np.asarray(fa, dtype=float), 0.0)
         d = np.asarray(fp, dtype=float)
         if not (np.all(np.isfinite(c)) and np.all(np.isfinite(d))):
             k0, i0 = np.argwhere(~np.isfinite(c + d))[0]
+            k = int(np.arange(self.time.size)[rows][k0])
             raise SolverError(f"muscle '{muscles.names[i0]}' force capacity is not finite at frame "
-                              f"{k0} (t = {motion.t[k0]:.6g} s)")
-        k = prop.copy()
-        u = prop.copy()
-    cap = np.einsum("nmj,nm->nj", np.abs(R), c)
-    scale = np.max(cap, axis=0)
-    for j in np.flatnonzero(~(scale > 0)):
-        scale[j] = max(float(np.max(np.abs(tau[:, j]))), 1.0)
-    A = np.einsum("nmj,nm->njm", R, c) / scale[None, :, None]
-    b = (tau - np.einsum("nmj,nm->nj", R, d)) / scale
-    lo = np.zeros((n, m))
-    hi = np.ones((n, m))
-    return SOProblem(time=np.asarray(motion.t, dtype=float), muscles=tuple(muscles.names), dofs=names,
-                     dof_index=idx, mode=mode, A=A, b=b, lo=lo, hi=hi, c=c, d=d, R=R, tau=tau,
-                     scale=scale, k=k, u=u, f_max=f_max, exponent=P)
+                              f"{k} (t = {self.time[k]:.6g} s)")
+        return R, c, d
+
+    @property
+    def n_frames(self) -> int:
+        return self._q.shape[0]
+
+    @property
+    def is_chunked(self) -> bool:
+        return self.n_frames > self.chunk_size
+
+    def chunks(self, n: int | None = None):
+        """``(start, stop)`` of each chunk of frames."""
+        n = self.n_frames if n is None else n
+        return [(s, min(s + self.chunk_size, n)) for s in range(0, n, self.chunk_size)]
+
+    def frames(self, start: int, stop: int) -> SOProblem:
+        """The :class:`SOProblem` of frames ``[start, stop)`` (scaled as the whole motion)."""
+        if self._whole is not None and (start, stop) == (0, self.n_frames):
+            return self._build(slice(start, stop), self._whole)
+        return self._build(slice(start, stop))
+
+    def frames_at(self, rows) -> SOProblem:
+        """The :class:`SOProblem` of the frames ``rows`` (indices), each as in :meth:`frames`."""
+        return self._build(np.asarray(rows, dtype=int))
+
+    def _build(self, rows, arrays=None) -> SOProblem:
+        R_all, c, d = self._arms_and_forces(rows) if arrays is None else arrays
+        R = np.ascontiguousarray(R_all[:, :, self.dof_index])
+        tau = self.tau[rows]
+        A = np.einsum("nmj,nm->njm", R, c)
+        A /= self.scale[None, :, None]
+        b = (tau - np.einsum("nmj,nm->nj", R, d)) / self.scale
+        n, m = R.shape[0], len(self.muscles)
+        return SOProblem(time=self.time[rows], muscles=self.muscles, dofs=self.dofs,
+                         dof_index=self.dof_index, mode=self.mode, A=A, b=b,
+                         lo=np.zeros((n, m)), hi=np.ones((n, m)), c=c, d=d, R=R, tau=tau,
+                         scale=self.scale, k=self.k, u=self.u, f_max=self.f_max, exponent=self.exponent)
+
+    def __getattr__(self, name):
+        if name in ChunkedSOProblem._PER_FRAME:
+            if self.__dict__.get("_full") is None:
+                self._full = self.frames(0, self.n_frames)
+            return getattr(self._full, name)
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    w = SOProblem.w
+    w_minmax = SOProblem.w_minmax
+    cost = SOProblem.cost
+
+    def forces(self, x) -> np.ndarray:
+        return np.concatenate([self.frames(s, e).forces(x[s:e]) for s, e in self.chunks()])
+
+    def moments(self, F) -> np.ndarray:
+        return np.concatenate([self.frames(s, e).moments(F[s:e]) for s, e in self.chunks()])
+
+    def __repr__(self) -> str:
+        return (f"ChunkedSOProblem({self.n_frames} frames in chunks of {self.chunk_size}, "
+                f"{len(self.muscles)} muscles, dofs {', '.join(self.dofs)})")
+
+
+def build_problem(model, motion: Motion, *, mode: str = "force", weights: str = "none",
+                  exponent: float = 2.0, dofs=None, moments=None, reserves: bool = False,
+                  chunk_size: int | None = None):
+    """The scaled SO problem of ``motion`` (moments by inverse dynamics unless given).
+
+    An :class:`SOProblem`; with ``chunk_size`` and a motion of more frames, a
+    :class:`ChunkedSOProblem` that builds its per-frame arrays a chunk at a time.
+    """
+    prob = ChunkedSOProblem(model, motion, mode=mode, weights=weights, exponent=exponent, dofs=dofs,
+                            moments=moments, reserves=reserves,
+                            chunk_size=motion.n_frames if chunk_size is None else chunk_size)
+    return prob if prob.is_chunked else prob.frames(0, prob.n_frames)
 
 
 # ---------------------------------------------------------------------------
@@ -319,10 +437,12 @@ class FramesResult:
     iterations: int          # Newton + proxsuite iterations
     qp_solves: int           # proxsuite QPs
     batched_frames: int
+    forces: np.ndarray | None = None    # (N, m) N, when solved chunk by chunk
+    moments: np.ndarray | None = None   # (N, nd) N m of the muscles, likewise
 
 
 def _frame_qp(prob: SOProblem, *, exponent, minmax, reserve_weight, tol) -> _qp.FrameQP:
-    m, nd = prob.A.shape[2], prob.A.shape[1]
+    m, nd = len(prob.muscles), len(prob.dofs)
     return _qp.FrameQP(m=m, nd=nd, weights=prob.w_minmax if minmax else prob.w, exponent=exponent,
                        minmax=minmax, reserve_weight=reserve_weight, eps=tol * 1e-4,
                        sqp_tol=max(tol * 1e-2, 1e-13))
@@ -331,98 +451,160 @@ def _frame_qp(prob: SOProblem, *, exponent, minmax, reserve_weight, tol) -> _qp.
 def solve_frames(prob: SOProblem, *, minmax: bool = False, reserve_weight: float | None = None,
                  tol: float = 1e-9, method: str = "auto", progress=None,
                  frames: np.ndarray | None = None) -> FramesResult:
-    """Solve the frames of a scaled problem (all, or ``frames``); see the module notes."""
+    """Solve the frames of a scaled problem (all, or ``frames``); see the module notes.
+
+    A :class:`ChunkedSOProblem` is built and solved a chunk at a time, with the
+    same steps on the same frames as in one piece: the batched solve is per
+    frame, its warm starts come from multipliers interpolated over the whole
+    motion, and one proxsuite QP is carried across chunks, so the result is
+    the same (only LP basis guesses, P = 1 and min/max, stop at a chunk's
+    end).  Its result also holds the forces and the muscles' moments.
+    """
     if method not in METHODS:
         raise SolverError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
+    chunked = isinstance(prob, ChunkedSOProblem)
     P = prob.exponent
-    N, nd, m = prob.A.shape
+    N, nd, m = prob.n_frames, len(prob.dofs), len(prob.muscles)
+    spans = prob.chunks() if chunked else [(0, N)]
     sel = np.arange(N) if frames is None else np.asarray(frames, dtype=int)
     x = np.full((N, m), np.nan)
     rho = np.zeros((N, nd))
     solved = np.zeros(N, dtype=bool)
     path = np.full(N, -1, dtype=int)
+    forces = np.full((N, m), np.nan) if chunked else None
+    moments = np.zeros((N, nd)) if chunked else None
     iters = 0
     nqp = 0
     batched = 0
-    todo = sel
-    if method == "auto" and not minmax and 2.0 <= P <= DUAL_MAX_EXPONENT:
-        ok_all = np.zeros(sel.size, dtype=bool)
-        # two passes: every COARSE-th frame from scratch, then the others starting from
-        # the multipliers interpolated in time between their solved neighbours
-        passes = [np.arange(sel.size)]
+    dual = method == "auto" and not minmax and 2.0 <= P <= DUAL_MAX_EXPONENT
+    batched_ok = np.zeros(N, dtype=bool)
+
+    def batch(rows_of, ip, lam0):
+        """dual_newton on the frames ``sel[ip]``; ``rows_of(frames)`` gives their (A, b, lo, hi)."""
+        nonlocal iters
+        fr = sel[ip]
+        A, b, lo, hi = rows_of(fr)
+        bs = _qp.dual_newton(A, b, prob.w, P, lo, hi, reserve_weight=reserve_weight, tol=tol, lam0=lam0)
+        ok = bs.converged
+        batched_ok[fr[ok]] = True
+        x[fr[ok]] = bs.x[ok]
+        rho[fr[ok]] = bs.rho[ok]
+        iters += int(bs.iterations.sum())
+        return ok, bs.lam
+
+    def rows(p, offset=0):
+        return lambda fr: (p.A[fr - offset], p.b[fr - offset], p.lo[fr - offset], p.hi[fr - offset])
+
+    second = lam0_all = None
+    if dual:
+        second = np.arange(sel.size)
         if sel.size > 4 * COARSE:
+            # two passes: every COARSE-th frame from scratch, then the others starting from
+            # the multipliers interpolated in time between their solved neighbours
             first = np.arange(0, sel.size, COARSE)
-            passes = [first, np.setdiff1d(np.arange(sel.size), first)]
-        lam_known = np.full((sel.size, nd), np.nan)
-        for ip in passes:
-            lam0 = None
+            second = np.setdiff1d(np.arange(sel.size), first)
+            lam_known = np.full((sel.size, nd), np.nan)
+            for start, stop in spans:
+                ip = first[(sel[first] >= start) & (sel[first] < stop)]
+                if ip.size:
+                    if chunked:   # build the rows of these frames alone
+                        part = prob.frames_at(sel[ip])
+                        got = lambda fr, p=part: (p.A, p.b, p.lo, p.hi)
+                    else:
+                        got = rows(prob)
+                    ok, lam = batch(got, ip, None)
+                    lam_known[ip[ok]] = lam[ok]
             if not np.isnan(lam_known).all():
                 good = np.flatnonzero(~np.isnan(lam_known[:, 0])) if nd else np.zeros(0, int)
                 if good.size >= 2:
-                    lam0 = np.column_stack([np.interp(ip, good, lam_known[good, j]) for j in range(nd)])
-            fr = sel[ip]
-            bs = _qp.dual_newton(prob.A[fr], prob.b[fr], prob.w, P, prob.lo[fr], prob.hi[fr],
-                                 reserve_weight=reserve_weight, tol=tol, lam0=lam0)
-            ok = bs.converged
-            lam_known[ip[ok]] = bs.lam[ok]
-            ok_all[ip[ok]] = True
-            x[fr[ok]] = bs.x[ok]
-            rho[fr[ok]] = bs.rho[ok]
-            iters += int(bs.iterations.sum())
-        solved[sel[ok_all]] = True
-        path[sel[ok_all]] = 0
-        batched += int(ok_all.sum())
-        todo = sel[~ok_all]
-        if progress is not None:
-            progress.update(int(ok_all.sum()))
+                    lam0_all = np.column_stack([np.interp(second, good, lam_known[good, j])
+                                                for j in range(nd)])
     fq = _frame_qp(prob, exponent=P, minmax=minmax, reserve_weight=reserve_weight, tol=tol)
     use_lp = (method == "auto" and (minmax or P == 1.0) and reserve_weight is None)
-    if use_lp:
-        E, f, cvec, lo_a, hi_a, ne = _lp_standard_form(prob, minmax)
     remaining = np.zeros(N, dtype=bool)
-    remaining[todo] = True
     skip = 0
     skip_next = LP_SKIP
-    for k in todo:
-        if not remaining[k]:
+    for start, stop in spans:
+        here = sel[(sel >= start) & (sel < stop)]
+        if here.size == 0:
             continue
-        remaining[k] = False
-        sol = fq.solve(prob.A[k], prob.b[k], prob.lo[k], prob.hi[k])
-        iters += sol.iterations
-        nqp += sol.qp_solves
-        done_now = 1
-        if sol.solved:
-            x[k], rho[k], solved[k], path[k] = sol.x, sol.rho, True, 1
-            if use_lp and skip > 0:
-                skip -= 1
-            elif use_lp:
-                # try this frame's basis on the next LP_WINDOW unsolved frames at once
-                zk = _lp_point(prob, k, sol.x, minmax)
-                basis = _qp.lp_basis_from(zk, lo_a[k], hi_a[k], ne)
-                rest = np.flatnonzero(remaining)[:LP_WINDOW]
-                cand = np.concatenate([[k], rest])
-                okv, zv, _ = _qp.lp_verify(E[cand], f[cand], cvec, lo_a[cand], hi_a[cand], basis,
-                                           tol=tol)
-                if okv[0]:
-                    x[k] = zv[0, :m]
-                    path[k] = 0
-                acc = cand[1:][okv[1:]]
-                x[acc] = zv[1:][okv[1:], :m]
-                solved[acc] = True
-                path[acc] = 0
-                remaining[acc] = False
-                batched += int(acc.size) + int(okv[0])
-                done_now += int(acc.size)
-                if acc.size == 0:          # degenerate or changing bases: stop guessing for a
-                    skip = skip_next        # while, twice as long after each failure (min/max
-                    skip_next = min(2 * skip_next, 512)   # with several dofs is rarely a vertex)
-                else:
-                    skip_next = LP_SKIP
-        if progress is not None:
-            progress.update(done_now)
-    x = np.where(np.isfinite(x), np.clip(x, prob.lo, prob.hi), x)   # proxsuite: inside to ~1e-16
+        sub, off = (prob.frames(start, stop), start) if chunked else (prob, 0)
+        if dual:
+            inside = (sel[second] >= start) & (sel[second] < stop)
+            if inside.any():
+                batch(rows(sub, off), second[inside], None if lam0_all is None else lam0_all[inside])
+            done = here[batched_ok[here]]
+            solved[done] = True
+            path[done] = 0
+            batched += done.size
+            if progress is not None:
+                progress.update(int(done.size))
+            todo = here[~batched_ok[here]]
+        else:
+            todo = here
+        if use_lp:
+            E, f, cvec, lo_a, hi_a, ne = _lp_standard_form(sub, minmax)
+        remaining[todo] = True
+        for k in todo:
+            if not remaining[k]:
+                continue
+            remaining[k] = False
+            kl = k - off
+            sol = fq.solve(sub.A[kl], sub.b[kl], sub.lo[kl], sub.hi[kl])
+            iters += sol.iterations
+            nqp += sol.qp_solves
+            done_now = 1
+            if sol.solved:
+                x[k], rho[k], solved[k], path[k] = sol.x, sol.rho, True, 1
+                if use_lp and skip > 0:
+                    skip -= 1
+                elif use_lp:
+                    # try this frame's basis on the next LP_WINDOW unsolved frames at once
+                    zk = _lp_point(sub, kl, sol.x, minmax)
+                    basis = _qp.lp_basis_from(zk, lo_a[kl], hi_a[kl], ne)
+                    rest = np.flatnonzero(remaining[start:stop])[:LP_WINDOW]
+                    cand = np.concatenate([[kl], rest])
+                    okv, zv, _ = _qp.lp_verify(E[cand], f[cand], cvec, lo_a[cand], hi_a[cand], basis,
+                                               tol=tol)
+                    if okv[0]:
+                        x[k] = zv[0, :m]
+                        path[k] = 0
+                    acc = cand[1:][okv[1:]] + off
+                    x[acc] = zv[1:][okv[1:], :m]
+                    solved[acc] = True
+                    path[acc] = 0
+                    remaining[acc] = False
+                    batched += int(acc.size) + int(okv[0])
+                    done_now += int(acc.size)
+                    if acc.size == 0:          # degenerate or changing bases: stop guessing for a
+                        skip = skip_next        # while, twice as long after each failure (min/max
+                        skip_next = min(2 * skip_next, 512)   # with several dofs is rarely a vertex)
+                    else:
+                        skip_next = LP_SKIP
+            if progress is not None:
+                progress.update(done_now)
+        xs = x[start:stop]
+        x[start:stop] = np.where(np.isfinite(xs), np.clip(xs, sub.lo, sub.hi), xs)   # proxsuite: inside to ~1e-16
+        if chunked:
+            forces[start:stop] = sub.forces(x[start:stop])
+            moments[start:stop] = sub.moments(forces[start:stop])
     return FramesResult(x=x, rho=rho, solved=solved, path=path, iterations=iters, qp_solves=nqp,
-                        batched_frames=batched)
+                        batched_frames=batched, forces=forces, moments=moments)
+
+
+def _by_chunk(prob, frames):
+    """``(problem, local frame, position in frames)`` for each of ``frames``, one build per chunk."""
+    frames = np.asarray(frames, dtype=int)
+    if not isinstance(prob, ChunkedSOProblem):
+        for i, k in enumerate(frames):
+            yield prob, int(k), i
+        return
+    for start, stop in prob.chunks():
+        here = np.flatnonzero((frames >= start) & (frames < stop))
+        if here.size:
+            sub = prob.frames(start, stop)
+            for i in here:
+                yield sub, int(frames[i]) - start, int(i)
 
 
 def _lp_standard_form(prob: SOProblem, minmax: bool):
@@ -461,9 +643,9 @@ def diagnose_infeasible(prob: SOProblem, frames, *, minmax: bool, tol: float):
     frames = np.asarray(frames, dtype=int)
     fq = _frame_qp(prob, exponent=min(prob.exponent, 2.0) if not minmax else 1.0, minmax=minmax,
                    reserve_weight=1e4, tol=tol)
-    out = np.full((frames.size, prob.A.shape[1]), np.nan)
-    for i, k in enumerate(frames):
-        sol = fq.solve(prob.A[k], prob.b[k], prob.lo[k], prob.hi[k])
+    out = np.full((frames.size, len(prob.dofs)), np.nan)
+    for sub, k, i in _by_chunk(prob, frames):
+        sol = fq.solve(sub.A[k], sub.b[k], sub.lo[k], sub.hi[k])
         if sol.solved:
             out[i] = sol.rho * prob.scale
     return out
@@ -521,6 +703,10 @@ class StaticOptimization:
     method : "auto" | "proxsuite"
         "auto" uses the batched paths with proxsuite as fallback;
         "proxsuite" solves every frame with proxsuite.
+    chunk_size : int
+        Frames built and solved at a time (default :data:`CHUNK_FRAMES`): a
+        long motion's per-frame problem arrays are never all in memory.  It
+        changes memory and speed only, not the result (not in ``get_params``).
 
     Attributes (after ``fit``)
     --------------------------
@@ -530,14 +716,15 @@ class StaticOptimization:
     cost_ (N,) the criterion per frame in physical units (Eq. 2.11 / 2.14, or
     ``max F/N`` for min/max); violation_ (N,) ``max_j |R^T F + r - tau|`` in
     N m; dofs_, muscles_; n_iter_, n_qp_, n_batched_; timing_; problem_ (the
-    scaled :class:`SOProblem`); result_ (a Trial with ``<muscle>_force``,
+    scaled :class:`SOProblem`, or :class:`ChunkedSOProblem` for motions longer
+    than ``chunk_size``); result_ (a Trial with ``<muscle>_force``,
     ``<muscle>_activation``, ``<coord>_reserve`` with reserves, ``status``,
     ``cost``, ``violation``; write it with :func:`pinmsk.write_trial`).
     """
 
     def __init__(self, *, mode: str = "force", exponent: float = 2, weights: str = "none",
                  minmax: bool = False, reserves: bool = False, reserve_weight: float = 1000.0,
-                 tol: float = 1e-9, dofs=None, method: str = "auto"):
+                 tol: float = 1e-9, dofs=None, method: str = "auto", chunk_size: int = CHUNK_FRAMES):
         self.mode = mode
         self.exponent = exponent
         self.weights = weights
@@ -547,6 +734,7 @@ class StaticOptimization:
         self.tol = tol
         self.dofs = dofs
         self.method = method
+        self.chunk_size = chunk_size
 
     def get_params(self) -> dict:
         return {k: getattr(self, k) for k in ("mode", "exponent", "weights", "minmax", "reserves",
@@ -564,6 +752,9 @@ class StaticOptimization:
             raise SolverError(f"tol must be > 0; got {self.tol!r}")
         if self.reserves and not (float(self.reserve_weight) > 0):
             raise SolverError(f"reserve_weight must be > 0; got {self.reserve_weight!r}")
+        if isinstance(self.chunk_size, bool) or not isinstance(self.chunk_size, (int, np.integer)) \
+                or self.chunk_size < 1:
+            raise SolverError(f"chunk_size must be a whole number of frames >= 1; got {self.chunk_size!r}")
 
     # -- fitting -----------------------------------------------------------
     def fit(self, model, trial, *, moments=None, cutoff=DEFAULT_CUTOFF, grf=None, external_loads=None,
@@ -589,7 +780,7 @@ class StaticOptimization:
         plan = plan_moments(model, trial, inputs, moments=moments, dofs=self.dofs, reserves=self.reserves)
         prob = build_problem(model, motion, mode=self.mode, weights=self.weights,
                              exponent=self.exponent, dofs=plan.dofs, moments=plan.tau,
-                             reserves=self.reserves)
+                             reserves=self.reserves, chunk_size=self.chunk_size)
         t1 = _time.perf_counter()
         self.inputs_ = inputs
         self.plan_ = plan
@@ -635,9 +826,11 @@ class StaticOptimization:
                 "loosen tol, or report the trial and settings")
         self.problem_ = prob
         x = fr.x
-        F = prob.forces(x)
+        F = prob.forces(x) if fr.forces is None else fr.forces
         reserves = fr.rho * prob.scale
-        moment = prob.moments(F) + (reserves if W is not None else 0.0)
+        moment = prob.moments(F) if fr.moments is None else fr.moments
+        if W is not None:
+            moment = moment + reserves
         self.forces_ = F
         self.activations_ = x if prob.mode == "activation" else F / prob.f_max
         self.reserves_ = reserves if W is not None else None
@@ -653,6 +846,7 @@ class StaticOptimization:
         self.n_batched_ = fr.batched_frames
         self.dofs_ = prob.dofs
         self.muscles_ = prob.muscles
+        del fr, x, moment     # (N, m) and (N, nd) arrays not kept: free them before the result trial
         self.result_ = self._result_trial(prob)
         return self
 
