@@ -382,8 +382,9 @@ def test_other_builtin_models_build(name, meshcat_url):
         assert any(c.kind == "set_animation" for c in v.commands)
 
 
-# view_forearm.py runs in a real subprocess below (its headless path without --no-block)
-@pytest.mark.parametrize("script", ["view_gait2d.py", "view_human3d.py"])
+# view_forearm.py runs in a real subprocess below (its headless path without --no-block); human3d is
+# slow (test_other_builtin_models_build builds its viewer, view_gait2d.py runs the same script pattern)
+@pytest.mark.parametrize("script", ["view_gait2d.py", pytest.param("view_human3d.py", marks=pytest.mark.slow)])
 def test_examples_run_headless(script, monkeypatch):
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.chdir(REPO)
