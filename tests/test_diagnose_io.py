@@ -169,7 +169,10 @@ def test_demo_writes_everything(tmp_path):
     assert result.steps[0].ratio > 5 and result.final.ratio < 1.5
 
 
+@pytest.mark.slow
 def test_example_runs_headless(tmp_path, monkeypatch):
+    """Example 01 (slow): its loop is checked by test_diagnose.py::test_two_hidden_effects_in_two_add_steps,
+    its figures and report by test_figures_and_report, on the same two-effect trial."""
     monkeypatch.chdir(tmp_path)
     assert "at_noise_floor" in run_example("01_diagnose_forearm.py", tmp_path)
     assert (tmp_path / "diagnosis_report.html").exists()
