@@ -1,4 +1,9 @@
-"""Shared test helpers: where the optional real data lives, headless matplotlib, the forearm on its Gaussian motion."""
+"""Shared test helpers: where the optional real data lives, headless matplotlib, the forearm on its Gaussian motion,
+and running an example script."""
+import contextlib
+import io
+import runpy
+import sys
 from pathlib import Path
 
 import matplotlib
@@ -31,3 +36,28 @@ def forearm():
 def motion():
     """The Gaussian 0 -> 120 deg elbow flexion of thesis Fig. 3.13 (the solver tests' forearm motion)."""
     return gaussian_elbow_motion()
+
+
+def run_example(script: str, *args: str) -> str:
+    """Run ``examples/<script>`` as ``python examples/<script> ARGS`` does, in this interpreter; return its stdout.
+
+    The script runs as ``__main__`` with that ``sys.argv`` and its folder on ``sys.path`` (for ``_common``);
+    a non-zero ``SystemExit`` fails the test.  In-process rather than a subprocess because a fresh
+    interpreter spends ~3 s importing pinmsk, scipy and matplotlib for every example;
+    tests/test_viewer.py keeps one example run in a real subprocess without a terminal.
+    """
+    import matplotlib.pyplot as plt
+    folder = str(REPO / "examples")
+    argv, path = sys.argv, list(sys.path)
+    sys.argv = [str(REPO / "examples" / script), *map(str, args)]
+    sys.path.insert(0, folder)
+    out = io.StringIO()
+    try:
+        with matplotlib.rc_context(), contextlib.redirect_stdout(out):
+            runpy.run_path(sys.argv[0], run_name="__main__")
+    except SystemExit as exc:
+        assert exc.code in (0, None), f"{script} exited with {exc.code}:\n{out.getvalue()[-3000:]}"
+    finally:
+        sys.argv, sys.path[:] = argv, path
+        plt.close("all")
+    return out.getvalue()

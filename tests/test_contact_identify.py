@@ -10,7 +10,7 @@ from pinmsk.contact.identify import ALL_TERMS, map_values
 from pinmsk.errors import ModelError, SolverError, TrialError
 from pinmsk.trial import Trial
 
-from conftest import REPO
+from conftest import REPO, run_example
 
 CSU = "real/csu-treadmill-leg2d/rawdata.txt"
 SITES = ("heel", "metatarsal", "toe")
@@ -371,14 +371,7 @@ def test_real_data_hypervolumetric_is_not_worse_than_what_it_contains(shared_dat
 
 
 def test_example_05_runs_headless(tmp_path):
-    import runpy
-    import sys
-    argv = sys.argv
-    sys.argv = ["05_contact_identification.py", "--quick", "--toe", "flat", "--out", str(tmp_path)]
-    try:
-        runpy.run_path(str(REPO / "examples" / "05_contact_identification.py"), run_name="__main__")
-    finally:
-        sys.argv = argv
+    run_example("05_contact_identification.py", "--quick", "--toe", "flat", "--out", tmp_path)
     summary = json.loads((tmp_path / "contact_summary.json").read_text())
     assert len(summary["fits"]) == 4 and all("(toe flat)" in k for k in summary["fits"])
     assert len(summary["sensitivity"]) == 3  # volumetric, hyper-volumetric, relaxed

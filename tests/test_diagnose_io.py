@@ -2,9 +2,6 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,7 +13,7 @@ from pinmsk.diagnose import (compare, demo, diagnose, fit_effect, make_trial, ru
                              shipped_trials)
 from pinmsk.errors import ConvergenceError, ModelError, TrialError
 
-REPO = Path(__file__).resolve().parents[1]
+from conftest import REPO, run_example
 
 
 @pytest.fixture(scope="module")
@@ -172,12 +169,12 @@ def test_demo_writes_everything(tmp_path):
     assert result.steps[0].ratio > 5 and result.final.ratio < 1.5
 
 
+@pytest.mark.slow
 def test_example_runs_headless(tmp_path, monkeypatch):
+    """Example 01 (slow): its loop is checked by test_diagnose.py::test_two_hidden_effects_in_two_add_steps,
+    its figures and report by test_figures_and_report, on the same two-effect trial."""
     monkeypatch.chdir(tmp_path)
-    out = subprocess.run([sys.executable, str(REPO / "examples" / "01_diagnose_forearm.py"), str(tmp_path)],
-                         capture_output=True, text=True, timeout=120, cwd=tmp_path)
-    assert out.returncode == 0, out.stderr
-    assert "at_noise_floor" in out.stdout
+    assert "at_noise_floor" in run_example("01_diagnose_forearm.py", tmp_path)
     assert (tmp_path / "diagnosis_report.html").exists()
 
 

@@ -57,14 +57,17 @@ def test_ff_batch_equals_one_by_one(finger):
         assert np.allclose(one["q"], batch["q"][:, b], rtol=1e-13, atol=1e-13)
 
 
-def test_ifm_recovered_excitations_drive_ff_to_the_same_motion(finger):
+@pytest.mark.parametrize("duration", [0.25, pytest.param(0.5, marks=pytest.mark.slow)])
+def test_ifm_recovered_excitations_drive_ff_to_the_same_motion(finger, duration):
     """IFM (Eq. 5.5 forces -> skeleton -> inverse muscle Fig. 5.6 with analytic F', F'')
     gives excitations that, fed to the fully forward compliant-tendon model, reproduce
-    the motion, the forces and the activations."""
+    the motion, the forces and the activations.  The first half period (default suite)
+    already tells a wrong F'' (q off by 6e-4 rad without it); the whole period (slow) also
+    passes through low activations (u down to 0.04), where the fibre ODE is stiff."""
     T, h = 0.5, 2e-4
     par = Fourier(2, period=T)
     P = np.array([[20.0, 20.9], [0.05, -0.05], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]])
-    tf = np.linspace(0, T, int(round(T / (h / 2))) + 1)          # grid of half steps
+    tf = np.linspace(0, duration, int(round(duration / (h / 2))) + 1)          # grid of half steps
     tm = 0.5 * (tf[1:] + tf[:-1])
     F = par.evaluate(P, tf)
     q, v, acc = simulate_skeleton(finger, tf, None, None, [0.0], [0.0], forces=F[:, None],
@@ -211,7 +214,7 @@ n_starts = 1
 
 def test_task_file_runs_and_writes_a_trial(tmp_path):
     task = tmp_path / "task.toml"
-    task.write_text(TASK)
+    task.write_text(TASK.replace("step = 0.0025", "step = 0.005"))    # 50 steps a cycle: half the time
     out = tmp_path / "out.sto"
     res = optimize_task(task, out)
     assert res.converged
@@ -253,7 +256,8 @@ def test_metabolic_objective_converges_with_smooth_switches():
     reported objective is the exact piecewise model, close to the smoothed one."""
     model = pinmsk.load_model("forearm")
     tg = Target("cycle", amplitude=1.6, period=1.9, offset=0.3)
-    prob = DynamicOptimization(model, parametrization=Fourier(3, period=1.9), target=tg,
+    # 2 harmonics (35 coefficients) converge as 3 do, in half the time
+    prob = DynamicOptimization(model, parametrization=Fourier(2, period=1.9), target=tg,
                                step=1.9 / 60, objective={"kind": "metabolic", "model": "umberger2003"},
                                tracking_tolerance=0.15, n_starts=1, maxiter=300, smooth=0.01).fit()
     r = prob.result_
@@ -328,17 +332,18 @@ def test_free_period_recovered_from_a_known_motion(finger):
 
 @pytest.mark.parametrize("design", ["ifm", "ift"])
 def test_inverse_designs_converge_on_forearm_tracking(design):
-    """IFM and IFT (Sec. 5.1) from the automatic guesses: forearm cycle within 0.1 rad
-    (Eq. 3.7), recovered excitations within [0, 1] (Eq. 3.8), every muscle active (forces
-    above the passive floor), and the recovered excitations, run through activation
-    dynamics, give back the recovered activations."""
+    """IFM and IFT (Sec. 5.1) from the automatic guess (one start: a second one ends at the
+    same optimum, at twice the cost): forearm cycle within 0.1 rad (Eq. 3.7), recovered
+    excitations within [0, 1] (Eq. 3.8), every muscle active (forces above the passive
+    floor), and the recovered excitations, run through activation dynamics, give back the
+    recovered activations."""
     from pinmsk.solvers.dynamic import passive_floor
     fa = pinmsk.load_model("forearm")
     T = 1.9
     prob = DynamicOptimization(fa, parametrization=Fourier(2, period=T), design=design,
                                target=Target("cycle", amplitude=1.6, period=T, offset=0.3),
                                step=T / 100, objective={"kind": "effort", "exponent": 2},
-                               tracking_tolerance=0.1, n_starts=2, bound_points=101,
+                               tracking_tolerance=0.1, n_starts=1, bound_points=101,
                                tracking_points=101)
     res = prob.fit().result_
     assert res.converged, res.status
@@ -376,7 +381,9 @@ def test_finger_tapping_ifm_converges_and_ift_bounds_are_flagged(finger, capsys)
     deactivation allows (u < 0) -- the optimizer reports it as not converged, with the
     violated bound, and converges once the bounds are relaxed."""
     kw = _finger_tapping(4.0)
-    res = DynamicOptimization(finger, design="ifm", **kw).fit().result_
+    # IFM on 100 steps per cycle (the 7 Hz case below keeps 200): the same convergence from the
+    # three automatic guesses, at 40 % of the time
+    res = DynamicOptimization(finger, design="ifm", **{**kw, "step": kw["step"] * 2}).fit().result_
     assert res.converged, res.status
     assert res.max_bound_violation < 1e-5 and res.max_tracking_error < 0.02
     res = DynamicOptimization(finger, design="ift", **kw).fit().result_

@@ -68,8 +68,10 @@ def simulate(mus, lmt, u_of, t_end=1.5, n=400):
 
     a0 = u_of(0.0)
     l0 = mus.equilibrium(lmt(0.0)[0], a0)["l_ce"]
-    sol = solve_ivp(rhs, (0, t_end), np.concatenate([a0, l0]), method="Radau", rtol=1e-10,
-                    atol=1e-12, dense_output=True)
+    # the comparison is pointwise (module doc), so the integrator needs no more accuracy than
+    # a faithful trajectory: rtol 1e-8 instead of 1e-10 takes 40 % of the time
+    sol = solve_ivp(rhs, (0, t_end), np.concatenate([a0, l0]), method="Radau", rtol=1e-8,
+                    atol=1e-10, dense_output=True)
     assert sol.status == 0
     t = np.linspace(0.2, t_end, n)
     y = sol.sol(t).T

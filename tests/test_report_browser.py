@@ -28,65 +28,68 @@ def _png_figure(seed: int) -> bytes:
     return buf.getvalue()
 
 
-def check_html_in_browser(path, *, min_images: int = 1, screenshot=None) -> list:
-    """Open ``path`` in headless Chromium; assert it is self-contained and its figures load.
+@pytest.fixture(scope="module")
+def page():
+    """One headless Chromium page for the module's checks (starting Chromium is most of a check's time)."""
+    with browser.chrome_or_skip(width=1000, height=800) as p:
+        p.send("Network.enable")
+        yield p
+
+
+def check_html_in_browser(page, path, *, min_images: int = 1, screenshot=None) -> list:
+    """Open ``path`` in the headless Chromium ``page``; assert it is self-contained and its figures load.
 
     Returns the images as ``[src prefix, complete, width, height]``.
     """
-    page = browser.chrome_or_skip(width=1000, height=800)
-    with page:
-        page.send("Network.enable")
-        page.navigate(path.resolve().as_uri())
-        images = page.wait_for(f"""(() => {{ const im = {browser.IMAGES_JS.strip()};
-            return im.length >= {min_images} && im.every(i => i[1]) ? im : null; }})()""", timeout=20)
-        external = [u for u in page.requested_urls() if not u.startswith(("file:", "data:"))]
-        if screenshot is not None:
-            page.screenshot(screenshot)
+    page.navigate("about:blank")
+    page.events.clear()             # only this page's requests count
+    page.navigate(path.resolve().as_uri())
+    images = page.wait_for(f"""(() => {{ const im = {browser.IMAGES_JS.strip()};
+        return im.length >= {min_images} && im.every(i => i[1]) ? im : null; }})()""", timeout=20)
+    external = [u for u in page.requested_urls() if not u.startswith(("file:", "data:"))]
+    if screenshot is not None:
+        page.screenshot(screenshot)
     assert not external, f"the report fetches from the network: {external[:5]}"
     broken = [i for i in images if i[2] == 0 or i[3] == 0]
     assert not broken, f"figures that did not load: {broken}"
     return images
 
 
-def test_self_contained_html_with_embedded_figures(tmp_path):
-    browser.chromium_or_skip()
+def test_self_contained_html_with_embedded_figures(page, tmp_path):
     imgs = "".join(
         f'<figure><img alt="f{k}" src="data:image/png;base64,{base64.b64encode(_png_figure(k)).decode()}">'
         f"</figure>" for k in range(3))
-    page = tmp_path / "report.html"
-    page.write_text(f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>t</title></head>"
+    html = tmp_path / "report.html"
+    html.write_text(f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>t</title></head>"
                     f"<body><h1>report</h1>{imgs}<table><tr><td>1</td></tr></table></body></html>")
-    images = check_html_in_browser(page, min_images=3, screenshot=tmp_path / "report.png")
+    images = check_html_in_browser(page, html, min_images=3, screenshot=tmp_path / "report.png")
     assert [i[2:] for i in images] == [[320, 240]] * 3          # 4x3 in at 80 dpi
     rgb = browser.read_png(tmp_path / "report.png")
     assert browser.warm_fraction(rgb) > 0.001                   # the red curves are drawn
 
 
-def test_broken_figure_is_reported(tmp_path):
-    browser.chromium_or_skip()
-    page = tmp_path / "broken.html"
-    page.write_text('<html><body><img src="data:image/png;base64,AAAA"></body></html>')
+def test_broken_figure_is_reported(page, tmp_path):
+    html = tmp_path / "broken.html"
+    html.write_text('<html><body><img src="data:image/png;base64,AAAA"></body></html>')
     with pytest.raises(AssertionError, match="did not load"):
-        check_html_in_browser(page)
+        check_html_in_browser(page, html)
 
 
-def test_network_fetch_is_reported(tmp_path):
-    browser.chromium_or_skip()
-    page = tmp_path / "external.html"
+def test_network_fetch_is_reported(page, tmp_path):
+    html = tmp_path / "external.html"
     png = base64.b64encode(_png_figure(0)).decode()
-    page.write_text(f'<html><body><img src="data:image/png;base64,{png}">'
+    html.write_text(f'<html><body><img src="data:image/png;base64,{png}">'
                     '<script src="http://127.0.0.1:9/missing.js"></script></body></html>')
     with pytest.raises(AssertionError, match="fetches from the network"):
-        check_html_in_browser(page)
+        check_html_in_browser(page, html)
 
 
-def test_pinmsk_report_in_browser(tmp_path):
+def test_pinmsk_report_in_browser(page, tmp_path):
     try:
         report = importlib.import_module("pinmsk.report")
     except ModuleNotFoundError:
         pytest.skip("pinmsk.report is not written yet (owned by the diagnosis work); "
                     "the harness above checks self-contained HTML already")
-    browser.chromium_or_skip()
     make = getattr(report, "write_report", None) or getattr(report, "write_html", None)
     if make is None:
         pytest.skip(f"pinmsk.report has no write_report/write_html yet (has: "
@@ -101,12 +104,11 @@ def test_pinmsk_report_in_browser(tmp_path):
         make(out, model=model, trial=trial)
     except TypeError as exc:
         pytest.skip(f"pinmsk.report.{make.__name__} takes other arguments than (path, model=, trial=): {exc}")
-    check_html_in_browser(out, min_images=1)
+    check_html_in_browser(page, out, min_images=1)
 
 
-def test_results_report_of_static_optimization_in_browser(tmp_path):
+def test_results_report_of_static_optimization_in_browser(page, tmp_path):
     """A results report of a real SO on the forearm: every <img> loads in Chromium."""
-    browser.chromium_or_skip()
     import pinmsk
     from pinmsk.report import write_results_report
     from pinmsk.solvers.analytical import gaussian_elbow_trial
@@ -118,7 +120,7 @@ def test_results_report_of_static_optimization_in_browser(tmp_path):
     trial = trial.with_channels(BRD_emg=np.asarray(so.result_["BRD_activation"]) ** 0.5)
     out = write_results_report(tmp_path / "so.html", model=model, trial=trial, results=so.result_,
                                title="static optimization", text=so.report())
-    images = check_html_in_browser(out, min_images=3, screenshot=tmp_path / "so.png")
+    images = check_html_in_browser(page, out, min_images=3, screenshot=tmp_path / "so.png")
     assert len(images) == 3 and all(i[0].startswith("data:image/png") for i in images)
     assert [i[2:] for i in images][:2] == [[900, 400], [900, 400]]     # forces, activations
     rgb = browser.read_png(tmp_path / "so.png")
