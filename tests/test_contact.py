@@ -184,10 +184,7 @@ def test_planar_kinematics_match_pinocchio(foot):
 
 def test_contacts_on_gait2d_sites():
     from pinmsk.model import load_model
-    try:
-        gait = load_model("gait2d")
-    except Exception as exc:  # the foundation's loader is still moving
-        pytest.skip(f"gait2d not loadable: {exc}")
+    gait = load_model("gait2d")
     cs = foot_contacts(gait, "hypervolumetric", side="r")
     assert [c.target for c in cs] == ["heel_r", "metatarsal_r", "toe_r"]
     m2 = gait.with_effect(*cs)

@@ -14,10 +14,7 @@ STANDING = 1.068093646531213  # torso_y with heel and metatarsal sites on y = 0 
 @pytest.fixture(scope="module")
 def gait():
     from pinmsk.model import load_model
-    try:
-        return load_model("gait2d")
-    except Exception as exc:  # the foundation's loader is still moving
-        pytest.skip(f"gait2d not loadable: {exc}")
+    return load_model("gait2d")
 
 
 def _pose(gait, y):
