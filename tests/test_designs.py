@@ -163,6 +163,8 @@ def test_compliant_ff_fast_forearm_swing(fast_swing, refs):
     assert np.ptp(refs["forearm-fast"][0]) > 2.5
 
 
+# slow: the 200-step finger reference and the fast swing check the accuracy by default
+@pytest.mark.slow
 def test_compliant_ff_converges_at_third_order(fast_swing, refs):
     """ARS(4,4,3) is 3rd order: halving h cuts the q error ~7x (measured 1.23e-3 -> 1.64e-4
     -> 2.2e-5 on the fast forearm swing; 2^3 = 8)."""

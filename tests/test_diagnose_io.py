@@ -105,6 +105,8 @@ def test_fit_that_does_not_converge(forearm, damped):
 
 # -- figures and report --------------------------------------------------------------------
 
+# slow: test_demo_writes_everything writes the same figures and report by default
+@pytest.mark.slow
 def test_figures_and_report(tmp_path, forearm):
     from pinmsk import plots
     trial = make_trial(forearm, ["payload:hand:mass=0.5", "joint_damping:elbow_flexion:c=0.2"], seed=12)

@@ -251,6 +251,8 @@ def test_shipped_task_files_are_valid():
         assert prob.parametrization.n_params in (7, 11)
 
 
+# slow: test_energy checks the smoothed heat rates; effort objectives cover the optimizer by default
+@pytest.mark.slow
 def test_metabolic_objective_converges_with_smooth_switches():
     """J5 (Eq. 3.6, Umberger 2003): SLSQP on the C1-smoothed heat rates converges; the
     reported objective is the exact piecewise model, close to the smoothed one."""
@@ -330,7 +332,8 @@ def test_free_period_recovered_from_a_known_motion(finger):
     np.testing.assert_allclose(res.coeffs[:, 0], P[:, 0], rtol=1e-3)
 
 
-@pytest.mark.parametrize("design", ["ifm", "ift"])
+# ifm is slow: the 4 Hz finger-tapping IFM case covers the design by default
+@pytest.mark.parametrize("design", [pytest.param("ifm", marks=pytest.mark.slow), "ift"])
 def test_inverse_designs_converge_on_forearm_tracking(design):
     """IFM and IFT (Sec. 5.1) from the automatic guess (one start: a second one ends at the
     same optimum, at twice the cost): forearm cycle within 0.1 rad (Eq. 3.7), recovered

@@ -380,8 +380,10 @@ def test_other_builtin_models_build(name, meshcat_url):
 
 
 # view_forearm.py runs in a real subprocess below (its headless path without --no-block); human3d is
-# slow (test_other_builtin_models_build builds its viewer, view_gait2d.py runs the same script pattern)
-@pytest.mark.parametrize("script", ["view_gait2d.py", pytest.param("view_human3d.py", marks=pytest.mark.slow)])
+# slow (test_other_builtin_models_build builds its viewer, view_forearm.py runs the same script pattern),
+# and so is gait2d (test_other_builtin_models_build[gait2d] builds it)
+@pytest.mark.parametrize("script", [pytest.param("view_gait2d.py", marks=pytest.mark.slow),
+                                    pytest.param("view_human3d.py", marks=pytest.mark.slow)])
 def test_examples_run_headless(script, monkeypatch):
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.chdir(REPO)
