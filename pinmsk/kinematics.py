@@ -157,11 +157,6 @@ def is_planar(model) -> bool:
     return bool(np.max(np.abs(J[[2, 3, 4], :]), initial=0.0) < 1e-9)
 
 
-def _wrench_rate(grf: Trial) -> float:
-    from .resample import measured_rate
-    return measured_rate(grf)
-
-
 def lowpass_wrenches(W: np.ndarray, *, rate: float, cutoff: float | None) -> np.ndarray:
     """World wrenches ``(N, 6k)`` low-passed like the kinematics (no-op for ``cutoff=None``)."""
     if cutoff is None or W.size == 0:
@@ -195,7 +190,8 @@ def _plate_loads(model, grf: Trial, motion: Motion, *, cutoff, external_loads, f
     wrenches = [_grf.plate_wrench(grf, p, min_force=MIN_FORCE, planar=planar) for p in plist]
     W = np.concatenate([np.hstack([F, M]) for F, M in wrenches], axis=1) if wrenches else np.zeros((grf.n_frames, 0))
     if cutoff is not None:
-        W = lowpass_wrenches(W, rate=_wrench_rate(grf), cutoff=cutoff)
+        from .resample import measured_rate
+        W = lowpass_wrenches(W, rate=measured_rate(grf), cutoff=cutoff)
     if not same_time:
         tg = np.asarray(grf.time, dtype=float)
         t = motion.t

@@ -1,6 +1,5 @@
 """The lab path from the command line: GRF used, 6 Hz by default, residuals and unspanned coordinates named."""
 import numpy as np
-import pytest
 
 import pinmsk
 from pinmsk import read_trial, write_trial

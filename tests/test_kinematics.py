@@ -11,7 +11,7 @@ from pinmsk.errors import InfeasibleError, TrialError
 from pinmsk.external_loads import read_external_loads
 from pinmsk.grf import external_forces
 from pinmsk.kinematics import DEFAULT_CUTOFF, is_planar, prepare
-from pinmsk.residuals import PEAK_FORCE_FRACTION, floating_base_residuals
+from pinmsk.residuals import PEAK_FORCE_FRACTION
 from pinmsk.solvers import StaticOptimization
 
 RATE = 200.0
