@@ -131,7 +131,7 @@ def check_vertical_force(trial: Trial, *, min_force: float = 20.0, body_mass: fl
                     raise TrialError(
                         f"ground reaction of side {side!r}: the force along {a} (median {med:.0f} N when loaded, "
                         f"channel {ch[('force', a)]!r}) exceeds the vertical {name!r} (median {med_y:.0f} N); "
-                        f"the plate's axes are not the lab's (y up): remap them (e.g. pinmsk.c3d.remap_axes "
+                        f"the plate's axes are not the lab's (y up): remap them (e.g. pinmsk.io.c3d.remap_axes "
                         f"for a z-up lab)")
         loaded = np.abs(fy) >= min_force
         if not loaded.any():

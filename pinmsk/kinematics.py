@@ -7,7 +7,7 @@ Every analysis (inverse dynamics, SO, FSO, diagnosis, batch) goes through
   :data:`DEFAULT_CUTOFF` = 6 Hz unless told otherwise (the usual choice for
   gait and most movements; Winter, *Biomechanics and Motor Control of Human
   Movement*, Ch. 2), then differentiated by quintic spline
-  (:func:`pinmsk.filtering.differentiate`).  ``cutoff=0`` (or ``None``) turns
+  (:func:`pinmsk.signals.filtering.differentiate`).  ``cutoff=0`` (or ``None``) turns
   filtering off explicitly, which is right for noise-free synthetic data.
 * **Ground reaction forces** are used whenever the trial (or ``grf=``, or an
   OpenSim ExternalLoads file) has them: each plate goes to a body of the model
@@ -161,7 +161,7 @@ def lowpass_wrenches(W: np.ndarray, *, rate: float, cutoff: float | None) -> np.
     """World wrenches ``(N, 6k)`` low-passed like the kinematics (no-op for ``cutoff=None``)."""
     if cutoff is None or W.size == 0:
         return W
-    from .filtering import lowpass
+    from .signals.filtering import lowpass
     if cutoff >= 0.5 * rate:
         raise TrialError(f"cutoff {cutoff:g} Hz is not below the GRF's Nyquist frequency "
                          f"{0.5 * rate:g} Hz (GRF at {rate:g} Hz)")
@@ -190,7 +190,7 @@ def _plate_loads(model, grf: Trial, motion: Motion, *, cutoff, external_loads, f
     wrenches = [_grf.plate_wrench(grf, p, min_force=MIN_FORCE, planar=planar) for p in plist]
     W = np.concatenate([np.hstack([F, M]) for F, M in wrenches], axis=1) if wrenches else np.zeros((grf.n_frames, 0))
     if cutoff is not None:
-        from .resample import measured_rate
+        from .signals.sampling import measured_rate
         W = lowpass_wrenches(W, rate=measured_rate(grf), cutoff=cutoff)
     if not same_time:
         tg = np.asarray(grf.time, dtype=float)
@@ -248,7 +248,7 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
         raise TrialError(f"expected a Trial or a Motion, got {type(trial).__name__}")
     motion = model.motion(trial, cutoff=c)
     if external_loads is not None and not hasattr(external_loads, "loads"):
-        from .external_loads import read_external_loads
+        from .io.external_loads import read_external_loads
         external_loads = read_external_loads(external_loads)
     own = has_ground_reaction(trial)
     source = None
@@ -262,7 +262,7 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
         raise TrialError("the trial has ground reaction channels and a separate GRF source was given "
                          f"({grf if not isinstance(grf, Trial) else 'grf='}); pass only one")
     if isinstance(grf, (str, Path)):
-        from .io import read_trial
+        from .io.tables import read_trial
         source = str(grf)
         grf = read_trial(grf)
     elif grf is not None:

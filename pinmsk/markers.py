@@ -27,7 +27,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from .errors import ModelError, TrialError
-from .tomlfile import read_toml
+from .io.toml_files import read_toml
 from .trial import Trial
 
 __all__ = ["read_trc", "fill_gaps", "find_gaps", "Gap", "marker_names", "marker_array",
@@ -331,7 +331,7 @@ def write_trc(trial: Trial, path, *, units: str = "mm", markers: Sequence[str] |
     for k in range(n):
         cells = ["" if not np.isfinite(v) else f"{v:.9g}" for v in xyz[k].ravel()]
         lines.append(f"{k + 1}\t{trial.time[k]:.9g}\t" + "\t".join(cells))
-    from .io import atomic_write
+    from .io.output_files import atomic_write
     text = "\n".join(lines) + "\n"
     return atomic_write(path, lambda fh: fh.write(text))
 

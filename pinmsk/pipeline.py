@@ -43,7 +43,7 @@ OpenSim ``.sto``/``.mot`` inputs are read leniently (``strict=False``); the repa
 are listed under ``info.read_repairs`` in ``summary.json``.
 
 Parallelism: local trials go to a :class:`concurrent.futures.ProcessPoolExecutor`
-with ``jobs`` workers and a progress bar (:class:`pinmsk.progress.Progress`).  With
+with ``jobs`` workers and a progress bar (:class:`pinmsk.presentation.progress.Progress`).  With
 ``scheduler="tcp://host:8786"`` the same function is submitted through
 ``distributed.Client(scheduler).get_executor()`` (the Dask ``concurrent.futures``
 interface): ``pip install distributed`` on the client and the workers, and pinmsk
@@ -64,10 +64,10 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from .channel_map import RAJAGOPAL_HIP_OFFSET, apply_channel_map, opensim_gait2d_map
+from .io.channel_map import RAJAGOPAL_HIP_OFFSET, apply_channel_map, opensim_gait2d_map
 from .errors import PinmskError, TrialError
-from .io import atomic_write, output_folder, write_json
-from .tomlfile import read_toml
+from .io.output_files import atomic_write, output_folder, write_json
+from .io.toml_files import read_toml
 from .trial import Trial
 
 __all__ = ["opensim_to_gait2d", "frame_positions", "transferred_cops", "run_trial", "batch",
@@ -84,9 +84,9 @@ def opensim_to_gait2d(coords: Trial, model, *, hip_offset=RAJAGOPAL_HIP_OFFSET,
                       knee_sign: str | int = "auto") -> Trial:
     """gait2d coordinates from an OpenSim full-body model's coordinates (sagittal plane).
 
-    The built-in column map :func:`pinmsk.channel_map.opensim_gait2d_map` (signs, the
+    The built-in column map :func:`pinmsk.io.channel_map.opensim_gait2d_map` (signs, the
     ``knee_sign="auto"`` rule and the hip placement are documented in
-    :mod:`pinmsk.channel_map`) applied to ``coords``, keeping only the model's coordinates
+    :mod:`pinmsk.io.channel_map`) applied to ``coords``, keeping only the model's coordinates
     in ``model.coordinate_order``.  ``hip_offset``: the OpenSim hip centre in the pelvis
     frame (default the unscaled Rajagopal model's); ``knee_sign``: ``"auto"``, ``+1``
     (Rajagopal, + = flexion) or ``-1`` (gait2392, Gait10dof18musc).
@@ -162,13 +162,13 @@ def _kinematics(model, spec: dict, base: Path):
     from .grf import external_forces
     from .ik import InverseKinematics
     from .markers import load_marker_set, read_trc
-    from .resample import to_time
+    from .signals.resampling import to_time
 
     kind = spec.get("kind")
     info: dict = {}
     ext = []
     if kind == "csu":
-        from .csu import read_csu
+        from .io.cleveland_gait import read_csu
 
         raw = read_csu(_path(base, spec["path"]), body_mass=spec.get("body_mass"),
                        belt_height=float(spec.get("belt_height", 0.0)))
@@ -182,7 +182,7 @@ def _kinematics(model, spec: dict, base: Path):
                               min_force=float(spec.get("min_force", 20.0)))
         info["body_mass"] = spec.get("body_mass")
     elif kind == "opensim":
-        from .io import read_trial
+        from .io.tables import read_trial
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -210,7 +210,7 @@ def _kinematics(model, spec: dict, base: Path):
         kin = ik.result_
         info["ik_marker_rms_mm"] = {k: 1000 * v for k, v in ik.marker_rms_.items()}
         if spec.get("grf"):
-            from .io import read_trial
+            from .io.tables import read_trial
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 grf = read_trial(_path(base, spec["grf"]), strict=False)
@@ -333,9 +333,9 @@ def _remove_partial_folders(out: Path, names) -> None:
 
 
 def _figures(model, d: Path, idt: Trial, res: Trial) -> int:
-    """Per-trial PNGs (joint moments, torso residuals) via :mod:`pinmsk.plots`; returns how many."""
+    """Per-trial PNGs (joint moments, torso residuals) via :mod:`pinmsk.presentation.plots`; returns how many."""
     try:
-        from . import plots
+        from .presentation import plots
     except ImportError:  # pragma: no cover - plots is optional for the batch
         return 0
     joints = [f"{c}_moment" for c in model.coordinate_order if c.startswith(("hip", "knee", "ankle"))]
@@ -395,7 +395,7 @@ def batch(trials: Sequence[dict], *, model="gait2d", out=None, base_dir=".", job
     complete, so an interrupted batch (Ctrl-C) leaves complete trial folders or
     none; the temporary folders of interrupted trials are removed.
     """
-    from .progress import Progress
+    from .presentation.progress import Progress
 
     out = None if out is None else Path(out)
     jobs = jobs or os.cpu_count() or 1

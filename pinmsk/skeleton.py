@@ -88,7 +88,7 @@ def inverse_dynamics(model, q, v, a, *, external: Sequence[ExternalForce] = (),
 
     Returns ``(N, nv)``.  ``external`` lists world-frame wrenches at points.
     ``progress``: an object with ``update(n)``, called every
-    :data:`PROGRESS_CHUNK` frames (e.g. :class:`pinmsk.progress.Progress`).
+    :data:`PROGRESS_CHUNK` frames (e.g. :class:`pinmsk.presentation.progress.Progress`).
     """
     pm = _pin(model)
     q = _frames(q, pm.nq, "q")

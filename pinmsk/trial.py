@@ -17,7 +17,7 @@ Channel names follow the pinmsk conventions (see DESIGN.md):
   ``ground_force_r_vy`` spellings are recognised by :func:`parse_ground_reaction`.
 
 Reading and writing files lives in :mod:`pinmsk.io`; filtering and
-differentiation in :mod:`pinmsk.filtering`.
+differentiation in :mod:`pinmsk.signals.filtering`.
 """
 
 from __future__ import annotations
@@ -33,7 +33,8 @@ from typing import NamedTuple
 import numpy as np
 
 from pinmsk.errors import TrialError
-from pinmsk.filtering import UNIFORM_TOLERANCE, differentiate, lowpass
+from pinmsk.signals.filtering import differentiate, lowpass
+from pinmsk.signals.sampling import median_step, uniform_rate
 
 __all__ = [
     "Trial",
@@ -422,7 +423,7 @@ class Trial:
         """Median sampling rate in Hz (``nan`` for a single frame)."""
         if self.n_frames < 2:
             return float("nan")
-        return float(1.0 / np.median(np.diff(self._time)))
+        return 1.0 / median_step(self._time)
 
     def _where(self) -> str:
         src = self._meta.get("source")
@@ -772,7 +773,7 @@ class Trial:
 
         ``q`` are the ``coordinates`` channels (low-passed at ``cutoff`` Hz if
         given); ``v`` and ``a`` are derivatives of the quintic spline through
-        them (:func:`pinmsk.filtering.differentiate`).  The coordinates must be
+        them (:func:`pinmsk.signals.filtering.differentiate`).  The coordinates must be
         present and finite, and rotational ones (by :func:`is_angular_name`)
         must look like radians.
         """
@@ -784,32 +785,24 @@ class Trial:
     def smoothed(self, cutoff: float, *, order: int = 4, names=None) -> Trial:
         """A new Trial with channels (all, or ``names``) low-passed at ``cutoff`` Hz.
 
-        Zero-lag Butterworth (:func:`pinmsk.filtering.lowpass`) at the median
+        Zero-lag Butterworth (:func:`pinmsk.signals.filtering.lowpass`) at the median
         rate; the time steps must be uniform within
-        :data:`pinmsk.filtering.UNIFORM_TOLERANCE` (10 %).
+        :data:`pinmsk.signals.sampling.UNIFORM_TOLERANCE` (10 %).
         """
         names = self._names if names is None else _as_names(names)
         idx = self._indices(names)
         self._check_finite(names)
         t = self._time
-        if t.shape[0] < 2:
-            raise TrialError("smoothing needs at least 2 frames")
-        dt = np.diff(t)
-        step = float(np.median(dt))
-        if np.max(np.abs(dt - step)) > UNIFORM_TOLERANCE * step:
-            raise TrialError(
-                f"{self._where()}filtering needs uniform sampling, but time steps range from "
-                f"{dt.min():.6g} to {dt.max():.6g} s; resample first, e.g. trial.resample({1 / step:.6g})"
-            )
+        rate = uniform_rate(t, where=self._where(), purpose="smoothing")
         values = self._values.copy()
-        values[:, idx] = lowpass(values[:, idx], rate=1.0 / step, cutoff=cutoff, order=order)
+        values[:, idx] = lowpass(values[:, idx], rate=rate, cutoff=cutoff, order=order)
         return self._new(t, self._names, values, meta={**self._meta, "lowpass_cutoff": float(cutoff)})
 
     # -- files -----------------------------------------------------------------
 
     def write(self, path, *, in_degrees: bool = False, angular=None, precision: int | None = None):
         """Write to ``.csv``, ``.sto`` or ``.mot``; see :func:`pinmsk.io.write_trial`."""
-        from pinmsk.io import write_trial
+        from pinmsk.io.tables import write_trial
 
         return write_trial(self, path, in_degrees=in_degrees, angular=angular, precision=precision)
 

@@ -108,7 +108,7 @@ def test_fit_that_does_not_converge(forearm, damped):
 # slow: test_demo_writes_everything writes the same figures and report by default
 @pytest.mark.slow
 def test_figures_and_report(tmp_path, forearm):
-    from pinmsk import plots
+    from pinmsk.presentation import plots
     trial = make_trial(forearm, ["payload:hand:mass=0.5", "joint_damping:elbow_flexion:c=0.2"], seed=12)
     run(forearm, trial, add=["payload:hand"], plot_dir=tmp_path / "fig", report_path=tmp_path / "r.html",
             json_path=tmp_path / "r.json")
@@ -128,7 +128,7 @@ def test_figures_and_report(tmp_path, forearm):
     out = plots.save_channels(trial, ["elbow_flexion", "elbow_flexion_moment"], tmp_path / "ch", stem="id")
     assert [p.name for p in out] == ["id.png"]
     # the convenience form write_report(path, model=, trial=) and its failure page
-    from pinmsk.report import write_report
+    from pinmsk.presentation.report import write_report
     p = write_report(tmp_path / "conv.html", model=forearm, trial=trial)
     assert "payload:hand" in p.read_text()
     t = np.linspace(0, 1, 51)

@@ -1,6 +1,6 @@
 """Self-contained HTML reports in a real browser: every figure loads, nothing is fetched
 from the network.  The harness is checked on a page built here with matplotlib; the
-report of ``pinmsk.report`` is checked when that module exists."""
+report of ``pinmsk.presentation.report`` is checked when that module exists."""
 from __future__ import annotations
 
 import base64
@@ -85,7 +85,7 @@ def test_network_fetch_is_reported(page, tmp_path):
 
 def test_pinmsk_report_in_browser(page, tmp_path):
     import pinmsk
-    from pinmsk.report import write_report
+    from pinmsk.presentation.report import write_report
 
     model = pinmsk.load_model("forearm")
     t = np.linspace(0, 1, 51)
@@ -98,7 +98,7 @@ def test_pinmsk_report_in_browser(page, tmp_path):
 def test_results_report_of_static_optimization_in_browser(page, tmp_path):
     """A results report of a real SO on the forearm: every <img> loads in Chromium."""
     import pinmsk
-    from pinmsk.report import write_results_report
+    from pinmsk.presentation.report import write_results_report
     from pinmsk.solvers.analytical import gaussian_elbow_trial
     from pinmsk.solvers.static import StaticOptimization
 

@@ -17,7 +17,7 @@ numbers), :func:`fit_contact_models` (several models on one trial, each starting
 ones it contains), :func:`fit_cli_run` (what ``pinmsk contact fit`` calls),
 :func:`read_contact_trial` (CSU text or .csv/.sto/.mot), :func:`synthetic_foot_trial`,
 :func:`contact_candidates` (diagnosis hook), :func:`from_spec` (a sidecar
-``[[contacts]]`` entry -> component, see :mod:`pinmsk.contact.spec`).  The CSU reader is :func:`pinmsk.csu.read_csu`.
+``[[contacts]]`` entry -> component, see :mod:`pinmsk.contact.spec`).  The CSU reader is :func:`pinmsk.io.cleveland_gait.read_csu`.
 """
 from .friction import friction_coefficient, regularized_coulomb
 from .sphere import (ContactForces, SiteKinematics, SphereContact, cap_centroid_depth, cap_volume,

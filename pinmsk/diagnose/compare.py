@@ -68,12 +68,13 @@ import numpy as np
 
 from ..components import Motion
 from ..errors import ModelError, TrialError
-from ..filtering import differentiate
+from ..signals.filtering import differentiate
 from ..kinematics import TrialInputs, prepare
 from ..skeleton import ExternalForce
 from ..trial import Trial, parse_ground_reaction
 from ..effects._base import SignalEffect, is_prismatic, unactuated_coordinates
-from ..effects.catalog import CatalogContext
+from .catalog import CatalogContext
+from ..signals.sampling import median_step
 
 __all__ = ["DEFAULT_CUTOFF", "MODES", "Comparison", "EquationError", "NoiseFloor", "compare",
            "catalog_context", "external_forces_from_trial", "white_noise_sigma"]
@@ -267,7 +268,7 @@ def _plan(model, trial, mode: str, *, has_grf: bool | None = None) -> _Plan:
 
 
 def catalog_context(model, trial, *, mode: str = "auto", frames=None) -> CatalogContext:
-    """The :class:`~pinmsk.effects.catalog.CatalogContext` of a model and trial (no dynamics computed)."""
+    """The :class:`~pinmsk.diagnose.catalog.CatalogContext` of a model and trial (no dynamics computed)."""
     if trial is None:
         return CatalogContext("torque", tuple(model.coordinates), tuple(unactuated_coordinates(model)),
                               tuple(frames or ()))
@@ -352,7 +353,7 @@ class EquationError:
             u = self.excitation
             d = np.diff(u, n=3, axis=0) / np.sqrt(20.0)
             d = np.vstack([d[:2], d, d[-1:]])
-            dt = float(np.median(np.diff(self.motion.t)))
+            dt = median_step(self.motion.t)
             w = max(int(round(0.5 / dt)), 5)
             kernel = np.ones(w) / w
             var = np.column_stack([np.convolve(d[:, j] ** 2, kernel, mode="same") for j in range(u.shape[1])])

@@ -42,9 +42,9 @@ def demo(out_dir, *, trial: str = DEMO_TRIAL, echo=print):
     measurement), the ranking, residual and error-step figures, ``report.html``
     and ``diagnosis.json``.  Returns the :class:`~pinmsk.diagnose.DiagnosisRun`.
     """
-    from ..io import read_trial
+    from ..io.tables import read_trial
     from ..model import load_model
-    from .. import plots
+    from ..presentation import plots
     from .diagnosis import diagnose, run
 
     out = Path(out_dir)

@@ -29,6 +29,7 @@ from ..components import Motion
 from ..errors import InfeasibleError, TrialError
 from ..kinematics import TrialInputs
 from ..trial import Trial, moment_channels
+from ..signals.sampling import median_step
 
 __all__ = ["MomentPlan", "plan_moments", "spanned_coordinates", "MOMENT_SOURCES"]
 
@@ -98,8 +99,8 @@ def _measured(model, trial: Trial, motion: Motion, coords, cutoff) -> np.ndarray
         k, j = np.argwhere(bad)[0]
         raise TrialError(f"measured moment {cols[j]!r} is {tau[k, j]!r} at row {k} (t = {motion.t[k]:.6g} s)")
     if cutoff is not None:
-        from ..filtering import lowpass
-        tau = lowpass(tau, rate=1.0 / float(np.median(np.diff(motion.t))), cutoff=cutoff)
+        from ..signals.filtering import lowpass
+        tau = lowpass(tau, rate=1.0 / median_step(motion.t), cutoff=cutoff)
     return tau
 
 

@@ -769,7 +769,7 @@ class StaticOptimization:
         array.  Coordinates no muscle spans are handled by
         :func:`pinmsk.solvers.moments.plan_moments`: an error without reserves
         where they need a force, a reported reserve with them.
-        ``progress``: an object with ``update(n)`` (e.g. pinmsk.progress.Progress).
+        ``progress``: an object with ``update(n)`` (e.g. pinmsk.presentation.progress.Progress).
         """
         self._check_params()
         t0 = _time.perf_counter()

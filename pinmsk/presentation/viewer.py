@@ -4,7 +4,7 @@ Built on Pinocchio's :class:`~pinocchio.visualize.MeshcatVisualizer` (which
 places the skeleton's visual geometry) and meshcat's own server, which serves
 the bundled JavaScript viewer on localhost, so no network is needed::
 
-    viewer = pinmsk.viewer.Viewer(pinmsk.load_model("forearm"))   # prints the URL
+    viewer = pinmsk.presentation.viewer.Viewer(pinmsk.load_model("forearm"))   # prints the URL
     viewer.display(q)                                  # one configuration
     viewer.play(trial, results=so_results)             # animation + time slider
     viewer.jupyter_cell()                              # in a notebook cell
@@ -43,7 +43,7 @@ import numpy as np
 import pinocchio as pin
 
 from . import viewer_geometry as vg
-from .errors import ModelError, TrialError
+from ..errors import ModelError, TrialError
 
 __all__ = ["Viewer", "ViewerCommand", "view_cli", "default_ground_height"]
 
@@ -751,7 +751,7 @@ def _channels_on(sources, names, t) -> np.ndarray | None:
 
 def _grf_on(sources, t) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """``{side: (F (N, 3), P (N, 3))}`` from ground reaction channels (missing axes are 0)."""
-    from .trial import parse_ground_reaction
+    from ..trial import parse_ground_reaction
 
     out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for s in sources:
@@ -886,9 +886,9 @@ def view_cli(model_name, trial_path=None, results_path=None, *, open_browser: bo
     ``block`` it then waits (Ctrl-C, or ``timeout`` seconds) and stops the
     server; otherwise it returns the running :class:`Viewer`.
     """
-    from .io import read_trial
-    from .model import load_model
-    from .trial import Trial
+    from ..io.tables import read_trial
+    from ..model import load_model
+    from ..trial import Trial
 
     if results_path and trial_path is None:
         raise TrialError("--results needs a TRIAL with the motion to show them on")

@@ -37,7 +37,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from .errors import PinmskError
+from ..errors import PinmskError
 
 __all__ = ["new_figure", "figure_png", "save_figure", "save_channels", "plot_channels", "plot_moments",
            "muscles_in", "emg_source", "emg_correlations", "plot_muscles", "align_results",
@@ -68,7 +68,7 @@ def figure_png(fig: Figure) -> bytes:
 
 def save_figure(fig: Figure, path, **savefig) -> Path:
     """Write ``fig`` as PNG to ``path`` (parent folders created) atomically; returns the path."""
-    from .io import atomic_write
+    from ..io.output_files import atomic_write
     return atomic_write(path, lambda fh: fig.savefig(fh, format="png", **savefig), binary=True, parents=True)
 
 
@@ -154,7 +154,7 @@ def emg_source(results, emg=True, muscles=None) -> dict[str, tuple[np.ndarray, n
 
     ``emg``: True -- the ``<muscle>_emg`` channels of ``results``; a Trial --
     its ``<muscle>_emg`` channels, or channels named ``<muscle>`` (as
-    :func:`pinmsk.emg.envelopes` writes them); None or False -- no EMG.
+    :func:`pinmsk.signals.emg.envelopes` writes them); None or False -- no EMG.
     ``muscles`` default to those with a force or activation channel in ``results``.
     """
     if emg is None or emg is False:

@@ -23,7 +23,7 @@ def shared_data_dir(*, required: bool = False) -> Path | None:
     missing folder raises :class:`FileNotFoundError` instead.
     """
     env = os.environ.get(ENV_VAR)
-    cand = Path(env) if env else Path(__file__).resolve().parents[1].parent / "shared" / "data"
+    cand = Path(env) if env else Path(__file__).resolve().parents[3] / "shared" / "data"
     if cand.is_dir():
         return cand
     if required:

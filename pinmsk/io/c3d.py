@@ -22,9 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import MissingDependencyError, TrialError
-from .markers import UNIT_SCALE, fill_gaps, DEFAULT_MAX_GAP
-from .trial import Trial
+from ..errors import MissingDependencyError, TrialError
+from ..markers import UNIT_SCALE, fill_gaps, DEFAULT_MAX_GAP
+from ..trial import Trial
 
 __all__ = ["read_c3d", "C3DData", "remap_axes", "require_ezc3d"]
 

@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..signals.sampling import median_step
+
 __all__ = ["write_report", "render_report", "write_results_report", "render_results_report"]
 
 _CSS = """
@@ -71,7 +73,7 @@ def render_report(run, *, title: str | None = None) -> str:
 
     parts.append("<h2>Model</h2><pre>" + _e(first.model.describe()) + "</pre>")
     t = np.asarray(trial.time)
-    dt = float(np.median(np.diff(t))) if t.size > 1 else float("nan")
+    dt = median_step(t)
     parts.append("<h2>Data</h2>")
     parts.append(_table(["item", "value"], [
         ("source", src), ("frames", trial.n_frames), ("duration (s)", f"{t[-1] - t[0]:.3f}"),
@@ -145,11 +147,11 @@ def write_report(run, path=None, *, model=None, trial=None, title: str | None = 
     """
     if model is not None or trial is not None:
         if model is None or trial is None:
-            from .errors import PinmskError
+            from ..errors import PinmskError
             raise PinmskError("write_report(path, model=..., trial=...) needs both a model and a trial")
         out = Path(run if path is None else path)
-        from .diagnose import run as run_diagnosis
-        from .errors import PinmskError
+        from ..diagnose import run as run_diagnosis
+        from ..errors import PinmskError
         try:
             run = run_diagnosis(model, trial, **options)
         except PinmskError as exc:
@@ -180,8 +182,8 @@ def _failure_page(model, trial, exc, title) -> str:
 # -- results (SO, FSO, any Trial of muscle forces) --------------------------------------------
 
 def _atomic_write(path, text: str) -> Path:
-    """Write ``text`` to ``path`` (parent folders created) atomically: :func:`pinmsk.io.atomic_write`."""
-    from .io import atomic_write
+    """Write ``text`` to ``path`` (parent folders created) atomically: :func:`pinmsk.io.output_files.atomic_write`."""
+    from ..io.output_files import atomic_write
     return atomic_write(path, lambda fh: fh.write(text), parents=True)
 
 
@@ -237,7 +239,7 @@ def status_counts(results) -> list[list]:
     codes, counts = np.unique(np.asarray(results["status"]), return_counts=True)
     meaning = {}
     if results.meta.get("analysis") == "static_optimization":
-        from .solvers.static import STATUS
+        from ..solvers.static import STATUS
         meaning = STATUS
     return [[f"{c:g}", int(n), meaning.get(int(c), "") if float(c).is_integer() else ""]
             for c, n in zip(codes, counts)]
@@ -312,7 +314,7 @@ def write_results_report(path, *, model, trial, results, title: str | None = Non
     """Write one self-contained HTML report of a result (SO, FSO, ...) to ``path``; returns the path.
 
     Sections: model (``model.describe()``), data (frames, duration, rate,
-    channels of ``trial`` and ``results``), figures (:func:`pinmsk.plots.results_figures`:
+    channels of ``trial`` and ``results``), figures (:func:`pinmsk.presentation.plots.results_figures`:
     moments when ``<coord>_moment`` channels exist, muscle forces and
     activations, vs EMG when ``<muscle>_emg`` channels are in ``results`` or
     ``trial`` or ``emg`` -- True or an EMG Trial -- is given), then
