@@ -41,7 +41,7 @@ import pinmsk
 from pinmsk.io.shared_data import shared_data_dir
 from pinmsk.signals.emg import on_off, onset_times
 from pinmsk.grf import external_forces, torso_residuals
-from pinmsk.markers import read_trc
+from pinmsk.io.trc import read_trc
 from pinmsk.pipeline import opensim_to_gait2d, transferred_cops
 from pinmsk.signals.resampling import to_time
 

@@ -28,8 +28,8 @@ from .components import Motion
 from .errors import ResidualWarning, TrialError
 from .kinematics import DEFAULT_CUTOFF, TrialInputs, lowpass_external, prepare
 from .residuals import ResidualReport, floating_base_residuals
-from .trial import Trial, moment_channels
 from .signals.sampling import median_step
+from .trial import Trial, moment_channels
 
 
 def component_forces(model, motion: Motion) -> dict[str, np.ndarray]:

@@ -4,8 +4,10 @@ import numpy as np
 import pytest
 
 from pinmsk import Trial, TrialError, ModelError
-from pinmsk.markers import (fill_gaps, find_gaps, load_marker_set, marker_array, marker_names,
-                            read_trc, write_trc)
+from pinmsk.signals.gaps import fill_gaps, find_gaps
+from pinmsk.markers import load_marker_set
+from pinmsk.trial import marker_array, marker_names
+from pinmsk.io.trc import read_trc, write_trc
 
 
 def _walk(n=50, rate=100.0):

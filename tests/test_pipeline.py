@@ -9,7 +9,8 @@ import pytest
 import pinmsk
 from pinmsk import Trial, TrialError
 from pinmsk.ik import markers_trial
-from pinmsk.markers import load_marker_set, write_trc
+from pinmsk.markers import load_marker_set
+from pinmsk.io.trc import write_trc
 from pinmsk.pipeline import (RAJAGOPAL_HIP_OFFSET, batch, batch_cli, load_config, opensim_to_gait2d,
                              run_trial)
 

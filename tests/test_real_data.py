@@ -12,7 +12,7 @@ import pytest
 
 import pinmsk
 from pinmsk import TrialError
-from pinmsk.markers import read_trc
+from pinmsk.io.trc import read_trc
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "examples"))

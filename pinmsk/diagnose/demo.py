@@ -4,6 +4,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..errors import TrialError
+from ..io.tables import read_trial
+from ..model import load_model
+from ..presentation import plots
+from .diagnosis import diagnose, run
 
 __all__ = ["demo", "shipped_trial", "shipped_trials", "DEMO_TRIAL"]
 
@@ -42,11 +46,6 @@ def demo(out_dir, *, trial: str = DEMO_TRIAL, echo=print):
     measurement), the ranking, residual and error-step figures, ``report.html``
     and ``diagnosis.json``.  Returns the :class:`~pinmsk.diagnose.DiagnosisRun`.
     """
-    from ..io.tables import read_trial
-    from ..model import load_model
-    from ..presentation import plots
-    from .diagnosis import diagnose, run
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     model = load_model("forearm")

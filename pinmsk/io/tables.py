@@ -59,8 +59,9 @@ import numpy as np
 from pinmsk.errors import RepairWarning, TrialError
 from pinmsk.trial import TIME, Trial, is_angular_name
 
-from .output_files import atomic_write
 from ..signals.sampling import median_step
+from .c3d import read_c3d
+from .output_files import atomic_write
 
 __all__ = ["read_trial", "write_trial", "read_sto_header", "StoHeader", "FORMATS", "C3D_PARTS",
            "state_path_coordinate", "check_precision", "DEFAULT_PRECISION"]
@@ -449,8 +450,6 @@ C3D_PARTS = ("markers", "analogs", "platforms")
 
 def _read_c3d_part(path: Path, part: str) -> Trial:
     """One time base of a C3D file as a Trial (see :func:`read_trial`)."""
-    from .c3d import read_c3d
-
     if part not in C3D_PARTS:
         raise TrialError(f"file {str(path)!r}: part={part!r}; a C3D part is one of {', '.join(C3D_PARTS)}")
     data = read_c3d(path, platforms=part == "platforms")

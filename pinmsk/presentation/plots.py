@@ -38,6 +38,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from ..errors import PinmskError
+from ..io.output_files import atomic_write
 
 __all__ = ["new_figure", "figure_png", "save_figure", "save_channels", "plot_channels", "plot_moments",
            "muscles_in", "emg_source", "emg_correlations", "plot_muscles", "align_results",
@@ -68,7 +69,6 @@ def figure_png(fig: Figure) -> bytes:
 
 def save_figure(fig: Figure, path, **savefig) -> Path:
     """Write ``fig`` as PNG to ``path`` (parent folders created) atomically; returns the path."""
-    from ..io.output_files import atomic_write
     return atomic_write(path, lambda fh: fig.savefig(fh, format="png", **savefig), binary=True, parents=True)
 
 

@@ -15,7 +15,13 @@ from pathlib import Path
 
 import numpy as np
 
+from ..diagnose import run as run_diagnosis
+from ..errors import PinmskError
+from ..io.output_files import atomic_write
 from ..signals.sampling import median_step
+from ..solvers.static import STATUS
+from . import plots
+from .plots import figure_png, muscles_in
 
 __all__ = ["write_report", "render_report", "write_results_report", "render_results_report"]
 
@@ -34,7 +40,6 @@ def _e(x) -> str:
 
 
 def _img(fig) -> str:
-    from .plots import figure_png
     data = base64.b64encode(figure_png(fig)).decode("ascii")
     return f'<img alt="figure" src="data:image/png;base64,{data}">'
 
@@ -57,8 +62,6 @@ def _g(x) -> str:
 
 def render_report(run, *, title: str | None = None) -> str:
     """The report as an HTML string."""
-    from . import plots
-
     steps = run.steps if hasattr(run, "steps") else [run]
     added = list(getattr(run, "added", []))
     first, last = steps[0], steps[-1]
@@ -147,11 +150,8 @@ def write_report(run, path=None, *, model=None, trial=None, title: str | None = 
     """
     if model is not None or trial is not None:
         if model is None or trial is None:
-            from ..errors import PinmskError
             raise PinmskError("write_report(path, model=..., trial=...) needs both a model and a trial")
         out = Path(run if path is None else path)
-        from ..diagnose import run as run_diagnosis
-        from ..errors import PinmskError
         try:
             run = run_diagnosis(model, trial, **options)
         except PinmskError as exc:
@@ -162,7 +162,6 @@ def write_report(run, path=None, *, model=None, trial=None, title: str | None = 
 
 
 def _failure_page(model, trial, exc, title) -> str:
-    from . import plots
     title = title or f"pinmsk diagnosis: {model.name}"
     fig = plots.new_figure(9.0, 1.5 + 1.2 * min(len(trial.names), 8))
     names = list(trial.names)[:8]
@@ -183,7 +182,6 @@ def _failure_page(model, trial, exc, title) -> str:
 
 def _atomic_write(path, text: str) -> Path:
     """Write ``text`` to ``path`` (parent folders created) atomically: :func:`pinmsk.io.output_files.atomic_write`."""
-    from ..io.output_files import atomic_write
     return atomic_write(path, lambda fh: fh.write(text), parents=True)
 
 
@@ -194,7 +192,6 @@ def _img_any(fig, caption: str) -> str:
     elif isinstance(fig, (str, Path)):
         data = Path(fig).read_bytes()
     else:
-        from .plots import figure_png
         data = figure_png(fig)
     b64 = base64.b64encode(data).decode("ascii")
     return (f'<figure><img alt="{_e(caption)}" src="data:image/png;base64,{b64}">'
@@ -215,7 +212,6 @@ def channel_stats(trial) -> list[list]:
 def muscle_stats(results) -> list[list]:
     """Rows ``[muscle, peak force (N), time of peak (s), mean force (N), mean activation, peak activation]``
     (means over frames; NaN where the channel is missing)."""
-    from .plots import muscles_in
     mus = list(dict.fromkeys(muscles_in(results, "force") + muscles_in(results, "activation")))
     t = np.asarray(results.time)
     nan = float("nan")
@@ -239,7 +235,6 @@ def status_counts(results) -> list[list]:
     codes, counts = np.unique(np.asarray(results["status"]), return_counts=True)
     meaning = {}
     if results.meta.get("analysis") == "static_optimization":
-        from ..solvers.static import STATUS
         meaning = STATUS
     return [[f"{c:g}", int(n), meaning.get(int(c), "") if float(c).is_integer() else ""]
             for c, n in zip(codes, counts)]
@@ -248,8 +243,6 @@ def status_counts(results) -> list[list]:
 def render_results_report(*, model, trial, results, title: str | None = None, text: str | None = None,
                           tables=None, extra_figures=None, emg=None) -> str:
     """The results report as an HTML string (see :func:`write_results_report`)."""
-    from . import plots
-
     title = title or f"pinmsk results: {model.name}"
     parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{_e(title)}</title>"
              f"<style>{_CSS}</style></head><body>", f"<h1>{_e(title)}</h1>"]

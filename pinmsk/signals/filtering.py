@@ -118,7 +118,7 @@ def lowpass(x, *, rate: float, cutoff: float, order: int = 4) -> np.ndarray:
         )
     padlen = filter_padlen(order, rate=rate, cutoff=cutoff, n=n)
     _check_finite(x, "lowpass input")
-    from scipy.signal import butter, sosfiltfilt   # here, not at import: scipy.signal costs ~1 s
+    from scipy.signal import butter, sosfiltfilt  # here, not at import: scipy.signal costs ~1 s
 
     sos = butter(order, cutoff / nyquist, btype="low", output="sos")
     return sosfiltfilt(sos, x, axis=0, padtype="odd", padlen=padlen)

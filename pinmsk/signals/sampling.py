@@ -35,10 +35,13 @@ def check_increasing(time, *, where: str = "") -> np.ndarray:
     """The time steps of ``time``; TrialError naming the row where time does not increase."""
     t = np.asarray(time, dtype=float)
     dt = np.diff(t)
-    if np.any(dt <= 0):
-        row = int(np.flatnonzero(dt <= 0)[0]) + 1
-        raise TrialError(f"{where}time is not strictly increasing at row {row}: "
-                         f"time[{row}]={float(t[row])!r} <= time[{row - 1}]={float(t[row - 1])!r}")
+    bad = np.flatnonzero(dt <= 0)
+    if bad.size:
+        row = int(bad[0]) + 1
+        raise TrialError(
+            f"{where}time is not strictly increasing at row {row}: time[{row}]={float(t[row])!r} "
+            f"<= time[{row - 1}]={float(t[row - 1])!r} ({bad.size} such row(s)); sort the samples "
+            "or remove repeated frames")
     return dt
 
 
