@@ -31,7 +31,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -40,7 +39,7 @@ from .components import Motion
 from .errors import ModelError, TrialError
 from .io.external_loads import read_external_loads
 from .io.tables import read_trial
-from .signals.filtering import lowpass
+from .signals.filtering import DEFAULT_CUTOFF, FILTER_ORDER, lowpass
 from .signals.sampling import measured_rate
 from .skeleton import ExternalForce, world_wrench
 from .trial import Trial, parse_ground_reaction
@@ -49,10 +48,6 @@ from .trial import Trial, parse_ground_reaction
 __all__ = ["DEFAULT_CUTOFF", "FILTER_ORDER", "Filtering", "TrialInputs", "prepare", "cutoff_value",
            "is_planar", "has_ground_reaction", "lowpass_external"]
 
-#: Default low-pass cut-off (Hz) of kinematics and ground reaction forces.
-DEFAULT_CUTOFF = 6.0
-#: Order of the designed Butterworth filter (run forwards and backwards).
-FILTER_ORDER = 4
 #: Vertical force (N) below which a plate counts as unloaded.
 MIN_FORCE = 20.0
 

@@ -85,13 +85,15 @@ def test_network_fetch_is_reported(page, tmp_path):
 
 def test_pinmsk_report_in_browser(page, tmp_path):
     import pinmsk
-    from pinmsk.presentation.report import write_report
+    from pinmsk.presentation.report import write_failure_report
 
     model = pinmsk.load_model("forearm")
     t = np.linspace(0, 1, 51)
     trial = pinmsk.Trial(t, {"elbow_flexion": 0.5 + t, "elbow_flexion_moment": np.sin(t)})
     out = tmp_path / "report.html"
-    write_report(out, model=model, trial=trial)
+    with pytest.raises(pinmsk.PinmskError) as err:       # too short to diagnose: the failure page
+        pinmsk.diagnose.run(model, trial)
+    write_failure_report(out, model, trial, err.value)
     check_html_in_browser(page, out, min_images=1)
 
 

@@ -658,15 +658,14 @@ class DiagnosisRun:
         return f"<DiagnosisRun {len(self.added)} added, final {self.final!r}>"
 
 
-def run(model, trial, *, add: Sequence = (), json_path=None, report_path=None, plot_dir=None,
-        first: Diagnosis | None = None, **options) -> DiagnosisRun:
+def run(model, trial, *, add: Sequence = (), first: Diagnosis | None = None, **options) -> DiagnosisRun:
     """Diagnose, then fit and add each ``add`` entry in turn, diagnosing after each.
 
     ``add`` entries: ``"family"`` (its best-ranked target), ``"family:target"``,
-    ``(family, target)`` tuples or Components.  Writes the JSON summary
-    (``json_path``), the HTML report (``report_path``) and PNG figures
-    (``plot_dir``) when asked.  ``options`` go to :func:`diagnose`; ``first``
-    reuses a diagnosis of this model and trial already made as step 0.
+    ``(family, target)`` tuples or Components.  Writes nothing: the JSON
+    summary, report and figures are :func:`pinmsk.presentation.report.save_diagnosis`.
+    ``options`` go to :func:`diagnose`; ``first`` reuses a diagnosis of this
+    model and trial already made as step 0.
     """
     if isinstance(add, (str, Component)):
         add = [add]
@@ -686,13 +685,4 @@ def run(model, trial, *, add: Sequence = (), json_path=None, report_path=None, p
             opts["_fits"] = getattr(steps[-1], "contact_fits", None)   # the fits depend on the trial only
         steps.append(diagnose(new_model, trial, comparison=comp, cutoff=steps[-1].settings["cutoff"], **opts))
         added.append(fit)
-    result = DiagnosisRun(steps, added)
-    if plot_dir is not None:
-        from ..presentation import plots
-        plots.save_diagnosis_figures(result, plot_dir)
-    if json_path is not None:
-        result.write_json(json_path)
-    if report_path is not None:
-        from ..presentation.report import write_report
-        write_report(result, report_path)
-    return result
+    return DiagnosisRun(steps, added)

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import PinmskError
-from ..kinematics import DEFAULT_CUTOFF
+from ..signals.filtering import DEFAULT_CUTOFF
 from ..trial import parse_ground_reaction
 
 
@@ -172,7 +172,7 @@ def cmd_simulate(args) -> int:
 def cmd_demo(args) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    from ..diagnose import demo
+    from ..demo import demo
     demo(out)
     return 0
 
@@ -228,13 +228,14 @@ def cmd_fso(args) -> int:
 
 def cmd_diagnose(args) -> int:
     from ..diagnose import run
+    from .report import save_diagnosis
     model = _model(args)
     trial = _read(args.trial, model, args)
     kw = _inputs(args)
     if kw.pop("ground_reaction") == "ignore":
         trial = trial.drop([n for n in trial.names if parse_ground_reaction(n) is not None])
-    r = run(model, trial, add=args.add or [], json_path=args.json, report_path=args.report,
-            plot_dir=args.plot, mode=args.mode, frames=args.frame or None, **kw)
+    r = run(model, trial, add=args.add or [], mode=args.mode, frames=args.frame or None, **kw)
+    save_diagnosis(r, json_path=args.json, report_path=args.report, plot_dir=args.plot)
     print(r.summary_text())
     for path in (args.json, args.report):
         if path:

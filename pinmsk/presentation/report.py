@@ -15,8 +15,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..diagnose import run as run_diagnosis
-from ..errors import PinmskError
 from ..io.output_files import atomic_write
 from ..signals.sampling import median_step
 from ..solvers.static import STATUS
@@ -140,25 +138,26 @@ def render_report(run, *, title: str | None = None) -> str:
     return "\n".join(parts)
 
 
-def write_report(run, path=None, *, model=None, trial=None, title: str | None = None, **options) -> Path:
-    """Write the HTML report of a run (or one Diagnosis) to ``path``.
+def write_report(run, path, *, title: str | None = None) -> Path:
+    """Write the HTML report of a diagnosis run (or one Diagnosis) to ``path``."""
+    return _atomic_write(Path(path), render_report(run, title=title))
 
-    Also ``write_report(path, model=model, trial=trial, **options)``: diagnose
-    first (``options`` go to :func:`pinmsk.diagnose.run`).  If the diagnosis
-    cannot run on that trial (too short, nothing to compare), the report
-    states why and shows the trial's channels instead.
-    """
-    if model is not None or trial is not None:
-        if model is None or trial is None:
-            raise PinmskError("write_report(path, model=..., trial=...) needs both a model and a trial")
-        out = Path(run if path is None else path)
-        try:
-            run = run_diagnosis(model, trial, **options)
-        except PinmskError as exc:
-            return _atomic_write(out, _failure_page(model, trial, exc, title))
-    else:
-        out = Path(path)
-    return _atomic_write(out, render_report(run, title=title))
+
+def write_failure_report(path, model, trial, error, *, title: str | None = None) -> Path:
+    """Write the report page of a diagnosis that could not run: why, the model and the trial's channels."""
+    return _atomic_write(Path(path), _failure_page(model, trial, error, title))
+
+
+def save_diagnosis(run, *, json_path=None, report_path=None, plot_dir=None) -> list[Path]:
+    """Write what was asked of a diagnosis run: JSON summary, HTML report, PNG figures; the paths written."""
+    written = []
+    if plot_dir is not None:
+        plots.save_diagnosis_figures(run, plot_dir)
+    if json_path is not None:
+        written.append(run.write_json(json_path))
+    if report_path is not None:
+        written.append(write_report(run, report_path))
+    return written
 
 
 def _failure_page(model, trial, exc, title) -> str:

@@ -28,7 +28,13 @@ import numpy as np
 from ..errors import TrialError
 from .sampling import check_increasing, uniform_rate
 
-__all__ = ["lowpass", "differentiate", "filter_padlen"]
+__all__ = ["lowpass", "differentiate", "filter_padlen", "DEFAULT_CUTOFF", "FILTER_ORDER"]
+
+#: Default low-pass cut-off (Hz) of kinematics and ground reaction forces in every analysis
+#: (:func:`pinmsk.kinematics.prepare`); ``cutoff=0`` / ``--cutoff 0`` turns filtering off.
+DEFAULT_CUTOFF = 6.0
+#: Order of the designed Butterworth filter (run forwards and backwards).
+FILTER_ORDER = 4
 
 def filter_padlen(order: int, *, rate: float | None = None, cutoff: float | None = None,
                   n: int | None = None) -> int:
