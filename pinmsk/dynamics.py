@@ -176,7 +176,7 @@ def _torque_function(model, moments) -> Callable | None:
         return moments
     if not isinstance(moments, Trial):
         raise TrialError(f"moments must be None, a Trial or a function; got {type(moments).__name__}")
-    cols = [f"{c}_moment" for c in model.coordinates]
+    cols = list(moment_channels(model.coordinates))
     present = [i for i, c in enumerate(cols) if c in moments]
     if not present:
         raise TrialError(

@@ -34,7 +34,7 @@ import numpy as np
 
 from .errors import TrialError
 from .skeleton import ExternalForce
-from .trial import Trial, parse_ground_reaction
+from .trial import Trial, moment_channel, parse_ground_reaction
 
 __all__ = ["cop_from_plate", "check_vertical_force", "external_forces", "grf_channels", "Plate", "plates",
            "plate_wrench", "BODY_ALIASES",
@@ -382,7 +382,7 @@ def torso_residuals(model, id_trial: Trial, *, coordinates: Sequence[str] | None
     summary = {}
     bw = None if body_mass is None else body_mass * 9.81
     for c in coordinates:
-        name = f"{c}_moment"
+        name = moment_channel(c)
         if name not in id_trial:
             raise TrialError(f"the inverse-dynamics trial has no {name!r}")
         r = np.asarray(id_trial[name])

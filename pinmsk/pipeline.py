@@ -80,7 +80,7 @@ from .markers import load_marker_set
 from .model import load_model
 from .presentation.progress import Progress
 from .signals.resampling import to_time
-from .trial import Trial
+from .trial import Trial, moment_channel
 
 __all__ = ["opensim_to_gait2d", "frame_positions", "transferred_cops", "run_trial", "batch",
            "batch_cli", "load_config", "RAJAGOPAL_HIP_OFFSET", "KINDS"]
@@ -251,7 +251,7 @@ def run_trial(spec: dict, *, model="gait2d", out_dir=None, base_dir=".") -> dict
         for c in m.coordinate_order:
             if c.startswith(("hip", "knee", "ankle")):
                 row[f"{c}_peak_abs_nm_per_kg" if bm else f"{c}_peak_abs_nm"] = float(
-                    np.max(np.abs(idt[f"{c}_moment"])) / norm)
+                    np.max(np.abs(idt[moment_channel(c)])) / norm)
         for c, s in rsum.items():
             row[f"{c}_residual_rms"] = s["rms"]
         act = None
@@ -331,7 +331,7 @@ def _figures(model, d: Path, idt: Trial, res: Trial) -> int:
         from .presentation import plots
     except ImportError:  # pragma: no cover - plots is optional for the batch
         return 0
-    joints = [f"{c}_moment" for c in model.coordinate_order if c.startswith(("hip", "knee", "ankle"))]
+    joints = [moment_channel(c) for c in model.coordinate_order if c.startswith(("hip", "knee", "ankle"))]
     n = len(plots.save_channels(idt, joints, d, stem="moments", ylabel="N m"))
     n += len(plots.save_channels(res, list(res.names), d, stem="residuals"))
     return n

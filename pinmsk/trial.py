@@ -110,6 +110,11 @@ def speed_channels(coords) -> tuple[str, ...]:
     return _suffixed(coords, SPEED_SUFFIX)
 
 
+def moment_channel(coord: str) -> str:
+    """``<coord>_moment``: the generalized force of one coordinate (N·m or N)."""
+    return coord + MOMENT_SUFFIX
+
+
 def moment_channels(coords) -> tuple[str, ...]:
     """``<coord>_moment`` for each coordinate (generalized force, N·m or N)."""
     return _suffixed(coords, MOMENT_SUFFIX)

@@ -53,7 +53,7 @@ from ..grf import external_forces
 from ..model import load_model
 from ..muscles.activation import excitation_from_activation
 from ..skeleton import ExternalForce, external_generalized_force
-from ..trial import Trial, parse_ground_reaction
+from ..trial import Trial, moment_channel, parse_ground_reaction
 from .diagnosis import parse_effect
 
 __all__ = ["make_trial", "NOISE", "effect_from_text", "walking_motion", "write_compact"]
@@ -171,7 +171,7 @@ def make_trial(model, effects: Sequence = (), *, duration: float = 10.0, rate: f
         if "moments" in measure:
             for i, c in enumerate(model.coordinates):
                 if c not in unact:
-                    chans[f"{c}_moment"] = tau[:n, i].copy()
+                    chans[moment_channel(c)] = tau[:n, i].copy()
         if "excitations" in measure:
             u = _excitations(model, full, tau, signal)
             for j, m in enumerate(model.muscle_names):

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors import PinmskError
 from ..signals.filtering import DEFAULT_CUTOFF
-from ..trial import parse_ground_reaction
+from ..trial import moment_channels, parse_ground_reaction
 
 
 def _model(args):
@@ -146,7 +146,7 @@ def cmd_id(args) -> int:
     print(res.report())
     out = res.trial
     _write(out, args.output, args.precision)
-    _plot(args, out, [f"{c}_moment" for c in model.coordinate_order], "inverse_dynamics", "moment (N m)")
+    _plot(args, out, list(moment_channels(model.coordinate_order)), "inverse_dynamics", "moment (N m)")
     return 0
 
 

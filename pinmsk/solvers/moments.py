@@ -189,7 +189,7 @@ def required_moments(model, motion: Motion, moments, idx, dofs) -> np.ndarray:
     elif isinstance(moments, Trial):
         if moments.n_frames != n:
             raise TrialError(f"the moments trial has {moments.n_frames} frames; the motion has {n}")
-        cols = [f"{c}_moment" for c in dofs]
+        cols = list(moment_channels(dofs))
         missing = [c for c in cols if c not in moments]
         if missing:
             raise TrialError(f"the moments trial lacks {', '.join(missing)} "
