@@ -11,9 +11,7 @@ do not pay for Pinocchio and SciPy until something needs them.
 """
 from __future__ import annotations
 
-import importlib
-import importlib.util
-
+from ._lazy import lazy_attributes
 from .errors import (ConvergenceError, InfeasibleError, ModelError, PinmskError, SolverError,
                      TrialError)
 
@@ -22,7 +20,8 @@ __version__ = "0.1.0"
 #: Public name -> the submodule that defines it (imported when the name is first used).
 _LAZY = {
     "Component": "components", "Motion": "components", "Parameter": "components",
-    "Model": "model", "load_model": "model",
+    "Parameters": "components",
+    "Data": "model", "Model": "model", "load_model": "model",
     "Trial": "trial",
     "read_trial": "io", "write_trial": "io",
     "ExternalForce": "skeleton",
@@ -31,24 +30,10 @@ _LAZY = {
 }
 
 __all__ = [
-    "Component", "ConvergenceError", "ExternalForce", "InfeasibleError", "Model", "ModelError",
-    "Motion", "Parameter", "PinmskError", "SolverError", "Trial", "TrialError", "builtin_names",
+    "Component", "ConvergenceError", "Data", "ExternalForce", "InfeasibleError", "Model", "ModelError",
+    "Motion", "Parameter", "Parameters", "PinmskError", "SolverError", "Trial", "TrialError", "builtin_names",
     "component_forces", "inverse_dynamics", "load_model", "read_trial", "simulate", "write_trial",
 ]
 
 
-def __getattr__(name: str):
-    module = _LAZY.get(name)
-    if module is not None:
-        value = getattr(importlib.import_module(f".{module}", __name__), name)
-        globals()[name] = value          # later look-ups skip this function
-        return value
-    if not name.startswith("_") and importlib.util.find_spec(f"{__name__}.{name}") is not None:
-        # submodules (pinmsk.dynamics, pinmsk.io, ...) stay reachable as attributes,
-        # as they were when this package imported them eagerly
-        return importlib.import_module(f".{name}", __name__)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, __all__)
