@@ -59,7 +59,8 @@ class FitResult:
 
     @property
     def n_params(self) -> int:
-        return len(self.values)
+        """The number of fitted (free) parameters; fixed ones (``vary=False``) do not count."""
+        return sum(self.effect.params[k].vary for k in self.values)
 
     @property
     def bic_change(self) -> float:
@@ -108,7 +109,7 @@ class CandidateFit:
         self.lo = np.array([decl[n].min for n in self.names], dtype=float)
         self.hi = np.array([decl[n].max for n in self.names], dtype=float)
         self.x_default = np.array([decl[n].value for n in self.names], dtype=float)
-        self.cache = None if self.signal else component.prepare(self.model, eq.motion_rows)
+        self.cache = None if self.signal else component.prepare(self.model, eq.motion_rows, data=eq.data)
         self._basis = None
         self._memo = None
         self.nfev = 0
