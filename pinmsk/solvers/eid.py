@@ -31,6 +31,7 @@ import scipy.sparse as sp
 
 from ..errors import ConvergenceError, InfeasibleError, SolverError
 from . import qp as _qp
+from ..kinematics import DEFAULT_CUTOFF
 from .mso import TAU_FALL, TAU_RISE, activation_problem, set_results
 
 #: P = 1: proxsuite's sparse solver reported feasible whole-trial LPs as
@@ -66,7 +67,7 @@ class ExtendedInverseDynamics:
         return {k: getattr(self, k) for k in ("exponent", "weights", "tau_rise", "tau_fall", "reserves",
                                               "reserve_weight", "tol", "dofs", "max_iter", "sqp_max_iter")}
 
-    def fit(self, model, trial, *, moments=None, cutoff: float | None = None, progress=None):
+    def fit(self, model, trial, *, moments=None, cutoff=DEFAULT_CUTOFF, progress=None):
         """Solve the whole trial at once; returns ``self``."""
         t0 = _time.perf_counter()
         P, prob = activation_problem(self, model, trial, moments=moments, cutoff=cutoff)

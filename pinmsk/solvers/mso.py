@@ -30,7 +30,8 @@ import numpy as np
 from ..errors import InfeasibleError, SolverError
 from ..trial import Trial
 from . import qp as _qp
-from .static import (WEIGHTS, as_motion, build_problem, diagnose_infeasible, infeasible_message)
+from ..kinematics import DEFAULT_CUTOFF, as_motion
+from .static import WEIGHTS, build_problem, diagnose_infeasible, infeasible_message
 
 try:  # the foundation's constants (thesis A.2: 11 ms and 68 ms)
     from ..muscles.activation import TAU_FALL, TAU_RISE
@@ -122,7 +123,7 @@ class ModifiedStaticOptimization:
         return {k: getattr(self, k) for k in ("exponent", "weights", "tau_rise", "tau_fall", "a0",
                                               "reserves", "reserve_weight", "tol", "dofs")}
 
-    def fit(self, model, trial, *, moments=None, cutoff: float | None = None, progress=None):
+    def fit(self, model, trial, *, moments=None, cutoff=DEFAULT_CUTOFF, progress=None):
         """Solve frame after frame; returns ``self`` (results as StaticOptimization's, plus excitations)."""
         t0 = _time.perf_counter()
         P, prob = activation_problem(self, model, trial, moments=moments, cutoff=cutoff)
