@@ -12,6 +12,12 @@ Eq. A.10-A.14, no parallel element) share one interface:
 - ``inverse(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, ddF_mt=0.0) -> dict`` (thesis Fig. 5.6)
 - ``activation_rate(u, a)``, ``excitation(a, adot)``, ``activation(t, u, a0=None)`` (App. A.2)
 
+:class:`DeGroote2016` and :class:`Millard2012` (OpenSim's DeGrooteFregly2016Muscle
+and Millard2012EquilibriumMuscle curves, with fibre damping) share the
+rigid-tendon part of it (``fiber_kinematics_rigid``, ``force``,
+``force_limits``), ``equilibrium`` and ``tendon_force``; they have no
+contraction dynamics or inverse model (those raise ModelError by name).
+
 Inputs are time-first ``(N, m)`` arrays (or ``(m,)`` for one frame) in SI
 units; parameters are ``(m,)``.  The objects are immutable: constructors copy
 the parameter arrays and mark them read-only, and attributes cannot be set.
@@ -26,16 +32,25 @@ import numpy as np
 from ._common import check_finite, locate, muscle_parameter, n_muscles, where_first
 from .activation import (TAU_FALL, TAU_RISE, activation_from_excitation, activation_rate,
                          excitation_from_activation)
+from ._solve import compliant_equilibrium
+from .degroote2016 import (degroote_active_force_length, degroote_active_force_length_derivative,
+                           degroote_force_velocity, degroote_force_velocity_derivative,
+                           degroote_passive_force_length, degroote_passive_force_length_derivative,
+                           degroote_tendon_force, degroote_tendon_force_derivative,
+                           degroote_tendon_length)
 from .inverse import inverse_nagano_gerritsen, inverse_thelen2003
 from .nagano_gerritsen import (ng_contraction_rate, ng_equilibrium, ng_fiber_force,
                                ng_force_length)
 from .pennation import check_along_positive, pennation_height
-from .tendon import TENDON_STRAIN0, thelen_tendon_force, winters_tendon_force
+from .tendon import (TENDON_STRAIN0, thelen_tendon_force, thelen_tendon_stiffness, thelen_tendon_strain,
+                     winters_tendon_force)
 from .thelen2003 import (GAMMA, K_PE, PASSIVE_STRAIN0, thelen_contraction_rate,
                          thelen_equilibrium, thelen_fiber_force, thelen_force_velocity)
+from . import millard2012 as _millard
 from ..errors import ModelError, TrialError
 
-__all__ = ["MUSCLE_PARAMETERS", "MuscleParameter", "NaganoGerritsen", "Thelen2003"]
+__all__ = ["MUSCLE_PARAMETERS", "DeGroote2016", "Millard2012", "MuscleParameter", "NaganoGerritsen",
+           "Thelen2003", "Thelen2003OpenSim"]
 
 _TENDONS = ("rigid", "compliant")
 
@@ -71,11 +86,75 @@ MUSCLE_PARAMETERS = {p.name: p for p in (
     MuscleParameter("l_slack", "m", "tendon slack length"),
     MuscleParameter("pennation", "rad", "pennation angle at optimal fibre length", 0.0, math.pi / 2,
                     low_open=False, high_open=True),
-    MuscleParameter("v_max", "m/s", "maximum shortening velocity (Thelen 2003; default 10 l_opt)"),
+    MuscleParameter("v_max", "m/s", "maximum shortening velocity (default 10 l_opt)"),
     MuscleParameter("width", "", "force-length half-width in units of l_opt (Nagano & Gerritsen)"),
     MuscleParameter("fast_fraction", "", "fraction of fast-twitch fibres (energy models)", 0.0, 1.0,
                     low_open=False),
     MuscleParameter("volume", "m^3", "muscle volume (energy models, PCSA weights)"),
+    # -- DeGroote 2016 and Millard 2012 (OpenSim property in brackets) ----------
+    MuscleParameter("damping", "", "fibre damping: damping force = damping F_max v_ce / v_max "
+                    "[fiber_damping]", 0.0, low_open=False),
+    MuscleParameter("tendon_strain", "", "tendon strain at one normalized force "
+                    "[tendon_strain_at_one_norm_force; TendonForceLengthCurve strain_at_one_norm_force]"),
+    MuscleParameter("passive_strain", "", "fibre strain (from l_opt) at one normalized passive force "
+                    "[passive_fiber_strain_at_one_norm_force; FiberForceLengthCurve "
+                    "strain_at_one_norm_force]"),
+    MuscleParameter("width_scale", "", "active force-length width scale (De Groote) "
+                    "[active_force_width_scale]", 1.0, low_open=False),
+    MuscleParameter("passive_scale", "", "passive fibre force factor, 0 = ignore_passive_fiber_force "
+                    "(De Groote)", 0.0, 1.0, low_open=False),
+    MuscleParameter("max_pennation", "rad", "maximum pennation angle: the fibre-length floor (Millard) "
+                    "[maximum_pennation_angle]", 0.0, math.pi / 2, low_open=False),
+    MuscleParameter("min_norm_active_fiber_length", "", "Millard active force-length: start of the "
+                    "steep ascending limb, in l_opt [ActiveForceLengthCurve]", 0.0, low_open=False),
+    MuscleParameter("transition_norm_fiber_length", "", "Millard active force-length: start of the "
+                    "shallow ascending limb, in l_opt [ActiveForceLengthCurve]", 0.0, 1.0, high_open=True),
+    MuscleParameter("max_norm_active_fiber_length", "", "Millard active force-length: end of the "
+                    "descending limb, in l_opt [ActiveForceLengthCurve]", 1.0, low_open=False),
+    MuscleParameter("shallow_ascending_slope", "", "Millard active force-length: slope of the shallow "
+                    "ascending limb [ActiveForceLengthCurve]", 0.0, low_open=False),
+    MuscleParameter("active_minimum_value", "", "Millard active force-length: value outside the "
+                    "active range [ActiveForceLengthCurve minimum_value]", 0.0, 1.0, low_open=False,
+                    high_open=True),
+    MuscleParameter("passive_strain_at_zero_force", "", "Millard passive force-length: fibre strain "
+                    "where the passive force starts [FiberForceLengthCurve strain_at_zero_force]",
+                    -1.0, low_open=True),
+    MuscleParameter("passive_stiffness_at_low_force", "", "Millard passive force-length: slope at low "
+                    "force [FiberForceLengthCurve stiffness_at_low_force]"),
+    MuscleParameter("passive_stiffness", "", "Millard passive force-length: slope at one normalized "
+                    "force [FiberForceLengthCurve stiffness_at_one_norm_force]"),
+    MuscleParameter("passive_curviness", "", "Millard passive force-length: curviness "
+                    "[FiberForceLengthCurve curviness]", 0.0, 1.0, low_open=False),
+    MuscleParameter("concentric_slope_at_vmax", "", "Millard force-velocity: slope at v = -v_max "
+                    "[ForceVelocityCurve]", 0.0, 1.0, low_open=False, high_open=True),
+    MuscleParameter("concentric_slope_near_vmax", "", "Millard force-velocity: slope near v = -v_max "
+                    "[ForceVelocityCurve]", 0.0, 1.0),
+    MuscleParameter("isometric_slope", "", "Millard force-velocity: slope at v = 0 [ForceVelocityCurve]",
+                    1.0, low_open=True),
+    MuscleParameter("eccentric_slope_at_vmax", "", "Millard force-velocity: slope at v = +v_max "
+                    "[ForceVelocityCurve]", 0.0, low_open=False),
+    MuscleParameter("eccentric_slope_near_vmax", "", "Millard force-velocity: slope near v = +v_max "
+                    "[ForceVelocityCurve]", 0.0, low_open=False),
+    MuscleParameter("max_eccentric_velocity_force_multiplier", "", "Millard force-velocity: value at "
+                    "v = +v_max [ForceVelocityCurve]", 1.0, low_open=True),
+    MuscleParameter("concentric_curviness", "", "Millard force-velocity: concentric curviness "
+                    "[ForceVelocityCurve]", 0.0, 1.0, low_open=False),
+    MuscleParameter("eccentric_curviness", "", "Millard force-velocity: eccentric curviness "
+                    "[ForceVelocityCurve]", 0.0, 1.0, low_open=False),
+    MuscleParameter("tendon_stiffness", "", "Millard tendon: slope at one normalized force "
+                    "[TendonForceLengthCurve stiffness_at_one_norm_force]"),
+    MuscleParameter("tendon_toe_force", "", "Millard tendon: normalized force at the end of the toe "
+                    "[TendonForceLengthCurve norm_force_at_toe_end]", 0.0, 1.0, high_open=True),
+    MuscleParameter("tendon_curviness", "", "Millard tendon: curviness [TendonForceLengthCurve curviness]",
+                    0.0, 1.0, low_open=False),
+    # -- Thelen 2003 with OpenSim's per-muscle curve constants ------------------
+    MuscleParameter("active_shape", "", "Thelen active force-length shape factor gamma [KshapeActive]"),
+    MuscleParameter("passive_shape", "", "Thelen passive force-length shape factor k_PE [KshapePassive]"),
+    MuscleParameter("fv_shape", "", "Thelen force-velocity shape factor A_f [Af]"),
+    MuscleParameter("eccentric_force", "", "Thelen maximum eccentric force multiplier f_hat [Flen]",
+                    1.0, low_open=True),
+    MuscleParameter("fv_extrapolation", "", "Thelen force-velocity: fraction of f_hat where the linear "
+                    "tail starts [fv_linear_extrap_threshold]", 0.0, 1.0, high_open=True),
 )}
 
 
@@ -101,12 +180,13 @@ class _MuscleModel:
         for key, value in given.items():
             optional = key in ("fast_fraction", "volume")
             put(self, key, None if optional and value is None else MUSCLE_PARAMETERS[key].check(value, m, names))
-        if not (tendon_strain0 > 0):
+        # models with a per-muscle tendon_strain parameter pass tendon_strain0=None
+        if tendon_strain0 is not None and not (tendon_strain0 > 0):
             raise ModelError(f"tendon_strain0 = {tendon_strain0} must be > 0")
         if not (0 < tau_rise and 0 < tau_fall):
             raise ModelError(f"activation time constants must be > 0 (tau_rise={tau_rise}, "
                              f"tau_fall={tau_fall})")
-        put(self, "tendon_strain0", float(tendon_strain0))
+        put(self, "tendon_strain0", None if tendon_strain0 is None else float(tendon_strain0))
         put(self, "tau_rise", float(tau_rise))
         put(self, "tau_fall", float(tau_fall))
         h = pennation_height(self.l_opt, self.pennation)
@@ -427,3 +507,413 @@ class NaganoGerritsen(_MuscleModel):
                                         width=self.width, tendon_strain0=self.tendon_strain0,
                                         tau_rise=self.tau_rise, tau_fall=self.tau_fall,
                                         names=self.names)
+
+
+class _CurveMuscle(_MuscleModel):
+    """OpenSim-style separable Hill muscles: fibre force ``F_max (a f_L f_V + f_PE + damping v)``.
+
+    ``v = v_ce / v_max`` is the normalized fibre velocity (negative when
+    shortening) and the curves are functions of ``l_ce / l_opt`` and ``v``;
+    the tendon curve is a function of the tendon strain.  Subclasses supply
+    the curves (:meth:`_length_curves`, :meth:`_velocity_curve`,
+    :meth:`_tendon_curve`, :meth:`_tendon_strain`) and may floor or clamp the
+    rigid-tendon force as their OpenSim counterpart does (:meth:`_rigid_fiber`).
+    """
+
+    mechanical_parameters = ("f_max", "l_opt", "l_slack", "pennation", "v_max", "damping")
+
+    def _curve_setup(self, kwargs, v_max) -> None:
+        l_opt = np.asarray(kwargs["l_opt"], dtype=float)
+        kwargs["v_max"] = 10.0 * l_opt if v_max is None else v_max
+        self._setup(tendon_strain0=None, **kwargs)
+        object.__setattr__(self, "_v_max_given", v_max is not None)
+
+    # -- hooks -------------------------------------------------------------------
+    def _length_curves(self, l_norm):
+        """``(f_L, df_L/dl, f_PE, df_PE/dl)`` at the normalized fibre length."""
+        raise NotImplementedError
+
+    def _velocity_curve(self, v_norm):
+        """``(f_V, df_V/dv)`` at the normalized fibre velocity."""
+        raise NotImplementedError
+
+    def _tendon_curve(self, strain):
+        """``(f_T, df_T/dstrain)`` at the tendon strain."""
+        raise NotImplementedError
+
+    def _tendon_strain(self, force):
+        """Tendon strain at a normalized tendon force (the inverse of :meth:`_tendon_curve`)."""
+        raise NotImplementedError
+
+    def _rigid_fiber(self, l_ce, v_norm, f_total):
+        """The rigid-tendon normalized fibre force (and a mask of muscle-frames that carry none)."""
+        return f_total, None
+
+    def _active_velocity_factor(self, a, v_norm):
+        """The force-velocity factor at activation ``a`` (the a = 1 curve unless activation scales it)."""
+        return self._velocity_curve(v_norm)[0]
+
+    # -- forces ------------------------------------------------------------------
+    def _rigid_force(self, a, l_mt, v_mt):
+        l_ce, v_ce, cos = self._rigid(l_mt, v_mt)
+        v = v_ce / self.v_max
+        fl, _, fpe, _ = self._length_curves(l_ce / self.l_opt)
+        fv = self._active_velocity_factor(a, v)
+        f, off = self._rigid_fiber(l_ce, v, a * fl * fv + fpe + self.damping * v)
+        if off is not None:
+            f = np.where(off, 0.0, f)
+        return self.f_max * f * cos
+
+    def force_limits(self, l_mt, v_mt):
+        """Rigid-tendon force capacity ``(F_active, F_passive)`` (N), each shaped like ``l_mt``.
+
+        ``F_active = F_max f_L f_V cos(alpha)`` and ``F_passive = F_max (f_PE +
+        damping v) cos(alpha)``, so that ``F = a F_active + F_passive`` is the
+        rigid-tendon force at activation ``a`` (exact: activation does not scale
+        the velocity in these models).  The damping term is negative while the
+        fibre shortens; Millard 2012 floors the total fibre force at 0, which a
+        linear function of ``a`` cannot (:meth:`force` applies it).  A slack unit
+        gives 0 and 0.
+        """
+        self._check(l_mt=l_mt, v_mt=v_mt)
+        l_mt, slack = self._taut(l_mt)
+        l_ce, v_ce, cos = self._rigid(l_mt, v_mt)
+        v = v_ce / self.v_max
+        fl, _, fpe, _ = self._length_curves(l_ce / self.l_opt)
+        fv, _ = self._velocity_curve(v)
+        fmc = self.f_max * cos
+        f_act = fl * fv * fmc
+        f_pas = (fpe + self.damping * v) * fmc
+        _, off = self._rigid_fiber(l_ce, v, f_pas)
+        off = slack if off is None else (off | slack)
+        if off.any():
+            f_act = np.where(off, 0.0, f_act)
+            f_pas = np.where(off, 0.0, f_pas)
+        return f_act, f_pas
+
+    def _fiber_closure(self, a):
+        damping = self.damping
+
+        def fiber(l_norm, v_norm):
+            fl, dfl, fpe, dfpe = self._length_curves(l_norm)
+            if v_norm is None:
+                return a * fl + fpe, a * dfl + dfpe
+            fv = self._active_velocity_factor(a, v_norm)
+            return a * fl * fv + fpe + damping * v_norm, a * dfl * fv + dfpe
+
+        return fiber
+
+    def equilibrium(self, l_mt, a, v_mt=None, *, tol: float = 1e-10, max_iter: int = 100):
+        """Compliant-tendon fibre equilibrium ``F_t = (a f_L f_V + f_PE + damping v) F_max cos(alpha)``.
+
+        Isometric fibre (``v_ce = 0``) unless ``v_mt`` is given (then the fibre
+        takes the series-stiffness share of ``v_mt``, see
+        :func:`pinmsk.muscles._solve.compliant_equilibrium`).  Returns
+        ``{"l_ce", "v_ce", "force"}`` (m, m/s, N); raises
+        :class:`pinmsk.errors.ConvergenceError` naming muscle and frame.
+        """
+        self._check(l_mt=l_mt, a=a, v_mt=v_mt)
+        a = self._check_activation(a)
+        l_ce, v_ce, f_t, _ = compliant_equilibrium(
+            l_mt, l_opt=self.l_opt, l_slack=self.l_slack, height=self.height,
+            tendon=self._tendon_curve, tendon_strain=self._tendon_strain,
+            fiber=self._fiber_closure(a), v_mt=v_mt, v_scale=self.v_max, tol=tol,
+            max_iter=max_iter, names=self.names, inputs={"l_mt": l_mt, "a": a})
+        return {"l_ce": l_ce, "v_ce": v_ce, "force": self.f_max * f_t}
+
+    def tendon_force(self, l_t):
+        """Tendon force (N) at tendon length ``l_t`` (m)."""
+        return self.f_max * self._tendon_curve(np.asarray(l_t, dtype=float) / self.l_slack - 1.0)[0]
+
+    def contraction_rate(self, l_ce, l_mt, a):
+        """Not available: pinmsk has no contraction dynamics for this model (use Thelen2003)."""
+        raise ModelError(f"{type(self).__name__} has no contraction dynamics in pinmsk; forward "
+                         "simulation and dynamic optimization need Thelen2003 muscles")
+
+    def inverse(self, F_mt, dF_mt, l_mt, dl_mt, ddl_mt, ddF_mt=0.0, **_):
+        """Not available: pinmsk has no inverse muscle model for this model (use Thelen2003)."""
+        raise ModelError(f"{type(self).__name__} has no inverse muscle model in pinmsk (excitations "
+                         "from forces need Thelen2003 or NaganoGerritsen muscles)")
+
+    def _curve_kwargs(self, names) -> dict:
+        return {k: getattr(self, k) for k in names}
+
+    def _common_kwargs(self) -> dict:
+        return dict(f_max=self.f_max, l_opt=self.l_opt, l_slack=self.l_slack, pennation=self.pennation,
+                    v_max=self.v_max if self._v_max_given else None, damping=self.damping,
+                    names=self.names, fast_fraction=self.fast_fraction, volume=self.volume,
+                    tau_rise=self.tau_rise, tau_fall=self.tau_fall)
+
+
+class DeGroote2016(_CurveMuscle):
+    """De Groote et al. 2016 muscle-tendon units as OpenSim's DeGrooteFregly2016Muscle, vectorised.
+
+    Curves: :mod:`pinmsk.muscles.degroote2016` (three-Gaussian active
+    force-length, exponential passive, asinh force-velocity, exponential
+    tendon).  Parameters (keyword-only; scalars or ``(m,)``): ``f_max`` (N),
+    ``l_opt`` (m), ``l_slack`` (m), ``pennation`` (rad), ``v_max`` (m/s,
+    default ``10 l_opt``), ``damping`` (0), ``width_scale`` (1),
+    ``passive_strain`` (0.6), ``passive_scale`` (1; 0 = no passive force),
+    ``tendon_strain`` (0.049), activation time constants (0.015 s, 0.060 s);
+    optional ``names``, ``fast_fraction`` and ``volume``.  As in OpenSim the
+    rigid-tendon force is not floored: the passive curve is negative below
+    0.2 l_opt and the damping term while shortening.
+    """
+
+    _CURVE_PARAMETERS = ("width_scale", "passive_strain", "passive_scale", "tendon_strain")
+
+    def __init__(self, *, f_max, l_opt, l_slack, pennation=0.0, v_max=None, damping=0.0,
+                 width_scale=1.0, passive_strain=0.6, passive_scale=1.0, tendon_strain=0.049,
+                 names=None, fast_fraction=None, volume=None, tau_rise: float = 0.015,
+                 tau_fall: float = 0.060):
+        self._curve_setup(dict(names=names, f_max=f_max, l_opt=l_opt, l_slack=l_slack,
+                               pennation=pennation, fast_fraction=fast_fraction, volume=volume,
+                               tau_rise=tau_rise, tau_fall=tau_fall, damping=damping,
+                               width_scale=width_scale, passive_strain=passive_strain,
+                               passive_scale=passive_scale, tendon_strain=tendon_strain), v_max)
+
+    def _kwargs(self) -> dict:
+        return {**self._common_kwargs(), **self._curve_kwargs(self._CURVE_PARAMETERS)}
+
+    def _length_curves(self, l_norm):
+        fpe = degroote_passive_force_length(l_norm, strain=self.passive_strain)
+        dfpe = degroote_passive_force_length_derivative(l_norm, strain=self.passive_strain)
+        return (degroote_active_force_length(l_norm, width_scale=self.width_scale),
+                degroote_active_force_length_derivative(l_norm, width_scale=self.width_scale),
+                self.passive_scale * fpe, self.passive_scale * dfpe)
+
+    def _velocity_curve(self, v_norm):
+        return degroote_force_velocity(v_norm), degroote_force_velocity_derivative(v_norm)
+
+    def _tendon_curve(self, strain):
+        l_t = 1.0 + np.asarray(strain, dtype=float)
+        return (degroote_tendon_force(l_t, strain=self.tendon_strain),
+                degroote_tendon_force_derivative(l_t, strain=self.tendon_strain))
+
+    def _tendon_strain(self, force):
+        return degroote_tendon_length(np.maximum(force, 0.0), strain=self.tendon_strain) - 1.0
+
+
+#: Millard 2012 curve parameters: ``(parameter, default)``; ``None`` = OpenSim's fitted default
+_MILLARD_CURVES = (
+    ("min_norm_active_fiber_length", 0.47 - 0.0259), ("transition_norm_fiber_length", 0.73),
+    ("max_norm_active_fiber_length", 1.8123), ("shallow_ascending_slope", 0.8616),
+    ("active_minimum_value", 0.0),
+    ("passive_strain_at_zero_force", 0.0), ("passive_strain", 0.7),
+    ("passive_stiffness_at_low_force", None), ("passive_stiffness", None), ("passive_curviness", None),
+    ("concentric_slope_at_vmax", 0.0), ("concentric_slope_near_vmax", 0.25), ("isometric_slope", 5.0),
+    ("eccentric_slope_at_vmax", 0.0), ("eccentric_slope_near_vmax", 0.15),
+    ("max_eccentric_velocity_force_multiplier", 1.4), ("concentric_curviness", 0.6),
+    ("eccentric_curviness", 0.9),
+    ("tendon_strain", 0.049), ("tendon_stiffness", None), ("tendon_toe_force", None),
+    ("tendon_curviness", None),
+)
+
+
+class Millard2012(_CurveMuscle):
+    """Millard et al. 2013 muscle-tendon units as OpenSim's Millard2012EquilibriumMuscle, vectorised.
+
+    The curves are OpenSim's quintic Bezier chains, evaluated exactly
+    (:mod:`pinmsk.muscles.millard2012`), built per muscle from the curve
+    parameters (names in :data:`MUSCLE_PARAMETERS`; OpenSim's curve property
+    in brackets there).  Parameters (keyword-only; scalars or ``(m,)``):
+    ``f_max``, ``l_opt``, ``l_slack``, ``pennation``, ``v_max`` (default
+    ``10 l_opt``), ``damping`` (0.1), ``max_pennation`` (acos 0.1), the curve
+    parameters (defaults: OpenSim's curve defaults as its damped model uses
+    them, i.e. ``active_minimum_value`` 0; the passive and tendon stiffness and
+    curviness default to OpenSim's fitted values from the strains: 0.2,
+    ``2/(e1 - e0)``, 0.75 and ``1.375/e_T``, 2/3, 0.5), activation time constants
+    (0.010 s, 0.040 s); optional ``names``, ``fast_fraction`` and ``volume``.
+
+    Rigid tendon as in OpenSim: the fibre length has the floor
+    ``max(min_norm_active_fiber_length l_opt, h / sin(max_pennation))``; a
+    fibre at the floor (shortening) or below carries no force, and the total
+    fibre force is floored at 0.  Use :meth:`Millard2012EquilibriumMuscle.model_parameters`
+    (via :mod:`pinmsk.opensim.muscles`) to get OpenSim's effective curve settings.
+    """
+
+    def __init__(self, *, f_max, l_opt, l_slack, pennation=0.0, v_max=None, damping=0.1,
+                 max_pennation=math.acos(0.1), names=None, fast_fraction=None, volume=None,
+                 tau_rise: float = 0.010, tau_fall: float = 0.040, **curves):
+        known = dict(_MILLARD_CURVES)
+        unknown = set(curves) - set(known)
+        if unknown:
+            raise ModelError(f"Millard2012: unknown parameter(s) {sorted(unknown)}; curve parameters "
+                             f"are {sorted(known)}")
+        given = {k: curves[k] for k in known if curves.get(k) is not None}
+        m = n_muscles(f_max, l_opt, l_slack, pennation, *given.values())
+        if names is not None:
+            m = len(names)
+        # OpenSim's fitted defaults of the optional passive and tendon settings
+        e0 = np.broadcast_to(np.asarray(given.get("passive_strain_at_zero_force", 0.0), float), (m,))
+        e1 = np.broadcast_to(np.asarray(given.get("passive_strain", 0.7), float), (m,))
+        et = np.broadcast_to(np.asarray(given.get("tendon_strain", 0.049), float), (m,))
+        fitted = {"passive_stiffness_at_low_force": 0.2, "passive_curviness": 0.75,
+                  "tendon_toe_force": 2.0 / 3.0, "tendon_curviness": 0.5}
+        with np.errstate(divide="ignore", invalid="ignore"):
+            fitted["passive_stiffness"] = 2.0 / (e1 - e0)
+            fitted["tendon_stiffness"] = 1.375 / et
+        values = {k: given.get(k, known[k] if known[k] is not None else fitted[k]) for k in known}
+        self._curve_setup(dict(names=names, f_max=f_max, l_opt=l_opt, l_slack=l_slack,
+                               pennation=pennation, fast_fraction=fast_fraction, volume=volume,
+                               tau_rise=tau_rise, tau_fall=tau_fall, damping=damping,
+                               max_pennation=max_pennation, **values), v_max)
+        object.__setattr__(self, "_given", frozenset(given))
+        self._build_curves()
+
+    def _build_curves(self) -> None:
+        """One stacked Bezier chain per curve (a single chain when all muscles share the settings)."""
+        p = {k: getattr(self, k) for k, _ in _MILLARD_CURVES}
+        rows = []
+        for i in range(self.n):
+            v = {k: float(a[i]) for k, a in p.items()}
+            try:
+                rows.append((
+                    _millard.ActiveForceLengthCurve(
+                        v["min_norm_active_fiber_length"], v["transition_norm_fiber_length"],
+                        v["max_norm_active_fiber_length"], v["shallow_ascending_slope"],
+                        v["active_minimum_value"]),
+                    _millard.FiberForceLengthCurve(
+                        v["passive_strain_at_zero_force"], v["passive_strain"],
+                        v["passive_stiffness_at_low_force"], v["passive_stiffness"], v["passive_curviness"]),
+                    _millard.ForceVelocityCurve(
+                        v["concentric_slope_at_vmax"], v["concentric_slope_near_vmax"], v["isometric_slope"],
+                        v["eccentric_slope_at_vmax"], v["eccentric_slope_near_vmax"],
+                        v["max_eccentric_velocity_force_multiplier"], v["concentric_curviness"],
+                        v["eccentric_curviness"]),
+                    _millard.TendonForceLengthCurve(
+                        v["tendon_strain"], v["tendon_stiffness"], v["tendon_toe_force"],
+                        v["tendon_curviness"])))
+            except ModelError as exc:
+                raise ModelError(f"Millard2012 {locate(None, i, self.names)}: {exc}") from None
+        if all(r == rows[0] for r in rows):
+            rows = rows[:1]
+        curves = [_millard.QuinticBezierCurve.stack([_millard._cached(r[j]) for r in rows])
+                  for j in range(4)]
+        put = object.__setattr__
+        put(self, "_afl", curves[0])
+        put(self, "_fpe", curves[1])
+        put(self, "_fv", curves[2])
+        put(self, "_tfl", curves[3])
+        h_min = np.where(self.max_pennation > 1e-14,
+                         self.height / np.sin(np.maximum(self.max_pennation, 1e-300)), 0.01 * self.l_opt)
+        l_min = np.maximum(np.maximum(self.min_norm_active_fiber_length * self.l_opt, h_min), 1e-14)
+        l_min.flags.writeable = False
+        put(self, "l_min", l_min)
+
+    def _kwargs(self) -> dict:
+        curves = {k: (getattr(self, k) if k in self._given else None) for k, _ in _MILLARD_CURVES}
+        return {**self._common_kwargs(), "max_pennation": self.max_pennation, **curves}
+
+    def _length_curves(self, l_norm):
+        fl, dfl = self._afl.evaluate(l_norm, (0, 1))
+        fpe, dfpe = self._fpe.evaluate(l_norm, (0, 1))
+        return fl, dfl, fpe, dfpe
+
+    def _velocity_curve(self, v_norm):
+        return tuple(self._fv.evaluate(v_norm, (0, 1)))
+
+    def _tendon_curve(self, strain):
+        return tuple(self._tfl.evaluate(1.0 + np.asarray(strain, dtype=float), (0, 1)))
+
+    def _tendon_strain(self, force):
+        return self._tfl.inverse(force) - 1.0
+
+    def _rigid_fiber(self, l_ce, v_norm, f_total):
+        # OpenSim: a fibre at its length floor that shortens (or below it) is clamped and carries no
+        # force; with a rigid tendon the damping force saturates so the fibre never pushes.
+        off = (l_ce < self.l_min) | ((l_ce <= self.l_min) & (v_norm <= 0.0))
+        return np.maximum(f_total, 0.0), off
+
+
+#: Thelen2003OpenSim curve constants: ``(parameter, OpenSim property, default)``
+_THELEN_CURVES = (("tendon_strain", "FmaxTendonStrain", 0.04), ("passive_strain", "FmaxMuscleStrain", 0.6),
+                  ("active_shape", "KshapeActive", 0.45), ("passive_shape", "KshapePassive", 5.0),
+                  ("fv_shape", "Af", 0.25), ("eccentric_force", "Flen", 1.4),
+                  ("fv_extrapolation", "fv_linear_extrap_threshold", 0.95))
+
+
+class Thelen2003OpenSim(_CurveMuscle):
+    """Thelen 2003 muscles with OpenSim's per-muscle curve constants (Thelen2003Muscle), vectorised.
+
+    The curves of :class:`Thelen2003` (thesis Eq. A.6-A.9) with the constants
+    as parameters -- ``tendon_strain`` (FmaxTendonStrain, 0.04),
+    ``passive_strain`` (FmaxMuscleStrain, 0.6), ``active_shape`` (KshapeActive,
+    0.45), ``passive_shape`` (KshapePassive, 5), ``fv_shape`` (Af, 0.25),
+    ``eccentric_force`` (Flen, 1.4), ``fv_extrapolation``
+    (fv_linear_extrap_threshold, 0.95) -- and OpenSim's exact tendon toe
+    (:data:`pinmsk.muscles.tendon.EXACT_TOE_FRACTION`).  Also ``f_max``, ``l_opt``,
+    ``l_slack``, ``pennation``, ``v_max`` (default ``10 l_opt``), ``max_pennation``
+    (acos 0.1), activation time constants (0.015 s, 0.050 s), ``names``,
+    ``fast_fraction``, ``volume``.
+
+    As OpenSim: the force-velocity factor at activation ``a`` is the curve at
+    ``v / (0.25 + 0.75 a)``, floored at 0; a fibre at or below OpenSim's length
+    floor (``h / sin(max_pennation)``, or 1 % of l_opt unpennated) carries no
+    force.  Rigid-tendon forces, force limits, isometric equilibrium and tendon
+    forces; no contraction dynamics or inverse model (use :class:`Thelen2003`,
+    which has the thesis constants, for those).
+    """
+
+    mechanical_parameters = ("f_max", "l_opt", "l_slack", "pennation", "v_max")
+
+    def __init__(self, *, f_max, l_opt, l_slack, pennation=0.0, v_max=None, tendon_strain=0.04,
+                 passive_strain=0.6, active_shape=0.45, passive_shape=5.0, fv_shape=0.25,
+                 eccentric_force=1.4, fv_extrapolation=0.95, max_pennation=math.acos(0.1),
+                 names=None, fast_fraction=None, volume=None, tau_rise: float = 0.015,
+                 tau_fall: float = 0.050):
+        self._curve_setup(dict(names=names, f_max=f_max, l_opt=l_opt, l_slack=l_slack,
+                               pennation=pennation, fast_fraction=fast_fraction, volume=volume,
+                               tau_rise=tau_rise, tau_fall=tau_fall, damping=0.0,
+                               max_pennation=max_pennation, tendon_strain=tendon_strain,
+                               passive_strain=passive_strain, active_shape=active_shape,
+                               passive_shape=passive_shape, fv_shape=fv_shape,
+                               eccentric_force=eccentric_force, fv_extrapolation=fv_extrapolation), v_max)
+        bad = ~(self.fv_extrapolation > 1.0 / self.eccentric_force)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise ModelError(f"fv_extrapolation = {self.fv_extrapolation[i]:g} for {locate(None, i, self.names)}"
+                             f"; it must exceed 1/eccentric_force = {1.0 / self.eccentric_force[i]:g}")
+        h_min = np.where(self.max_pennation > 1e-14,
+                         self.height / np.sin(np.maximum(self.max_pennation, 1e-300)), 0.01 * self.l_opt)
+        h_min.flags.writeable = False
+        object.__setattr__(self, "l_min", h_min)
+        object.__setattr__(self, "_pe_scale", 1.0 / np.expm1(self.passive_shape))
+
+    def _kwargs(self) -> dict:
+        kw = self._common_kwargs()
+        del kw["damping"]
+        return {**kw, "max_pennation": self.max_pennation,
+                **{k: getattr(self, k) for k, _, _ in _THELEN_CURVES}}
+
+    def _length_curves(self, l_norm):
+        d = np.asarray(l_norm, dtype=float) - 1.0
+        fl = np.exp(-(d * d) / self.active_shape)
+        rate = self.passive_shape / self.passive_strain
+        e = np.exp(rate * np.maximum(d, 0.0))
+        taut = d > 0.0
+        return (fl, (-2.0 / self.active_shape) * d * fl, np.where(taut, (e - 1.0) * self._pe_scale, 0.0),
+                np.where(taut, rate * e * self._pe_scale, 0.0))
+
+    def _fv(self, w):
+        return np.maximum(thelen_force_velocity(w, a_f=self.fv_shape, f_hat=self.eccentric_force,
+                                                extrapolation=self.fv_extrapolation), 0.0)
+
+    def _velocity_curve(self, v_norm):
+        v = np.asarray(v_norm, dtype=float)
+        h = 1e-7      # the slope is not used by the force computations; a central difference suffices
+        return self._fv(v), (self._fv(v + h) - self._fv(v - h)) / (2.0 * h)
+
+    def _active_velocity_factor(self, a, v_norm):
+        return self._fv(np.asarray(v_norm, dtype=float) / (0.25 + 0.75 * np.asarray(a, dtype=float)))
+
+    def _tendon_curve(self, strain):
+        return (thelen_tendon_force(strain, strain0=self.tendon_strain, exact_toe=True),
+                thelen_tendon_stiffness(strain, strain0=self.tendon_strain, exact_toe=True))
+
+    def _tendon_strain(self, force):
+        return thelen_tendon_strain(force, strain0=self.tendon_strain, exact_toe=True)
+
+    def _rigid_fiber(self, l_ce, v_norm, f_total):
+        # OpenSim's calcActiveFiberForceAlongTendon: no force at or below the fibre-length floor
+        return f_total, l_ce <= self.l_min

@@ -17,7 +17,7 @@ strain_toe = 0.609 strain0, k_lin = 1.712/strain0) gives a force of
 at the toe is 42.770 against k_lin = 42.8: the curve is C0 at the toe but its
 slope jumps by 0.07 % (the published constants are rounded; OpenSim's exact
 ones are ``strain_toe = 99 e^3 strain0 / (166 e^3 - 67)``).  We use the thesis
-values as printed.
+values as printed; ``exact_toe=True`` gives OpenSim's (for imported OpenSim models).
 """
 from __future__ import annotations
 
@@ -36,21 +36,31 @@ K_TOE = 3.0
 F_TOE = 0.33
 
 
-def _thelen_constants(strain0: float):
-    strain_toe = 0.609 * strain0
-    k_lin = 1.712 / strain0
+#: OpenSim's exact toe strain of the Thelen tendon, as a fraction of strain0 (the thesis rounds it to 0.609)
+EXACT_TOE_FRACTION = 99.0 * math.exp(3.0) / (166.0 * math.exp(3.0) - 67.0)
+
+
+def _thelen_constants(strain0, exact_toe: bool = False):
+    """``(strain_toe, k_lin, scale, rate)`` of Eq. A.6: the thesis' rounded toe constants, or
+    OpenSim's exact ones (``exact_toe``: the curve is C1 at the toe and 1 at strain0)."""
+    if exact_toe:
+        strain_toe = EXACT_TOE_FRACTION * strain0
+        k_lin = (1.0 - F_TOE) / (strain0 - strain_toe)
+    else:
+        strain_toe = 0.609 * strain0
+        k_lin = 1.712 / strain0
     scale = F_TOE / math.expm1(K_TOE)          # f_toe / (e^k_toe - 1)
     return strain_toe, k_lin, scale, K_TOE / strain_toe
 
 
-def thelen_tendon_force(strain, *, strain0: float = TENDON_STRAIN0):
+def thelen_tendon_force(strain, *, strain0=TENDON_STRAIN0, exact_toe: bool = False):
     """Thelen 2003 normalized tendon force from strain, thesis Eq. A.6.
 
     Exponential toe ``f_toe/(e^k_toe - 1) (exp(k_toe eps/eps_toe) - 1)`` up to
     ``eps_toe = 0.609 strain0``, then linear ``k_lin (eps - eps_toe) + f_toe``
     with ``k_lin = 1.712/strain0``; zero for eps <= 0 (slack).
     """
-    eps_toe, k_lin, scale, rate = _thelen_constants(strain0)
+    eps_toe, k_lin, scale, rate = _thelen_constants(strain0, exact_toe)
     eps = np.asarray(strain, dtype=float)
     # clipping to [0, eps_toe] evaluates both pieces branch-free: the toe term
     # saturates at f_toe and the linear term is zero below the toe.
@@ -58,9 +68,9 @@ def thelen_tendon_force(strain, *, strain0: float = TENDON_STRAIN0):
     return toe + k_lin * np.maximum(eps - eps_toe, 0.0)
 
 
-def thelen_tendon_stiffness(strain, *, strain0: float = TENDON_STRAIN0):
+def thelen_tendon_stiffness(strain, *, strain0=TENDON_STRAIN0, exact_toe: bool = False):
     """d(normalized tendon force)/d(strain) of Eq. A.6 (right derivative at 0 and at the toe)."""
-    eps_toe, k_lin, scale, rate = _thelen_constants(strain0)
+    eps_toe, k_lin, scale, rate = _thelen_constants(strain0, exact_toe)
     eps = np.asarray(strain, dtype=float)
     in_toe = (eps >= 0.0) & (eps <= eps_toe)
     toe = rate * scale * np.exp(rate * np.clip(eps, 0.0, eps_toe))
@@ -75,9 +85,9 @@ def thelen_tendon_stiffness_derivative(strain, *, strain0: float = TENDON_STRAIN
     return np.where(in_toe, rate * rate * scale * np.exp(rate * np.clip(eps, 0.0, eps_toe)), 0.0)
 
 
-def thelen_tendon_strain(force, *, strain0: float = TENDON_STRAIN0):
+def thelen_tendon_strain(force, *, strain0=TENDON_STRAIN0, exact_toe: bool = False):
     """Inverse of Eq. A.6: tendon strain from normalized tendon force (0 for force <= 0)."""
-    eps_toe, k_lin, scale, rate = _thelen_constants(strain0)
+    eps_toe, k_lin, scale, rate = _thelen_constants(strain0, exact_toe)
     f = np.asarray(force, dtype=float)
     toe = np.log1p(np.clip(f, 0.0, F_TOE) / scale) / rate
     return toe + np.maximum(f - F_TOE, 0.0) / k_lin

@@ -54,12 +54,21 @@ A_F = 0.25               # force-velocity shape factor (Eq. A.9)
 F_HAT = 1.4              # asymptotic eccentric force, young adults (Eq. A.9)
 FV_EXTRAPOLATION = 0.95  # fraction of f_hat above which fv continues linearly (Thelen 2003)
 
-# Derived force-velocity constants (see the module docstring).
-_C = (2.0 + 2.0 / A_F) / (F_HAT - 1.0)                  # eccentric hyperbola rate (= 25)
-_P_THR = FV_EXTRAPOLATION * F_HAT                       # fv where the linear tail starts
-_W_THR = (_P_THR - 1.0) / (_C * (F_HAT - _P_THR))       # w where it starts
-_K_CON = A_F / (1.0 + A_F)                              # slope of the tail below w = -1
-_K_ECC = _C * (F_HAT - 1.0) / (1.0 + _C * _W_THR) ** 2  # slope of the tail above _W_THR
+
+
+def _fv_constants(a_f, f_hat, extrapolation):
+    """``(c, p_thr, w_thr, k_con, k_ecc)`` of the force-velocity curve with shape factor ``a_f``,
+    eccentric asymptote ``f_hat`` and linear-tail threshold ``extrapolation`` (module docstring)."""
+    c = (2.0 + 2.0 / a_f) / (f_hat - 1.0)               # eccentric hyperbola rate
+    p_thr = extrapolation * f_hat                       # fv where the linear tail starts
+    w_thr = (p_thr - 1.0) / (c * (f_hat - p_thr))       # w where it starts
+    k_con = a_f / (1.0 + a_f)                           # slope of the tail below w = -1
+    k_ecc = c * (f_hat - 1.0) / (1.0 + c * w_thr) ** 2  # slope of the tail above w_thr
+    return c, p_thr, w_thr, k_con, k_ecc
+
+
+# Derived force-velocity constants of the thesis values (see the module docstring).
+_C, _P_THR, _W_THR, _K_CON, _K_ECC = _fv_constants(A_F, F_HAT, FV_EXTRAPOLATION)
 _PE_SCALE = 1.0 / math.expm1(K_PE)
 
 
@@ -123,28 +132,40 @@ def _fv_blend(w, fv, dfv, smooth):
             np.where(inside, dcon + S * (decc - dcon) + dS * (ecc - con), dfv))
 
 
-def thelen_force_velocity(v_norm, *, smooth: float = 0.0):
+def thelen_force_velocity(v_norm, *, smooth: float = 0.0, a_f=A_F, f_hat=F_HAT,
+                          extrapolation=FV_EXTRAPOLATION):
     """Normalized force-velocity multiplier ``f_V(v/v_max)`` at full activation (Eq. A.9 inverted).
 
     ``f_V(0) = 1``, ``f_V(-1) = 0`` (maximum shortening velocity), increasing,
     ``-> 1.4`` for lengthening until the linear tail at ``0.95 * 1.4``.  At
     activation ``a`` the active fibre force is ``a f_isom f_V(v_norm / (0.25 + 0.75 a))``;
     "activation-mode" static optimization uses ``f_V(v_norm)`` (the a = 1 curve).
-    ``smooth > 0`` blends the slope jump at 0 over ``|w| < smooth`` (see :func:`_fv_blend`).
+    ``smooth > 0`` blends the slope jump at 0 over ``|w| < smooth`` (see :func:`_fv_blend`;
+    thesis shape only).  ``a_f``, ``f_hat``, ``extrapolation``: other shape factors
+    (scalars or per-muscle arrays; OpenSim's Thelen2003Muscle ``Af``, ``Flen`` and
+    ``fv_linear_extrap_threshold``); the defaults are the thesis values.
     """
+    thesis = a_f is A_F and f_hat is F_HAT and extrapolation is FV_EXTRAPOLATION
     if smooth:
+        if not thesis:
+            raise ValueError("force-velocity smoothing supports the thesis shape factors only")
         w = np.asarray(v_norm, dtype=float)
         return _fv_blend(w, thelen_force_velocity(w), thelen_force_velocity_derivative(w),
                          smooth)[0]
+    if thesis:
+        a_f, f_hat, c, w_thr, k_con, k_ecc = A_F, F_HAT, _C, _W_THR, _K_CON, _K_ECC
+    else:
+        a_f, f_hat = np.asarray(a_f, dtype=float), np.asarray(f_hat, dtype=float)
+        c, _, w_thr, k_con, k_ecc = _fv_constants(a_f, f_hat, np.asarray(extrapolation, dtype=float))
     w = np.asarray(v_norm, dtype=float)
     w1 = np.clip(w, -1.0, 0.0)
-    w2 = np.clip(w, 0.0, _W_THR)
+    w2 = np.clip(w, 0.0, w_thr)
     # Branch-free: each clipped piece is zero (or 1) outside its interval, so
     # the four pieces add up without np.where chains.
-    return ((1.0 + w1) / (1.0 - w1 / A_F)
-            + (_C * (F_HAT - 1.0)) * w2 / (1.0 + _C * w2)
-            + _K_CON * np.minimum(w + 1.0, 0.0)
-            + _K_ECC * np.maximum(w - _W_THR, 0.0))
+    return ((1.0 + w1) / (1.0 - w1 / a_f)
+            + (c * (f_hat - 1.0)) * w2 / (1.0 + c * w2)
+            + k_con * np.minimum(w + 1.0, 0.0)
+            + k_ecc * np.maximum(w - w_thr, 0.0))
 
 
 def thelen_force_velocity_derivative(v_norm, *, smooth: float = 0.0):
