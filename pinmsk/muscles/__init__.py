@@ -5,7 +5,10 @@ muscles) with per-muscle ``(m,)`` parameters, plus two small immutable model
 objects that bind the parameters:
 
 - :class:`Thelen2003` -- Thelen tendon, parallel element, Eq. A.6-A.9;
-- :class:`NaganoGerritsen` -- Winters tendon, Eq. A.10-A.14, no parallel element.
+- :class:`NaganoGerritsen` -- Winters tendon, Eq. A.10-A.14, no parallel element;
+- :class:`DeGroote2016`, :class:`Millard2012`, :class:`Thelen2003OpenSim` -- OpenSim's
+  DeGrooteFregly2016Muscle, Millard2012EquilibriumMuscle and Thelen2003Muscle curves
+  (modules :mod:`.degroote2016`, :mod:`.millard2012`), for imported OpenSim models.
 
 Modules: :mod:`.activation` (A.1-A.5), :mod:`.tendon` (A.6, A.10-A.11),
 :mod:`.thelen2003` (A.7-A.9), :mod:`.nagano_gerritsen` (A.12-A.14),
@@ -16,7 +19,7 @@ negative when shortening.
 from .activation import (TAU_FALL, TAU_RISE, activation_from_excitation, activation_rate,
                          excitation_from_activation, he_activation_rate)
 from .inverse import inverse_muscle, inverse_nagano_gerritsen, inverse_thelen2003
-from .models import NaganoGerritsen, Thelen2003
+from .models import DeGroote2016, Millard2012, NaganoGerritsen, Thelen2003, Thelen2003OpenSim
 from .nagano_gerritsen import (ng_activation_from_force, ng_activation_hat, ng_contraction_rate,
                                ng_equilibrium, ng_fiber_force, ng_fiber_force_partials,
                                ng_fiber_velocity, ng_force_length, ng_force_length_derivative)
@@ -34,7 +37,7 @@ from .thelen2003 import (thelen_activation_from_force, thelen_active_force_lengt
                          thelen_passive_force_length, thelen_passive_force_length_derivative)
 
 __all__ = [
-    "NaganoGerritsen", "Thelen2003",
+    "DeGroote2016", "Millard2012", "NaganoGerritsen", "Thelen2003", "Thelen2003OpenSim",
     "TAU_FALL", "TAU_RISE", "TENDON_STRAIN0",
     "activation_from_excitation", "activation_rate", "excitation_from_activation",
     "he_activation_rate",

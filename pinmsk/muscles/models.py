@@ -49,8 +49,8 @@ from .thelen2003 import (GAMMA, K_PE, PASSIVE_STRAIN0, thelen_contraction_rate,
 from . import millard2012 as _millard
 from ..errors import ModelError, TrialError
 
-__all__ = ["MUSCLE_PARAMETERS", "DeGroote2016", "Millard2012", "MuscleParameter", "NaganoGerritsen",
-           "Thelen2003", "Thelen2003OpenSim"]
+__all__ = ["MUSCLE_MODELS", "MUSCLE_PARAMETERS", "DeGroote2016", "Millard2012", "MuscleParameter",
+           "NaganoGerritsen", "Thelen2003", "Thelen2003OpenSim"]
 
 _TENDONS = ("rigid", "compliant")
 
@@ -322,6 +322,8 @@ class Thelen2003(_MuscleModel):
     gamma = 0.45, A_f = 0.25, f_hat = 1.4 (young adults).
     """
 
+    model_type = "thelen2003"
+
     mechanical_parameters = ("f_max", "l_opt", "l_slack", "pennation", "v_max")
 
     def __init__(self, *, f_max, l_opt, l_slack, pennation=0.0, v_max=None, names=None,
@@ -430,6 +432,8 @@ class NaganoGerritsen(_MuscleModel):
     ``volume``; ``tendon_strain0`` (0.04) and activation time constants.
     Constants: A_rel = 0.41, B_rel = 5.2 /s, f_hat = 1.4, Gamma = 1.
     """
+
+    model_type = "nagano_gerritsen"
 
     mechanical_parameters = ("f_max", "l_opt", "l_slack", "pennation", "width")
 
@@ -660,6 +664,8 @@ class DeGroote2016(_CurveMuscle):
     0.2 l_opt and the damping term while shortening.
     """
 
+    model_type = "degroote2016"
+
     _CURVE_PARAMETERS = ("width_scale", "passive_strain", "passive_scale", "tendon_strain")
 
     def __init__(self, *, f_max, l_opt, l_slack, pennation=0.0, v_max=None, damping=0.0,
@@ -731,6 +737,8 @@ class Millard2012(_CurveMuscle):
     fibre force is floored at 0.  Use :meth:`Millard2012EquilibriumMuscle.model_parameters`
     (via :mod:`pinmsk.opensim.muscles`) to get OpenSim's effective curve settings.
     """
+
+    model_type = "millard2012"
 
     def __init__(self, *, f_max, l_opt, l_slack, pennation=0.0, v_max=None, damping=0.1,
                  max_pennation=math.acos(0.1), names=None, fast_fraction=None, volume=None,
@@ -855,6 +863,8 @@ class Thelen2003OpenSim(_CurveMuscle):
     which has the thesis constants, for those).
     """
 
+    model_type = "thelen2003_opensim"
+
     mechanical_parameters = ("f_max", "l_opt", "l_slack", "pennation", "v_max")
 
     def __init__(self, *, f_max, l_opt, l_slack, pennation=0.0, v_max=None, tendon_strain=0.04,
@@ -917,3 +927,8 @@ class Thelen2003OpenSim(_CurveMuscle):
     def _rigid_fiber(self, l_ce, v_norm, f_total):
         # OpenSim's calcActiveFiberForceAlongTendon: no force at or below the fibre-length floor
         return f_total, l_ce <= self.l_min
+
+
+#: The muscle-tendon model classes by their ``model_type`` (the MuscleSet / sidecar type name).
+MUSCLE_MODELS = {cls.model_type: cls for cls in (Thelen2003, NaganoGerritsen, DeGroote2016, Millard2012,
+                                                  Thelen2003OpenSim)}

@@ -1,0 +1,1 @@
+"""OpenSim models in pinmsk: the model layer of the .osim import (skeleton, functions, paths, muscles)."""
