@@ -5,7 +5,6 @@ Analytic key points and finite-difference derivatives always run; the comparison
 curve objects and muscles run when ``opensim`` is importable (skipped with the reason otherwise), the
 .osim models when the shared data are present.
 """
-import math
 import pickle
 import xml.etree.ElementTree as ET
 
@@ -125,8 +124,8 @@ def test_millard_curves_key_points():
                     eccentric_slope_at_vmax=0.1, eccentric_slope_near_vmax=0.15,
                     max_eccentric_velocity_force_multiplier=1.4)
     v = np.linspace(-1.0, 1.0, 41)
-    np.testing.assert_allclose(ForceVelocityInverseCurve(**settings).value(ForceVelocityCurve(**settings).value(v)),
-                               v, atol=1e-12)
+    fv_of_v = ForceVelocityCurve(**settings).value(v)
+    np.testing.assert_allclose(ForceVelocityInverseCurve(**settings).value(fv_of_v), v, atol=1e-12)
 
 
 @pytest.mark.parametrize("curve", [ActiveForceLengthCurve(), ActiveForceLengthCurve(0.25, 0.77, 1.9, 0.75, 0.0),
@@ -244,8 +243,8 @@ def test_millard_rigid_floor_and_clamp():
 def test_per_muscle_curves_and_muscle_set():
     a = Millard2012(f_max=1000.0, l_opt=0.1, l_slack=0.2, tendon_strain=0.033, names=["a"])
     b = Millard2012(f_max=600.0, l_opt=0.12, l_slack=0.25, active_minimum_value=0.1, names=["b"])
-    ab = Millard2012(f_max=[1000.0, 600.0], l_opt=[0.1, 0.12], l_slack=[0.2, 0.25], tendon_strain=[0.033, 0.049],
-                     active_minimum_value=[0.0, 0.1], names=["a", "b"])
+    ab = Millard2012(f_max=[1000.0, 600.0], l_opt=[0.1, 0.12], l_slack=[0.2, 0.25],
+                     tendon_strain=[0.033, 0.049], active_minimum_value=[0.0, 0.1], names=["a", "b"])
     l_mt = np.array([[0.31, 0.36], [0.29, 0.38]])
     got = ab.equilibrium(l_mt, 0.5)["force"]
     np.testing.assert_allclose(got[:, 0], a.equilibrium(l_mt[:, :1], 0.5)["force"][:, 0], rtol=1e-12)
@@ -280,8 +279,8 @@ def test_mapping_defaults_notes_and_types():
     assert toe.max_error == pytest.approx(np.max(np.abs(thelen_tendon_force(eps) - thelen_tendon_force(
         eps, exact_toe=True))), rel=1e-3)
     assert 1e-4 < toe.max_error < 1e-3
-    m2, _ = muscle_from_osim("Thelen2003Muscle", {"KshapeActive": "0.5", "Flen": 1.8, "FmaxTendonStrain": "0.033"},
-                             name="x")
+    m2, _ = muscle_from_osim("Thelen2003Muscle", {"KshapeActive": "0.5", "Flen": 1.8,
+                                                  "FmaxTendonStrain": "0.033"}, name="x")
     assert m2.model_type == "thelen2003_opensim" and m2.parameters["active_shape"] == 0.5
     assert not [n for n in m2.notes if n.kind == "approximated"]
     # Millard: OpenSim's curve adjustment of the undamped elastic-tendon model is applied and noted
@@ -311,7 +310,8 @@ def test_mapping_refuses_bad_input_by_name():
     with pytest.raises(ModelError, match="'vas'.*max_isometric_force = 'lots' is not a number"):
         muscle_from_osim("Millard2012EquilibriumMuscle", {"max_isometric_force": "lots"}, name="vas")
     with pytest.raises(ModelError, match=r"osim:12.*ActiveForceLengthCurve.*shallow_ascending_slope"):
-        muscle_from_osim("Millard2012EquilibriumMuscle", {"ActiveForceLengthCurve": {"shallow_ascending_slope": "9"}},
+        muscle_from_osim("Millard2012EquilibriumMuscle",
+                         {"ActiveForceLengthCurve": {"shallow_ascending_slope": "9"}},
                          name="vas", where="m.osim:12: <Millard2012EquilibriumMuscle name='vas'>")
     with pytest.raises(ModelError, match="ignore_tendon_compliance = 'maybe'"):
         muscle_from_osim("DeGrooteFregly2016Muscle", {"ignore_tendon_compliance": "maybe"}, name="d")
@@ -369,7 +369,8 @@ def test_degroote_curves_match_opensim():
                                      tendon_strain_at_one_norm_force=et)
         for ours, theirs, x in (
                 (p.active_force_length_multiplier, mus.calcActiveForceLengthMultiplier, lx),
-                (p.active_force_length_multiplier_derivative, mus.calcActiveForceLengthMultiplierDerivative, lx),
+                (p.active_force_length_multiplier_derivative,
+                 mus.calcActiveForceLengthMultiplierDerivative, lx),
                 (p.passive_force_multiplier, mus.calcPassiveForceMultiplier, lx),
                 (p.passive_force_multiplier_derivative, mus.calcPassiveForceMultiplierDerivative, lx),
                 (p.force_velocity_multiplier, mus.calcForceVelocityMultiplier, v),
@@ -383,11 +384,11 @@ def test_degroote_curves_match_opensim():
 @needs_opensim
 @pytest.mark.parametrize("ours, theirs, lo, hi", [
     (ActiveForceLengthCurve(), lambda: osim.ActiveForceLengthCurve(), 0.0, 2.2),
-    (ActiveForceLengthCurve(0.25, 0.77, 1.9, 0.75, 0.0), lambda: osim.ActiveForceLengthCurve(0.25, 0.77, 1.9, 0.75, 0.0),
-     0.0, 2.2),
+    (ActiveForceLengthCurve(0.25, 0.77, 1.9, 0.75, 0.0),
+     lambda: osim.ActiveForceLengthCurve(0.25, 0.77, 1.9, 0.75, 0.0), 0.0, 2.2),
     (FiberForceLengthCurve(), lambda: osim.FiberForceLengthCurve(), 0.5, 2.0),
-    (FiberForceLengthCurve(0.1, 0.5, 0.3, 4.0, 0.3), lambda: osim.FiberForceLengthCurve(0.1, 0.5, 0.3, 4.0, 0.3),
-     0.5, 2.0),
+    (FiberForceLengthCurve(0.1, 0.5, 0.3, 4.0, 0.3),
+     lambda: osim.FiberForceLengthCurve(0.1, 0.5, 0.3, 4.0, 0.3), 0.5, 2.0),
     (ForceVelocityCurve(), lambda: osim.ForceVelocityCurve(), -1.3, 1.3),
     (ForceVelocityCurve(0.0, 0.3, 4.0, 0.0, 0.2, 1.6, 0.3, 0.7),
      lambda: osim.ForceVelocityCurve(0.0, 0.3, 4.0, 0.0, 0.2, 1.6, 0.3, 0.7), -1.3, 1.3),
@@ -413,7 +414,8 @@ def _slider(muscle):
     model = osim.Model()
     body = osim.Body("b", 1.0, osim.Vec3(0), osim.Inertia(1))
     model.addBody(body)
-    joint = osim.SliderJoint("s", model.getGround(), osim.Vec3(0), osim.Vec3(0), body, osim.Vec3(0), osim.Vec3(0))
+    joint = osim.SliderJoint("s", model.getGround(), osim.Vec3(0), osim.Vec3(0), body, osim.Vec3(0),
+                             osim.Vec3(0))
     model.addJoint(joint)
     muscle.addNewPathPoint("o", model.getGround(), osim.Vec3(0))
     muscle.addNewPathPoint("i", body, osim.Vec3(0))
@@ -491,3 +493,18 @@ def test_compliant_equilibrium_matches_opensim(kind):
         fa = ours.force_limits(np.array([length]), np.array([0.2]))[0][0]
         if kind == "thelen":
             assert fa == pytest.approx(mus.calcInextensibleTendonActiveFiberForce(s, 1.0), abs=1e-8)
+
+
+@needs_opensim
+def test_thelen_active_force_matches_opensim_at_every_activation():
+    mus, ours = _opensim_muscle("thelen", rigid=False)
+    model, _, _ = _slider(mus)          # the model owns the muscle: keep it alive
+    lce, vn, a = (g.ravel() for g in np.meshgrid(np.linspace(0.07, 0.17, 6), np.linspace(-1.3, 1.3, 9),
+                                                  [0.02, 0.3, 1.0], indexing="ij"))
+    ref = [mus.calcActiveFiberForceAlongTendon(float(ai), float(li), float(vi * ours.v_max[0]))
+           for ai, li, vi in zip(a, lce, vn)]
+    cos = np.sqrt(1.0 - (ours.height / lce) ** 2)
+    fl = ours._length_curves(lce / ours.l_opt)[0]
+    got = ours.f_max * a * fl * ours._active_velocity_factor(a, vn) * cos
+    # OpenSim inverts its force-velocity curve by Newton to 1e-6 (normalized velocity): measured 5e-9 N
+    np.testing.assert_allclose(got, ref, atol=1e-7)

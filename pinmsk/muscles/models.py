@@ -34,10 +34,9 @@ from .activation import (TAU_FALL, TAU_RISE, activation_from_excitation, activat
                          excitation_from_activation)
 from ._solve import compliant_equilibrium
 from .degroote2016 import (degroote_active_force_length, degroote_active_force_length_derivative,
-                           degroote_force_velocity, degroote_force_velocity_derivative,
-                           degroote_passive_force_length, degroote_passive_force_length_derivative,
-                           degroote_tendon_force, degroote_tendon_force_derivative,
-                           degroote_tendon_length)
+                           degroote_force_velocity, degroote_passive_force_length,
+                           degroote_passive_force_length_derivative, degroote_tendon_force,
+                           degroote_tendon_force_derivative, degroote_tendon_length)
 from .inverse import inverse_nagano_gerritsen, inverse_thelen2003
 from .nagano_gerritsen import (ng_contraction_rate, ng_equilibrium, ng_fiber_force,
                                ng_force_length)
@@ -538,7 +537,7 @@ class _CurveMuscle(_MuscleModel):
         raise NotImplementedError
 
     def _velocity_curve(self, v_norm):
-        """``(f_V, df_V/dv)`` at the normalized fibre velocity."""
+        """``f_V`` at the normalized fibre velocity (the a = 1 curve)."""
         raise NotImplementedError
 
     def _tendon_curve(self, strain):
@@ -555,7 +554,7 @@ class _CurveMuscle(_MuscleModel):
 
     def _active_velocity_factor(self, a, v_norm):
         """The force-velocity factor at activation ``a`` (the a = 1 curve unless activation scales it)."""
-        return self._velocity_curve(v_norm)[0]
+        return self._velocity_curve(v_norm)
 
     # -- forces ------------------------------------------------------------------
     def _rigid_force(self, a, l_mt, v_mt):
@@ -571,20 +570,21 @@ class _CurveMuscle(_MuscleModel):
     def force_limits(self, l_mt, v_mt):
         """Rigid-tendon force capacity ``(F_active, F_passive)`` (N), each shaped like ``l_mt``.
 
-        ``F_active = F_max f_L f_V cos(alpha)`` and ``F_passive = F_max (f_PE +
-        damping v) cos(alpha)``, so that ``F = a F_active + F_passive`` is the
-        rigid-tendon force at activation ``a`` (exact: activation does not scale
-        the velocity in these models).  The damping term is negative while the
-        fibre shortens; Millard 2012 floors the total fibre force at 0, which a
-        linear function of ``a`` cannot (:meth:`force` applies it).  A slack unit
-        gives 0 and 0.
+        ``F_active = F_max f_L f_V cos(alpha)`` (``f_V`` at full activation) and
+        ``F_passive = F_max (f_PE + damping v) cos(alpha)``, so that
+        ``F = a F_active + F_passive`` is the rigid-tendon force at activation ``a``:
+        exactly for De Groote and Millard (activation does not scale their
+        velocity), at a = 0 and a = 1 for Thelen (as :meth:`Thelen2003.force_limits`).
+        The damping term is negative while the fibre shortens; Millard 2012 floors
+        the total fibre force at 0, which a linear function of ``a`` cannot
+        (:meth:`force` applies it).  A slack unit gives 0 and 0.
         """
         self._check(l_mt=l_mt, v_mt=v_mt)
         l_mt, slack = self._taut(l_mt)
         l_ce, v_ce, cos = self._rigid(l_mt, v_mt)
         v = v_ce / self.v_max
         fl, _, fpe, _ = self._length_curves(l_ce / self.l_opt)
-        fv, _ = self._velocity_curve(v)
+        fv = self._velocity_curve(v)
         fmc = self.f_max * cos
         f_act = fl * fv * fmc
         f_pas = (fpe + self.damping * v) * fmc
@@ -689,7 +689,7 @@ class DeGroote2016(_CurveMuscle):
                 self.passive_scale * fpe, self.passive_scale * dfpe)
 
     def _velocity_curve(self, v_norm):
-        return degroote_force_velocity(v_norm), degroote_force_velocity_derivative(v_norm)
+        return degroote_force_velocity(v_norm)
 
     def _tendon_curve(self, strain):
         l_t = 1.0 + np.asarray(strain, dtype=float)
@@ -819,7 +819,7 @@ class Millard2012(_CurveMuscle):
         return fl, dfl, fpe, dfpe
 
     def _velocity_curve(self, v_norm):
-        return tuple(self._fv.evaluate(v_norm, (0, 1)))
+        return self._fv.value(v_norm)
 
     def _tendon_curve(self, strain):
         return tuple(self._tfl.evaluate(1.0 + np.asarray(strain, dtype=float), (0, 1)))
@@ -882,8 +882,9 @@ class Thelen2003OpenSim(_CurveMuscle):
         bad = ~(self.fv_extrapolation > 1.0 / self.eccentric_force)
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            raise ModelError(f"fv_extrapolation = {self.fv_extrapolation[i]:g} for {locate(None, i, self.names)}"
-                             f"; it must exceed 1/eccentric_force = {1.0 / self.eccentric_force[i]:g}")
+            raise ModelError(f"fv_extrapolation = {self.fv_extrapolation[i]:g} for "
+                             f"{locate(None, i, self.names)}; it must exceed 1/eccentric_force = "
+                             f"{1.0 / self.eccentric_force[i]:g}")
         h_min = np.where(self.max_pennation > 1e-14,
                          self.height / np.sin(np.maximum(self.max_pennation, 1e-300)), 0.01 * self.l_opt)
         h_min.flags.writeable = False
@@ -905,17 +906,13 @@ class Thelen2003OpenSim(_CurveMuscle):
         return (fl, (-2.0 / self.active_shape) * d * fl, np.where(taut, (e - 1.0) * self._pe_scale, 0.0),
                 np.where(taut, rate * e * self._pe_scale, 0.0))
 
-    def _fv(self, w):
-        return np.maximum(thelen_force_velocity(w, a_f=self.fv_shape, f_hat=self.eccentric_force,
+    def _velocity_curve(self, v_norm):
+        return np.maximum(thelen_force_velocity(v_norm, a_f=self.fv_shape, f_hat=self.eccentric_force,
                                                 extrapolation=self.fv_extrapolation), 0.0)
 
-    def _velocity_curve(self, v_norm):
-        v = np.asarray(v_norm, dtype=float)
-        h = 1e-7      # the slope is not used by the force computations; a central difference suffices
-        return self._fv(v), (self._fv(v + h) - self._fv(v - h)) / (2.0 * h)
-
     def _active_velocity_factor(self, a, v_norm):
-        return self._fv(np.asarray(v_norm, dtype=float) / (0.25 + 0.75 * np.asarray(a, dtype=float)))
+        scale = 0.25 + 0.75 * np.asarray(a, dtype=float)       # activation scales the speed (Eq. A.9)
+        return self._velocity_curve(np.asarray(v_norm, dtype=float) / scale)
 
     def _tendon_curve(self, strain):
         return (thelen_tendon_force(strain, strain0=self.tendon_strain, exact_toe=True),

@@ -450,7 +450,8 @@ def muscle_model_from_osim(muscles: Iterable[tuple[str, str, Mapping]], *,
     for m in mapped:
         families[m.element_type].append(m.name)
     if len(families) > 1:
-        listing = "; ".join(f"{t}: {', '.join(v[:5])}{' ...' if len(v) > 5 else ''}" for t, v in families.items())
+        listing = "; ".join(f"{t}: {', '.join(v[:5])}{' ...' if len(v) > 5 else ''}"
+                            for t, v in families.items())
         raise ModelError(f"pinmsk holds one muscle model per model, but this one mixes {len(families)} "
                          f"OpenSim muscle types ({listing}); convert them to one type in OpenSim")
     types = {m.model_type for m in mapped}
@@ -521,7 +522,8 @@ def summarize_notes(notes: Iterable[MuscleNote], *, max_names: int = 6) -> list[
         errs = [n.max_error for n in ns if n.max_error is not None]
         err = ""
         if errs:
-            err = f" (max error {max(errs):.3g}{' ' + unit if unit else ''}{' over ' + domain if domain else ''})"
+            err = (f" (max error {max(errs):.3g}{' ' + unit if unit else ''}"
+                   f"{' over ' + domain if domain else ''})")
         lines.append(f"{kind}: {what}: {detail}{err} [{len(names)} muscle(s): {who}]")
     return lines
 
@@ -553,7 +555,7 @@ def opensim_static_optimization_capacity(mtu, l_mt, v_mt) -> np.ndarray:
     l_ce, v_ce, cos = mtu._rigid(l_mt, v_mt)
     v = v_ce / mtu.v_max
     fl, _, _, _ = mtu._length_curves(l_ce / mtu.l_opt)
-    fv, _ = mtu._velocity_curve(v)
+    fv = mtu._velocity_curve(v)
     f = mtu.f_max * fl * fv
     if isinstance(mtu, Millard2012):
         l_norm = l_ce / mtu.l_opt
