@@ -8,13 +8,16 @@ otherwise impossible to find.
 """
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
 
 from ..errors import ModelError, TrialError
 
-__all__ = ["as_array", "check_active", "check_finite", "locate", "muscle_parameter", "where_first"]
+__all__ = ["OpenSimMuscleProperties", "as_array", "check_active", "check_finite", "locate", "muscle_parameter",
+           "where_first"]
 
 
 def as_array(x, what: str) -> np.ndarray:
@@ -131,3 +134,36 @@ def n_muscles(*values) -> int:
                                  f"({m} vs {shape[0]})")
             m = max(m, shape[0])
     return m
+
+
+@dataclass(frozen=True)
+class OpenSimMuscleProperties:
+    """The properties every OpenSim ``Muscle`` has, with OpenSim's names and defaults.
+
+    The base of the per-type property classes (``DeGrooteFregly2016Muscle``,
+    ``Millard2012EquilibriumMuscle``, ``Thelen2003Muscle``); values in OpenSim's
+    units (``max_contraction_velocity`` in optimal fibre lengths per second).
+    """
+
+    max_isometric_force: float = 1000.0
+    optimal_fiber_length: float = 0.1
+    tendon_slack_length: float = 0.2
+    pennation_angle_at_optimal: float = 0.0
+    max_contraction_velocity: float = 10.0
+    ignore_tendon_compliance: bool = False
+    ignore_activation_dynamics: bool = False
+
+    def _require(self, ok: bool, prop: str, rule: str) -> None:
+        """Raise :class:`ModelError` ``"<Type>: <prop> = <value>; it must be <rule>"`` unless ``ok``."""
+        if not ok:
+            raise ModelError(f"{type(self).__name__}: {prop} = {getattr(self, prop)!r}; it must be {rule}")
+
+    def _check_properties(self, *positive: str) -> None:
+        """OpenSim's bounds of the base properties and of the type's ``positive`` ones."""
+        for prop in ("max_isometric_force", "optimal_fiber_length", "tendon_slack_length",
+                     "max_contraction_velocity", *positive):
+            v = getattr(self, prop)
+            self._require(isinstance(v, (int, float)) and math.isfinite(v) and v > 0, prop,
+                          "a finite number > 0")
+        self._require(0.0 <= self.pennation_angle_at_optimal < math.pi / 2, "pennation_angle_at_optimal",
+                      "in [0, pi/2)")

@@ -38,7 +38,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ..errors import ModelError
+from ._common import OpenSimMuscleProperties
 
 __all__ = [
     "ACTIVE_B", "K_PE", "TENDON_C1", "TENDON_C2", "TENDON_C3", "FV_D1", "FV_D2", "FV_D3", "FV_D4",
@@ -167,7 +167,7 @@ def degroote_tendon_length(force, *, strain=0.049):
 
 # --------------------------------------------------------------------------- OpenSim properties
 @dataclass(frozen=True)
-class DeGrooteFregly2016Muscle:
+class DeGrooteFregly2016Muscle(OpenSimMuscleProperties):
     """The properties of one OpenSim ``DeGrooteFregly2016Muscle``, with OpenSim's names and defaults.
 
     Values are in OpenSim's units (metres, newtons, radians; ``max_contraction_velocity``
@@ -178,13 +178,6 @@ class DeGrooteFregly2016Muscle:
     :class:`pinmsk.muscles.DeGroote2016`.
     """
 
-    max_isometric_force: float = 1000.0
-    optimal_fiber_length: float = 0.1
-    tendon_slack_length: float = 0.2
-    pennation_angle_at_optimal: float = 0.0
-    max_contraction_velocity: float = 10.0
-    ignore_tendon_compliance: bool = False
-    ignore_activation_dynamics: bool = False
     activation_time_constant: float = 0.015
     deactivation_time_constant: float = 0.060
     default_activation: float = 0.5
@@ -198,19 +191,10 @@ class DeGrooteFregly2016Muscle:
     activation_dynamics_smoothing: float = 0.1
 
     def __post_init__(self):
-        def need(ok, prop, rule):
-            if not ok:
-                raise ModelError(f"DeGrooteFregly2016Muscle: {prop} = {getattr(self, prop)!r}; "
-                                 f"it must be {rule}")
-        for prop in ("max_isometric_force", "optimal_fiber_length", "tendon_slack_length",
-                     "max_contraction_velocity", "activation_time_constant",
-                     "deactivation_time_constant", "activation_dynamics_smoothing",
-                     "passive_fiber_strain_at_one_norm_force", "tendon_strain_at_one_norm_force",
-                     "default_activation"):
-            v = getattr(self, prop)
-            need(isinstance(v, (int, float)) and math.isfinite(v) and v > 0, prop, "a finite number > 0")
-        need(0.0 <= self.pennation_angle_at_optimal < math.pi / 2, "pennation_angle_at_optimal",
-             "in [0, pi/2)")
+        self._check_properties("activation_time_constant", "deactivation_time_constant",
+                               "activation_dynamics_smoothing", "passive_fiber_strain_at_one_norm_force",
+                               "tendon_strain_at_one_norm_force", "default_activation")
+        need = self._require
         need(self.active_force_width_scale >= 1.0, "active_force_width_scale", ">= 1")
         need(self.fiber_damping >= 0.0, "fiber_damping", ">= 0")
         need(0.0 <= self.default_normalized_tendon_force <= 5.0, "default_normalized_tendon_force",

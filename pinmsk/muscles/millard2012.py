@@ -35,6 +35,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ._common import OpenSimMuscleProperties
 from ..errors import ModelError
 
 __all__ = [
@@ -262,8 +263,27 @@ def _finite(curve: str, **values) -> None:
         _check(isinstance(v, (int, float)) and math.isfinite(v), curve, f"{k} = {v!r} is not a finite number")
 
 
+class _Curve:
+    """OpenSim's curve-object interface of the frozen curve settings below (the curve is built once)."""
+
+    def build_curve(self) -> QuinticBezierCurve:
+        raise NotImplementedError
+
+    def value(self, x):
+        """The curve at ``x`` (OpenSim ``calcValue``), vectorised."""
+        return _cached(self).value(x)
+
+    def derivative(self, x, order: int = 1):
+        """``d^order y / dx^order`` at ``x`` (OpenSim ``calcDerivative``; order 0, 1 or 2)."""
+        return _cached(self).derivative(x, order)
+
+    def inverse(self, y):
+        """``x`` where the (increasing) curve equals ``y``: see :meth:`QuinticBezierCurve.inverse`."""
+        return _cached(self).inverse(y)
+
+
 @dataclass(frozen=True)
-class ActiveForceLengthCurve:
+class ActiveForceLengthCurve(_Curve):
     """OpenSim ``ActiveForceLengthCurve``: the active force-length multiplier of the normalised fibre length.
 
     Five corners: 0 at ``min_norm_active_fiber_length``, the steep ascending limb
@@ -312,15 +332,9 @@ class ActiveForceLengthCurve:
                    (x23, y23, dydx23, x3, ylow, 0.0)]
         return _chain(corners, c, what, x0, x3, ylow, ylow, 0.0, 0.0)
 
-    def value(self, l_norm):
-        return _cached(self).value(l_norm)
-
-    def derivative(self, l_norm, order: int = 1):
-        return _cached(self).derivative(l_norm, order)
-
 
 @dataclass(frozen=True)
-class FiberForceLengthCurve:
+class FiberForceLengthCurve(_Curve):
     """OpenSim ``FiberForceLengthCurve``: the passive fibre force multiplier of the normalised fibre length.
 
     0 (slope 0) at ``1 + strain_at_zero_force``, 1 (slope
@@ -370,15 +384,9 @@ class FiberForceLengthCurve:
         corners = [(x_zero, 0.0, 0.0, x_low, y_low, k_low), (x_low, y_low, k_low, x_iso, 1.0, k_iso)]
         return _chain(corners, c, type(self).__name__, x_zero, x_iso, 0.0, 1.0, 0.0, k_iso)
 
-    def value(self, l_norm):
-        return _cached(self).value(l_norm)
-
-    def derivative(self, l_norm, order: int = 1):
-        return _cached(self).derivative(l_norm, order)
-
 
 @dataclass(frozen=True)
-class ForceVelocityCurve:
+class ForceVelocityCurve(_Curve):
     """OpenSim ``ForceVelocityCurve``: the force-velocity multiplier of the normalised fibre velocity.
 
     ``v`` in units of the maximum contraction velocity, negative when shortening:
@@ -438,12 +446,6 @@ class ForceVelocityCurve:
         return QuinticBezierCurve(cx, cy, -1.0, 1.0, 0.0, self.max_eccentric_velocity_force_multiplier,
                                   self.concentric_slope_at_vmax, self.eccentric_slope_at_vmax)
 
-    def value(self, v_norm):
-        return _cached(self).value(v_norm)
-
-    def derivative(self, v_norm, order: int = 1):
-        return _cached(self).derivative(v_norm, order)
-
 
 @dataclass(frozen=True)
 class ForceVelocityInverseCurve(ForceVelocityCurve):
@@ -470,15 +472,9 @@ class ForceVelocityInverseCurve(ForceVelocityCurve):
         return QuinticBezierCurve(cy, cx, 0.0, self.max_eccentric_velocity_force_multiplier, -1.0, 1.0,
                                   1.0 / self.concentric_slope_at_vmax, 1.0 / self.eccentric_slope_at_vmax)
 
-    def value(self, f_v):
-        return _cached(self).value(f_v)
-
-    def derivative(self, f_v, order: int = 1):
-        return _cached(self).derivative(f_v, order)
-
 
 @dataclass(frozen=True)
-class TendonForceLengthCurve:
+class TendonForceLengthCurve(_Curve):
     """OpenSim ``TendonForceLengthCurve``: the tendon force multiplier of the normalised tendon length.
 
     0 (slope 0) at slack length 1.0, 1 at ``1 + strain_at_one_norm_force``,
@@ -530,16 +526,6 @@ class TendonForceLengthCurve:
                    (x_ctrl, y_ctrl, dydx_toe_mid, x_toe, f_toe, k_iso)]
         return _chain(corners, c, type(self).__name__, 1.0, x_toe, 0.0, f_toe, 0.0, k_iso)
 
-    def value(self, l_norm):
-        return _cached(self).value(l_norm)
-
-    def derivative(self, l_norm, order: int = 1):
-        return _cached(self).derivative(l_norm, order)
-
-    def inverse(self, force):
-        """Normalised tendon length at a normalised tendon force (1.0 for force <= 0)."""
-        return _cached(self).inverse(force)
-
 
 def _chain(corners, c, what, x0, x1, y0, y1, dydx0, dydx1) -> QuinticBezierCurve:
     pts = [corner_control_points(*k, c, what=what) for k in corners]
@@ -563,7 +549,7 @@ def _cached(settings) -> QuinticBezierCurve:
 
 # --------------------------------------------------------------------------- OpenSim muscle
 @dataclass(frozen=True)
-class Millard2012EquilibriumMuscle:
+class Millard2012EquilibriumMuscle(OpenSimMuscleProperties):
     """The properties of one OpenSim ``Millard2012EquilibriumMuscle``, with OpenSim's names and defaults.
 
     The curve properties are the four curve objects.  :meth:`effective` returns
@@ -572,13 +558,6 @@ class Millard2012EquilibriumMuscle:
     of :class:`pinmsk.muscles.Millard2012` for those effective curves.
     """
 
-    max_isometric_force: float = 1000.0
-    optimal_fiber_length: float = 0.1
-    tendon_slack_length: float = 0.2
-    pennation_angle_at_optimal: float = 0.0
-    max_contraction_velocity: float = 10.0
-    ignore_tendon_compliance: bool = False
-    ignore_activation_dynamics: bool = False
     fiber_damping: float = 0.1
     default_activation: float = 0.05
     activation_time_constant: float = 0.010
@@ -591,19 +570,11 @@ class Millard2012EquilibriumMuscle:
     tendon_force_length_curve: TendonForceLengthCurve = field(default_factory=TendonForceLengthCurve)
 
     def __post_init__(self):
-        name = type(self).__name__
-        for prop in ("max_isometric_force", "optimal_fiber_length", "tendon_slack_length",
-                     "max_contraction_velocity", "activation_time_constant", "deactivation_time_constant"):
-            v = getattr(self, prop)
-            _check(isinstance(v, (int, float)) and math.isfinite(v) and v > 0, name,
-                   f"{prop} = {v!r} must be a finite number > 0")
-        _check(0.0 <= self.pennation_angle_at_optimal < math.pi / 2, name,
-               f"pennation_angle_at_optimal = {self.pennation_angle_at_optimal!r} must be in [0, pi/2)")
-        _check(0.0 <= self.maximum_pennation_angle <= math.pi / 2, name,
-               f"maximum_pennation_angle = {self.maximum_pennation_angle!r} must be in [0, pi/2]")
-        _check(self.fiber_damping >= 0, name, f"fiber_damping = {self.fiber_damping!r} must be >= 0")
-        _check(0 <= self.minimum_activation < 1, name,
-               f"minimum_activation = {self.minimum_activation!r} must be in [0, 1)")
+        self._check_properties("activation_time_constant", "deactivation_time_constant")
+        need = self._require
+        need(0.0 <= self.maximum_pennation_angle <= math.pi / 2, "maximum_pennation_angle", "in [0, pi/2]")
+        need(self.fiber_damping >= 0, "fiber_damping", ">= 0")
+        need(0 <= self.minimum_activation < 1, "minimum_activation", "in [0, 1)")
 
     @property
     def damped(self) -> bool:

@@ -579,12 +579,7 @@ class _CurveMuscle(_MuscleModel):
         the total fibre force at 0, which a linear function of ``a`` cannot
         (:meth:`force` applies it).  A slack unit gives 0 and 0.
         """
-        self._check(l_mt=l_mt, v_mt=v_mt)
-        l_mt, slack = self._taut(l_mt)
-        l_ce, v_ce, cos = self._rigid(l_mt, v_mt)
-        v = v_ce / self.v_max
-        fl, _, fpe, _ = self._length_curves(l_ce / self.l_opt)
-        fv = self._velocity_curve(v)
+        slack, l_ce, v, cos, fl, fpe, fv = self.rigid_curves(l_mt, v_mt)
         fmc = self.f_max * cos
         f_act = fl * fv * fmc
         f_pas = (fpe + self.damping * v) * fmc
@@ -594,6 +589,19 @@ class _CurveMuscle(_MuscleModel):
             f_act = np.where(off, 0.0, f_act)
             f_pas = np.where(off, 0.0, f_pas)
         return f_act, f_pas
+
+    def rigid_curves(self, l_mt, v_mt):
+        """``(slack, l_ce, v, cos_alpha, f_L, f_PE, f_V)`` of the rigid-tendon fibre.
+
+        ``slack``: muscle-frames where the unit is not longer than its tendon (their
+        fibre is placed just taut); ``v = v_ce / v_max``; ``f_V`` at full activation.
+        """
+        self._check(l_mt=l_mt, v_mt=v_mt)
+        l_mt, slack = self._taut(l_mt)
+        l_ce, v_ce, cos = self._rigid(l_mt, v_mt)
+        v = v_ce / self.v_max
+        fl, _, fpe, _ = self._length_curves(l_ce / self.l_opt)
+        return slack, l_ce, v, cos, fl, fpe, self._velocity_curve(v)
 
     def _fiber_closure(self, a):
         damping = self.damping

@@ -1,7 +1,8 @@
 """The muscles of a model as one component.
 
-A :class:`MuscleSet` joins a muscle-tendon model (``Thelen2003`` or
-``NaganoGerritsen``, vectorised over muscles) with the muscles' paths
+A :class:`MuscleSet` joins a muscle-tendon model (``Thelen2003``,
+``NaganoGerritsen``, or for imported OpenSim models ``Millard2012``,
+``DeGroote2016``, ``Thelen2003OpenSim``; vectorised over muscles) with the muscles' paths
 (lengths and moment arms as functions of the coordinates).  Muscle forces
 ``F`` (N, m) map to generalized forces by ``tau = R(q)^T F`` with ``R`` the
 (N, m, nv) moment arms (thesis Eq. 3.14 in one dof).

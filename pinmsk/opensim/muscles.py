@@ -47,6 +47,7 @@ from typing import Any, Iterable, Mapping, Sequence
 import numpy as np
 
 from ..errors import ModelError
+from ..muscles._common import OpenSimMuscleProperties
 from ..muscles.degroote2016 import DeGrooteFregly2016Muscle
 from ..muscles.millard2012 import (ActiveForceLengthCurve, FiberForceLengthCurve, ForceVelocityCurve,
                                    Millard2012EquilibriumMuscle, TendonForceLengthCurve)
@@ -61,16 +62,9 @@ __all__ = ["MUSCLE_TYPES", "MappedMuscle", "MuscleModelImport", "MuscleNote", "T
 
 # --------------------------------------------------------------------------- OpenSim Thelen
 @dataclass(frozen=True)
-class Thelen2003Muscle:
+class Thelen2003Muscle(OpenSimMuscleProperties):
     """The properties of one OpenSim ``Thelen2003Muscle``, with OpenSim's names, defaults and bounds."""
 
-    max_isometric_force: float = 1000.0
-    optimal_fiber_length: float = 0.1
-    tendon_slack_length: float = 0.2
-    pennation_angle_at_optimal: float = 0.0
-    max_contraction_velocity: float = 10.0
-    ignore_tendon_compliance: bool = False
-    ignore_activation_dynamics: bool = False
     FmaxTendonStrain: float = 0.04
     FmaxMuscleStrain: float = 0.6
     KshapeActive: float = 0.45
@@ -86,19 +80,12 @@ class Thelen2003Muscle:
     default_fiber_length: float = 0.1
 
     def __post_init__(self):
-        def need(ok, prop, rule):
-            if not ok:
-                raise ModelError(f"Thelen2003Muscle: {prop} = {getattr(self, prop)!r}; it must be {rule}")
-        for prop in ("max_isometric_force", "optimal_fiber_length", "tendon_slack_length",
-                     "max_contraction_velocity", "FmaxTendonStrain", "FmaxMuscleStrain",
-                     "KshapeActive", "KshapePassive", "Af", "activation_time_constant",
-                     "deactivation_time_constant"):
-            need(math.isfinite(getattr(self, prop)) and getattr(self, prop) > 0, prop, "a finite number > 0")
+        self._check_properties("FmaxTendonStrain", "FmaxMuscleStrain", "KshapeActive", "KshapePassive", "Af",
+                               "activation_time_constant", "deactivation_time_constant")
+        need = self._require
         need(self.Flen > 1.0, "Flen", "> 1")
         need(1.0 / self.Flen < self.fv_linear_extrap_threshold < 1.0, "fv_linear_extrap_threshold",
              f"in (1/Flen = {1.0 / self.Flen:g}, 1)")
-        need(0.0 <= self.pennation_angle_at_optimal < math.pi / 2, "pennation_angle_at_optimal",
-             "in [0, pi/2)")
         need(0.0 <= self.maximum_pennation_angle <= math.pi / 2, "maximum_pennation_angle", "in [0, pi/2]")
 
     def thesis_curves(self) -> bool:
@@ -550,12 +537,7 @@ def opensim_static_optimization_capacity(mtu, l_mt, v_mt) -> np.ndarray:
         return mtu.force_limits(l_mt, v_mt)[0]
     if not isinstance(mtu, (Millard2012, DeGroote2016)):
         raise ModelError(f"no OpenSim static-optimization capacity for {type(mtu).__name__} muscles")
-    mtu._check(l_mt=l_mt, v_mt=v_mt)
-    l_mt, slack = mtu._taut(l_mt)
-    l_ce, v_ce, cos = mtu._rigid(l_mt, v_mt)
-    v = v_ce / mtu.v_max
-    fl, _, _, _ = mtu._length_curves(l_ce / mtu.l_opt)
-    fv = mtu._velocity_curve(v)
+    slack, l_ce, _, _, fl, _, fv = mtu.rigid_curves(l_mt, v_mt)
     f = mtu.f_max * fl * fv
     if isinstance(mtu, Millard2012):
         l_norm = l_ce / mtu.l_opt
