@@ -298,11 +298,10 @@ def cmd_optimize(args) -> int:
     with _progress(None, "optimize", "iterations") as bar:
         res = optimize_task(args.task, args.output, progress=bar, precision=args.precision)
     print(res.report())
-    result = res.to_trial()
-    _plot(args, result, [n for n in result.names if n.endswith(("_excitation", "_activation"))],
+    _plot(args, res, [n for n in res.names if n.endswith(("_excitation", "_activation"))],
           "optimize_controls", "excitation / activation")
-    _plot(args, result, [n for n in result.names if n.endswith("_desired")]
-          + [n[: -len("_desired")] for n in result.names if n.endswith("_desired")],
+    _plot(args, res, [n for n in res.names if n.endswith("_desired")]
+          + [n[: -len("_desired")] for n in res.names if n.endswith("_desired")],
           "optimize_motion", "coordinate (rad)")
     if args.output:
         print(f"wrote {args.output} and {args.output}.json")

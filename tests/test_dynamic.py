@@ -132,7 +132,7 @@ def test_unconverged_is_flagged_not_reported(finger, capsys):
     assert not res.converged
     assert "NOT CONVERGED" in res.report()
     assert "did not converge" in capsys.readouterr().err
-    assert res.summary()["converged"] is False
+    assert prob.to_dict()["converged"] is False
 
 
 def test_bad_problems_are_named(finger):

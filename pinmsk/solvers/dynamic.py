@@ -90,26 +90,37 @@ An optimizer that stops without converging, or converges to a point that
 violates the constraints by more than ``constraint_tol``, is flagged in the
 result (``converged=False``, ``status``) and on stderr; its numbers are
 never reported as a solution.
+
+The result (``result_``) is a :class:`~pinmsk.fitting.Result`: the Trial of
+``<coord>``, ``<coord>_speed``, ``<coord>_desired`` and ``<muscle>_excitation``,
+``_activation``, ``_force`` on the RK4 grid; its statistics (``converged``,
+``objective``, ``k`` the decision variables, ``iterations``, ``violation`` the
+largest excitation-bound violation) and details (``status``, ``terms``,
+``max_bound_violation``, ``max_tracking_error``, ``coeffs``,
+``parametrization``, ``design``, ``q``, ``v``, ``a``, ``u``, ``force``,
+``target`` as (N, .) arrays, ``seconds``, ``nit``, ``nfev``, ``starts``,
+``coordinates``, ``muscles``, ``x``) are attributes of it.
+:meth:`DynamicOptimization.to_dict` is the JSON summary ``pinmsk optimize`` writes.
 """
 from __future__ import annotations
 
 import json
 import sys
 import time as _time
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
 from ..errors import ConvergenceError, ModelError, SolverError, TrialError
+from ..fitting import Fitter, FitStatistics, Result, format_report
 from ..muscles.activation import excitation_from_activation
 from ..muscles.thelen2003 import GAMMA, K_PE, PASSIVE_STRAIN0, thelen_passive_force_length
 from .designs import BatchMuscles, BatchSkeleton, muscle_inverse, simulate_ff, simulate_skeleton
 from .parametrization import Fourier, Parametrization, Polynomial, Spline
 
 __all__ = ["BatchSkeleton", "simulate_ff", "simulate_skeleton", "muscle_inverse",
-           "DynamicOptimization", "DynamicResult", "Target", "optimize_task",
+           "DynamicOptimization", "Target", "optimize_task",
            "load_task", "TASK_SCHEMA"]
 
 DESIGNS = ("ff", "ifm", "ift")
@@ -202,81 +213,14 @@ class Target:
         return float(np.max(self(t) ** 2))
 
 
-# =============================================================================== result
-@dataclass
-class DynamicResult:
-    """Outcome of :class:`DynamicOptimization`.  ``converged`` False means: not a solution."""
-
-    converged: bool
-    status: str
-    objective: float
-    terms: dict
-    max_bound_violation: float
-    max_tracking_error: float
-    coeffs: np.ndarray
-    parametrization: Parametrization
-    design: str
-    time: np.ndarray
-    q: np.ndarray
-    v: np.ndarray
-    a: np.ndarray
-    u: np.ndarray
-    force: np.ndarray
-    target: np.ndarray
-    seconds: float
-    nit: int
-    nfev: int
-    starts: list = field(default_factory=list)
-    coordinates: tuple = ()
-    muscles: tuple = ()
-    x: np.ndarray | None = None
-
-    def summary(self) -> dict:
-        return {"converged": bool(self.converged), "status": self.status,
-                "objective": float(self.objective),
-                "terms": {k: float(v) for k, v in self.terms.items()},
-                "max_bound_violation": float(self.max_bound_violation),
-                "max_tracking_error": float(self.max_tracking_error),
-                "seconds": float(self.seconds), "nit": int(self.nit), "nfev": int(self.nfev),
-                "design": self.design, "parametrization": self.parametrization.describe(),
-                "coefficients": np.asarray(self.coeffs).tolist(),
-                "starts": self.starts}
-
-    def report(self) -> str:
-        flag = "CONVERGED" if self.converged else "NOT CONVERGED (not a solution)"
-        lines = [f"dynamic optimization ({self.design}, {self.parametrization!r}): {flag}",
-                 f"  status: {self.status}",
-                 f"  objective {self.objective:.6g}  "
-                 + "  ".join(f"{k} {v:.6g}" for k, v in self.terms.items()),
-                 f"  max excitation-bound violation {self.max_bound_violation:.3g}, "
-                 f"max tracking error {self.max_tracking_error:.4g} rad, integration check "
-                 f"{self.terms.get('integration_error', float('nan')):.2g} rad",
-                 f"  {self.nit} iterations, {self.nfev} batched evaluations, {self.seconds:.2f} s"]
-        return "\n".join(lines)
-
-    def to_trial(self):
-        """Coordinates, speeds, excitations, activations and forces as a :class:`~pinmsk.trial.Trial`."""
-        from ..trial import Trial
-        ch = {}
-        for j, c in enumerate(self.coordinates):
-            ch[c] = self.q[:, j]
-            ch[f"{c}_speed"] = self.v[:, j]
-            ch[f"{c}_desired"] = self.target[:, j]
-        for i, n in enumerate(self.muscles):
-            ch[f"{n}_excitation"] = self.u[:, i]
-            ch[f"{n}_activation"] = self.a[:, i]
-            ch[f"{n}_force"] = self.force[:, i]
-        return Trial(self.time, ch)
-
-
 # =============================================================================== problem
 _OBJ_KEYS = {"kind", "exponent", "weights", "normalize", "model"}
 
 
-class DynamicOptimization:
+class DynamicOptimization(Fitter):
     """Parametrized dynamic optimization of a musculoskeletal model (thesis Ch. 3).
 
-    Keyword arguments (stored; :meth:`fit` solves):
+    Arguments (stored only; :meth:`fit` solves), the model first and the rest keyword-only:
 
     - ``design``: ``"ff"``, ``"ifm"`` or ``"ift"`` (Sec. 5.1);
     - ``parametrization``: a :class:`Parametrization` (one per signal, shared basis);
@@ -946,7 +890,7 @@ class DynamicOptimization:
                               + "; ".join(r["message"] for r in records))
         _, x, rec = best
         self.result_ = self._result(x, rec, records, _time.perf_counter() - t0)
-        if not self.result_.converged:
+        if not self.result_.stats.converged:
             print(f"pinmsk: WARNING dynamic optimization did not converge ({self.result_.status}); "
                   "the result is not a solution", file=sys.stderr)
         return self
@@ -1187,14 +1131,53 @@ class DynamicOptimization:
         tn = {"J": f, "physiological": float(terms["physiological"][0]),
               "tracking": float(terms["tracking"][0]), "integration_error": ierr,
               "J_optimized": f_opt}
-        return DynamicResult(
-            converged=bool(ok), status=status, objective=f, terms=tn,
-            max_bound_violation=bound_viol, max_tracking_error=err,
-            coeffs=self._coeffs(x)[0], parametrization=self._parametrization_at(x), design=self.design,
-            time=self._t.copy(), q=sim["q"][:, 0], v=sim["v"][:, 0], a=sim["a"][:, 0], u=u,
-            force=sim["force"][:, 0], target=qd, seconds=seconds, nit=int(rec["nit"]),
-            nfev=int(rec["nfev"]), starts=records, x=np.array(x), coordinates=self.model.coordinates,
-            muscles=self.model.muscle_names)
+        info = dict(status=status, terms=tn, max_bound_violation=bound_viol, max_tracking_error=err,
+                    coeffs=self._coeffs(x)[0], parametrization=self._parametrization_at(x), design=self.design,
+                    q=sim["q"][:, 0], v=sim["v"][:, 0], a=sim["a"][:, 0], u=u, force=sim["force"][:, 0],
+                    target=qd, seconds=seconds, nit=int(rec["nit"]), nfev=int(rec["nfev"]), starts=records,
+                    x=np.array(x), coordinates=self.model.coordinates, muscles=self.model.muscle_names)
+        stats = FitStatistics(k=np.size(x), converged=bool(ok), message=status, iterations=int(rec["nit"]),
+                              violation=bound_viol, objective=f)
+        ch = {}
+        for j, c in enumerate(info["coordinates"]):
+            ch[c] = info["q"][:, j]
+            ch[f"{c}_speed"] = info["v"][:, j]
+            ch[f"{c}_desired"] = qd[:, j]
+        for i, n in enumerate(info["muscles"]):
+            ch[f"{n}_excitation"] = u[:, i]
+            ch[f"{n}_activation"] = info["a"][:, i]
+            ch[f"{n}_force"] = info["force"][:, i]
+        return Result(self._t.copy(), ch, stats=stats, info=info, report=self._report_text(stats, info))
+
+    def _report_text(self, stats: FitStatistics, info: dict) -> str:
+        flag = "CONVERGED" if stats.converged else "NOT CONVERGED (not a solution)"
+        terms = info["terms"]
+        return format_report(
+            f"Dynamic optimization ({info['design']} design, {info['parametrization']!r}) of model "
+            f"'{self.model.name}': {flag}", [
+                ("status", info["status"]),
+                ("objective", f"{stats.objective:.6g} (" + ", ".join(f"{k} {v:.6g}" for k, v in terms.items()) + ")"),
+                ("violation", f"max excitation-bound violation {info['max_bound_violation']:.3g}"),
+                ("tracking", f"max error {info['max_tracking_error']:.4g} rad, integration check "
+                             f"{terms.get('integration_error', float('nan')):.2g} rad"),
+                ("solver", f"SLSQP, {info['nit']} iterations, {info['nfev']} batched evaluations, "
+                           f"{np.size(info['x'])} decision variables"),
+                ("time", f"{info['seconds']:.2f} s"),
+            ])
+
+    def to_dict(self) -> dict:
+        """The fit as a JSON-ready dict (what ``pinmsk optimize`` writes to ``<out>.json``)."""
+        self._check_fitted()
+        r = self.result_
+        return {"converged": bool(r.converged), "status": r.status,
+                "objective": float(r.objective),
+                "terms": {k: float(v) for k, v in r.terms.items()},
+                "max_bound_violation": float(r.max_bound_violation),
+                "max_tracking_error": float(r.max_tracking_error),
+                "seconds": float(r.seconds), "nit": int(r.nit), "nfev": int(r.nfev),
+                "design": r.design, "parametrization": r.parametrization.describe(),
+                "coefficients": np.asarray(r.coeffs).tolist(),
+                "starts": r.starts}
 
 
 _ACTIVE = None
@@ -1343,17 +1326,17 @@ def scale_masses(model, factor: float):
                  contacts=model.contacts, meta=model.meta)
 
 
-def optimize_task(task_path, out_path=None, progress=None, *, precision: int | None = None) -> DynamicResult:
+def optimize_task(task_path, out_path=None, progress=None, *, precision: int | None = None) -> Result:
     """Run the task file ``task_path``; write the result trial to ``out_path`` (.sto/.csv/.mot,
     ``precision`` significant digits, default that of :func:`pinmsk.io.write_trial`)
-    and a JSON summary next to it (``<out>.json``).  Returns the :class:`DynamicResult`
-    (check ``converged``)."""
+    and the JSON summary (:meth:`DynamicOptimization.to_dict`) next to it (``<out>.json``).
+    Returns the fit's :class:`~pinmsk.fitting.Result` (check ``converged``)."""
     spec = load_task(task_path)
     prob = build_from_task(spec, base_dir=Path(task_path).parent, progress=progress)
     res = prob.fit().result_
     if out_path is not None:
         from ..io import write_json, write_trial
         out = Path(out_path)
-        write_trial(res.to_trial(), out, precision=precision)
-        write_json(out.with_suffix(out.suffix + ".json"), res.summary())
+        write_trial(res, out, precision=precision)
+        write_json(out.with_suffix(out.suffix + ".json"), prob.to_dict())
     return res
