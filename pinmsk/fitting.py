@@ -146,7 +146,8 @@ class FitStatistics:
                         f"{self.sse:.6g}{before}"),
                 ("criteria", f"AIC {self.aic:.6g}, BIC {self.bic:.6g} ({noise})")]
         if math.isfinite(self.sse_before):
-            rows.append(("change", f"AIC {self.aic_change:+.4g}, BIC {self.bic_change:+.4g} against the reference"))
+            rows.append(("change", f"AIC change {self.aic_change:+.4g}, BIC change {self.bic_change:+.4g} "
+                                   "against the reference"))
         state = "converged" if self.converged else "NOT converged"
         rows.append(("convergence", f"{state} ({self.message}; {self.iterations} evaluations)"
                                     if self.message else f"{state} ({self.iterations} evaluations)"))

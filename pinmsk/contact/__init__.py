@@ -16,8 +16,9 @@ Feet and fitting: :func:`load_foot2d`, :func:`foot_contacts`, :class:`ContactFit
 numbers), :func:`fit_contact_models` (several models on one trial, each starting from the
 ones it contains), :func:`fit_cli_run` (what ``pinmsk contact fit`` calls),
 :func:`read_contact_trial` (CSU text or .csv/.sto/.mot), :func:`synthetic_foot_trial`,
-:func:`contact_candidates` (diagnosis hook), :func:`from_spec` (a sidecar
-``[[contacts]]`` entry -> component, see :mod:`pinmsk.contact.spec`).  The CSU reader is :func:`pinmsk.csu.read_csu`.
+:func:`from_spec` (a sidecar ``[[contacts]]`` entry -> component, see
+:mod:`pinmsk.contact.spec`).  The CSU reader is :func:`pinmsk.csu.read_csu`.  The contact
+models as diagnosis candidates (``contact_candidates``) are in :mod:`pinmsk.diagnose.contact`.
 """
 from .friction import friction_coefficient, regularized_coulomb
 from .sphere import (ContactForces, SiteKinematics, SphereContact, cap_centroid_depth, cap_volume,
@@ -30,12 +31,11 @@ from .identify import (ContactFit, fit_cli_run, fit_contact_models, fourier_basi
                        stance_cycle, toe_from_kinematics)
 from .spec import from_spec
 from .synthetic import synthetic_foot_trial
-from .diagnosis import contact_candidates
 
 __all__ = [
     "ContactFit", "ContactForces", "GroundReaction", "HuntCrossley", "HyperVolumetric", "KINDS",
     "SITES", "SiteKinematics", "SphereContact", "Volumetric", "cap_centroid_depth", "cap_volume",
-    "contact_candidates", "fit_cli_run", "fit_contact_models", "from_spec", "foot_contacts", "fourier_basis",
+    "fit_cli_run", "fit_contact_models", "from_spec", "foot_contacts", "fourier_basis",
     "friction_coefficient", "ground_reaction", "load_foot2d", "read_contact_trial", "regularized_coulomb", "site_frames",
     "site_kinematics", "smooth_positive", "stance_cycle", "synthetic_foot_trial", "toe_from_kinematics",
     "wrench_generalized_force",

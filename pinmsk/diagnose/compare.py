@@ -96,7 +96,8 @@ class NoiseFloor:
     propagated: np.ndarray
     method: str
 
-    def as_dict(self) -> dict[str, float]:
+    def to_dict(self) -> dict[str, float]:
+        """``{channel: sigma, ..., "total": RMS of the sigmas}``, JSON-ready."""
         out = {c: float(s) for c, s in zip(self.channels, self.sigma)}
         out["total"] = float(np.sqrt(np.mean(self.sigma ** 2)))
         return out

@@ -42,8 +42,9 @@ from ..effects import CatalogContext
 from ..effects import catalog as effect_catalog
 from ..effects import registry
 from ..effects._base import unactuated_coordinates
+from ..fitting import Result
 from .compare import DEFAULT_CUTOFF, Comparison, compare, simulate_windows
-from .fit import CandidateFit, FitResult
+from .fit import EffectFit, describe_fit
 
 __all__ = ["Diagnosis", "DiagnosisRun", "EffectScore", "diagnose", "run", "parse_effect", "describe_fit",
            "AT_FLOOR", "THRESHOLD"]
@@ -57,9 +58,10 @@ _MIN_BLOCK = 20
 
 @dataclass
 class EffectScore:
-    """One ranked candidate: the fitted effect and how much it explains out of sample."""
+    """One ranked candidate: its fit (a :class:`~pinmsk.fitting.Result`, as
+    :class:`~pinmsk.diagnose.fit.EffectFit` gives) and how much it explains out of sample."""
 
-    fit: FitResult
+    fit: Result
     rmse_after: dict
     explained_fraction: float
     improvement: float
@@ -86,7 +88,7 @@ class EffectScore:
 
     @property
     def params(self) -> dict:
-        return dict(self.fit.values)
+        return dict(self.fit.params)
 
     @property
     def stderr(self) -> dict:
@@ -96,7 +98,8 @@ class EffectScore:
         """``name = value ± stderr unit, ...`` of the fitted parameters."""
         return describe_fit(self.fit)
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
+        """The entry as a JSON-ready dict (one element of the diagnosis JSON's ``ranking``)."""
         return {
             "effect": self.family, "target": self.target,
             "params": {k: float(v) for k, v in self.params.items()},
@@ -104,29 +107,10 @@ class EffectScore:
             "explained_fraction": float(self.explained_fraction),
             "significant": bool(self.significant),
             "stderr": {k: _finite(v) for k, v in self.stderr.items()},
-            **({"bic_change": float(self.fit.bic_change), "n_params": int(self.fit.n_params),
+            **({"bic_change": float(self.fit.stats.bic_change), "n_params": int(self.fit.stats.k),
                 "worst_windows": [dict(w) for w in getattr(self, "worst_windows", [])]}
                if getattr(self.effect, "kind", None) == "contact" else {}),
         }
-
-
-def describe_fit(fit: FitResult) -> str:
-    """``name = value ± stderr unit, ...`` (``(at bound)`` where the fit stopped at a bound)."""
-    parts = []
-    decl = fit.effect.params
-    for k, v in fit.values.items():
-        se = fit.stderr.get(k)
-        unit = decl[k].unit
-        s = f"{k} = {v:.4g}"
-        if se is not None and np.isfinite(se):
-            s += f" ± {se:.2g}"
-        s += f" {unit}" if unit else ""
-        if se is not None and np.isnan(se):
-            s += " (at bound)"
-        elif se is not None and np.isinf(se):
-            s += " (not identifiable)"
-        parts.append(s)
-    return ", ".join(parts)
 
 
 def _finite(x):
@@ -154,7 +138,7 @@ class Diagnosis:
         self.settings = settings
         self.skipped = skipped
         self.rmse = comparison.rmse()
-        self.noise_floor = comparison.noise.as_dict()
+        self.noise_floor = comparison.noise.to_dict()
         self.ratio = comparison.ratio()
         self.channel_ratios = {ch: self.rmse[ch] / self.noise_floor[ch] for ch in comparison.channels}
         worst = max(self.channel_ratios.values())
@@ -179,9 +163,12 @@ class Diagnosis:
                 return s
         return None
 
-    def fit(self, effect, target: str | None = None, *, max_nfev: int = 100) -> FitResult:
-        """Fit an effect (family name, ``family:target`` or a Component) on all frames.
+    def fit(self, effect, target: str | None = None, *, max_nfev: int = 100) -> Result:
+        """The fit of an effect (family name, ``family:target`` or a Component) on all frames.
 
+        A name the ranking holds gives that entry's fit; anything else is
+        fitted by :class:`~pinmsk.diagnose.fit.EffectFit`.  Either way the
+        answer is a :class:`~pinmsk.fitting.Result` (see ``EffectFit``).
         Raises :class:`~pinmsk.errors.ConvergenceError` if the fit does not
         converge within ``max_nfev`` evaluations.
         """
@@ -194,18 +181,11 @@ class Diagnosis:
             if plain and s.label == comp.label:
                 if not s.converged:
                     raise ConvergenceError(
-                        f"the fit of {s.label} did not converge ({s.fit.message}); it cannot be added as is. "
-                        "Check that the trial covers the effect or pass fixed parameter values"
+                        f"the fit of {s.label} did not converge ({s.fit.stats.message}); it cannot be added as "
+                        "is. Check that the trial covers the effect or pass fixed parameter values"
                     )
                 return s.fit
-        cf = CandidateFit(self.comparison.eq, self.comparison.eq_noise.sigma, comp)
-        x, conv, msg = cf.fit(max_nfev=max_nfev)
-        if not conv:
-            raise ConvergenceError(
-                f"the fit of {comp.label} did not converge after {cf.nfev} evaluations ({msg.rstrip('.')}); check that "
-                "the trial covers the effect, or fix some parameters (Parameter.vary=False)"
-            )
-        return cf.result(x, conv, msg)
+        return EffectFit(comp, max_nfev=max_nfev).fit(self.comparison).result_
 
     def with_effect(self, effect=None, target: str | None = None):
         """The model with an effect added, fitted (default: the best significant one)."""
@@ -217,14 +197,15 @@ class Diagnosis:
         return _model_plus(self.model, self.fit(effect, target))
 
     # -- reporting -----------------------------------------------------------------------
-    def to_json_dict(self, added: Sequence = ()) -> dict:
+    def to_dict(self, added: Sequence = ()) -> dict:
+        """The diagnosis as a JSON-ready dict (``added``: the fits added before it, for ``"added"``)."""
         inputs = self.comparison.inputs
         return {
             "inputs": inputs.meta() if inputs is not None else {},
             "rmse": dict(self.rmse),
             "noise_floor": dict(self.noise_floor),
             "worst_windows": [dict(w) for w in self.worst_windows],
-            "ranking": [s.to_json() for s in self.ranking],
+            "ranking": [s.to_dict() for s in self.ranking],
             "verdict": self.verdict,
             "added": [_added_json(a) for a in added],
         }
@@ -270,7 +251,7 @@ class Diagnosis:
                 sig = "yes" if s.significant else "no "
                 ww = s.worst_windows[0] if s.worst_windows else None
                 where = (f"  worst {ww['channel']} {ww['start']:.2f}-{ww['end']:.2f} s" if ww else "")
-                lines.append(f"  {k:>2}. {s.label:<{lw}}  k = {s.fit.n_params:>2}  dBIC {s.fit.bic_change:10.1f}  "
+                lines.append(f"  {k:>2}. {s.label:<{lw}}  k = {s.fit.stats.k:>2}  dBIC {s.fit.stats.bic_change:10.1f}  "
                              f"explained {100 * s.explained_fraction:6.1f}%  rmse after "
                              + ", ".join(f"{ch} {s.rmse_after[ch]:.3g}" for ch in c.channels)
                              + f"  significant {sig}{where}" + (f"  [{s.note}]" if s.note else ""))
@@ -300,7 +281,7 @@ class Diagnosis:
                  else f"the error is {self.ratio:.1f}x the noise floor over all channels, {worst:.1f}x on {ch}")
         if self.best is not None and self.comparison.mode == "contact":
             return (f"verdict: missing_effect -- {where}; best explanation: the {self.best.label} contact model "
-                    f"(BIC {self.best.fit.bic_change:+.4g}, fitted parameters above); add it with "
+                    f"(BIC {self.best.fit.stats.bic_change:+.4g}, fitted parameters above); add it with "
                     f"--add {self.best.label}")
         if self.best is not None:
             return (f"verdict: missing_effect -- {where}; best explanation: {self.best.label} "
@@ -336,7 +317,7 @@ def _added_json(a) -> dict:
     fit = a.fit if isinstance(a, EffectScore) else a
     eff = fit.effect
     return {"effect": eff.family, "target": eff.target,
-            "params": {k: float(v) for k, v in fit.values.items()},
+            "params": {k: float(v) for k, v in fit.params.items()},
             "stderr": {k: _finite(v) for k, v in fit.stderr.items()}}
 
 
@@ -413,7 +394,7 @@ def _worst_windows(c: Comparison, window: float, k: int = 5) -> list:
     if c.mode == "contact":
         from .contact import contact_window
         window = contact_window(c, window)
-    return _windows_of(c.time, c.residual, c.channels, c.noise.as_dict(), window, k=k, mask=c.mask)
+    return _windows_of(c.time, c.residual, c.channels, c.noise.to_dict(), window, k=k, mask=c.mask)
 
 
 def _windows_of(t, res, channels, floor: dict, window: float, k: int = 5, mask=None) -> list:
@@ -464,19 +445,18 @@ def _correlations(c: Comparison, k: int = 4) -> dict:
     return out
 
 
-def _score(c: Comparison, cf: CandidateFit, settings) -> EffectScore:
-    folds = settings["folds"]
-    guard = settings["guard"]
-    x, conv, msg = cf.fit()
-    fit = cf.result(x, conv, msg)
-    e_cv, cv_ok = cf.cross_validate(folds, guard, x_full=None if cf.linear else x)
+def _score(c: Comparison, est: EffectFit, settings) -> EffectScore:
+    """The ranking entry of a fitted candidate: held-out error by blocked cross-validation."""
+    fit = est.result_
+    conv, msg = fit.stats.converged, fit.stats.message
+    e_cv, cv_ok = est.cross_validate(folds=settings["folds"], guard=settings["guard"])
     sig = c.eq_noise.sigma
     mse0 = float(np.mean((c.eq.e / sig) ** 2))
     mse1 = float(np.mean((e_cv / sig) ** 2))
     # A muscle-level effect also filters the measured signals' noise; that part of the fall is not
     # physics.  Count only the fall beyond the change of the noise floor it causes.
     floor_change = 0.0
-    if cf.signal and c.mode == "muscle":
+    if est.problem_.signal and c.mode == "muscle":
         emg_after = c.eq.emg_noise(fit.effect)
         after2 = c.noise.propagated ** 2 + emg_after ** 2
         floor_change = float(np.mean((sig ** 2 - after2) / sig ** 2))
@@ -490,7 +470,7 @@ def _score(c: Comparison, cf: CandidateFit, settings) -> EffectScore:
         rmse_after["total"] = float(np.sqrt(np.mean(r ** 2)))
     converged = bool(conv)
     note = "" if converged else f"fit did not converge: {msg}"
-    significant = converged and improvement >= settings["threshold"] and fit.bic_change < 0
+    significant = converged and improvement >= settings["threshold"] and fit.stats.bic_change < 0
     return EffectScore(fit, rmse_after, explained, improvement, significant, converged, note)
 
 
@@ -560,8 +540,7 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
     ranking, skipped = [], []
     for comp in cands:
         try:
-            cf = CandidateFit(c.eq, c.eq_noise.sigma, comp)
-            ranking.append(_score(c, cf, settings))
+            ranking.append(_score(c, EffectFit(comp, strict=False).fit(c), settings))
         except PinmskError as exc:
             skipped.append((comp.label, str(exc)))
     ranking = _order(ranking)
@@ -586,7 +565,7 @@ def _diagnose_contact(c, candidates, folds, threshold, at_floor, window, cutoff,
 
 def _order_by_bic(ranking: list) -> list:
     """Converged first, then lowest BIC (largest fall of BIC against the model as given)."""
-    return sorted(ranking, key=lambda s: (not s.converged, s.fit.bic_change))
+    return sorted(ranking, key=lambda s: (not s.converged, s.fit.stats.bic_change))
 
 
 def _order(ranking: list, tie: float = 0.05) -> list:
@@ -596,7 +575,7 @@ def _order(ranking: list, tie: float = 0.05) -> list:
         swapped = False
         for i in range(len(out) - 1):
             a, b = out[i], out[i + 1]
-            if (a.converged == b.converged and a.target == b.target and a.fit.n_params > b.fit.n_params
+            if (a.converged == b.converged and a.target == b.target and a.fit.stats.k > b.fit.stats.k
                     and a.improvement - b.improvement < tie):
                 out[i], out[i + 1] = b, a
                 swapped = True
@@ -631,8 +610,9 @@ class DiagnosisRun:
     ratio = property(lambda self: self.final.ratio)
     correlations = property(lambda self: self.final.correlations)
 
-    def to_json_dict(self) -> dict:
-        return self.final.to_json_dict(self.added)
+    def to_dict(self) -> dict:
+        """The loop as a JSON-ready dict: the final diagnosis and the effects added."""
+        return self.final.to_dict(self.added)
 
     def summary_text(self) -> str:
         first = self.steps[0]
@@ -651,7 +631,7 @@ class DiagnosisRun:
     def write_json(self, path) -> Path:
         """The JSON summary (parent folders created); refused if any number is NaN or infinite."""
         from ..io import write_json
-        return write_json(path, self.to_json_dict(), parents=True)
+        return write_json(path, self.to_dict(), parents=True)
 
     def __repr__(self) -> str:
         return f"<DiagnosisRun {len(self.added)} added, final {self.final!r}>"
