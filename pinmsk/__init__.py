@@ -28,11 +28,13 @@ _LAZY = {
     "ExternalForce": "skeleton",
     "component_forces": "dynamics", "inverse_dynamics": "dynamics", "simulate": "dynamics",
     "builtin_names": "builtin_models",
+    "Fitter": "fitting", "FitStatistics": "fitting", "Result": "fitting",
 }
 
 __all__ = [
-    "Component", "ConvergenceError", "ExternalForce", "InfeasibleError", "Model", "ModelError",
-    "Motion", "Parameter", "PinmskError", "SolverError", "Trial", "TrialError", "builtin_names",
+    "Component", "ConvergenceError", "ExternalForce", "FitStatistics", "Fitter", "InfeasibleError", "Model",
+    "ModelError", "Motion", "Parameter", "PinmskError", "Result", "SolverError", "Trial", "TrialError",
+    "builtin_names",
     "component_forces", "inverse_dynamics", "load_model", "read_trial", "simulate", "write_trial",
 ]
 

@@ -280,7 +280,11 @@ def _json_value(v):
         return {str(k): _json_value(x) for k, x in v.items()}
     if isinstance(v, (list, tuple, set)):
         return [_json_value(x) for x in v]
-    return repr(v)
+    for attr in ("label", "name"):             # a component, a model, a marker set, ...: by its name
+        name = getattr(v, attr, None)
+        if isinstance(name, str):
+            return name
+    return f"<{type(v).__name__}>"
 
 
 class Fitter:
