@@ -22,7 +22,7 @@ import numpy as np
 from pinmsk.components import Motion
 from pinmsk.contact import ContactFit, foot_contacts, ground_reaction, load_foot2d
 from pinmsk.contact.foot import Foot2dGeometry, foot2d_site_kinematics
-from pinmsk.datasets import shared_data_dir
+from pinmsk.io.shared_data import shared_data_dir
 from pinmsk.skeleton import ExternalForce, external_generalized_force
 
 _SHARED = shared_data_dir()
@@ -77,7 +77,7 @@ def main(argv=None):
     if args.skip_fit:
         return
     if DATA.exists():
-        from pinmsk.csu import read_csu
+        from pinmsk.io.cleveland_gait import read_csu
         trial, opts = read_csu(DATA, body_mass=67.2), {}
         what = "the real CSU cycle"
     else:

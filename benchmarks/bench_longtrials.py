@@ -60,21 +60,21 @@ def startup() -> None:
         ("python (nothing imported)", "pass"),
         ("import pinmsk", "import pinmsk"),
         ("pinmsk --help", "import sys; sys.argv = ['pinmsk', '--help']\n"
-                          "from pinmsk.cli import main\ntry: main()\nexcept SystemExit: pass"),
+                          "from pinmsk.presentation.cli import main\ntry: main()\nexcept SystemExit: pass"),
         ("pinmsk --version", "import sys; sys.argv = ['pinmsk', '--version']\n"
-                             "from pinmsk.cli import main\ntry: main()\nexcept SystemExit: pass"),
+                             "from pinmsk.presentation.cli import main\ntry: main()\nexcept SystemExit: pass"),
         ("old eager imports", "import pinmsk.model, pinmsk.dynamics, pinmsk.io, scipy.signal, scipy.interpolate"),
     ]
     for label, code in rows:
         wall, cpu = fresh(code)
         print(f"  {label:<28} {wall:6.2f} s {cpu:6.2f} s")
     print("  (old eager imports: what 'import pinmsk' and 'pinmsk --help' loaded before: Pinocchio, "
-          "the model, and scipy.signal via pinmsk.filtering)")
+          "the model, and scipy.signal via pinmsk.signals.filtering)")
 
 
 def writing() -> None:
     import pinmsk
-    import pinmsk.io as pio
+    import pinmsk.io.tables as pio
 
     n = WRITE_FRAMES
     rng = np.random.default_rng(0)

@@ -60,7 +60,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 import pinmsk  # noqa: E402
-from pinmsk.datasets import shared_data_dir  # noqa: E402
+from pinmsk.io.shared_data import shared_data_dir  # noqa: E402
 
 #: Cutoff (Hz) of every setup used here (the Arm26 and Gait10dof18musc setups all say 6 Hz).
 CUTOFF = 6.0
@@ -336,7 +336,7 @@ def gait2d_inputs(model, ik: pinmsk.Trial, grf: pinmsk.Trial):
     """(kinematics, external forces) of the subject01 walk on gait2d."""
     from pinmsk.grf import external_forces
     from pinmsk.pipeline import opensim_to_gait2d
-    from pinmsk.resample import to_time
+    from pinmsk.signals.resampling import to_time
 
     # gait10dof18musc, like gait2392, counts knee flexion negative (range [-120, 10] deg);
     # opensim_to_gait2d's knee_sign="auto" detects that and flips it

@@ -38,12 +38,12 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 import pinmsk  # noqa: E402
-from pinmsk.datasets import shared_data_dir  # noqa: E402
+from pinmsk.io.shared_data import shared_data_dir  # noqa: E402
 from pinmsk.grf import external_forces  # noqa: E402
 from pinmsk.ik import InverseKinematics, markers_trial  # noqa: E402
 from pinmsk.markers import load_marker_set, read_trc  # noqa: E402
 from pinmsk.pipeline import opensim_to_gait2d, transferred_cops  # noqa: E402
-from pinmsk.resample import to_time  # noqa: E402
+from pinmsk.signals.resampling import to_time  # noqa: E402
 from pinmsk.solvers.static import StaticOptimization  # noqa: E402
 
 TARGET_S = 2.0

@@ -12,10 +12,12 @@ from pathlib import Path
 
 import pinmsk
 from pinmsk import diagnose as dx
+from pinmsk.io.shared_data import shipped_trial
+from pinmsk.presentation.report import save_diagnosis
 
 out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(".")
 model = pinmsk.load_model("forearm")
-trial = pinmsk.read_trial(dx.shipped_trial("forearm_payload_damping.csv"))
+trial = pinmsk.read_trial(shipped_trial("forearm_payload_damping.csv"))
 
 d = dx.diagnose(model, trial)                    # where the model fails, and the ranked effects
 print(d.summary_text())
@@ -30,8 +32,7 @@ for step in range(3):
     print(f"  total rmse now {d.rmse['total']:.4g} (noise floor {d.noise_floor['total']:.4g}): {d.verdict}")
 
 # the same loop as the CLI runs it, with figures and a report
-result = dx.run(pinmsk.load_model("forearm"), trial,
-                add=[e.label for e in model.effects],
-                report_path=out / "diagnosis_report.html", plot_dir=out / "figures")
+result = dx.run(pinmsk.load_model("forearm"), trial, add=[e.label for e in model.effects])
+save_diagnosis(result, report_path=out / "diagnosis_report.html", plot_dir=out / "figures")
 print()
 print(f"final verdict: {result.verdict}; model effects: {', '.join(c.label for c in result.model.components)}")

@@ -54,7 +54,7 @@ for P, minmax in cases:
     print(f"  {label:8s} {so.timing_['solve_s'] * 1e3:7.2f} ms ({so.timing_['solve_s'] / 201 * 1e6:6.1f} us/frame), "
           f"max |F - F_analytical| = {np.max(np.abs(so.forces_ - exact)):.2e} N, "
           f"max violation {np.max(so.violation_):.1e} N m")
-    so.result_.write(out / f"forearm_so_{'minmax' if minmax else f'P{P}'}.sto")
+    pinmsk.write_trial(so.result_, out / f"forearm_so_{'minmax' if minmax else f'P{P}'}.sto")
 print()
 print(results["P = 2"].report())
 
@@ -99,7 +99,7 @@ t = walk.t
 so = StaticOptimization(exponent=2, reserves=True).fit(gait, walk)
 print()
 print(so.report())
-so.result_.write(out / "gait2d_so_P2.sto")
+pinmsk.write_trial(so.result_, out / "gait2d_so_P2.sto")
 fig, ax = plt.subplots(figsize=(9, 4))
 for i, n in enumerate(gait.muscles.names):
     if n.endswith("_r"):

@@ -50,7 +50,7 @@ for P, fig_no, thesis_cpu in ((2, "3_16", 20), (3, "3_17", 29)):
     print(f"  tracking error max |q - q_d| = {err:.4f} deg (RK45: "
           f"{np.rad2deg(np.max(np.abs(fso45.tracking_error_))):.4f} deg)")
     print("  " + fso.report().replace("\n", "\n  "))
-    fso.result_.write(out / f"forearm_fso_P{P}.sto")
+    pinmsk.write_trial(fso.result_, out / f"forearm_fso_P{P}.sto")
 
     fig, ax = plt.subplots(2, 2, figsize=(10, 6.5))
     ax[0, 0].plot(motion.t, np.rad2deg(motion.q[:, 0]), "k", lw=2, label="desired")

@@ -1,7 +1,7 @@
 """Foot contact identification (thesis Ch. 4) on real treadmill walking.
 
 Drives foot2d with the foot located by its heel and 5th-metatarsal markers in
-the CSU treadmill trial (:func:`pinmsk.csu.read_csu`, ``anchor="heel"``: foot
+the CSU treadmill trial (:func:`pinmsk.io.cleveland_gait.read_csu`, ``anchor="heel"``: foot
 angle from the marker line, heel sphere site at a calibrated offset from the
 heel marker), fits the point (Eq. 4.4), linear volumetric (Eq. 4.5-4.8),
 hyper-volumetric (Eq. 4.9-4.15) and relaxed hyper-volumetric (Sec. 4.1.4)
@@ -72,7 +72,7 @@ def main(argv=None) -> dict:
         data = DEFAULT_DATA
     opts = {}
     if data.exists():
-        from pinmsk.csu import read_csu
+        from pinmsk.io.cleveland_gait import read_csu
         trial = read_csu(data, body_mass=67.2, anchor=args.anchor)
         source = f"CSU treadmill trial {data}"
     else:

@@ -8,7 +8,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from pinmsk.datasets import shared_data_dir
+from pinmsk.io.shared_data import shared_data_dir
 
 
 def viewer_arguments(argv, *, description: str) -> argparse.Namespace:

@@ -9,7 +9,7 @@ nothing is copied.  Without the data the script says so and exits 0.
 * markers RSHO, RGTRO, RLEK, RLM, RHEE, RMT5 (100 Hz, m) -> ``InverseKinematics`` with the ``csu`` set of
   ``urdf/markers_gait2d.toml`` (x and y only; free: torso_x, torso_y, torso_angle, hip_r, knee_r,
   ankle_r; the left leg is not measured and stays at 0);
-* force plate FP2: the COP from the moment about the global origin on the belt (``pinmsk.csu``),
+* force plate FP2: the COP from the moment about the global origin on the belt (``pinmsk.io.cleveland_gait``),
   applied to ``foot_r`` as a world-frame wrench;
 * inverse dynamics after a 6 Hz zero-lag low-pass of the coordinates (as leg2d's test);
 * hip, knee and ankle moments per kg (body mass 67.2 kg from the repository's test.m) and the
@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 import pinmsk
-from pinmsk.csu import read_csu
+from pinmsk.io.cleveland_gait import read_csu
 from pinmsk.grf import external_forces, torso_residuals
 from pinmsk.ik import InverseKinematics
 from pinmsk.markers import load_marker_set

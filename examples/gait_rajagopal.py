@@ -38,12 +38,12 @@ from pathlib import Path
 import numpy as np
 
 import pinmsk
-from pinmsk.datasets import shared_data_dir
-from pinmsk.emg import on_off, onset_times
+from pinmsk.io.shared_data import shared_data_dir
+from pinmsk.signals.emg import on_off, onset_times
 from pinmsk.grf import external_forces, torso_residuals
-from pinmsk.markers import read_trc
+from pinmsk.io.trc import read_trc
 from pinmsk.pipeline import opensim_to_gait2d, transferred_cops
-from pinmsk.resample import to_time
+from pinmsk.signals.resampling import to_time
 
 JOINTS = (("hip", "hip_flexion_{s}_moment", -1.0), ("knee", "knee_angle_{s}_moment", 1.0),
           ("ankle", "ankle_angle_{s}_moment", -1.0))

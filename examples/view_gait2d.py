@@ -11,7 +11,7 @@ joints are coloured by a made-up residual.
 import numpy as np
 
 import pinmsk
-from pinmsk.viewer import Viewer
+from pinmsk.presentation.viewer import Viewer
 
 from _common import serve_or_close, viewer_arguments
 

@@ -8,7 +8,7 @@ The motion is synthetic; a ghost with smaller amplitude stands beside it.
 import numpy as np
 
 import pinmsk
-from pinmsk.viewer import Viewer
+from pinmsk.presentation.viewer import Viewer
 
 from _common import serve_or_close, viewer_arguments
 

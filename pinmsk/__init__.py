@@ -11,9 +11,7 @@ do not pay for Pinocchio and SciPy until something needs them.
 """
 from __future__ import annotations
 
-import importlib
-import importlib.util
-
+from ._lazy import lazy_exports
 from .errors import (ConvergenceError, InfeasibleError, ModelError, PinmskError, SolverError,
                      TrialError)
 
@@ -39,18 +37,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str):
-    module = _LAZY.get(name)
-    if module is not None:
-        value = getattr(importlib.import_module(f".{module}", __name__), name)
-        globals()[name] = value          # later look-ups skip this function
-        return value
-    if not name.startswith("_") and importlib.util.find_spec(f"{__name__}.{name}") is not None:
-        # submodules (pinmsk.dynamics, pinmsk.io, ...) stay reachable as attributes,
-        # as they were when this package imported them eagerly
-        return importlib.import_module(f".{name}", __name__)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = lazy_exports(__name__, _LAZY, globals())

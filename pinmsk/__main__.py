@@ -1,6 +1,6 @@
 """``python -m pinmsk`` is the ``pinmsk`` command."""
 import sys
 
-from .cli import main
+from .presentation.cli import main
 
 sys.exit(main())

@@ -28,6 +28,7 @@ from .components import Motion
 from .errors import ResidualWarning, TrialError
 from .kinematics import DEFAULT_CUTOFF, TrialInputs, lowpass_external, prepare
 from .residuals import ResidualReport, floating_base_residuals
+from .signals.sampling import median_step
 from .trial import Trial, moment_channels
 
 
@@ -78,7 +79,7 @@ def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, ex
     if external:
         # explicit wrenches on the motion's time base get the same low-pass as the kinematics
         gc = inputs.filtering.grf_cutoff
-        ext = lowpass_external(external, rate=1.0 / float(np.median(np.diff(inputs.motion.t))), cutoff=gc)
+        ext = lowpass_external(external, rate=1.0 / median_step(inputs.motion.t), cutoff=gc)
         inputs = replace(inputs, external=ext, filtering=replace(inputs.filtering, has_grf=True),
                          notes=inputs.notes + ("external wrenches given by the caller on "
                                                + ", ".join(e.frame for e in ext),))
@@ -175,7 +176,7 @@ def _torque_function(model, moments) -> Callable | None:
         return moments
     if not isinstance(moments, Trial):
         raise TrialError(f"moments must be None, a Trial or a function; got {type(moments).__name__}")
-    cols = [f"{c}_moment" for c in model.coordinates]
+    cols = list(moment_channels(model.coordinates))
     present = [i for i, c in enumerate(cols) if c in moments]
     if not present:
         raise TrialError(

@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .errors import ModelError
+
 __all__ = ["RHO_MUSCLE", "SIGMA_MUSCLE", "muscle_mass", "stimulation_time",
            "bhargava2004", "umberger2003", "metabolic_rate", "smooth_step", "smooth_relu",
            "smooth_clip", "smooth_power", "SMOOTH_WIDTH"]
@@ -232,7 +234,6 @@ def umberger2003(*, u, a, l_ce, v_ce, f_ce, f_isom, l_opt, f_max, fast_fraction,
 
 def metabolic_rate(model_name: str, **kw):
     """Dispatch by name: ``"umberger2003"`` or ``"bhargava2004"`` (``t_stim`` needed for the latter)."""
-    from .errors import ModelError
     if model_name == "umberger2003":
         kw.pop("t_stim", None)
         return umberger2003(**kw)

@@ -34,7 +34,7 @@ import numpy as np
 
 from .errors import TrialError
 from .skeleton import ExternalForce
-from .trial import Trial, parse_ground_reaction
+from .trial import Trial, moment_channel, parse_ground_reaction
 
 __all__ = ["cop_from_plate", "check_vertical_force", "external_forces", "grf_channels", "Plate", "plates",
            "plate_wrench", "BODY_ALIASES",
@@ -131,7 +131,7 @@ def check_vertical_force(trial: Trial, *, min_force: float = 20.0, body_mass: fl
                     raise TrialError(
                         f"ground reaction of side {side!r}: the force along {a} (median {med:.0f} N when loaded, "
                         f"channel {ch[('force', a)]!r}) exceeds the vertical {name!r} (median {med_y:.0f} N); "
-                        f"the plate's axes are not the lab's (y up): remap them (e.g. pinmsk.c3d.remap_axes "
+                        f"the plate's axes are not the lab's (y up): remap them (e.g. pinmsk.io.c3d.remap_axes "
                         f"for a z-up lab)")
         loaded = np.abs(fy) >= min_force
         if not loaded.any():
@@ -382,7 +382,7 @@ def torso_residuals(model, id_trial: Trial, *, coordinates: Sequence[str] | None
     summary = {}
     bw = None if body_mass is None else body_mass * 9.81
     for c in coordinates:
-        name = f"{c}_moment"
+        name = moment_channel(c)
         if name not in id_trial:
             raise TrialError(f"the inverse-dynamics trial has no {name!r}")
         r = np.asarray(id_trial[name])

@@ -8,7 +8,7 @@ where ``x_m(q)`` is model marker m (a point fixed in a body, from a
 :class:`pinmsk.markers.MarkerSet`), ``y_m[k]`` the measured position, ``P_a``
 keeps the measured axes (``"xy"`` for sagittal data, ``"xyz"`` for 3-D) and
 ``w_m`` the marker weight.  A marker that is NaN in a frame has zero weight
-there (gaps that :func:`pinmsk.markers.fill_gaps` did not fill).
+there (gaps that :func:`pinmsk.signals.gaps.fill_gaps` did not fill).
 
 The solver is Levenberg-Marquardt on the Gauss-Newton normal equations with
 Pinocchio frame Jacobians (``LOCAL_WORLD_ALIGNED``: the linear rows are the
@@ -24,6 +24,7 @@ over markers, m), ``iterations_`` and ``converged_`` (per frame).
 """
 from __future__ import annotations
 
+import difflib
 from typing import Sequence
 
 import numpy as np
@@ -31,8 +32,8 @@ import pinocchio as pin
 
 from .errors import ConvergenceError, ModelError, TrialError
 from .fitting import Fitter, FitStatistics, Result, format_report
-from .markers import MarkerSet, load_marker_set, marker_array, marker_names
-from .trial import Trial
+from .markers import MarkerSet, load_marker_set
+from .trial import Trial, marker_array, marker_names
 
 __all__ = ["InverseKinematics", "inverse_kinematics", "model_marker_positions", "add_marker_frames"]
 
@@ -43,7 +44,6 @@ def add_marker_frames(model, markers: MarkerSet) -> tuple[pin.Model, list[int]]:
     ids = []
     for m in markers.markers:
         if not pm.existFrame(m.body):
-            import difflib
             close = difflib.get_close_matches(m.body, [f.name for f in pm.frames], n=3)
             raise ModelError(f"marker {m.name!r}: the model has no body/frame {m.body!r}"
                              + (f"; did you mean {', '.join(map(repr, close))}?" if close else ""))

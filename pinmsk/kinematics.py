@@ -7,7 +7,7 @@ Every analysis (inverse dynamics, SO, FSO, diagnosis, batch) goes through
   :data:`DEFAULT_CUTOFF` = 6 Hz unless told otherwise (the usual choice for
   gait and most movements; Winter, *Biomechanics and Motor Control of Human
   Movement*, Ch. 2), then differentiated by quintic spline
-  (:func:`pinmsk.filtering.differentiate`).  ``cutoff=0`` (or ``None``) turns
+  (:func:`pinmsk.signals.filtering.differentiate`).  ``cutoff=0`` (or ``None``) turns
   filtering off explicitly, which is right for noise-free synthetic data.
 * **Ground reaction forces** are used whenever the trial (or ``grf=``, or an
   OpenSim ExternalLoads file) has them: each plate goes to a body of the model
@@ -31,24 +31,23 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
+from . import grf as _grf
 from .components import Motion
-from .errors import TrialError
+from .errors import ModelError, TrialError
+from .io.external_loads import read_external_loads
+from .io.tables import read_trial
+from .signals.filtering import DEFAULT_CUTOFF, FILTER_ORDER, lowpass
+from .signals.sampling import measured_rate
+from .skeleton import ExternalForce, world_wrench
 from .trial import Trial, parse_ground_reaction
 
-if TYPE_CHECKING:   # pinmsk.skeleton imports Pinocchio; the CLI's parser (--help) reads DEFAULT_CUTOFF here
-    from .skeleton import ExternalForce
 
 __all__ = ["DEFAULT_CUTOFF", "FILTER_ORDER", "Filtering", "TrialInputs", "prepare", "cutoff_value",
            "is_planar", "has_ground_reaction", "lowpass_external"]
 
-#: Default low-pass cut-off (Hz) of kinematics and ground reaction forces.
-DEFAULT_CUTOFF = 6.0
-#: Order of the designed Butterworth filter (run forwards and backwards).
-FILTER_ORDER = 4
 #: Vertical force (N) below which a plate counts as unloaded.
 MIN_FORCE = 20.0
 
@@ -161,7 +160,6 @@ def lowpass_wrenches(W: np.ndarray, *, rate: float, cutoff: float | None) -> np.
     """World wrenches ``(N, 6k)`` low-passed like the kinematics (no-op for ``cutoff=None``)."""
     if cutoff is None or W.size == 0:
         return W
-    from .filtering import lowpass
     if cutoff >= 0.5 * rate:
         raise TrialError(f"cutoff {cutoff:g} Hz is not below the GRF's Nyquist frequency "
                          f"{0.5 * rate:g} Hz (GRF at {rate:g} Hz)")
@@ -170,8 +168,6 @@ def lowpass_wrenches(W: np.ndarray, *, rate: float, cutoff: float | None) -> np.
 
 def lowpass_external(external, *, rate: float, cutoff) -> tuple[ExternalForce, ...]:
     """:class:`ExternalForce` s with their wrenches (about the origin) low-passed at ``cutoff`` Hz."""
-    from .skeleton import ExternalForce, world_wrench
-
     c = cutoff_value(cutoff)
     out = []
     for e in external:
@@ -182,15 +178,12 @@ def lowpass_external(external, *, rate: float, cutoff) -> tuple[ExternalForce, .
 
 def _plate_loads(model, grf: Trial, motion: Motion, *, cutoff, external_loads, frames, planar,
                  q_on_grf_time, same_time: bool):
-    from . import grf as _grf
-    from .skeleton import ExternalForce
     _grf.check_vertical_force(grf, min_force=MIN_FORCE)
     plist = _grf.plates(model, grf, external_loads=external_loads, frames=frames, q=q_on_grf_time,
                         min_force=MIN_FORCE)
     wrenches = [_grf.plate_wrench(grf, p, min_force=MIN_FORCE, planar=planar) for p in plist]
     W = np.concatenate([np.hstack([F, M]) for F, M in wrenches], axis=1) if wrenches else np.zeros((grf.n_frames, 0))
     if cutoff is not None:
-        from .resample import measured_rate
         W = lowpass_wrenches(W, rate=measured_rate(grf), cutoff=cutoff)
     if not same_time:
         tg = np.asarray(grf.time, dtype=float)
@@ -229,7 +222,6 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
         Low-pass of the GRF; default the kinematics' ``cutoff`` (the consistent
         choice); 0 leaves the GRF unfiltered, as OpenSim's ID tool does.
     """
-    from .errors import ModelError
     if ground_reaction not in GROUND_REACTION_MODES:
         raise TrialError(f"ground_reaction must be one of {', '.join(GROUND_REACTION_MODES)}; "
                          f"got {ground_reaction!r}")
@@ -248,7 +240,6 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
         raise TrialError(f"expected a Trial or a Motion, got {type(trial).__name__}")
     motion = model.motion(trial, cutoff=c)
     if external_loads is not None and not hasattr(external_loads, "loads"):
-        from .external_loads import read_external_loads
         external_loads = read_external_loads(external_loads)
     own = has_ground_reaction(trial)
     source = None
@@ -262,7 +253,6 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
         raise TrialError("the trial has ground reaction channels and a separate GRF source was given "
                          f"({grf if not isinstance(grf, Trial) else 'grf='}); pass only one")
     if isinstance(grf, (str, Path)):
-        from .io import read_trial
         source = str(grf)
         grf = read_trial(grf)
     elif grf is not None:

@@ -24,7 +24,7 @@ import pinocchio as pin
 from .components import Component, Motion
 from .errors import ModelError
 from .kinematics import DEFAULT_CUTOFF, cutoff_value
-from .tomlfile import check_keys, read_toml
+from .io.toml_files import check_keys, read_toml
 
 #: Every key a model sidecar may hold (``urdf/README.md``), per table; others are errors.
 #: ``[[effects]]`` keys are the effect's own (type, target, params, its options and

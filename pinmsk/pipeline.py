@@ -43,7 +43,7 @@ OpenSim ``.sto``/``.mot`` inputs are read leniently (``strict=False``); the repa
 are listed under ``info.read_repairs`` in ``summary.json``.
 
 Parallelism: local trials go to a :class:`concurrent.futures.ProcessPoolExecutor`
-with ``jobs`` workers and a progress bar (:class:`pinmsk.progress.Progress`).  With
+with ``jobs`` workers and a progress bar (:class:`pinmsk.presentation.progress.Progress`).  With
 ``scheduler="tcp://host:8786"`` the same function is submitted through
 ``distributed.Client(scheduler).get_executor()`` (the Dask ``concurrent.futures``
 interface): ``pip install distributed`` on the client and the workers, and pinmsk
@@ -59,16 +59,28 @@ import shutil
 import tempfile
 import time as _time
 import traceback
+import warnings
 from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
 
-from .channel_map import RAJAGOPAL_HIP_OFFSET, apply_channel_map, opensim_gait2d_map
+from .dynamics import inverse_dynamics
 from .errors import PinmskError, TrialError
-from .io import atomic_write, output_folder, write_json
-from .tomlfile import read_toml
-from .trial import Trial
+from .grf import external_forces, grf_channels, torso_residuals, transfer_cop
+from .ik import InverseKinematics
+from .io.channel_map import RAJAGOPAL_HIP_OFFSET, apply_channel_map, opensim_gait2d_map
+from .io.cleveland_gait import read_csu
+from .io.output_files import atomic_write, output_folder, write_json
+from .io.tables import read_trial, write_trial
+from .io.toml_files import read_toml
+from .io.trc import read_trc
+from .kinematics import DEFAULT_CUTOFF, cutoff_value
+from .markers import load_marker_set
+from .model import load_model
+from .presentation.progress import Progress
+from .signals.resampling import to_time
+from .trial import Trial, moment_channel
 
 __all__ = ["opensim_to_gait2d", "frame_positions", "transferred_cops", "run_trial", "batch",
            "batch_cli", "load_config", "RAJAGOPAL_HIP_OFFSET", "KINDS"]
@@ -84,9 +96,9 @@ def opensim_to_gait2d(coords: Trial, model, *, hip_offset=RAJAGOPAL_HIP_OFFSET,
                       knee_sign: str | int = "auto") -> Trial:
     """gait2d coordinates from an OpenSim full-body model's coordinates (sagittal plane).
 
-    The built-in column map :func:`pinmsk.channel_map.opensim_gait2d_map` (signs, the
+    The built-in column map :func:`pinmsk.io.channel_map.opensim_gait2d_map` (signs, the
     ``knee_sign="auto"`` rule and the hip placement are documented in
-    :mod:`pinmsk.channel_map`) applied to ``coords``, keeping only the model's coordinates
+    :mod:`pinmsk.io.channel_map`) applied to ``coords``, keeping only the model's coordinates
     in ``model.coordinate_order``.  ``hip_offset``: the OpenSim hip centre in the pelvis
     frame (default the unscaled Rajagopal model's); ``knee_sign``: ``"auto"``, ``+1``
     (Rajagopal, + = flexion) or ``-1`` (gait2392, Gait10dof18musc).
@@ -123,8 +135,6 @@ def transferred_cops(model, kin: Trial, grf: Trial, markers: Trial, reference: M
     frame standing for that marker (default ``foot_<side>``, the ankle joint centre).
     See :func:`pinmsk.grf.transfer_cop`.
     """
-    from .grf import grf_channels, transfer_cop
-
     q = kin.get(model.coordinates)
     frames = {s: (model_frames or {}).get(s, f"foot_{s}") for s in reference}
     pos = frame_positions(model, q, list(frames.values()))
@@ -151,25 +161,15 @@ def _path(base: Path, p) -> Path:
 
 
 def _load_model(spec):
-    from .model import load_model
     return load_model(spec)
 
 
 def _kinematics(model, spec: dict, base: Path):
     """(kinematics Trial, GRF Trial or None, info dict) for one trial spec."""
-    import warnings
-
-    from .grf import external_forces
-    from .ik import InverseKinematics
-    from .markers import load_marker_set, read_trc
-    from .resample import to_time
-
     kind = spec.get("kind")
     info: dict = {}
     ext = []
     if kind == "csu":
-        from .csu import read_csu
-
         raw = read_csu(_path(base, spec["path"]), body_mass=spec.get("body_mass"),
                        belt_height=float(spec.get("belt_height", 0.0)))
         mset = load_marker_set(spec.get("marker_file", "gait2d")).subset(spec.get("markers", "csu"))
@@ -182,8 +182,6 @@ def _kinematics(model, spec: dict, base: Path):
                               min_force=float(spec.get("min_force", 20.0)))
         info["body_mass"] = spec.get("body_mass")
     elif kind == "opensim":
-        from .io import read_trial
-
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             coords = read_trial(_path(base, spec["coordinates"]), strict=False)
@@ -210,7 +208,6 @@ def _kinematics(model, spec: dict, base: Path):
         kin = ik.result_
         info["ik_marker_rms_mm"] = {k: 1000 * v for k, v in ik.marker_rms_.items()}
         if spec.get("grf"):
-            from .io import read_trial
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 grf = read_trial(_path(base, spec["grf"]), strict=False)
@@ -229,10 +226,6 @@ def run_trial(spec: dict, *, model="gait2d", out_dir=None, base_dir=".") -> dict
     Returns a summary row (JSON-serialisable).  Never raises on a bad trial: the row gets
     ``status = "failed: <message>"`` instead, so one bad file does not stop a batch.
     """
-    from .dynamics import inverse_dynamics
-    from .grf import torso_residuals
-    from .kinematics import DEFAULT_CUTOFF, cutoff_value
-
     t0 = _time.perf_counter()
     name = spec.get("name", "trial")
     row: dict = {"name": name, "kind": spec.get("kind")}
@@ -258,7 +251,7 @@ def run_trial(spec: dict, *, model="gait2d", out_dir=None, base_dir=".") -> dict
         for c in m.coordinate_order:
             if c.startswith(("hip", "knee", "ankle")):
                 row[f"{c}_peak_abs_nm_per_kg" if bm else f"{c}_peak_abs_nm"] = float(
-                    np.max(np.abs(idt[f"{c}_moment"])) / norm)
+                    np.max(np.abs(idt[moment_channel(c)])) / norm)
         for c, s in rsum.items():
             row[f"{c}_residual_rms"] = s["rms"]
         act = None
@@ -277,11 +270,11 @@ def run_trial(spec: dict, *, model="gait2d", out_dir=None, base_dir=".") -> dict
                     "status": "ok"})
         if out_dir is not None:
             with _trial_folder(out_dir) as d:
-                kin.write(d / "kinematics.sto")
-                idt.write(d / "inverse_dynamics.sto")
-                res.write(d / "residuals.sto")
+                write_trial(kin, d / "kinematics.sto")
+                write_trial(idt, d / "inverse_dynamics.sto")
+                write_trial(res, d / "residuals.sto")
                 if act is not None:
-                    act.write(d / "activations.sto")
+                    write_trial(act, d / "activations.sto")
                 if spec.get("plots", True):
                     row["figures"] = _figures(m, d, idt, res)
                 write_json(d / "summary.json", {"row": row, "info": info, "residuals": rsum}, default=str)
@@ -333,12 +326,12 @@ def _remove_partial_folders(out: Path, names) -> None:
 
 
 def _figures(model, d: Path, idt: Trial, res: Trial) -> int:
-    """Per-trial PNGs (joint moments, torso residuals) via :mod:`pinmsk.plots`; returns how many."""
+    """Per-trial PNGs (joint moments, torso residuals) via :mod:`pinmsk.presentation.plots`; returns how many."""
     try:
-        from . import plots
+        from .presentation import plots
     except ImportError:  # pragma: no cover - plots is optional for the batch
         return 0
-    joints = [f"{c}_moment" for c in model.coordinate_order if c.startswith(("hip", "knee", "ankle"))]
+    joints = [moment_channel(c) for c in model.coordinate_order if c.startswith(("hip", "knee", "ankle"))]
     n = len(plots.save_channels(idt, joints, d, stem="moments", ylabel="N m"))
     n += len(plots.save_channels(res, list(res.names), d, stem="residuals"))
     return n
@@ -395,8 +388,6 @@ def batch(trials: Sequence[dict], *, model="gait2d", out=None, base_dir=".", job
     complete, so an interrupted batch (Ctrl-C) leaves complete trial folders or
     none; the temporary folders of interrupted trials are removed.
     """
-    from .progress import Progress
-
     out = None if out is None else Path(out)
     jobs = jobs or os.cpu_count() or 1
     rows: list = [None] * len(trials)

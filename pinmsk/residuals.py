@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .effects._base import is_prismatic, unactuated_coordinates
 from .trial import Trial
 
 __all__ = ["ResidualReport", "floating_base_residuals", "PEAK_FORCE_FRACTION", "PEAK_MOMENT_FRACTION"]
@@ -135,7 +136,6 @@ def floating_base_residuals(model, motion, tau: np.ndarray, external=()) -> Resi
     point of application of the loads (the ground), or above ``y = 0``.
     """
     import pinocchio as pin
-    from .effects._base import is_prismatic, unactuated_coordinates
 
     coords = tuple(unactuated_coordinates(model))
     t = np.asarray(motion.t, dtype=float)

@@ -12,6 +12,7 @@ body (:class:`ExternalForce`) and are converted here to Pinocchio's joint-local
 """
 from __future__ import annotations
 
+import difflib
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -56,7 +57,6 @@ def _frame_joint(pmodel: pin.Model, name: str) -> int:
     if pmodel.existJointName(name):
         return pmodel.getJointId(name)
     names = [f.name for f in pmodel.frames]
-    import difflib
     close = difflib.get_close_matches(name, names, n=3)
     hint = f"; did you mean {', '.join(map(repr, close))}?" if close else ""
     raise ModelError(f"model has no frame or body '{name}'{hint}")
@@ -88,7 +88,7 @@ def inverse_dynamics(model, q, v, a, *, external: Sequence[ExternalForce] = (),
 
     Returns ``(N, nv)``.  ``external`` lists world-frame wrenches at points.
     ``progress``: an object with ``update(n)``, called every
-    :data:`PROGRESS_CHUNK` frames (e.g. :class:`pinmsk.progress.Progress`).
+    :data:`PROGRESS_CHUNK` frames (e.g. :class:`pinmsk.presentation.progress.Progress`).
     """
     pm = _pin(model)
     q = _frames(q, pm.nq, "q")

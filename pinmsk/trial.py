@@ -17,7 +17,7 @@ Channel names follow the pinmsk conventions (see DESIGN.md):
   ``ground_force_r_vy`` spellings are recognised by :func:`parse_ground_reaction`.
 
 Reading and writing files lives in :mod:`pinmsk.io`; filtering and
-differentiation in :mod:`pinmsk.filtering`.
+differentiation in :mod:`pinmsk.signals.filtering`.
 """
 
 from __future__ import annotations
@@ -27,13 +27,14 @@ import fnmatch
 import math
 import re
 import types
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from typing import NamedTuple
 
 import numpy as np
 
 from pinmsk.errors import TrialError
-from pinmsk.filtering import UNIFORM_TOLERANCE, differentiate, lowpass
+from pinmsk.signals.filtering import differentiate, lowpass
+from pinmsk.signals.sampling import check_increasing, median_step, uniform_rate
 
 __all__ = [
     "Trial",
@@ -107,6 +108,11 @@ def coordinate_channels(coords) -> tuple[str, ...]:
 def speed_channels(coords) -> tuple[str, ...]:
     """``<coord>_speed`` for each coordinate."""
     return _suffixed(coords, SPEED_SUFFIX)
+
+
+def moment_channel(coord: str) -> str:
+    """``<coord>_moment``: the generalized force of one coordinate (N·m or N)."""
+    return coord + MOMENT_SUFFIX
 
 
 def moment_channels(coords) -> tuple[str, ...]:
@@ -261,6 +267,31 @@ def _missing_message(missing: list[str], available: tuple[str, ...], what: str) 
 # ---------------------------------------------------------------------------
 
 
+AXES = ("x", "y", "z")
+
+
+def marker_names(trial: Trial) -> tuple[str, ...]:
+    """Marker names of a marker Trial (``meta["markers"]``, or from ``<m>_x`` channels)."""
+    names = trial.meta.get("markers")
+    if names:
+        return tuple(names)
+    return tuple(n[:-2] for n in trial.names if n.endswith("_x") and f"{n[:-2]}_y" in trial)
+
+
+def marker_array(trial: Trial, names: Sequence[str] | None = None, *, axes: str = "xyz") -> np.ndarray:
+    """Marker positions ``(N, M, len(axes))`` (m) of ``names`` (default: all markers).
+
+    Absent axes (2-D data has no ``_z``) are an error unless left out of ``axes``.
+    """
+    names = marker_names(trial) if names is None else tuple(names)
+    cols = [f"{m}_{a}" for m in names for a in axes]
+    missing = [c for c in cols if c not in trial]
+    if missing:
+        raise TrialError(f"marker trial has no channels {', '.join(missing[:5])}"
+                         f"{' ...' if len(missing) > 5 else ''} (markers: {', '.join(marker_names(trial))})")
+    return trial.get(cols).reshape(trial.n_frames, len(names), len(axes))
+
+
 def _readonly(a: np.ndarray) -> np.ndarray:
     a.setflags(write=False)
     return a
@@ -342,7 +373,7 @@ class Trial:
         if not np.all(np.isfinite(t)):
             row = int(np.flatnonzero(~np.isfinite(t))[0])
             raise TrialError(f"{where}time is not finite at row {row} (value {float(t[row])!r})")
-        _check_increasing(t, where)
+        check_increasing(t, where=where)
         empty = [i for i, n in enumerate(names) if not n]
         if empty:
             raise TrialError(f"{where}channel name at position {empty[0]} is empty")
@@ -422,7 +453,7 @@ class Trial:
         """Median sampling rate in Hz (``nan`` for a single frame)."""
         if self.n_frames < 2:
             return float("nan")
-        return float(1.0 / np.median(np.diff(self._time)))
+        return 1.0 / median_step(self._time)
 
     def _where(self) -> str:
         src = self._meta.get("source")
@@ -586,7 +617,7 @@ class Trial:
             new_t = np.asarray(time_or_rate, dtype=float)
             if new_t.ndim != 1 or new_t.shape[0] == 0:
                 raise TrialError(f"new times must be a non-empty (M,) array, got shape {new_t.shape}")
-            _check_increasing(new_t, "resample: new ")
+            check_increasing(new_t, where="resample: new ")
             tol = 1e-9 * max(1.0, abs(t[0]), abs(t[-1]))
             out = np.flatnonzero((new_t < t[0] - tol) | (new_t > t[-1] + tol))
             if out.size:
@@ -756,7 +787,7 @@ class Trial:
         ``coordinates`` that :func:`is_angular_name` takes for rotations; with
         neither, no unit check is made.
         """
-        _check_increasing(self._time, self._where())
+        check_increasing(self._time, where=self._where())
         coords = self.require(coordinates) if coordinates is not None else ()
         self._check_finite(self._names)
         if angular is not None:
@@ -772,7 +803,7 @@ class Trial:
 
         ``q`` are the ``coordinates`` channels (low-passed at ``cutoff`` Hz if
         given); ``v`` and ``a`` are derivatives of the quintic spline through
-        them (:func:`pinmsk.filtering.differentiate`).  The coordinates must be
+        them (:func:`pinmsk.signals.filtering.differentiate`).  The coordinates must be
         present and finite, and rotational ones (by :func:`is_angular_name`)
         must look like radians.
         """
@@ -784,50 +815,20 @@ class Trial:
     def smoothed(self, cutoff: float, *, order: int = 4, names=None) -> Trial:
         """A new Trial with channels (all, or ``names``) low-passed at ``cutoff`` Hz.
 
-        Zero-lag Butterworth (:func:`pinmsk.filtering.lowpass`) at the median
+        Zero-lag Butterworth (:func:`pinmsk.signals.filtering.lowpass`) at the median
         rate; the time steps must be uniform within
-        :data:`pinmsk.filtering.UNIFORM_TOLERANCE` (10 %).
+        :data:`pinmsk.signals.sampling.UNIFORM_TOLERANCE` (10 %).
         """
         names = self._names if names is None else _as_names(names)
         idx = self._indices(names)
         self._check_finite(names)
         t = self._time
-        if t.shape[0] < 2:
-            raise TrialError("smoothing needs at least 2 frames")
-        dt = np.diff(t)
-        step = float(np.median(dt))
-        if np.max(np.abs(dt - step)) > UNIFORM_TOLERANCE * step:
-            raise TrialError(
-                f"{self._where()}filtering needs uniform sampling, but time steps range from "
-                f"{dt.min():.6g} to {dt.max():.6g} s; resample first, e.g. trial.resample({1 / step:.6g})"
-            )
+        rate = uniform_rate(t, where=self._where(), purpose="smoothing")
         values = self._values.copy()
-        values[:, idx] = lowpass(values[:, idx], rate=1.0 / step, cutoff=cutoff, order=order)
+        values[:, idx] = lowpass(values[:, idx], rate=rate, cutoff=cutoff, order=order)
         return self._new(t, self._names, values, meta={**self._meta, "lowpass_cutoff": float(cutoff)})
-
-    # -- files -----------------------------------------------------------------
-
-    def write(self, path, *, in_degrees: bool = False, angular=None, precision: int | None = None):
-        """Write to ``.csv``, ``.sto`` or ``.mot``; see :func:`pinmsk.io.write_trial`."""
-        from pinmsk.io import write_trial
-
-        return write_trial(self, path, in_degrees=in_degrees, angular=angular, precision=precision)
 
 
 def _rebuild(time, names, values, units, meta) -> Trial:
     """Unpickle a Trial."""
     return Trial.from_array(time, names, values, units=units, meta=meta)
-
-
-def _check_increasing(t: np.ndarray, where: str = "") -> None:
-    """Raise TrialError at the first row whose time is not above the previous one."""
-    if t.shape[0] < 2:
-        return
-    bad = np.flatnonzero(np.diff(t) <= 0)
-    if bad.size:
-        row = int(bad[0]) + 1
-        raise TrialError(
-            f"{where}time is not strictly increasing at row {row}: time[{row}]={float(t[row])!r} "
-            f"<= time[{row - 1}]={float(t[row - 1])!r} ({bad.size} such row(s)); sort the samples "
-            "or remove repeated frames"
-        )

@@ -12,7 +12,7 @@ import pytest
 matplotlib.use("Agg")
 
 from pinmsk import load_model  # noqa: E402  (after the headless backend is chosen)
-from pinmsk.datasets import shared_data_dir  # noqa: E402
+from pinmsk.io.shared_data import shared_data_dir  # noqa: E402
 from pinmsk.solvers.analytical import gaussian_elbow_motion  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import pinmsk
-from pinmsk.cli import main
-from pinmsk.io import read_trial, write_trial
+from pinmsk.presentation.cli import main
+from pinmsk.io.tables import read_trial, write_trial
 from pinmsk.trial import Trial
 
 

@@ -17,9 +17,10 @@ import numpy as np
 import pytest
 
 import pinmsk
-from pinmsk.cli import main
+from pinmsk.presentation.cli import main
 from pinmsk.errors import ConvergenceError, ModelError, OutputError, TrialError
-from pinmsk.io import read_trial, write_json, write_trial
+from pinmsk.io.tables import read_trial, write_trial
+from pinmsk.io.output_files import write_json
 from pinmsk.trial import Trial
 
 from conftest import REPO
@@ -138,7 +139,7 @@ def test_output_under_a_file_is_refused(tmp_path, capsys):
 
 def test_read_only_file_system_is_refused_before_the_analysis(tmp_path, capsys, monkeypatch):
     """Simulated: the OS refuses to create files (EROFS), as a read-only mount does even for root."""
-    import pinmsk.io as pio
+    import pinmsk.io.output_files as pio
     src = _elbow_csv(tmp_path / "e.csv")
 
     def refuse(*args, **kwargs):
@@ -168,7 +169,7 @@ def test_read_only_folder_by_permissions(tmp_path, capsys):
 
 def test_a_later_output_failing_removes_the_earlier_ones(tmp_path, capsys, monkeypatch):
     """The .sto is written, then the figures fail (disk full): the .sto and the new --plot folder go."""
-    from pinmsk import plots
+    from pinmsk.presentation import plots
     src = _elbow_csv(tmp_path / "e.csv")
     keep = tmp_path / "old.sto"
     keep.write_text("an earlier result\n")

@@ -3,7 +3,7 @@ import numpy as np
 
 import pinmsk
 from pinmsk import read_trial, write_trial
-from pinmsk.cli import main
+from pinmsk.presentation.cli import main
 
 from test_kinematics import _external_loads_xml, bouncing
 

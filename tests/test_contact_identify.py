@@ -292,7 +292,7 @@ def test_missing_channels_are_named(synth):
 # -- CSU data ------------------------------------------------------------------------
 
 def test_csu_reader(shared_data, tmp_path):
-    from pinmsk.csu import read_csu
+    from pinmsk.io.cleveland_gait import read_csu
     tr = read_csu(shared_data / CSU, body_mass=67.2)
     assert tr.n_frames == 301 and tr.rate == pytest.approx(100.0)
     fy, fx = tr["ground_force_vy"], tr["ground_force_vx"]
@@ -312,7 +312,7 @@ def test_csu_reader(shared_data, tmp_path):
 
 
 def test_csu_reader_bad_file(tmp_path):
-    from pinmsk.csu import read_csu
+    from pinmsk.io.cleveland_gait import read_csu
     p = tmp_path / "bad.txt"
     p.write_text("TimeStamp\tFP2.ForX\n7.0\t1.0\n")
     with pytest.raises(TrialError, match="header line starting with '%'"):
@@ -327,7 +327,7 @@ def test_csu_reader_locates_the_foot_from_heel_and_mt5_markers(shared_data):
     heel_height in foot flat and above the measured COP during heel-only loading."""
     from pinmsk.contact import load_foot2d
     from pinmsk.contact.foot import Foot2dGeometry, foot2d_site_kinematics
-    from pinmsk.csu import read_csu
+    from pinmsk.io.cleveland_gait import read_csu
     tr = read_csu(shared_data / CSU)
     assert tr.meta["anchor"] == "heel" and tr.meta["heel_calibration_frames"] >= 5
     ox, oy = tr.meta["heel_offset"]
@@ -358,7 +358,7 @@ def test_real_data_hypervolumetric_is_not_worse_than_what_it_contains(shared_dat
     exactly) and below the undamped point contact (contained in the small-penetration limit).  The
     damped point contact ends lower still (J 0.097 against 0.100): its Hunt-Crossley damping
     k_s a_s d^n v, with n as low as 0.3, is no limit of Eq. 4.15's a_h V v."""
-    from pinmsk.csu import read_csu
+    from pinmsk.io.cleveland_gait import read_csu
     tr = read_csu(shared_data / CSU)
     fit = ContactFit().fit(None, tr)
     assert fit.window_ == pytest.approx((7.99, 9.18)) and fit.settings_()["window_source"].startswith("one cycle")
@@ -392,8 +392,8 @@ def test_fit_cli_run_from_files(shared_data, tmp_path):
 
 
 def test_cli_prints_the_settings(vol_trial, tmp_path, capsys):
-    from pinmsk.cli import main
-    from pinmsk.io import write_trial
+    from pinmsk.presentation.cli import main
+    from pinmsk.io.tables import write_trial
     path = tmp_path / "foot.csv"
     write_trial(vol_trial, path)
     assert main(["contact", "fit", "foot2d", str(path), "--contact", "point", "--starts", "2", "--cutoff", "0",

@@ -10,8 +10,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import pinmsk
-from pinmsk.solvers.designs import (A_MIN, U_MARGIN, BatchMuscles, BatchSkeleton, _rk4,
-                                    simulate_ff)
+from pinmsk.solvers.simulation_designs import A_MIN, U_MARGIN, BatchMuscles, BatchSkeleton, _rk4, simulate_ff
 
 # (model, period T in s, q0 in rad): the optimizer's cases, 200 steps per period.  The finger's
 # excitations start at 0 and 1 (phase -pi/2): within one 1/6 s period its activations would

@@ -112,7 +112,8 @@ def test_two_hidden_effects_in_two_add_steps(tmp_path):
     assert first.verdict == "missing_effect" and first.best.label == "payload:hand"
     second = run(m, trial, add=[first.best.label])
     assert second.verdict == "missing_effect" and second.best.label == "joint_damping:elbow_flexion"
-    final = run(m, trial, add=["payload:hand", "joint_damping"], json_path=tmp_path / "d.json")
+    final = run(m, trial, add=["payload:hand", "joint_damping"])
+    final.write_json(tmp_path / "d.json")
     assert final.verdict == "at_noise_floor"
     assert [a.effect.label for a in final.added] == ["payload:hand", "joint_damping:elbow_flexion"]
     assert final.added[0].params["mass"] == pytest.approx(0.5, rel=0.15)

@@ -114,8 +114,8 @@ def test_cli_diagnose_json(tmp_path, foot, capsys, add):
 
     With ``--add volumetric`` (slow: a second diagnosis refits every candidate) it ends at the
     noise floor; the default suite checks that step through ``run`` (the ``loop`` fixture)."""
-    from pinmsk.cli import main
-    from pinmsk.io import write_trial
+    from pinmsk.presentation.cli import main
+    from pinmsk.io.tables import write_trial
     tr = synthetic_foot_trial(contact="volumetric", noise=0.003, seed=3, clearance=0.03, ground_speed=0.0)
     path = tmp_path / "foot.csv"
     write_trial(tr, path)

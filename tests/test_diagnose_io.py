@@ -9,8 +9,10 @@ import pytest
 import pinmsk
 from pinmsk import effects
 from pinmsk.components import Parameter
-from pinmsk.diagnose import (EffectFit, compare, demo, diagnose, make_trial, run, shipped_trial,
-                             shipped_trials)
+from pinmsk.demo import demo
+from pinmsk.diagnose import EffectFit, compare, diagnose, make_trial, run
+from pinmsk.io.shared_data import shipped_trial, shipped_trials
+from pinmsk.presentation.report import save_diagnosis, write_failure_report, write_report
 from pinmsk.errors import ConvergenceError, ModelError, TrialError
 
 from conftest import REPO, run_example
@@ -108,10 +110,10 @@ def test_fit_that_does_not_converge(forearm, damped):
 # slow: test_demo_writes_everything writes the same figures and report by default
 @pytest.mark.slow
 def test_figures_and_report(tmp_path, forearm):
-    from pinmsk import plots
+    from pinmsk.presentation import plots
     trial = make_trial(forearm, ["payload:hand:mass=0.5", "joint_damping:elbow_flexion:c=0.2"], seed=12)
-    run(forearm, trial, add=["payload:hand"], plot_dir=tmp_path / "fig", report_path=tmp_path / "r.html",
-            json_path=tmp_path / "r.json")
+    result = run(forearm, trial, add=["payload:hand"])
+    save_diagnosis(result, plot_dir=tmp_path / "fig", report_path=tmp_path / "r.html", json_path=tmp_path / "r.json")
     names = {p.name for p in (tmp_path / "fig").glob("*.png")}
     assert names == {"comparison_before.png", "comparison_after.png", "residual_heatmap.png", "ranking.png",
                      "effect_contribution.png", "error_steps.png"}
@@ -127,13 +129,14 @@ def test_figures_and_report(tmp_path, forearm):
     # channel plots used by `pinmsk id --plot`
     out = plots.save_channels(trial, ["elbow_flexion", "elbow_flexion_moment"], tmp_path / "ch", stem="id")
     assert [p.name for p in out] == ["id.png"]
-    # the convenience form write_report(path, model=, trial=) and its failure page
-    from pinmsk.report import write_report
-    p = write_report(tmp_path / "conv.html", model=forearm, trial=trial)
+    # one diagnosis report on its own, and the page of a diagnosis that could not run
+    p = write_report(result.steps[0], tmp_path / "one.html")
     assert "payload:hand" in p.read_text()
     t = np.linspace(0, 1, 51)
     short = pinmsk.Trial(t, {"elbow_flexion": 0.5 + t, "elbow_flexion_moment": np.sin(t)})
-    p = write_report(tmp_path / "short.html", model=forearm, trial=short)
+    with pytest.raises(pinmsk.PinmskError) as err:
+        run(forearm, short)
+    p = write_failure_report(tmp_path / "short.html", forearm, short, err.value)
     text = p.read_text()
     assert "could not run" in text and "data:image/png;base64," in text
 

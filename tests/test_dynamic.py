@@ -442,7 +442,7 @@ def test_shipped_ift_task_runs_from_the_cli(tmp_path, capsys):
     task's 0.1 rad, the recovered excitations within [0, 1], written as a trial + JSON."""
     from pathlib import Path
 
-    from pinmsk.cli import main
+    from pinmsk.presentation.cli import main
     task = Path(__file__).resolve().parents[1] / "data" / "tasks" / "forearm_ift_j1.toml"
     out = tmp_path / "ift.sto"
     assert main(["optimize", str(task), "-o", str(out)]) == 0

@@ -11,9 +11,10 @@ import pinmsk
 from pinmsk import effects
 from pinmsk.components import Motion
 from pinmsk.dynamics import inverse_dynamics_array, skeleton_with_inertias
-from pinmsk.effects import (ActivationDynamics, CoulombFriction, ElectromechanicalDelay, JointDamping,
-                            JointSpring, PassiveElastic, Payload, RienerEdrich1999PassiveMoment,
-                            SegmentMass, catalog)
+from pinmsk.effects import (ActivationDynamics, CoulombFriction, ElectromechanicalDelay,
+                            JointDamping, JointSpring, PassiveElastic, Payload,
+                            RienerEdrich1999PassiveMoment, SegmentMass)
+from pinmsk.diagnose.catalog import catalog
 from pinmsk.effects.registry import from_spec
 from pinmsk.errors import ModelError
 from pinmsk.muscles.activation import activation_from_excitation

@@ -14,8 +14,9 @@ import pytest
 
 import pinmsk
 from pinmsk.components import Motion
-from pinmsk.effects import SignalEffect, catalog, families, get
-from pinmsk.effects.catalog import CatalogContext
+from pinmsk.effects import SignalEffect, families, get
+from pinmsk.diagnose.catalog import catalog
+from pinmsk.diagnose.catalog import CatalogContext
 from pinmsk.errors import ModelError
 
 _MODELS: dict = {}

@@ -1,4 +1,4 @@
-"""Tests of pinmsk.filtering: zero-lag Butterworth and quintic-spline derivatives.
+"""Tests of pinmsk.signals.filtering: zero-lag Butterworth and quintic-spline derivatives.
 
 References are analytic: derivatives of sin(2*pi*f*t) and of a degree-5
 polynomial, and the forward-backward Butterworth gain 1 / (1 + (f/fc)**(2n)).
@@ -9,7 +9,7 @@ import pytest
 from scipy.signal import butter, sosfilt, sosfiltfilt
 
 from pinmsk.errors import TrialError
-from pinmsk.filtering import differentiate, filter_padlen, lowpass
+from pinmsk.signals.filtering import differentiate, filter_padlen, lowpass
 
 W = 2 * np.pi  # 1 Hz
 

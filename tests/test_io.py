@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import pinmsk.io as pio
-from pinmsk.datasets import shared_data_dir
+import pinmsk.io.tables as pio
+from pinmsk.io.shared_data import shared_data_dir
 from pinmsk.errors import RepairWarning, TrialError
-from pinmsk.io import read_sto_header, read_trial, write_trial
+from pinmsk.io.tables import read_sto_header, read_trial, write_trial
 from pinmsk.trial import Trial, parse_ground_reaction
 
 

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from pinmsk import load_model
-from pinmsk.channel_map import (GAIT10DOF_HIP_OFFSET, RAJAGOPAL_HIP_OFFSET, apply_channel_map,
-                                load_channel_map)
-from pinmsk.cli import main
+from pinmsk.io.channel_map import (GAIT10DOF_HIP_OFFSET, RAJAGOPAL_HIP_OFFSET, apply_channel_map,
+                                   load_channel_map)
+from pinmsk.presentation.cli import main
 from pinmsk.errors import MissingDependencyError, PinmskError, RepairWarning, TrialError
-from pinmsk.io import read_trial, state_path_coordinate, write_trial
+from pinmsk.io.tables import read_trial, state_path_coordinate, write_trial
 from pinmsk.pipeline import opensim_to_gait2d
 from pinmsk.trial import Trial, parse_ground_reaction
 
@@ -148,7 +148,7 @@ def test_cli_lenient_prints_one_warning_per_repair(tmp_path, capsys, monkeypatch
 
 
 def test_every_trial_command_offers_the_read_flags():
-    from pinmsk.cli import build_parser
+    from pinmsk.presentation.cli import build_parser
 
     parser = build_parser()
     sub = next(a for a in parser._actions if a.dest == "command").choices
@@ -315,7 +315,7 @@ def test_builtin_map_reads_state_paths_and_degrees(tmp_path, gait2d):
     write_trial(Trial(plain.time, deg), tmp_path / "ik.sto")
     text = (tmp_path / "ik.sto").read_text().replace("inDegrees=no", "inDegrees=yes")
     (tmp_path / "ik.mot").write_text(text)
-    from pinmsk.cli import _read
+    from pinmsk.presentation.cli import _read
 
     class Args:
         lenient, map = False, "opensim-gait2d"
@@ -349,7 +349,7 @@ def _real_coordinates(shared_data, rel):
 def test_builtin_map_agrees_with_opensim_to_gait2d_on_real_data(shared_data, gait2d, rel, cli_map, kw, sign):
     path, coords = _real_coordinates(shared_data, rel)
     kin = opensim_to_gait2d(coords, gait2d, **kw)
-    from pinmsk.cli import _read
+    from pinmsk.presentation.cli import _read
 
     class Args:
         lenient, map = True, cli_map

@@ -8,7 +8,7 @@ import pinmsk
 from pinmsk import Trial, write_trial
 from pinmsk.dynamics import inverse_dynamics_array, inverse_dynamics_result
 from pinmsk.errors import InfeasibleError, TrialError
-from pinmsk.external_loads import read_external_loads
+from pinmsk.io.external_loads import read_external_loads
 from pinmsk.grf import external_forces
 from pinmsk.kinematics import DEFAULT_CUTOFF, is_planar, prepare
 from pinmsk.residuals import PEAK_FORCE_FRACTION
@@ -223,7 +223,7 @@ def test_so_balances_measured_moments_when_asked(forearm):
     tau = pinmsk.inverse_dynamics(forearm, tr)["elbow_flexion_moment"] + 2.0     # a dynamometer reading
     tr = tr.with_channels({"elbow_flexion_moment": tau})
     so = StaticOptimization().fit(forearm, tr, moments="measured")
-    from pinmsk.filtering import lowpass
+    from pinmsk.signals.filtering import lowpass
     want = lowpass(tau, rate=tr.rate, cutoff=6.0)
     np.testing.assert_allclose(so.problem_.tau[:, 0], want, atol=1e-9)
     assert "measured" in so.report() and "measured" in so.result_.meta["balanced_moments"]

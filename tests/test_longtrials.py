@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 import pinmsk
-import pinmsk.progress as progress_mod
+import pinmsk.presentation.progress as progress_mod
 import pinmsk.skeleton as skeleton
-from pinmsk.cli import main
-from pinmsk.io import read_trial, write_trial
-from pinmsk.progress import Progress
+from pinmsk.presentation.cli import main
+from pinmsk.io.tables import read_trial, write_trial
+from pinmsk.presentation.progress import Progress
 from pinmsk.trial import Trial
 
 
@@ -139,7 +139,7 @@ def test_help_and_import_do_not_load_heavy_modules():
     probe = f"""
 import contextlib, io, sys
 heavy = lambda: [m for m in {_HEAVY!r} if m in sys.modules]
-from pinmsk.cli import main
+from pinmsk.presentation.cli import main
 with contextlib.redirect_stdout(io.StringIO()):
     try:
         main(["--help"])

@@ -4,8 +4,10 @@ import numpy as np
 import pytest
 
 from pinmsk import Trial, TrialError, ModelError
-from pinmsk.markers import (fill_gaps, find_gaps, load_marker_set, marker_array, marker_names,
-                            read_trc, write_trc)
+from pinmsk.signals.gaps import fill_gaps, find_gaps
+from pinmsk.markers import load_marker_set
+from pinmsk.trial import marker_array, marker_names
+from pinmsk.io.trc import read_trc, write_trc
 
 
 def _walk(n=50, rate=100.0):
@@ -140,13 +142,13 @@ def test_marker_set_errors(tmp_path):
 def test_c3d_without_ezc3d_says_how_to_install(monkeypatch, tmp_path):
     import sys
     monkeypatch.setitem(sys.modules, "ezc3d", None)      # import ezc3d -> ImportError
-    from pinmsk.c3d import read_c3d
+    from pinmsk.io.c3d import read_c3d
     with pytest.raises(ImportError, match=r"pip install pinmsk\[c3d\]"):
         read_c3d(tmp_path / "x.c3d")
 
 
 def test_remap_axes_z_up_to_y_up():
-    from pinmsk.c3d import remap_axes
+    from pinmsk.io.c3d import remap_axes
     t = np.arange(3.0)
     tr = Trial(t, {"A_x": t, "A_y": 2 * t, "A_z": 3 * t, "ground_force_vz": 10 * t, "ground_force_vx": t,
                    "ground_force_vy": 0 * t, "emg": t})

@@ -12,7 +12,7 @@ import pytest
 
 import pinmsk
 from pinmsk import skeleton
-from pinmsk.datasets import shared_data_dir
+from pinmsk.io.shared_data import shared_data_dir
 
 from conftest import REPO
 

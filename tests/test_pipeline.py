@@ -8,8 +8,10 @@ import pytest
 
 import pinmsk
 from pinmsk import Trial, TrialError
+import pinmsk.pipeline as pipeline_module
 from pinmsk.ik import markers_trial
-from pinmsk.markers import load_marker_set, write_trc
+from pinmsk.markers import load_marker_set
+from pinmsk.io.trc import write_trc
 from pinmsk.pipeline import (RAJAGOPAL_HIP_OFFSET, batch, batch_cli, load_config, opensim_to_gait2d,
                              run_trial)
 
@@ -157,15 +159,15 @@ def test_interrupted_batch_leaves_complete_trial_folders_or_none(gait2d, tmp_pat
     _synthetic_trc(gait2d, tmp_path / "a.trc", n=40)
     trials = [{"name": n, "kind": "trc", "trc": "a.trc", "markers": "csu", "so": False, "plots": False}
               for n in ("one", "two")]
-    write = Trial.write
+    write = pipeline_module.write_trial
 
-    def interrupt_second_trial(self, path, **kw):
+    def interrupt_second_trial(trial, path, **kw):
         if path.parent.name.startswith(".two.") and path.name == "residuals.sto":
             assert (path.parent / "inverse_dynamics.sto").exists()      # mid-trial: half written
             raise KeyboardInterrupt
-        return write(self, path, **kw)
+        return write(trial, path, **kw)
 
-    monkeypatch.setattr(Trial, "write", interrupt_second_trial)
+    monkeypatch.setattr(pipeline_module, "write_trial", interrupt_second_trial)
     out = tmp_path / "out"
     with pytest.raises(KeyboardInterrupt):
         batch(trials, out=out, base_dir=tmp_path, jobs=1)

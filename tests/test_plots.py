@@ -1,4 +1,4 @@
-"""Results figures (pinmsk.plots): muscles, EMG, SO vs FSO -- real numbers, headless."""
+"""Results figures (pinmsk.presentation.plots): muscles, EMG, SO vs FSO -- real numbers, headless."""
 from __future__ import annotations
 
 import numpy as np
@@ -6,7 +6,7 @@ import pytest
 from matplotlib.figure import Figure
 
 import pinmsk
-from pinmsk import plots
+from pinmsk.presentation import plots
 from pinmsk.errors import PinmskError
 from pinmsk.solvers.analytical import gaussian_elbow_trial
 from pinmsk.solvers.static import StaticOptimization

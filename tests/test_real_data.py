@@ -12,7 +12,7 @@ import pytest
 
 import pinmsk
 from pinmsk import TrialError
-from pinmsk.markers import read_trc
+from pinmsk.io.trc import read_trc
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "examples"))
@@ -66,7 +66,7 @@ def test_real_wrong_sign_force_plate_is_detected(real):
 
 
 def test_real_emg_rate_checks(real):
-    from pinmsk.resample import check_rate
+    from pinmsk.signals.sampling import check_rate
     emg = _read_moco(real, "electromyography.sto")
     assert check_rate(emg, 2000.0, what="EMG") == pytest.approx(2000.0, rel=1e-6)
     with pytest.raises(TrialError, match="stated to be sampled at 1000 Hz"):
@@ -78,8 +78,8 @@ def test_real_c3d_markers_analogs(real):
     p = real / "pyomeca-box-lift-emg" / "markers_analogs.c3d"
     if not p.exists():
         pytest.skip("c3d absent")
-    from pinmsk.c3d import read_c3d
-    from pinmsk.emg import envelopes
+    from pinmsk.io.c3d import read_c3d
+    from pinmsk.signals.emg import envelopes
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         d = read_c3d(p)

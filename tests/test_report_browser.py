@@ -1,6 +1,6 @@
 """Self-contained HTML reports in a real browser: every figure loads, nothing is fetched
 from the network.  The harness is checked on a page built here with matplotlib; the
-report of ``pinmsk.report`` is checked when that module exists."""
+report of ``pinmsk.presentation.report`` is checked when that module exists."""
 from __future__ import annotations
 
 import base64
@@ -85,20 +85,22 @@ def test_network_fetch_is_reported(page, tmp_path):
 
 def test_pinmsk_report_in_browser(page, tmp_path):
     import pinmsk
-    from pinmsk.report import write_report
+    from pinmsk.presentation.report import write_failure_report
 
     model = pinmsk.load_model("forearm")
     t = np.linspace(0, 1, 51)
     trial = pinmsk.Trial(t, {"elbow_flexion": 0.5 + t, "elbow_flexion_moment": np.sin(t)})
     out = tmp_path / "report.html"
-    write_report(out, model=model, trial=trial)
+    with pytest.raises(pinmsk.PinmskError) as err:       # too short to diagnose: the failure page
+        pinmsk.diagnose.run(model, trial)
+    write_failure_report(out, model, trial, err.value)
     check_html_in_browser(page, out, min_images=1)
 
 
 def test_results_report_of_static_optimization_in_browser(page, tmp_path):
     """A results report of a real SO on the forearm: every <img> loads in Chromium."""
     import pinmsk
-    from pinmsk.report import write_results_report
+    from pinmsk.presentation.report import write_results_report
     from pinmsk.solvers.analytical import gaussian_elbow_trial
     from pinmsk.solvers.static import StaticOptimization
 

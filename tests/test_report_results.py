@@ -1,4 +1,4 @@
-"""pinmsk.report.write_results_report: a self-contained HTML of a real SO result."""
+"""pinmsk.presentation.report.write_results_report: a self-contained HTML of a real SO result."""
 from __future__ import annotations
 
 import base64
@@ -10,7 +10,7 @@ import pytest
 from PIL import Image
 
 import pinmsk
-from pinmsk import report
+from pinmsk.presentation import report
 from pinmsk.solvers.analytical import gaussian_elbow_trial
 from pinmsk.solvers.static import StaticOptimization
 
@@ -67,7 +67,7 @@ def test_tables_hold_independent_numbers(built):
 
 
 def test_moments_extra_figures_tables_and_atomic(tmp_path):
-    from pinmsk import plots
+    from pinmsk.presentation import plots
     fig = plots.new_figure(3, 2)
     fig.subplots().plot([0, 1])
     model = pinmsk.load_model("forearm")

@@ -11,9 +11,9 @@ import pinocchio as pin
 import pytest
 
 import pinmsk
-from pinmsk import viewer_geometry as vg
+from pinmsk.presentation import viewer_geometry as vg
 from pinmsk.errors import ModelError, TrialError
-from pinmsk.viewer import Viewer, contact_spheres, parse_static_scene, view_cli
+from pinmsk.presentation.viewer import Viewer, contact_spheres, parse_static_scene, view_cli
 
 from conftest import REPO, run_example
 

@@ -11,7 +11,7 @@ import pinocchio as pin
 import pytest
 
 import pinmsk
-from pinmsk.viewer import Viewer
+from pinmsk.presentation.viewer import Viewer
 
 import browser
 

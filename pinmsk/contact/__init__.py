@@ -17,8 +17,8 @@ numbers), :func:`fit_contact_models` (several models on one trial, each starting
 ones it contains), :func:`fit_cli_run` (what ``pinmsk contact fit`` calls),
 :func:`read_contact_trial` (CSU text or .csv/.sto/.mot), :func:`synthetic_foot_trial`,
 :func:`from_spec` (a sidecar ``[[contacts]]`` entry -> component, see
-:mod:`pinmsk.contact.spec`).  The CSU reader is :func:`pinmsk.csu.read_csu`.  The contact
-models as diagnosis candidates (``contact_candidates``) are in :mod:`pinmsk.diagnose.contact`.
+:mod:`pinmsk.contact.spec`).  The CSU reader is :func:`pinmsk.io.cleveland_gait.read_csu`.  The
+contact models as diagnosis candidates (``contact_candidates``) are in :mod:`pinmsk.diagnose.contact`.
 """
 from .friction import friction_coefficient, regularized_coulomb
 from .sphere import (ContactForces, SiteKinematics, SphereContact, cap_centroid_depth, cap_volume,

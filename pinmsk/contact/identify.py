@@ -1,7 +1,7 @@
 """Kinematically driven identification of foot contact parameters (thesis Sec. 4.1.2, Eq. 4.1-4.2).
 
 The foot2d model is driven by the measured foot (channels ``ankle_x``, ``ankle_y``,
-``foot_angle``; for the CSU data :func:`pinmsk.csu.read_csu` derives them from the heel
+``foot_angle``; for the CSU data :func:`pinmsk.io.cleveland_gait.read_csu` derives them from the heel
 and 5th-metatarsal markers, so the heel sphere follows the measured heel).  The toe
 angle is the 11-term Fourier series of Eq. 4.1 over the analysed window (period =
 window length).  By default (``toe="kinematic"``, the thesis procedure) its
@@ -43,7 +43,7 @@ per SVD against 0.5 ms.
 Channels: ``ground_force_vx`` (friction, N), ``ground_force_vy`` (normal, N),
 ``ground_force_px`` (COP x, m; NaN allowed where the vertical force is small).
 The ground moves at ``ground_speed`` (m/s, x) -- ``trial.meta["ground_speed"]``
-when the reader set it (a treadmill belt, see :mod:`pinmsk.csu`).
+when the reader set it (a treadmill belt, see :mod:`pinmsk.io.cleveland_gait`).
 """
 from __future__ import annotations
 
@@ -57,8 +57,8 @@ from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
 from ..errors import ModelError, SolverError, TrialError
-from ..filtering import differentiate
 from ..fitting import Fitter, FitStatistics, Result, format_report
+from ..signals.filtering import differentiate
 from .dual import Dual
 from .foot import (KINDS, SITES, Foot2dGeometry, foot2d_site_kinematics, foot_contacts,
                    ground_reaction, load_foot2d)
@@ -849,7 +849,7 @@ class ContactFit(Fitter):
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
-        from ..plots import save_figure
+        from ..presentation.plots import save_figure
 
         out_dir = Path(out_dir)
         prob, gr = self.problem_, self.reaction_
@@ -976,10 +976,10 @@ def foot_placement(trial) -> str:
     anchor = meta.get("anchor")
     if anchor == "heel":
         ox, oy = meta.get("heel_offset", (float("nan"), float("nan")))
-        return (f"heel and 5th-metatarsal markers (pinmsk.csu.read_csu, anchor='heel'): foot angle from the "
+        return (f"heel and 5th-metatarsal markers (pinmsk.io.cleveland_gait.read_csu, anchor='heel'): foot angle from the "
                 f"marker line, heel site at ({1000 * ox:.1f}, {1000 * oy:.1f}) mm from the heel marker")
     if anchor == "ankle":
-        return "lateral malleolus marker as the ankle (pinmsk.csu.read_csu, anchor='ankle')"
+        return "lateral malleolus marker as the ankle (pinmsk.io.cleveland_gait.read_csu, anchor='ankle')"
     return "the trial's ankle_x, ankle_y, foot_angle channels"
 
 
@@ -1018,9 +1018,9 @@ def read_contact_trial(path):
     with open(path, "r", errors="replace") as fh:
         first = fh.readline()
     if first.lstrip().startswith("%") and "TimeStamp" in first:
-        from ..csu import read_csu
+        from ..io.cleveland_gait import read_csu
         return read_csu(path)
-    from ..io import read_trial
+    from ..io.tables import read_trial
     return read_trial(path)
 
 
@@ -1072,6 +1072,6 @@ def fit_cli_run(model, trial, *, json_path=None, plot_dir=None, **options) -> di
     if plot_dir is not None:
         out["figures"] = [str(p) for p in fit.plot(plot_dir)]
     if json_path is not None:
-        from ..io import write_json
+        from ..io.output_files import write_json
         write_json(json_path, out, parents=True)
     return out

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..filtering import differentiate
+from ..signals.filtering import differentiate
 from ..trial import Trial
 from .foot import SITES, Foot2dGeometry, foot2d_site_kinematics, foot_contacts, ground_reaction, load_foot2d
 from .identify import SWING, fourier_basis, toe_from_kinematics

@@ -13,8 +13,8 @@ The loop, in a notebook::
     model2 = d.with_effect()               # model + the best significant effect
     d2 = dx.diagnose(model2, trial)        # the error falls; verdict at_noise_floor
 
-and as the CLI does it: ``dx.run(model, trial, add=["payload:hand"], json_path=...,
-report_path=..., plot_dir=...)``.  Modules: :mod:`.compare` (residuals, modes,
+and as the CLI does it: ``dx.run(model, trial, add=["payload:hand"])``, whose result
+:func:`pinmsk.presentation.report.save_diagnosis` writes as JSON, report and figures.  Modules: :mod:`.compare` (residuals, modes,
 noise floor), :mod:`.contact` (the contact mode: a driven foot's GRF, the contact
 models as candidates, BIC), :mod:`.fit` (:class:`EffectFit`, the one way to fit an
 effect, and cross-validation), :mod:`.diagnosis`
@@ -26,10 +26,9 @@ from .diagnosis import (AT_FLOOR, THRESHOLD, Diagnosis, DiagnosisRun, EffectScor
 from .fit import EffectFit
 from . import synth
 from .synth import make_trial
-from .demo import demo, shipped_trial, shipped_trials
 
 __all__ = [
     "AT_FLOOR", "Comparison", "DEFAULT_CUTOFF", "Diagnosis", "DiagnosisRun", "EffectFit", "EffectScore",
-    "NoiseFloor", "THRESHOLD", "compare", "demo", "diagnose", "external_forces_from_trial",
-    "make_trial", "parse_effect", "run", "shipped_trial", "shipped_trials", "synth",
+    "NoiseFloor", "THRESHOLD", "compare", "diagnose", "external_forces_from_trial",
+    "make_trial", "parse_effect", "run", "synth",
 ]

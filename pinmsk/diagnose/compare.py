@@ -68,12 +68,13 @@ import numpy as np
 
 from ..components import Motion
 from ..errors import ModelError, TrialError
-from ..filtering import differentiate
+from ..signals.filtering import differentiate
 from ..kinematics import TrialInputs, prepare
 from ..skeleton import ExternalForce
-from ..trial import Trial, parse_ground_reaction
+from ..trial import Trial, moment_channel, moment_channels, parse_ground_reaction
 from ..effects._base import SignalEffect, is_prismatic, unactuated_coordinates
-from ..effects.catalog import CatalogContext
+from .catalog import CatalogContext
+from ..signals.sampling import median_step
 
 __all__ = ["DEFAULT_CUTOFF", "MODES", "Comparison", "EquationError", "NoiseFloor", "compare",
            "catalog_context", "external_forces_from_trial", "white_noise_sigma"]
@@ -155,7 +156,7 @@ def _check_measured(model, trial) -> None:
     that are NaN, infinite or beyond :data:`MEASURED_LIMIT`, by channel, row and time.
 
     A centre of pressure may be NaN (undefined while its plate is unloaded), not infinite."""
-    names = [f"{c}_moment" for c in model.coordinates if f"{c}_moment" in trial]
+    names = [n for n in moment_channels(model.coordinates) if n in trial]
     names += [f"{m}_{kind}" for m in model.muscle_names for kind in ("excitation", "emg")
               if f"{m}_{kind}" in trial]
     grf = {n: parse_ground_reaction(n) for n in trial.names}
@@ -208,7 +209,7 @@ def _plan(model, trial, mode: str, *, has_grf: bool | None = None) -> _Plan:
         return _Plan("contact", (), (), None)        # no coordinate is compared: joint effects do not apply
     unact = unactuated_coordinates(model)
     grf = _has_grf(trial) if has_grf is None else has_grf
-    with_moment = [c for c in model.coordinates if f"{c}_moment" in trial]
+    with_moment = [c for c in model.coordinates if moment_channel(c) in trial]
     actuated_moment = [c for c in with_moment if c not in unact]
     base_rows = [c for c in unact if grf or c in with_moment]
     kind, _ = _excitations(model, trial)
@@ -268,7 +269,7 @@ def _plan(model, trial, mode: str, *, has_grf: bool | None = None) -> _Plan:
 
 
 def catalog_context(model, trial, *, mode: str = "auto", frames=None) -> CatalogContext:
-    """The :class:`~pinmsk.effects.catalog.CatalogContext` of a model and trial (no dynamics computed)."""
+    """The :class:`~pinmsk.diagnose.catalog.CatalogContext` of a model and trial (no dynamics computed)."""
     if trial is None:
         return CatalogContext("torque", tuple(model.coordinates), tuple(unactuated_coordinates(model)),
                               tuple(frames or ()))
@@ -353,7 +354,7 @@ class EquationError:
             u = self.excitation
             d = np.diff(u, n=3, axis=0) / np.sqrt(20.0)
             d = np.vstack([d[:2], d, d[-1:]])
-            dt = float(np.median(np.diff(self.motion.t)))
+            dt = median_step(self.motion.t)
             w = max(int(round(0.5 / dt)), 5)
             kernel = np.ones(w) / w
             var = np.column_stack([np.convolve(d[:, j] ** 2, kernel, mode="same") for j in range(u.shape[1])])
@@ -485,13 +486,13 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
     if plan.mode in ("torque", "motion"):
         measured_tau = np.zeros((t.size, model.nv))
         for c in plan.coordinates:
-            if f"{c}_moment" in trial:
-                measured_tau[:, model.coordinate_index(c)] = trial[f"{c}_moment"]
+            if moment_channel(c) in trial:
+                measured_tau[:, model.coordinate_index(c)] = trial[moment_channel(c)]
     else:
         _, excitation = _excitations(model, trial)
     eq_coords = plan.coordinates
     if plan.mode == "motion":
-        eq_coords = tuple(c for c in plan.coordinates if f"{c}_moment" in trial)
+        eq_coords = tuple(c for c in plan.coordinates if moment_channel(c) in trial)
     eq = EquationError(model=model, motion=motion, rows=rows, coordinates=eq_coords, mode=plan.mode,
                        measured_tau=measured_tau, external=external, excitation=excitation)
     options = {"grf_frames": grf_frames, "grf": grf, "external_loads": external_loads, "grf_cutoff": grf_cutoff,
@@ -500,10 +501,10 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
     if plan.mode == "motion":
         meas, mod, floor = _motion_level(model, trial, motion, rows, sim_window, eq, noise_floor, cutoff)
         channels = tuple(plan.coordinates)
-        eq_floor = _torque_floor(model, trial, motion, eq, cutoff, tuple(f"{c}_moment" for c in eq_coords))
+        eq_floor = _torque_floor(model, trial, motion, eq, cutoff, moment_channels(eq_coords))
         return Comparison("motion", model, trial, cutoff, t[rows], channels, tuple(plan.coordinates),
                           meas, mod, floor, eq, states, options, eq_floor, inputs=inputs)
-    channels = tuple(f"{c}_moment" for c in eq_coords)
+    channels = moment_channels(eq_coords)
     if plan.mode == "muscle":
         # the measured side's noise passes through the model's own muscle-level chain: recompute it
         floor = _muscle_floor(model, trial, motion, eq, cutoff, channels, noise_floor)
@@ -595,7 +596,7 @@ def simulate_windows(model, trial, motion, rows, window, *, tau_noise=None, stat
     t = motion.t
     out = np.full((rows.size, model.nv), np.nan)
     pos = {r: k for k, r in enumerate(rows)}
-    cols = [f"{c}_moment" for c in model.coordinates]
+    cols = list(moment_channels(model.coordinates))
     drive_all = np.column_stack([trial[c] if c in trial else np.zeros(t.size) for c in cols])
     if tau_noise is not None:
         drive_all = drive_all + tau_noise
@@ -618,7 +619,7 @@ def _motion_level(model, trial, motion, rows, window, eq, floor, cutoff):
     qs = simulate_windows(model, trial, motion, rows, window)
     if floor is None:
         sigma_q = white_noise_sigma(np.column_stack([trial[c] for c in model.coordinates]))
-        cols = [f"{c}_moment" for c in model.coordinates]
+        cols = list(moment_channels(model.coordinates))
         tau = np.column_stack([trial[c] if c in trial else np.zeros(trial.n_frames) for c in cols])
         sigma_tau = white_noise_sigma(tau)
         rng = np.random.default_rng(54321)

@@ -3,7 +3,7 @@
 :func:`diagnose` compares a model with a trial (:mod:`.compare`), locates the
 failure (per-channel RMSE against the noise floor, the worst time windows,
 the states the residual follows) and ranks every applicable effect of the
-catalog (:func:`pinmsk.effects.catalog`) by how much of the residual it
+catalog (:func:`pinmsk.diagnose.catalog`) by how much of the residual it
 explains *out of sample*:
 
 * each candidate is fitted on all frames (its reported parameters and
@@ -38,13 +38,14 @@ import numpy as np
 
 from ..components import Component
 from ..errors import ConvergenceError, ModelError, PinmskError, TrialError
-from ..effects import CatalogContext
-from ..effects import catalog as effect_catalog
+from .catalog import catalog as effect_catalog
+from .catalog import CatalogContext
 from ..effects import registry
 from ..effects._base import unactuated_coordinates
 from ..fitting import Result
 from .compare import DEFAULT_CUTOFF, Comparison, compare, simulate_windows
 from .fit import EffectFit, describe_fit
+from ..signals.sampling import median_step
 
 __all__ = ["Diagnosis", "DiagnosisRun", "EffectScore", "diagnose", "run", "parse_effect", "describe_fit",
            "AT_FLOOR", "THRESHOLD"]
@@ -402,7 +403,7 @@ def _windows_of(t, res, channels, floor: dict, window: float, k: int = 5, mask=N
     dur = t[-1] - t[0]
     if dur / window < 3:
         window = dur / 5
-    dt = float(np.median(np.diff(t)))
+    dt = median_step(t)
     if window / dt < 10:
         raise TrialError(
             f"windows of {window:.3g} s hold {window / dt:.1f} samples at {1 / dt:.4g} Hz; need at least 10 "
@@ -493,7 +494,7 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
     """Compare ``model`` with ``trial``, locate the failure and rank the missing effects.
 
     ``candidates``: effects to rank (Components, or family names / ``family:target``
-    strings); default the whole catalog that applies (:func:`pinmsk.effects.catalog`).
+    strings); default the whole catalog that applies (:func:`pinmsk.diagnose.catalog`).
     ``frames`` names frames for frame effects (a payload).  See the module
     docstring for the scoring and :func:`pinmsk.diagnose.compare.compare` for
     ``mode``, ``cutoff`` and the noise floor.
@@ -517,7 +518,7 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
             f"{n} analysable samples are too few for {folds} cross-validation blocks of at least "
             f"{_MIN_BLOCK}; record a longer trial or pass folds={max(2, n // _MIN_BLOCK)}"
         )
-    dt = float(np.median(np.diff(c.eq.motion.t)))
+    dt = median_step(c.eq.motion.t)
     guard = int(np.ceil(1.0 / (cutoff * dt))) if cutoff else 2
     settings = {"folds": folds, "threshold": threshold, "at_floor": at_floor, "guard": guard,
                 "window": window, "cutoff": cutoff}
@@ -630,22 +631,21 @@ class DiagnosisRun:
 
     def write_json(self, path) -> Path:
         """The JSON summary (parent folders created); refused if any number is NaN or infinite."""
-        from ..io import write_json
+        from ..io.output_files import write_json
         return write_json(path, self.to_dict(), parents=True)
 
     def __repr__(self) -> str:
         return f"<DiagnosisRun {len(self.added)} added, final {self.final!r}>"
 
 
-def run(model, trial, *, add: Sequence = (), json_path=None, report_path=None, plot_dir=None,
-        first: Diagnosis | None = None, **options) -> DiagnosisRun:
+def run(model, trial, *, add: Sequence = (), first: Diagnosis | None = None, **options) -> DiagnosisRun:
     """Diagnose, then fit and add each ``add`` entry in turn, diagnosing after each.
 
     ``add`` entries: ``"family"`` (its best-ranked target), ``"family:target"``,
-    ``(family, target)`` tuples or Components.  Writes the JSON summary
-    (``json_path``), the HTML report (``report_path``) and PNG figures
-    (``plot_dir``) when asked.  ``options`` go to :func:`diagnose`; ``first``
-    reuses a diagnosis of this model and trial already made as step 0.
+    ``(family, target)`` tuples or Components.  Writes nothing: the JSON
+    summary, report and figures are :func:`pinmsk.presentation.report.save_diagnosis`.
+    ``options`` go to :func:`diagnose`; ``first`` reuses a diagnosis of this
+    model and trial already made as step 0.
     """
     if isinstance(add, (str, Component)):
         add = [add]
@@ -665,13 +665,4 @@ def run(model, trial, *, add: Sequence = (), json_path=None, report_path=None, p
             opts["_fits"] = getattr(steps[-1], "contact_fits", None)   # the fits depend on the trial only
         steps.append(diagnose(new_model, trial, comparison=comp, cutoff=steps[-1].settings["cutoff"], **opts))
         added.append(fit)
-    result = DiagnosisRun(steps, added)
-    if plot_dir is not None:
-        from .. import plots
-        plots.save_diagnosis_figures(result, plot_dir)
-    if json_path is not None:
-        result.write_json(json_path)
-    if report_path is not None:
-        from ..report import write_report
-        write_report(result, report_path)
-    return result
+    return DiagnosisRun(steps, added)

@@ -45,11 +45,16 @@ import numpy as np
 from scipy.interpolate import make_interp_spline
 
 from ..components import Component, Motion
-from ..errors import ModelError
+from ..dynamics import inverse_dynamics_array
 from ..effects import registry
 from ..effects._base import SignalEffect, unactuated_coordinates
+from ..errors import ModelError
+from ..grf import external_forces
+from ..model import load_model
 from ..muscles.activation import excitation_from_activation
-from ..trial import Trial
+from ..skeleton import ExternalForce, external_generalized_force
+from ..trial import Trial, moment_channel, parse_ground_reaction
+from .diagnosis import parse_effect
 
 __all__ = ["make_trial", "NOISE", "effect_from_text", "walking_motion", "write_compact"]
 
@@ -60,7 +65,6 @@ NOISE = {"angle": np.deg2rad(0.2), "translation": 0.0005, "moment": 0.02, "grf":
 
 def effect_from_text(text: str) -> Component:
     """``"family:target:p=v,p=v"`` -> a Component (all parameters not given keep their defaults)."""
-    from .diagnosis import parse_effect
     family, target, values = parse_effect(text)
     cls = registry.get(family)
     if target is None and getattr(cls, "level", "joint") != "muscle":
@@ -70,7 +74,6 @@ def effect_from_text(text: str) -> Component:
 
 def _load(model):
     if isinstance(model, (str, Path)):
-        from ..model import load_model
         return load_model(model)
     return model
 
@@ -155,7 +158,6 @@ def make_trial(model, effects: Sequence = (), *, duration: float = 10.0, rate: f
     chans: dict[str, np.ndarray] = {}
     for i, c in enumerate(model.coordinates):
         chans[c] = q[:n, i].copy()
-    from ..dynamics import inverse_dynamics_array
     if "grf" in measure:
         if not unact:
             raise ModelError(f"model '{model.name}' is fixed to the world: it has no ground reaction forces")
@@ -164,13 +166,12 @@ def make_trial(model, effects: Sequence = (), *, duration: float = 10.0, rate: f
         full = Motion(np.arange(q.shape[0]) / rate, q, v, a)
         external = []
         if "grf" in measure:                     # the legs carry what the ground pushes
-            from ..grf import external_forces
             external = external_forces(model, Trial(t, {k: x for k, x in chans.items() if "ground" in k}))
         tau = inverse_dynamics_array(truth, full, external=external)
         if "moments" in measure:
             for i, c in enumerate(model.coordinates):
                 if c not in unact:
-                    chans[f"{c}_moment"] = tau[:n, i].copy()
+                    chans[moment_channel(c)] = tau[:n, i].copy()
         if "excitations" in measure:
             u = _excitations(model, full, tau, signal)
             for j, m in enumerate(model.muscle_names):
@@ -337,8 +338,6 @@ def _excitations(model, motion, tau, signal):
 
 def _grf(truth, motion: Motion, unact, t) -> dict:
     """Per-foot ground reaction forces making the torso rows of the true inverse dynamics vanish."""
-    from ..dynamics import inverse_dynamics_array
-    from ..skeleton import ExternalForce, external_generalized_force
     import pinocchio as pin
 
     model = truth
@@ -398,7 +397,6 @@ def _grf(truth, motion: Motion, unact, t) -> dict:
 
 
 def _add_noise(trial: Trial, model, lv: dict, rng) -> Trial:
-    from ..trial import parse_ground_reaction
     new = {}
     n = trial.n_frames
     peak_fy = max([np.max(np.abs(trial[c])) for c in trial.names if c.endswith("ground_force_vy")] or [0.0])

@@ -43,7 +43,7 @@ when ``linear = True``), ranks it and adds it like the built-in ones::
 
 Subclass :class:`pinmsk.components.Component` directly for any other
 target (implement ``generalized_force(model, motion, params=None, cache=None)
--> (N, nv)``); see :mod:`pinmsk.effects.catalog` for how candidates are chosen.
+-> (N, nv)``); see :mod:`pinmsk.diagnose.catalog` for how candidates are chosen.
 """
 from .registry import families, from_spec, get, register
 from ._base import JointEffect, SignalEffect
@@ -55,7 +55,6 @@ from .payload import Payload
 from .segment_mass import SegmentMass
 from .activation import ActivationDynamics
 from .delay import ElectromechanicalDelay
-from .catalog import CatalogContext, catalog
 
 
 def unregister(family: str) -> None:
@@ -70,8 +69,8 @@ def unregister(family: str) -> None:
 _BUILTIN = frozenset(families())
 
 __all__ = [
-    "ActivationDynamics", "CatalogContext", "CoulombFriction", "ElectromechanicalDelay",
+    "ActivationDynamics", "CoulombFriction", "ElectromechanicalDelay",
     "JointDamping", "JointEffect", "JointSpring", "PassiveElastic", "Payload",
-    "RienerEdrich1999PassiveMoment", "SegmentMass", "SignalEffect", "catalog", "families",
+    "RienerEdrich1999PassiveMoment", "SegmentMass", "SignalEffect", "families",
     "from_spec", "get", "register", "unregister",
 ]

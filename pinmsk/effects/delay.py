@@ -25,6 +25,7 @@ import numpy as np
 from ..components import Parameter
 from ._base import SignalEffect
 from .registry import register
+from ..signals.sampling import median_step
 
 
 @register
@@ -52,7 +53,7 @@ class ElectromechanicalDelay(SignalEffect):
         n = ub.shape[1]
         if n < 2 or cols.size == 0:
             return out
-        dt = float(np.median(np.diff(t)))
+        dt = median_step(t)
         pad = int(np.ceil(self.params["delay"].max / dt)) + 8
         key = (id(u), u.shape, float(u.flat[0]), float(u.flat[-1]), pad, tuple(cols))
         if self._spectrum_cache is not None and self._spectrum_cache[0] == key:

@@ -58,7 +58,7 @@ def from_spec(spec: dict, *, where: str = "[[effects]]"):
     Keys other than ``type``, ``target``, ``params``, the effect's keyword options and its
     parameter names are refused with a "did you mean" (``where`` names the entry).
     """
-    from ..tomlfile import check_keys
+    from ..io.toml_files import check_keys
 
     spec = dict(spec)
     try:

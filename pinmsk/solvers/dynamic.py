@@ -116,7 +116,7 @@ from ..errors import ConvergenceError, ModelError, SolverError, TrialError
 from ..fitting import Fitter, FitStatistics, Result, format_report
 from ..muscles.activation import excitation_from_activation
 from ..muscles.thelen2003 import GAMMA, K_PE, PASSIVE_STRAIN0, thelen_passive_force_length
-from .designs import BatchMuscles, BatchSkeleton, muscle_inverse, simulate_ff, simulate_skeleton
+from .simulation_designs import BatchMuscles, BatchSkeleton, muscle_inverse, simulate_ff, simulate_skeleton
 from .parametrization import Fourier, Parametrization, Polynomial, Spline
 
 __all__ = ["BatchSkeleton", "simulate_ff", "simulate_skeleton", "muscle_inverse",
@@ -1223,7 +1223,7 @@ TASK_SCHEMA = {
 
 
 def _check_keys(table: dict, section: str, where: str):
-    from ..tomlfile import check_keys
+    from ..io.toml_files import check_keys
     check_keys(table, TASK_SCHEMA[section], where=where, section=f"[{section}]")
 
 
@@ -1235,7 +1235,7 @@ def load_task(task_path) -> dict:
     if p.suffix.lower() == ".json":
         spec = json.loads(p.read_text())
     else:
-        from ..tomlfile import read_toml
+        from ..io.toml_files import read_toml
         spec = read_toml(p, what="task file")
     for k in spec:
         if k not in TASK_SCHEMA:
@@ -1266,7 +1266,7 @@ def build_from_task(spec: dict, *, base_dir=None, progress=None) -> DynamicOptim
     coord = mo.get("coordinate", model.coordinates[0])
     model.coordinate_index(coord)
     if kind == "file":
-        from ..io import read_trial
+        from ..io.tables import read_trial
         f = Path(mo["file"])
         if base_dir is not None and not f.is_absolute():
             f = Path(base_dir) / f
@@ -1335,7 +1335,8 @@ def optimize_task(task_path, out_path=None, progress=None, *, precision: int | N
     prob = build_from_task(spec, base_dir=Path(task_path).parent, progress=progress)
     res = prob.fit().result_
     if out_path is not None:
-        from ..io import write_json, write_trial
+        from ..io.tables import write_trial
+        from ..io.output_files import write_json
         out = Path(out_path)
         write_trial(res, out, precision=precision)
         write_json(out.with_suffix(out.suffix + ".json"), prob.to_dict())

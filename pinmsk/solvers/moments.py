@@ -26,11 +26,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..components import Motion
+from ..dynamics import inverse_dynamics_array
 from ..errors import InfeasibleError, TrialError
 from ..kinematics import TrialInputs
 from ..trial import Trial, moment_channels
+from ..signals.filtering import lowpass
+from ..signals.sampling import median_step
 
-__all__ = ["MomentPlan", "plan_moments", "spanned_coordinates", "MOMENT_SOURCES"]
+__all__ = ["MomentPlan", "plan_moments", "required_moments", "spanned_coordinates", "MOMENT_SOURCES"]
 
 MOMENT_SOURCES = ("id", "measured")
 #: An unspanned coordinate needing less than this (N or N m) needs nothing (round-off).
@@ -98,15 +101,13 @@ def _measured(model, trial: Trial, motion: Motion, coords, cutoff) -> np.ndarray
         k, j = np.argwhere(bad)[0]
         raise TrialError(f"measured moment {cols[j]!r} is {tau[k, j]!r} at row {k} (t = {motion.t[k]:.6g} s)")
     if cutoff is not None:
-        from ..filtering import lowpass
-        tau = lowpass(tau, rate=1.0 / float(np.median(np.diff(motion.t))), cutoff=cutoff)
+        tau = lowpass(tau, rate=1.0 / median_step(motion.t), cutoff=cutoff)
     return tau
 
 
 def plan_moments(model, trial, inputs: TrialInputs, *, moments=None, dofs=None, reserves: bool = False,
                  what: str = "static optimization") -> MomentPlan:
     """Decide the balanced dofs and their moments (see the module docstring)."""
-    from ..dynamics import inverse_dynamics_array
     motion = inputs.motion
     spanned = spanned_coordinates(model.muscles, motion.q)
     coords = model.coordinates
@@ -153,7 +154,6 @@ def plan_moments(model, trial, inputs: TrialInputs, *, moments=None, dofs=None, 
                                  "were not balanced (inverse dynamics was); pass moments='measured' "
                                  "(CLI --moments measured) to balance them")
     else:
-        from .static import required_moments
         dof_names = tuple(coords[j] for j in idx)
         tau = required_moments(model, motion, moments, idx, dof_names)
         # what the given moments ask of the unspanned coordinates, where they say it
@@ -179,3 +179,36 @@ def plan_moments(model, trial, inputs: TrialInputs, *, moments=None, dofs=None, 
             + ("" if inputs.external else "; a floating base without ground reaction forces is in free fall: "
                "give the trial's GRF"))
     return plan
+
+
+def required_moments(model, motion: Motion, moments, idx, dofs) -> np.ndarray:
+    """Moments (N, nd) to balance: given (Trial or array) or by inverse dynamics."""
+    n = motion.n_frames
+    if moments is None:
+        tau = inverse_dynamics_array(model, motion)[:, idx]
+    elif isinstance(moments, Trial):
+        if moments.n_frames != n:
+            raise TrialError(f"the moments trial has {moments.n_frames} frames; the motion has {n}")
+        cols = list(moment_channels(dofs))
+        missing = [c for c in cols if c not in moments]
+        if missing:
+            raise TrialError(f"the moments trial lacks {', '.join(missing)} "
+                             f"(it has {', '.join(moments.names)})")
+        tau = np.column_stack([np.asarray(moments[c], dtype=float) for c in cols])
+    else:
+        tau = np.asarray(moments, dtype=float)
+        if tau.ndim == 1 and len(idx) == 1:
+            tau = tau[:, None]
+        if tau.ndim != 2 or tau.shape[0] != n:
+            raise TrialError(f"moments must be (N, nv) or (N, n_dofs) with N = {n}; got {tau.shape}")
+        if tau.shape[1] == model.nv and tau.shape[1] != len(idx):
+            tau = tau[:, idx]
+        elif tau.shape[1] != len(idx):
+            raise TrialError(f"moments has {tau.shape[1]} columns; expected {model.nv} (all "
+                             f"coordinates) or {len(idx)} (the dofs {', '.join(dofs)})")
+    bad = ~np.isfinite(tau)
+    if bad.any():
+        k, j = np.argwhere(bad)[0]
+        raise TrialError(f"the moment of '{dofs[j]}' is not finite at frame {k} "
+                         f"(t = {motion.t[k]:.6g} s); check the trial and its inverse dynamics")
+    return tau

@@ -61,7 +61,7 @@ from ..kinematics import DEFAULT_CUTOFF, prepare
 from ..residuals import floating_base_residuals
 from ..trial import Trial
 from . import qp as _qp
-from .moments import plan_moments
+from .moments import plan_moments, required_moments
 
 MODES = ("force", "activation")
 WEIGHTS = ("none", "fmax", "pcsa", "volume")
@@ -223,41 +223,6 @@ def resolve_dofs(model, R_all: np.ndarray, dofs, *, allow_unspanned: bool = Fals
                 "cannot balance it; leave it out of dofs (the default balances the "
                 "coordinates spanned by muscles) or pass reserves=True")
     return tuple(model.coordinates[j] for j in idx), idx
-
-
-def required_moments(model, motion: Motion, moments, idx, dofs) -> np.ndarray:
-    """Moments (N, nd) to balance: given (Trial or array) or by inverse dynamics."""
-    n = motion.n_frames
-    if moments is None:
-        from ..dynamics import inverse_dynamics_array
-
-        tau = inverse_dynamics_array(model, motion)[:, idx]
-    elif isinstance(moments, Trial):
-        if moments.n_frames != n:
-            raise TrialError(f"the moments trial has {moments.n_frames} frames; the motion has {n}")
-        cols = [f"{c}_moment" for c in dofs]
-        missing = [c for c in cols if c not in moments]
-        if missing:
-            raise TrialError(f"the moments trial lacks {', '.join(missing)} "
-                             f"(it has {', '.join(moments.names)})")
-        tau = np.column_stack([np.asarray(moments[c], dtype=float) for c in cols])
-    else:
-        tau = np.asarray(moments, dtype=float)
-        if tau.ndim == 1 and len(idx) == 1:
-            tau = tau[:, None]
-        if tau.ndim != 2 or tau.shape[0] != n:
-            raise TrialError(f"moments must be (N, nv) or (N, n_dofs) with N = {n}; got {tau.shape}")
-        if tau.shape[1] == model.nv and tau.shape[1] != len(idx):
-            tau = tau[:, idx]
-        elif tau.shape[1] != len(idx):
-            raise TrialError(f"moments has {tau.shape[1]} columns; expected {model.nv} (all "
-                             f"coordinates) or {len(idx)} (the dofs {', '.join(dofs)})")
-    bad = ~np.isfinite(tau)
-    if bad.any():
-        k, j = np.argwhere(bad)[0]
-        raise TrialError(f"the moment of '{dofs[j]}' is not finite at frame {k} "
-                         f"(t = {motion.t[k]:.6g} s); check the trial and its inverse dynamics")
-    return tau
 
 
 #: Frames per chunk in which :class:`StaticOptimization` builds and solves a long motion:
@@ -772,7 +737,7 @@ class StaticOptimization(Fitter):
         array.  Coordinates no muscle spans are handled by
         :func:`pinmsk.solvers.moments.plan_moments`: an error without reserves
         where they need a force, a reported reserve with them.
-        ``progress``: an object with ``update(n)`` (e.g. pinmsk.progress.Progress).
+        ``progress``: an object with ``update(n)`` (e.g. pinmsk.presentation.progress.Progress).
         """
         self._check_params()
         t0 = _time.perf_counter()

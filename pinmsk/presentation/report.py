@@ -15,6 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io.output_files import atomic_write
+from ..signals.sampling import median_step
+from ..solvers.static import STATUS
+from . import plots
+from .plots import figure_png, muscles_in
+
 __all__ = ["write_report", "render_report", "write_results_report", "render_results_report"]
 
 _CSS = """
@@ -32,7 +38,6 @@ def _e(x) -> str:
 
 
 def _img(fig) -> str:
-    from .plots import figure_png
     data = base64.b64encode(figure_png(fig)).decode("ascii")
     return f'<img alt="figure" src="data:image/png;base64,{data}">'
 
@@ -55,8 +60,6 @@ def _g(x) -> str:
 
 def render_report(run, *, title: str | None = None) -> str:
     """The report as an HTML string."""
-    from . import plots
-
     steps = run.steps if hasattr(run, "steps") else [run]
     added = list(getattr(run, "added", []))
     first, last = steps[0], steps[-1]
@@ -71,7 +74,7 @@ def render_report(run, *, title: str | None = None) -> str:
 
     parts.append("<h2>Model</h2><pre>" + _e(first.model.describe()) + "</pre>")
     t = np.asarray(trial.time)
-    dt = float(np.median(np.diff(t))) if t.size > 1 else float("nan")
+    dt = median_step(t)
     parts.append("<h2>Data</h2>")
     parts.append(_table(["item", "value"], [
         ("source", src), ("frames", trial.n_frames), ("duration (s)", f"{t[-1] - t[0]:.3f}"),
@@ -135,32 +138,29 @@ def render_report(run, *, title: str | None = None) -> str:
     return "\n".join(parts)
 
 
-def write_report(run, path=None, *, model=None, trial=None, title: str | None = None, **options) -> Path:
-    """Write the HTML report of a run (or one Diagnosis) to ``path``.
+def write_report(run, path, *, title: str | None = None) -> Path:
+    """Write the HTML report of a diagnosis run (or one Diagnosis) to ``path``."""
+    return _atomic_write(Path(path), render_report(run, title=title))
 
-    Also ``write_report(path, model=model, trial=trial, **options)``: diagnose
-    first (``options`` go to :func:`pinmsk.diagnose.run`).  If the diagnosis
-    cannot run on that trial (too short, nothing to compare), the report
-    states why and shows the trial's channels instead.
-    """
-    if model is not None or trial is not None:
-        if model is None or trial is None:
-            from .errors import PinmskError
-            raise PinmskError("write_report(path, model=..., trial=...) needs both a model and a trial")
-        out = Path(run if path is None else path)
-        from .diagnose import run as run_diagnosis
-        from .errors import PinmskError
-        try:
-            run = run_diagnosis(model, trial, **options)
-        except PinmskError as exc:
-            return _atomic_write(out, _failure_page(model, trial, exc, title))
-    else:
-        out = Path(path)
-    return _atomic_write(out, render_report(run, title=title))
+
+def write_failure_report(path, model, trial, error, *, title: str | None = None) -> Path:
+    """Write the report page of a diagnosis that could not run: why, the model and the trial's channels."""
+    return _atomic_write(Path(path), _failure_page(model, trial, error, title))
+
+
+def save_diagnosis(run, *, json_path=None, report_path=None, plot_dir=None) -> list[Path]:
+    """Write what was asked of a diagnosis run: JSON summary, HTML report, PNG figures; the paths written."""
+    written = []
+    if plot_dir is not None:
+        plots.save_diagnosis_figures(run, plot_dir)
+    if json_path is not None:
+        written.append(run.write_json(json_path))
+    if report_path is not None:
+        written.append(write_report(run, report_path))
+    return written
 
 
 def _failure_page(model, trial, exc, title) -> str:
-    from . import plots
     title = title or f"pinmsk diagnosis: {model.name}"
     fig = plots.new_figure(9.0, 1.5 + 1.2 * min(len(trial.names), 8))
     names = list(trial.names)[:8]
@@ -180,8 +180,7 @@ def _failure_page(model, trial, exc, title) -> str:
 # -- results (SO, FSO, any Trial of muscle forces) --------------------------------------------
 
 def _atomic_write(path, text: str) -> Path:
-    """Write ``text`` to ``path`` (parent folders created) atomically: :func:`pinmsk.io.atomic_write`."""
-    from .io import atomic_write
+    """Write ``text`` to ``path`` (parent folders created) atomically: :func:`pinmsk.io.output_files.atomic_write`."""
     return atomic_write(path, lambda fh: fh.write(text), parents=True)
 
 
@@ -192,7 +191,6 @@ def _img_any(fig, caption: str) -> str:
     elif isinstance(fig, (str, Path)):
         data = Path(fig).read_bytes()
     else:
-        from .plots import figure_png
         data = figure_png(fig)
     b64 = base64.b64encode(data).decode("ascii")
     return (f'<figure><img alt="{_e(caption)}" src="data:image/png;base64,{b64}">'
@@ -213,7 +211,6 @@ def channel_stats(trial) -> list[list]:
 def muscle_stats(results) -> list[list]:
     """Rows ``[muscle, peak force (N), time of peak (s), mean force (N), mean activation, peak activation]``
     (means over frames; NaN where the channel is missing)."""
-    from .plots import muscles_in
     mus = list(dict.fromkeys(muscles_in(results, "force") + muscles_in(results, "activation")))
     t = np.asarray(results.time)
     nan = float("nan")
@@ -237,7 +234,6 @@ def status_counts(results) -> list[list]:
     codes, counts = np.unique(np.asarray(results["status"]), return_counts=True)
     meaning = {}
     if results.meta.get("analysis") == "static_optimization":
-        from .solvers.static import STATUS
         meaning = STATUS
     return [[f"{c:g}", int(n), meaning.get(int(c), "") if float(c).is_integer() else ""]
             for c, n in zip(codes, counts)]
@@ -246,8 +242,6 @@ def status_counts(results) -> list[list]:
 def render_results_report(*, model, trial, results, title: str | None = None, text: str | None = None,
                           tables=None, extra_figures=None, emg=None) -> str:
     """The results report as an HTML string (see :func:`write_results_report`)."""
-    from . import plots
-
     title = title or f"pinmsk results: {model.name}"
     parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{_e(title)}</title>"
              f"<style>{_CSS}</style></head><body>", f"<h1>{_e(title)}</h1>"]
@@ -312,7 +306,7 @@ def write_results_report(path, *, model, trial, results, title: str | None = Non
     """Write one self-contained HTML report of a result (SO, FSO, ...) to ``path``; returns the path.
 
     Sections: model (``model.describe()``), data (frames, duration, rate,
-    channels of ``trial`` and ``results``), figures (:func:`pinmsk.plots.results_figures`:
+    channels of ``trial`` and ``results``), figures (:func:`pinmsk.presentation.plots.results_figures`:
     moments when ``<coord>_moment`` channels exist, muscle forces and
     activations, vs EMG when ``<muscle>_emg`` channels are in ``results`` or
     ``trial`` or ``emg`` -- True or an EMG Trial -- is given), then

@@ -1,37 +1,22 @@
-"""``pinmsk demo``: the whole diagnosis loop on a shipped forearm trial."""
+"""``pinmsk demo``: the whole diagnosis loop on a shipped forearm trial (a workflow).
+
+It runs the analyses (:mod:`pinmsk.diagnose`) and hands their results to
+:mod:`pinmsk.presentation` for the figures and the report.
+"""
 from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import TrialError
+from .diagnose.diagnosis import diagnose, run
+from .io.shared_data import shipped_trial
+from .io.tables import read_trial
+from .model import load_model
+from .presentation import plots
+from .presentation.report import save_diagnosis
 
-__all__ = ["demo", "shipped_trial", "shipped_trials", "DEMO_TRIAL"]
+__all__ = ["demo", "DEMO_TRIAL"]
 
 DEMO_TRIAL = "forearm_payload.csv"
-
-
-def _data_dir() -> Path:
-    try:
-        import importlib.resources
-        d = Path(str(importlib.resources.files("pinmsk._data")))
-        if d.is_dir():
-            return d
-    except (ModuleNotFoundError, TypeError):
-        pass
-    return Path(__file__).resolve().parents[2] / "data"
-
-
-def shipped_trials() -> list[str]:
-    """Names of the hidden-effect trials shipped in ``data/``."""
-    return sorted(p.name for p in _data_dir().glob("*.csv"))
-
-
-def shipped_trial(name: str) -> Path:
-    """Path of a shipped trial (see ``data/README.md`` for how each was made)."""
-    p = _data_dir() / name
-    if not p.exists():
-        raise TrialError(f"no shipped trial '{name}'; shipped: {', '.join(shipped_trials()) or 'none'}")
-    return p
 
 
 def demo(out_dir, *, trial: str = DEMO_TRIAL, echo=print):
@@ -42,11 +27,6 @@ def demo(out_dir, *, trial: str = DEMO_TRIAL, echo=print):
     measurement), the ranking, residual and error-step figures, ``report.html``
     and ``diagnosis.json``.  Returns the :class:`~pinmsk.diagnose.DiagnosisRun`.
     """
-    from ..io import read_trial
-    from ..model import load_model
-    from .. import plots
-    from .diagnosis import diagnose, run
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     model = load_model("forearm")
@@ -57,14 +37,14 @@ def demo(out_dir, *, trial: str = DEMO_TRIAL, echo=print):
     echo(first.summary_text())
     if first.best is None:
         echo("nothing to add: the base model is at the noise floor")
-        result = run(model, data, first=first, json_path=out / "diagnosis.json",
-                     report_path=out / "report.html", plot_dir=out)
+        result = run(model, data, first=first)
+        save_diagnosis(result, json_path=out / "diagnosis.json", report_path=out / "report.html", plot_dir=out)
         return result
     label = first.best.label
     echo("")
     echo(f"== adding {label} and diagnosing again ==")
-    result = run(model, data, add=[label], first=first, json_path=out / "diagnosis.json",
-                 report_path=out / "report.html", plot_dir=out)
+    result = run(model, data, add=[label], first=first)
+    save_diagnosis(result, json_path=out / "diagnosis.json", report_path=out / "report.html", plot_dir=out)
     after = result.final
     echo(after.summary_text(header=False))
     echo("")

@@ -11,7 +11,7 @@ import difflib
 import sys
 from pathlib import Path
 
-from .errors import ModelError
+from ..errors import ModelError
 
 if sys.version_info >= (3, 11):
     import tomllib

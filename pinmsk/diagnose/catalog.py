@@ -25,8 +25,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from ..errors import ModelError
-from . import registry
-from ._base import moving_bodies
+from ..effects import registry
+from ..effects._base import moving_bodies
 
 
 @dataclass(frozen=True)
@@ -49,7 +49,7 @@ def catalog(model, trial=None, *, frames=None, mode: str = "auto", families=None
     :func:`pinmsk.diagnose.compare`).
     """
     if context is None:
-        from ..diagnose.compare import catalog_context
+        from .compare import catalog_context
         context = catalog_context(model, trial, mode=mode, frames=frames)
     names = registry.families() if families is None else list(families)
     for f in names:

@@ -37,7 +37,9 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from .errors import PinmskError
+from ..errors import PinmskError
+from ..io.output_files import atomic_write
+from ..trial import moment_channel, moment_channels
 
 __all__ = ["new_figure", "figure_png", "save_figure", "save_channels", "plot_channels", "plot_moments",
            "muscles_in", "emg_source", "emg_correlations", "plot_muscles", "align_results",
@@ -68,7 +70,6 @@ def figure_png(fig: Figure) -> bytes:
 
 def save_figure(fig: Figure, path, **savefig) -> Path:
     """Write ``fig`` as PNG to ``path`` (parent folders created) atomically; returns the path."""
-    from .io import atomic_write
     return atomic_write(path, lambda fh: fig.savefig(fh, format="png", **savefig), binary=True, parents=True)
 
 
@@ -113,7 +114,7 @@ def moment_channels_in(trial, coordinates=None) -> list[str]:
     """The ``<coord>_moment`` channels of a Trial (of ``coordinates`` if given), in order."""
     if coordinates is None:
         return [c for c in trial.names if c.endswith("_moment")]
-    return [f"{c}_moment" for c in coordinates if f"{c}_moment" in trial]
+    return [n for n in moment_channels(coordinates) if n in trial]
 
 
 def plot_moments(trial, coordinates=None, *, title: str | None = None, path=None) -> Figure:
@@ -154,7 +155,7 @@ def emg_source(results, emg=True, muscles=None) -> dict[str, tuple[np.ndarray, n
 
     ``emg``: True -- the ``<muscle>_emg`` channels of ``results``; a Trial --
     its ``<muscle>_emg`` channels, or channels named ``<muscle>`` (as
-    :func:`pinmsk.emg.envelopes` writes them); None or False -- no EMG.
+    :func:`pinmsk.signals.emg.envelopes` writes them); None or False -- no EMG.
     ``muscles`` default to those with a force or activation channel in ``results``.
     """
     if emg is None or emg is False:
@@ -519,7 +520,7 @@ def plot_effect_contribution(diag, path=None, *, score=None) -> Figure:
             ax.plot(t, -s.fit.delta[:, j], color=_MODEL, lw=1.2, label=f"{s.label} (fitted)")
         name = c.eq.coordinates[j]
         # contact-mode equations are the GRF channels themselves; otherwise generalized forces
-        ax.set_title(name if c.mode == "contact" else f"{name}_moment", fontsize=9, loc="left")
+        ax.set_title(name if c.mode == "contact" else moment_channel(name), fontsize=9, loc="left")
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=7)
     axes[-1].set_xlabel("time (s)")

@@ -56,8 +56,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import TrialError
-from .trial import Trial
+from ..errors import TrialError
+from ..trial import Trial
 
 
 def _fill_gaps(x: np.ndarray, max_gap: int, name: str, path) -> tuple[np.ndarray, int]:
@@ -84,7 +84,7 @@ def _fill_gaps(x: np.ndarray, max_gap: int, name: str, path) -> tuple[np.ndarray
 
 def _anchor_heel(t, hx, hy, theta, fy, cop, flat, *, min_force, heel_offset, heel_height, path):
     """foot2d ankle ``(ax, ay)`` that puts the heel site H at ``RHEE + Rot(theta) o`` (see read_csu)."""
-    from .contact.foot import Foot2dGeometry, load_foot2d
+    from ..contact.foot import Foot2dGeometry, load_foot2d
 
     h = Foot2dGeometry.from_model(load_foot2d()).heel[:2]
     c, s = np.cos(theta), np.sin(theta)

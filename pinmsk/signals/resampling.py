@@ -1,7 +1,5 @@
 """Aligning channels recorded at different rates (markers 100 Hz, force plates and EMG 2000 Hz).
 
-* :func:`measured_rate` / :func:`check_rate` -- the rate the time column shows, and a
-  clear error when it contradicts the rate a file or a user states.
 * :func:`to_time` -- one Trial onto given times (linear by default; optional
   anti-alias low-pass when the new rate is lower; channels with NaN, such as
   the COP of an unloaded plate, are interpolated linearly without filtering).
@@ -15,38 +13,12 @@ from typing import Sequence
 
 import numpy as np
 
-from .errors import TrialError
+from ..errors import TrialError
 from .filtering import lowpass
-from .trial import Trial
+from .sampling import measured_rate, median_step
+from ..trial import Trial
 
-__all__ = ["measured_rate", "check_rate", "to_time", "align", "common_time"]
-
-
-def measured_rate(trial: Trial) -> float:
-    """Sampling rate (Hz) from the median time step; TrialError if steps vary by > 1 %."""
-    t = np.asarray(trial.time)
-    if t.size < 2:
-        raise TrialError("a rate needs at least 2 samples")
-    dt = np.diff(t)
-    step = float(np.median(dt))
-    spread = float(np.max(np.abs(dt - step))) / step
-    if spread > 0.01:
-        k = int(np.argmax(np.abs(dt - step)))
-        raise TrialError(
-            f"{trial.meta.get('source', 'trial')}: the sampling is not uniform: the time step at row {k + 1} is "
-            f"{dt[k]:.6g} s, the median {step:.6g} s; resample it first (pinmsk.resample.to_time)")
-    return 1.0 / step
-
-
-def check_rate(trial: Trial, stated: float, *, what: str = "signal", tolerance: float = 0.01) -> float:
-    """The measured rate; TrialError if it differs from ``stated`` Hz by more than ``tolerance``."""
-    r = measured_rate(trial)
-    if abs(r / float(stated) - 1.0) > tolerance:
-        raise TrialError(
-            f"{trial.meta.get('source', what)}: the {what} is stated to be sampled at {stated:g} Hz, but its "
-            f"time column steps at {r:.6g} Hz ({1 / r:.6g} s per sample); check the acquisition rate in "
-            "the header or the time column (a wrong rate shifts every event and filter cut-off)")
-    return r
+__all__ = ["to_time", "align", "common_time"]
 
 
 def common_time(trials: Sequence[Trial], *, rate: float) -> np.ndarray:
@@ -69,7 +41,7 @@ def to_time(trial: Trial, time, *, antialias: bool = True, order: int = 4) -> Tr
     time = np.asarray(time, dtype=float)
     src = trial
     if antialias and time.size > 1 and trial.n_frames > 1:
-        new_rate = 1.0 / float(np.median(np.diff(time)))
+        new_rate = 1.0 / median_step(time)
         old_rate = measured_rate(trial)
         if new_rate < 0.99 * old_rate:
             finite = [n for n in trial.names if np.all(np.isfinite(trial[n]))]

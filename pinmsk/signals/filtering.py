@@ -25,16 +25,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from pinmsk.errors import TrialError
+from ..errors import TrialError
+from .sampling import check_increasing, uniform_rate
 
-__all__ = ["lowpass", "differentiate", "filter_padlen", "UNIFORM_TOLERANCE"]
+__all__ = ["lowpass", "differentiate", "filter_padlen", "DEFAULT_CUTOFF", "FILTER_ORDER"]
 
-#: Largest relative deviation of a time step from the median step that
-#: :func:`differentiate` still treats as uniform sampling when it filters
-#: (covers time stamps rounded to a few decimals, e.g. 600 Hz written as
-#: 0.0017, 0.0033, 0.005).
-UNIFORM_TOLERANCE = 0.1
-
+#: Default low-pass cut-off (Hz) of kinematics and ground reaction forces in every analysis
+#: (:func:`pinmsk.kinematics.prepare`); ``cutoff=0`` / ``--cutoff 0`` turns filtering off.
+DEFAULT_CUTOFF = 6.0
+#: Order of the designed Butterworth filter (run forwards and backwards).
+FILTER_ORDER = 4
 
 def filter_padlen(order: int, *, rate: float | None = None, cutoff: float | None = None,
                   n: int | None = None) -> int:
@@ -124,7 +124,7 @@ def lowpass(x, *, rate: float, cutoff: float, order: int = 4) -> np.ndarray:
         )
     padlen = filter_padlen(order, rate=rate, cutoff=cutoff, n=n)
     _check_finite(x, "lowpass input")
-    from scipy.signal import butter, sosfiltfilt   # here, not at import: scipy.signal costs ~1 s
+    from scipy.signal import butter, sosfiltfilt  # here, not at import: scipy.signal costs ~1 s
 
     sos = butter(order, cutoff / nyquist, btype="low", output="sos")
     return sosfiltfilt(sos, x, axis=0, padtype="odd", padlen=padlen)
@@ -142,7 +142,7 @@ def differentiate(time, x, *, cutoff: float | None = None, order: int = 4):
     cutoff : float, optional
         If given, ``x`` is first passed through :func:`lowpass` with this
         cut-off (Hz) and ``order``, at the rate ``1 / median(diff(time))``;
-        the time steps must then be uniform within :data:`UNIFORM_TOLERANCE`.
+        the time steps must then be uniform within :data:`pinmsk.signals.sampling.UNIFORM_TOLERANCE`.
     order : int
         Butterworth order used when ``cutoff`` is given.
 
@@ -167,24 +167,11 @@ def differentiate(time, x, *, cutoff: float | None = None, order: int = 4):
             f"differentiation by quintic spline needs at least 6 samples, got {n}"
         )
     _check_finite(t, "time")
-    dt = np.diff(t)
-    if np.any(dt <= 0):
-        row = int(np.flatnonzero(dt <= 0)[0]) + 1
-        raise TrialError(
-            f"time is not strictly increasing at row {row}: "
-            f"time[{row}]={float(t[row])!r} <= time[{row - 1}]={float(t[row - 1])!r}"
-        )
+    check_increasing(t)
     _check_finite(x, "signal to differentiate")
     if cutoff is not None:
-        step = float(np.median(dt))
-        spread = float(np.max(np.abs(dt - step))) / step
-        if spread > UNIFORM_TOLERANCE:
-            raise TrialError(
-                f"filtering needs uniform sampling, but time steps range from "
-                f"{dt.min():.6g} to {dt.max():.6g} s (median {step:.6g} s); resample "
-                "first, e.g. trial.resample(rate)"
-            )
-        x = lowpass(x, rate=1.0 / step, cutoff=cutoff, order=order)
+        rate = uniform_rate(t)
+        x = lowpass(x, rate=rate, cutoff=cutoff, order=order)
     from scipy.interpolate import make_interp_spline
 
     spline = make_interp_spline(t, x, k=5, axis=0)

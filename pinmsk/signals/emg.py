@@ -13,7 +13,7 @@ between trials is kept; scaling each trial to its own maximum would erase it.
 
 Rates are checked: the band-pass needs ``rate > 2 x high`` edge, and a
 ``stated_rate`` that disagrees with the time column raises
-:class:`~pinmsk.errors.TrialError` (:func:`pinmsk.resample.check_rate`).
+:class:`~pinmsk.errors.TrialError` (:func:`pinmsk.signals.sampling.check_rate`).
 """
 from __future__ import annotations
 
@@ -21,10 +21,10 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from .errors import TrialError
+from ..errors import TrialError
 from .filtering import filter_padlen, lowpass
-from .resample import check_rate, measured_rate
-from .trial import Trial
+from .sampling import check_rate, measured_rate
+from ..trial import Trial
 
 __all__ = ["envelope", "envelopes", "normalize", "on_off", "onset_times", "DEFAULT_BAND",
            "DEFAULT_LOWPASS"]

@@ -4,7 +4,7 @@
 
 * ``markers`` -- a Trial of ``<label>_{x,y,z}`` in metres (the ``POINT:UNITS``
   parameter is honoured; residual < 0 or all-zero samples are gaps, then
-  handled as in :func:`pinmsk.markers.fill_gaps`);
+  handled as in :func:`pinmsk.signals.gaps.fill_gaps`);
 * ``analogs`` -- a Trial of every analog channel by label at the analog rate
   (values already scaled by ezc3d), in the file's label order; duplicate labels
   are an error;
@@ -22,9 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import MissingDependencyError, TrialError
-from .markers import UNIT_SCALE, fill_gaps, DEFAULT_MAX_GAP
-from .trial import Trial
+from ..errors import MissingDependencyError, TrialError
+from ..signals.gaps import DEFAULT_MAX_GAP, fill_gaps
+from ..trial import Trial
+from .trc import UNIT_SCALE
 
 __all__ = ["read_c3d", "C3DData", "remap_axes", "require_ezc3d"]
 

@@ -65,9 +65,10 @@ from typing import Mapping
 
 import numpy as np
 
-from .errors import TrialError
-from .io import state_path_coordinate
-from .trial import Trial, close_matches
+from ..errors import TrialError
+from ..trial import Trial, close_matches
+from .tables import read_trial, state_path_coordinate
+from .toml_files import read_toml
 
 __all__ = ["MapEntry", "ChannelMap", "load_channel_map", "apply_channel_map", "read_mapped", "suggest_map",
            "BUILTIN_MAPS", "MAP_SCHEMA", "opensim_gait2d_map", "RAJAGOPAL_HIP_OFFSET", "GAIT10DOF_HIP_OFFSET"]
@@ -199,7 +200,6 @@ def load_channel_map(spec) -> ChannelMap:
         did = f" (did you mean {hint[0]!r}?)" if hint else ""
         raise TrialError(f"column map {str(spec)!r} is neither a built-in map{did} nor a .toml file; "
                          f"built-in maps: {', '.join(BUILTIN_MAPS)}")
-    from .tomlfile import read_toml
 
     raw = read_toml(path, what="column map", error=TrialError)
     where = str(path)
@@ -368,8 +368,6 @@ def read_mapped(path, *, model=None, cmap=None, strict: bool = True, require_coo
     the map's sources that become them.  Without ``cmap``, a trial that lacks the model's
     coordinates but looks like a built-in map's input is an error naming that map.
     """
-    from .io import read_trial
-
     cmap = None if cmap is None else load_channel_map(cmap)
     angular = None
     if model is not None:

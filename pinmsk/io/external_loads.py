@@ -25,7 +25,7 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
-from .errors import TrialError
+from ..errors import TrialError
 
 __all__ = ["ExternalLoadSpec", "ExternalLoads", "read_external_loads"]
 

@@ -14,26 +14,26 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import PinmskError
-from .kinematics import DEFAULT_CUTOFF
-from .trial import parse_ground_reaction
+from ..errors import PinmskError
+from ..signals.filtering import DEFAULT_CUTOFF
+from ..trial import moment_channels, parse_ground_reaction
 
 
 def _model(args):
-    from .model import load_model
+    from ..model import load_model
     return load_model(args.model, moment_arms=getattr(args, "moment_arms", None))
 
 
 def _read(path, model=None, args=None, *, coordinates: bool = True):
-    """Read a trial as ``--lenient`` / ``--map`` ask (:func:`pinmsk.channel_map.read_mapped`).
+    """Read a trial as ``--lenient`` / ``--map`` ask (:func:`pinmsk.io.channel_map.read_mapped`).
 
     Each repair of a lenient read is one ``pinmsk: warning:`` line, each choice a map made
     one ``pinmsk: note:`` line.
     """
     import warnings
 
-    from .channel_map import read_mapped
-    from .errors import RepairWarning
+    from ..io.channel_map import read_mapped
+    from ..errors import RepairWarning
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RepairWarning)
         trial = read_mapped(path, model=model, cmap=getattr(args, "map", None),
@@ -56,11 +56,11 @@ def _add_read_flags(s) -> None:
     s.add_argument("--map", metavar="MAP", default=None,
                    help="rename columns first: a TOML map file ([rename] old = \"new\", optional "
                         "[scale], [offset]) or a built-in map: opensim-gait2d, rajagopal-gait2d, "
-                        "gait10dof-gait2d (see pinmsk.channel_map)")
+                        "gait10dof-gait2d (see pinmsk.io.channel_map)")
 
 
 def _write(trial, path, precision=None):
-    from .io import write_trial
+    from ..io.tables import write_trial
     write_trial(trial, path, precision=precision)
     print(f"wrote {path}")
 
@@ -118,8 +118,8 @@ def _plot(args, trial, channels, stem, ylabel) -> None:
 # -- commands ------------------------------------------------------------------
 
 def cmd_models(args) -> int:
-    from .builtin_models import builtin_names
-    from .model import load_model
+    from ..builtin_models import builtin_names
+    from ..model import load_model
     print(f"{'model':<10} {'dof':>4} {'muscles':>8}  description")
     for name in builtin_names():
         try:
@@ -138,7 +138,7 @@ def cmd_info(args) -> int:
 
 
 def cmd_id(args) -> int:
-    from .dynamics import inverse_dynamics_result
+    from ..dynamics import inverse_dynamics_result
     model = _model(args)
     trial = _read(args.trial, model, args)
     with _progress(trial.n_frames, "ID", "frames") as bar:
@@ -146,12 +146,12 @@ def cmd_id(args) -> int:
     print(res.report())
     out = res.trial
     _write(out, args.output, args.precision)
-    _plot(args, out, [f"{c}_moment" for c in model.coordinate_order], "inverse_dynamics", "moment (N m)")
+    _plot(args, out, list(moment_channels(model.coordinate_order)), "inverse_dynamics", "moment (N m)")
     return 0
 
 
 def cmd_simulate(args) -> int:
-    from .dynamics import simulate
+    from ..dynamics import simulate
     model = _model(args)
     moments = _read(args.moments, model, args, coordinates=False) if args.moments else None
     if args.duration is None and moments is None:
@@ -172,7 +172,7 @@ def cmd_simulate(args) -> int:
 def cmd_demo(args) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    from .diagnose import demo
+    from ..demo import demo
     demo(out)
     return 0
 
@@ -212,14 +212,14 @@ def _run_solver(args, solver, total: int | None, label: str, title: str) -> int:
 
 
 def cmd_so(args) -> int:
-    from .solvers.static import StaticOptimization
+    from ..solvers.static import StaticOptimization
     dofs = [d.strip() for d in args.dofs.split(",") if d.strip()] if args.dofs else None
     so = StaticOptimization(**_so_options(args), minmax=args.minmax, dofs=dofs)
     return _run_solver(args, so, None, "SO", "static_optimization")
 
 
 def cmd_fso(args) -> int:
-    from .solvers.fso import ForwardStaticOptimization
+    from ..solvers.fso import ForwardStaticOptimization
     fso = ForwardStaticOptimization(**_so_options(args), tracking=args.tracking, enforce=args.enforce,
                                     control_points=args.control_points, integrator=args.integrator,
                                     allow_divergence=args.allow_divergence)
@@ -227,14 +227,15 @@ def cmd_fso(args) -> int:
 
 
 def cmd_diagnose(args) -> int:
-    from .diagnose import run
+    from ..diagnose import run
+    from .report import save_diagnosis
     model = _model(args)
     trial = _read(args.trial, model, args)
     kw = _inputs(args)
     if kw.pop("ground_reaction") == "ignore":
         trial = trial.drop([n for n in trial.names if parse_ground_reaction(n) is not None])
-    r = run(model, trial, add=args.add or [], json_path=args.json, report_path=args.report,
-            plot_dir=args.plot, mode=args.mode, frames=args.frame or None, **kw)
+    r = run(model, trial, add=args.add or [], mode=args.mode, frames=args.frame or None, **kw)
+    save_diagnosis(r, json_path=args.json, report_path=args.report, plot_dir=args.plot)
     print(r.summary_text())
     for path in (args.json, args.report):
         if path:
@@ -243,7 +244,7 @@ def cmd_diagnose(args) -> int:
 
 
 def cmd_synth(args) -> int:
-    from .diagnose.synth import make_trial
+    from ..diagnose.synth import make_trial
     trial = make_trial(args.model, args.effect or [], duration=args.duration, rate=args.rate,
                        noise=None if args.no_noise else "realistic", seed=args.seed,
                        measure=args.measure or None)
@@ -252,8 +253,8 @@ def cmd_synth(args) -> int:
 
 
 def cmd_contact_fit(args) -> int:
-    from .contact import fit_cli_run
-    from .contact.identify import settings_lines
+    from ..contact import fit_cli_run
+    from ..contact.identify import settings_lines
     opts = {}   # only what the user gave: the rest are ContactFit's defaults (printed below)
     if args.contact:
         opts["contact"] = args.contact
@@ -294,7 +295,7 @@ _OPTIMIZE_EPILOG = (
 
 
 def cmd_optimize(args) -> int:
-    from .solvers.dynamic import optimize_task
+    from ..solvers.dynamic import optimize_task
     with _progress(None, "optimize", "iterations") as bar:
         res = optimize_task(args.task, args.output, progress=bar, precision=args.precision)
     print(res.report())
@@ -321,7 +322,7 @@ def cmd_view(args) -> int:
 
 
 def cmd_batch(args) -> int:
-    from .pipeline import batch_cli
+    from ..pipeline import batch_cli
     summary = batch_cli(args.config, scheduler=args.scheduler, jobs=args.jobs)
     n = len(summary["rows"])
     print(f"{n - len(summary['failed'])}/{n} trials done; summary table {summary['table']}")
@@ -339,7 +340,7 @@ def _version() -> str:
     try:
         return version("pinmsk")
     except PackageNotFoundError:
-        from . import __version__
+        from .. import __version__
         return __version__
 
 
@@ -553,7 +554,7 @@ _OUTPUT_FOLDERS = ("plot", "out")
 
 def _check_outputs(args) -> None:
     """Refuse, before any work, outputs whose folder is missing or read-only; create --plot folders."""
-    from .io import check_output_file, output_folder
+    from ..io.output_files import check_output_file, output_folder
     for name in _OUTPUT_FILES:
         if getattr(args, name, None):
             check_output_file(getattr(args, name))
@@ -568,7 +569,7 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 
 
 def _run(argv) -> int:
-    from .io import output_transaction
+    from ..io.output_files import output_transaction
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

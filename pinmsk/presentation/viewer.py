@@ -4,7 +4,7 @@ Built on Pinocchio's :class:`~pinocchio.visualize.MeshcatVisualizer` (which
 places the skeleton's visual geometry) and meshcat's own server, which serves
 the bundled JavaScript viewer on localhost, so no network is needed::
 
-    viewer = pinmsk.viewer.Viewer(pinmsk.load_model("forearm"))   # prints the URL
+    viewer = pinmsk.presentation.viewer.Viewer(pinmsk.load_model("forearm"))   # prints the URL
     viewer.display(q)                                  # one configuration
     viewer.play(trial, results=so_results)             # animation + time slider
     viewer.jupyter_cell()                              # in a notebook cell
@@ -32,7 +32,12 @@ or ``<muscle>_force``; ``<coord>_residual``; ``ground_force_v[xyz]`` and
 """
 from __future__ import annotations
 
+import base64
+import contextlib
+import difflib
+import io
 import os
+import re
 import sys
 import time
 import warnings
@@ -42,8 +47,11 @@ from typing import Mapping, Sequence
 import numpy as np
 import pinocchio as pin
 
+from ..errors import ModelError, TrialError
+from ..io.tables import read_trial
+from ..model import load_model
+from ..trial import Trial, parse_ground_reaction
 from . import viewer_geometry as vg
-from .errors import ModelError, TrialError
 
 __all__ = ["Viewer", "ViewerCommand", "view_cli", "default_ground_height"]
 
@@ -658,9 +666,6 @@ class Viewer:
 
 def _start_quietly(meshcat):
     """Start a meshcat server subprocess; its banner goes to stderr, we print the URL ourselves."""
-    import contextlib
-    import io
-
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
         vis = meshcat.Visualizer()
@@ -726,7 +731,6 @@ def _coordinates_of(trial, model, what: str) -> np.ndarray:
     names = set(trial.names)
     missing = [c for c in model.coordinates if c not in names]
     if missing:
-        import difflib
         hints = [f"{c} (did you mean {difflib.get_close_matches(c, trial.names, n=1)[0]!r}?)"
                  if difflib.get_close_matches(c, trial.names, n=1) else c for c in missing]
         raise TrialError(
@@ -751,8 +755,6 @@ def _channels_on(sources, names, t) -> np.ndarray | None:
 
 def _grf_on(sources, t) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """``{side: (F (N, 3), P (N, 3))}`` from ground reaction channels (missing axes are 0)."""
-    from .trial import parse_ground_reaction
-
     out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for s in sources:
         found: dict[str, dict[tuple[str, str], str]] = {}
@@ -856,9 +858,6 @@ def parse_static_scene(html: str) -> dict[str, set[str]]:
     ``kinds`` holds ``object``, ``transform``, ``property`` and ``animation``;
     a ``set_animation`` adds ``animation`` to every animated path.
     """
-    import base64
-    import re
-
     import umsgpack
 
     out: dict[str, set[str]] = {}
@@ -886,10 +885,6 @@ def view_cli(model_name, trial_path=None, results_path=None, *, open_browser: bo
     ``block`` it then waits (Ctrl-C, or ``timeout`` seconds) and stops the
     server; otherwise it returns the running :class:`Viewer`.
     """
-    from .io import read_trial
-    from .model import load_model
-    from .trial import Trial
-
     if results_path and trial_path is None:
         raise TrialError("--results needs a TRIAL with the motion to show them on")
     model = load_model(model_name)
