@@ -45,6 +45,7 @@ from ..errors import ConvergenceError, ModelError
 from ..effects._base import SignalEffect
 from ..fitting import Fitter, FitStatistics, Result, format_report
 from ..stats import weighted_sse
+from ..trial import moment_channel
 
 __all__ = ["EffectFit", "EffectProblem", "describe_fit"]
 
@@ -335,7 +336,7 @@ class EffectProblem:
                               message=message, iterations=self.nfev, objective=sse)
         info = {"effect": effect, "params": {k: clipped[k] for k in self.all_names}, "stderr": stderr,
                 "delta": full}
-        channels = {f"{c}_moment": full[:, j] for j, c in enumerate(self.eq.coordinates)}
+        channels = {moment_channel(c): full[:, j] for j, c in enumerate(self.eq.coordinates)}
         title = f"{effect.label}: {_describe(effect, info['params'], stderr)}"
         return Result(self.eq.motion.t[self.eq.rows], channels, stats=stats, info=info,
                       meta={"analysis": "effect_fit", "effect": effect.label},
