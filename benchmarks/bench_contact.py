@@ -77,8 +77,8 @@ def main(argv=None):
     if args.skip_fit:
         return
     if DATA.exists():
-        from pinmsk.io.cleveland_gait import read_csu
-        trial, opts = read_csu(DATA, body_mass=67.2), {}
+        from pinmsk.contact import read_csu_foot2d
+        trial, opts = read_csu_foot2d(DATA, body_mass=67.2), {}
         what = "the real CSU cycle"
     else:
         from pinmsk.contact import synthetic_foot_trial

@@ -72,8 +72,8 @@ def main(argv=None) -> dict:
         data = DEFAULT_DATA
     opts = {}
     if data.exists():
-        from pinmsk.io.cleveland_gait import read_csu
-        trial = read_csu(data, body_mass=67.2, anchor=args.anchor)
+        from pinmsk.contact import read_csu_foot2d
+        trial = read_csu_foot2d(data, body_mass=67.2, anchor=args.anchor)
         source = f"CSU treadmill trial {data}"
     else:
         trial = synthetic_foot_trial()

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 import pinmsk
-from pinmsk.io.cleveland_gait import read_csu
+from pinmsk.contact import read_csu_foot2d
 from pinmsk.grf import external_forces, torso_residuals
 from pinmsk.ik import InverseKinematics
 from pinmsk.markers import load_marker_set
@@ -43,7 +43,7 @@ CUTOFF = 6.0       # Hz
 def run(path: Path, out: Path, *, plots: bool = True) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     model = pinmsk.load_model("gait2d")
-    raw = read_csu(path, body_mass=BODY_MASS)
+    raw = read_csu_foot2d(path, body_mass=BODY_MASS)
     mset = load_marker_set("gait2d").subset("csu")
     ik = InverseKinematics(markers=mset, axes="xy", q0={"torso_y": 1.0}).fit(model, raw)
     kin = ik.result_

@@ -11,7 +11,7 @@ do not pay for Pinocchio and SciPy until something needs them.
 """
 from __future__ import annotations
 
-from ._lazy import lazy_exports
+from ._lazy import lazy_attributes
 from .errors import (ConvergenceError, InfeasibleError, ModelError, PinmskError, SolverError,
                      TrialError)
 
@@ -20,7 +20,8 @@ __version__ = "0.1.0"
 #: Public name -> the submodule that defines it (imported when the name is first used).
 _LAZY = {
     "Component": "components", "Motion": "components", "Parameter": "components",
-    "Model": "model", "load_model": "model",
+    "Parameters": "components",
+    "Data": "model", "Model": "model", "load_model": "model",
     "Trial": "trial",
     "read_trial": "io", "write_trial": "io",
     "ExternalForce": "skeleton",
@@ -30,11 +31,11 @@ _LAZY = {
 }
 
 __all__ = [
-    "Component", "ConvergenceError", "ExternalForce", "FitStatistics", "Fitter", "InfeasibleError", "Model",
-    "ModelError", "Motion", "Parameter", "PinmskError", "Result", "SolverError", "Trial", "TrialError",
-    "builtin_names",
+    "Component", "ConvergenceError", "Data", "ExternalForce", "FitStatistics", "Fitter", "InfeasibleError",
+    "Model", "ModelError", "Motion", "Parameter", "Parameters", "PinmskError", "Result", "SolverError", "Trial",
+    "TrialError", "builtin_names",
     "component_forces", "inverse_dynamics", "load_model", "read_trial", "simulate", "write_trial",
 ]
 
 
-__getattr__, __dir__ = lazy_exports(__name__, _LAZY, globals())
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, __all__)

@@ -1,4 +1,4 @@
-"""Where the built-in models live, and how to turn a sidecar into a Pinocchio model.
+"""Where the built-in models live, and the URDF each sidecar points at.
 
 The built-in models (``finger``, ``forearm``, ``gait2d``, ``human3d``) are a
 URDF plus one TOML *sidecar* each, in the repository's ``urdf/`` folder.  A
@@ -10,6 +10,9 @@ sidecar format and the coordinate conventions.
 ``human.urdf`` of the ``example-robot-data`` distribution with the marker
 ``@example-robot-data:<path inside share/example-robot-data>``.
 
+Turning a sidecar into a model (skeleton, gravity, muscles, effects, contacts) is
+:func:`pinmsk.load_model`'s job, in one place (``pinmsk.model._load_sidecar``).
+
 Functions
 ---------
 builtin_dir, builtin_names, builtin_sidecar
@@ -18,8 +21,8 @@ read_sidecar
     parse a sidecar (TOML) into a dict, with errors that name the file.
 resolve_urdf, example_robot_data_dir
     the URDF file a sidecar refers to and the package directories its meshes need.
-build_pinocchio_model, build_geometry_model
-    the Pinocchio skeleton of a sidecar, gravity from ``[model] gravity``.
+build_geometry_model
+    the visual or collision geometry of a sidecar's URDF.
 coordinate_permutation
     map Pinocchio's (depth-first) coordinates to a sidecar's ``coordinate_order``.
 """
@@ -51,7 +54,6 @@ __all__ = [
     "read_sidecar",
     "resolve_urdf",
     "example_robot_data_dir",
-    "build_pinocchio_model",
     "build_geometry_model",
     "coordinate_permutation",
 ]
@@ -218,35 +220,10 @@ def resolve_urdf(sidecar, reference: str | None = None) -> UrdfSource:
 # -----------------------------------------------------------------------------
 
 
-def build_pinocchio_model(sidecar) -> pin.Model:
-    """The Pinocchio skeleton of a sidecar (path, or built-in model name).
-
-    Sets ``model.gravity`` from ``[model] gravity``.  The joints stay in the
-    URDF parser's depth-first order (siblings sorted by joint name), which is
-    the only order Pinocchio supports; a sidecar's ``[model] coordinate_order``
-    is applied at the boundary with :func:`coordinate_permutation`.
-    """
-    path = _sidecar_path(sidecar)
-    cfg = read_sidecar(path)
-    src = resolve_urdf(path, cfg["model"]["urdf"])
-    model = pin.buildModelFromUrdf(str(src.path))
-    gravity = cfg["model"].get("gravity")
-    if gravity is not None:
-        g = np.asarray(gravity, dtype=float)
-        if g.shape != (3,) or not np.all(np.isfinite(g)):
-            raise ModelError(f"sidecar {path}: [model] gravity must be three finite numbers (m/s^2), got {gravity!r}")
-        model.gravity = pin.Motion(g, np.zeros(3))
-    order = cfg["model"].get("coordinate_order")
-    if order is not None:
-        coordinate_permutation(model, order, source=path)  # validate it against the URDF now
-    return model
-
-
 def build_geometry_model(sidecar, model: pin.Model, kind: str = "visual") -> pin.GeometryModel:
     """Visual (``kind="visual"``) or collision geometry of a sidecar's URDF for ``model``.
 
-    ``model`` must be the one :func:`build_pinocchio_model` returned for the
-    same sidecar.
+    ``model`` must be the Pinocchio model of the same sidecar (``load_model(sidecar).pin``).
     """
     kinds = {"visual": pin.GeometryType.VISUAL, "collision": pin.GeometryType.COLLISION}
     if kind not in kinds:

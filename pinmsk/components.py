@@ -14,10 +14,17 @@ damping returns ``-c * v``).  The equation of motion reads
 
 so inverse dynamics of a model with components subtracts their sum.  The same
 object serves forward simulation, inverse dynamics, the QPs and the diagnosis.
-Parameter-independent work (Jacobians, regressors) goes into ``prepare`` and is
-passed back as ``cache`` so fitting a parameter does not repeat it.
+Parameter-independent work (Jacobians, regressors) goes into
+``prepare(model, motion, data=None)`` and is passed back as ``cache`` so fitting a
+parameter does not repeat it; ``data`` is a workspace the caller owns
+(:meth:`pinmsk.Model.create_data`), which shares kinematics between the
+components prepared on one motion.  The force law itself stays a pure function
+of arrays and parameter values.
 
-Components are immutable: :meth:`Component.with_params` returns a copy.
+Components are immutable: attributes cannot be assigned, and
+:meth:`Component.with_params` (values, bounds, ``vary``), :meth:`Component.fix`
+and :meth:`Component.free` return copies.  :class:`Parameters` is a read-only
+table of parameters (``pinmsk.Model.parameters`` lists every parameter of a model).
 """
 from __future__ import annotations
 
@@ -25,7 +32,8 @@ import copy
 import difflib
 import math
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Mapping
+from types import MappingProxyType
+from typing import Any, ClassVar, Iterable, Iterator, Mapping
 
 import numpy as np
 
@@ -55,6 +63,114 @@ class Parameter:
             )
 
 
+class ParameterKeyError(ModelError, KeyError):
+    """No parameter of that name (a :class:`ModelError` and, for mappings, a ``KeyError``)."""
+
+    def __str__(self) -> str:           # KeyError would quote the message
+        return str(self.args[0]) if self.args else ""
+
+
+class Parameters(Mapping):
+    """A read-only, ordered table of :class:`Parameter` s by name (lmfit's ``Parameters``, frozen).
+
+    ``pinmsk.Model.parameters`` is one of these, with names prefixed by the
+    component that owns them (``joint_damping:elbow_flexion.c``,
+    ``hypervolumetric:heel_r.k_h``, ``muscle:BIClong.f_max``).  :meth:`fix`,
+    :meth:`free` and :meth:`with_values` return new tables; a model takes one
+    back with ``model.with_parameters(table)``.
+    """
+
+    __slots__ = ("_table",)
+
+    def __init__(self, parameters: Iterable[Parameter] = ()):
+        table = {}
+        for p in parameters:
+            if p.name in table:
+                raise ModelError(f"parameter '{p.name}' appears twice")
+            table[p.name] = p
+        object.__setattr__(self, "_table", table)
+
+    def __setattr__(self, key, value):
+        raise AttributeError("Parameters is read-only; use fix(), free() or with_values(), "
+                             "which return a new table")
+
+    def __getitem__(self, name: str) -> Parameter:
+        try:
+            return self._table[name]
+        except KeyError:
+            raise ParameterKeyError(_unknown(name, self._table, "parameter")) from None
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._table)
+
+    def __len__(self) -> int:
+        return len(self._table)
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, Parameters) and list(self._table.values()) == list(other._table.values())
+
+    __hash__ = None
+
+    def __reduce__(self):
+        return (Parameters, (tuple(self._table.values()),))
+
+    def valuesdict(self) -> dict[str, float]:
+        """``{name: value}`` (as lmfit's ``Parameters.valuesdict``)."""
+        return {k: p.value for k, p in self._table.items()}
+
+    @property
+    def free_names(self) -> tuple[str, ...]:
+        """Names of the parameters a fit may change (``vary=True``)."""
+        return tuple(k for k, p in self._table.items() if p.vary)
+
+    def _changed(self, names, **kw) -> "Parameters":
+        table = dict(self._table)
+        for n in names:
+            table[n] = _replace(self[n], **kw)
+        return Parameters(table.values())
+
+    def fix(self, *names: str) -> "Parameters":
+        """A copy with ``names`` fixed (``vary=False``)."""
+        return self._changed(names, vary=False)
+
+    def free(self, *names: str) -> "Parameters":
+        """A copy with ``names`` free (``vary=True``)."""
+        return self._changed(names, vary=True)
+
+    def with_values(self, values: Mapping[str, float] | None = None, **kw: float) -> "Parameters":
+        """A copy with new values (checked against the bounds)."""
+        table = dict(self._table)
+        for n, v in {**(values or {}), **kw}.items():
+            table[n] = _replace(self[n], value=float(v))
+            table[n].check("Parameters")
+        return Parameters(table.values())
+
+    def pretty(self) -> str:
+        """The table as text: name, value, min, max, vary, unit (and stderr where known)."""
+        rows = [("name", "value", "min", "max", "vary", "unit", "stderr")]
+        for p in self._table.values():
+            rows.append((p.name, f"{p.value:.6g}", f"{p.min:.4g}", f"{p.max:.4g}", str(p.vary), p.unit,
+                         "" if p.stderr is None else f"{p.stderr:.3g}"))
+        widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+        return "\n".join("  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows)
+
+    def __repr__(self) -> str:
+        return f"<Parameters: {len(self)} ({len(self.free_names)} free)>"
+
+
+def _unknown(name, known, what: str) -> str:
+    close = difflib.get_close_matches(str(name), list(known), n=3)
+    hint = f"; did you mean {', '.join(map(repr, close))}?" if close else ""
+    return f"no {what} '{name}'{hint}"
+
+
+def _read_only(x) -> np.ndarray:
+    """A read-only float copy of ``x`` (C order)."""
+    arr = np.array(x, dtype=float, order="C")
+    arr.flags.writeable = False
+    return arr
+
+
 @dataclass(frozen=True)
 class Motion:
     """Motion of a model over a trial, time-first and in SI units.
@@ -62,6 +178,10 @@ class Motion:
     ``q, v, a`` are ``(N, nv)``; ``t`` is ``(N,)``.  ``signals`` holds other
     measured channels a component may need (excitations, EMG, ground reaction
     forces), each ``(N,)``, keyed by channel name.
+
+    A Motion is immutable: its arrays are read-only copies and ``signals`` a
+    read-only mapping, so a :class:`pinmsk.model.Data` may cache kinematics
+    computed from it by its identity.
     """
 
     t: np.ndarray
@@ -76,8 +196,9 @@ class Motion:
 
     def __post_init__(self):
         for name in ("t", "q", "v", "a"):
-            arr = np.ascontiguousarray(np.asarray(getattr(self, name), dtype=float))
-            object.__setattr__(self, name, arr)
+            object.__setattr__(self, name, _read_only(getattr(self, name)))
+        object.__setattr__(self, "signals", MappingProxyType(
+            {k: _read_only(s) for k, s in dict(self.signals).items()}))
         if self.q.ndim != 2 or self.v.shape != self.q.shape or self.a.shape != self.q.shape:
             raise ModelError(
                 f"Motion: q, v, a must all be (N, nv); got {self.q.shape}, {self.v.shape}, {self.a.shape}"
@@ -100,15 +221,29 @@ class Motion:
             {k: np.asarray(s)[index] for k, s in self.signals.items()},
         )
 
+    def __reduce__(self):
+        return (Motion, (self.t, self.q, self.v, self.a, dict(self.signals)))
 
-class Component:
+
+class _Frozen(type):
+    """Metaclass of :class:`Component`: instances become read-only once constructed."""
+
+    def __call__(cls, *args, **kwargs):
+        obj = super().__call__(*args, **kwargs)
+        obj.__dict__["_frozen"] = True
+        return obj
+
+
+class Component(metaclass=_Frozen):
     """Base class of muscles, effects and contacts.
 
     Subclasses set ``family`` (registry name), ``kind`` (``"effect"``,
     ``"muscle"`` or ``"contact"``), ``target_kind`` (``"coordinate"``,
     ``"frame"``, ``"body"``, ``"muscle"``, ``"model"``) and ``parameters`` (a
     tuple of :class:`Parameter` declarations with defaults and bounds), and
-    implement :meth:`generalized_force`.
+    implement :meth:`generalized_force`.  Their ``__init__`` may set attributes;
+    once it returns the instance is read-only (assignment raises
+    ``AttributeError``), as a :class:`pinmsk.Model` is.
     """
 
     family: ClassVar[str] = "component"
@@ -137,6 +272,25 @@ class Component:
             params[name] = p
         self._params = params
 
+    # -- immutability -----------------------------------------------------
+    def __setattr__(self, key, value):
+        if self.__dict__.get("_frozen"):
+            raise AttributeError(
+                f"{type(self).__name__} '{self.label}' is immutable (cannot set '{key}'); build a new one, "
+                "or use with_params(...), fix(...) or free(...), which return a copy")
+        object.__setattr__(self, key, value)
+
+    def __delattr__(self, key):
+        if self.__dict__.get("_frozen"):
+            raise AttributeError(f"{type(self).__name__} '{self.label}' is immutable (cannot delete '{key}')")
+        object.__delattr__(self, key)
+
+    def _evolve(self, params: dict[str, Parameter]) -> "Component":
+        """A copy with the parameter table ``params`` (already checked)."""
+        new = copy.copy(self)
+        new.__dict__["_params"] = params
+        return new
+
     # -- parameters -------------------------------------------------------
     @property
     def label(self) -> str:
@@ -160,20 +314,48 @@ class Component:
         return lo, hi
 
     def with_params(self, values: Mapping[str, float] | None = None, *,
-                    stderr: Mapping[str, float] | None = None, **kw: float) -> "Component":
-        """A copy with new parameter values (and optional standard errors)."""
+                    stderr: Mapping[str, float] | None = None, vary: Mapping[str, bool] | None = None,
+                    bounds: Mapping[str, tuple[float, float]] | None = None, **kw: float) -> "Component":
+        """A copy with new parameter values, and optionally standard errors, ``vary`` flags
+        (False: a fit keeps the parameter at its value) and bounds ``{name: (lo, hi)}``.
+
+        The values are checked against the (new) bounds once everything is applied.
+        """
         values = {**(values or {}), **kw}
-        new = copy.copy(self)
         params = dict(self._params)
+        for what, changes in (("values", values), ("stderr", stderr), ("vary", vary), ("bounds", bounds)):
+            for name in changes or ():
+                if name not in params:
+                    where = "" if what == "values" else f" (in {what}=)"
+                    raise ModelError(f"{self.label}: no parameter '{name}'{where}; it has {sorted(params)}")
+        for name, (lo, hi) in (bounds or {}).items():
+            lo, hi = float(lo), float(hi)
+            if not lo <= hi:
+                raise ModelError(f"{self.label}: bounds for '{name}' are [{lo:g}, {hi:g}]; lower > upper")
+            params[name] = _replace(params[name], min=lo, max=hi)
         for name, val in values.items():
-            if name not in params:
-                raise ModelError(f"{self.label}: no parameter '{name}'; it has {sorted(params)}")
             params[name] = _replace(params[name], value=float(val))
-            params[name].check(self.label)
+        for name, flag in (vary or {}).items():
+            params[name] = _replace(params[name], vary=bool(flag))
         for name, err in (stderr or {}).items():
             params[name] = _replace(params[name], stderr=float(err))
-        new._params = params
-        return new
+        for name in {*values, *(bounds or {})}:
+            params[name].check(self.label)
+        return self._evolve(params)
+
+    def fix(self, *names: str) -> "Component":
+        """A copy in which a fit keeps ``names`` at their values (``vary=False``)."""
+        return self.with_params(vary={n: False for n in names})
+
+    def free(self, *names: str) -> "Component":
+        """A copy in which a fit may change ``names`` (``vary=True``)."""
+        return self.with_params(vary={n: True for n in names})
+
+    def parameter_table(self, prefix: str | None = None) -> Parameters:
+        """This component's parameters as a :class:`Parameters` table named ``<prefix>.<name>``
+        (``prefix`` defaults to :attr:`label`)."""
+        pre = self.label if prefix is None else prefix
+        return Parameters(_replace(p, name=f"{pre}.{k}") for k, p in self._params.items())
 
     def with_vector(self, x: np.ndarray) -> "Component":
         return self.with_params(dict(zip(self._params, np.asarray(x, dtype=float))))
@@ -190,8 +372,13 @@ class Component:
         """Add this component's inertia to ``pin_model`` (a copy); inertial components only."""
         raise ModelError(f"{self.label} does not change the skeleton's inertia")
 
-    def prepare(self, model, motion: Motion) -> Any:
-        """Parameter-independent precomputation for ``motion`` (default: none)."""
+    def prepare(self, model, motion: Motion, data=None) -> Any:
+        """Parameter-independent precomputation for ``motion`` (default: none).
+
+        ``data`` (a :class:`pinmsk.model.Data` of ``model``, owned by the caller) shares
+        kinematics between components prepared on the same motion; without it the
+        work is done afresh.  Pass the result as ``cache`` to :meth:`generalized_force`.
+        """
         return None
 
     def generalized_force(self, model, motion: Motion, params: Mapping[str, float] | None = None,
@@ -215,6 +402,15 @@ class Component:
 
     def __hash__(self) -> int:
         return hash((type(self).__name__, self.target, tuple(self.values.items())))
+
+
+def motion_cached(data, model, key, motion: Motion, compute):
+    """``compute(pinocchio_data)`` for ``motion``: through ``data``'s cache when a
+    :class:`pinmsk.model.Data` is given (computed once per ``key`` and motion), else afresh
+    in a new Pinocchio workspace.  What components' ``prepare`` methods use."""
+    if data is None:
+        return compute(model.pin.createData())
+    return data.cached(model, key, motion, compute)
 
 
 def _replace(p: Parameter, **kw) -> Parameter:

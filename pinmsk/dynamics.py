@@ -32,19 +32,24 @@ from .signals.sampling import median_step
 from .trial import Trial, moment_channels
 
 
-def component_forces(model, motion: Motion) -> dict[str, np.ndarray]:
-    """Generalized force ``(N, nv)`` of each of the model's effects and contacts, by label."""
-    return {c.label: np.asarray(c.generalized_force(model, motion, cache=c.prepare(model, motion)))
+def component_forces(model, motion: Motion, *, data=None) -> dict[str, np.ndarray]:
+    """Generalized force ``(N, nv)`` of each of the model's effects and contacts, by label.
+
+    ``data`` (``model.create_data()``, default a new one) is the workspace the components
+    share their kinematics in; pass the same one to reuse it for later work on ``motion``."""
+    data = model.create_data() if data is None else data
+    return {c.label: np.asarray(c.generalized_force(model, motion, cache=c.prepare(model, motion, data=data)))
             for c in model.components}
 
 
 def inverse_dynamics_array(model, motion: Motion, *, external: Sequence[skeleton.ExternalForce] = (),
-                           components: bool = True, progress=None) -> np.ndarray:
-    """Actuator generalized forces ``(N, nv)`` for a Motion (see :func:`inverse_dynamics`)."""
+                           components: bool = True, progress=None, data=None) -> np.ndarray:
+    """Actuator generalized forces ``(N, nv)`` for a Motion (see :func:`inverse_dynamics`);
+    ``data`` as for :func:`component_forces`."""
     tau = skeleton.inverse_dynamics(model, motion.q, motion.v, motion.a, external=external,
                                     progress=progress)
     if components:
-        for f in component_forces(model, motion).values():
+        for f in component_forces(model, motion, data=data).values():
             tau -= f
     return tau
 

@@ -1,29 +1,45 @@
-"""The musculoskeletal Model: a Pinocchio skeleton plus components.
+"""The musculoskeletal Model (frozen) and its Data (a workspace), as in Pinocchio.
 
-A :class:`Model` never changes once built (as a Pinocchio ``Model``):
-algorithms take ``(model, ...)`` and create their own workspaces.  Adding an
-effect returns a new model::
+A :class:`Model` never changes once built: it cannot be assigned to, its
+``meta`` is a read-only mapping and its component lists are tuples.  Changing
+something returns a new model::
 
     model = pinmsk.load_model("forearm")
     heavier = model.with_effect(Payload("hand", mass=2.0))   # or model + effect
+    fixed = heavier.fix("payload:hand.mass")                  # model.parameters: one table
+
+Algorithms take ``(model, ...)`` and work in a :class:`Data` the caller owns
+(``model.create_data()``: Pinocchio's ``Data`` plus a cache of the kinematics
+computed for each :class:`~pinmsk.components.Motion`), so two threads with two
+Data objects share no state.  ``model.pin`` is the Pinocchio model; pinmsk never
+modifies it (e.g. :meth:`Model.with_gravity` builds a copy), and neither should
+callers.
 
 Built-in models are a URDF plus a TOML sidecar in ``urdf/`` (schema in
 ``urdf/README.md``); ``load_model`` also takes the path of a user's sidecar
-(``.toml``) or a bare URDF (no muscles).
+(``.toml``) or a bare URDF (no muscles).  :func:`_load_sidecar` is the one
+sidecar -> Pinocchio loader.
 """
 from __future__ import annotations
 
 import difflib
 import warnings
 from pathlib import Path
-from typing import Iterable, Sequence
+from types import MappingProxyType
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 import pinocchio as pin
 
-from .components import Component, Motion
+from . import builtin_models
+from .components import Component, Motion, ParameterKeyError, Parameters
+from .contact.spec import from_spec as contact_from_spec
+from .effects import registry
 from .errors import ModelError
 from .kinematics import DEFAULT_CUTOFF, cutoff_value
+from .muscles import NaganoGerritsen, Thelen2003
+from .muscles.muscle_set import MUSCLE_PREFIX, MuscleSet
+from .muscles.paths import MomentArmPath
 from .io.toml_files import check_keys, read_toml
 
 #: Every key a model sidecar may hold (``urdf/README.md``), per table; others are errors.
@@ -56,27 +72,70 @@ _MUSCLE_LAWS = {"thelen2003": ("thelen2003", True), "nagano_gerritsen": ("winter
 PINOCCHIO_GRAVITY = (0.0, 0.0, -9.81)
 
 
+def _freeze(x):
+    """A read-only copy of metadata: dicts become mappingproxies, lists tuples."""
+    if isinstance(x, Mapping):
+        return MappingProxyType({k: _freeze(v) for k, v in x.items()})
+    if isinstance(x, (list, tuple)):
+        return tuple(_freeze(v) for v in x)
+    return x
+
+
+def _thaw(x):
+    """Plain dicts again (mappingproxies do not pickle)."""
+    if isinstance(x, Mapping):
+        return {k: _thaw(v) for k, v in x.items()}
+    if isinstance(x, tuple):
+        return tuple(_thaw(v) for v in x)
+    return x
+
 
 class Model:
-    """A skeleton (Pinocchio model) with muscles, effects and contacts. Immutable."""
+    """A skeleton (Pinocchio model) with muscles, effects and contacts. Frozen.
+
+    The constructor copies ``pin_model``, so changing it afterwards does not
+    change the Model.  Attributes cannot be assigned; the ``with_*`` methods,
+    :meth:`without`, :meth:`fix` and :meth:`free` return new models.
+    """
+
+    __slots__ = ("name", "muscles", "effects", "contacts", "meta", "coordinates",
+                 "_pin", "_coord_index", "_parameters")
 
     def __init__(self, *, name: str, pin_model: pin.Model, muscles=None,
                  effects: Sequence[Component] = (), contacts: Sequence[Component] = (),
-                 meta: dict | None = None):
+                 meta: Mapping | None = None):
+        self._setup(name=name, pin_model=pin.Model(pin_model), muscles=muscles, effects=effects,
+                    contacts=contacts, meta=meta)
+
+    @classmethod
+    def _make(cls, *, name, pin_model, muscles, effects, contacts, meta) -> "Model":
+        """A model that shares ``pin_model`` (derived models of one skeleton; never modified)."""
+        self = object.__new__(cls)
+        self._setup(name=name, pin_model=pin_model, muscles=muscles, effects=effects,
+                    contacts=contacts, meta=meta)
+        return self
+
+    def _setup(self, *, name, pin_model, muscles, effects, contacts, meta) -> None:
         if pin_model.nq != pin_model.nv:
             raise ModelError(
                 f"model '{name}': pinmsk supports skeletons of 1-dof joints (nq == nv); "
                 f"this one has nq={pin_model.nq}, nv={pin_model.nv}"
             )
-        self._pin = pin_model
-        self.name = name
-        self.muscles = muscles
-        self.effects = tuple(effects)
-        self.contacts = tuple(contacts)
-        self.meta = dict(meta or {})
-        self.coordinates = tuple(pin_model.names[j] for j in range(1, pin_model.njoints))
-        self._coord_index = {c: pin_model.joints[j].idx_v
-                             for j, c in enumerate(pin_model.names) if j > 0}
+        put = object.__setattr__
+        put(self, "_pin", pin_model)
+        put(self, "name", str(name))
+        put(self, "muscles", muscles)
+        put(self, "effects", tuple(effects))
+        put(self, "contacts", tuple(contacts))
+        put(self, "meta", _freeze(dict(meta or {})))
+        put(self, "coordinates", tuple(pin_model.names[j] for j in range(1, pin_model.njoints)))
+        put(self, "_coord_index", MappingProxyType({c: pin_model.joints[j].idx_v
+                                                    for j, c in enumerate(pin_model.names) if j > 0}))
+        put(self, "_parameters", None)
+        for comp in self.effects + self.contacts:
+            if not isinstance(comp, Component):
+                raise ModelError(f"model '{name}': components must be Component instances, "
+                                 f"not {type(comp).__name__}")
         labels = [c.label for c in self.effects + self.contacts]
         dup = sorted({x for x in labels if labels.count(x) > 1})
         if dup:
@@ -84,10 +143,24 @@ class Model:
         for comp in self.effects + self.contacts:
             comp.check_target(self)
 
+    def _derive(self, **changes) -> "Model":
+        kw = dict(name=self.name, pin_model=self._pin, muscles=self.muscles, effects=self.effects,
+                  contacts=self.contacts, meta=self.meta)
+        kw.update(changes)
+        return Model._make(**kw)
+
+    def __setattr__(self, key, value):
+        raise AttributeError(f"pinmsk.Model is immutable (cannot set '{key}'); use with_effect, without, "
+                             "with_muscles, with_gravity, with_parameters, fix or free, which return a new model")
+
+    def __delattr__(self, key):
+        raise AttributeError(f"pinmsk.Model is immutable (cannot delete '{key}')")
+
     # -- skeleton -------------------------------------------------------
     @property
     def pin(self) -> pin.Model:
-        """The Pinocchio model. Treat it as read-only (algorithms never modify it)."""
+        """The Pinocchio model (read-only by convention: pinmsk never modifies it; copy it
+        with ``pinocchio.Model(model.pin)`` to change something)."""
         return self._pin
 
     @property
@@ -108,7 +181,10 @@ class Model:
 
     @property
     def gravity(self) -> np.ndarray:
-        return np.array(self._pin.gravity.linear)
+        """Gravity in the world frame, (3,) m/s^2 (a read-only copy; see :meth:`with_gravity`)."""
+        g = np.array(self._pin.gravity.linear, dtype=float)
+        g.flags.writeable = False
+        return g
 
     @property
     def mass(self) -> float:
@@ -118,9 +194,12 @@ class Model:
     def components(self) -> tuple[Component, ...]:
         return self.effects + self.contacts
 
-    def create_data(self) -> pin.Data:
-        """A fresh Pinocchio workspace for this model."""
-        return self._pin.createData()
+    def create_data(self) -> "Data":
+        """A fresh workspace for this model: Pinocchio's ``Data`` plus a kinematics cache.
+
+        Give one to each thread; see :class:`Data`.
+        """
+        return Data(self)
 
     def coordinate_index(self, name: str) -> int:
         """Column of coordinate ``name`` in ``q``/``v`` (ModelError with suggestions)."""
@@ -162,6 +241,17 @@ class Model:
     def frame_names(self) -> tuple[str, ...]:
         return tuple(f.name for f in self._pin.frames)
 
+    def with_gravity(self, gravity) -> "Model":
+        """A new model whose skeleton (a copy) has ``gravity`` (3 finite numbers, m/s^2)."""
+        pm = pin.Model(self._pin)
+        _set_gravity(pm, gravity, f"model '{self.name}'")
+        return self._derive(pin_model=pm)
+
+    def with_skeleton(self, pin_model: pin.Model) -> "Model":
+        """A new model on (a copy of) another Pinocchio skeleton, with the same components
+        (their targets are checked against it)."""
+        return self._derive(pin_model=pin.Model(pin_model))
+
     # -- components -----------------------------------------------------
     def with_effect(self, *effects: Component) -> "Model":
         """A new model with ``effects`` added (duplicates of an existing label are refused)."""
@@ -171,8 +261,7 @@ class Model:
             if not isinstance(e, Component):
                 raise ModelError(f"with_effect takes components, not {type(e).__name__}")
             (con if e.kind == "contact" else eff).append(e)
-        return Model(name=self.name, pin_model=self._pin, muscles=self.muscles,
-                     effects=eff, contacts=con, meta=self.meta)
+        return self._derive(effects=eff, contacts=con)
 
     def __add__(self, other: Component) -> "Model":
         return self.with_effect(other)
@@ -183,19 +272,90 @@ class Model:
         if label not in [c.label for c in comps]:
             raise ModelError(f"model '{self.name}' has no component '{label}' "
                              f"(has: {', '.join(c.label for c in comps) or 'none'})")
-        return Model(name=self.name, pin_model=self._pin, muscles=self.muscles,
-                     effects=[e for e in self.effects if e.label != label],
-                     contacts=[c for c in self.contacts if c.label != label], meta=self.meta)
+        return self._derive(effects=[e for e in self.effects if e.label != label],
+                            contacts=[c for c in self.contacts if c.label != label])
 
     def component(self, label: str) -> Component:
         for c in self.effects + self.contacts:
             if c.label == label:
                 return c
-        raise ModelError(f"model '{self.name}' has no component '{label}'")
+        raise ModelError(f"model '{self.name}' has no component '{label}' "
+                         f"(has: {', '.join(c.label for c in self.components) or 'none'})")
 
     def with_muscles(self, muscles) -> "Model":
-        return Model(name=self.name, pin_model=self._pin, muscles=muscles,
-                     effects=self.effects, contacts=self.contacts, meta=self.meta)
+        """A new model with another :class:`~pinmsk.muscles.muscle_set.MuscleSet` (or None)."""
+        return self._derive(muscles=muscles)
+
+    # -- parameters -----------------------------------------------------
+    @property
+    def parameters(self) -> Parameters:
+        """Every effect, contact and muscle parameter, one read-only :class:`Parameters` table.
+
+        Names are prefixed by their owner: ``<component label>.<name>`` for effects and
+        contacts (``joint_damping:elbow_flexion.c``, ``hypervolumetric:heel_r.k_h``) and
+        ``muscle:<muscle>.<name>`` for muscles (``muscle:BIClong.f_max``).  Each row
+        has value, min, max, vary, unit (and stderr after a fit).
+        """
+        if self._parameters is None:
+            rows = [p for c in self.components for p in c.parameter_table().values()]
+            if self.muscles is not None:
+                rows += list(self.muscles.parameter_table().values())
+            object.__setattr__(self, "_parameters", Parameters(rows))
+        return self._parameters
+
+    def with_parameters(self, values: Mapping[str, float] | Parameters | None = None, *,
+                        vary: Mapping[str, bool] | None = None,
+                        bounds: Mapping[str, tuple[float, float]] | None = None,
+                        stderr: Mapping[str, float] | None = None) -> "Model":
+        """A new model with parameters changed by their :attr:`parameters` names.
+
+        ``values`` maps names to values, or is a :class:`Parameters` table (such as
+        ``model.parameters.fix(...)``), whose values, bounds and vary flags are all
+        applied.  ``vary`` fixes (False) or frees (True) parameters for fits;
+        ``bounds`` maps names to ``(lo, hi)``.
+        """
+        changes: dict[str, dict[str, dict]] = {}
+        if isinstance(values, Parameters):
+            table = values
+            values, vary, bounds = {}, dict(vary or {}), dict(bounds or {})
+            for n, p in table.items():
+                values[n] = p.value
+                vary.setdefault(n, p.vary)
+                bounds.setdefault(n, (p.min, p.max))
+        for what, mapping in (("values", values), ("vary", vary), ("bounds", bounds), ("stderr", stderr)):
+            for name, x in (mapping or {}).items():
+                owner, pname = self._owner(name)
+                changes.setdefault(owner, {}).setdefault(what, {})[pname] = x
+        if not changes:
+            return self
+        muscles = self.muscles
+        comps = {c.label: c for c in self.components}
+        for owner, kw in changes.items():
+            if owner == MUSCLE_PREFIX:
+                muscles = muscles.with_params(kw.pop("values", None), **kw)
+            else:
+                comps[owner] = comps[owner].with_params(kw.pop("values", None), **kw)
+        return self._derive(muscles=muscles, effects=[comps[c.label] for c in self.effects],
+                            contacts=[comps[c.label] for c in self.contacts])
+
+    def fix(self, *names: str) -> "Model":
+        """A new model in which fits keep the parameters ``names`` at their values."""
+        return self.with_parameters(vary={n: False for n in names})
+
+    def free(self, *names: str) -> "Model":
+        """A new model in which fits may change the parameters ``names``."""
+        return self.with_parameters(vary={n: True for n in names})
+
+    def _owner(self, name: str) -> tuple[str, str]:
+        """``(component label or 'muscle', name inside it)`` of a :attr:`parameters` name."""
+        try:
+            self.parameters[name]
+        except ParameterKeyError as exc:
+            raise ParameterKeyError(f"model '{self.name}': {exc}") from None
+        if name.startswith(MUSCLE_PREFIX + ":"):
+            return MUSCLE_PREFIX, name[len(MUSCLE_PREFIX) + 1:]
+        label, pname = name.rsplit(".", 1)
+        return label, pname
 
     # -- trials ---------------------------------------------------------
     def motion(self, trial, *, cutoff=DEFAULT_CUTOFF, signals: Iterable[str] | None = None) -> Motion:
@@ -232,11 +392,66 @@ class Model:
 
     def __reduce__(self):
         # Pinocchio models pickle; rebuild through the constructor.
-        return (_rebuild, (self.name, self._pin, self.muscles, self.effects, self.contacts, self.meta))
+        return (_rebuild, (self.name, self._pin, self.muscles, self.effects, self.contacts, _thaw(self.meta)))
 
 
 def _rebuild(name, pm, muscles, effects, contacts, meta):
-    return Model(name=name, pin_model=pm, muscles=muscles, effects=effects, contacts=contacts, meta=meta)
+    return Model._make(name=name, pin_model=pm, muscles=muscles, effects=effects, contacts=contacts, meta=meta)
+
+
+class Data:
+    """The workspace of one :class:`Model`, as Pinocchio's ``Data`` is of its ``Model``.
+
+    ``pin`` is a ``pinocchio.Data`` of ``model.pin``.  :meth:`cached` keeps what
+    components compute from a motion's kinematics (frame Jacobians and point
+    accelerations, the joint torque regressor, contact-site kinematics) keyed by
+    the :class:`~pinmsk.components.Motion` object (immutable, so its identity is a
+    sound key), for the last ``max_motions`` motions; components prepared on the
+    same motion with the same Data share that work.
+
+    A Data is not thread-safe: give each thread its own (``model.create_data()``);
+    two Data objects share nothing.  It serves every model built on the same
+    skeleton (``model + effect`` keeps the skeleton).
+    """
+
+    __slots__ = ("model", "pin", "max_motions", "_entries")
+
+    def __init__(self, model: Model, *, max_motions: int = 4):
+        self.model = model
+        self.pin = model.pin.createData()
+        self.max_motions = int(max_motions)
+        self._entries: list[tuple[Motion, dict]] = []   # [(motion, {key: value})], most recent last
+
+    def cached(self, model, key, motion: Motion, compute: Callable[[Any], Any]):
+        """``compute(self.pin)`` for ``motion``, computed once per ``(key, motion)``.
+
+        ``key`` names the quantity (e.g. ``("frame_point", frame_id)``); ``model`` must
+        share this Data's skeleton.
+        """
+        if model.pin is not self.model.pin:
+            raise ModelError(f"this Data was created by model '{self.model.name}', whose skeleton is not "
+                             f"that of model '{model.name}'; use {model.name}.create_data()")
+        for i, (mo, values) in enumerate(self._entries):
+            if mo is motion:
+                if i != len(self._entries) - 1:
+                    self._entries.append(self._entries.pop(i))
+                break
+        else:
+            values = {}
+            self._entries.append((motion, values))
+            if len(self._entries) > self.max_motions:
+                del self._entries[0]
+        if key not in values:
+            values[key] = compute(self.pin)
+        return values[key]
+
+    def clear(self) -> None:
+        """Forget every cached quantity."""
+        self._entries.clear()
+
+    def __repr__(self) -> str:
+        n = sum(len(v) for _, v in self._entries)
+        return f"<pinmsk.Data of {self.model.name}: {n} cached quantities over {len(self._entries)} motion(s)>"
 
 
 # -- loading ---------------------------------------------------------------
@@ -253,8 +468,6 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
     ``gravity``) otherwise keeps Pinocchio's URDF/ROS convention ``[0, 0, -9.81]``
     (z up), with a warning saying so.
     """
-    from . import builtin_models
-
     p = Path(str(name_or_path))
     if p.suffix.lower() == ".urdf":
         if not p.exists():
@@ -266,7 +479,8 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
         if gravity is None:
             _warn_default_gravity(p)
         _set_gravity(pm, gravity, p)
-        return Model(name=p.stem, pin_model=pm, meta={"urdf": str(p)})
+        return Model._make(name=p.stem, pin_model=pm, muscles=None, effects=(), contacts=(),
+                           meta={"urdf": str(p)})
     if p.suffix.lower() == ".toml":
         if not p.exists():
             raise ModelError(f"model sidecar not found: {p}")
@@ -295,17 +509,17 @@ def _warn_default_gravity(where) -> None:
 def _set_gravity(pm: pin.Model, gravity, where) -> None:
     if gravity is None:
         return
-    g = np.asarray(gravity, dtype=float)
-    if g.shape != (3,) or not np.all(np.isfinite(g)):
+    try:
+        g = np.asarray(gravity, dtype=float)
+    except (TypeError, ValueError):
+        g = None
+    if g is None or g.shape != (3,) or not np.all(np.isfinite(g)):
         raise ModelError(f"{where}: gravity must be 3 finite numbers (m/s^2), got {gravity}")
     pm.gravity = pin.Motion(np.concatenate([g, np.zeros(3)]))
 
 
 def _load_sidecar(sidecar: Path, *, moment_arms: str | None, tendon: str | None, gravity=None) -> Model:
-    from . import builtin_models
-    from .effects import registry
-    from .muscles.paths import MomentArmPath
-
+    """The one sidecar -> (Pinocchio skeleton + components) loader behind :func:`load_model`."""
     spec = read_toml(sidecar, what="model sidecar")
     _check_sidecar(spec, sidecar)
     mspec = spec.get("model")
@@ -341,12 +555,10 @@ def _load_sidecar(sidecar: Path, *, moment_arms: str | None, tendon: str | None,
         muscles = _build_muscles(entries, mm, path, tendon or mm.get("tendon", "rigid"), sidecar)
     effects = [registry.from_spec(e, where=f"{sidecar} [[effects]] #{i + 1}")
                for i, e in enumerate(spec.get("effects", []))]
-    if spec.get("contacts"):
-        from .contact import from_spec as contact_from_spec
-        effects += [contact_from_spec(c, where=f"{sidecar} [[contacts]] #{i + 1}")
-                    for i, c in enumerate(spec["contacts"])]
-    model = Model(name=name, pin_model=pm, muscles=muscles, meta=meta)
-    return model.with_effect(*effects) if effects else model
+    contacts = [contact_from_spec(c, where=f"{sidecar} [[contacts]] #{i + 1}")
+                for i, c in enumerate(spec.get("contacts", []))]
+    model = Model._make(name=name, pin_model=pm, muscles=muscles, effects=(), contacts=(), meta=meta)
+    return model.with_effect(*effects, *contacts) if effects or contacts else model
 
 
 def _check_sidecar(spec: dict, sidecar: Path) -> None:
@@ -375,9 +587,6 @@ def _check_sidecar(spec: dict, sidecar: Path) -> None:
 
 
 def _build_muscles(entries, mm: dict, path, tendon: str, sidecar: Path):
-    from .muscles import NaganoGerritsen, Thelen2003
-    from .muscles.muscle_set import MuscleSet
-
     kind = mm.get("type", "thelen2003")
     names = [e.get("name") for e in entries]
     for i, n in enumerate(names):
@@ -395,13 +604,10 @@ def _build_muscles(entries, mm: dict, path, tendon: str, sidecar: Path):
                 vals.append(np.nan if default is None else default)
         return np.array(vals)
 
-    common = dict(f_max=col("f_max"), l_opt=col("l_opt"), l_slack=col("l_slack"),
-                  pennation=col("pennation", 0.0))
-    for key in ("f_max", "l_opt", "l_slack"):
-        bad = np.flatnonzero(~(common[key] > 0))
-        if bad.size:
-            raise ModelError(f"{sidecar}: muscle '{names[bad[0]]}' has {key} = {common[key][bad[0]]}; "
-                             "it must be > 0")
+    # the values are checked where they are stored: by the muscle model (pinmsk.muscles.models.MUSCLE_PARAMETERS)
+    common = dict(names=names, f_max=col("f_max"), l_opt=col("l_opt"), l_slack=col("l_slack"),
+                  pennation=col("pennation", 0.0), fast_fraction=col("fast_fraction", 0.5, required=False),
+                  volume=col("volume", required=False) if any("volume" in e for e in entries) else None)
     if kind not in _MUSCLE_LAWS:
         raise ModelError(f"{sidecar}: unknown muscle_model type '{kind}' "
                          "(known: thelen2003, nagano_gerritsen)")
@@ -417,12 +623,13 @@ def _build_muscles(entries, mm: dict, path, tendon: str, sidecar: Path):
         if not (isinstance(strain, (int, float)) and 0 < strain < 1):
             raise ModelError(f"{sidecar}: [muscle_model] tendon_strain must be a number in (0, 1), got {strain!r}")
         common["tendon_strain0"] = float(strain)
-    if kind == "thelen2003":
-        mtu = Thelen2003(**common)
-    else:
-        mtu = NaganoGerritsen(**common, width=col("width"))
-    volume = col("volume", required=False) if any("volume" in e for e in entries) else None
-    ff = col("fast_fraction", 0.5, required=False)
     points = {e["name"]: [tuple(p) for p in e.get("points", [])] for e in entries}
-    return MuscleSet(names=names, model_type=kind, mtu=mtu, path=path, tendon=tendon,
-                     volume=volume, fast_fraction=ff, display_points=points)
+    try:
+        if kind == "thelen2003":
+            mtu = Thelen2003(**common)
+        else:
+            mtu = NaganoGerritsen(**common, width=col("width"))
+        return MuscleSet(names=names, model_type=kind, mtu=mtu, path=path, tendon=tendon,
+                         display_points=points)
+    except ModelError as exc:
+        raise ModelError(f"{sidecar}: [[muscles]]: {exc}") from None

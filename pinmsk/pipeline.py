@@ -70,7 +70,7 @@ from .errors import PinmskError, TrialError
 from .grf import external_forces, grf_channels, torso_residuals, transfer_cop
 from .ik import InverseKinematics
 from .io.channel_map import RAJAGOPAL_HIP_OFFSET, apply_channel_map, opensim_gait2d_map
-from .io.cleveland_gait import read_csu
+from .contact.identify import read_csu_foot2d
 from .io.output_files import atomic_write, output_folder, write_json
 from .io.tables import read_trial, write_trial
 from .io.toml_files import read_toml
@@ -170,7 +170,7 @@ def _kinematics(model, spec: dict, base: Path):
     info: dict = {}
     ext = []
     if kind == "csu":
-        raw = read_csu(_path(base, spec["path"]), body_mass=spec.get("body_mass"),
+        raw = read_csu_foot2d(_path(base, spec["path"]), body_mass=spec.get("body_mass"),
                        belt_height=float(spec.get("belt_height", 0.0)))
         mset = load_marker_set(spec.get("marker_file", "gait2d")).subset(spec.get("markers", "csu"))
         ik = InverseKinematics(markers=mset, axes="xy", q0={"torso_y": 1.0}).fit(model, raw)

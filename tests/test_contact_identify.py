@@ -292,8 +292,8 @@ def test_missing_channels_are_named(synth):
 # -- CSU data ------------------------------------------------------------------------
 
 def test_csu_reader(shared_data, tmp_path):
-    from pinmsk.io.cleveland_gait import read_csu
-    tr = read_csu(shared_data / CSU, body_mass=67.2)
+    from pinmsk.contact import read_csu_foot2d
+    tr = read_csu_foot2d(shared_data / CSU, body_mass=67.2)
     assert tr.n_frames == 301 and tr.rate == pytest.approx(100.0)
     fy, fx = tr["ground_force_vy"], tr["ground_force_vx"]
     mz = tr["ground_moment_origin_z"]
@@ -304,7 +304,7 @@ def test_csu_reader(shared_data, tmp_path):
     assert tr.meta["filled"]["RLM.PosX"] == 5  # the marker gap near t = 7.45 s
     assert -1.1 < tr.meta["ground_speed"] < -0.8  # belt backwards at ~0.94 m/s
     # belt height shifts heights and the COP (M_z = x F_y - y F_x)
-    tr2 = read_csu(shared_data / CSU, belt_height=0.01)
+    tr2 = read_csu_foot2d(shared_data / CSU, belt_height=0.01)
     np.testing.assert_allclose(tr2["RHEE_y"], tr["RHEE_y"] - 0.01)
     np.testing.assert_allclose(tr2["ground_force_px"][ok], (mz[ok] + 0.01 * fx[ok]) / fy[ok])
     t0, t1 = stance_cycle(tr)
@@ -312,14 +312,14 @@ def test_csu_reader(shared_data, tmp_path):
 
 
 def test_csu_reader_bad_file(tmp_path):
-    from pinmsk.io.cleveland_gait import read_csu
+    from pinmsk.contact import read_csu_foot2d
     p = tmp_path / "bad.txt"
     p.write_text("TimeStamp\tFP2.ForX\n7.0\t1.0\n")
     with pytest.raises(TrialError, match="header line starting with '%'"):
-        read_csu(p)
+        read_csu_foot2d(p)
     p.write_text("% TimeStamp\tRLM.PosX\tFP2.ForX\tFP2.ForY\tFP2.MomZ\n7.0\tNaN\t0\t0\t0\n7.01\t1\t0\t0\t0\n")
     with pytest.raises(TrialError, match="RLM.PosX.*edge of the file"):
-        read_csu(p)
+        read_csu_foot2d(p)
 
 
 def test_csu_reader_locates_the_foot_from_heel_and_mt5_markers(shared_data):
@@ -327,8 +327,8 @@ def test_csu_reader_locates_the_foot_from_heel_and_mt5_markers(shared_data):
     heel_height in foot flat and above the measured COP during heel-only loading."""
     from pinmsk.contact import load_foot2d
     from pinmsk.contact.foot import Foot2dGeometry, foot2d_site_kinematics
-    from pinmsk.io.cleveland_gait import read_csu
-    tr = read_csu(shared_data / CSU)
+    from pinmsk.contact import read_csu_foot2d
+    tr = read_csu_foot2d(shared_data / CSU)
     assert tr.meta["anchor"] == "heel" and tr.meta["heel_calibration_frames"] >= 5
     ox, oy = tr.meta["heel_offset"]
     assert 0.02 < ox < 0.07 and -0.04 < oy < 0.0  # ahead of and below the skin marker on the heel
@@ -345,12 +345,12 @@ def test_csu_reader_locates_the_foot_from_heel_and_mt5_markers(shared_data):
     # the malleolus marker is not the ankle joint: the foot2d ankle sits several cm from it
     assert np.hypot(*tr.meta["ankle_from_marker"]) > 0.02
     # given offset, and the old hanging-from-the-malleolus mode
-    tr2 = read_csu(shared_data / CSU, heel_offset=(ox, oy))
+    tr2 = read_csu_foot2d(shared_data / CSU, heel_offset=(ox, oy))
     np.testing.assert_allclose(tr2["ankle_x"], tr["ankle_x"], atol=1e-12)
-    tr3 = read_csu(shared_data / CSU, anchor="ankle")
+    tr3 = read_csu_foot2d(shared_data / CSU, anchor="ankle")
     np.testing.assert_allclose(tr3["ankle_x"], tr3["RLM_x"])
     with pytest.raises(TrialError, match="anchor must be 'heel'"):
-        read_csu(shared_data / CSU, anchor="knee")
+        read_csu_foot2d(shared_data / CSU, anchor="knee")
 
 
 def test_real_data_hypervolumetric_is_not_worse_than_what_it_contains(shared_data):
@@ -358,8 +358,8 @@ def test_real_data_hypervolumetric_is_not_worse_than_what_it_contains(shared_dat
     exactly) and below the undamped point contact (contained in the small-penetration limit).  The
     damped point contact ends lower still (J 0.097 against 0.100): its Hunt-Crossley damping
     k_s a_s d^n v, with n as low as 0.3, is no limit of Eq. 4.15's a_h V v."""
-    from pinmsk.io.cleveland_gait import read_csu
-    tr = read_csu(shared_data / CSU)
+    from pinmsk.contact import read_csu_foot2d
+    tr = read_csu_foot2d(shared_data / CSU)
     fit = ContactFit().fit(None, tr)
     assert fit.window_ == pytest.approx((7.99, 9.18)) and fit.settings_()["window_source"].startswith("one cycle")
     vol = fit.nested_["volumetric"]
@@ -409,3 +409,10 @@ def test_cli_prints_the_settings(vol_trial, tmp_path, capsys):
         assert line in text, line
     assert main(["contact", "fit", "foot2d", str(path), "--starts", "0"]) == 2
     assert "pinmsk: error: ContactFit: n_starts must be an integer >= 1, got 0" in capsys.readouterr().err
+
+
+def test_csu_reader_needs_the_foot_models_heel_site_to_anchor_by_the_heel(tmp_path):
+    """The reader (io) knows no model: anchoring by the heel needs the site, named in the error."""
+    from pinmsk.io.cleveland_gait import read_csu
+    with pytest.raises(TrialError, match="heel_site=.*read_csu_foot2d"):
+        read_csu(tmp_path / "walk.txt")

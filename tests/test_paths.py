@@ -13,14 +13,14 @@ import pickle
 import numpy as np
 import pytest
 
+import pinmsk
 from pinmsk import builtin_models as bm
 from pinmsk.errors import ModelError, PinmskError
 from pinmsk.muscles.paths import DisplayPoints, MomentArmPath, display_points_from_sidecar, path_variants
 
 
 def _coordinates(name):
-    model = bm.build_pinocchio_model(name)
-    return tuple(model.names[j] for j in range(1, model.njoints))
+    return pinmsk.load_model(name).coordinates
 
 
 def _cases():

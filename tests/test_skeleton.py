@@ -40,7 +40,7 @@ def test_batch_matches_per_frame_and_mass_matrix(name):
     model = pinmsk.load_model(name)
     q, v, a = _random_state(model, 25, seed=3)
     tau = skeleton.inverse_dynamics(model, q, v, a)
-    pm, pd = model.pin, model.create_data()
+    pm, pd = model.pin, model.create_data().pin
     for i in (0, 7, 24):
         assert np.allclose(tau[i], pin.rnea(pm, pd, q[i], v[i], a[i]), atol=1e-12)
     M = skeleton.mass_matrix(model, q)
@@ -93,7 +93,7 @@ def test_external_force_at_hand_matches_lever_arm():
     q = np.array([[np.pi / 2]])
     z = np.zeros((1, 1))
     hand = model.pin.frames[model.frame_id("hand")]
-    pd = model.create_data()
+    pd = model.create_data().pin
     pin.framesForwardKinematics(model.pin, pd, q[0])
     p_hand = pd.oMf[model.frame_id("hand")].translation.copy()
     # the hand COM lies D_H in front of the elbow when horizontal (+x), at elbow height

@@ -15,6 +15,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+import pinmsk
 from pinmsk import builtin_models as bm
 from pinmsk.errors import ModelError
 
@@ -35,7 +36,7 @@ needs_erd = pytest.mark.skipif(not _has_example_robot_data(), reason="example-ro
 
 @pytest.fixture(scope="module")
 def models():
-    return {name: bm.build_pinocchio_model(name) for name in ("finger", "forearm", "gait2d")}
+    return {name: pinmsk.load_model(name).pin for name in ("finger", "forearm", "gait2d")}
 
 
 def _frame_pos(model, q, frame):
@@ -90,7 +91,7 @@ def test_sidecar_errors_name_the_file(tmp_path):
     missing = tmp_path / "missing.toml"
     missing.write_text('[model]\nurdf = "nothere.urdf"\n')
     with pytest.raises(ModelError, match="nothere.urdf' does not exist"):
-        bm.build_pinocchio_model(missing)
+        pinmsk.load_model(missing)
 
 
 # ---------------------------------------------------------------------------- skeletons
@@ -405,7 +406,7 @@ def test_human3d_is_found_and_loads():
     assert urdf == src.path and package_dirs == src.package_dirs
     assert src.path.name == "human.urdf" and src.path.is_file()
     assert src.path.parts[-3:] == ("human_description", "robots", "human.urdf")
-    m = bm.build_pinocchio_model("human3d")
+    m = pinmsk.load_model("human3d").pin
     assert m.nq == m.nv == 36
     np.testing.assert_array_equal(m.gravity.linear, [0.0, -9.81, 0.0])
     # y is up in this model: the head is above the pelvis, the feet below
@@ -423,4 +424,4 @@ def test_missing_example_robot_data_is_a_clear_error(monkeypatch):
 
     monkeypatch.setattr(importlib.metadata, "distribution", missing)
     with pytest.raises(ModelError, match=r"example-robot-data package, which is not installed; .*pip install example-robot-data"):
-        bm.build_pinocchio_model("human3d")
+        pinmsk.load_model("human3d")

@@ -19,24 +19,39 @@ ones it contains), :func:`fit_cli_run` (what ``pinmsk contact fit`` calls),
 :func:`from_spec` (a sidecar ``[[contacts]]`` entry -> component, see
 :mod:`pinmsk.contact.spec`).  The CSU reader is :func:`pinmsk.io.cleveland_gait.read_csu`.  The
 contact models as diagnosis candidates (``contact_candidates``) are in :mod:`pinmsk.diagnose.contact`.
+
+Layers: the physics (spheres, laws, feet, sidecar entries) is imported with the package and
+imports no model; the identification and the synthetic trial use models
+(:func:`pinmsk.load_model`, which builds contacts from this package), so their names are
+imported on first use (PEP 562), as :mod:`pinmsk` does.
 """
+from .._lazy import lazy_attributes
 from .friction import friction_coefficient, regularized_coulomb
 from .sphere import (ContactForces, SiteKinematics, SphereContact, cap_centroid_depth, cap_volume,
                      site_kinematics, smooth_positive, wrench_generalized_force)
 from .hunt_crossley import HuntCrossley
 from .volumetric import HyperVolumetric, Volumetric
-from .foot import (KINDS, SITES, GroundReaction, foot_contacts, ground_reaction, load_foot2d,
-                   site_frames)
-from .identify import (ContactFit, fit_cli_run, fit_contact_models, fourier_basis, read_contact_trial,
-                       stance_cycle, toe_from_kinematics)
+from .foot import KINDS, SITES, GroundReaction, foot_contacts, ground_reaction, site_frames
 from .spec import from_spec
-from .synthetic import synthetic_foot_trial
+
+#: Names of the model-level submodules, imported when first used.
+_LAZY = {
+    "ContactFit": "identify", "fit_cli_run": "identify", "fit_contact_models": "identify",
+    "fourier_basis": "identify", "load_foot2d": "identify", "read_contact_trial": "identify",
+    "read_csu_foot2d": "identify",
+    "stance_cycle": "identify", "toe_from_kinematics": "identify",
+    "synthetic_foot_trial": "synthetic",
+}
+
 
 __all__ = [
     "ContactFit", "ContactForces", "GroundReaction", "HuntCrossley", "HyperVolumetric", "KINDS",
     "SITES", "SiteKinematics", "SphereContact", "Volumetric", "cap_centroid_depth", "cap_volume",
     "fit_cli_run", "fit_contact_models", "from_spec", "foot_contacts", "fourier_basis",
-    "friction_coefficient", "ground_reaction", "load_foot2d", "read_contact_trial", "regularized_coulomb", "site_frames",
+    "friction_coefficient", "ground_reaction", "load_foot2d", "read_contact_trial", "read_csu_foot2d",
+    "regularized_coulomb", "site_frames",
     "site_kinematics", "smooth_positive", "stance_cycle", "synthetic_foot_trial", "toe_from_kinematics",
     "wrench_generalized_force",
 ]
+
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, __all__)

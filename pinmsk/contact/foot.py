@@ -1,6 +1,7 @@
 """Feet: the foot2d model, the three-sphere contact sets of thesis Ch. 4, and per-foot totals.
 
-* :func:`load_foot2d` -- the 4-dof kinematically driven foot (``urdf/foot2d.urdf``).
+* the 4-dof kinematically driven foot is the built-in model ``foot2d``
+  (``load_model("foot2d")``, or :func:`pinmsk.contact.load_foot2d`).
 * :func:`foot_contacts` -- spheres at the heel H, first metatarsal P and toe T
   with the bounds of Tables 4.2-4.4 (``kind`` = ``point``, ``volumetric`` or
   ``hypervolumetric``).  Works for any model with those frames: foot2d's
@@ -24,19 +25,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import cached_property
-from pathlib import Path
 from typing import Sequence
 
 import numpy as np
-import pinocchio as pin
 
 from ..errors import ModelError
 from .dual import vector
 from .hunt_crossley import HuntCrossley
-from .sphere import ContactForces, cross, smooth_positive
+from .sphere import ContactForces, SiteKinematics, cross, smooth_positive
 from .volumetric import HyperVolumetric, Volumetric
-
-URDF_DIR = Path(__file__).resolve().parents[2] / "urdf"
 
 #: contact model names (CLI ``--contact``) -> classes
 KINDS = {"point": HuntCrossley, "volumetric": Volumetric, "hypervolumetric": HyperVolumetric}
@@ -62,24 +59,6 @@ THESIS_VALUES = {
         "toe": dict(k_h=7.5e5, a_h=13e6, R=0.044, H=0.79, mu_f=0.34, v_s=0.034),
     },
 }
-
-
-def load_foot2d():
-    """The foot2d :class:`pinmsk.Model` (4 dof: ankle_x, ankle_y, foot_angle, mtp)."""
-    from ..model import Model, load_model
-
-    try:
-        return load_model("foot2d")
-    except Exception:  # the sidecar loader is optional here: build from the URDF directly
-        pass
-    urdf = URDF_DIR / "foot2d.urdf"
-    if not urdf.exists():
-        raise ModelError(f"foot2d URDF not found at {urdf}; run python urdf/generate_foot2d.py")
-    pm = pin.buildModelFromUrdf(str(urdf))
-    pm.gravity = pin.Motion(np.array([0.0, -9.81, 0.0, 0.0, 0.0, 0.0]))
-    return Model(name="foot2d", pin_model=pm,
-                 meta={"urdf": str(urdf), "up_axis": "y",
-                       "description": "Kinematically driven sagittal foot, thesis Ch. 4"})
 
 
 def site_frames(model, side: str | None = None) -> dict[str, str]:
@@ -119,10 +98,7 @@ def foot_contacts(model, kind: str = "hypervolumetric", *, side: str | None = No
         vals.update((values or {}).get(site, {}))
         c = cls(frame, ground_speed=ground_speed, smoothing=smoothing, center=center,
                 bounds={cls.radius_name: (0.001, RADIUS_UPPER[site])}, **vals)
-        if relax:
-            from .sphere import _replace
-            c._params = {k: (_replace(p, vary=True) if k in ("dx", "dy") else p) for k, p in c._params.items()}
-        out.append(c)
+        out.append(c.free("dx", "dy") if relax else c)
     return out
 
 
@@ -218,8 +194,6 @@ def foot2d_site_kinematics(geom: Foot2dGeometry, q, v) -> dict:
     ``q, v`` may also be sequences of the four (N,) columns, some of them
     :class:`~pinmsk.contact.dual.Dual` (the fitted toe angle): the kinematics then carry derivatives.
     """
-    from .sphere import SiteKinematics
-
     if not isinstance(q, (list, tuple)):
         q, v = np.asarray(q, dtype=float).T, np.asarray(v, dtype=float).T
     A, vA = _planar(q[0], q[1]), _planar(v[0], v[1])

@@ -59,9 +59,11 @@ from threadpoolctl import threadpool_limits
 from ..errors import ModelError, SolverError, TrialError
 from ..fitting import Fitter, FitStatistics, Result, format_report
 from ..signals.filtering import differentiate
+from ..io.cleveland_gait import read_csu
+from ..model import load_model
 from .dual import Dual
 from .foot import (KINDS, SITES, Foot2dGeometry, foot2d_site_kinematics, foot_contacts,
-                   ground_reaction, load_foot2d)
+                   ground_reaction)
 from .sphere import cap_volume
 
 DRIVE = ("ankle_x", "ankle_y", "foot_angle")
@@ -176,9 +178,10 @@ class _Residual:
         self.prob = prob
         self.contacts = contacts
         self.fit_toe = fit_toe
-        self.slots = [(i, n) for i, c in enumerate(contacts) for n, p in c._params.items() if p.vary]
+        params = [c.params for c in contacts]
+        self.slots = [(i, n) for i, P in enumerate(params) for n, p in P.items() if p.vary]
         self.nfree = len(self.slots)
-        par = [contacts[i]._params[n] for i, n in self.slots]
+        par = [params[i][n] for i, n in self.slots]
         p0 = np.array([p.value for p in par])
         lo = np.array([p.min for p in par])
         hi = np.array([p.max for p in par])
@@ -451,32 +454,26 @@ class ContactFit(Fitter):
                 raise ModelError(f"ContactFit: fixed names '{name}', which the {self.contact} contact does not "
                                  f"have (it has {', '.join(sorted(known))})")
         no_friction = "friction_force" not in self._terms()
-        from .sphere import _replace
         out = []
         for site, c in zip(SITES, cs):
-            params = dict(c._params)
-            if self.relax:
-                for name in ("dx", "dy"):
-                    params[name] = _replace(params[name], min=-self.relax_range, max=self.relax_range)
-            for name, (lo, hi) in bnds.get(site, {}).items():
-                if name not in params:
-                    raise ModelError(f"ContactFit: {c.label} has no parameter '{name}' ({sorted(params)})")
-                params[name] = _replace(params[name], min=float(lo), max=float(hi))
-            for name, val in init.get(site, {}).items():
-                if name not in params:
-                    raise ModelError(f"ContactFit: {c.label} has no parameter '{name}' ({sorted(params)})")
-                params[name] = _replace(params[name], value=float(val))
+            params = c.params
+            bounds = {n: (-self.relax_range, self.relax_range) for n in ("dx", "dy")} if self.relax else {}
+            values = {}
+            for what, given, into in (("bounds", bnds, bounds), ("initial", init, values)):
+                for name, x in given.get(site, {}).items():
+                    if name not in params:
+                        raise ModelError(f"ContactFit: {c.label} has no parameter '{name}' ({sorted(params)})")
+                    into[name] = (float(x[0]), float(x[1])) if what == "bounds" else float(x)
             for name, p in params.items():
-                # nothing minimised depends on the friction pair when friction is not tracked
-                if name in self.fixed or (no_friction and name in FRICTION):
-                    params[name] = p = _replace(p, vary=False)
-                if not (p.min <= p.value <= p.max):
+                lo, hi = bounds.get(name, (p.min, p.max))
+                value = values.get(name, p.value)
+                if not (lo <= value <= hi):
                     raise SolverError(
-                        f"ContactFit: the initial guess {site}.{name} = {p.value:g} {p.unit} is outside its "
-                        f"bounds [{p.min:g}, {p.max:g}]; widen bounds= or pass initial= inside them")
-            c = c.with_params()  # copy
-            c._params = params
-            out.append(c)
+                        f"ContactFit: the initial guess {site}.{name} = {value:g} {p.unit} is outside its "
+                        f"bounds [{lo:g}, {hi:g}]; widen bounds= or pass initial= inside them")
+            # nothing minimised depends on the friction pair when friction is not tracked
+            fixed = [n for n in params if n in self.fixed or (no_friction and n in FRICTION)]
+            out.append(c.with_params(values, bounds=bounds, vary={n: False for n in fixed}))
         return out
 
     def _resolve_window(self, trial):
@@ -704,7 +701,7 @@ class ContactFit(Fitter):
             kin = foot2d_site_kinematics(prob.geom, q, prob.v)
         msgs = []
         for s, c in zip(SITES, contacts):
-            P = c._params
+            P = c.params
             rmax = P[c.radius_name].max
             reach = rmax + max(abs(P["dy"].min), abs(P["dy"].max)) * P["dy"].vary + abs(P["dy"].value)
             hmin = float(kin[s].position[:, 1].min())
@@ -1018,16 +1015,31 @@ def read_contact_trial(path):
     with open(path, "r", errors="replace") as fh:
         first = fh.readline()
     if first.lstrip().startswith("%") and "TimeStamp" in first:
-        from ..io.cleveland_gait import read_csu
-        return read_csu(path)
+        return read_csu_foot2d(path)
     from ..io.tables import read_trial
     return read_trial(path)
+
+
+def load_foot2d():
+    """The foot2d :class:`pinmsk.Model` (4 dof: ankle_x, ankle_y, foot_angle, mtp; thesis Ch. 4):
+    the built-in model ``foot2d`` (``urdf/foot2d.toml``, y up), by :func:`pinmsk.load_model`."""
+    return load_model("foot2d")
+
+
+def read_csu_foot2d(path, **options):
+    """A CSU leg2d file (:func:`pinmsk.io.cleveland_gait.read_csu`) placed on the foot2d model.
+
+    With ``anchor="heel"`` (the default) the foot2d ankle goes where foot2d's heel
+    sphere site (Table 4.1) sits relative to the heel marker; ``options`` go to ``read_csu``.
+    """
+    if options.get("anchor", "heel") == "heel" and options.get("heel_site") is None:
+        options["heel_site"] = Foot2dGeometry.from_model(load_foot2d()).heel[:2]
+    return read_csu(path, **options)
 
 
 def _load_model_arg(model):
     if model is None or str(model) == "foot2d" or Path(str(model)).name in ("foot2d.toml", "foot2d.urdf"):
         return load_foot2d()
-    from ..model import load_model
     return load_model(model)
 
 

@@ -44,8 +44,6 @@ def from_spec(spec: Mapping[str, Any], *, where: str = "[[contacts]]"):
 
     ``where`` names the entry in error messages (e.g. ``"gait2d.toml [[contacts]] #3"``).
     """
-    from .sphere import _replace
-
     if not isinstance(spec, Mapping):
         raise ModelError(f"{where}: expected a table, got {type(spec).__name__}")
     typ = spec.get("type")
@@ -103,6 +101,4 @@ def from_spec(spec: Mapping[str, Any], *, where: str = "[[contacts]]"):
     for k in fixed:
         if k not in declared:
             raise ModelError(f"{where} (frame {frame}): 'fixed' names unknown parameter '{k}'")
-    if fixed:
-        c._params = {k: (_replace(p, vary=False) if k in fixed else p) for k, p in c._params.items()}
-    return c
+    return c.fix(*fixed)

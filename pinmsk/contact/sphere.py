@@ -32,7 +32,7 @@ from typing import Any, ClassVar, Mapping
 import numpy as np
 import pinocchio as pin
 
-from ..components import Component, Motion, Parameter, _replace
+from ..components import Component, Motion, Parameter, _replace, motion_cached
 from ..errors import ModelError
 from .dual import asarray, vector
 from .friction import regularized_coulomb
@@ -124,14 +124,16 @@ class SiteKinematics:
 
 
 def site_kinematics(model, frame: str, q: np.ndarray, v: np.ndarray, *,
-                    jacobian: bool = True) -> SiteKinematics:
-    """:class:`SiteKinematics` of Pinocchio frame ``frame`` over the rows of ``q, v`` (one FK per frame)."""
+                    jacobian: bool = True, pin_data=None) -> SiteKinematics:
+    """:class:`SiteKinematics` of Pinocchio frame ``frame`` over the rows of ``q, v`` (one FK per frame).
+
+    ``pin_data``: a Pinocchio ``Data`` of the model to work in (default: a new one)."""
     pm = model.pin if hasattr(model, "pin") else model
     fid = model.frame_id(frame) if hasattr(model, "frame_id") else pm.getFrameId(frame)
     q = np.atleast_2d(np.asarray(q, dtype=float))
     v = np.atleast_2d(np.asarray(v, dtype=float))
     n = q.shape[0]
-    pd = pm.createData()
+    pd = pm.createData() if pin_data is None else pin_data
     pos = np.empty((n, 3))
     rot = np.empty((n, 3, 3))
     vel = np.empty((n, 3))
@@ -295,8 +297,12 @@ class SphereContact(Component):
         force = ff + vector(zero, fn, zero)
         return ContactForces(fn, ff, force, point, delta, vol, slip)
 
-    def prepare(self, model, motion: Motion) -> SiteKinematics:
-        return site_kinematics(model, self.target, motion.q, motion.v, jacobian=True)
+    def prepare(self, model, motion: Motion, data=None) -> SiteKinematics:
+        """The site's :class:`SiteKinematics` with Jacobians (cached in ``data``, a
+        :class:`pinmsk.model.Data`, when given)."""
+        return motion_cached(
+            data, model, ("site", model.frame_id(self.target)), motion,
+            lambda pd: site_kinematics(model, self.target, motion.q, motion.v, jacobian=True, pin_data=pd))
 
     def evaluate(self, model, motion: Motion, params=None, cache: SiteKinematics | None = None) -> ContactForces:
         """:class:`ContactForces` over the frames of ``motion``."""

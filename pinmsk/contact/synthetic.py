@@ -19,8 +19,8 @@ import numpy as np
 
 from ..signals.filtering import differentiate
 from ..trial import Trial
-from .foot import SITES, Foot2dGeometry, foot2d_site_kinematics, foot_contacts, ground_reaction, load_foot2d
-from .identify import SWING, fourier_basis, toe_from_kinematics
+from .foot import SITES, Foot2dGeometry, foot2d_site_kinematics, foot_contacts, ground_reaction
+from .identify import SWING, fourier_basis, load_foot2d, toe_from_kinematics
 
 
 def _smoothstep(u):

@@ -297,7 +297,8 @@ class EquationError:
         self.measured_tau = measured_tau          # (N, nv) with zeros on unactuated rows (torque mode)
         self.excitation = excitation              # (N, m) measured signals (muscle mode)
         self._ext_rows = _subset_external(self.external, rows)
-        tau_id = inverse_dynamics_array(model, self.motion_rows, external=self._ext_rows)
+        self.data = model.create_data()           # the candidates' kinematics, shared (one thread)
+        tau_id = inverse_dynamics_array(model, self.motion_rows, external=self._ext_rows, data=self.data)
         self.tau_id = tau_id[:, self.columns]
         if self.mode == "muscle":
             self.chain = sorted([c for c in model.effects if isinstance(c, SignalEffect)],

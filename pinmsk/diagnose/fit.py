@@ -92,7 +92,7 @@ class EffectProblem:
         self.lo = np.array([decl[n].min for n in self.names], dtype=float)
         self.hi = np.array([decl[n].max for n in self.names], dtype=float)
         self.x_default = np.array([decl[n].value for n in self.names], dtype=float)
-        self.cache = None if self.signal else component.prepare(self.model, eq.motion_rows)
+        self.cache = None if self.signal else component.prepare(self.model, eq.motion_rows, data=eq.data)
         self._basis = None
         self._memo = None
         self.nfev = 0

@@ -43,7 +43,9 @@ when ``linear = True``), ranks it and adds it like the built-in ones::
 
 Subclass :class:`pinmsk.components.Component` directly for any other
 target (implement ``generalized_force(model, motion, params=None, cache=None)
--> (N, nv)``); see :mod:`pinmsk.diagnose.catalog` for how candidates are chosen.
+-> (N, nv)``, and optionally ``prepare(model, motion, data=None)`` for the
+parameter-independent work, given back as ``cache``); see
+:mod:`pinmsk.diagnose.catalog` for how candidates are chosen.
 """
 from .registry import families, from_spec, get, register
 from ._base import JointEffect, SignalEffect

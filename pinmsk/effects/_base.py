@@ -10,8 +10,9 @@
   own.
 * batch kinematics shared by the frame- and body-targeted effects
   (frame Jacobians and classical accelerations, the joint torque regressor),
-  memoised on the identity of the motion's arrays so that several candidates
-  prepared on the same motion do not repeat the Pinocchio calls.
+  cached in the :class:`pinmsk.model.Data` the caller passes (``prepare(model,
+  motion, data=...)``), so that several candidates prepared on the same motion
+  do not repeat the Pinocchio calls; without a Data they are computed afresh.
 """
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ from typing import Any, Mapping
 import numpy as np
 import pinocchio as pin
 
-from ..components import Component, Motion
+from ..components import Component, Motion, motion_cached
 from ..errors import ModelError
 
 __all__ = ["JointEffect", "SignalEffect", "frame_point_kinematics", "torque_regressor",
@@ -227,65 +228,50 @@ def hand_like_frames(model) -> list[str]:
     return out
 
 
-# -- memoised batch kinematics ---------------------------------------------------
+# -- batch kinematics (cached in a caller's Data) ---------------------------------
 
-_MEMO: list = []       # [(key arrays..., value)], most recent last
-_MEMO_SIZE = 8
-
-
-def _memo(kind, pm, arrays, compute):
-    for entry in _MEMO:
-        if entry[0] == kind and entry[1] is pm and len(entry[2]) == len(arrays) and all(
-                x is y for x, y in zip(entry[2], arrays)):
-            return entry[3]
-    value = compute()
-    _MEMO.append((kind, pm, tuple(arrays), value))
-    if len(_MEMO) > _MEMO_SIZE:
-        del _MEMO[0]
-    return value
-
-
-def frame_point_kinematics(model, motion: Motion, frame: str):
+def frame_point_kinematics(model, motion: Motion, frame: str, data=None):
     """``(J_p, a_p)`` of a frame's origin over frames: world-aligned linear Jacobian ``(N, 3, nv)``
-    and classical linear acceleration ``(N, 3)`` (``J_p a + Jdot_p v``)."""
+    and classical linear acceleration ``(N, 3)`` (``J_p a + Jdot_p v``).
+
+    ``data`` (a :class:`pinmsk.model.Data`) caches the result for this motion."""
     pm = model.pin
     fid = model.frame_id(frame)
 
-    def compute():
+    def compute(pd):
         n = motion.n_frames
         J = np.empty((n, 3, pm.nv))
         acc = np.empty((n, 3))
-        data = pm.createData()
         lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         q, v, a = motion.q, motion.v, motion.a
         for k in range(n):
-            pin.forwardKinematics(pm, data, q[k], v[k], a[k])
-            pin.updateFramePlacement(pm, data, fid)
-            acc[k] = pin.getFrameClassicalAcceleration(pm, data, fid, lwa).linear
-            J[k] = np.reshape(pin.computeFrameJacobian(pm, data, q[k], fid, lwa), (6, pm.nv))[:3]
+            pin.forwardKinematics(pm, pd, q[k], v[k], a[k])
+            pin.updateFramePlacement(pm, pd, fid)
+            acc[k] = pin.getFrameClassicalAcceleration(pm, pd, fid, lwa).linear
+            J[k] = np.reshape(pin.computeFrameJacobian(pm, pd, q[k], fid, lwa), (6, pm.nv))[:3]
         return J, acc
 
-    return _memo(("point", fid), pm, (motion.q, motion.v, motion.a), compute)
+    return motion_cached(data, model, ("frame_point", fid), motion, compute)
 
 
-def torque_regressor(model, motion: Motion) -> np.ndarray:
+def torque_regressor(model, motion: Motion, data=None) -> np.ndarray:
     """Pinocchio's joint torque regressor over frames, ``(N, nv, 10 (njoints - 1))``.
 
     ``rnea(q, v, a) = Y(q, v, a) pi`` with ``pi`` the stacked dynamic
     parameters ``[m, m c, I_origin]`` of each joint's inertia (gravity included).
+    ``data`` (a :class:`pinmsk.model.Data`) caches the result for this motion.
     """
     pm = model.pin
 
-    def compute():
+    def compute(pd):
         n = motion.n_frames
-        data = pm.createData()
         Y = np.empty((n, pm.nv, 10 * (pm.njoints - 1)))
         q, v, a = motion.q, motion.v, motion.a
         for k in range(n):
-            Y[k] = np.reshape(pin.computeJointTorqueRegressor(pm, data, q[k], v[k], a[k]), Y.shape[1:])
+            Y[k] = np.reshape(pin.computeJointTorqueRegressor(pm, pd, q[k], v[k], a[k]), Y.shape[1:])
         return Y
 
-    return _memo("regressor", pm, (motion.q, motion.v, motion.a), compute)
+    return motion_cached(data, model, "torque_regressor", motion, compute)
 
 
 def add_dynamic_parameters(pin_model, joint: int, dpi: np.ndarray) -> None:

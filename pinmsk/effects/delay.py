@@ -20,6 +20,8 @@ Like every muscle-level effect it applies no generalized force of its own.
 """
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from ..components import Parameter
@@ -38,12 +40,18 @@ class ElectromechanicalDelay(SignalEffect):
         Parameter("delay", 0.04, 0.0, 0.25, "s", "delay from EMG/excitation to muscle activation"),
     )
     zero_params = {"delay": 0.0}
-    _spectrum_cache = None
 
     def __getstate__(self):
         state = dict(self.__dict__)
-        state.pop("_spectrum_cache", None)
+        state.pop("_spectrum", None)
         return state
+
+    def _spectrum_memo(self) -> threading.local:
+        """The last signal's spectrum, per thread (a memo, not state: the effect stays immutable)."""
+        memo = self.__dict__.get("_spectrum")
+        if memo is None:
+            memo = self.__dict__.setdefault("_spectrum", threading.local())
+        return memo
 
     def transform_batch(self, t, u, params, mask=None):
         """Delayed signals for P delays; ``u`` is (N, m), or (P, N, m) for one signal per delay."""
@@ -56,8 +64,10 @@ class ElectromechanicalDelay(SignalEffect):
         dt = median_step(t)
         pad = int(np.ceil(self.params["delay"].max / dt)) + 8
         key = (id(u), u.shape, float(u.flat[0]), float(u.flat[-1]), pad, tuple(cols))
-        if self._spectrum_cache is not None and self._spectrum_cache[0] == key:
-            spec, L = self._spectrum_cache[1:]           # same signal, other delays: reuse its FFT
+        memo = self._spectrum_memo()
+        cached = getattr(memo, "value", None)
+        if cached is not None and cached[0] == key:
+            spec, L = cached[1:]                          # same signal, other delays: reuse its FFT
         else:
             x = (u if u.ndim == 3 else u[None])[:, :, cols]                  # (P or 1, N, k)
             s = (np.arange(1, 2 * pad + 1) / (2 * pad + 1))[None, :, None]
@@ -65,7 +75,7 @@ class ElectromechanicalDelay(SignalEffect):
             ext = np.concatenate([x, bridge], axis=1)                        # circular: bridge also precedes x
             L = ext.shape[1]
             spec = np.fft.rfft(ext, axis=1)
-            self._spectrum_cache = (key, spec, L) if u.ndim == 2 else None
+            memo.value = (key, spec, L) if u.ndim == 2 else None
         omega = 2 * np.pi * np.fft.rfftfreq(L, dt)
         shift = np.exp(-1j * omega[None, :] * d[:, None])                   # (P, F)
         y = np.fft.irfft(spec * shift[:, :, None], n=L, axis=1)

@@ -40,9 +40,9 @@ class Payload(Component):
     )
     zero_params = {"mass": 0.0}
 
-    def prepare(self, model, motion):
+    def prepare(self, model, motion, data=None):
         """``J_p^T (a_p - g)`` over frames, ``(N, nv)``."""
-        J, acc = frame_point_kinematics(model, motion, self.target)
+        J, acc = frame_point_kinematics(model, motion, self.target, data)
         return np.einsum("nkv,nk->nv", J, acc - model.gravity[None, :])
 
     def generalized_force(self, model, motion, params=None, cache=None):

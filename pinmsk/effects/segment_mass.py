@@ -53,10 +53,10 @@ class SegmentMass(Component):
     def check_target(self, model) -> None:
         self._joint(model)
 
-    def prepare(self, model, motion):
+    def prepare(self, model, motion, data=None):
         """``Y_j pi_j`` over frames, ``(N, nv)``: the body's own inverse-dynamics contribution."""
         j = self._joint(model)
-        Y = torque_regressor(model, motion)
+        Y = torque_regressor(model, motion, data)
         pi = model.pin.inertias[j].toDynamicParameters()
         return Y[:, :, 10 * (j - 1):10 * j] @ pi
 

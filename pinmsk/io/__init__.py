@@ -11,7 +11,7 @@
 """
 from __future__ import annotations
 
-from .._lazy import lazy_exports
+from .._lazy import lazy_attributes
 
 _EXPORTS = {
     "read_trial": "tables", "write_trial": "tables", "read_sto_header": "tables",
@@ -24,4 +24,4 @@ _EXPORTS = {
     "read_toml": "toml_files", "shared_data_dir": "shared_data",
 }
 __all__ = sorted(_EXPORTS)
-__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
+__getattr__, __dir__ = lazy_attributes(__name__, _EXPORTS, __all__)

@@ -82,11 +82,9 @@ def _fill_gaps(x: np.ndarray, max_gap: int, name: str, path) -> tuple[np.ndarray
     return out, int(bad.sum())
 
 
-def _anchor_heel(t, hx, hy, theta, fy, cop, flat, *, min_force, heel_offset, heel_height, path):
-    """foot2d ankle ``(ax, ay)`` that puts the heel site H at ``RHEE + Rot(theta) o`` (see read_csu)."""
-    from ..contact.foot import Foot2dGeometry, load_foot2d
-
-    h = Foot2dGeometry.from_model(load_foot2d()).heel[:2]
+def _anchor_heel(t, hx, hy, theta, fy, cop, flat, *, min_force, heel_offset, heel_height, heel_site, path):
+    """Foot-model ankle ``(ax, ay)`` that puts the heel site H at ``RHEE + Rot(theta) o`` (see read_csu)."""
+    h = np.asarray(heel_site, dtype=float).reshape(-1)[:2]
     c, s = np.cos(theta), np.sin(theta)
     info = {}
     if heel_offset is None:
@@ -122,12 +120,21 @@ def _anchor_heel(t, hx, hy, theta, fy, cop, flat, *, min_force, heel_offset, hee
 def read_csu(path, *, plate: str = "FP2", belt_height: float = 0.0, min_force: float = 20.0,
              max_gap: int = 5, ankle: str = "RLM", heel: str = "RHEE", toe: str = "RMT5",
              body_mass: float | None = None, anchor: str = "heel", heel_offset=None,
-             heel_height: float = 0.045) -> Trial:
-    """Read a CSU leg2d text file (see the module docstring) into a Trial."""
+             heel_height: float = 0.045, heel_site=None) -> Trial:
+    """Read a CSU leg2d text file (see the module docstring) into a Trial.
+
+    ``heel_site`` is the foot model's heel site H relative to its ankle A, in the
+    foot frame (m, ``(x, y)``); ``anchor="heel"`` needs it to place the ankle.
+    :func:`pinmsk.contact.foot.read_csu_foot2d` reads a file for the foot2d model.
+    """
     path = Path(path)
     if anchor not in ("heel", "ankle"):
         raise TrialError(f"read_csu: anchor must be 'heel' (locate the foot from the heel and MT5 markers) "
                          f"or 'ankle' (hang the foot from the {ankle} marker), got {anchor!r}")
+    if anchor == "heel" and heel_site is None:
+        raise TrialError("read_csu: anchor='heel' places the foot model by its heel site: pass heel_site=(x, y) "
+                         "(m, foot frame), or read with pinmsk.contact.foot.read_csu_foot2d(path), "
+                         "or use anchor='ankle'")
     if not path.exists():
         raise TrialError(f"CSU file not found: {path}")
     lines = path.read_text().splitlines()
@@ -200,7 +207,7 @@ def read_csu(path, *, plate: str = "FP2", belt_height: float = 0.0, min_force: f
             try:
                 ax, ay, info = _anchor_heel(t, channels[f"{heel}_x"], channels[f"{heel}_y"], theta, fy, cop, flat,
                                             min_force=min_force, heel_offset=heel_offset,
-                                            heel_height=heel_height, path=path)
+                                            heel_height=heel_height, heel_site=heel_site, path=path)
             except TrialError as exc:
                 if f"{ankle}_x" not in channels:
                     raise

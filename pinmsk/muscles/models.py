@@ -18,6 +18,9 @@ the parameter arrays and mark them read-only, and attributes cannot be set.
 """
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+
 import numpy as np
 
 from ._common import check_finite, locate, muscle_parameter, n_muscles, where_first
@@ -32,15 +35,55 @@ from .thelen2003 import (GAMMA, K_PE, PASSIVE_STRAIN0, thelen_contraction_rate,
                          thelen_equilibrium, thelen_fiber_force, thelen_force_velocity)
 from ..errors import ModelError, TrialError
 
-__all__ = ["Thelen2003", "NaganoGerritsen"]
+__all__ = ["MUSCLE_PARAMETERS", "MuscleParameter", "NaganoGerritsen", "Thelen2003"]
 
 _TENDONS = ("rigid", "compliant")
+
+
+@dataclass(frozen=True)
+class MuscleParameter:
+    """The declaration of one per-muscle parameter: unit, meaning and valid range.
+
+    ``low``/``high`` bound it (``low_open``/``high_open``: the bound itself is
+    excluded); :meth:`check` is the one validation of muscle parameters (the
+    muscle models run it on construction).
+    """
+
+    name: str
+    unit: str
+    doc: str
+    low: float = 0.0
+    high: float = math.inf
+    low_open: bool = True
+    high_open: bool = False
+
+    def check(self, value, m: int, names=None) -> np.ndarray:
+        """``value`` as a read-only (m,) array, or ModelError naming the first bad muscle."""
+        return muscle_parameter(value, self.name, m, names=names, positive=self.low == 0.0 and self.low_open,
+                                low=None if self.low == 0.0 and self.low_open else self.low,
+                                high=None if math.isinf(self.high) else self.high, high_open=self.high_open)
+
+
+#: Every per-muscle parameter of the muscle-tendon models, by name (SI units).
+MUSCLE_PARAMETERS = {p.name: p for p in (
+    MuscleParameter("f_max", "N", "maximum isometric force"),
+    MuscleParameter("l_opt", "m", "optimal fibre length"),
+    MuscleParameter("l_slack", "m", "tendon slack length"),
+    MuscleParameter("pennation", "rad", "pennation angle at optimal fibre length", 0.0, math.pi / 2,
+                    low_open=False, high_open=True),
+    MuscleParameter("v_max", "m/s", "maximum shortening velocity (Thelen 2003; default 10 l_opt)"),
+    MuscleParameter("width", "", "force-length half-width in units of l_opt (Nagano & Gerritsen)"),
+    MuscleParameter("fast_fraction", "", "fraction of fast-twitch fibres (energy models)", 0.0, 1.0,
+                    low_open=False),
+    MuscleParameter("volume", "m^3", "muscle volume (energy models, PCSA weights)"),
+)}
 
 
 class _MuscleModel:
     """Shared machinery: parameter validation, immutability, input checks, rigid kinematics."""
 
-    _array_params: tuple[str, ...] = ()
+    #: the per-muscle parameters of the model's mechanics (what ``pinmsk.Model.parameters`` lists)
+    mechanical_parameters: tuple[str, ...] = ("f_max", "l_opt", "l_slack", "pennation")
 
     def _setup(self, *, names, f_max, l_opt, l_slack, pennation, fast_fraction, volume,
                tendon_strain0, tau_rise, tau_fall, **extra) -> None:
@@ -53,18 +96,11 @@ class _MuscleModel:
         put = object.__setattr__
         put(self, "names", names)
         put(self, "n", m)
-        put(self, "f_max", muscle_parameter(f_max, "f_max", m, names=names))
-        put(self, "l_opt", muscle_parameter(l_opt, "l_opt", m, names=names))
-        put(self, "l_slack", muscle_parameter(l_slack, "l_slack", m, names=names))
-        put(self, "pennation", muscle_parameter(pennation, "pennation", m, names=names,
-                                                positive=False, low=0.0, high=np.pi / 2,
-                                                high_open=True))
-        for key, value in extra.items():
-            put(self, key, muscle_parameter(value, key, m, names=names))
-        put(self, "fast_fraction", None if fast_fraction is None else muscle_parameter(
-            fast_fraction, "fast_fraction", m, names=names, positive=False, low=0.0, high=1.0))
-        put(self, "volume", None if volume is None else muscle_parameter(
-            volume, "volume", m, names=names))
+        given = dict(f_max=f_max, l_opt=l_opt, l_slack=l_slack, pennation=pennation, **extra,
+                     fast_fraction=fast_fraction, volume=volume)
+        for key, value in given.items():
+            optional = key in ("fast_fraction", "volume")
+            put(self, key, None if optional and value is None else MUSCLE_PARAMETERS[key].check(value, m, names))
         if not (tendon_strain0 > 0):
             raise ModelError(f"tendon_strain0 = {tendon_strain0} must be > 0")
         if not (0 < tau_rise and 0 < tau_fall):
@@ -206,6 +242,8 @@ class Thelen2003(_MuscleModel):
     gamma = 0.45, A_f = 0.25, f_hat = 1.4 (young adults).
     """
 
+    mechanical_parameters = ("f_max", "l_opt", "l_slack", "pennation", "v_max")
+
     def __init__(self, *, f_max, l_opt, l_slack, pennation=0.0, v_max=None, names=None,
                  fast_fraction=None, volume=None, tendon_strain0: float = TENDON_STRAIN0,
                  tau_rise: float = TAU_RISE, tau_fall: float = TAU_FALL):
@@ -312,6 +350,8 @@ class NaganoGerritsen(_MuscleModel):
     ``volume``; ``tendon_strain0`` (0.04) and activation time constants.
     Constants: A_rel = 0.41, B_rel = 5.2 /s, f_hat = 1.4, Gamma = 1.
     """
+
+    mechanical_parameters = ("f_max", "l_opt", "l_slack", "pennation", "width")
 
     def __init__(self, *, f_max, l_opt, l_slack, pennation=0.0, width, names=None,
                  fast_fraction=None, volume=None, tendon_strain0: float = TENDON_STRAIN0,

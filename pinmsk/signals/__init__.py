@@ -9,7 +9,7 @@ The functions here work on arrays and Trials and never import a model.
 """
 from __future__ import annotations
 
-from .._lazy import lazy_exports
+from .._lazy import lazy_attributes
 
 _EXPORTS = {
     "lowpass": "filtering", "differentiate": "filtering", "filter_padlen": "filtering",
@@ -19,4 +19,4 @@ _EXPORTS = {
     "envelope": "emg", "envelopes": "emg", "normalize": "emg", "on_off": "emg", "onset_times": "emg",
 }
 __all__ = sorted(_EXPORTS)
-__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
+__getattr__, __dir__ = lazy_attributes(__name__, _EXPORTS, __all__)
