@@ -2,7 +2,7 @@
 
     python benchmarks/bench_foundation.py            # ~20 s
 
-* batch ID (``pinmsk.skeleton.inverse_dynamics``) vs a bare ``pin.rnea`` loop over
+* batch ID (``pinmsk.skeleton.rnea``) vs a bare ``pin.rnea`` loop over
   the same frames, on forearm, gait2d and human3d (target: >= 80 % of the bare loop);
 * muscle layer (force-length-velocity capacity + compliant-tendon equilibrium over
   all 16 gait2d muscles, vectorised over frames) in muscle-frames/s (target: >= 2e6),
@@ -48,7 +48,7 @@ def bench_id(name, n=20000):
         return out
 
     def ours():
-        return skeleton.inverse_dynamics(model, q, v, a, data=pd)
+        return skeleton.rnea(model, q, v, a, data=pd)
 
     t_bare = best_of(bare)
     t_ours = best_of(ours)

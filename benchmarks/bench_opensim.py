@@ -336,12 +336,9 @@ def gait2d_inputs(model, ik: pinmsk.Trial, grf: pinmsk.Trial):
     """(kinematics, external forces) of the subject01 walk on gait2d."""
     from pinmsk.grf import external_forces
     from pinmsk.pipeline import opensim_to_gait2d
-    from pinmsk.signals.resampling import to_time
-
-    # gait10dof18musc, like gait2392, counts knee flexion negative (range [-120, 10] deg);
     # opensim_to_gait2d's knee_sign="auto" detects that and flips it
     kin = opensim_to_gait2d(ik, model, hip_offset=SUBJECT01_HIP_OFFSET, knee_sign="auto")
-    g = to_time(uniform_grf(grf), kin.time)
+    g = uniform_grf(grf).resample(kin.time, method="linear", antialias=True)
     # subject01_walk_grf.xml: ground_force_* -> calcn_r, 1_ground_force_* -> calcn_l
     ext = external_forces(model, g, planar=True, frames={None: "foot_r", "1": "foot_l"})
     return kin, ext

@@ -43,7 +43,6 @@ from pinmsk.grf import external_forces  # noqa: E402
 from pinmsk.ik import InverseKinematics, markers_trial  # noqa: E402
 from pinmsk.markers import load_marker_set, read_trc  # noqa: E402
 from pinmsk.pipeline import opensim_to_gait2d, transferred_cops  # noqa: E402
-from pinmsk.signals.resampling import to_time  # noqa: E402
 from pinmsk.solvers.static import StaticOptimization  # noqa: E402
 
 TARGET_S = 2.0
@@ -59,7 +58,7 @@ def prepare(folder: Path):
     trc = read_trc(folder / "markers_walk.trc", warn=False)
     t_read = time.perf_counter() - t0
     kin_ref = opensim_to_gait2d(coords, model)
-    grf = to_time(grf, kin_ref.time)
+    grf = grf.resample(kin_ref.time, method="linear", antialias=True)
     mset = load_marker_set("gait2d")
     mset = mset.subset(list(mset.sets["csu"]) + list(mset.sets["csu_left"]))
     q_ref = kin_ref.get(model.coordinates)

@@ -43,7 +43,6 @@ from pinmsk.signals.emg import on_off, onset_times
 from pinmsk.grf import external_forces, torso_residuals
 from pinmsk.io.trc import read_trc
 from pinmsk.pipeline import opensim_to_gait2d, transferred_cops
-from pinmsk.signals.resampling import to_time
 
 JOINTS = (("hip", "hip_flexion_{s}_moment", -1.0), ("knee", "knee_angle_{s}_moment", 1.0),
           ("ankle", "ankle_angle_{s}_moment", -1.0))
@@ -72,7 +71,7 @@ def load(folder: Path, model):
         emg = pinmsk.read_trial(folder / "electromyography.sto", strict=False)
     markers = read_trc(folder / "markers_walk.trc", warn=False)
     kin = opensim_to_gait2d(coords, model)
-    grf = to_time(grf, kin.time)
+    grf = grf.resample(kin.time, method="linear", antialias=True)
     return kin, grf, id_ref, emg, markers
 
 
@@ -91,7 +90,7 @@ def compare_moments(model, idt, id_ref, mass):
 
 
 def compare_emg(act, emg, time):
-    emg = to_time(emg, time, antialias=False)
+    emg = emg.resample(time, method="linear")
     out = {}
     for g, (cols, muscle) in GROUPS.items():
         e = np.mean([np.asarray(emg[c]) for c in cols], axis=0)

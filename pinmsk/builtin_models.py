@@ -21,10 +21,6 @@ read_sidecar
     parse a sidecar (TOML) into a dict, with errors that name the file.
 resolve_urdf, example_robot_data_dir
     the URDF file a sidecar refers to and the package directories its meshes need.
-build_geometry_model
-    the visual or collision geometry of a sidecar's URDF.
-coordinate_permutation
-    map Pinocchio's (depth-first) coordinates to a sidecar's ``coordinate_order``.
 """
 
 from __future__ import annotations
@@ -35,15 +31,10 @@ import importlib.resources
 from pathlib import Path
 from typing import NamedTuple
 
-import numpy as np
-import pinocchio as pin
 
 from pinmsk.errors import ModelError
+from pinmsk.io.toml_files import read_toml
 
-try:  # Python >= 3.11
-    import tomllib as _toml
-except ModuleNotFoundError:  # pragma: no cover - Python 3.10
-    import tomli as _toml
 
 __all__ = [
     "EXAMPLE_ROBOT_DATA_MARKER",
@@ -54,8 +45,6 @@ __all__ = [
     "read_sidecar",
     "resolve_urdf",
     "example_robot_data_dir",
-    "build_geometry_model",
-    "coordinate_permutation",
 ]
 
 #: Prefix of a sidecar ``urdf`` value that lives in the example-robot-data distribution.
@@ -100,8 +89,7 @@ def builtin_names() -> tuple[str, ...]:
 
 
 def _names_urdf(path: Path) -> bool:
-    with open(path, "rb") as fh:
-        model = _toml.load(fh).get("model", {})
+    model = read_toml(path, what="built-in model sidecar").get("model", {})
     return isinstance(model, dict) and "urdf" in model
 
 
@@ -135,13 +123,7 @@ def read_sidecar(path) -> dict:
     classes that read them.
     """
     path = _sidecar_path(path)
-    try:
-        with open(path, "rb") as fh:
-            data = _toml.load(fh)
-    except FileNotFoundError:
-        raise ModelError(f"sidecar file {path} does not exist") from None
-    except _toml.TOMLDecodeError as exc:
-        raise ModelError(f"sidecar {path} is not valid TOML: {exc}") from None
+    data = read_toml(path, what="sidecar file")
     model = data.get("model")
     if not isinstance(model, dict) or not isinstance(model.get("urdf"), str):
         raise ModelError(
@@ -220,62 +202,3 @@ def resolve_urdf(sidecar, reference: str | None = None) -> UrdfSource:
 # -----------------------------------------------------------------------------
 
 
-def build_geometry_model(sidecar, model: pin.Model, kind: str = "visual") -> pin.GeometryModel:
-    """Visual (``kind="visual"``) or collision geometry of a sidecar's URDF for ``model``.
-
-    ``model`` must be the Pinocchio model of the same sidecar (``load_model(sidecar).pin``).
-    """
-    kinds = {"visual": pin.GeometryType.VISUAL, "collision": pin.GeometryType.COLLISION}
-    if kind not in kinds:
-        raise ModelError(f"geometry kind must be 'visual' or 'collision', got {kind!r}")
-    src = resolve_urdf(_sidecar_path(sidecar))
-    return pin.buildGeomFromUrdf(model, str(src.path), kinds[kind], package_dirs=[str(p) for p in src.package_dirs])
-
-
-def coordinate_permutation(model: pin.Model, order, *, source=None) -> np.ndarray:
-    """Indices mapping Pinocchio's velocity coordinates to the order ``order``.
-
-    Pinocchio needs every subtree's joints to be contiguous (depth-first
-    order: ``Data.lastChild`` / ``nvSubtree``, CRBA and ``Model.check`` rely
-    on it), and its URDF parser sorts sibling joints by name, so a model can
-    present its coordinates in another order only through a permutation at
-    the Pinocchio boundary.  With ``perm = coordinate_permutation(model, order)``:
-
-        x_user = x_pin[..., perm]            # q, v, a, tau of 1-dof joints
-        x_pin[..., perm] = x_user
-        M_user = M_pin[np.ix_(perm, perm)]
-
-    ``order`` must name every joint once; every joint must have nq == nv == 1.
-    """
-    where = f"sidecar {source}: " if source else ""
-    names = list(model.names)[1:]
-    order = [str(n) for n in order]
-    dupes = sorted({n for n in order if order.count(n) > 1})
-    missing = [n for n in names if n not in order]
-    unknown = [n for n in order if n not in names]
-    if dupes or missing or unknown:
-        parts = []
-        if unknown:
-            hints = []
-            for n in unknown:
-                close = difflib.get_close_matches(n, names, n=1)
-                hints.append(f"{n!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
-            parts.append("unknown joints " + ", ".join(hints))
-        if missing:
-            parts.append("missing joints " + ", ".join(map(repr, missing)))
-        if dupes:
-            parts.append("repeated joints " + ", ".join(map(repr, dupes)))
-        raise ModelError(
-            f"{where}coordinate_order must list every joint of the model exactly once: {'; '.join(parts)}. "
-            f"The model's joints are: {', '.join(names)}"
-        )
-    perm = []
-    for n in order:
-        j = model.getJointId(n)
-        if model.nqs[j] != 1 or model.nvs[j] != 1:
-            raise ModelError(
-                f"{where}coordinate_order can only permute 1-dof joints; joint {n!r} has nq = {model.nqs[j]}, "
-                f"nv = {model.nvs[j]}"
-            )
-        perm.append(model.idx_vs[j])
-    return np.asarray(perm, dtype=int)

@@ -46,7 +46,7 @@ def inverse_dynamics_array(model, motion: Motion, *, external: Sequence[skeleton
                            components: bool = True, progress=None, data=None) -> np.ndarray:
     """Actuator generalized forces ``(N, nv)`` for a Motion (see :func:`inverse_dynamics`);
     ``data`` as for :func:`component_forces`."""
-    tau = skeleton.inverse_dynamics(model, motion.q, motion.v, motion.a, external=external,
+    tau = skeleton.rnea(model, motion.q, motion.v, motion.a, external=external,
                                     progress=progress)
     if components:
         for f in component_forces(model, motion, data=data).values():

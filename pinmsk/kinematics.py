@@ -31,6 +31,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Iterable
 
 import numpy as np
 
@@ -45,7 +46,8 @@ from .skeleton import ExternalForce, world_wrench
 from .trial import Trial, parse_ground_reaction
 
 
-__all__ = ["DEFAULT_CUTOFF", "FILTER_ORDER", "Filtering", "TrialInputs", "prepare", "cutoff_value",
+__all__ = ["DEFAULT_CUTOFF", "FILTER_ORDER", "Filtering", "TrialInputs", "motion", "as_motion", "prepare",
+           "cutoff_value",
            "is_planar", "has_ground_reaction", "lowpass_external"]
 
 #: Vertical force (N) below which a plate counts as unloaded.
@@ -200,6 +202,46 @@ def _plate_loads(model, grf: Trial, motion: Motion, *, cutoff, external_loads, f
     return tuple(plist), tuple(ext)
 
 
+def motion(model, trial, *, cutoff=DEFAULT_CUTOFF, signals: Iterable[str] | None = None) -> Motion:
+    """The model's :class:`Motion` (q, v, a in coordinate order) from a Trial.
+
+    Velocities and accelerations come from the trial's coordinates
+    (:meth:`pinmsk.Trial.kinematics`): zero-lag low-pass at ``cutoff`` Hz (default
+    :data:`DEFAULT_CUTOFF` = 6 Hz; 0 or None: none), then quintic-spline derivatives.
+    All other channels (or those named in ``signals``) are passed as signals.
+    Analyses use :func:`prepare`, which adds the external loads.
+    """
+    trial.require(model.coordinates)
+    q, v, a = trial.kinematics(model.coordinates, cutoff=cutoff_value(cutoff))
+    names = [n for n in trial.names if n not in model.coordinates] if signals is None else list(signals)
+    return Motion(np.asarray(trial.time, dtype=float), q, v, a, {n: trial[n] for n in names})
+
+
+def as_motion(model, data, cutoff=DEFAULT_CUTOFF) -> Motion:
+    """A :class:`Motion` of the model from a Trial (by :func:`motion`) or a Motion, checked:
+    its width is the model's, it has frames, and q, v, a are finite (the frame and
+    coordinate of the first bad value are named)."""
+    if isinstance(data, Motion):
+        mo = data
+        if mo.q.shape[1] != model.nv:
+            raise TrialError(f"the motion has {mo.q.shape[1]} coordinates; model "
+                             f"'{model.name}' has {model.nv} ({', '.join(model.coordinates)})")
+    elif isinstance(data, Trial):
+        mo = motion(model, data, cutoff=cutoff)
+    else:
+        raise TrialError(f"expected a Trial or a Motion, got {type(data).__name__}")
+    if mo.n_frames == 0:
+        raise TrialError("the trial has no frames; an analysis needs at least one")
+    for name in ("q", "v", "a"):
+        arr = getattr(mo, name)
+        bad = ~np.isfinite(arr)
+        if bad.any():
+            k, j = np.argwhere(bad)[0]
+            raise TrialError(f"the motion's {name} is not finite at frame {k} (t = {mo.t[k]:.6g} s), "
+                             f"coordinate '{model.coordinates[j]}'; fill or cut the gaps first")
+    return mo
+
+
 def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | None = None,
             external_loads=None, frames=None, ground_reaction: str = "auto",
             grf_cutoff="same") -> TrialInputs:
@@ -238,7 +280,7 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
         return TrialInputs(trial, (), (), Filtering(None), ("a Motion was given: no filter applied",))
     if not isinstance(trial, Trial):
         raise TrialError(f"expected a Trial or a Motion, got {type(trial).__name__}")
-    motion = model.motion(trial, cutoff=c)
+    mo = motion(model, trial, cutoff=c)
     if external_loads is not None and not hasattr(external_loads, "loads"):
         external_loads = read_external_loads(external_loads)
     own = has_ground_reaction(trial)
@@ -246,7 +288,7 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
     if ground_reaction == "ignore":
         notes = ("ground reaction: left out on request (ground_reaction='ignore')",) if (
             own or grf is not None or external_loads is not None) else ()
-        return TrialInputs(motion, (), (), Filtering(c, grf_cutoff=gc), notes)
+        return TrialInputs(mo, (), (), Filtering(c, grf_cutoff=gc), notes)
     if grf is None and external_loads is not None and external_loads.datafile is not None and not own:
         grf = external_loads.datafile
     if grf is not None and own:
@@ -258,17 +300,17 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
     elif grf is not None:
         source = grf.meta.get("source", "grf trial")
     if grf is None and not own:
-        return TrialInputs(motion, (), (), Filtering(c, grf_cutoff=gc))
+        return TrialInputs(mo, (), (), Filtering(c, grf_cutoff=gc))
     data = grf if grf is not None else trial
     planar = is_planar(model)
     if grf is not None:
         tg = np.asarray(grf.time, dtype=float)
-        q_g = np.column_stack([np.interp(tg, motion.t, motion.q[:, j]) for j in range(model.nq)]) \
+        q_g = np.column_stack([np.interp(tg, mo.t, mo.q[:, j]) for j in range(model.nq)]) \
             if model.nq == model.nv else None
     else:
-        q_g = motion.q if model.nq == model.nv else None
+        q_g = mo.q if model.nq == model.nv else None
     try:
-        plist, ext = _plate_loads(model, data, motion, cutoff=gc, external_loads=external_loads, frames=frames,
+        plist, ext = _plate_loads(model, data, mo, cutoff=gc, external_loads=external_loads, frames=frames,
                                   planar=planar, q_on_grf_time=q_g, same_time=grf is None)
     except ModelError as exc:
         raise TrialError(f"ground reaction: {exc}") from None
@@ -279,4 +321,4 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
         if dropped and any(np.any(np.abs(np.asarray(data[n])) > 0) for n in dropped):
             notes.append(f"planar model: out-of-plane GRF components ({', '.join(dropped)}) cannot act "
                          "on it and were left out")
-    return TrialInputs(motion, ext, plist, Filtering(c, grf_cutoff=gc, has_grf=True), tuple(notes), source)
+    return TrialInputs(mo, ext, plist, Filtering(c, grf_cutoff=gc, has_grf=True), tuple(notes), source)

@@ -36,7 +36,8 @@ from .components import Component, Motion, ParameterKeyError, Parameters
 from .contact.spec import from_spec as contact_from_spec
 from .effects import registry
 from .errors import ModelError
-from .kinematics import DEFAULT_CUTOFF, cutoff_value
+from . import kinematics
+from .kinematics import DEFAULT_CUTOFF
 from .muscles import NaganoGerritsen, Thelen2003
 from .muscles.muscle_set import MUSCLE_PREFIX, MuscleSet
 from .muscles.paths import MomentArmPath
@@ -359,19 +360,8 @@ class Model:
 
     # -- trials ---------------------------------------------------------
     def motion(self, trial, *, cutoff=DEFAULT_CUTOFF, signals: Iterable[str] | None = None) -> Motion:
-        """The model's :class:`Motion` (q, v, a in coordinate order) from a Trial.
-
-        Velocities and accelerations come from the trial's coordinates by
-        ``Trial.kinematics``: zero-lag low-pass at ``cutoff`` Hz (default
-        :data:`pinmsk.kinematics.DEFAULT_CUTOFF` = 6 Hz; 0 or None: none), then
-        quintic-spline derivatives.  All other channels are passed as signals.
-        Analyses use :func:`pinmsk.kinematics.prepare`, which adds the GRF.
-        """
-        trial.require(self.coordinates)
-        q, v, a = trial.kinematics(self.coordinates, cutoff=cutoff_value(cutoff))
-        names = [n for n in trial.names if n not in self.coordinates] if signals is None else list(signals)
-        sig = {n: trial[n] for n in names}
-        return Motion(np.asarray(trial.time, dtype=float), q, v, a, sig)
+        """The model's :class:`Motion` from a Trial: :func:`pinmsk.kinematics.motion` (6 Hz default)."""
+        return kinematics.motion(self, trial, cutoff=cutoff, signals=signals)
 
     def describe(self) -> str:
         """A short human-readable summary (used by ``pinmsk info``)."""

@@ -79,7 +79,6 @@ from .kinematics import DEFAULT_CUTOFF, cutoff_value
 from .markers import load_marker_set
 from .model import load_model
 from .presentation.progress import Progress
-from .signals.resampling import to_time
 from .trial import Trial, moment_channel
 
 __all__ = ["opensim_to_gait2d", "frame_positions", "transferred_cops", "run_trial", "batch",
@@ -190,7 +189,7 @@ def _kinematics(model, spec: dict, base: Path):
         kin = opensim_to_gait2d(coords, model, hip_offset=tuple(spec.get("hip_offset", RAJAGOPAL_HIP_OFFSET)))
         if "t0" in spec or "t1" in spec:
             kin = kin.slice_time(spec.get("t0"), spec.get("t1"))
-        grf = to_time(grf, kin.time)
+        grf = grf.resample(kin.time, method="linear", antialias=True)
         cops = None
         if spec.get("trc"):
             mk = read_trc(_path(base, spec["trc"]), warn=False)
@@ -212,7 +211,7 @@ def _kinematics(model, spec: dict, base: Path):
                 warnings.simplefilter("ignore")
                 grf = read_trial(_path(base, spec["grf"]), strict=False)
             info["read_repairs"] = list(grf.meta["read_notes"])
-            grf = to_time(grf, kin.time)
+            grf = grf.resample(kin.time, method="linear", antialias=True)
             ext = external_forces(model, grf, planar=True)
         info["body_mass"] = spec.get("body_mass")
     else:

@@ -82,7 +82,7 @@ def world_wrench(ext: ExternalForce, n: int) -> np.ndarray:
 PROGRESS_CHUNK = 4096
 
 
-def inverse_dynamics(model, q, v, a, *, external: Sequence[ExternalForce] = (),
+def rnea(model, q, v, a, *, external: Sequence[ExternalForce] = (),
                      data: pin.Data | None = None, progress=None) -> np.ndarray:
     """Joint generalized forces ``tau = M(q) a + h(q, v) - J^T f_ext`` over frames (RNEA).
 
@@ -130,7 +130,7 @@ def external_generalized_force(model, q, external: Sequence[ExternalForce]) -> n
     pm = _pin(model)
     q = _frames(q, pm.nq, "q")
     z = np.zeros((q.shape[0], pm.nv))
-    return inverse_dynamics(pm, q, z, z, external=()) - inverse_dynamics(pm, q, z, z, external=external)
+    return rnea(pm, q, z, z, external=()) - rnea(pm, q, z, z, external=external)
 
 
 def forward_dynamics(model, q, v, tau, *, data: pin.Data | None = None) -> np.ndarray:

@@ -591,8 +591,9 @@ class Trial:
             )
         return self._new(t[mask], self._names, self._values[mask])
 
-    def resample(self, time_or_rate, *, method: str = "cubic") -> Trial:
-        """A new Trial interpolated onto new sample times.
+    def resample(self, time_or_rate, *, method: str = "cubic", antialias: bool = False,
+                 order: int = 4) -> Trial:
+        """A new Trial interpolated onto new sample times (the one resampling of pinmsk).
 
         Parameters
         ----------
@@ -605,6 +606,12 @@ class Trial:
             (``scipy.interpolate.CubicSpline``), all channels must be finite.
             ``"linear"``: piecewise linear (``numpy.interp``); a NaN only
             affects the intervals next to it.
+        antialias : bool
+            When the new rate is lower than the trial's, low-pass the finite
+            channels first (zero-lag Butterworth of ``order`` at 0.4 x the new
+            rate), so that aligning 2 kHz force plates onto 100 Hz markers does
+            not alias.  Channels with NaN (e.g. the COP of an unloaded plate)
+            are interpolated unfiltered.
         """
         t = self._time
         if np.ndim(time_or_rate) == 0:
@@ -628,10 +635,18 @@ class Trial:
                     "extrapolation is not done"
                 )
             new_t = np.clip(new_t, t[0], t[-1])
+        src = self._values
+        if antialias and new_t.size > 1 and self.n_frames > 1:
+            new_rate, old_rate = 1.0 / median_step(new_t), uniform_rate(t, where=self._where(),
+                                                                        purpose="anti-alias filtering")
+            finite = np.flatnonzero(np.all(np.isfinite(src), axis=0))
+            if new_rate < 0.99 * old_rate and finite.size:
+                src = src.copy()
+                src[:, finite] = lowpass(src[:, finite], rate=old_rate, cutoff=0.4 * new_rate, order=order)
         if method == "linear":
             values = np.empty((new_t.shape[0], self.n_channels))
             for j in range(self.n_channels):  # one call per channel, vectorised over frames
-                values[:, j] = np.interp(new_t, t, self._values[:, j])
+                values[:, j] = np.interp(new_t, t, src[:, j])
         elif method == "cubic":
             if self.n_frames < 2:
                 raise TrialError("resample needs at least 2 frames")
@@ -639,7 +654,7 @@ class Trial:
             from scipy.interpolate import CubicSpline
 
             if self.n_channels:
-                values = CubicSpline(t, self._values, axis=0)(new_t)
+                values = CubicSpline(t, src, axis=0)(new_t)
             else:
                 values = np.empty((new_t.shape[0], 0))
         else:

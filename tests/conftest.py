@@ -38,6 +38,28 @@ def motion():
     return gaussian_elbow_motion()
 
 
+@contextlib.contextmanager
+def _as_command(argv: list[str], *, path: str | None = None):
+    """Run the body as a command line: ``sys.argv = argv`` (and ``path`` first on ``sys.path``), stdout
+    collected into the yielded StringIO, figures closed afterwards; a non-zero ``SystemExit`` fails the test
+    with the end of the output and the error line."""
+    import matplotlib.pyplot as plt
+    saved_argv, saved_path = sys.argv, list(sys.path)
+    sys.argv = list(argv)
+    if path is not None:
+        sys.path.insert(0, path)
+    out, err = io.StringIO(), io.StringIO()
+    try:
+        with matplotlib.rc_context(), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            yield out
+    except SystemExit as exc:
+        assert exc.code in (0, None), (f"{argv[0]} exited with {exc.code}:\n{out.getvalue()[-3000:]}"
+                                       f"\n{err.getvalue()[-2000:]}")
+    finally:
+        sys.argv, sys.path[:] = saved_argv, saved_path
+        plt.close("all")
+
+
 def run_example(script: str, *args: str) -> str:
     """Run ``examples/<script>`` as ``python examples/<script> ARGS`` does, in this interpreter; return its stdout.
 
@@ -46,18 +68,18 @@ def run_example(script: str, *args: str) -> str:
     interpreter spends ~3 s importing pinmsk, scipy and matplotlib for every example;
     tests/test_viewer.py keeps one example run in a real subprocess without a terminal.
     """
-    import matplotlib.pyplot as plt
-    folder = str(REPO / "examples")
-    argv, path = sys.argv, list(sys.path)
-    sys.argv = [str(REPO / "examples" / script), *map(str, args)]
-    sys.path.insert(0, folder)
-    out = io.StringIO()
-    try:
-        with matplotlib.rc_context(), contextlib.redirect_stdout(out):
-            runpy.run_path(sys.argv[0], run_name="__main__")
-    except SystemExit as exc:
-        assert exc.code in (0, None), f"{script} exited with {exc.code}:\n{out.getvalue()[-3000:]}"
-    finally:
-        sys.argv, sys.path[:] = argv, path
-        plt.close("all")
+    argv = [str(REPO / "examples" / script), *map(str, args)]
+    with _as_command(argv, path=str(REPO / "examples")) as out:
+        runpy.run_path(argv[0], run_name="__main__")
+    return out.getvalue()
+
+
+def run_pinmsk(*args: str) -> str:
+    """Run ``pinmsk ARGS`` as ``python -m pinmsk ARGS`` does, in this interpreter; return its stdout.
+
+    Through the package's ``__main__`` rather than a module path, so it keeps working wherever the
+    CLI module lives; an exit status other than 0 fails the test (with the end of the output).
+    """
+    with _as_command(["pinmsk", *map(str, args)]) as out:
+        runpy.run_module("pinmsk", run_name="__main__")
     return out.getvalue()

@@ -272,7 +272,7 @@ def test_contact_candidates(foot):
 
 def test_inverse_dynamics_with_contacts_equals_external_wrenches(foot):
     from pinmsk.dynamics import inverse_dynamics_array
-    from pinmsk.skeleton import inverse_dynamics
+    from pinmsk.skeleton import rnea
     mo = _random_motion(foot, n=20, seed=5)
     cs = foot_contacts(foot, "hypervolumetric")
     model = foot.with_effect(*cs)
@@ -280,7 +280,7 @@ def test_inverse_dynamics_with_contacts_equals_external_wrenches(foot):
     tau = inverse_dynamics_array(model, mo)
     outs = [c.evaluate(foot, mo) for c in cs]
     ext = [ExternalForce(c.target, o.force, o.point) for c, o in zip(cs, outs)]
-    np.testing.assert_allclose(tau, inverse_dynamics(foot, mo.q, mo.v, mo.a, external=ext), atol=1e-8)
+    np.testing.assert_allclose(tau, rnea(foot, mo.q, mo.v, mo.a, external=ext), atol=1e-8)
 
 
 def test_dropped_foot_comes_to_rest_on_its_spheres(foot):

@@ -15,7 +15,7 @@ from pinmsk.io.shared_data import shipped_trial, shipped_trials
 from pinmsk.presentation.report import save_diagnosis, write_failure_report, write_report
 from pinmsk.errors import ConvergenceError, ModelError, TrialError
 
-from conftest import REPO, run_example
+from conftest import REPO
 
 
 @pytest.fixture(scope="module")
@@ -172,15 +172,6 @@ def test_demo_writes_everything(tmp_path):
     for name in ("before.png", "after.png", "report.html", "diagnosis.json"):
         assert (tmp_path / name).stat().st_size > 1000, name
     assert result.steps[0].ratio > 5 and result.final.ratio < 1.5
-
-
-@pytest.mark.slow
-def test_example_runs_headless(tmp_path, monkeypatch):
-    """Example 01 (slow): its loop is checked by test_diagnose.py::test_two_hidden_effects_in_two_add_steps,
-    its figures and report by test_figures_and_report, on the same two-effect trial."""
-    monkeypatch.chdir(tmp_path)
-    assert "at_noise_floor" in run_example("01_diagnose_forearm.py", tmp_path)
-    assert (tmp_path / "diagnosis_report.html").exists()
 
 
 def test_synth_bad_requests(forearm):

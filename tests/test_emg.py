@@ -4,7 +4,7 @@ import pytest
 
 from pinmsk import Trial, TrialError
 from pinmsk.signals.emg import envelope, envelopes, normalize, on_off, onset_times
-from pinmsk.signals.resampling import align, to_time
+from pinmsk.signals.resampling import align
 from pinmsk.signals.sampling import check_rate, measured_rate
 
 
@@ -100,4 +100,4 @@ def test_check_rate_and_nonuniform_sampling():
     with pytest.raises(TrialError, match="uniform sampling"):
         measured_rate(Trial(t2, {"x": t}))
     with pytest.raises(TrialError, match="outside the trial"):
-        to_time(tr, [0.0, 1.0])
+        tr.resample([0.0, 1.0], method="linear", antialias=True)

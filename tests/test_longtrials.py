@@ -94,9 +94,9 @@ def test_inverse_dynamics_reports_progress_by_chunk(monkeypatch):
     q = np.zeros((n, model.nv))
     monkeypatch.setattr(skeleton, "PROGRESS_CHUNK", 7)
     rec = _Recorder()
-    tau = skeleton.inverse_dynamics(model, q, q, q, progress=rec)
+    tau = skeleton.rnea(model, q, q, q, progress=rec)
     assert rec.calls == [7, 7, 6]
-    np.testing.assert_array_equal(tau, skeleton.inverse_dynamics(model, q, q, q))
+    np.testing.assert_array_equal(tau, skeleton.rnea(model, q, q, q))
 
 
 def test_cli_id_progress_only_when_asked(tmp_path, capsys, monkeypatch):

@@ -167,7 +167,7 @@ def test_data_shares_kinematics_on_one_motion_only(gait2d, forearm):
     assert torque_regressor(gait2d, twin, data) is not Y
     # the regressor reproduces the skeleton's inverse dynamics: rnea = Y pi
     pi = np.concatenate([gait2d.pin.inertias[j].toDynamicParameters() for j in range(1, gait2d.pin.njoints)])
-    tau = pinmsk.skeleton.inverse_dynamics(gait2d, mo.q, mo.v, mo.a)
+    tau = pinmsk.skeleton.rnea(gait2d, mo.q, mo.v, mo.a)
     np.testing.assert_allclose(Y @ pi, tau, atol=1e-9)
     J, acc = frame_point_kinematics(gait2d, mo, "foot_r", data)
     assert frame_point_kinematics(gait2d, mo, "foot_r", data)[0] is J

@@ -147,7 +147,7 @@ def test_pendulum_inverse_dynamics_matches_opensim(tmp_path):
     assert np.linalg.norm(gravity) > 9.0
 
     t, q, v, a = _trajectory()
-    tau_pm = skeleton.inverse_dynamics(model, q[:, None], v[:, None], a[:, None])[:, 0]
+    tau_pm = skeleton.rnea(model, q[:, None], v[:, None], a[:, None])[:, 0]
 
     with _harness().quiet(osim):
         om, coord, state = _opensim_pendulum(gravity)
@@ -163,7 +163,7 @@ def test_pendulum_inverse_dynamics_matches_opensim(tmp_path):
     # For a pin about the joint z axis only the mass, the COM's offset from the axis, Izz (about the
     # COM, in the joint frame) and the joint placement / tilt enter tau; a 1 % error in Izz gives
     # ~5e-4 relative, far above the tolerance.  Both terms matter over the trajectory:
-    g_only = skeleton.inverse_dynamics(model, q[:, None], 0 * v[:, None], 0 * a[:, None])[:, 0]
+    g_only = skeleton.rnea(model, q[:, None], 0 * v[:, None], 0 * a[:, None])[:, 0]
     assert np.ptp(g_only) > 1.0 and np.max(np.abs(tau_pm - g_only)) > 1.0
     scale = np.max(np.abs(tau_os))
     err = np.max(np.abs(tau_pm - tau_os))

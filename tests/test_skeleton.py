@@ -30,7 +30,7 @@ def _random_state(model, n, seed=0):
 def test_aba_inverts_rnea(name):
     model = pinmsk.load_model(name)
     q, v, a = _random_state(model, 40)
-    tau = skeleton.inverse_dynamics(model, q, v, a)
+    tau = skeleton.rnea(model, q, v, a)
     a2 = skeleton.forward_dynamics(model, q, v, tau)
     assert np.max(np.abs(a2 - a)) < 1e-9
 
@@ -39,7 +39,7 @@ def test_aba_inverts_rnea(name):
 def test_batch_matches_per_frame_and_mass_matrix(name):
     model = pinmsk.load_model(name)
     q, v, a = _random_state(model, 25, seed=3)
-    tau = skeleton.inverse_dynamics(model, q, v, a)
+    tau = skeleton.rnea(model, q, v, a)
     pm, pd = model.pin, model.create_data().pin
     for i in (0, 7, 24):
         assert np.allclose(tau[i], pin.rnea(pm, pd, q[i], v[i], a[i]), atol=1e-12)
@@ -100,13 +100,13 @@ def test_external_force_at_hand_matches_lever_arm():
     elbow = pd.oMi[hand.parentJoint].translation
     assert np.allclose(p_hand - elbow, [D_H, 0, 0], atol=1e-12)
     ext = skeleton.ExternalForce("hand", force=[[0.0, -10.0, 0.0]], point=[p_hand])
-    base = skeleton.inverse_dynamics(model, q, z, z)[0, 0]
-    loaded = skeleton.inverse_dynamics(model, q, z, z, external=[ext])[0, 0]
+    base = skeleton.rnea(model, q, z, z)[0, 0]
+    loaded = skeleton.rnea(model, q, z, z, external=[ext])[0, 0]
     assert loaded - base == pytest.approx(10.0 * D_H, rel=1e-12)
     # the same force applied 5 cm further out needs 0.5 N m more, and a free torque adds directly
     ext2 = skeleton.ExternalForce("hand", force=[[0.0, -10.0, 0.0]], point=[p_hand + [0.05, 0, 0]],
                                   torque=[[0.0, 0.0, 2.0]])
-    loaded2 = skeleton.inverse_dynamics(model, q, z, z, external=[ext2])[0, 0]
+    loaded2 = skeleton.rnea(model, q, z, z, external=[ext2])[0, 0]
     assert loaded2 - base == pytest.approx(10.0 * (D_H + 0.05) - 2.0, rel=1e-12)
     jtf = skeleton.external_generalized_force(model, q, [ext])
     assert jtf[0, 0] == pytest.approx(-10.0 * D_H, rel=1e-12)
@@ -120,11 +120,11 @@ def test_derivatives_match_finite_differences():
     for j in (0, 3, 6):
         e = np.zeros(model.nv)
         e[j] = eps
-        fd = (skeleton.inverse_dynamics(model, q + e, v, a) - skeleton.inverse_dynamics(model, q - e, v, a)) / (2 * eps)
+        fd = (skeleton.rnea(model, q + e, v, a) - skeleton.rnea(model, q - e, v, a)) / (2 * eps)
         assert np.allclose(dq[:, :, j], fd, atol=1e-5)
-        fdv = (skeleton.inverse_dynamics(model, q, v + e, a) - skeleton.inverse_dynamics(model, q, v - e, a)) / (2 * eps)
+        fdv = (skeleton.rnea(model, q, v + e, a) - skeleton.rnea(model, q, v - e, a)) / (2 * eps)
         assert np.allclose(dv[:, :, j], fdv, atol=1e-5)
-    tau = skeleton.inverse_dynamics(model, q, v, a)
+    tau = skeleton.rnea(model, q, v, a)
     daq, dav, dtau = skeleton.aba_derivatives(model, q, v, tau)
     assert np.allclose(np.einsum("nij,njk->nik", dtau, M), np.eye(model.nv), atol=1e-8)
 
@@ -132,9 +132,9 @@ def test_derivatives_match_finite_differences():
 def test_shape_errors_are_clear():
     model = pinmsk.load_model("forearm")
     with pytest.raises(ModelError, match=r"q must have shape \(N, 1\)"):
-        skeleton.inverse_dynamics(model, np.zeros((3, 2)), np.zeros((3, 1)), np.zeros((3, 1)))
+        skeleton.rnea(model, np.zeros((3, 2)), np.zeros((3, 1)), np.zeros((3, 1)))
     with pytest.raises(ModelError, match="frames"):
-        skeleton.inverse_dynamics(model, np.zeros((3, 1)), np.zeros((2, 1)), np.zeros((3, 1)))
+        skeleton.rnea(model, np.zeros((3, 1)), np.zeros((2, 1)), np.zeros((3, 1)))
     with pytest.raises(ModelError, match="no frame or body 'hnad'.*'hand'"):
-        skeleton.inverse_dynamics(model, np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)),
+        skeleton.rnea(model, np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)),
                                   external=[skeleton.ExternalForce("hnad", [[0, 1, 0]], [[0, 0, 0]])])

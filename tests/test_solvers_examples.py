@@ -18,24 +18,7 @@ def test_example_02_static_optimization(tmp_path):
     assert len(errs) == 5 and max(errs) < 1e-6
 
 
-# 03 and 04 are slow: test_solvers_fso (FSO tracks and matches SO, its variants) and
-# test_solvers_mso_eid (MSO and EID against SO, EID optimal) cover their numbers by default;
-# 02 stays in the default suite as the quick thesis reproduction.
-@pytest.mark.slow
-def test_example_03_fso(tmp_path):
-    text = run("03_forward_static_optimization.py", tmp_path)
-    assert (tmp_path / "fig3_16_fso_P2.png").exists() and (tmp_path / "fig3_17_fso_P3.png").exists()
-    diffs = [float(d) for d in re.findall(r"largest \|F_FSO - F_SO\|: ([0-9.]+) N", text)]
-    errs = [float(e) for e in re.findall(r"tracking error max \|q - q_d\| = ([0-9.]+) deg", text)]
-    assert len(diffs) == 2 and max(diffs) < 0.5
-    assert max(errs) < 0.1
-
-
-@pytest.mark.slow
-def test_example_04_so_mso_eid(tmp_path):
-    text = run("04_so_mso_eid.py", tmp_path)
-    assert (tmp_path / "so_mso_eid_2s.png").exists() and (tmp_path / "so_mso_eid_0.8s.png").exists()
-    assert "EID" in text and "MSO" in text
+# examples 03 and 04 run in tests/test_examples_covered.py.
 
 
 @pytest.mark.slow

@@ -15,7 +15,7 @@ from pinmsk.presentation import viewer_geometry as vg
 from pinmsk.errors import ModelError, TrialError
 from pinmsk.presentation.viewer import Viewer, contact_spheres, parse_static_scene, view_cli
 
-from conftest import REPO, run_example
+from conftest import REPO
 
 pytest.importorskip("meshcat")
 
@@ -379,17 +379,8 @@ def test_other_builtin_models_build(name, meshcat_url):
         assert any(c.kind == "set_animation" for c in v.commands)
 
 
-# view_forearm.py runs in a real subprocess below (its headless path without --no-block); human3d is
-# slow (test_other_builtin_models_build builds its viewer, view_forearm.py runs the same script pattern),
-# and so is gait2d (test_other_builtin_models_build[gait2d] builds it)
-@pytest.mark.parametrize("script", [pytest.param("view_gait2d.py", marks=pytest.mark.slow),
-                                    pytest.param("view_human3d.py", marks=pytest.mark.slow)])
-def test_examples_run_headless(script, monkeypatch):
-    monkeypatch.delenv("DISPLAY", raising=False)
-    monkeypatch.chdir(REPO)
-    assert "http://127.0.0.1:" in run_example(script, "--no-block")
-
-
+# view_gait2d.py and view_human3d.py run in tests/test_examples_covered.py; view_forearm.py runs here,
+# in a real subprocess without a terminal
 def test_example_without_terminal_exits_by_itself():
     # a generic "run every example" harness passes no flags and has no terminal
     env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))

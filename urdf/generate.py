@@ -783,7 +783,7 @@ def gait_urdf(g) -> str:
         "giving torso_x, torso_y, torso_angle, hip_l, knee_l, ankle_l, mtp_l, hip_r, knee_r, ankle_r,\n"
         "mtp_r; Pinocchio needs subtrees contiguous, so no joint order can be Eq. 5.1's interleaved\n"
         "one.  The sidecar's [model] coordinate_order (Eq. 5.1) is applied at the Pinocchio boundary\n"
-        "by permutation (pinmsk.builtin_models.coordinate_permutation).\n"
+        "by name (pinmsk.Model.coordinate_order orders the written columns).\n"
         f"BM = {fnum(GAIT_BM)} kg, BH = {fnum(GAIT_BH)} m.  Total mass = {fnum(g['total_mass'])} kg\n"
         "  = BM (0.678 + 2 x 0.100 + 2 x 0.0465) + 2 x (0.6 + 0.6 + 0.2).\n"
         f"HAT   m = {fnum(hat['mass'])} L = {fnum(hat['length'])} Izz = {fnum(hat['izz'])}; hips {fnum(hat['hip_drop'])} m below the HAT COM\n"
@@ -918,7 +918,7 @@ volume = F_max l_opt / sigma with sigma = 0.25 MPa (thesis Eq. B.3).
         "# The order pinmsk presents coordinates in (Eq. 5.1).  Pinocchio keeps its own depth-first",
         "# joint order (torso_x, torso_y, torso_angle, hip_l, knee_l, ankle_l, mtp_l, hip_r, knee_r,",
         "# ankle_r, mtp_r): subtrees must be contiguous there, so Eq. 5.1's interleaved order can only",
-        "# be a permutation at the Pinocchio boundary (builtin_models.coordinate_permutation).",
+        "# be the order of written columns (pinmsk.Model.coordinate_order); arrays keep Pinocchio's.",
         "coordinate_order = [" + ", ".join(toml_str(n) for n in GAIT_JOINT_ORDER) + "]",
         "",
         "[muscle_model]",

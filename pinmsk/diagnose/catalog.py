@@ -1,15 +1,19 @@
 """Which effects apply to a model and a trial: the diagnosis' candidate list.
 
 :func:`catalog` returns one default-parameter instance per applicable
-``(family, target)``.  Each family decides through a classmethod
-``candidates(model, context)``; families registered by users without one get
-a rule from their ``target_kind``:
+``(family, target)``.  The policy lives here, not in the physics: a family
+gets candidates by its ``target_kind``:
 
 * ``"coordinate"`` -- every actuated coordinate the trial lets us compare;
-* ``"frame"`` -- the frames the user names (``frames=[...]``);
+* ``"frame"`` -- the frames the user names (``frames=[...]``), else the
+  model's hand-like frames (hand, palm, fingertip, tool, ...);
 * ``"body"`` -- every body that carries mass;
+* ``"side"`` -- each leg (``r``, ``l``) with hip, knee and ankle coordinates,
+  one of them compared;
 * ``"model"`` -- one instance without target;
 * ``"muscle"`` -- one instance for all muscles, in muscle-level comparisons.
+
+A user family may override its rule with a classmethod ``candidates(model, context)``.
 
 Rules of the built-in families: joint effects (damping, friction, spring,
 passive elastic) on compared, actuated coordinates; ``payload`` on hand-like
@@ -26,7 +30,7 @@ from dataclasses import dataclass, field
 
 from ..errors import ModelError
 from ..effects import registry
-from ..effects._base import moving_bodies
+from ..effects._base import hand_like_frames, moving_bodies
 
 
 @dataclass(frozen=True)
@@ -83,7 +87,11 @@ def _default_candidates(cls, model, context) -> list:
     if kind == "coordinate":
         return [cls(c) for c in context.coordinates if c not in context.unactuated]
     if kind == "frame":
-        return [cls(f) for f in context.frames]
+        return [cls(f) for f in (context.frames or hand_like_frames(model))]
+    if kind == "side":
+        legs = [s for s in ("r", "l") if all(f"{j}_{s}" in model.coordinates for j in ("hip", "knee", "ankle"))
+                and any(f"{j}_{s}" in context.coordinates for j in ("hip", "knee", "ankle"))]
+        return [cls(s) for s in legs]
     if kind == "body":
         return [cls(b) for b in moving_bodies(model)]
     if kind == "model":

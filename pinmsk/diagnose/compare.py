@@ -69,7 +69,7 @@ import numpy as np
 from ..components import Motion
 from ..errors import ModelError, TrialError
 from ..signals.filtering import differentiate
-from ..kinematics import TrialInputs, prepare
+from ..kinematics import DEFAULT_CUTOFF, TrialInputs, prepare
 from ..skeleton import ExternalForce
 from ..trial import Trial, moment_channel, moment_channels, parse_ground_reaction
 from ..effects._base import SignalEffect, is_prismatic, unactuated_coordinates
@@ -79,7 +79,6 @@ from ..signals.sampling import median_step
 __all__ = ["DEFAULT_CUTOFF", "MODES", "Comparison", "EquationError", "NoiseFloor", "compare",
            "catalog_context", "external_forces_from_trial", "white_noise_sigma"]
 
-DEFAULT_CUTOFF = 6.0
 MODES = ("torque", "motion", "muscle", "contact")
 _N_PROPAGATE = 3
 #: Largest |value| accepted in a measured channel (SI: N m, N, m, or excitation): far above any

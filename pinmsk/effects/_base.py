@@ -81,11 +81,6 @@ class JointEffect(Component):
     def _dforce_dstate(self, q, v, p):  # pragma: no cover - abstract
         raise NotImplementedError
 
-    @classmethod
-    def candidates(cls, model, context) -> list:
-        """One instance per actuated coordinate the diagnosis compares."""
-        return [cls(c) for c in context.coordinates if c not in context.unactuated]
-
 
 class SignalEffect(Component):
     """A muscle-level effect: a transform of the excitation signals ``u (N, m) -> (N, m)``.
@@ -151,12 +146,6 @@ class SignalEffect(Component):
         ub = np.broadcast_to(u, (P,) + u.shape[-2:])
         cols = np.arange(ub.shape[2]) if mask is None else np.flatnonzero(mask)
         return vals, ub, cols, ub.copy()
-
-    @classmethod
-    def candidates(cls, model, context) -> list:
-        if context.mode != "muscle" or model.muscles is None:
-            return []
-        return [cls("muscles")]
 
 
 # -- model structure helpers ---------------------------------------------------

@@ -237,15 +237,6 @@ class RienerEdrich1999PassiveMoment(JointEffect):
                 dq[:, i, j] = dT[:, r, c]
         return dq, np.zeros_like(dq)
 
-    @classmethod
-    def candidates(cls, model, context) -> list:
-        out = []
-        for s in ("r", "l"):
-            coords = (f"hip_{s}", f"knee_{s}", f"ankle_{s}")
-            if all(c in model.coordinates for c in coords) and any(c in context.coordinates for c in coords):
-                out.append(cls(s))
-        return out
-
 
 def _side(target, side) -> str:
     if side is not None and target is not None and _norm_side(target) != _norm_side(side):

@@ -22,7 +22,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..components import Component, Parameter
-from ._base import add_dynamic_parameters, frame_point_kinematics, hand_like_frames
+from ._base import add_dynamic_parameters, frame_point_kinematics
 from .registry import register
 
 
@@ -60,8 +60,3 @@ class Payload(Component):
             return
         point = pin.Inertia(m, np.array(f.placement.translation), np.zeros((3, 3)))
         add_dynamic_parameters(pin_model, f.parentJoint, point.toDynamicParameters())
-
-    @classmethod
-    def candidates(cls, model, context) -> list:
-        frames = list(context.frames) if context.frames else hand_like_frames(model)
-        return [cls(f) for f in frames]

@@ -73,7 +73,3 @@ class SegmentMass(Component):
         d = self.values["delta"]
         if d != 0.0:
             add_dynamic_parameters(pin_model, j, d * model.pin.inertias[j].toDynamicParameters())
-
-    @classmethod
-    def candidates(cls, model, context) -> list:
-        return [cls(b) for b in moving_bodies(model)]

@@ -403,30 +403,10 @@ class Viewer:
         return dict(zip(m.names, vals))
 
     def _per_muscle(self, x, what) -> np.ndarray:
-        names = self.model.muscles.names
-        if isinstance(x, Mapping):
-            unknown = sorted(set(x) - set(names))
-            if unknown:
-                raise ModelError(f"{what}: unknown muscles {unknown} (muscles: {', '.join(names)})")
-            x = np.array([float(x.get(n, 0.0)) for n in names])
-        else:
-            x = np.asarray(x, dtype=float).reshape(-1)
-        if x.shape != (len(names),):
-            raise ModelError(f"{what} has {x.size} values; the model has {len(names)} muscles")
-        return _require_finite(x, names, what)
+        return _per_name(x, self.model.muscles.names, what, "muscles")
 
     def _per_coordinate(self, x, what) -> np.ndarray:
-        coords = self.model.coordinates
-        if isinstance(x, Mapping):
-            unknown = sorted(set(x) - set(coords))
-            if unknown:
-                raise ModelError(f"{what}: unknown coordinates {unknown} (coordinates: {', '.join(coords)})")
-            x = np.array([float(x.get(c, 0.0)) for c in coords])
-        else:
-            x = np.asarray(x, dtype=float).reshape(-1)
-        if x.shape != (len(coords),):
-            raise ModelError(f"{what} has {x.size} values; the model has {len(coords)} coordinates")
-        return _require_finite(x, coords, what)
+        return _per_name(x, self.model.coordinates, what, "coordinates")
 
     # ---------------------------------------------------------------- play
     def play(self, trial, *, results=None, ghost=None, ghost_offset=0.0, residual=None,
@@ -716,6 +696,21 @@ def _interp_columns(t, t_src, values) -> np.ndarray:
 
 _NO_DRAW = "meshcat cannot draw NaN or infinite values"
 _NO_NAN = f"{_NO_DRAW}: fill or cut the gaps first"
+
+
+def _per_name(x, names, what: str, kind: str) -> np.ndarray:
+    """One value per name from a mapping (missing names 0) or a sequence; unknown names, a wrong
+    length or a non-finite value are ModelErrors naming ``what`` and ``kind``."""
+    if isinstance(x, Mapping):
+        unknown = sorted(set(x) - set(names))
+        if unknown:
+            raise ModelError(f"{what}: unknown {kind} {unknown} ({kind}: {', '.join(names)})")
+        x = np.array([float(x.get(n, 0.0)) for n in names])
+    else:
+        x = np.asarray(x, dtype=float).reshape(-1)
+    if x.shape != (len(names),):
+        raise ModelError(f"{what} has {x.size} values; the model has {len(names)} {kind}")
+    return _require_finite(x, names, what)
 
 
 def _require_finite(x: np.ndarray, labels, what: str) -> np.ndarray:

@@ -15,7 +15,7 @@ _EXPORTS = {
     "lowpass": "filtering", "differentiate": "filtering", "filter_padlen": "filtering",
     "measured_rate": "sampling", "check_rate": "sampling", "uniform_rate": "sampling",
     "UNIFORM_TOLERANCE": "sampling",
-    "to_time": "resampling", "align": "resampling", "common_time": "resampling",
+    "align": "resampling", "common_time": "resampling",
     "envelope": "emg", "envelopes": "emg", "normalize": "emg", "on_off": "emg", "onset_times": "emg",
 }
 __all__ = sorted(_EXPORTS)

@@ -1,8 +1,7 @@
 """Aligning channels recorded at different rates (markers 100 Hz, force plates and EMG 2000 Hz).
 
-* :func:`to_time` -- one Trial onto given times (linear by default; optional
-  anti-alias low-pass when the new rate is lower; channels with NaN, such as
-  the COP of an unloaded plate, are interpolated linearly without filtering).
+* one Trial onto other times is :meth:`pinmsk.Trial.resample` (with ``antialias=True``
+  it low-passes first when the new rate is lower);
 * :func:`align` -- several Trials onto one common time base over the time they
   all cover, merged into one Trial (duplicate channel names are refused).
 """
@@ -14,11 +13,10 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import TrialError
-from .filtering import lowpass
-from .sampling import measured_rate, median_step
 from ..trial import Trial
+from .sampling import measured_rate
 
-__all__ = ["to_time", "align", "common_time"]
+__all__ = ["align", "common_time"]
 
 
 def common_time(trials: Sequence[Trial], *, rate: float) -> np.ndarray:
@@ -30,28 +28,6 @@ def common_time(trials: Sequence[Trial], *, rate: float) -> np.ndarray:
         raise TrialError(f"the trials do not overlap in time ({spans}); check their start times")
     n = int(math.floor((t1 - t0) * rate * (1 + 1e-12) + 1e-9)) + 1
     return t0 + np.arange(n) / rate
-
-
-def to_time(trial: Trial, time, *, antialias: bool = True, order: int = 4) -> Trial:
-    """``trial`` interpolated (linearly) onto ``time``; low-passed first if that lowers the rate.
-
-    The anti-alias filter is a zero-lag Butterworth at 0.4 x the new rate, applied to the
-    finite channels only.  Times outside the trial are an error (no extrapolation).
-    """
-    time = np.asarray(time, dtype=float)
-    src = trial
-    if antialias and time.size > 1 and trial.n_frames > 1:
-        new_rate = 1.0 / median_step(time)
-        old_rate = measured_rate(trial)
-        if new_rate < 0.99 * old_rate:
-            finite = [n for n in trial.names if np.all(np.isfinite(trial[n]))]
-            if finite:
-                vals = trial.to_dict(); vals.pop("time")
-                filt = lowpass(trial.get(finite), rate=old_rate, cutoff=0.4 * new_rate, order=order)
-                for j, n in enumerate(finite):
-                    vals[n] = filt[:, j]
-                src = Trial(trial.time, vals, units=dict(trial.units), meta=dict(trial.meta))
-    return src.resample(time, method="linear")
 
 
 def align(*trials: Trial, rate: float | None = None, time=None, antialias: bool = True) -> Trial:
@@ -72,7 +48,7 @@ def align(*trials: Trial, rate: float | None = None, time=None, antialias: bool 
     if time is None:
         rate = measured_rate(trials[0]) if rate is None else float(rate)
         time = common_time(trials, rate=rate)
-    out = to_time(trials[0], time, antialias=antialias)
+    out = trials[0].resample(time, method="linear", antialias=antialias)
     for t in trials[1:]:
-        out = out.merge(to_time(t, time, antialias=antialias))
+        out = out.merge(t.resample(time, method="linear", antialias=antialias))
     return out

@@ -739,8 +739,8 @@ class DynamicOptimization(Fitter):
 
     def _target_torque(self):
         """Inverse dynamics (N, nv) of the target motion: what the muscles must supply."""
-        from ..skeleton import inverse_dynamics
-        return inverse_dynamics(self.model, *self._target_states())
+        from ..skeleton import rnea
+        return rnea(self.model, *self._target_states())
 
     def initial_guesses(self) -> list[np.ndarray]:
         """Cheap starts: inverse dynamics of the target, minimum-effort sharing, inverse

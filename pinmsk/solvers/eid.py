@@ -32,6 +32,7 @@ import scipy.sparse as sp
 from ..errors import ConvergenceError, InfeasibleError, SolverError
 from ..fitting import Fitter, format_report
 from . import qp as _qp
+from ..kinematics import DEFAULT_CUTOFF
 from .mso import TAU_FALL, TAU_RISE, activation_problem, result_of, set_results
 
 #: P = 1: proxsuite's sparse solver reported feasible whole-trial LPs as
@@ -65,7 +66,7 @@ class ExtendedInverseDynamics(Fitter):
         self.max_iter = max_iter
         self.sqp_max_iter = sqp_max_iter
 
-    def fit(self, model, trial, *, moments=None, cutoff: float | None = None, progress=None):
+    def fit(self, model, trial, *, moments=None, cutoff=DEFAULT_CUTOFF, progress=None):
         """Solve the whole trial at once; returns ``self``."""
         t0 = _time.perf_counter()
         P, prob = activation_problem(self, model, trial, moments=moments, cutoff=cutoff)

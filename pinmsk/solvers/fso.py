@@ -73,9 +73,9 @@ from ..fitting import Fitter, FitStatistics, Result, format_report
 from ..skeleton import integrate
 from ..trial import Trial
 from . import qp as _qp
-from ..kinematics import DEFAULT_CUTOFF, prepare
+from ..kinematics import DEFAULT_CUTOFF, as_motion, prepare
 from ..skeleton import ExternalForce, external_generalized_force, world_wrench
-from .static import MODES, WEIGHTS, _muscle_property, as_motion, check_model
+from .static import MODES, WEIGHTS, _muscle_property, check_model
 
 TRACKING = ("q", "qv", "qva", "pid")
 ENFORCE = ("constraint", "cost")

@@ -31,7 +31,8 @@ from ..errors import InfeasibleError, SolverError
 from ..fitting import Fitter, FitStatistics, Result, format_report
 from ..trial import Trial
 from . import qp as _qp
-from .static import (WEIGHTS, as_motion, build_problem, diagnose_infeasible, infeasible_message)
+from ..kinematics import DEFAULT_CUTOFF, as_motion
+from .static import WEIGHTS, build_problem, diagnose_infeasible, infeasible_message
 
 try:  # the foundation's constants (thesis A.2: 11 ms and 68 ms)
     from ..muscles.activation import TAU_FALL, TAU_RISE
@@ -120,7 +121,7 @@ class ModifiedStaticOptimization(Fitter):
         self.tol = tol
         self.dofs = dofs
 
-    def fit(self, model, trial, *, moments=None, cutoff: float | None = None, progress=None):
+    def fit(self, model, trial, *, moments=None, cutoff=DEFAULT_CUTOFF, progress=None):
         """Solve frame after frame; returns ``self`` (results as StaticOptimization's, plus excitations)."""
         t0 = _time.perf_counter()
         P, prob = activation_problem(self, model, trial, moments=moments, cutoff=cutoff)

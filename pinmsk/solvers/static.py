@@ -55,9 +55,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..components import Motion
-from ..errors import ConvergenceError, InfeasibleError, ModelError, ResidualWarning, SolverError, TrialError
+from ..errors import ConvergenceError, InfeasibleError, ModelError, ResidualWarning, SolverError
 from ..fitting import Fitter, FitStatistics, Result, format_report
-from ..kinematics import DEFAULT_CUTOFF, prepare
+from ..kinematics import DEFAULT_CUTOFF, as_motion, prepare
 from ..residuals import floating_base_residuals
 from ..trial import Trial
 from . import qp as _qp
@@ -177,29 +177,6 @@ def check_model(model):
         raise ModelError(f"muscle '{muscles.names[i]}' has F_max = {f_max[i]}; it must be a finite "
                          "value > 0 (fix the model's sidecar)")
     return muscles
-
-
-def as_motion(model, data, cutoff=None) -> Motion:
-    """A :class:`Motion` of the model from a Trial (differentiated) or a Motion, checked."""
-    if isinstance(data, Motion):
-        motion = data
-        if motion.q.shape[1] != model.nv:
-            raise TrialError(f"the motion has {motion.q.shape[1]} coordinates; model "
-                             f"'{model.name}' has {model.nv} ({', '.join(model.coordinates)})")
-    elif isinstance(data, Trial):
-        motion = model.motion(data, cutoff=cutoff)
-    else:
-        raise TrialError(f"expected a Trial or a Motion, got {type(data).__name__}")
-    if motion.n_frames == 0:
-        raise TrialError("the trial has no frames; static optimization needs at least one")
-    for name in ("q", "v", "a"):
-        arr = getattr(motion, name)
-        bad = ~np.isfinite(arr)
-        if bad.any():
-            k, j = np.argwhere(bad)[0]
-            raise TrialError(f"the motion's {name} is not finite at frame {k} (t = {motion.t[k]:.6g} s), "
-                             f"coordinate '{model.coordinates[j]}'; fill or cut the gaps first")
-    return motion
 
 
 def resolve_dofs(model, R_all: np.ndarray, dofs, *, allow_unspanned: bool = False):
