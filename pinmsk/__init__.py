@@ -12,8 +12,7 @@ do not pay for Pinocchio and SciPy until something needs them.
 from __future__ import annotations
 
 from ._lazy import lazy_attributes
-from .errors import (ConvergenceError, InfeasibleError, ModelError, PinmskError, SolverError,
-                     TrialError)
+from .errors import ConvergenceError, InfeasibleError, ModelError, PinmskError, SolverError, TrialError
 
 __version__ = "0.1.0"
 

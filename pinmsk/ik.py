@@ -31,7 +31,7 @@ import numpy as np
 import pinocchio as pin
 
 from .errors import ConvergenceError, ModelError, TrialError
-from .fitting import Fitter, FitStatistics, Result, format_report
+from .fitting import FitStatistics, Fitter, Result, format_report
 from .markers import MarkerSet, load_marker_set
 from .trial import Trial, marker_array, marker_names
 

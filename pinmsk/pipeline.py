@@ -65,12 +65,12 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from .contact.identify import read_csu_foot2d
 from .dynamics import inverse_dynamics
 from .errors import PinmskError, TrialError
 from .grf import external_forces, grf_channels, torso_residuals, transfer_cop
 from .ik import InverseKinematics
 from .io.channel_map import RAJAGOPAL_HIP_OFFSET, apply_channel_map, opensim_gait2d_map
-from .contact.identify import read_csu_foot2d
 from .io.output_files import atomic_write, output_folder, write_json
 from .io.tables import read_trial, write_trial
 from .io.toml_files import read_toml

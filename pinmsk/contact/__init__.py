@@ -26,13 +26,13 @@ imports no model; the identification and the synthetic trial use models
 imported on first use (PEP 562), as :mod:`pinmsk` does.
 """
 from .._lazy import lazy_attributes
+from .foot import KINDS, SITES, GroundReaction, foot_contacts, ground_reaction, site_frames
 from .friction import friction_coefficient, regularized_coulomb
+from .hunt_crossley import HuntCrossley
+from .spec import from_spec
 from .sphere import (ContactForces, SiteKinematics, SphereContact, cap_centroid_depth, cap_volume,
                      site_kinematics, smooth_positive, wrench_generalized_force)
-from .hunt_crossley import HuntCrossley
 from .volumetric import HyperVolumetric, Volumetric
-from .foot import KINDS, SITES, GroundReaction, foot_contacts, ground_reaction, site_frames
-from .spec import from_spec
 
 #: Names of the model-level submodules, imported when first used.
 _LAZY = {

@@ -57,13 +57,12 @@ from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
 from ..errors import ModelError, SolverError, TrialError
-from ..fitting import Fitter, FitStatistics, Result, format_report
-from ..signals.filtering import differentiate
+from ..fitting import FitStatistics, Fitter, Result, format_report
 from ..io.cleveland_gait import read_csu
 from ..model import load_model
+from ..signals.filtering import differentiate
 from .dual import Dual
-from .foot import (KINDS, SITES, Foot2dGeometry, foot2d_site_kinematics, foot_contacts,
-                   ground_reaction)
+from .foot import KINDS, SITES, Foot2dGeometry, foot2d_site_kinematics, foot_contacts, ground_reaction
 from .sphere import cap_volume
 
 DRIVE = ("ankle_x", "ankle_y", "foot_angle")

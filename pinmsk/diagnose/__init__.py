@@ -20,11 +20,10 @@ models as candidates, BIC), :mod:`.fit` (:class:`EffectFit`, the one way to fit 
 effect, and cross-validation), :mod:`.diagnosis`
 (ranking, verdict, the loop), :mod:`.synth` (hidden-effect trials).
 """
-from .compare import DEFAULT_CUTOFF, Comparison, NoiseFloor, compare, external_forces_from_trial
-from .diagnosis import (AT_FLOOR, THRESHOLD, Diagnosis, DiagnosisRun, EffectScore, diagnose,
-                        parse_effect, run)
-from .fit import EffectFit
 from . import synth
+from .compare import DEFAULT_CUTOFF, Comparison, NoiseFloor, compare, external_forces_from_trial
+from .diagnosis import AT_FLOOR, THRESHOLD, Diagnosis, DiagnosisRun, EffectScore, diagnose, parse_effect, run
+from .fit import EffectFit
 from .synth import make_trial
 
 __all__ = [

@@ -100,7 +100,8 @@ from ..contact.identify import (ALL_TERMS, DRIVE, GRF, SWING, VARIANTS, ContactF
 from ..errors import ConvergenceError, ModelError, PinmskError, SolverError, TrialError
 from ..fitting import FitStatistics, Result
 from ..stats import weighted_sse
-from .compare import NoiseFloor, white_noise_sigma
+from .comparison import Comparison, NoiseFloor, white_noise_sigma
+from .ranking import EffectScore, order_by_bic, windows_of
 
 __all__ = ["CHANNELS", "DELTA_BIC", "ContactCandidate", "ContactEquationError", "ContactSet",
            "applicable", "compare_contact", "contact_candidates", "contact_problem", "drivable",
@@ -294,8 +295,6 @@ def _model_contacts(model):
 def compare_contact(model, trial, *, cutoff=None, noise_floor: NoiseFloor | None = None, problem=None,
                     options=None):
     """The contact-level :class:`~pinmsk.diagnose.compare.Comparison` (see the module docstring)."""
-    from .compare import Comparison
-
     if problem is None:
         why = _why_not(model, trial)
         if why:
@@ -329,9 +328,15 @@ def compare_contact(model, trial, *, cutoff=None, noise_floor: NoiseFloor | None
     opts = {"grf_frames": None, "sim_window": 0.5}
     opts.update(options or {})
     c = Comparison("contact", model, trial, cutoff, problem.t.copy(), CHANNELS, CHANNELS, measured, modelled,
-                   noise_floor, eq, states, opts, None, mask)
+                   noise_floor, eq, states, opts, None, mask, remake=_remake_contact)
     c.ground_speed = gs if gs is not None else float(trial.meta.get("ground_speed", 0.0))
     return c
+
+
+def _remake_contact(c: Comparison, model) -> Comparison:
+    """``c`` again for another model: the same stance problem, noise floor and options."""
+    return compare_contact(model, c.trial, cutoff=c.cutoff, noise_floor=c.noise, problem=c.eq.problem,
+                           options=c.options)
 
 
 def _floor(model, trial, problem, cutoff, window, toe, mask, modelled) -> NoiseFloor:
@@ -509,8 +514,6 @@ def rank_contacts(c, settings, fits=None):
     :class:`ContactSet`), ``params``, ``stderr``, ``components`` (the fitted spheres),
     ``contact_fit`` (the :class:`~pinmsk.contact.ContactFit`) and ``delta`` (the channels as an array).
     """
-    from .diagnosis import EffectScore, _order_by_bic
-
     cands = contact_candidates(c.model, c.trial)
     if fits is None:
         fits = _fit_candidates(c, cands)
@@ -551,13 +554,12 @@ def rank_contacts(c, settings, fits=None):
         s.delta_bic = dbic
         s.worst_windows = _candidate_windows(c, res, settings)
         ranking.append(s)
-    return _order_by_bic(ranking), skipped, fits
+    return order_by_bic(ranking), skipped, fits
 
 
 def _candidate_windows(c, residual, settings) -> list:
-    from .diagnosis import _windows_of
     """The 3 worst windows of each channel (ordered by rmse / floor over all channels)."""
-    every = _windows_of(c.time, residual, c.channels, c.noise.to_dict(), contact_window(c, settings["window"]),
+    every = windows_of(c.time, residual, c.channels, c.noise.to_dict(), contact_window(c, settings["window"]),
                         k=10 ** 6, mask=c.mask)
     out, count = [], {}
     for w in every:

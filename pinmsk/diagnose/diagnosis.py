@@ -30,22 +30,24 @@ diagnose again.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
 from ..components import Component
-from ..errors import ConvergenceError, ModelError, PinmskError, TrialError
-from .catalog import catalog as effect_catalog
-from .catalog import CatalogContext
 from ..effects import registry
-from ..effects._base import unactuated_coordinates
+from ..effects._base import is_prismatic, moving_bodies, unactuated_coordinates
+from ..errors import ConvergenceError, ModelError, PinmskError, TrialError
 from ..fitting import Result
-from .compare import DEFAULT_CUTOFF, Comparison, compare, simulate_windows
-from .fit import EffectFit, describe_fit
+from ..io.output_files import write_json
 from ..signals.sampling import median_step
+from .catalog import CatalogContext
+from .catalog import catalog as effect_catalog
+from .compare import DEFAULT_CUTOFF, Comparison, compare, simulate_windows
+from .contact import DELTA_BIC, contact_window, model_with_contacts, rank_contacts, resolve
+from .fit import EffectFit, describe_fit
+from .ranking import EffectScore, finite_or_none, windows_of
 
 __all__ = ["Diagnosis", "DiagnosisRun", "EffectScore", "diagnose", "run", "parse_effect", "describe_fit",
            "AT_FLOOR", "THRESHOLD"]
@@ -55,68 +57,6 @@ THRESHOLD = 0.1
 #: error / noise floor at or below which the verdict is at_noise_floor
 AT_FLOOR = 1.5
 _MIN_BLOCK = 20
-
-
-@dataclass
-class EffectScore:
-    """One ranked candidate: its fit (a :class:`~pinmsk.fitting.Result`, as
-    :class:`~pinmsk.diagnose.fit.EffectFit` gives) and how much it explains out of sample."""
-
-    fit: Result
-    rmse_after: dict
-    explained_fraction: float
-    improvement: float
-    significant: bool
-    converged: bool
-    note: str = ""
-
-    @property
-    def effect(self) -> Component:
-        """The fitted component (add it with ``model.with_effect(score.effect)``)."""
-        return self.fit.effect
-
-    @property
-    def family(self) -> str:
-        return self.effect.family
-
-    @property
-    def target(self) -> str | None:
-        return self.effect.target
-
-    @property
-    def label(self) -> str:
-        return self.effect.label
-
-    @property
-    def params(self) -> dict:
-        return dict(self.fit.params)
-
-    @property
-    def stderr(self) -> dict:
-        return dict(self.fit.stderr)
-
-    def describe_params(self) -> str:
-        """``name = value ± stderr unit, ...`` of the fitted parameters."""
-        return describe_fit(self.fit)
-
-    def to_dict(self) -> dict:
-        """The entry as a JSON-ready dict (one element of the diagnosis JSON's ``ranking``)."""
-        return {
-            "effect": self.family, "target": self.target,
-            "params": {k: float(v) for k, v in self.params.items()},
-            "rmse_after": {k: float(v) for k, v in self.rmse_after.items()},
-            "explained_fraction": float(self.explained_fraction),
-            "significant": bool(self.significant),
-            "stderr": {k: _finite(v) for k, v in self.stderr.items()},
-            **({"bic_change": float(self.fit.stats.bic_change), "n_params": int(self.fit.stats.k),
-                "worst_windows": [dict(w) for w in getattr(self, "worst_windows", [])]}
-               if getattr(self.effect, "kind", None) == "contact" else {}),
-        }
-
-
-def _finite(x):
-    x = float(x)
-    return x if np.isfinite(x) else None
 
 
 class Diagnosis:
@@ -174,7 +114,6 @@ class Diagnosis:
         converge within ``max_nfev`` evaluations.
         """
         if self.comparison.mode == "contact":
-            from .contact import resolve
             return resolve(self, effect, target).fit
         comp = _resolve(effect, target, self)
         plain = isinstance(effect, str) and not parse_effect(effect)[2]
@@ -299,13 +238,11 @@ class Diagnosis:
 def _model_plus(model, fit):
     """``model`` with a fitted effect; a contact model replaces the contacts on its frames."""
     if getattr(fit.effect, "kind", None) == "contact" and hasattr(fit, "components"):
-        from .contact import model_with_contacts
         return model_with_contacts(model, fit)
     return model.with_effect(fit.effect)
 
 
 def _unit(c: Comparison) -> str:
-    from ..effects._base import is_prismatic
     if c.mode == "contact":
         return "N and m"
     lin = [is_prismatic(c.model, x) for x in c.coordinates]
@@ -319,7 +256,7 @@ def _added_json(a) -> dict:
     eff = fit.effect
     return {"effect": eff.family, "target": eff.target,
             "params": {k: float(v) for k, v in fit.params.items()},
-            "stderr": {k: _finite(v) for k, v in fit.stderr.items()}}
+            "stderr": {k: finite_or_none(v) for k, v in fit.stderr.items()}}
 
 
 # -- building blocks -------------------------------------------------------------------------
@@ -381,7 +318,6 @@ def _targets(cls, model) -> str:
     if kind == "coordinate":
         return ", ".join(model.coordinates)
     if kind in ("frame", "body"):
-        from ..effects._base import moving_bodies
         names = list(moving_bodies(model)) if kind == "body" else list(model.frame_names)
         return ", ".join(names)
     if kind == "muscle":
@@ -393,39 +329,8 @@ def _targets(cls, model) -> str:
 
 def _worst_windows(c: Comparison, window: float, k: int = 5) -> list:
     if c.mode == "contact":
-        from .contact import contact_window
         window = contact_window(c, window)
-    return _windows_of(c.time, c.residual, c.channels, c.noise.to_dict(), window, k=k, mask=c.mask)
-
-
-def _windows_of(t, res, channels, floor: dict, window: float, k: int = 5, mask=None) -> list:
-    """The ``k`` (channel, time window) pairs with the largest RMS residual / noise floor."""
-    dur = t[-1] - t[0]
-    if dur / window < 3:
-        window = dur / 5
-    dt = median_step(t)
-    if window / dt < 10:
-        raise TrialError(
-            f"windows of {window:.3g} s hold {window / dt:.1f} samples at {1 / dt:.4g} Hz; need at least 10 "
-            "per window: pass a longer window= or a longer, denser trial"
-        )
-    out = []
-    starts = np.arange(t[0], t[-1] - 0.5 * window, window)
-    for a in starts:
-        sel = (t >= a) & (t < a + window)
-        if sel.sum() < 5:
-            continue
-        if mask is None:
-            r = np.sqrt(np.mean(res[sel] ** 2, axis=0))
-        else:
-            m = mask[sel]
-            r = np.sqrt(np.sum(np.where(m, res[sel] ** 2, 0.0), axis=0) / np.maximum(m.sum(axis=0), 1))
-            r = np.where(m.sum(axis=0) >= 3, r, 0.0)
-        for ch, v in zip(channels, r):
-            out.append({"channel": ch, "start": float(a), "end": float(min(a + window, t[-1])),
-                        "rmse": float(v)})
-    out.sort(key=lambda w: -w["rmse"] / floor[w["channel"]])
-    return out[:k]
+    return windows_of(c.time, c.residual, c.channels, c.noise.to_dict(), window, k=k, mask=c.mask)
 
 
 def _correlations(c: Comparison, k: int = 4) -> dict:
@@ -551,7 +456,6 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
 
 
 def _diagnose_contact(c, candidates, folds, threshold, at_floor, window, cutoff, delta_bic, fits) -> Diagnosis:
-    from .contact import DELTA_BIC, rank_contacts
     if candidates is not None:
         raise ModelError("contact mode ranks the contact models of the foot (point, volumetric, "
                          "hypervolumetric, hypervolumetric_relaxed); candidates= does not apply")
@@ -562,11 +466,6 @@ def _diagnose_contact(c, candidates, folds, threshold, at_floor, window, cutoff,
     d = Diagnosis(c, ranking, _worst_windows(c, window), _correlations(c), settings, skipped)
     d.contact_fits = fits
     return d
-
-
-def _order_by_bic(ranking: list) -> list:
-    """Converged first, then lowest BIC (largest fall of BIC against the model as given)."""
-    return sorted(ranking, key=lambda s: (not s.converged, s.fit.stats.bic_change))
 
 
 def _order(ranking: list, tie: float = 0.05) -> list:
@@ -631,7 +530,6 @@ class DiagnosisRun:
 
     def write_json(self, path) -> Path:
         """The JSON summary (parent folders created); refused if any number is NaN or infinite."""
-        from ..io.output_files import write_json
         return write_json(path, self.to_dict(), parents=True)
 
     def __repr__(self) -> str:

@@ -41,9 +41,9 @@ import numpy as np
 from scipy.optimize import least_squares, lsq_linear
 
 from ..components import Component
-from ..errors import ConvergenceError, ModelError
 from ..effects._base import SignalEffect
-from ..fitting import Fitter, FitStatistics, Result, format_report
+from ..errors import ConvergenceError, ModelError
+from ..fitting import FitStatistics, Fitter, Result, format_report
 from ..stats import weighted_sse
 from ..trial import moment_channel
 

@@ -25,9 +25,9 @@ import threading
 import numpy as np
 
 from ..components import Parameter
+from ..signals.sampling import median_step
 from ._base import SignalEffect
 from .registry import register
-from ..signals.sampling import median_step
 
 
 @register

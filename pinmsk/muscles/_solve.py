@@ -16,9 +16,9 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from ..errors import ConvergenceError
 from ._common import locate, where_first
 from .pennation import check_along_positive
-from ..errors import ConvergenceError
 
 __all__ = ["safeguarded_newton", "compliant_equilibrium"]
 

@@ -38,8 +38,8 @@ from .nagano_gerritsen import (ng_activation_from_force, ng_fiber_force_partials
                                ng_force_length_derivative)
 from .pennation import check_along_positive, pennation_height
 from .tendon import (TENDON_STRAIN0, thelen_tendon_stiffness, thelen_tendon_stiffness_derivative,
-                     thelen_tendon_strain, winters_tendon_stiffness,
-                     winters_tendon_stiffness_derivative, winters_tendon_strain)
+                     thelen_tendon_strain, winters_tendon_stiffness, winters_tendon_stiffness_derivative,
+                     winters_tendon_strain)
 from .thelen2003 import (thelen_activation_from_force, thelen_active_force_length,
                          thelen_active_force_length_derivative, thelen_fiber_force_partials,
                          thelen_passive_force_length, thelen_passive_force_length_derivative)

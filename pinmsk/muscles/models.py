@@ -23,17 +23,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import ModelError, TrialError
 from ._common import check_finite, locate, muscle_parameter, n_muscles, where_first
 from .activation import (TAU_FALL, TAU_RISE, activation_from_excitation, activation_rate,
                          excitation_from_activation)
 from .inverse import inverse_nagano_gerritsen, inverse_thelen2003
-from .nagano_gerritsen import (ng_contraction_rate, ng_equilibrium, ng_fiber_force,
-                               ng_force_length)
+from .nagano_gerritsen import ng_contraction_rate, ng_equilibrium, ng_fiber_force, ng_force_length
 from .pennation import check_along_positive, pennation_height
 from .tendon import TENDON_STRAIN0, thelen_tendon_force, winters_tendon_force
-from .thelen2003 import (GAMMA, K_PE, PASSIVE_STRAIN0, thelen_contraction_rate,
-                         thelen_equilibrium, thelen_fiber_force, thelen_force_velocity)
-from ..errors import ModelError, TrialError
+from .thelen2003 import (GAMMA, K_PE, PASSIVE_STRAIN0, thelen_contraction_rate, thelen_equilibrium,
+                         thelen_fiber_force, thelen_force_velocity)
 
 __all__ = ["MUSCLE_PARAMETERS", "MuscleParameter", "NaganoGerritsen", "Thelen2003"]
 

@@ -15,8 +15,8 @@ from typing import Sequence
 
 import numpy as np
 
-from ._common import locate, where_first
 from ..errors import TrialError
+from ._common import locate, where_first
 
 __all__ = ["pennation_height", "pennation_angle", "fiber_length", "fiber_velocity_from_along",
            "fiber_acceleration_from_along", "rigid_tendon_kinematics", "check_along_positive"]

@@ -32,11 +32,11 @@ from typing import Sequence
 
 import numpy as np
 
+from ..errors import ConvergenceError
 from ._common import check_active
 from ._solve import compliant_equilibrium, safeguarded_newton
 from .pennation import check_along_positive, pennation_height
 from .tendon import TENDON_STRAIN0, thelen_tendon_force, thelen_tendon_stiffness, thelen_tendon_strain
-from ..errors import ConvergenceError
 
 __all__ = [
     "K_PE", "PASSIVE_STRAIN0", "GAMMA", "A_F", "F_HAT", "FV_EXTRAPOLATION",

@@ -32,8 +32,8 @@ def _read(path, model=None, args=None, *, coordinates: bool = True):
     """
     import warnings
 
-    from ..io.channel_map import read_mapped
     from ..errors import RepairWarning
+    from ..io.channel_map import read_mapped
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RepairWarning)
         trial = read_mapped(path, model=model, cmap=getattr(args, "map", None),

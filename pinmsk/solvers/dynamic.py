@@ -113,11 +113,11 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import ConvergenceError, ModelError, SolverError, TrialError
-from ..fitting import Fitter, FitStatistics, Result, format_report
+from ..fitting import FitStatistics, Fitter, Result, format_report
 from ..muscles.activation import excitation_from_activation
 from ..muscles.thelen2003 import GAMMA, K_PE, PASSIVE_STRAIN0, thelen_passive_force_length
-from .simulation_designs import BatchMuscles, BatchSkeleton, muscle_inverse, simulate_ff, simulate_skeleton
 from .parametrization import Fourier, Parametrization, Polynomial, Spline
+from .simulation_designs import BatchMuscles, BatchSkeleton, muscle_inverse, simulate_ff, simulate_skeleton
 
 __all__ = ["BatchSkeleton", "simulate_ff", "simulate_skeleton", "muscle_inverse",
            "DynamicOptimization", "Target", "optimize_task",
@@ -1335,8 +1335,8 @@ def optimize_task(task_path, out_path=None, progress=None, *, precision: int | N
     prob = build_from_task(spec, base_dir=Path(task_path).parent, progress=progress)
     res = prob.fit().result_
     if out_path is not None:
-        from ..io.tables import write_trial
         from ..io.output_files import write_json
+        from ..io.tables import write_trial
         out = Path(out_path)
         write_trial(res, out, precision=precision)
         write_json(out.with_suffix(out.suffix + ".json"), prob.to_dict())

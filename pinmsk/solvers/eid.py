@@ -31,8 +31,8 @@ import scipy.sparse as sp
 
 from ..errors import ConvergenceError, InfeasibleError, SolverError
 from ..fitting import Fitter, format_report
-from . import qp as _qp
 from ..kinematics import DEFAULT_CUTOFF
+from . import qp as _qp
 from .mso import TAU_FALL, TAU_RISE, activation_problem, result_of, set_results
 
 #: P = 1: proxsuite's sparse solver reported feasible whole-trial LPs as

@@ -69,12 +69,11 @@ from scipy.interpolate import CubicHermiteSpline
 from ..components import Motion
 from ..dynamics import skeleton_with_inertias
 from ..errors import ConvergenceError, InfeasibleError, ModelError, SolverError
-from ..fitting import Fitter, FitStatistics, Result, format_report
-from ..skeleton import integrate
+from ..fitting import FitStatistics, Fitter, Result, format_report
+from ..kinematics import DEFAULT_CUTOFF, as_motion, prepare
+from ..skeleton import ExternalForce, external_generalized_force, integrate, world_wrench
 from ..trial import Trial
 from . import qp as _qp
-from ..kinematics import DEFAULT_CUTOFF, as_motion, prepare
-from ..skeleton import ExternalForce, external_generalized_force, world_wrench
 from .static import MODES, WEIGHTS, _muscle_property, check_model
 
 TRACKING = ("q", "qv", "qva", "pid")

@@ -28,10 +28,10 @@ import time as _time
 import numpy as np
 
 from ..errors import InfeasibleError, SolverError
-from ..fitting import Fitter, FitStatistics, Result, format_report
+from ..fitting import FitStatistics, Fitter, Result, format_report
+from ..kinematics import DEFAULT_CUTOFF, as_motion
 from ..trial import Trial
 from . import qp as _qp
-from ..kinematics import DEFAULT_CUTOFF, as_motion
 from .static import WEIGHTS, build_problem, diagnose_infeasible, infeasible_message
 
 try:  # the foundation's constants (thesis A.2: 11 ms and 68 ms)

@@ -67,7 +67,10 @@ class BatchSkeleton:
 
 # =============================================================================== muscles
 from ..muscles.tendon import _thelen_constants as _tendon_consts
-from ..muscles.thelen2003 import A_F as _A_F, F_HAT as _F_HAT, _C as _FV_C, _K_CON, _K_ECC, _W_THR
+from ..muscles.thelen2003 import _C as _FV_C
+from ..muscles.thelen2003 import _K_CON, _K_ECC, _W_THR
+from ..muscles.thelen2003 import A_F as _A_F
+from ..muscles.thelen2003 import F_HAT as _F_HAT
 from ..muscles.thelen2003 import FV_EXTRAPOLATION as _FV_EXTRA
 
 _FV_ECC = _FV_C * (_F_HAT - 1.0)

@@ -56,7 +56,7 @@ import numpy as np
 
 from ..components import Motion
 from ..errors import ConvergenceError, InfeasibleError, ModelError, ResidualWarning, SolverError
-from ..fitting import Fitter, FitStatistics, Result, format_report
+from ..fitting import FitStatistics, Fitter, Result, format_report
 from ..kinematics import DEFAULT_CUTOFF, as_motion, prepare
 from ..residuals import floating_base_residuals
 from ..trial import Trial
