@@ -8,8 +8,9 @@ import pytest
 import pinmsk
 from pinmsk.errors import ConvergenceError, ModelError
 from pinmsk.solvers.dynamic import (BatchSkeleton, DynamicOptimization, Target, BatchMuscles,
-                                    load_task, muscle_inverse, optimize_task, scale_masses,
+                                    load_task, muscle_inverse, scale_masses,
                                     simulate_ff, simulate_skeleton)
+from pinmsk.pipeline import optimize_task
 from pinmsk.solvers.parametrization import Fourier, Polynomial
 
 

@@ -14,7 +14,7 @@ free moment.  Their ``generalized_force`` is ``J^T`` of the world wrench.
 Feet and fitting: :func:`load_foot2d`, :func:`foot_contacts`, :class:`ContactFit`
 (Eq. 4.2 identification, exact Jacobians through :class:`~pinmsk.contact.dual.Dual`
 numbers), :func:`fit_contact_models` (several models on one trial, each starting from the
-ones it contains), :func:`fit_cli_run` (what ``pinmsk contact fit`` calls),
+ones it contains), :func:`load_contact_model`,
 :func:`read_contact_trial` (CSU text or .csv/.sto/.mot), :func:`synthetic_foot_trial`,
 :func:`from_spec` (a sidecar ``[[contacts]]`` entry -> component, see
 :mod:`pinmsk.contact.spec`).  The CSU reader is :func:`pinmsk.io.cleveland_gait.read_csu`.  The
@@ -36,7 +36,7 @@ from .volumetric import HyperVolumetric, Volumetric
 
 #: Names of the model-level submodules, imported when first used.
 _LAZY = {
-    "ContactFit": "identify", "fit_cli_run": "identify", "fit_contact_models": "identify",
+    "ContactFit": "identify", "load_contact_model": "identify", "fit_contact_models": "identify",
     "fourier_basis": "identify", "load_foot2d": "identify", "read_contact_trial": "identify",
     "read_csu_foot2d": "identify",
     "stance_cycle": "identify", "toe_from_kinematics": "identify",
@@ -47,7 +47,7 @@ _LAZY = {
 __all__ = [
     "ContactFit", "ContactForces", "GroundReaction", "HuntCrossley", "HyperVolumetric", "KINDS",
     "SITES", "SiteKinematics", "SphereContact", "Volumetric", "cap_centroid_depth", "cap_volume",
-    "fit_cli_run", "fit_contact_models", "from_spec", "foot_contacts", "fourier_basis",
+    "fit_contact_models", "load_contact_model", "from_spec", "foot_contacts", "fourier_basis",
     "friction_coefficient", "ground_reaction", "load_foot2d", "read_contact_trial", "read_csu_foot2d",
     "regularized_coulomb", "site_frames",
     "site_kinematics", "smooth_positive", "stance_cycle", "synthetic_foot_trial", "toe_from_kinematics",

@@ -59,11 +59,12 @@ from threadpoolctl import threadpool_limits
 from ..errors import ModelError, SolverError, TrialError
 from ..fitting import FitStatistics, Fitter, Result, format_report
 from ..io.cleveland_gait import read_csu
+from ..io.tables import read_trial
 from ..model import load_model
 from ..signals.filtering import differentiate
 from .dual import Dual
 from .foot import KINDS, SITES, Foot2dGeometry, foot2d_site_kinematics, foot_contacts, ground_reaction
-from .sphere import cap_volume
+from .sphere import SiteKinematics, cap_volume
 
 DRIVE = ("ankle_x", "ankle_y", "foot_angle")
 GRF = ("ground_force_vy", "ground_force_vx", "ground_force_px")
@@ -132,7 +133,6 @@ def stance_cycle(trial, *, threshold: float = 20.0) -> tuple[float, float]:
                          f"found {off.size}")
     t = trial.time
     return float(t[off[0]]), float(t[off[1]])
-
 
 
 @dataclass
@@ -318,7 +318,6 @@ class _Residual:
 
 def _stack_kinematics(kins):
     """One SiteKinematics holding the frames of ``kins`` one after the other (plain or Dual fields)."""
-    from .sphere import SiteKinematics
     return SiteKinematics(*(np.concatenate([getattr(k, f) for k in kins])
                             for f in ("position", "rotation", "velocity", "omega")))
 
@@ -839,49 +838,6 @@ class ContactFit(Fitter):
                 "measured_events_s": [float(t[i1]), float(t[iv]), float(t[i2])],
                 "model_events_s": [float(t[j1]), float(t[jv]), float(t[j2])]}
 
-    def plot(self, out_dir) -> list[Path]:
-        """GRF (vertical, horizontal) and COP vs measured, as PNGs in ``out_dir``."""
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        from ..presentation.plots import save_figure
-
-        out_dir = Path(out_dir)
-        prob, gr = self.problem_, self.reaction_
-        t = prob.t
-        title = f"{self.contact}{' relaxed' if self.relax else ''}"
-        fig, ax = plt.subplots(2, 1, figsize=(6, 5.5), sharex=True)
-        ax[0].plot(t, prob.meas[0], "k", label="measured")
-        ax[0].plot(t, gr.normal, "C3", label="model")
-        for o, s in zip(self.outputs_, SITES):
-            ax[0].plot(t, o.normal, lw=0.8, ls="--", label=s)
-        ax[0].set_ylabel("vertical GRF (N)")
-        ax[0].legend(fontsize=7)
-        ax[0].set_title(f"{title}: J = {self.objective_:.4f}")
-        ax[1].plot(t, prob.meas[1], "k", label="measured")
-        ax[1].plot(t, gr.friction, "C3", label="model")
-        ax[1].set_ylabel("horizontal GRF (N)")
-        ax[1].set_xlabel("time (s)")
-        fig.tight_layout()
-        p1 = out_dir / f"grf_{self.contact}{'_relaxed' if self.relax else ''}.png"
-        save_figure(fig, p1, dpi=110)
-        plt.close(fig)
-        fig, ax = plt.subplots(figsize=(6, 3.2))
-        m = prob.cop_mask
-        ax.plot(t[m], prob.meas[2][m], "k.", ms=3, label="measured")
-        ax.plot(t[m], gr.cop[m, 0], "C3", label="model")
-        ax.set_ylabel("COP x (m)")
-        ax.set_xlabel("time (s)")
-        ax.set_title(title)
-        ax.legend(fontsize=7)
-        fig.tight_layout()
-        p2 = out_dir / f"cop_{self.contact}{'_relaxed' if self.relax else ''}.png"
-        save_figure(fig, p2, dpi=110)
-        plt.close(fig)
-        return [p1, p2]
-
-
 
 _JOB = None
 
@@ -1015,7 +971,6 @@ def read_contact_trial(path):
         first = fh.readline()
     if first.lstrip().startswith("%") and "TimeStamp" in first:
         return read_csu_foot2d(path)
-    from ..io.tables import read_trial
     return read_trial(path)
 
 
@@ -1036,7 +991,8 @@ def read_csu_foot2d(path, **options):
     return read_csu(path, **options)
 
 
-def _load_model_arg(model):
+def load_contact_model(model):
+    """The model a contact fit runs on: foot2d for None or its name/files, else :func:`pinmsk.load_model`."""
     if model is None or str(model) == "foot2d" or Path(str(model)).name in ("foot2d.toml", "foot2d.urdf"):
         return load_foot2d()
     return load_model(model)
@@ -1061,28 +1017,3 @@ def fit_contact_models(model, trial, variants=VARIANTS, **options) -> dict:
     return out
 
 
-def fit_cli_run(model, trial, *, json_path=None, plot_dir=None, **options) -> dict:
-    """What ``pinmsk contact fit MODEL TRIAL [--contact ...] [--json] [--plot]`` runs.
-
-    ``model`` is a Model, a model name/path, or None (foot2d); ``trial`` a Trial or a
-    file (CSU leg2d text, .csv, .sto, .mot; see :func:`read_contact_trial`) with
-    ankle_x, ankle_y, foot_angle and ground_force_vx/vy/px.  ``options`` are
-    :class:`ContactFit`'s keywords, with its defaults (the CLI passes only what the
-    user gave).  Returns (and writes to ``json_path``) :meth:`ContactFit.to_dict`:
-    ``objective`` (Eq. 4.2), ``params`` ({site: {name: value}}), ``rmse``
-    (``normal_force``, ``friction_force`` in N, ``cop`` in m), ``seconds`` and
-    ``settings`` (:meth:`ContactFit.settings_`); ``plot_dir`` gets the GRF and COP
-    figures (their paths under ``figures``).
-    """
-    if model is None or isinstance(model, (str, Path)):
-        model = _load_model_arg(model)
-    if isinstance(trial, (str, Path)):
-        trial = read_contact_trial(trial)
-    fit = ContactFit(**options).fit(model, trial)
-    out = fit.to_dict()
-    if plot_dir is not None:
-        out["figures"] = [str(p) for p in fit.plot(plot_dir)]
-    if json_path is not None:
-        from ..io.output_files import write_json
-        write_json(json_path, out, parents=True)
-    return out

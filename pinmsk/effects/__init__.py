@@ -47,6 +47,8 @@ target (implement ``generalized_force(model, motion, params=None, cache=None)
 parameter-independent work, given back as ``cache``); see
 :mod:`pinmsk.diagnose.catalog` for how candidates are chosen.
 """
+from ..errors import ModelError
+from . import registry as _r
 from ._base import JointEffect, SignalEffect
 from .activation import ActivationDynamics
 from .damping import JointDamping
@@ -61,9 +63,7 @@ from .spring import JointSpring
 
 def unregister(family: str) -> None:
     """Remove a user-registered family (built-in families cannot be removed)."""
-    from . import registry as _r
     if family in _BUILTIN:
-        from ..errors import ModelError
         raise ModelError(f"'{family}' is a built-in effect family and cannot be unregistered")
     _r._REGISTRY.pop(family, None)
 

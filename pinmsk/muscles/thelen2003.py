@@ -33,7 +33,7 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import ConvergenceError
-from ._common import check_active
+from ._common import check_active, locate, where_first
 from ._solve import compliant_equilibrium, safeguarded_newton
 from .pennation import check_along_positive, pennation_height
 from .tendon import TENDON_STRAIN0, thelen_tendon_force, thelen_tendon_stiffness, thelen_tendon_strain
@@ -260,7 +260,6 @@ def thelen_activation_from_force(f_ce, f_isom, v_norm, *, tol: float = 1e-13,
             break
         hi = np.where(short, 2.0 * hi, hi)
     else:
-        from ._common import locate, where_first
         frame, muscle = where_first(short)
         raise ConvergenceError(
             f"no activation produces the fibre force at {locate(frame, muscle, names)}: "

@@ -253,7 +253,7 @@ def cmd_synth(args) -> int:
 
 
 def cmd_contact_fit(args) -> int:
-    from ..contact import fit_cli_run
+    from ..pipeline import contact_fit_task
     from ..contact.identify import settings_lines
     opts = {}   # only what the user gave: the rest are ContactFit's defaults (printed below)
     if args.contact:
@@ -268,7 +268,7 @@ def cmd_contact_fit(args) -> int:
         opts["toe"] = args.toe
     if args.cutoff is not None:
         opts["cutoff"] = args.cutoff or None
-    out = fit_cli_run(args.model, args.trial, json_path=args.json, plot_dir=args.plot, **opts)
+    out = contact_fit_task(args.model, args.trial, json_path=args.json, plot_dir=args.plot, **opts)
     print("\n".join(settings_lines(out["settings"])))
     for k, (label, j) in enumerate(zip(out["start_labels"], out["starts"])):
         print(f"  start {k + 1}, {label}: J {j:.5g}{' (best)' if k == out['best_start'] else ''}")
@@ -295,7 +295,7 @@ _OPTIMIZE_EPILOG = (
 
 
 def cmd_optimize(args) -> int:
-    from ..solvers.dynamic import optimize_task
+    from ..pipeline import optimize_task
     with _progress(None, "optimize", "iterations") as bar:
         res = optimize_task(args.task, args.output, progress=bar, precision=args.precision)
     print(res.report())

@@ -112,15 +112,20 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from .. import energy
 from ..errors import ConvergenceError, ModelError, SolverError, TrialError
 from ..fitting import FitStatistics, Fitter, Result, format_report
+from ..io.tables import read_trial
+from ..io.toml_files import check_keys, read_toml
+from ..model import Model, load_model
 from ..muscles.activation import excitation_from_activation
 from ..muscles.thelen2003 import GAMMA, K_PE, PASSIVE_STRAIN0, thelen_passive_force_length
+from ..skeleton import rnea
 from .parametrization import Fourier, Parametrization, Polynomial, Spline
 from .simulation_designs import BatchMuscles, BatchSkeleton, muscle_inverse, simulate_ff, simulate_skeleton
 
 __all__ = ["BatchSkeleton", "simulate_ff", "simulate_skeleton", "muscle_inverse",
-           "DynamicOptimization", "Target", "optimize_task",
+           "DynamicOptimization", "Target",
            "load_task", "TASK_SCHEMA"]
 
 DESIGNS = ("ff", "ifm", "ift")
@@ -583,7 +588,6 @@ class DynamicOptimization(Fitter):
     def _energy(self, sim, w: float = 0.0):
         """Metabolic rates (N, B, m): exact (``w = 0``, reported) or with the C1 switches
         of width ``w`` (optimized; :mod:`pinmsk.energy`), u and a clipped to [0, 1] alike."""
-        from .. import energy
         mu = self._mu
         kw = dict(u=energy.smooth_clip(sim["u"], 0.0, 1.0, w),
                   a=energy.smooth_clip(sim["a"], 0.0, 1.0, w), l_ce=sim["l_ce"],
@@ -739,7 +743,6 @@ class DynamicOptimization(Fitter):
 
     def _target_torque(self):
         """Inverse dynamics (N, nv) of the target motion: what the muscles must supply."""
-        from ..skeleton import rnea
         return rnea(self.model, *self._target_states())
 
     def initial_guesses(self) -> list[np.ndarray]:
@@ -1223,7 +1226,6 @@ TASK_SCHEMA = {
 
 
 def _check_keys(table: dict, section: str, where: str):
-    from ..io.toml_files import check_keys
     check_keys(table, TASK_SCHEMA[section], where=where, section=f"[{section}]")
 
 
@@ -1235,7 +1237,6 @@ def load_task(task_path) -> dict:
     if p.suffix.lower() == ".json":
         spec = json.loads(p.read_text())
     else:
-        from ..io.toml_files import read_toml
         spec = read_toml(p, what="task file")
     for k in spec:
         if k not in TASK_SCHEMA:
@@ -1252,7 +1253,6 @@ def load_task(task_path) -> dict:
 
 def build_from_task(spec: dict, *, base_dir=None, progress=None) -> DynamicOptimization:
     """A :class:`DynamicOptimization` from a validated task dict."""
-    from ..model import load_model
     ms = spec["model"]
     name = ms["name"]
     if base_dir is not None and str(name).endswith((".toml", ".urdf")) and not Path(name).is_absolute():
@@ -1266,7 +1266,6 @@ def build_from_task(spec: dict, *, base_dir=None, progress=None) -> DynamicOptim
     coord = mo.get("coordinate", model.coordinates[0])
     model.coordinate_index(coord)
     if kind == "file":
-        from ..io.tables import read_trial
         f = Path(mo["file"])
         if base_dir is not None and not f.is_absolute():
             f = Path(base_dir) / f
@@ -1315,7 +1314,6 @@ def build_from_task(spec: dict, *, base_dir=None, progress=None) -> DynamicOptim
 
 def scale_masses(model, factor: float):
     """A new model whose segment masses and inertias are scaled by ``factor``."""
-    from ..model import Model
     if not factor > 0:
         raise ModelError(f"mass_scale must be > 0, got {factor}")
     pm = pin.Model(model.pin)
@@ -1326,18 +1324,3 @@ def scale_masses(model, factor: float):
                  contacts=model.contacts, meta=model.meta)
 
 
-def optimize_task(task_path, out_path=None, progress=None, *, precision: int | None = None) -> Result:
-    """Run the task file ``task_path``; write the result trial to ``out_path`` (.sto/.csv/.mot,
-    ``precision`` significant digits, default that of :func:`pinmsk.io.write_trial`)
-    and the JSON summary (:meth:`DynamicOptimization.to_dict`) next to it (``<out>.json``).
-    Returns the fit's :class:`~pinmsk.fitting.Result` (check ``converged``)."""
-    spec = load_task(task_path)
-    prob = build_from_task(spec, base_dir=Path(task_path).parent, progress=progress)
-    res = prob.fit().result_
-    if out_path is not None:
-        from ..io.output_files import write_json
-        from ..io.tables import write_trial
-        out = Path(out_path)
-        write_trial(res, out, precision=precision)
-        write_json(out.with_suffix(out.suffix + ".json"), prob.to_dict())
-    return res
