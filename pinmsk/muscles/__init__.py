@@ -10,7 +10,7 @@ objects that bind the parameters:
 Modules: :mod:`.activation` (A.1-A.5), :mod:`.tendon` (A.6, A.10-A.11),
 :mod:`.thelen2003` (A.7-A.9), :mod:`.nagano_gerritsen` (A.12-A.14),
 :mod:`.pennation` (constant-thickness geometry), :mod:`.inverse` (Fig. 5.6,
-Eq. 5.2-5.4), :mod:`.models` (the objects).  SI units; fibre velocity is
+Eq. 5.2-5.4), :mod:`.models` (the objects).  SI units; fiber velocity is
 negative when shortening.
 """
 from .activation import (TAU_FALL, TAU_RISE, activation_from_excitation, activation_rate,

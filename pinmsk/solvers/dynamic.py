@@ -11,14 +11,14 @@ Simulation designs (Sec. 5.1)
     the signals are muscle excitations ``u``; the state ``[q, v, a(, l_ce)]``
     is integrated: activation dynamics (Eq. A.2) -> muscle force (Thelen 2003,
     rigid tendon, or compliant tendon with the contraction dynamics of
-    Eq. 3.9 / A.6-A.9 and fibre lengths as states) -> skeleton (Pinocchio ABA).
+    Eq. 3.9 / A.6-A.9 and fiber lengths as states) -> skeleton (Pinocchio ABA).
 ``"ifm"`` (inverse-forward from muscle forces)
     the signals are muscle-tendon forces ``F`` (Eq. 5.5); only the skeleton is
     integrated (``tau = R(q)^T F``), then activations, activation rates and
     excitations come from the inverse muscle model (Fig. 5.6, Eq. 5.2-5.4,
     compliant tendon) fed with the *analytic* ``F, F', F''`` of the
     parametrization and ``l_mt, l_mt', l_mt''`` of the simulated kinematics.
-    The contractile force the fibre must supply is constrained to at least
+    The contractile force the fiber must supply is constrained to at least
     ``F_CE_MIN`` (0.2 % of F_max) on the grid of the excitation bounds: below
     zero the inverse model switches to ``a = 0``, a kink no gradient method
     crosses.
@@ -35,7 +35,7 @@ Simulation designs (Sec. 5.1)
 
 In IFM and IFT the recovered excitation contains ``df/dv`` (Eq. 5.4), and
 Thelen's force-velocity slope jumps at zero velocity (5 concentric, 10
-eccentric): the excitation would jump at every fibre reversal and the bound
+eccentric): the excitation would jump at every fiber reversal and the bound
 constraints with it.  These designs therefore use the force-velocity curve
 blended over ``|v/v_max| < fv_smooth`` (C2, within 1.2 % of Eq. A.9 in the
 band; :func:`~pinmsk.muscles.thelen2003.thelen_force_velocity`), in the
@@ -54,7 +54,7 @@ Excitations are clipped to [-0.2, 1.2] inside the FF simulation only to keep
 infeasible iterates finite: the bounds themselves are constraints (Eq. 3.8),
 and clipping exactly at 0 would make the problem non-smooth where
 excitations rest on their lower bound and the compliant contraction dynamics
-use ``max(a, 0.01)`` (the fibre velocity is undetermined at zero activation).
+use ``max(a, 0.01)`` (the fiber velocity is undetermined at zero activation).
 
 Objectives (``objective=``)
 ---------------------------
@@ -146,9 +146,9 @@ class _Unsimulable(SolverError):
 def passive_floor(mu: BatchMuscles, l_mt, dl_mt=None, ddl_mt=None):
     """Smooth upper bound of a muscle-tendon unit's passive force, with its time derivatives.
 
-    ``F_max (FLOOR + exp(K_PE (l - 1)/eps0) / (exp(K_PE) - 1))`` at the rigid-tendon fibre
+    ``F_max (FLOOR + exp(K_PE (l - 1)/eps0) / (exp(K_PE) - 1))`` at the rigid-tendon fiber
     length ``l = sqrt((l_mt - l_slack)^2 + h^2) / l_opt``.  It exceeds the Thelen
-    passive force (Eq. A.7) everywhere, because the compliant fibre is never longer
+    passive force (Eq. A.7) everywhere, because the compliant fiber is never longer
     than the rigid one and ``cos(alpha) <= 1``, and unlike Eq. A.7 it is C-infinity.
     A force above it leaves a positive contractile force, so the inverse muscle model
     (Fig. 5.6) returns ``a > 0`` and no switch to ``a = 0`` (a kink the optimizer of
@@ -457,7 +457,7 @@ class DynamicOptimization(Fitter):
         flat = lambda x: x.reshape(n * B, -1)   # noqa: E731
         mu = self._mu
         inv = muscle_inverse(self.model, flat(q), flat(v), flat(acc), flat(F), flat(dF), flat(ddF),
-                             muscles=mu, fv_smooth=self.fv_smooth, fibre_floor=1e-3 * mu.l_opt)
+                             muscles=mu, fv_smooth=self.fv_smooth, fiber_floor=1e-3 * mu.l_opt)
         sim = {"q": q, "v": v, "acc": acc, "force": F}
         for k in ("a", "u", "l_ce", "v_ce"):
             sim[k] = inv[k].reshape(n, B, -1)
@@ -465,7 +465,7 @@ class DynamicOptimization(Fitter):
         d = sim["l_ce"] / mu.l_opt - 1.0
         sim["f_isom"] = np.exp(d * d * (-1.0 / GAMMA))
         x = np.sqrt(np.maximum(sim["l_ce"] ** 2 - mu.h2, 1e-12))
-        # normalized contractile force demanded of the fibre (Fig. 5.6 step 3), unclipped
+        # normalized contractile force demanded of the fiber (Fig. 5.6 step 3), unclipped
         sim["f_ce_raw"] = (F * sim["l_ce"] / x) / mu.f_max \
             - thelen_passive_force_length(sim["l_ce"] / mu.l_opt)
         sim["f_ce"] = mu.f_max * np.maximum(sim["f_ce_raw"], 0.0)
@@ -633,7 +633,7 @@ class DynamicOptimization(Fitter):
         try:
             sim = self.simulate(x[None, :])
         except (TrialError, ConvergenceError) as exc:
-            # e.g. the inverse muscle model has no fibre state at a wild iterate: a
+            # e.g. the inverse muscle model has no fiber state at a wild iterate: a
             # large objective and violated constraints make the line search back off.
             if self._c_size is None:
                 raise
@@ -684,7 +684,7 @@ class DynamicOptimization(Fitter):
         """``(df/dx, dc/dx)`` by finite differences, all perturbations in one batch.
 
         Central differences; where one side of a perturbation fails (the inverse muscle
-        model has no fibre state there, or the simulation blows up) the other side is
+        model has no fiber state there, or the simulation blows up) the other side is
         used one-sided, so an iterate near such a region keeps a usable gradient."""
         key = x.tobytes()
         hit = self._gcache.get(key)
@@ -712,7 +712,7 @@ class DynamicOptimization(Fitter):
         okp, okm = ok(fp, cp), ok(fm, cm)
         if not np.all(okp | okm):
             raise SolverError("a finite-difference simulation failed on both sides of the "
-                              "current point (non-finite state or no fibre state); reduce "
+                              "current point (non-finite state or no fiber state); reduce "
                               "the step or change the start")
         both = okp & okm
         w = np.where(both, 2.0 * h, h)                    # (f+ - f-)/2h, (f+ - f0)/h, (f0 - f-)/h
