@@ -61,7 +61,7 @@ from ..fitting import FitStatistics, Fitter, Result, format_report
 from ..io.cleveland_gait import read_csu
 from ..io.tables import read_trial
 from ..model import load_model
-from ..signals.filtering import differentiate
+from ..signals.filtering import CONTACT_CUTOFF, differentiate
 from .dual import Dual
 from .foot import KINDS, SITES, Foot2dGeometry, foot2d_site_kinematics, foot_contacts, ground_reaction
 from .sphere import SiteKinematics, cap_volume
@@ -335,7 +335,8 @@ class ContactFit(Fitter):
                    :func:`stance_cycle`, when the trial holds two; else the whole trial),
                    ``None`` (the whole trial) or ``(t0, t1)`` in s
     cutoff         low-pass (Hz) of the driving kinematics before differentiation (default
-                   12 Hz, for marker data; None: none, for noise-free synthetic kinematics).
+                   :data:`pinmsk.signals.filtering.CONTACT_CUTOFF` = 12 Hz, for marker data; None:
+                   none, for noise-free synthetic kinematics).
                    The GRF is not filtered.
     terms          the Eq. 4.2 terms minimised, a non-empty subset of ``ALL_TERMS`` =
                    ``("normal_force", "friction_force", "cop")``; default all three, for every
@@ -388,7 +389,7 @@ class ContactFit(Fitter):
     """
 
     def __init__(self, *, contact: str = "hypervolumetric", relax: bool = False, window="cycle",
-                 cutoff: float | None = 12.0, terms=ALL_TERMS, toe: str = "kinematic", n_starts: int = 4,
+                 cutoff: float | None = CONTACT_CUTOFF, terms=ALL_TERMS, toe: str = "kinematic", n_starts: int = 4,
                  nested: bool = True, initial=None, bounds=None, fixed=(), ground_speed: float | None = None,
                  cop_threshold: float = 0.05, seed: int = 0, max_nfev: int = 400, ftol: float = 1e-6,
                  relax_range: float = 0.02, n_jobs: int = 1, toe_range: float = 0.02,
