@@ -65,7 +65,7 @@ def test_force_length_A13():
     assert ng_force_length(1.0, w) == 1.0
     assert ng_force_length(1 + w, w) == pytest.approx(0.0, abs=1e-15)
     assert ng_force_length(1 - w, w) == pytest.approx(0.0, abs=1e-15)
-    assert ng_force_length(1 + 1.5 * w, w) == 0.0         # parabola clipped, no pushing fibre
+    assert ng_force_length(1 + 1.5 * w, w) == 0.0         # parabola clipped, no pushing fiber
     l = np.linspace(1 - 0.99 * w, 1 + 0.99 * w, 1001)
     c = -1 / w ** 2
     np.testing.assert_allclose(ng_force_length(l, w), c * l ** 2 - 2 * c * l + c + 1, rtol=1e-12,
@@ -202,7 +202,7 @@ def test_equilibrium():
     np.testing.assert_allclose(mus.contraction_rate(l, l_mt, a) / mus.l_opt, 0.0, atol=1e-7)
     rows = np.array([mus.equilibrium(l_mt[k], a[k])["l_ce"] for k in range(30)])
     np.testing.assert_allclose(rows, l[:30], rtol=0, atol=1e-12)
-    # with the velocity share; shortening within what the fibre can do (a >= 0.3:
+    # with the velocity share; shortening within what the fiber can do (a >= 0.3:
     # unloaded shortening speed B f_isom / A >= 4 l_opt/s at f_isom >= 0.3)
     a_d = 0.3 + 0.7 * a[:500]
     v_d = np.random.default_rng(5).uniform(-2, 2, a_d.shape) * mus.l_opt

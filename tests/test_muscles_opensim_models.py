@@ -14,9 +14,9 @@ import pytest
 from pinmsk.errors import ModelError, TrialError
 from pinmsk.muscles import DeGroote2016, Millard2012, Thelen2003, Thelen2003OpenSim
 from pinmsk.muscles.degroote2016 import (DeGrooteFregly2016Muscle, degroote_active_force_length,
-                                         degroote_active_force_length_derivative,
-                                         degroote_force_velocity, degroote_force_velocity_derivative,
-                                         degroote_force_velocity_inverse, degroote_passive_force_length,
+                                         degroote_active_force_length_derivative, degroote_force_velocity,
+                                         degroote_force_velocity_derivative, degroote_force_velocity_inverse,
+                                         degroote_passive_force_length,
                                          degroote_passive_force_length_derivative, degroote_tendon_force,
                                          degroote_tendon_force_derivative, degroote_tendon_length)
 from pinmsk.muscles.millard2012 import (ActiveForceLengthCurve, FiberForceLengthCurve, ForceVelocityCurve,
@@ -199,7 +199,7 @@ def test_model_isometric_force_at_optimal_length(cls):
     for a in (0.3, 1.0):
         np.testing.assert_allclose(mtu.force(a, l_mt2, v), np.maximum(a * fa + fp, 0.0)
                                    if cls is Millard2012 else a * fa + fp, rtol=1e-12, atol=1e-9)
-    # compliant equilibrium: tendon force equals the fibre force along it
+    # compliant equilibrium: tendon force equals the fiber force along it
     eq = mtu.equilibrium(l_mt2 + 0.005, np.full(3, 0.7))
     l_t = l_mt2 + 0.005 - np.sqrt(eq["l_ce"] ** 2 - mtu.height ** 2)
     np.testing.assert_allclose(mtu.tendon_force(l_t), eq["force"], rtol=1e-12)
@@ -230,12 +230,12 @@ def test_models_refuse_bad_inputs_by_name():
 
 def test_millard_rigid_floor_and_clamp():
     mtu = Millard2012(f_max=1000.0, l_opt=0.1, l_slack=0.2, damping=0.5)
-    # shortening fast at low activation: the damping force would push; OpenSim floors the fibre force at 0
+    # shortening fast at low activation: the damping force would push; OpenSim floors the fiber force at 0
     f = mtu.force(0.01, np.array([0.3]), np.array([-0.9]))
     assert f[0] == 0.0
     fa, fp = mtu.force_limits(np.array([0.3]), np.array([-0.9]))
     assert fp[0] < 0 and 0.01 * fa[0] + fp[0] < 0
-    # below the active curve's minimum length the fibre is clamped: no force
+    # below the active curve's minimum length the fiber is clamped: no force
     short = 0.2 + 0.9 * mtu.min_norm_active_fiber_length * 0.1
     assert mtu.force(1.0, np.array([short]), np.array([0.0]))[0] == 0.0
 
@@ -352,7 +352,7 @@ def test_shared_models_isometric_force_at_optimal_length(shared_data, rel, kind,
     mtu = imp.mtu
     l_mt = (mtu.l_slack + mtu.l_opt * np.cos(mtu.pennation))[None]
     fa, _ = mtu.force_limits(l_mt, np.zeros_like(l_mt))
-    # at l_ce = l_opt, v = 0 the active fibre force is max_isometric_force
+    # at l_ce = l_opt, v = 0 the active fiber force is max_isometric_force
     np.testing.assert_allclose(fa[0] / np.cos(mtu.pennation), xml_fmax, rtol=1e-12)
 
 

@@ -20,7 +20,7 @@ through their key points:
   1 at ``l = 1 + e0``;
 - force-velocity: ``d1 asinh(d2 v + d3) + d4`` (the paper's log form), with
   ``d1, d4`` chosen so that ``f_V(-1) = 0`` and ``f_V(0) = 1``; ``v`` is the
-  fibre velocity in units of the maximum contraction velocity (negative when
+  fiber velocity in units of the maximum contraction velocity (negative when
   shortening); it is defined for all ``v`` (no clipping, as in OpenSim);
 - tendon: ``c1 exp(k_T (l_T - c2)) - c3`` of the normalised tendon length
   ``l_T = l_t / l_slack`` with ``c1 = c3 = 0.2``, ``c2 = 1`` (0 at slack length,
@@ -28,8 +28,8 @@ through their key points:
   tendon strain at one normalised force:
   ``k_T = ln((1 + c3)/c1) / (1 + e_T - c2)``.
 
-Fibre damping (an addition of OpenSim's, not in the paper) adds
-``fiber_damping * v`` (normalised) to the fibre force.
+Fiber damping (an addition of OpenSim's, not in the paper) adds
+``fiber_damping * v`` (normalised) to the fiber force.
 """
 from __future__ import annotations
 
@@ -64,11 +64,11 @@ FV_D1 = -0.3211346127989808
 FV_D2 = -8.149
 FV_D3 = -0.374
 FV_D4 = 0.8825327733249912
-MIN_NORM_FIBER_LENGTH = 0.2     # where the passive curve is 0 (and OpenSim's fibre-length bounds)
+MIN_NORM_FIBER_LENGTH = 0.2     # where the passive curve is 0 (and OpenSim's fiber-length bounds)
 MAX_NORM_FIBER_LENGTH = 1.8
 
 
-# --------------------------------------------------------------------------- fibre curves
+# --------------------------------------------------------------------------- fiber curves
 def _width_x(l_norm, width_scale):
     return (np.asarray(l_norm, dtype=float) - 1.0) / width_scale + 1.0
 
@@ -106,7 +106,7 @@ def _passive_offset(strain):
 
 
 def degroote_passive_force_length(l_norm, *, strain=0.6):
-    """Passive fibre force multiplier: 0 at ``l_norm = 0.2``, 1 at ``1 + strain`` (negative below 0.2).
+    """Passive fiber force multiplier: 0 at ``l_norm = 0.2``, 1 at ``1 + strain`` (negative below 0.2).
 
     ``strain`` is OpenSim's ``passive_fiber_strain_at_one_norm_force``.
     """
@@ -133,7 +133,7 @@ def degroote_force_velocity_derivative(v_norm):
 
 
 def degroote_force_velocity_inverse(f_v):
-    """Normalised fibre velocity from the multiplier: ``(sinh((f - d4)/d1) - d3)/d2`` (exact inverse)."""
+    """Normalised fiber velocity from the multiplier: ``(sinh((f - d4)/d1) - d3)/d2`` (exact inverse)."""
     return (np.sinh((np.asarray(f_v, dtype=float) - FV_D4) / FV_D1) - FV_D3) / FV_D2
 
 
@@ -171,7 +171,7 @@ class DeGrooteFregly2016Muscle(OpenSimMuscleProperties):
     """The properties of one OpenSim ``DeGrooteFregly2016Muscle``, with OpenSim's names and defaults.
 
     Values are in OpenSim's units (metres, newtons, radians; ``max_contraction_velocity``
-    in optimal fibre lengths per second).  Construction checks OpenSim's
+    in optimal fiber lengths per second).  Construction checks OpenSim's
     property bounds and raises :class:`~pinmsk.errors.ModelError` naming the
     property.  The curve methods are OpenSim's ``calc...`` functions, vectorised;
     :meth:`model_parameters` gives the keyword arguments of

@@ -35,8 +35,8 @@ from typing import Sequence
 
 import numpy as np
 
-from ._common import OpenSimMuscleProperties
 from ..errors import ModelError
+from ._common import OpenSimMuscleProperties
 
 __all__ = [
     "QuinticBezierCurve", "corner_control_points", "scale_curviness",
@@ -46,7 +46,7 @@ __all__ = [
 ]
 
 _ROOT_EPS = math.sqrt(np.finfo(float).eps)
-#: OpenSim switches to the undamped model below this fibre damping coefficient
+#: OpenSim switches to the undamped model below this fiber damping coefficient
 MIN_NONZERO_DAMPING = 0.001
 
 # Power-basis coefficients of the degree-5 Bernstein polynomials: the Bezier
@@ -284,7 +284,7 @@ class _Curve:
 
 @dataclass(frozen=True)
 class ActiveForceLengthCurve(_Curve):
-    """OpenSim ``ActiveForceLengthCurve``: the active force-length multiplier of the normalised fibre length.
+    """OpenSim ``ActiveForceLengthCurve``: the active force-length multiplier of the normalised fiber length.
 
     Five corners: 0 at ``min_norm_active_fiber_length``, the steep ascending limb
     to ``transition_norm_fiber_length``, the shallow ascending limb of slope
@@ -335,7 +335,7 @@ class ActiveForceLengthCurve(_Curve):
 
 @dataclass(frozen=True)
 class FiberForceLengthCurve(_Curve):
-    """OpenSim ``FiberForceLengthCurve``: the passive fibre force multiplier of the normalised fibre length.
+    """OpenSim ``FiberForceLengthCurve``: the passive fiber force multiplier of the normalised fiber length.
 
     0 (slope 0) at ``1 + strain_at_zero_force``, 1 (slope
     ``stiffness_at_one_norm_force``) at ``1 + strain_at_one_norm_force``.  The
@@ -387,7 +387,7 @@ class FiberForceLengthCurve(_Curve):
 
 @dataclass(frozen=True)
 class ForceVelocityCurve(_Curve):
-    """OpenSim ``ForceVelocityCurve``: the force-velocity multiplier of the normalised fibre velocity.
+    """OpenSim ``ForceVelocityCurve``: the force-velocity multiplier of the normalised fiber velocity.
 
     ``v`` in units of the maximum contraction velocity, negative when shortening:
     0 at -1, 1 at 0 (slope ``isometric_slope``), ``max_eccentric_velocity_force_multiplier``
@@ -449,7 +449,7 @@ class ForceVelocityCurve(_Curve):
 
 @dataclass(frozen=True)
 class ForceVelocityInverseCurve(ForceVelocityCurve):
-    """OpenSim ``ForceVelocityInverseCurve``: normalised fibre velocity of the force-velocity multiplier.
+    """OpenSim ``ForceVelocityInverseCurve``: normalised fiber velocity of the force-velocity multiplier.
 
     The same Bezier segments as the :class:`ForceVelocityCurve` of the same
     settings with x and y swapped; the end slopes must be > 0 (the inverse's are
@@ -578,7 +578,7 @@ class Millard2012EquilibriumMuscle(OpenSimMuscleProperties):
 
     @property
     def damped(self) -> bool:
-        """Whether OpenSim uses the damped model (fibre damping >= 0.001)."""
+        """Whether OpenSim uses the damped model (fiber damping >= 0.001)."""
         return self.fiber_damping >= MIN_NONZERO_DAMPING
 
     def effective(self) -> tuple["Millard2012EquilibriumMuscle", list[str]]:
@@ -620,7 +620,7 @@ class Millard2012EquilibriumMuscle(OpenSimMuscleProperties):
         return replace(m, active_force_length_curve=afl, force_velocity_curve=fv), changes
 
     def minimum_fiber_length(self) -> float:
-        """OpenSim's fibre-length floor (m): the larger of the active curve's minimum and the
+        """OpenSim's fiber-length floor (m): the larger of the active curve's minimum and the
         length at the maximum pennation angle (1 % of l_opt for a zero maximum angle)."""
         h = self.optimal_fiber_length * math.sin(self.pennation_angle_at_optimal)
         if self.maximum_pennation_angle > 1e-14:

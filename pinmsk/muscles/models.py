@@ -13,7 +13,7 @@ Eq. A.10-A.14, no parallel element) share one interface:
 - ``activation_rate(u, a)``, ``excitation(a, adot)``, ``activation(t, u, a0=None)`` (App. A.2)
 
 :class:`DeGroote2016` and :class:`Millard2012` (OpenSim's DeGrooteFregly2016Muscle
-and Millard2012EquilibriumMuscle curves, with fibre damping) share the
+and Millard2012EquilibriumMuscle curves, with fiber damping) share the
 rigid-tendon part of it (``fiber_kinematics_rigid``, ``force``,
 ``force_limits``), ``equilibrium`` and ``tendon_force``; they have no
 contraction dynamics or inverse model (those raise ModelError by name).
@@ -29,24 +29,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import ModelError, TrialError
+from . import millard2012 as _millard
 from ._common import check_finite, locate, muscle_parameter, n_muscles, where_first
+from ._solve import compliant_equilibrium
 from .activation import (TAU_FALL, TAU_RISE, activation_from_excitation, activation_rate,
                          excitation_from_activation)
-from ._solve import compliant_equilibrium
 from .degroote2016 import (degroote_active_force_length, degroote_active_force_length_derivative,
                            degroote_force_velocity, degroote_passive_force_length,
                            degroote_passive_force_length_derivative, degroote_tendon_force,
                            degroote_tendon_force_derivative, degroote_tendon_length)
 from .inverse import inverse_nagano_gerritsen, inverse_thelen2003
-from .nagano_gerritsen import (ng_contraction_rate, ng_equilibrium, ng_fiber_force,
-                               ng_force_length)
+from .nagano_gerritsen import ng_contraction_rate, ng_equilibrium, ng_fiber_force, ng_force_length
 from .pennation import check_along_positive, pennation_height
 from .tendon import (TENDON_STRAIN0, thelen_tendon_force, thelen_tendon_stiffness, thelen_tendon_strain,
                      winters_tendon_force)
-from .thelen2003 import (GAMMA, K_PE, PASSIVE_STRAIN0, thelen_contraction_rate,
-                         thelen_equilibrium, thelen_fiber_force, thelen_force_velocity)
-from . import millard2012 as _millard
-from ..errors import ModelError, TrialError
+from .thelen2003 import (GAMMA, K_PE, PASSIVE_STRAIN0, thelen_contraction_rate, thelen_equilibrium,
+                         thelen_fiber_force, thelen_force_velocity)
 
 __all__ = ["MUSCLE_MODELS", "MUSCLE_PARAMETERS", "DeGroote2016", "Millard2012", "MuscleParameter",
            "NaganoGerritsen", "Thelen2003", "Thelen2003OpenSim"]
@@ -81,28 +80,28 @@ class MuscleParameter:
 #: Every per-muscle parameter of the muscle-tendon models, by name (SI units).
 MUSCLE_PARAMETERS = {p.name: p for p in (
     MuscleParameter("f_max", "N", "maximum isometric force"),
-    MuscleParameter("l_opt", "m", "optimal fibre length"),
+    MuscleParameter("l_opt", "m", "optimal fiber length"),
     MuscleParameter("l_slack", "m", "tendon slack length"),
-    MuscleParameter("pennation", "rad", "pennation angle at optimal fibre length", 0.0, math.pi / 2,
+    MuscleParameter("pennation", "rad", "pennation angle at optimal fiber length", 0.0, math.pi / 2,
                     low_open=False, high_open=True),
     MuscleParameter("v_max", "m/s", "maximum shortening velocity (default 10 l_opt)"),
     MuscleParameter("width", "", "force-length half-width in units of l_opt (Nagano & Gerritsen)"),
-    MuscleParameter("fast_fraction", "", "fraction of fast-twitch fibres (energy models)", 0.0, 1.0,
+    MuscleParameter("fast_fraction", "", "fraction of fast-twitch fibers (energy models)", 0.0, 1.0,
                     low_open=False),
     MuscleParameter("volume", "m^3", "muscle volume (energy models, PCSA weights)"),
     # -- DeGroote 2016 and Millard 2012 (OpenSim property in brackets) ----------
-    MuscleParameter("damping", "", "fibre damping: damping force = damping F_max v_ce / v_max "
+    MuscleParameter("damping", "", "fiber damping: damping force = damping F_max v_ce / v_max "
                     "[fiber_damping]", 0.0, low_open=False),
     MuscleParameter("tendon_strain", "", "tendon strain at one normalized force "
                     "[tendon_strain_at_one_norm_force; TendonForceLengthCurve strain_at_one_norm_force]"),
-    MuscleParameter("passive_strain", "", "fibre strain (from l_opt) at one normalized passive force "
+    MuscleParameter("passive_strain", "", "fiber strain (from l_opt) at one normalized passive force "
                     "[passive_fiber_strain_at_one_norm_force; FiberForceLengthCurve "
                     "strain_at_one_norm_force]"),
     MuscleParameter("width_scale", "", "active force-length width scale (De Groote) "
                     "[active_force_width_scale]", 1.0, low_open=False),
-    MuscleParameter("passive_scale", "", "passive fibre force factor, 0 = ignore_passive_fiber_force "
+    MuscleParameter("passive_scale", "", "passive fiber force factor, 0 = ignore_passive_fiber_force "
                     "(De Groote)", 0.0, 1.0, low_open=False),
-    MuscleParameter("max_pennation", "rad", "maximum pennation angle: the fibre-length floor (Millard) "
+    MuscleParameter("max_pennation", "rad", "maximum pennation angle: the fiber-length floor (Millard) "
                     "[maximum_pennation_angle]", 0.0, math.pi / 2, low_open=False),
     MuscleParameter("min_norm_active_fiber_length", "", "Millard active force-length: start of the "
                     "steep ascending limb, in l_opt [ActiveForceLengthCurve]", 0.0, low_open=False),
@@ -115,7 +114,7 @@ MUSCLE_PARAMETERS = {p.name: p for p in (
     MuscleParameter("active_minimum_value", "", "Millard active force-length: value outside the "
                     "active range [ActiveForceLengthCurve minimum_value]", 0.0, 1.0, low_open=False,
                     high_open=True),
-    MuscleParameter("passive_strain_at_zero_force", "", "Millard passive force-length: fibre strain "
+    MuscleParameter("passive_strain_at_zero_force", "", "Millard passive force-length: fiber strain "
                     "where the passive force starts [FiberForceLengthCurve strain_at_zero_force]",
                     -1.0, low_open=True),
     MuscleParameter("passive_stiffness_at_low_force", "", "Millard passive force-length: slope at low "
@@ -236,7 +235,7 @@ class _MuscleModel:
     def _taut(self, l_mt):
         """``(l_mt', slack)``: frames where the unit is not longer than its tendon are
         slack (a rigid tendon cannot transmit force there); ``l_mt'`` moves them just
-        past the slack length so the fibre geometry stays defined."""
+        past the slack length so the fiber geometry stays defined."""
         l_mt = np.asarray(l_mt, dtype=float)
         slack = l_mt - self.l_slack <= 1e-9 * self.l_opt
         if slack.any():
@@ -276,7 +275,7 @@ class _MuscleModel:
         return l_ce, np.asarray(v_mt, dtype=float) * cos, cos
 
     def fiber_kinematics_rigid(self, l_mt, v_mt):
-        """Fibre length and velocity ``(l_ce, v_ce)`` (m, m/s) for an inextensible tendon.
+        """Fiber length and velocity ``(l_ce, v_ce)`` (m, m/s) for an inextensible tendon.
 
         ``x = l_mt - l_slack``, ``l_ce = sqrt(x^2 + h^2)`` (constant-thickness
         pennation), ``v_ce = v_mt cos(alpha)``.
@@ -288,8 +287,8 @@ class _MuscleModel:
     def force(self, a, l_mt, v_mt, tendon: str = "rigid"):
         """Muscle-tendon force (N) at activation ``a``.
 
-        ``tendon="rigid"``: the fibre follows the unit (``fiber_kinematics_rigid``);
-        ``"compliant"``: the fibre length from :meth:`equilibrium` (with the
+        ``tendon="rigid"``: the fiber follows the unit (``fiber_kinematics_rigid``);
+        ``"compliant"``: the fiber length from :meth:`equilibrium` (with the
         quasi-static velocity share of ``v_mt``).
         """
         if tendon not in _TENDONS:
@@ -298,7 +297,7 @@ class _MuscleModel:
             return self.equilibrium(l_mt, a, v_mt)["force"]
         if v_mt is None:
             raise TrialError("the rigid-tendon force needs the muscle-tendon velocity v_mt "
-                             "(pass 0.0 for an isometric fibre)")
+                             "(pass 0.0 for an isometric fiber)")
         self._check(a=a, l_mt=l_mt, v_mt=v_mt)
         a = self._check_activation(a)
         return self._rigid_force(a, l_mt, v_mt)
@@ -378,10 +377,10 @@ class Thelen2003(_MuscleModel):
         return f_act, f_pas
 
     def equilibrium(self, l_mt, a, v_mt=None, *, tol: float = 1e-10, max_iter: int = 100):
-        """Compliant-tendon fibre equilibrium ``F_t = (F_ce + F_pe) cos(alpha)`` (App. A.3).
+        """Compliant-tendon fiber equilibrium ``F_t = (F_ce + F_pe) cos(alpha)`` (App. A.3).
 
-        Isometric fibre (``v_ce = 0``) unless ``v_mt`` is given, in which case the
-        fibre takes the series-stiffness share of ``v_mt`` (an initial-state
+        Isometric fiber (``v_ce = 0``) unless ``v_mt`` is given, in which case the
+        fiber takes the series-stiffness share of ``v_mt`` (an initial-state
         heuristic).  Returns ``{"l_ce", "v_ce", "force"}`` (m, m/s, N).
         Raises :class:`pinmsk.errors.ConvergenceError` naming muscle and frame.
         """
@@ -399,19 +398,19 @@ class Thelen2003(_MuscleModel):
                                                 strain0=self.tendon_strain0)
 
     def contraction_rate(self, l_ce, l_mt, a):
-        """Fibre velocity ``l_ce' = f_CD(l_ce, l_mt, a)`` (m/s), compliant tendon (thesis Eq. 3.9)."""
+        """Fiber velocity ``l_ce' = f_CD(l_ce, l_mt, a)`` (m/s), compliant tendon (thesis Eq. 3.9)."""
         self._check(l_ce=l_ce, l_mt=l_mt, a=a)
         return thelen_contraction_rate(l_ce, l_mt, a, l_opt=self.l_opt, l_slack=self.l_slack,
                                        pennation=self.pennation, v_max=self.v_max,
                                        tendon_strain0=self.tendon_strain0, names=self.names)
 
     def inverse(self, F_mt, dF_mt, l_mt, dl_mt, ddl_mt, ddF_mt=0.0, *, fv_smooth: float = 0.0,
-                fibre_floor=None):
+                fiber_floor=None):
         """Activation, its rate and excitation from muscle-tendon force (thesis Fig. 5.6, Eq. 5.2-5.4).
 
-        ``ddF_mt`` (the force's second derivative) enters the fibre acceleration;
+        ``ddF_mt`` (the force's second derivative) enters the fiber acceleration;
         the default 0 neglects it (see :mod:`pinmsk.muscles.inverse`).  ``fv_smooth`` and
-        ``fibre_floor``: see :func:`~pinmsk.muscles.inverse.inverse_thelen2003`.
+        ``fiber_floor``: see :func:`~pinmsk.muscles.inverse.inverse_thelen2003`.
         Returns ``{"a", "adot", "u", "l_ce", "v_ce", "dv_ce", "l_t"}``.
         """
         return inverse_thelen2003(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, ddF_mt=ddF_mt,
@@ -419,7 +418,7 @@ class Thelen2003(_MuscleModel):
                                   pennation=self.pennation, v_max=self.v_max,
                                   tendon_strain0=self.tendon_strain0, tau_rise=self.tau_rise,
                                   tau_fall=self.tau_fall, names=self.names, fv_smooth=fv_smooth,
-                                  fibre_floor=fibre_floor)
+                                  fiber_floor=fiber_floor)
 
 
 class NaganoGerritsen(_MuscleModel):
@@ -474,7 +473,7 @@ class NaganoGerritsen(_MuscleModel):
         return f_act, np.zeros_like(f_act)
 
     def equilibrium(self, l_mt, a, v_mt=None, *, tol: float = 1e-10, max_iter: int = 100):
-        """Compliant (Winters) tendon fibre equilibrium ``F_t = F_ce cos(alpha)``.
+        """Compliant (Winters) tendon fiber equilibrium ``F_t = F_ce cos(alpha)``.
 
         Returns ``{"l_ce", "v_ce", "force"}``; see :meth:`Thelen2003.equilibrium`.
         """
@@ -492,7 +491,7 @@ class NaganoGerritsen(_MuscleModel):
                                                  strain0=self.tendon_strain0)
 
     def contraction_rate(self, l_ce, l_mt, a):
-        """Fibre velocity ``l_ce' = f_CD(l_ce, l_mt, a)`` (m/s), Winters tendon (thesis Eq. 3.9)."""
+        """Fiber velocity ``l_ce' = f_CD(l_ce, l_mt, a)`` (m/s), Winters tendon (thesis Eq. 3.9)."""
         self._check(l_ce=l_ce, l_mt=l_mt, a=a)
         return ng_contraction_rate(l_ce, l_mt, a, l_opt=self.l_opt, l_slack=self.l_slack,
                                    pennation=self.pennation, width=self.width,
@@ -513,9 +512,9 @@ class NaganoGerritsen(_MuscleModel):
 
 
 class _CurveMuscle(_MuscleModel):
-    """OpenSim-style separable Hill muscles: fibre force ``F_max (a f_L f_V + f_PE + damping v)``.
+    """OpenSim-style separable Hill muscles: fiber force ``F_max (a f_L f_V + f_PE + damping v)``.
 
-    ``v = v_ce / v_max`` is the normalized fibre velocity (negative when
+    ``v = v_ce / v_max`` is the normalized fiber velocity (negative when
     shortening) and the curves are functions of ``l_ce / l_opt`` and ``v``;
     the tendon curve is a function of the tendon strain.  Subclasses supply
     the curves (:meth:`_length_curves`, :meth:`_velocity_curve`,
@@ -533,11 +532,11 @@ class _CurveMuscle(_MuscleModel):
 
     # -- hooks -------------------------------------------------------------------
     def _length_curves(self, l_norm):
-        """``(f_L, df_L/dl, f_PE, df_PE/dl)`` at the normalized fibre length."""
+        """``(f_L, df_L/dl, f_PE, df_PE/dl)`` at the normalized fiber length."""
         raise NotImplementedError
 
     def _velocity_curve(self, v_norm):
-        """``f_V`` at the normalized fibre velocity (the a = 1 curve)."""
+        """``f_V`` at the normalized fiber velocity (the a = 1 curve)."""
         raise NotImplementedError
 
     def _tendon_curve(self, strain):
@@ -549,7 +548,7 @@ class _CurveMuscle(_MuscleModel):
         raise NotImplementedError
 
     def _rigid_fiber(self, l_ce, v_norm, f_total):
-        """The rigid-tendon normalized fibre force (and a mask of muscle-frames that carry none)."""
+        """The rigid-tendon normalized fiber force (and a mask of muscle-frames that carry none)."""
         return f_total, None
 
     def _active_velocity_factor(self, a, v_norm):
@@ -575,8 +574,8 @@ class _CurveMuscle(_MuscleModel):
         ``F = a F_active + F_passive`` is the rigid-tendon force at activation ``a``:
         exactly for De Groote and Millard (activation does not scale their
         velocity), at a = 0 and a = 1 for Thelen (as :meth:`Thelen2003.force_limits`).
-        The damping term is negative while the fibre shortens; Millard 2012 floors
-        the total fibre force at 0, which a linear function of ``a`` cannot
+        The damping term is negative while the fiber shortens; Millard 2012 floors
+        the total fiber force at 0, which a linear function of ``a`` cannot
         (:meth:`force` applies it).  A slack unit gives 0 and 0.
         """
         slack, l_ce, v, cos, fl, fpe, fv = self.rigid_curves(l_mt, v_mt)
@@ -591,10 +590,10 @@ class _CurveMuscle(_MuscleModel):
         return f_act, f_pas
 
     def rigid_curves(self, l_mt, v_mt):
-        """``(slack, l_ce, v, cos_alpha, f_L, f_PE, f_V)`` of the rigid-tendon fibre.
+        """``(slack, l_ce, v, cos_alpha, f_L, f_PE, f_V)`` of the rigid-tendon fiber.
 
         ``slack``: muscle-frames where the unit is not longer than its tendon (their
-        fibre is placed just taut); ``v = v_ce / v_max``; ``f_V`` at full activation.
+        fiber is placed just taut); ``v = v_ce / v_max``; ``f_V`` at full activation.
         """
         self._check(l_mt=l_mt, v_mt=v_mt)
         l_mt, slack = self._taut(l_mt)
@@ -616,9 +615,9 @@ class _CurveMuscle(_MuscleModel):
         return fiber
 
     def equilibrium(self, l_mt, a, v_mt=None, *, tol: float = 1e-10, max_iter: int = 100):
-        """Compliant-tendon fibre equilibrium ``F_t = (a f_L f_V + f_PE + damping v) F_max cos(alpha)``.
+        """Compliant-tendon fiber equilibrium ``F_t = (a f_L f_V + f_PE + damping v) F_max cos(alpha)``.
 
-        Isometric fibre (``v_ce = 0``) unless ``v_mt`` is given (then the fibre
+        Isometric fiber (``v_ce = 0``) unless ``v_mt`` is given (then the fiber
         takes the series-stiffness share of ``v_mt``, see
         :func:`pinmsk.muscles._solve.compliant_equilibrium`).  Returns
         ``{"l_ce", "v_ce", "force"}`` (m, m/s, N); raises
@@ -739,10 +738,10 @@ class Millard2012(_CurveMuscle):
     ``2/(e1 - e0)``, 0.75 and ``1.375/e_T``, 2/3, 0.5), activation time constants
     (0.010 s, 0.040 s); optional ``names``, ``fast_fraction`` and ``volume``.
 
-    Rigid tendon as in OpenSim: the fibre length has the floor
+    Rigid tendon as in OpenSim: the fiber length has the floor
     ``max(min_norm_active_fiber_length l_opt, h / sin(max_pennation))``; a
-    fibre at the floor (shortening) or below carries no force, and the total
-    fibre force is floored at 0.  Use :meth:`Millard2012EquilibriumMuscle.model_parameters`
+    fiber at the floor (shortening) or below carries no force, and the total
+    fiber force is floored at 0.  Use :meth:`Millard2012EquilibriumMuscle.model_parameters`
     (via :mod:`pinmsk.opensim.muscles`) to get OpenSim's effective curve settings.
     """
 
@@ -836,8 +835,8 @@ class Millard2012(_CurveMuscle):
         return self._tfl.inverse(force) - 1.0
 
     def _rigid_fiber(self, l_ce, v_norm, f_total):
-        # OpenSim: a fibre at its length floor that shortens (or below it) is clamped and carries no
-        # force; with a rigid tendon the damping force saturates so the fibre never pushes.
+        # OpenSim: a fiber at its length floor that shortens (or below it) is clamped and carries no
+        # force; with a rigid tendon the damping force saturates so the fiber never pushes.
         off = (l_ce < self.l_min) | ((l_ce <= self.l_min) & (v_norm <= 0.0))
         return np.maximum(f_total, 0.0), off
 
@@ -864,7 +863,7 @@ class Thelen2003OpenSim(_CurveMuscle):
     ``fast_fraction``, ``volume``.
 
     As OpenSim: the force-velocity factor at activation ``a`` is the curve at
-    ``v / (0.25 + 0.75 a)``, floored at 0; a fibre at or below OpenSim's length
+    ``v / (0.25 + 0.75 a)``, floored at 0; a fiber at or below OpenSim's length
     floor (``h / sin(max_pennation)``, or 1 % of l_opt unpennated) carries no
     force.  Rigid-tendon forces, force limits, isometric equilibrium and tendon
     forces; no contraction dynamics or inverse model (use :class:`Thelen2003`,
@@ -930,7 +929,7 @@ class Thelen2003OpenSim(_CurveMuscle):
         return thelen_tendon_strain(force, strain0=self.tendon_strain, exact_toe=True)
 
     def _rigid_fiber(self, l_ce, v_norm, f_total):
-        # OpenSim's calcActiveFiberForceAlongTendon: no force at or below the fibre-length floor
+        # OpenSim's calcActiveFiberForceAlongTendon: no force at or below the fiber-length floor
         return f_total, l_ce <= self.l_min
 
 

@@ -106,7 +106,7 @@ class MuscleSet(Component):
 
     @property
     def fast_fraction(self) -> np.ndarray:
-        """Fraction of fast-twitch fibres per muscle (0.5 where the model gives none)."""
+        """Fraction of fast-twitch fibers per muscle (0.5 where the model gives none)."""
         if self.mtu.fast_fraction is not None:
             return self.mtu.fast_fraction
         ff = np.full(self.n, 0.5)
@@ -115,7 +115,7 @@ class MuscleSet(Component):
 
     @property
     def pcsa(self) -> np.ndarray:
-        """Physiological cross-sectional area, volume / optimal fibre length (m^2)."""
+        """Physiological cross-sectional area, volume / optimal fiber length (m^2)."""
         return self.volume / self.l_opt
 
     @property
@@ -213,7 +213,7 @@ class MuscleSet(Component):
         """Rigid-tendon force capacity ``(F_active, F_passive)``, each (N, m).
 
         Muscle force is ``F = a * F_active + F_passive`` with ``0 <= a <= 1``:
-        ``F_active = F_max f_L f_V cos(alpha)`` at the current fibre length and
+        ``F_active = F_max f_L f_V cos(alpha)`` at the current fiber length and
         velocity, ``F_passive`` the parallel element along the tendon (zero for
         models without one).
         """

@@ -18,7 +18,7 @@ solved for the force: ``q = (f_isom B_rel + A_rel w)/(B_rel - w)`` with
 slopes of the two branches match at v = 0 (the curve is C1 there).
 
 The force-length parabola (Eq. A.13) is negative for ``|l_norm - 1| > width``;
-it is clipped to zero there (no fibre pushes).
+it is clipped to zero there (no fiber pushes).
 """
 from __future__ import annotations
 
@@ -72,7 +72,7 @@ def _k(f_isom, b_rel, f_hat, a_rel, gamma):
 
 def ng_fiber_force(v_norm, a, f_isom, *, a_rel=A_REL, b_rel=B_REL, f_hat=F_HAT,
                    gamma=GAMMA_SLOPE):
-    """CE force ``f_ce / F_max`` from fibre velocity: the exact inverse of Eq. A.12.
+    """CE force ``f_ce / F_max`` from fiber velocity: the exact inverse of Eq. A.12.
 
     ``a q`` with the concentric hyperbola ``q = (f_isom B + A w)/(B - w)``,
     ``w = v_norm / a_hat``, or the eccentric ``q = f_isom [1 + (f_hat - 1) v/(a_hat K + v)]``.
@@ -91,7 +91,7 @@ def ng_fiber_force(v_norm, a, f_isom, *, a_rel=A_REL, b_rel=B_REL, f_hat=F_HAT,
 
 def ng_fiber_velocity(f_ce, a, f_isom, *, a_rel=A_REL, b_rel=B_REL, f_hat=F_HAT,
                       gamma=GAMMA_SLOPE):
-    """Fibre velocity (in l_opt/s) from CE force ``f_ce / F_max``, thesis Eq. A.12.
+    """Fiber velocity (in l_opt/s) from CE force ``f_ce / F_max``, thesis Eq. A.12.
 
     ``q = f_ce/a``; concentric (``q <= f_isom``): ``a_hat B (q - f_isom)/(q + A)``;
     eccentric: ``a_hat K (q - f_isom)/(f_isom f_hat - q)``.  Defined for
@@ -160,7 +160,7 @@ def _positive_root(p, b, c):
 
 def ng_activation_from_force(f_ce, f_isom, v_norm, *, a_rel=A_REL, b_rel=B_REL, f_hat=F_HAT,
                              gamma=GAMMA_SLOPE):
-    """Activation from CE force, fibre length and velocity -- closed form (thesis Eq. 5.2 for a).
+    """Activation from CE force, fiber length and velocity -- closed form (thesis Eq. 5.2 for a).
 
     ``f = a q(v, a_hat, f_isom)`` is increasing in ``a``.  For ``a >= 0.3``
     (``a_hat = 1``) it is linear: ``a = f / q(v, 1)``.  Below, ``a_hat = 10a/3``
@@ -205,7 +205,7 @@ def _fiber_closure(a, width, *, a_rel=A_REL, b_rel=B_REL, f_hat=F_HAT, gamma=GAM
 def ng_equilibrium(l_mt, a, *, l_opt, l_slack, pennation, width, v_mt=None,
                    tendon_strain0: float = TENDON_STRAIN0, tol: float = 1e-10,
                    max_iter: int = 100, names: Sequence[str] | None = None):
-    """Compliant (Winters) tendon fibre equilibrium ``F_t = F_ce cos(alpha)`` for the NG muscle.
+    """Compliant (Winters) tendon fiber equilibrium ``F_t = F_ce cos(alpha)`` for the NG muscle.
 
     As :func:`pinmsk.muscles.thelen2003.thelen_equilibrium`, without a parallel
     element.  Returns ``(l_ce, v_ce, f_t)``, ``f_t`` normalized by F_max.

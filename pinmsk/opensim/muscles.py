@@ -15,9 +15,9 @@ curve constants)                                                   which the the
                                                                    its measured error)
 Thelen2003Muscle (other       :class:`~pinmsk.muscles.             curves exact (OpenSim's constants
 constants)                    Thelen2003OpenSim`                   per muscle)
-Millard2012EquilibriumMuscle  :class:`~pinmsk.muscles.Millard2012` quintic Bezier curves exact, fibre
+Millard2012EquilibriumMuscle  :class:`~pinmsk.muscles.Millard2012` quintic Bezier curves exact, fiber
                                                                    damping, OpenSim's curve adjustments
-DeGrooteFregly2016Muscle      :class:`~pinmsk.muscles.DeGroote2016` curves exact, fibre damping
+DeGrooteFregly2016Muscle      :class:`~pinmsk.muscles.DeGroote2016` curves exact, fiber damping
 ============================  ===================================  =====================================
 
 Properties come as a mapping from the XML tag to its text (or a number or a
@@ -388,8 +388,8 @@ def muscle_from_osim(element_type: str, properties: Mapping, *, name: str | None
                 floor = (osim.optimal_fiber_length * math.sin(osim.pennation_angle_at_optimal)
                          / math.sin(max(osim.maximum_pennation_angle, 1e-300)))
                 note("ignored", "maximum_pennation_angle",
-                     f"{osim.maximum_pennation_angle:g} rad: pinmsk's Thelen2003 has no fibre-length floor "
-                     f"(OpenSim gives no force at or below {floor:.4g} m, the fibre length at that angle)")
+                     f"{osim.maximum_pennation_angle:g} rad: pinmsk's Thelen2003 has no fiber-length floor "
+                     f"(OpenSim gives no force at or below {floor:.4g} m, the fiber length at that angle)")
         else:
             model_type = "thelen2003_opensim"
     elif element_type == "Millard2012EquilibriumMuscle":
@@ -525,9 +525,9 @@ def opensim_static_optimization_capacity(mtu, l_mt, v_mt) -> np.ndarray:
     ``F_active``), but not for the other two:
 
     - Millard2012EquilibriumMuscle evaluates the pennation angle at the
-      *normalized* fibre length (``asin(h / (l_ce / l_opt))``, h in metres), so a
+      *normalized* fiber length (``asin(h / (l_ce / l_opt))``, h in metres), so a
       pennated muscle's capacity is almost unprojected;
-    - DeGrooteFregly2016Muscle returns the active *fibre* force, not projected
+    - DeGrooteFregly2016Muscle returns the active *fiber* force, not projected
       on the tendon (no ``cos(alpha)``).
 
     Use this to reproduce OpenSim's SO activations like for like; the muscle
