@@ -109,6 +109,16 @@ class MomentArmPath:
     def __reduce__(self):
         return (_rebuild, (type(self), self._muscles, self._coordinates, np.array(self._l0), np.array(self._coeffs)))
 
+    def __eq__(self, other) -> bool:
+        """Same muscles, coordinates, lengths at q = 0 and moment-arm coefficients."""
+        if type(other) is not type(self):
+            return NotImplemented
+        return (self._muscles == other._muscles and self._coordinates == other._coordinates
+                and np.array_equal(self._l0, other._l0) and np.array_equal(self._coeffs, other._coeffs))
+
+    def __hash__(self) -> int:
+        return hash((self._muscles, self._coordinates, self._l0.tobytes(), self._coeffs.tobytes()))
+
     def __repr__(self) -> str:
         return (
             f"MomentArmPath({len(self._muscles)} muscles x {len(self._coordinates)} coordinates, "
