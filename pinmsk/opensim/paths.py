@@ -67,6 +67,7 @@ __all__ = [
     "PathSpec", "path_specs_from_xml", "coordinate_ranges_from_xml", "GeometricPaths",
     "PolynomialFitReport", "fit_polynomial_paths", "sample_poses", "body_fixed_xyz",
     "SimmSpline", "LinearFunction", "Constant", "PolynomialFunction", "PiecewiseLinearFunction",
+    "MultiplierFunction", "function_from_xml",
 ]
 
 GROUND = "ground"
@@ -391,6 +392,20 @@ class _StepFunction(_Function):
         return Constant(0.0)
 
 
+@dataclass(frozen=True)
+class MultiplierFunction(_Function):
+    """f(x) = scale * g(x) (OpenSim's MultiplierFunction)."""
+
+    function: object
+    scale: float
+
+    def __call__(self, x):
+        return self.scale * np.asarray(self.function(x), dtype=float)
+
+    def derivative(self):
+        return MultiplierFunction(self.function.derivative(), self.scale)
+
+
 class SimmSpline(_Function):
     """OpenSim's SimmSpline: a cubic spline with end conditions from divided differences, extrapolated
     linearly with the end slopes (the coefficients follow SimmSpline::calcCoefficients)."""
@@ -539,9 +554,14 @@ def function_from_xml(elem) -> object:
         return SimmSpline(_floats(fn, "x"), _floats(fn, "y"))
     if tag == "PiecewiseLinearFunction":
         return PiecewiseLinearFunction(_floats(fn, "x"), _floats(fn, "y"))
+    if tag == "MultiplierFunction":
+        inner = fn.find("function")
+        if inner is None or len(inner) == 0:
+            raise ModelError(f"{_where(fn)}: a MultiplierFunction needs a <function>")
+        return MultiplierFunction(function_from_xml(inner), _floats(fn, "scale", 1, default=(1.0,))[0])
     raise ModelError(f"{_where(fn)}: function type {tag!r} is not supported for moving path points "
                      "(supported: Constant, LinearFunction, PolynomialFunction, SimmSpline, "
-                     "PiecewiseLinearFunction)")
+                     "PiecewiseLinearFunction, MultiplierFunction)")
 
 
 def coordinate_ranges_from_xml(root) -> dict[str, tuple[float, float]]:
@@ -890,9 +910,8 @@ def _cylinder_spiral(p1, p2, r1, r2, long_wrap, radius, single, live):
     """Arc length of the spiral from r1 to r2 over the cylinder; without ``single`` the tangent points
     slide along the axis until the path is tangent to within 0.1 degree (OpenSim's iteration)."""
     r1, r2 = r1.copy(), r2.copy()
-    sense = np.where(long_wrap, -1.0, 1.0)
 
-    def spiral():
+    def spiral(r1, r2, long_wrap):
         axial = r2[:, 2] - r1[:, 2]
         uu = r1 * np.array([1.0, 1.0, 0.0])
         vv = r2 * np.array([1.0, 1.0, 0.0])
@@ -900,7 +919,8 @@ def _cylinder_spiral(p1, p2, r1, r2, long_wrap, radius, single, live):
         theta = np.where(long_wrap, 2.0 * math.pi - theta, theta)
         return axial, theta, np.sqrt((radius * theta) ** 2 + axial ** 2)
 
-    def point(t, axial, theta, r):
+    def point(t, axial, theta, r, long_wrap):
+        sense = np.where(long_wrap, -1.0, 1.0)
         return _rot_z(sense * t * theta, r) + (t * axial)[:, None] * _DN
 
     def adjust(pt, r, w):
@@ -914,23 +934,27 @@ def _cylinder_spiral(p1, p2, r1, r2, long_wrap, radius, single, live):
         _, _, inter, _ = _intersect_lines(pt, w, p1a, w1a)
         return need, r + 1.5 * (inter - r)
 
-    axial, theta, arc = spiral()
+    axial, theta, arc = spiral(r1, r2, long_wrap)
     if not single:
-        todo = live.copy()
+        idx = np.flatnonzero(live)
         for _ in range(_MAX_SPIRAL_ITERATIONS):
-            nseg = np.maximum((arc / 0.002).astype(int), 1)
-            todo &= nseg >= 2
-            if not np.any(todo):
+            nseg = np.maximum((arc[idx] / 0.002).astype(int), 1)
+            idx = idx[nseg >= 2]
+            if idx.size == 0:
                 break
-            t = 1.0 / np.maximum(nseg, 1)
-            need1, new1 = adjust(p1, r1, point(t, axial, theta, r1))
-            r1_next = _sel(need1, new1, r1)
+            t = 1.0 / np.maximum((arc[idx] / 0.002).astype(int), 1)
+            a1, a2, lw = r1[idx], r2[idx], long_wrap[idx]
+            need1, new1 = adjust(p1[idx], a1, point(t, axial[idx], theta[idx], a1, lw))
+            a1 = _sel(need1, new1, a1)
             # OpenSim computes the second wrap point from the already moved r1 (same theta, axial)
-            need2, new2 = adjust(p2, r2, point(1.0 - t, axial, theta, r1_next))
-            todo &= need1 | need2
-            r1 = _sel(todo, r1_next, r1)
-            r2 = _sel(todo & need2, new2, r2)
-            axial, theta, arc = spiral()
+            need2, new2 = adjust(p2[idx], a2, point(1.0 - t, axial[idx], theta[idx], a1, lw))
+            moved = need1 | need2
+            idx = idx[moved]
+            r1[idx] = a1[moved]
+            r2[idx] = _sel(need2[moved], new2[moved], a2[moved])
+            if idx.size == 0:
+                break
+            axial[idx], theta[idx], arc[idx] = spiral(r1[idx], r2[idx], long_wrap[idx])
     return r1, r2, arc
 
 
@@ -1324,7 +1348,8 @@ def _wrap_ellipsoid(P1, P2, *, dims, axis, sign, method):
         if np.any(shift):
             bis = 0.5 * (orig + c1[:, axis])
             tc1 = c1.copy()
-            tc1[:, axis] = c1[:, axis] + fw * (bis - c1[:, axis])
+            with np.errstate(invalid="ignore"):
+                tc1[:, axis] = c1[:, axis] + np.where(shift, fw, 0.0) * (bis - c1[:, axis])
             c1 = _sel(shift, _ellipsoid_closest(a, np.where(shift[:, None], tc1, c1)), c1)
     vs = _unit(np.cross(p1p2, p1 - c1))
     vs4 = -_dot(vs, c1)
@@ -1349,27 +1374,39 @@ def _wrap_ellipsoid(P1, P2, *, dims, axis, sign, method):
 # passes closest to it
 # --------------------------------------------------------------------------------------------
 def _torus_line_point(p1, p2, ring):
-    """Point of the line p1 -> p2 where OpenSim's residual (WrapTorus::calcCircleResids) vanishes,
-    found from u = 0 by damped Newton steps (OpenSim: lmdif with 1e-4 tolerances) -> (point, distance)."""
+    """Point of the line p1 -> p2 where OpenSim's residual (WrapTorus::calcCircleResids) is least in
+    the valley of residual^2 reached downhill from u = 0 (OpenSim: lmdif from u = 0 with 1e-4
+    tolerances; here Gauss-Newton steps of at most 1 cm that must lower residual^2) -> (point, distance)."""
     d = p2 - p1
     nrm = _unit(d)
     c2 = 2.0 * _dot(p1, nrm)
     c3 = p1[:, 0] * nrm[:, 0] + p1[:, 1] * nrm[:, 1]
     c4 = nrm[:, 0] ** 2 + nrm[:, 1] ** 2
     c5 = p1[:, 0] ** 2 + p1[:, 1] ** 2
+
+    def resid(u):
+        rho2 = np.maximum(u * u * c4 + 2.0 * c3 * u + c5, 1e-300)
+        rho = np.sqrt(rho2)
+        g = (c4 * u + c3) / rho
+        r = c2 + 2.0 * u - 4.0 * ring * g
+        dr = 2.0 - 4.0 * ring * (c4 * rho2 - (c4 * u + c3) ** 2) / (rho2 * rho)
+        return r, dr
+
     u = np.zeros(len(p1))
-    span = np.maximum(_norm(d), 1e-12)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        for _ in range(100):
-            rho2 = np.maximum(u * u * c4 + 2.0 * c3 * u + c5, 1e-300)
-            rho = np.sqrt(rho2)
-            g = (c4 * u + c3) / rho
-            res = c2 + 2.0 * u - 4.0 * ring * g
-            dres = 2.0 - 4.0 * ring * (c4 * rho2 - (c4 * u + c3) ** 2) / (rho2 * rho)
-            step = np.where(np.abs(dres) > 1e-12, -res / dres, -np.sign(res) * 0.1 * span)
-            step = np.clip(step, -0.5 * span, 0.5 * span)
-            u = u + step
-            if np.all(np.abs(step) < 1e-14 * np.maximum(1.0, np.abs(u))):
+    r, dr = resid(u)
+    limit = 0.01
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        for _ in range(2000):
+            step = np.where(np.abs(dr) > 1e-300, -r * dr / np.maximum(dr * dr, 1e-300), 0.0)
+            step = np.clip(step, -limit, limit)
+            for _ in range(30):            # halve until residual^2 does not grow
+                rn, drn = resid(u + step)
+                worse = rn * rn > r * r
+                if not np.any(worse):
+                    break
+                step = np.where(worse, 0.5 * step, step)
+            u, r, dr = u + step, rn, drn
+            if np.all(np.abs(step) < 1e-15 * np.maximum(1.0, np.abs(u))):
                 break
     x = p1 + u[:, None] * nrm
     rxy = np.sqrt(x[:, 0] ** 2 + x[:, 1] ** 2)
