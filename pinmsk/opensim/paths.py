@@ -1845,3 +1845,145 @@ class GeometricPaths:
                 raise ModelError(f"no coordinate {name!r} among the paths' coordinates{hint}")
             cols.append(self.coordinates.index(name))
         return cols
+
+
+# --------------------------------------------------------------------------------------------
+# polynomial surrogates (OpenSim's PolynomialPathFitter, PredSim)
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class PolynomialFitReport:
+    """How well one muscle's polynomial reproduces its geometric path on held-out poses (m)."""
+
+    muscle: str
+    coordinates: tuple
+    degree: int
+    n_terms: int
+    length_max: float
+    length_rms: float
+    moment_arm_max: float
+    moment_arm_rms: float
+    n_train: int
+    n_test: int
+
+    def line(self) -> str:
+        return (f"{self.muscle}: degree {self.degree} in {', '.join(self.coordinates) or 'no coordinate'} "
+                f"({self.n_terms} terms): length error max {1e3 * self.length_max:.3f} mm, rms "
+                f"{1e3 * self.length_rms:.3f} mm; moment-arm error max {1e3 * self.moment_arm_max:.3f} mm, rms "
+                f"{1e3 * self.moment_arm_rms:.3f} mm ({self.n_test} held-out poses)")
+
+
+def sample_poses(ranges: Mapping[str, tuple], coordinates: Sequence[str], n: int, *, seed: int = 0) -> np.ndarray:
+    """``n`` poses (n, nq), each coordinate uniform in its range (Latin hypercube: every range is cut
+    into n strata, one sample in each)."""
+    rng = np.random.default_rng(seed)
+    out = np.empty((int(n), len(coordinates)))
+    for j, c in enumerate(coordinates):
+        if c not in ranges:
+            raise ModelError(f"no range for coordinate {c!r} to sample poses in")
+        lo, hi = (float(v) for v in ranges[c])
+        if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi):
+            raise ModelError(f"coordinate {c!r}: range [{lo:g}, {hi:g}] must be finite with min <= max to sample")
+        u = (rng.permutation(int(n)) + rng.random(int(n))) / int(n)
+        out[:, j] = lo + (hi - lo) * u
+    return out
+
+
+def _monomials(k: int, degree: int) -> np.ndarray:
+    """Exponents (T, k) of every monomial of total degree <= degree in k variables, by degree."""
+    rows = [np.zeros(k, dtype=int)]
+    for d in range(1, degree + 1):
+        for combo in combinations_with_replacement(range(k), d):
+            e = np.zeros(k, dtype=int)
+            for v in combo:
+                e[v] += 1
+            rows.append(e)
+    return np.array(rows, dtype=int).reshape(-1, k)
+
+
+def _design(x, scale, exps):
+    """Length rows (n, T) and derivative rows d/dq_v (n, k, T) of the monomials at scaled x (n, k)."""
+    n, k = x.shape
+    K = int(exps.max()) if exps.size else 0
+    pw = x[:, :, None] ** np.arange(K + 1)                                     # (n, k, K+1)
+    parts = pw[:, np.arange(k)[None, :], exps]                                  # (n, T, k)
+    A = np.prod(parts, axis=2) if k else np.ones((n, exps.shape[0]))
+    D = np.zeros((n, k, exps.shape[0]))
+    for v in range(k):
+        dv = np.where(exps[:, v] > 0, exps[:, v] * pw[:, v, np.maximum(exps[:, v] - 1, 0)], 0.0)
+        others = np.prod(np.delete(parts, v, axis=2), axis=2) if k > 1 else 1.0
+        D[:, v] = dv * others / scale[v]
+    return A, D
+
+
+def fit_polynomial_paths(paths: GeometricPaths, *, ranges: Mapping[str, tuple], coordinates=None,
+                         n_train: int = 2000, n_test: int = 500, max_degree: int = 6,
+                         tolerance: float = 1e-4, threshold: float = 1e-6, seed: int = 0,
+                         model_coordinates=None):
+    """Fit each muscle's length with a polynomial in the coordinates it crosses.
+
+    Poses are sampled in ``ranges`` (Latin hypercube) over ``coordinates``
+    (default: all of ``paths.coordinates``; the others stay at 0).  A muscle
+    crosses coordinate j where some sampled moment arm exceeds ``threshold``
+    (m).  Lengths and moment arms are fitted together by least squares (the
+    moment arms are ``-dl/dq`` of the same polynomial); the degree is the lowest
+    (1 .. ``max_degree``) whose largest length and moment-arm errors on ``n_test``
+    held-out poses are below ``tolerance`` (m), else the one with the smallest
+    such error.  Returns ``(PolynomialPath, reports)``; the path's coordinates
+    are ``model_coordinates`` (default ``paths.coordinates``).
+    """
+    from ..muscles.paths import PolynomialPath
+
+    names = tuple(paths.coordinates)
+    fit_names = tuple(names if coordinates is None else coordinates)
+    cols = paths._coordinate_columns(fit_names)
+    model_coordinates = tuple(names if model_coordinates is None else model_coordinates)
+
+    def poses(n, s):
+        q = np.zeros((int(n), len(names)))
+        q[:, cols] = sample_poses(ranges, fit_names, n, seed=s)
+        return q
+
+    q_tr, q_te = poses(n_train, seed), poses(n_test, seed + 1)
+    l_tr, r_tr = paths.lengths_and_moment_arms(q_tr, coordinates=fit_names)
+    l_te, r_te = paths.lengths_and_moment_arms(q_te, coordinates=fit_names)
+    terms, reports = [], []
+    for i, muscle in enumerate(paths.muscles):
+        crossed = [k for k in range(len(cols)) if np.max(np.abs(r_tr[:, i, k])) > threshold]
+        cnames = tuple(fit_names[k] for k in crossed)
+        lo = np.array([ranges[c][0] for c in cnames], dtype=float)
+        hi = np.array([ranges[c][1] for c in cnames], dtype=float)
+        center, scale = 0.5 * (lo + hi), np.maximum(0.5 * (hi - lo), 1e-9)
+        qc_tr = q_tr[:, [cols[k] for k in crossed]]
+        qc_te = q_te[:, [cols[k] for k in crossed]]
+        x_tr, x_te = (qc_tr - center) / scale, (qc_te - center) / scale
+        best = None
+        for degree in range(0 if not crossed else 1, (0 if not crossed else max_degree) + 1):
+            exps = _monomials(len(crossed), degree)
+            if exps.shape[0] > n_train * (1 + len(crossed)) // 2:
+                break
+            A, D = _design(x_tr, scale, exps)
+            M = np.concatenate([A, -D.transpose(1, 0, 2).reshape(-1, exps.shape[0])])
+            y = np.concatenate([l_tr[:, i], r_tr[:, i, crossed].T.reshape(-1)])
+            coef = np.linalg.lstsq(M, y, rcond=None)[0]
+            At, Dt = _design(x_te, scale, exps)
+            el = At @ coef - l_te[:, i]
+            er = (-(Dt @ coef)).T - r_te[:, i, crossed].T if crossed else np.zeros((0, len(q_te)))
+            # coordinates not crossed: the polynomial's arm is 0; their sampled arms are <= threshold
+            others = [k for k in range(len(cols)) if k not in crossed]
+            er_all = np.concatenate([er.reshape(-1), r_te[:, i, others].reshape(-1)])
+            stats = (float(np.max(np.abs(el))), float(np.sqrt(np.mean(el ** 2))),
+                     float(np.max(np.abs(er_all))) if er_all.size else 0.0,
+                     float(np.sqrt(np.mean(er_all ** 2))) if er_all.size else 0.0)
+            worst = max(stats[0], stats[2])
+            if best is None or worst < best[0]:
+                best = (worst, degree, exps, coef, stats)
+            if worst < tolerance:
+                break
+        _, degree, exps, coef, stats = best
+        terms.append({"coordinates": cnames, "center": center, "scale": scale, "exponents": exps,
+                      "coefficients": coef})
+        reports.append(PolynomialFitReport(muscle=muscle, coordinates=cnames, degree=degree, n_terms=len(coef),
+                                           length_max=stats[0], length_rms=stats[1], moment_arm_max=stats[2],
+                                           moment_arm_rms=stats[3], n_train=int(n_train), n_test=int(n_test)))
+    path = PolynomialPath(muscles=paths.muscles, coordinates=model_coordinates, terms=terms)
+    return path, tuple(reports)
