@@ -65,7 +65,7 @@ from ..errors import ModelError, PinmskError
 __all__ = [
     "PathPointSpec", "ConditionalPathPointSpec", "MovingPathPointSpec", "WrapSpec", "PathWrapSpec",
     "PathSpec", "path_specs_from_xml", "coordinate_ranges_from_xml", "GeometricPaths",
-    "PolynomialFitReport", "fit_polynomial_paths", "sample_poses", "body_fixed_xyz",
+    "PolynomialFitReport", "fit_polynomial_paths", "sample_poses", "motion_ranges", "body_fixed_xyz",
     "SimmSpline", "LinearFunction", "Constant", "PolynomialFunction", "PiecewiseLinearFunction",
     "MultiplierFunction", "function_from_xml",
 ]
@@ -1987,3 +1987,18 @@ def fit_polynomial_paths(paths: GeometricPaths, *, ranges: Mapping[str, tuple], 
                                            moment_arm_rms=stats[3], n_train=int(n_train), n_test=int(n_test)))
     path = PolynomialPath(muscles=paths.muscles, coordinates=model_coordinates, terms=terms)
     return path, tuple(reports)
+
+
+def motion_ranges(q, coordinates: Sequence[str], *, margin: float = math.radians(10.0),
+                  limits: Mapping[str, tuple] | None = None) -> dict[str, tuple[float, float]]:
+    """Sampling ranges around a motion, as OpenSim's PolynomialPathFitter samples them: each
+    coordinate's min and max over the frames ``q`` (N, nq), widened by ``margin`` (rad or m) and
+    clipped to ``limits`` (the model's ranges) where given."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    out = {}
+    for j, c in enumerate(coordinates):
+        lo, hi = float(np.min(q[:, j])) - margin, float(np.max(q[:, j])) + margin
+        if limits is not None and c in limits:
+            lo, hi = max(lo, float(limits[c][0])), min(hi, float(limits[c][1]))
+        out[c] = (lo, hi)
+    return out
