@@ -441,13 +441,12 @@ class PolynomialPath:
         return (f"PolynomialPath({len(self._muscles)} muscles x {len(self._coordinates)} coordinates, "
                 f"degree {self.degree}, {self._coef.size} terms)")
 
-    @property
-    def muscles(self) -> tuple[str, ...]:
-        return self._muscles
-
-    @property
-    def coordinates(self) -> tuple[str, ...]:
-        return self._coordinates
+    # the same read-only views and frame checks as MomentArmPath (same slot names)
+    muscles = MomentArmPath.muscles
+    coordinates = MomentArmPath.coordinates
+    n_muscles = MomentArmPath.n_muscles
+    nv = MomentArmPath.nv
+    _frames = MomentArmPath._frames
 
     @property
     def terms(self) -> tuple:
@@ -455,19 +454,9 @@ class PolynomialPath:
         return self._terms
 
     @property
-    def n_muscles(self) -> int:
-        return len(self._muscles)
-
-    @property
-    def nv(self) -> int:
-        return len(self._coordinates)
-
-    @property
     def degree(self) -> int:
         """Highest total degree of the length polynomials (0 = constant lengths)."""
         return self._degree
-
-    _frames = MomentArmPath._frames
 
     # --- evaluation ---------------------------------------------------------------
     def _x(self, q):
