@@ -60,8 +60,7 @@ from __future__ import annotations
 
 import difflib
 import math
-import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from itertools import combinations_with_replacement
 from typing import Callable, Mapping, Sequence
 
