@@ -1,0 +1,1 @@
+"""OpenSim model layer: skeletons, functions, muscle paths and muscles built from an .osim document."""
