@@ -1007,8 +1007,8 @@ def _wrap_sphere(p1, p2, *, radius, axis, sign):
     c2 = ~c1 & (j2 > j3) & (j2 > j4)
     c3 = ~c1 & ~c2 & (j3 > j4)
     use1a, use2a = c1 | c2, c1 | c3
-    r1, r11 = _sel(use1a, r1a, r1b), _sel(use1a, r1b, r1a)
-    r2, r22 = _sel(use2a, r2a, r2b), _sel(use2a, r2b, r2a)
+    r1 = _sel(use1a, r1a, r1b)
+    r2 = _sel(use2a, r2a, r2b)
     far = np.zeros(n, dtype=bool)
     if sign != 0:
         s1, s2 = _dsign(p1[:, axis]), _dsign(p2[:, axis])
@@ -1097,7 +1097,6 @@ def _ellipsoid_closest(a3, pts, special=-1):
     """Closest point of the ellipsoid with radii a3 to each of pts (n, 3); ``special`` forces the 2-D
     cross-section through that axis (OpenSim's specialCaseAxis; -1: chosen per point)."""
     a, b, c = (float(v) for v in a3)
-    u, v, w = pts[:, 0], pts[:, 1], pts[:, 2]
     n = pts.shape[0]
     if special < 0:
         axis_of = np.full(n, -1)
