@@ -129,3 +129,16 @@ def test_the_checks_see_a_cycle_and_a_wrong_way_import(tmp_path):
         assert layer("presentation.plots") > layer("solvers.x")
     finally:
         del MODULES["solvers.x"]
+
+
+def test_every_subpackage_ships_in_the_wheel():
+    """A package missing from pyproject's list installs from a checkout (-e) but not from a wheel."""
+    import sys
+    if sys.version_info >= (3, 11):
+        import tomllib
+    else:  # pragma: no cover
+        import tomli as tomllib
+    listed = set(tomllib.loads((PKG.parent / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    found = {"pinmsk" + ("." + ".".join(p.parent.relative_to(PKG).parts) if p.parent != PKG else "")
+             for p in PKG.rglob("__init__.py")}
+    assert found <= listed, f"add to pyproject.toml [tool.setuptools] packages: {sorted(found - listed)}"
