@@ -19,8 +19,8 @@ LAYERS = {
     "io": 4,
     "components": 5, "fitting": 5,
     "muscles": 6, "effects": 6, "contact": 6, "skeleton": 6,
-    "kinematics": 7, "grf": 7, "residuals": 7,
-    "builtin_models": 8, "model": 8, "opensim": 8,
+    "kinematics": 7, "grf": 7, "residuals": 7, "opensim": 7,
+    "builtin_models": 8, "model": 8,
     "markers": 9, "ik": 9, "dynamics": 9, "energy": 9, "contact.identify": 9, "contact.synthetic": 9,
     "solvers": 11,
     "diagnose": 12,
@@ -129,3 +129,16 @@ def test_the_checks_see_a_cycle_and_a_wrong_way_import(tmp_path):
         assert layer("presentation.plots") > layer("solvers.x")
     finally:
         del MODULES["solvers.x"]
+
+
+def test_every_subpackage_ships_in_the_wheel():
+    """A package missing from pyproject's list installs from a checkout (-e) but not from a wheel."""
+    import sys
+    if sys.version_info >= (3, 11):
+        import tomllib
+    else:  # pragma: no cover
+        import tomli as tomllib
+    listed = set(tomllib.loads((PKG.parent / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    found = {"pinmsk" + ("." + ".".join(p.parent.relative_to(PKG).parts) if p.parent != PKG else "")
+             for p in PKG.rglob("__init__.py")}
+    assert found <= listed, f"add to pyproject.toml [tool.setuptools] packages: {sorted(found - listed)}"

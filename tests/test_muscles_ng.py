@@ -135,6 +135,19 @@ def test_partials_fd():
                                atol=1e-9)
 
 
+def test_zero_activation_gives_zero_force_and_one_sided_partials():
+    """a = 0 makes a_hat = 0 and Eq. A.12 a 0/0; the force is its limit, 0 (it was NaN)."""
+    v = np.array([-3.0, -0.1, 0.0, 0.1, 3.0])
+    fi = np.array([0.9, 0.5, 0.7, 0.6, 0.8])
+    a = np.zeros(5)
+    assert np.array_equal(ng_fiber_force(v, a, fi), np.zeros(5))
+    f, dv, da, dfi = ng_fiber_force_partials(v, a, fi)
+    assert np.array_equal(f, np.zeros(5)) and np.array_equal(dv, np.zeros(5)) and np.array_equal(dfi, np.zeros(5))
+    h = 1e-9
+    np.testing.assert_allclose(da, ng_fiber_force(v, h, fi) / h, rtol=1e-6)   # one-sided, a >= 0
+    assert da[0] == pytest.approx(-A) and da[2] == pytest.approx(0.7)
+
+
 def test_activation_closed_form():
     rng = np.random.default_rng(4)
     a = rng.uniform(0.0, 1.3, (500, 6))          # both a_hat branches

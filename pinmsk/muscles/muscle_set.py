@@ -234,9 +234,9 @@ class MuscleSet(Component):
         return self.joint_moments(motion.q, F)
 
     def __eq__(self, other) -> bool:
-        """Same muscles, muscle model (all its parameters), tendon and parameter flags (paths are not compared)."""
+        """Same muscles, muscle model (all its parameters), paths, tendon and parameter flags."""
         return (type(other) is type(self) and self.names == other.names and self.mtu == other.mtu
-                and self.tendon == other.tendon and self._params == other._params)
+                and self.path == other.path and self.tendon == other.tendon and self._params == other._params)
 
     def __hash__(self) -> int:
         return hash((type(self).__name__, self.names, self.tendon))

@@ -86,7 +86,9 @@ def ng_fiber_force(v_norm, a, f_isom, *, a_rel=A_REL, b_rel=B_REL, f_hat=F_HAT,
         w = vc / ah
         q_con = (f_isom * b_rel + a_rel * w) / (b_rel - w)
         q_ecc = f_isom * (1.0 + (f_hat - 1.0) * ve / (ah * _k(f_isom, b_rel, f_hat, a_rel, gamma) + ve))
-    return a * np.where(v <= 0.0, q_con, q_ecc)
+    f = a * np.where(v <= 0.0, q_con, q_ecc)
+    # a = 0 makes a_hat = 0 and q a 0/0 (w = v / 0); the force there is its limit a -> 0+, zero
+    return np.where(a == 0.0, 0.0, f) if np.any(a == 0.0) else f
 
 
 def ng_fiber_velocity(f_ce, a, f_isom, *, a_rel=A_REL, b_rel=B_REL, f_hat=F_HAT,
@@ -147,6 +149,13 @@ def ng_fiber_force_partials(v_norm, a, f_isom, *, a_rel=A_REL, b_rel=B_REL, f_ha
     dq_dv = np.where(concentric, dqv_c, dqv_e)
     dq_dah = np.where(concentric, dqa_c, dqa_e)
     dq_df = np.where(concentric, dqf_c, dqf_e)
+    # a = 0 (a_hat = 0): q is a 0/0 there; use the limits a -> 0+: f = 0 and its v and f_isom
+    # slopes vanish, df/da = lim q (-A_rel shortening, f_isom isometric, f_hat f_isom lengthening)
+    off = a == 0.0
+    if np.any(off):
+        q0 = np.where(v < 0.0, -a_rel, np.where(v > 0.0, f_hat * f_isom, f_isom))
+        return (np.where(off, 0.0, a * q), np.where(off, 0.0, a * dq_dv),
+                np.where(off, q0, q + a * dq_dah * dah), np.where(off, 0.0, a * dq_df))
     return a * q, a * dq_dv, q + a * dq_dah * dah, a * dq_df
 
 

@@ -1,1 +1,1 @@
-"""OpenSim models in pinmsk: the model layer of the .osim import (skeleton, functions, paths, muscles)."""
+"""OpenSim model layer: skeletons, functions, muscle paths and muscles built from an .osim document."""
