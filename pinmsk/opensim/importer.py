@@ -46,25 +46,29 @@ __all__ = ["import_osim", "write_import", "marker_set", "ImportHook"]
 ImportHook = Callable[[OsimDocument, Skeleton, "object"], tuple]
 
 
-def import_osim(path, *, locked: str = "joint", gravity=None, hooks: Sequence[ImportHook] = ()):
+def import_osim(path, *, locked: str = "joint", nonlinear: str = "fit", gravity=None,
+                hooks: Sequence[ImportHook] = ()):
     """``(Model, ImportReport)`` of the OpenSim model at ``path`` (see the module docstring).
 
     ``locked``: ``"joint"`` (default) keeps locked coordinates as joints, ``"weld"`` fixes them at their
-    default values.  ``gravity`` (3 numbers, m/s^2) replaces the model's.  ``hooks`` import muscles,
-    actuators and contacts.
+    default values.  ``nonlinear``: ``"fit"`` (default) replaces joints whose axes are nonlinear in a
+    coordinate by best-fitting fixed-axis joints (their errors are in the report); ``"exact"`` gives each
+    such axis a Pinocchio joint of its own (a dependent coordinate, filled by
+    ``model.meta['coordinate_map']``; the model then has more coordinates than OpenSim's).  ``gravity``
+    (3 numbers, m/s^2) replaces the model's.  ``hooks`` import muscles, actuators and contacts.
     """
-    model, report, _ = _import(path, locked=locked, gravity=gravity, hooks=hooks)
+    model, report, _ = _import(path, locked=locked, nonlinear=nonlinear, gravity=gravity, hooks=hooks)
     return model, report
 
 
-def _import(path, *, locked, gravity, hooks):
+def _import(path, *, locked, gravity, hooks, nonlinear="fit"):
     from ..model import Model, _set_gravity
 
     p = Path(str(path))
     if p.suffix.lower() != ".osim":
         raise ModelError(f"{p}: an OpenSim model file ends in .osim")
     doc = read_osim(p)
-    skel = build_skeleton(doc, locked=locked)
+    skel = build_skeleton(doc, locked=locked, nonlinear=nonlinear)
     pm = skel.pin_model
     _set_gravity(pm, gravity, "import_osim")
     meta = _meta(doc, skel, p)
@@ -98,6 +102,10 @@ def _meta(doc: OsimDocument, skel: Skeleton, path: Path) -> dict:
         "locked_coordinates": dict(skel.locked), "welded_coordinates": dict(skel.welded),
         "clamped_coordinates": list(skel.clamped), "coupled_coordinates": [dict(c) for c in skel.couplings],
         "osim_motion_types": dict(skel.motion_types),
+        "coordinate_map": skel.coordinate_map,
+        "dependent_coordinates": {n: {"joint": d.joint, "axis": d.axis, "of": list(d.of), "function": repr(d.function)}
+                                  for n, d in skel.dependent.items()},
+        "virtual_coordinates": list(skel.virtual),
         "markers": [{"name": n, "body": b, "position": T[:3, 3].tolist()} for n, (b, T) in skel.markers.items()],
         "credits": doc.credits,
     }
@@ -163,7 +171,8 @@ def write_import(model_or_path, out_dir, *, name: str | None = None) -> dict[str
     locked = options.get("locked", "joint")
     if locked not in LOCKED_MODES:
         raise ModelError(f"write_import: unknown locked option {locked!r}")
-    model, report, skel = _import(path, locked=locked, gravity=gravity, hooks=())
+    model, report, skel = _import(path, locked=locked, nonlinear=options.get("nonlinear", "fit"), gravity=gravity,
+                                  hooks=())
     stem = name or re.sub(r"[^A-Za-z0-9_.-]", "_", path.stem)
     if not re.fullmatch(r"[A-Za-z0-9_.-]+", stem):
         raise ModelError(f"write_import: name {stem!r} must be letters, digits, '_', '.' or '-'")

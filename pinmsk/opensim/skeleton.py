@@ -57,9 +57,11 @@ from . import functions as fns
 from .report import APPROXIMATED, EXACT, NOT_IMPORTED, NOTE, ReportEntry
 
 __all__ = ["JointKinematics", "OsimKinematics", "Skeleton", "build_skeleton", "rotation", "rotation_xyz",
-           "UrdfLink", "UrdfJoint", "LOCKED_MODES"]
+           "UrdfLink", "UrdfJoint", "DependentCoordinate", "CoordinateMap", "LOCKED_MODES", "NONLINEAR_MODES"]
 
 LOCKED_MODES = ("joint", "weld")
+NONLINEAR_MODES = ("fit", "exact")
+_AXIS_NAMES = ("rotation1", "rotation2", "rotation3", "translation1", "translation2", "translation3")
 _X, _Y, _Z = np.eye(3)
 #: Effort and velocity limits written for every joint (pinmsk's URDF convention; unused by the analyses).
 EFFORT_LIMIT = 1000.0
@@ -339,6 +341,168 @@ def _tree_order(doc: OsimDocument, joints: list[JointKinematics]) -> tuple[Joint
 
 
 # ---------------------------------------------------------------------------
+# dependent coordinates and the map from OpenSim's coordinates to Pinocchio's
+# ---------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class DependentCoordinate:
+    """A Pinocchio joint whose value is a function of OpenSim coordinates: ``function(*of)`` (the nonlinear
+    ``axis`` of CustomJoint ``joint``, in ``nonlinear="exact"`` skeletons)."""
+
+    name: str
+    joint: str
+    axis: str
+    of: tuple[str, ...]
+    function: fns.Function
+    where: str
+    welded: Mapping[str, float] = field(default_factory=dict)
+
+
+def _image_range(d: DependentCoordinate, fit_ranges) -> tuple[float, float]:
+    """The values a dependent coordinate takes over its coordinates' (fit) ranges."""
+    free = [c for c in d.of if c not in d.welded]
+    grids = np.meshgrid(*[np.linspace(*fit_ranges[c], 401 if len(free) == 1 else 21) if c not in d.welded
+                          else np.array([d.welded[c]]) for c in d.of], indexing="ij")
+    x = np.stack([g.ravel() for g in grids], axis=1)
+    v = d.function.value(x[:, 0] if x.shape[1] == 1 else x) if d.of else d.function.value(np.zeros(1))
+    return float(np.min(v)), float(np.max(v))
+
+
+def _coupler_functions(doc) -> tuple:
+    return tuple((con.dependent, con.independent, fns.from_osim(con.function), float(con.scale_factor))
+                 for con in doc.constraints if con.enforced)
+
+
+class CoordinateMap:
+    """OpenSim's coordinates -> the Pinocchio model's ``q`` (with speeds, accelerations, Jacobian).
+
+    A Pinocchio joint is either an OpenSim coordinate or a :class:`DependentCoordinate`
+    (``x = f(q_of)``, so ``v = f' v_of`` and ``a = f' a_of + f'' v_of^2``).  With ``couplers=True``
+    the dependent coordinate of each enforced CoordinateCouplerConstraint is first set from its
+    independent ones (``q_dep = s f(q_ind)``, same chain rule), as OpenSim's solvers enforce it.
+    Generalized forces map back by virtual work: ``tau_osim = J^T tau_pinocchio``
+    (:meth:`generalized_forces`).  Inputs are ``{name: (N,)}`` mappings (missing coordinates take their
+    default values) or ``(N, n)`` arrays in :attr:`osim_coordinates` order; outputs are time-first arrays
+    in Pinocchio order (:attr:`joints`).
+    """
+
+    def __init__(self, *, osim_coordinates, joints, dependent, couplers, defaults, welded):
+        self.osim_coordinates = tuple(osim_coordinates)
+        self.joints = tuple(joints)
+        self.dependent = dict(dependent)
+        self.couplers = tuple(couplers)
+        self.defaults = dict(defaults)
+        self.welded = dict(welded)
+        self._col = {c: i for i, c in enumerate(self.osim_coordinates)}
+
+    @property
+    def identity(self) -> bool:
+        """True if every Pinocchio joint is an OpenSim coordinate (no dependent coordinates)."""
+        return not self.dependent
+
+    def _osim(self, q, what):
+        n_os = len(self.osim_coordinates)
+        if q is None:
+            return None
+        if isinstance(q, Mapping):
+            unknown = sorted(set(q) - set(self.osim_coordinates))
+            if unknown:
+                raise ModelError(f"CoordinateMap: {what} names unknown coordinate(s) {unknown}")
+            arrs = {k: np.atleast_1d(np.asarray(v, dtype=float)) for k, v in q.items()}
+            n = max([a.shape[0] for a in arrs.values()], default=1)
+            out = np.empty((n, n_os))
+            for c, i in self._col.items():
+                default = self.welded.get(c, self.defaults[c]) if what == "q" else 0.0
+                out[:, i] = np.broadcast_to(arrs.get(c, default), (n,))
+            return out
+        a = np.asarray(q, dtype=float)
+        a = a[None, :] if a.ndim == 1 else a
+        if a.ndim != 2 or a.shape[1] != n_os:
+            raise ModelError(f"CoordinateMap: {what} must have {n_os} columns (OpenSim's coordinates), "
+                             f"got shape {np.shape(q)}")
+        return a.copy()
+
+    def _chain(self, f: fns.Function, x, J, v, a):
+        """Value, Jacobian row, speed and acceleration of ``f`` at argument columns ``x`` (N, k)."""
+        k = x.shape[1]     # >= 1: a dependent coordinate or coupler always has an argument
+        arg = x[:, 0] if k == 1 else x
+        val = f.value(arg)
+        d1 = [f.derivative(arg, 1, i) for i in range(k)]
+        Jrow = sum(d1[i][:, None] * J[:, i, :] for i in range(k))
+        vel = None if v is None else sum(d1[i] * v[:, i] for i in range(k))
+        acc = None
+        if a is not None:
+            acc = sum(d1[i] * a[:, i] for i in range(k))
+            if k == 1:     # multi-argument functions are linear (LinearFunction): no curvature term
+                acc = acc + f.derivative(arg, 2) * v[:, 0] ** 2
+        return val, Jrow, vel, acc
+
+    def _resolve(self, q, v, a, couplers):
+        Q = self._osim(q, "q")
+        V = self._osim(v, "v") if v is not None else None
+        A = self._osim(a, "a") if a is not None else None
+        if A is not None and V is None:
+            raise ModelError("CoordinateMap: accelerations need speeds too")
+        n, n_os = Q.shape
+        J = np.broadcast_to(np.eye(n_os), (n, n_os, n_os)).copy()
+        if couplers:
+            for dep, indep, f, scale in self.couplers:
+                cols = [self._col[c] for c in indep]
+                val, Jrow, vel, acc = self._chain(f, Q[:, cols], J[:, cols, :], None if V is None else V[:, cols],
+                                                  None if A is None else A[:, cols])
+                i = self._col[dep]
+                Q[:, i], J[:, i, :] = scale * val, scale * Jrow
+                if V is not None:
+                    V[:, i] = scale * vel
+                if A is not None:
+                    A[:, i] = scale * acc
+        return Q, V, A, J
+
+    def expand(self, q, v=None, a=None, *, couplers: bool = True):
+        """Pinocchio ``(q, v, a)`` (N, nq) from OpenSim coordinates (``v``/``a`` None if not given)."""
+        q_, v_, a_, _ = self._expand(q, v, a, couplers)
+        return q_, v_, a_
+
+    def jacobian(self, q, *, couplers: bool = True) -> np.ndarray:
+        """``d q_pinocchio / d q_osim`` (N, nq, n_osim)."""
+        return self._expand(q, None, None, couplers)[3]
+
+    def generalized_forces(self, q, tau, *, couplers: bool = True) -> np.ndarray:
+        """OpenSim coordinates' generalized forces (N, n_osim) from Pinocchio's ``tau`` (N, nq): J^T tau."""
+        J = self.jacobian(q, couplers=couplers)
+        return np.einsum("nji,nj->ni", J, np.atleast_2d(np.asarray(tau, dtype=float)))
+
+    def _expand(self, q, v, a, couplers):
+        Q, V, A, J = self._resolve(q, v, a, couplers)
+        n = Q.shape[0]
+        nq = len(self.joints)
+        qp = np.empty((n, nq))
+        vp = None if V is None else np.empty((n, nq))
+        ap = None if A is None else np.empty((n, nq))
+        Jp = np.empty((n, nq, Q.shape[1]))
+        for j, name in enumerate(self.joints):
+            d = self.dependent.get(name)
+            if d is None:
+                i = self._col[name]
+                qp[:, j], Jp[:, j, :] = Q[:, i], J[:, i, :]
+                if vp is not None:
+                    vp[:, j] = V[:, i]
+                if ap is not None:
+                    ap[:, j] = A[:, i]
+                continue
+            cols = [self._col[c] for c in d.of]
+            val, Jrow, vel, acc = self._chain(d.function, Q[:, cols], J[:, cols, :],
+                                              None if V is None else V[:, cols], None if A is None else A[:, cols])
+            qp[:, j] = val
+            Jp[:, j, :] = Jrow
+            if vp is not None:
+                vp[:, j] = vel
+            if ap is not None:
+                ap[:, j] = acc
+        return qp, vp, ap, Jp
+
+
+# ---------------------------------------------------------------------------
 # the Pinocchio skeleton
 # ---------------------------------------------------------------------------
 
@@ -400,19 +564,28 @@ class Skeleton:
     clamped: tuple[str, ...]
     couplings: tuple[Mapping, ...]
     motion_types: Mapping[str, str]
+    dependent: Mapping[str, "DependentCoordinate"] = field(default_factory=dict)
+    virtual: tuple[str, ...] = ()               # OpenSim coordinates that are no Pinocchio joint (exact mode)
+    coordinate_map: "CoordinateMap | None" = None
     options: Mapping = field(default_factory=dict)
 
 
-def build_skeleton(doc: OsimDocument, *, locked: str = "joint", fit_samples: int = 201,
+def build_skeleton(doc: OsimDocument, *, locked: str = "joint", nonlinear: str = "fit", fit_samples: int = 81,
                    check_samples: int = 2001) -> Skeleton:
     """The Pinocchio skeleton of ``doc``, with report entries for each joint and the error bounds.
 
     ``locked``: ``"joint"`` keeps locked coordinates as joints (default), ``"weld"`` fixes them at
-    their default values.  ``fit_samples`` / ``check_samples``: coordinate samples for fitting an
-    approximated joint and for measuring its error.
+    their default values.  ``nonlinear``: ``"fit"`` (default) replaces a joint whose axes are nonlinear
+    functions of a coordinate by the best-fitting fixed-axis joint (measured, reported); ``"exact"``
+    gives each such axis a Pinocchio joint of its own, a *dependent coordinate* (``dependent``) whose
+    value is the axis function of its coordinate(s): exact when filled by :class:`CoordinateMap`.
+    ``fit_samples`` / ``check_samples``: coordinate samples for fitting an approximated joint and for
+    measuring its error.
     """
     if locked not in LOCKED_MODES:
         raise ModelError(f"locked must be one of {LOCKED_MODES}, got {locked!r}")
+    if nonlinear not in NONLINEAR_MODES:
+        raise ModelError(f"nonlinear must be one of {NONLINEAR_MODES}, got {nonlinear!r}")
     kin = OsimKinematics(doc)
     coords = {c.name: c for c in doc.coordinates}
     entries: list[ReportEntry] = []
@@ -427,19 +600,26 @@ def build_skeleton(doc: OsimDocument, *, locked: str = "joint", fit_samples: int
         links[b.name] = UrdfLink(b.name, mass=float(b.mass), com=tuple(map(float, b.mass_center)),
                                  inertia=_inertia_matrix(b.inertia), body=b.name)
     ujoints: list[UrdfJoint] = []
+    dependent: dict[str, DependentCoordinate] = {}
     approx: dict[str, tuple[_Fit, JointKinematics]] = {}
     reach: dict[str, float] = {}
     names_used = set(links)
     for jk in kin.joints:
-        segs, fit, text = _convert(jk, welded=welded, fit_ranges=fit_ranges, kin=kin,
-                                   fit_samples=fit_samples, check_samples=check_samples)
+        segs, fit, text, deps = _convert(jk, welded=welded, fit_ranges=fit_ranges, kin=kin, fit_samples=fit_samples,
+                                         check_samples=check_samples, nonlinear_mode=nonlinear)
+        for d in deps.values():
+            if d.name in coords or d.name in dependent:
+                raise ModelError(f"{d.where}: pinmsk names this axis' coordinate '{d.name}', which the model "
+                                 "already uses; rename that coordinate or use nonlinear='fit'")
+            ranges[d.name] = _image_range(d, fit_ranges)
+        dependent.update(deps)
         new = _chain_joints(jk, segs, ranges, names_used)
         ujoints += new
         for uj in new:
             if uj.child not in links:
                 links[uj.child] = UrdfLink(uj.child)
         reach[jk.child] = _max_translation(jk, fit, ranges, welded)
-        entries.append(_joint_entry(jk, new, fit, text))
+        entries.append(_joint_entry(jk, new, fit, text, deps))
         if fit is not None:
             approx[jk.child] = (fit, jk)
 
@@ -448,7 +628,17 @@ def build_skeleton(doc: OsimDocument, *, locked: str = "joint", fit_samples: int
     pm = _pinocchio(doc, links, ordered, markers)
     bounds = _bounds(doc, kin, approx, reach)
     joint_names = set(pm.names)
-    coordinate_order = tuple(c for c in kin.coordinates if c not in welded and c in joint_names)
+    coordinate_order = []
+    for c in kin.coordinates:
+        if c not in welded and c in joint_names:
+            coordinate_order.append(c)
+        coordinate_order += [d for d, rec in dependent.items() if c in rec.of and d not in coordinate_order]
+    coordinate_order += [d for d in dependent if d not in coordinate_order]
+    coordinate_order = tuple(coordinate_order)
+    virtual = tuple(c for c in kin.coordinates if c not in welded and c not in joint_names)
+    cmap = CoordinateMap(osim_coordinates=kin.coordinates, joints=tuple(pm.names[j] for j in range(1, pm.njoints)),
+                         dependent=dependent, couplers=_coupler_functions(doc), defaults=kin.defaults,
+                         welded=welded)
     entries += _coordinate_entries(doc, coords, welded, locked, coordinate_order)
     clamped = tuple(c.name for c in doc.coordinates if c.clamped and c.name not in welded)
     g = np.asarray(doc.gravity, dtype=float)
@@ -457,11 +647,20 @@ def build_skeleton(doc: OsimDocument, *, locked: str = "joint", fit_samples: int
     entries.append(ReportEntry(
         element=f"{doc.source}: <BodySet>", became=f"{nb} bodies -> Pinocchio bodies with their mass, centre of "
         f"mass and inertia (total mass {sum(b.mass for b in doc.bodies):.4f} kg)"))
+    if dependent:
+        entries.append(ReportEntry(
+            element=f"{doc.source}: nonlinear joint axes",
+            became=(f"{len(dependent)} dependent coordinates ({', '.join(dependent)}) -> Pinocchio joints of "
+                    "their own, exact when their values are the axis functions of their coordinates "
+                    f"(CoordinateMap, model.meta['coordinate_map'])"
+                    + (f"; OpenSim coordinates {', '.join(virtual)} drive only such axes and are not Pinocchio "
+                       "joints" if virtual else "")), status=NOTE))
     return Skeleton(doc=doc, kinematics=kin, pin_model=pm, links=links, joints=tuple(ordered), markers=markers,
                     entries=tuple(entries), bounds=bounds, coordinate_order=coordinate_order,
+                    dependent=dependent, virtual=virtual, coordinate_map=cmap,
                     locked={c.name: c.default_value for c in doc.coordinates if c.locked},
                     welded=welded, clamped=clamped, couplings=tuple(couplings),
-                    motion_types=_motion_types(kin), options={"locked": locked})
+                    motion_types=_motion_types(kin), options={"locked": locked, "nonlinear": nonlinear})
 
 
 def _inertia_matrix(v) -> tuple[tuple[float, ...], ...]:
@@ -508,21 +707,38 @@ def _classify(ax: _Axis, welded: Mapping[str, float]):
     return ("nonlinear", free)
 
 
-def _convert(jk: JointKinematics, *, welded, fit_ranges, kin, fit_samples, check_samples):
-    """The segments (('fixed', T) | (kind, axis, coordinate)) of one joint, its fit (or None), a note."""
+def _convert(jk: JointKinematics, *, welded, fit_ranges, kin, fit_samples, check_samples, nonlinear_mode):
+    """The segments (('fixed', T) | (kind, axis, coordinate)) of one joint, its fit (or None), a note, and
+    its dependent coordinates (``nonlinear_mode="exact"``)."""
     cls = [_classify(ax, welded) for ax in jk.axes]
     pure_coords = [c[1] for c in cls if c[0] == "pure"]
     nonlinear = [c for c in cls if c[0] == "nonlinear"]
     free = sorted({c for k in cls if k[0] != "const" for c in (k[1:2] if k[0] == "pure" else k[1])})
     exact = not nonlinear and len(pure_coords) == len(set(pure_coords))
     if exact:
-        return _exact_segments(jk, cls), None, ""
+        return _exact_segments(jk, cls), None, "", {}
+    if nonlinear_mode == "exact":
+        deps = {}
+        seen = set()
+        for i, (ax, k) in enumerate(zip(jk.axes, cls)):
+            if k[0] == "pure" and k[1] in seen:      # a second axis driven by the same coordinate
+                k = ("nonlinear", (k[1],))
+            if k[0] == "nonlinear":
+                name = f"{jk.joint.name}_{_AXIS_NAMES[ax.index]}"
+                deps[name] = DependentCoordinate(name=name, joint=jk.joint.name, axis=_AXIS_NAMES[ax.index],
+                                                 of=ax.coordinates, function=ax.function, where=ax.where,
+                                                 welded={c: welded[c] for c in ax.coordinates if c in welded})
+                k = ("pure", name, 1.0, 0.0)
+            elif k[0] == "pure":
+                seen.add(k[1])
+            cls[i] = k
+        return _exact_segments(jk, cls), None, "", deps
     if len(free) == 1:
         c = free[0]
         fit = _fit_one_dof(jk, c, fit_ranges[c], welded, kin, fit_samples, check_samples)
         segs = [("fixed", fit.P), (fit.kind, _Z, c), ("fixed", fit.C)]
-        return segs, fit, ""
-    return _fallback(jk, cls, welded, fit_ranges, kin, check_samples)
+        return segs, fit, "", {}
+    return _fallback(jk, cls, welded, fit_ranges, kin, check_samples) + ({},)
 
 
 def _exact_segments(jk: JointKinematics, cls) -> list:
@@ -622,16 +838,22 @@ def _fit_one_dof(jk, c, q_range, welded, kin, n_fit, n_check) -> _Fit:
     def unpack(x):
         return P0 @ pin.exp6(x[:6]).homogeneous, pin.exp6(x[6:]).homogeneous @ C0
 
+    J = _model_motion(kind, np.eye(4), np.eye(4), qs)     # the joint's own motion: fixed samples
+
     def residual(x):
         P, C = unpack(x)
-        M = _model_motion(kind, P, C, qs)
-        got = (M[:, None, :3, :3] @ probes[None, :, :, None])[..., 0] + M[:, None, :3, 3]
+        y = probes @ C[:3, :3].T + C[:3, 3]                    # probes in the joint's moving frame
+        y = np.einsum("nij,kj->nki", J[:, :3, :3], y) + J[:, None, :3, 3]
+        got = y @ P[:3, :3].T + P[:3, 3]
         return np.concatenate([(got - target).ravel(), 1e-6 * x])
 
     x = np.zeros(12)
     if np.max(np.abs(residual(x)[:-12])) > 1e-12:
         x = least_squares(residual, x, method="lm", xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=2000).x
     P, C = unpack(x)
+    if kind == "revolute":   # slide the joint frame along its axis to the point nearest the joint centre
+        delta = float((jk.parent_offset[:3, 3] - P[:3, 3]) @ P[:3, 2])
+        P, C = P @ _transform(p=delta * _Z), _transform(p=-delta * _Z) @ C
     qc = np.linspace(lo, hi, n_check) if hi > lo else np.array([lo])
     De = _sampled_motion(jk, c, qc, welded, kin)
     Da = _model_motion(kind, P, C, qc)
@@ -854,7 +1076,7 @@ def _bounds(doc, kin, approx, reach) -> dict[str, float]:
     return out
 
 
-def _joint_entry(jk: JointKinematics, new: list[UrdfJoint], fit: _Fit | None, text: str) -> ReportEntry:
+def _joint_entry(jk: JointKinematics, new: list[UrdfJoint], fit: _Fit | None, text: str, deps) -> ReportEntry:
     movable = [uj for uj in new if uj.kind != "fixed"]
     if not movable:
         became = f"fixed: '{jk.child}' welded to '{jk.parent}'"
@@ -868,6 +1090,15 @@ def _joint_entry(jk: JointKinematics, new: list[UrdfJoint], fit: _Fit | None, te
                            else f"{uj.kind} '{uj.name}' along {_axis_text(uj.axis)}" for uj in movable)
         became = f"{'chain of ' if len(movable) > 1 else ''}{became} ('{jk.parent}' -> '{jk.child}')"
     if fit is None:
+        if deps:
+            became += (f"; exact with dependent coordinates {', '.join(deps)} (the nonlinear axes' "
+                       "functions of their coordinates)")
+        if jk.joint.type in ("FreeJoint", "BallJoint"):
+            # Simbody's Free and Ball mobilizers take the angular velocity as their speeds, not the angles' rates
+            became += ("; NOTE: in OpenSim the speeds of its rotations are angular-velocity components, in "
+                       "pinmsk the coordinates' time derivatives (X-Y-Z angle rates), so the moments of these "
+                       "rotations differ from OpenSim's inverse dynamics by the angle-rate Jacobian")
+            return ReportEntry(element=jk.joint.where, became=became, status=NOTE)
         return ReportEntry(element=jk.joint.where, became=became)
     details = {"max_origin_error_m": fit.max_translation_error, "max_rotation_error_rad": fit.max_rotation_error,
                "range": list(fit.q_range), "sampled": fit.sampled}
