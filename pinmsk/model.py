@@ -464,8 +464,10 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
         if moment_arms is not None or tendon is not None:
             raise ModelError(f"{p}: moment_arms and tendon do not apply to an OpenSim model (its muscles "
                              "are not imported yet)")
-        from .opensim.importer import import_osim
-        return import_osim(p, gravity=gravity)[0]
+        from .opensim.importer import import_osim, warn_report
+        model, report = import_osim(p, gravity=gravity)
+        warn_report(report)
+        return model
     if p.suffix.lower() == ".urdf":
         if not p.exists():
             raise ModelError(f"URDF file not found: {p}")

@@ -8,6 +8,7 @@ itself; the models of ``../shared/data/opensim-models`` are checked when present
 (``-m slow``); the same code paths are covered fast by the inline leg (spline knee, coupled patella)
 and by gait10dof18musc.
 """
+import pickle
 import time
 
 import numpy as np
@@ -215,6 +216,24 @@ def leg():
         <coordinate>lumbar_extension</coordinate>
         <optimal_force>100</optimal_force>
       </CoordinateActuator>
+      <PointActuator name="FX">
+        <min_control>-Inf</min_control><max_control>Inf</max_control>
+        <body>pelvis</body><point>-0.034 0 0</point><point_is_global>false</point_is_global>
+        <direction>1 0 0</direction><force_is_global>true</force_is_global><optimal_force>10</optimal_force>
+      </PointActuator>
+      <TorqueActuator name="MZ">
+        <bodyA>pelvis</bodyA><bodyB>ground</bodyB><torque_is_global>true</torque_is_global>
+        <axis>0 0 1</axis><optimal_force>5</optimal_force>
+      </TorqueActuator>
+      <HuntCrossleyForce name="heel_hc">
+        <HuntCrossleyForce::ContactParametersSet name="contact_parameters"><objects>
+          <HuntCrossleyForce::ContactParameters>
+            <geometry>heel floor</geometry><stiffness>1000000</stiffness><dissipation>2</dissipation>
+            <static_friction>0.8</static_friction><dynamic_friction>0.4</dynamic_friction><viscous_friction>0.4</viscous_friction>
+          </HuntCrossleyForce::ContactParameters>
+        </objects></HuntCrossleyForce::ContactParametersSet>
+        <transition_velocity>0.2</transition_velocity>
+      </HuntCrossleyForce>
     </objects></ForceSet>
     <MarkerSet name="markerset"><objects>
       <Marker name="ASIS"><socket_parent_frame>/bodyset/pelvis</socket_parent_frame><location>0.01 0.0 0.12</location></Marker>
@@ -421,9 +440,15 @@ def test_parse_reads_every_part_with_its_line(leg_path):
     assert cond.coordinate == "knee_angle" and cond.range == (-2.6, -1.4)
     assert moving.x_coordinate == "knee_angle" and moving.x_location.type == "SimmSpline"
     assert m.path.wraps[0].wrap_object == "femur_cyl"
-    (act,) = doc.actuators
+    act, point, torque = doc.actuators
     assert act.coordinate == "lumbar_extension" and act.properties["optimal_force"] == 100.0
-    (cf,) = doc.contact_forces
+    assert point.type == "PointActuator" and point.bodies == ("/bodyset/pelvis",)
+    assert point.properties["point"] == (-0.034, 0.0, 0.0) and point.properties["min_control"] == -np.inf
+    assert torque.bodies == ("/bodyset/pelvis", "/ground") and torque.properties["axis"] == (0.0, 0.0, 1.0)
+    hc, cf = doc.contact_forces
+    assert hc.type == "HuntCrossleyForce" and hc.geometry == ("heel", "floor")
+    (params,) = hc.properties["contact_parameters"]
+    assert params["stiffness"] == 1e6 and params["geometry"] == "heel floor"
     assert cf.geometry == ("heel", "floor") and cf.properties["stiffness"] == 3067776.0
     sphere = [g for g in doc.contact_geometry if g.name == "heel"][0]
     assert sphere.radius == 0.035 and sphere.frame == "/bodyset/foot"
@@ -629,6 +654,7 @@ def test_report_lists_what_is_not_imported_and_hooks_replace_it(leg_path, leg_im
     model, report = leg_import
     missing = {e.element.split(": ", 1)[1] for e in report.not_imported}
     assert missing == {'<Thelen2003Muscle name="vas">', '<CoordinateActuator name="lumbar_reserve">',
+                       '<PointActuator name="FX">', '<TorqueActuator name="MZ">', '<HuntCrossleyForce name="heel_hc">',
                        '<SmoothSphereHalfSpaceForce name="heel_contact">'}
     assert model.meta["import_report"] is report and "not imported" in report.format()
 
@@ -637,7 +663,7 @@ def test_report_lists_what_is_not_imported_and_hooks_replace_it(leg_path, leg_im
         return m, entries, [mu.where for mu in doc.muscles]
 
     _, rep = import_osim(leg_path, hooks=[muscles_hook])
-    assert len(rep.not_imported) == 2 and rep.find('name="vas"')[0].became == "a test muscle"
+    assert len(rep.not_imported) == 5 and rep.find('name="vas"')[0].became == "a test muscle"
     element, became, approximation, max_error = rep.approximations[0]
     assert max_error > 0 and approximation and isinstance(rep, ImportReport)
 
@@ -657,6 +683,29 @@ def test_every_joint_type_is_exact(types_path):
         for n, p in got.items():
             ref = poses[n][i, :3, 3] if n in poses else markers[n][i]
             assert np.linalg.norm(p - ref) < 1e-12
+
+
+def test_nonlinear_axes_of_a_multi_coordinate_joint_are_frozen_and_measured():
+    # a two-coordinate joint whose translation is a spline of one of them: no single fixed axis to fit, so the
+    # translation is frozen at the default pose and the error sampled over the coordinates' ranges
+    spline = '<SimmSpline name="function"><x>-1 0 1</x><y>0.02 0 0.03</y></SimmSpline>'
+    text = doc(body("arm", 2.0, "0 -0.2 0", "0.02 0.003 0.02 0 0 0"),
+               joint("CustomJoint", "shoulder", "g", "a", coord("elev", "-1 1") + coord("plane", "-1 1"),
+                     offset("g", "/ground", "0 1.4 0") + offset("a", "/bodyset/arm"),
+                     extra="<SpatialTransform>" + axis("rotation1", "elev", "0 0 1", LIN)
+                     + axis("rotation2", "plane", "0 1 0", LIN) + axis("rotation3", "", "1 0 0", ZERO)
+                     + axis("translation1", "elev", "1 0 0", spline) + axis("translation2", "", "0 1 0", ZERO)
+                     + axis("translation3", "", "0 0 1", ZERO) + "</SpatialTransform>"))
+    skel = build_skeleton(parse_osim(text, source="shoulder.osim"))
+    (entry,) = [e for e in skel.entries if e.status == "approximated"]
+    assert entry.details["sampled"] and "frozen" in entry.approximation and skel.pin_model.nq == 2
+    # the frozen translation is the spline at the default elev = 0, so the error is |spline(elev)| <= 0.03 m
+    assert entry.max_error == pytest.approx(0.03, rel=0.05)
+    vals = {"elev": np.linspace(-1, 1, 41), "plane": np.zeros(41)}
+    exact = skel.kinematics.body_poses(vals)["arm"][:, :3, 3]
+    for i in range(41):
+        got = _pin_positions(skel.pin_model, _q_pin(skel, vals, i), ["arm"])["arm"]
+        assert np.linalg.norm(got - exact[i]) <= entry.max_error + 1e-12
 
 
 # ---------------------------------------------------------------------------
@@ -808,7 +857,10 @@ def test_inverse_dynamics_matches_opensim_on_exact_skeletons(tmp_path, leg_path)
 # ---------------------------------------------------------------------------
 
 def test_load_model_and_write_import_round_trip(leg_path, tmp_path):
-    model = pinmsk.load_model(leg_path)     # the .osim branch of load_model
+    with pytest.warns(UserWarning, match=r"leg\.osim: 2 joint\(s\) approximated .*knee \d.* mm.*6 element\(s\) not "
+                                         r"imported yet \(CoordinateActuator, HuntCrossleyForce"):
+        model = pinmsk.load_model(leg_path)     # the .osim branch of load_model
+    assert pickle.loads(pickle.dumps(model)).meta["import_report"].approximations
     assert isinstance(model, pinmsk.Model) and model.name == "leg" and model.nq == 9
     assert np.allclose(model.gravity, [0.0, -9.80665, 0.0])
     assert model.coordinate_order[:3] == ("pelvis_tilt", "pelvis_tx", "pelvis_ty")

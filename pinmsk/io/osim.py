@@ -343,8 +343,8 @@ class Actuator(OsimElement):
 
 @dataclass(frozen=True)
 class ContactGeometry(OsimElement):
-    """ContactSphere (``radius``) or ContactHalfSpace (its plane is x > 0 of its frame; OpenSim's
-    half space is the region x >= 0 rotated by ``orientation``) at ``location``/``orientation`` in ``frame``."""
+    """ContactSphere (``radius``) or ContactHalfSpace (a solid filling x > 0 of its own frame, as
+    Simbody's HalfSpace) at ``location``/``orientation`` (rad, body-fixed X-Y-Z) in ``frame``."""
 
     frame: str = ""
     location: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -356,7 +356,8 @@ class ContactGeometry(OsimElement):
 @dataclass(frozen=True)
 class ContactForce(OsimElement):
     """SmoothSphereHalfSpaceForce (``geometry`` = sphere, half space) or HuntCrossleyForce
-    (``geometry`` = the names in its contact parameters) with their parameters."""
+    (``geometry`` = the names in its contact parameters; ``properties["contact_parameters"]`` = one dict
+    per ContactParameters) with their parameters."""
 
     geometry: tuple[str, ...] = ()
     properties: dict = field(default_factory=dict, compare=False)
@@ -512,7 +513,8 @@ class _Reader:
         return None
 
     def properties(self, node: _Node, skip: Iterable[str] = ()) -> dict:
-        """Every simple child as a Python value (bool, float, tuple of floats or str), sub-objects as dicts."""
+        """Every simple child as a Python value (bool, float, tuple of floats or str), sub-objects as dicts
+        (a tag that repeats gives a list of them)."""
         out: dict[str, Any] = {}
         skip = set(skip)
         for c in node.children:
@@ -521,12 +523,16 @@ class _Reader:
             if c.children:
                 if c.tag in ("Appearance", "FrameGeometry", "attached_geometry", "VisibleObject"):
                     continue
-                sub = self.properties(c)
+                value = self.properties(c)
                 if c.name:
-                    sub = {"name": c.name, **sub}
-                out[c.tag] = sub
+                    value = {"name": c.name, **value}
             else:
-                out[c.tag] = _value(c.text)
+                value = _value(c.text)
+            if c.tag in out:
+                prev = out[c.tag]
+                out[c.tag] = (prev if isinstance(prev, list) else [prev]) + [value]
+            else:
+                out[c.tag] = value
         return out
 
     # -- functions -------------------------------------------------------
@@ -785,11 +791,14 @@ class _Reader:
                 geo = tuple(_leaf(self.socket(node, path, t) or self.string(node, t.replace("socket_", "")))
                             for t in ("socket_sphere", "socket_half_space"))
             else:
-                geo = []
-                for params in _find_nodes(node, "HuntCrossleyForce::ContactParameters") + \
+                geo, params = [], []
+                for p in _find_nodes(node, "HuntCrossleyForce::ContactParameters") + \
                         _find_nodes(node, "ElasticFoundationForce::ContactParameters"):
-                    geo += self.string(params, "geometry").split()
+                    geo += self.string(p, "geometry").split()
+                    params.append(self.properties(p))
                 geo = tuple(dict.fromkeys(geo))
+                props = {k: v for k, v in props.items() if not k.endswith("::ContactParametersSet")}
+                props["contact_parameters"] = tuple(params)
             sink.contact_forces.append(ContactForce(**self.base(node), geometry=geo, properties=props))
         else:
             sink.other.append(OtherElement(**self.base(node), category="force", properties=self.properties(node)))

@@ -43,6 +43,11 @@ TINY_NUMBER = 1e-7
 ROUNDOFF_ERROR = 2e-13
 
 
+def _samples(x) -> tuple[int, ...]:
+    """The sample shape of an argument array: ``(N,)`` (``()`` for a scalar)."""
+    return np.shape(np.asarray(x, dtype=float))[:1]
+
+
 class Function:
     """An OpenSim function of ``n_args`` arguments (value and derivatives, vectorised)."""
 
@@ -81,11 +86,11 @@ class Constant(Function):
         self.c = float(value)
 
     def value(self, x):
-        return np.full(np.shape(np.asarray(x, dtype=float))[:1], self.c)
+        return np.full(_samples(x), self.c)
 
     def derivative(self, x, order=1, component=0):
         self._check_order(order)
-        return np.zeros(np.shape(np.asarray(x, dtype=float))[:1])
+        return np.zeros(_samples(x))
 
     def affine(self):
         return 0.0, self.c
@@ -112,8 +117,7 @@ class LinearFunction(Function):
 
     def derivative(self, x, order=1, component=0):
         self._check_order(order)
-        n = np.shape(np.asarray(x, dtype=float))[:1]
-        return np.full(n, self.coefficients[component] if order == 1 else 0.0)
+        return np.full(_samples(x), self.coefficients[component] if order == 1 else 0.0)
 
     def affine(self):
         return (float(self.coefficients[0]), float(self.coefficients[1])) if self.n_args == 1 else None

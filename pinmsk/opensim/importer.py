@@ -40,7 +40,7 @@ from ..io.osim import OsimDocument, read_osim
 from .report import NOT_IMPORTED, ImportReport, ReportEntry
 from .skeleton import LOCKED_MODES, Skeleton, build_skeleton
 
-__all__ = ["import_osim", "write_import", "marker_set", "ImportHook"]
+__all__ = ["import_osim", "write_import", "marker_set", "warn_report", "ImportHook"]
 
 #: ``hook(doc, skeleton, model) -> (model, entries, handled element 'where' strings)``.
 ImportHook = Callable[[OsimDocument, Skeleton, "object"], tuple]
@@ -93,6 +93,25 @@ def _import(path, *, locked, gravity, hooks, nonlinear="fit"):
     model = Model._make(name=model.name, pin_model=model.pin, muscles=model.muscles, effects=model.effects,
                         contacts=model.contacts, meta=meta)
     return model, report, skel
+
+
+def warn_report(report: ImportReport, *, stacklevel: int = 3) -> None:
+    """One UserWarning naming the approximated joints (with their errors) and counting what is not
+    imported, if there is any (``load_model`` of an .osim: the numbers are never silently approximate)."""
+    import warnings
+
+    parts = []
+    if report.approximations:
+        worst = ", ".join(f"{e.element.split('name=', 1)[-1].strip('>').strip(chr(34))} "
+                          f"{e.max_error * 1000:.3g} mm" for e in report.approximations)
+        parts.append(f"{len(report.approximations)} joint(s) approximated by fixed-axis joints (max error of the "
+                     f"child-body origin: {worst})")
+    if report.not_imported:
+        kinds = sorted({e.element.split("<", 1)[-1].split(" ", 1)[0] for e in report.not_imported})
+        parts.append(f"{len(report.not_imported)} element(s) not imported yet ({', '.join(kinds)})")
+    if parts:
+        warnings.warn(f"{Path(report.source).name}: {'; '.join(parts)}; the import report is "
+                      "model.meta['import_report']", UserWarning, stacklevel=stacklevel)
 
 
 def _meta(doc: OsimDocument, skel: Skeleton, path: Path) -> dict:
@@ -263,7 +282,7 @@ def _sidecar(model, report: ImportReport, stem: str, source: Path) -> str:
     for e in report.approximations:
         lines.append(f"# APPROXIMATED: {e.line()}")
     for e in report.entries:
-        if "coupled" in e.became or "locked" in e.became:
+        if e.status == "note" and any(w in e.became for w in ("coupled", "locked", "dependent", "angular-velocity")):
             lines.append(f"# NOTE: {e.line()}")
     if len(lines) > 5:
         lines.append("")

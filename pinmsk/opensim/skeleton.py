@@ -272,19 +272,7 @@ class OsimKinematics:
 
     def values(self, q) -> tuple[dict[str, np.ndarray], int]:
         """``({coordinate: (N,)}, N)`` from any accepted form of ``q``."""
-        if isinstance(q, Mapping):
-            unknown = sorted(set(q) - set(self.coordinates))
-            if unknown:
-                raise ModelError(f"{self.doc.source}: the model has no coordinate(s) {unknown}")
-            arrs = {k: np.atleast_1d(np.asarray(v, dtype=float)) for k, v in q.items()}
-            n = max([a.shape[0] for a in arrs.values()], default=1)
-            out = {c: np.broadcast_to(arrs.get(c, self.defaults[c]), (n,)).astype(float) for c in self.coordinates}
-            return out, n
-        a = np.asarray(q, dtype=float)
-        a = a[None, :] if a.ndim == 1 else a
-        if a.ndim != 2 or a.shape[1] != len(self.coordinates):
-            raise ModelError(f"{self.doc.source}: q must have {len(self.coordinates)} columns (OpenSim's coordinates "
-                             f"{', '.join(self.coordinates)}), got shape {np.shape(q)}")
+        a = _columns(q, self.coordinates, self.defaults, f"{self.doc.source}: q")
         return {c: a[:, i] for i, c in enumerate(self.coordinates)}, a.shape[0]
 
     def body_poses(self, q) -> dict[str, np.ndarray]:
@@ -309,6 +297,24 @@ class OsimKinematics:
             acc = acc + b.mass * (poses[b.name] @ c)[:, :3]
             total += b.mass
         return acc / total
+
+
+def _columns(q, names: Sequence[str], defaults: Mapping[str, float], what: str) -> np.ndarray:
+    """``(N, n)`` values of the coordinates ``names`` from a ``{name: (N,)}`` mapping (missing names take
+    ``defaults``) or from an ``(N, n)`` / ``(n,)`` array in ``names`` order (a copy either way)."""
+    if isinstance(q, Mapping):
+        unknown = sorted(set(q) - set(names))
+        if unknown:
+            raise ModelError(f"{what} names coordinate(s) {unknown} the model does not have")
+        arrs = {k: np.atleast_1d(np.asarray(v, dtype=float)) for k, v in q.items()}
+        n = max([a.shape[0] for a in arrs.values()], default=1)
+        return np.stack([np.broadcast_to(arrs.get(c, defaults[c]), (n,)) for c in names], axis=1).astype(float)
+    a = np.array(q, dtype=float)
+    a = a[None, :] if a.ndim == 1 else a
+    if a.ndim != 2 or a.shape[1] != len(names):
+        raise ModelError(f"{what} must have {len(names)} columns (OpenSim's coordinates {', '.join(names)}), "
+                         f"got shape {np.shape(q)}")
+    return a
 
 
 def _tree_order(doc: OsimDocument, joints: list[JointKinematics]) -> tuple[JointKinematics, ...]:
@@ -401,26 +407,11 @@ class CoordinateMap:
         return not self.dependent
 
     def _osim(self, q, what):
-        n_os = len(self.osim_coordinates)
         if q is None:
             return None
-        if isinstance(q, Mapping):
-            unknown = sorted(set(q) - set(self.osim_coordinates))
-            if unknown:
-                raise ModelError(f"CoordinateMap: {what} names unknown coordinate(s) {unknown}")
-            arrs = {k: np.atleast_1d(np.asarray(v, dtype=float)) for k, v in q.items()}
-            n = max([a.shape[0] for a in arrs.values()], default=1)
-            out = np.empty((n, n_os))
-            for c, i in self._col.items():
-                default = self.welded.get(c, self.defaults[c]) if what == "q" else 0.0
-                out[:, i] = np.broadcast_to(arrs.get(c, default), (n,))
-            return out
-        a = np.asarray(q, dtype=float)
-        a = a[None, :] if a.ndim == 1 else a
-        if a.ndim != 2 or a.shape[1] != n_os:
-            raise ModelError(f"CoordinateMap: {what} must have {n_os} columns (OpenSim's coordinates), "
-                             f"got shape {np.shape(q)}")
-        return a.copy()
+        defaults = ({c: self.welded.get(c, self.defaults[c]) for c in self.osim_coordinates} if what == "q"
+                    else dict.fromkeys(self.osim_coordinates, 0.0))
+        return _columns(q, self.osim_coordinates, defaults, f"CoordinateMap: {what}")
 
     def _chain(self, f: fns.Function, x, J, v, a):
         """Value, Jacobian row, speed and acceleration of ``f`` at argument columns ``x`` (N, k)."""
@@ -686,8 +677,9 @@ def _couplings(doc, coords, ranges, entries):
         entries.append(ReportEntry(
             element=con.where,
             became=(f"{con.dependent} = {con.scale_factor:g} * {f!r}({', '.join(con.independent)}) recorded in "
-                    f"model.meta['coupled_coordinates']; not enforced by the skeleton: '{con.dependent}' stays a "
-                    "joint of its own, as in OpenSim's inverse dynamics (motions must give it)"),
+                    f"model.meta['coupled_coordinates']; not enforced by the skeleton: '{con.dependent}' keeps a "
+                    "value of its own, as in OpenSim's inverse dynamics (motions must give it; "
+                    "CoordinateMap(couplers=True) sets it from the coupling)"),
             status=NOTE, details=rec))
     return out, fit_ranges
 
@@ -880,12 +872,15 @@ def _fallback(jk, cls, welded, fit_ranges, kin, n_check):
             vals = {c: np.array([welded.get(c, kin.defaults[c])]) for c in ax.coordinates}
             new.append(("const", float(ax.value(vals, 1)[0])))
     segs = _exact_segments(jk, new)
+    # a grid over the ranges (ends included, where the extremes usually are) plus random poses
+    free = [c for c in jk.coordinates if c not in welded]
+    k = max(3, int(round(4000 ** (1.0 / max(1, len(free))))))
+    grids = np.meshgrid(*[np.linspace(*fit_ranges[c], k) for c in free], indexing="ij")
     rng = np.random.default_rng(0)
-    vals = {c: np.full(n_check, welded.get(c, kin.defaults[c])) for c in jk.coordinates}
-    for c in jk.coordinates:
-        if c not in welded:
-            lo, hi = fit_ranges[c]
-            vals[c] = rng.uniform(lo, hi, n_check)
+    vals = {c: np.full(grids[0].size + n_check, welded.get(c, kin.defaults[c])) for c in jk.coordinates}
+    for c, g in zip(free, grids):
+        vals[c] = np.concatenate([g.ravel(), rng.uniform(*fit_ranges[c], n_check)])
+    n_check = grids[0].size + n_check
     De = jk.child_in_parent(vals, n_check)
     Da = np.broadcast_to(np.eye(4), (n_check, 4, 4)).copy()
     for s in segs:
@@ -1109,7 +1104,7 @@ def _joint_entry(jk: JointKinematics, new: list[UrdfJoint], fit: _Fit | None, te
     what = (f"its axes {'; '.join(_short(n) for n in nonlinear)} are nonlinear in the coordinate; "
             if nonlinear else "")
     if fit.sampled:
-        approx_text = f"{what}{text}; error sampled at random poses"
+        approx_text = f"{what}{text}; error sampled on a grid over the ranges and at random poses"
     else:
         approx_text = (f"{what}replaced by the best-fitting fixed-axis {fit.kind} joint over "
                        f"[{fit.q_range[0]:.4g}, {fit.q_range[1]:.4g}]")
