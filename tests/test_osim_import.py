@@ -949,6 +949,13 @@ def test_bad_values_and_unsupported_joints_are_named():
         build_skeleton(parse_osim(text, source="leg.osim"))
 
 
+def test_reversed_old_joint_is_refused_by_name():
+    text = old_format().replace("<reverse>false</reverse></PinJoint>", "<reverse>true</reverse></PinJoint>")
+    with pytest.raises(ModelError, match=r'old\.osim:\d+: <PinJoint name="knee">: <reverse>true</reverse> joints are '
+                                         "not supported"):
+        build_skeleton(parse_osim(text, source="old.osim"))
+
+
 def test_cli_info_on_a_bad_osim_prints_one_line(tmp_path, capsys):
     from pinmsk.presentation.cli import main
     p = tmp_path / "bad.osim"

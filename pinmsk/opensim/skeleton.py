@@ -175,6 +175,9 @@ class JointKinematics:
 
     def __init__(self, doc: OsimDocument, joint: Joint):
         self.joint = joint
+        if joint.reverse:
+            raise ModelError(f"{joint.where}: <reverse>true</reverse> joints are not supported; swap its parent "
+                             "and child bodies (and invert its motion) in the model")
         parent, chain_p = doc.frame_body(joint.parent_frame)
         child, chain_c = doc.frame_body(joint.child_frame)
         self.parent = parent.name
@@ -634,6 +637,10 @@ def build_skeleton(doc: OsimDocument, *, locked: str = "joint", nonlinear: str =
     clamped = tuple(c.name for c in doc.coordinates if c.clamped and c.name not in welded)
     g = np.asarray(doc.gravity, dtype=float)
     entries.append(ReportEntry(element=f"{doc.source}: <gravity>", became=f"gravity {g.tolist()} m/s^2 (y up)"))
+    if doc.length_units.lower() not in ("meters", "meter", "m") or doc.force_units.lower() not in ("n", "newtons"):
+        entries.append(ReportEntry(element=f"{doc.source}: <length_units>/<force_units>",
+                                   became=f"{doc.length_units!r}, {doc.force_units!r} are labels only: OpenSim "
+                                          "reads every number as m, kg, N, rad, and so does pinmsk", status=NOTE))
     nb = len(doc.bodies)
     entries.append(ReportEntry(
         element=f"{doc.source}: <BodySet>", became=f"{nb} bodies -> Pinocchio bodies with their mass, centre of "
