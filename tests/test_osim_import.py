@@ -29,7 +29,12 @@ try:
 except ImportError:  # pragma: no cover - depends on the environment
     osim = None
 else:
-    osim.Logger.setLevelString("error")
+    # no opensim.log: OpenSim opens its file sink in the current folder, which is the model's while it loads
+    osim.Logger.setLevelString("Off")
+    try:
+        osim.Logger.removeFileSink()
+    except Exception:  # pragma: no cover - older opensim
+        pass
 
 needs_opensim = pytest.mark.skipif(osim is None, reason="opensim is not importable (`pip install opensim`)")
 

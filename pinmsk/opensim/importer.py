@@ -102,10 +102,17 @@ def warn_report(report: ImportReport, *, stacklevel: int = 3) -> None:
 
     parts = []
     if report.approximations:
-        worst = ", ".join(f"{e.element.split('name=', 1)[-1].strip('>').strip(chr(34))} "
-                          f"{e.max_error * 1000:.3g} mm" for e in report.approximations)
-        parts.append(f"{len(report.approximations)} joint(s) approximated by fixed-axis joints (max error of the "
-                     f"child-body origin: {worst})")
+        each = []
+        for e in report.approximations:
+            name = e.element.split("name=", 1)[-1].strip(">").strip('"')
+            rot = e.details.get("max_rotation_error_rad")
+            each.append(f"{name} {e.max_error * 1000:.3g} mm" + (f" / {np.degrees(rot):.2g} deg" if rot and rot > 1e-6 else ""))
+        text = (f"{len(report.approximations)} joint(s) approximated by fixed-axis joints (max error of the "
+                f"child body's origin / orientation: {', '.join(each)})")
+        if report.bounds:
+            frame, worst = max(report.bounds.items(), key=lambda kv: kv[1])
+            text += f", positions below them off by up to {worst * 1000:.3g} mm (a bound; at {frame})"
+        parts.append(text)
     if report.not_imported:
         kinds = sorted({e.element.split("<", 1)[-1].split(" ", 1)[0] for e in report.not_imported})
         parts.append(f"{len(report.not_imported)} element(s) not imported yet ({', '.join(kinds)})")
