@@ -464,7 +464,7 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
         if moment_arms is not None or tendon is not None:
             raise ModelError(f"{p}: moment_arms and tendon do not apply to an OpenSim model (its muscles "
                              "are not imported yet)")
-        from .opensim.importer import import_osim, warn_report
+        from .opensim.importer import warn_report
         model, report = import_osim(p, gravity=gravity)
         warn_report(report)
         return model
@@ -495,6 +495,16 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
             )
         sidecar = builtin_models.builtin_sidecar(str(name_or_path))
     return _load_sidecar(sidecar, moment_arms=moment_arms, tendon=tendon, gravity=gravity)
+
+
+def import_osim(path, *, locked: str = "joint", nonlinear: str = "fit", gravity=None, hooks=()):
+    """``(Model, ImportReport)`` of an OpenSim ``.osim`` (the parts: :func:`pinmsk.opensim.importer.read_import`,
+    whose docstring gives the options; ``load_model`` takes the defaults)."""
+    from .opensim.importer import read_import
+    imp = read_import(path, locked=locked, nonlinear=nonlinear, gravity=gravity, hooks=hooks)
+    model = Model._make(name=imp.name, pin_model=imp.pin_model, muscles=imp.muscles, effects=(), contacts=(),
+                        meta=imp.meta)
+    return (model.with_effect(*imp.components) if imp.components else model), imp.report
 
 
 def _warn_default_gravity(where) -> None:

@@ -20,7 +20,8 @@ from pinmsk.errors import ModelError, OutputError
 from pinmsk.io.osim import parse_osim, read_osim
 from pinmsk.io.shared_data import shared_data_dir
 from pinmsk.opensim import functions as fns
-from pinmsk.opensim.importer import import_osim, marker_set, write_import
+from pinmsk.model import import_osim
+from pinmsk.opensim.importer import HookResult, write_import
 from pinmsk.opensim.report import ImportReport, ReportEntry
 from pinmsk.opensim.skeleton import build_skeleton
 
@@ -663,9 +664,9 @@ def test_report_lists_what_is_not_imported_and_hooks_replace_it(leg_path, leg_im
                        '<SmoothSphereHalfSpaceForce name="heel_contact">'}
     assert model.meta["import_report"] is report and "not imported" in report.format()
 
-    def muscles_hook(doc, skeleton, m):
+    def muscles_hook(doc, skeleton):
         entries = [ReportEntry(element=mu.where, became="a test muscle") for mu in doc.muscles]
-        return m, entries, [mu.where for mu in doc.muscles]
+        return HookResult(entries=tuple(entries), handled=tuple(mu.where for mu in doc.muscles))
 
     _, rep = import_osim(leg_path, hooks=[muscles_hook])
     assert len(rep.not_imported) == 5 and rep.find('name="vas"')[0].became == "a test muscle"
@@ -888,7 +889,7 @@ def test_load_model_and_write_import_round_trip(leg_path, tmp_path):
             assert np.allclose(da.oMf[a.getFrameId(n)].homogeneous, db.oMf[b.getFrameId(n)].homogeneous,
                                atol=1e-12), n
     ms = pinmsk.markers.load_marker_set(files["markers"])
-    assert ms.names == ("ASIS", "KNEE_LAT", "TOE", "PAT") and ms.names == marker_set(model).names
+    assert ms.names == ("ASIS", "KNEE_LAT", "TOE", "PAT") == tuple(m["name"] for m in model.meta["markers"])
     assert ms["TOE"].body == "toes" and ms["TOE"].position == pytest.approx((0.06, -0.01, 0.0))
     assert "APPROXIMATED" in files["sidecar"].read_text() and "knee" in files["report"].read_text()
 

@@ -1,15 +1,19 @@
-"""Importing an OpenSim model: ``import_osim(path) -> (Model, ImportReport)`` and ``write_import``.
+"""Importing an OpenSim model as pinmsk parts: :func:`read_import`, :func:`write_import`.
 
-:func:`import_osim` reads the ``.osim`` (:func:`pinmsk.io.osim.read_osim`),
-builds the skeleton (:func:`pinmsk.opensim.skeleton.build_skeleton`: bodies,
-joints, coordinates, gravity, markers as frames) and returns a frozen
-:class:`~pinmsk.model.Model` with an :class:`~pinmsk.opensim.report.ImportReport`.
-``pinmsk.load_model("model.osim")`` calls it.
+:func:`read_import` reads the ``.osim`` (:func:`pinmsk.io.osim.read_osim`), builds
+the skeleton (:func:`pinmsk.opensim.skeleton.build_skeleton`: bodies, joints,
+coordinates, gravity, markers as frames) and returns an :class:`OsimImport`: the
+Pinocchio model, the model's ``meta``, the muscles and components the hooks made,
+and the :class:`~pinmsk.opensim.report.ImportReport`.  ``model.py`` builds the
+frozen :class:`~pinmsk.model.Model` from it (``opensim/`` sits below ``model.py``):
+:func:`pinmsk.model.import_osim` returns ``(Model, ImportReport)`` and
+``pinmsk.load_model("model.osim")`` the model (with one warning if something is
+approximated or not imported).
 
 Muscles, actuators and contacts are brought in by *hooks* (``hooks=``): each is
-called as ``hook(doc, skeleton, model)`` and returns ``(model, entries,
-handled)`` -- the model with what it added (``model.with_muscles(...)``,
-``model.with_effect(...)``), its report entries, and the ``where`` strings
+called as ``hook(doc, skeleton)`` and returns a :class:`HookResult` -- a
+:class:`~pinmsk.muscles.muscle_set.MuscleSet` (or None), components (effects,
+contacts), its report entries, and the ``where`` strings
 (:attr:`pinmsk.io.osim.OsimElement.where`) of the elements it handled.  Every
 muscle, actuator, contact force and other element no hook handled gets a
 "not imported" entry, so nothing is dropped silently.
@@ -17,19 +21,20 @@ muscle, actuator, contact force and other element no hook handled gets a
 :func:`write_import` writes the skeleton as a URDF plus a TOML sidecar (and the
 marker set and the report) that ``load_model`` reads back to the same skeleton.
 
-The model's ``meta`` carries what the skeleton does not hold: ``osim`` (the
-source), ``coordinate_order`` (OpenSim's), ``locked_coordinates``,
-``clamped_coordinates``, ``coupled_coordinates``, ``osim_motion_types``
-(Rotational / Translational / Coupled: OpenSim converts only Rotational
-coordinates between degrees and radians in its files), ``markers`` and
-``import_report``.
+The ``meta`` carries what the skeleton does not hold: ``osim`` (the source),
+``coordinate_order`` (OpenSim's), ``locked_coordinates``, ``clamped_coordinates``,
+``coupled_coordinates``, ``osim_motion_types`` (Rotational / Translational /
+Coupled: OpenSim converts only Rotational coordinates between degrees and radians
+in its files), ``coordinate_map`` (:class:`~pinmsk.opensim.skeleton.CoordinateMap`),
+``markers`` and ``import_report``.
 """
 from __future__ import annotations
 
 import json
 import re
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterable, Sequence
+from typing import Any, Callable, Sequence
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
@@ -37,62 +42,96 @@ import pinocchio as pin
 
 from ..errors import ModelError
 from ..io.osim import OsimDocument, read_osim
-from .report import NOT_IMPORTED, ImportReport, ReportEntry
-from .skeleton import LOCKED_MODES, Skeleton, build_skeleton
+from .report import NOT_IMPORTED, NOTE, ImportReport, ReportEntry
+from .skeleton import LOCKED_MODES, NONLINEAR_MODES, Skeleton, build_skeleton
 
-__all__ = ["import_osim", "write_import", "marker_set", "warn_report", "ImportHook"]
-
-#: ``hook(doc, skeleton, model) -> (model, entries, handled element 'where' strings)``.
-ImportHook = Callable[[OsimDocument, Skeleton, "object"], tuple]
+__all__ = ["OsimImport", "HookResult", "ImportHook", "read_import", "write_import", "warn_report",
+           "urdf_string"]
 
 
-def import_osim(path, *, locked: str = "joint", nonlinear: str = "fit", gravity=None,
-                hooks: Sequence[ImportHook] = ()):
-    """``(Model, ImportReport)`` of the OpenSim model at ``path`` (see the module docstring).
+@dataclass(frozen=True)
+class HookResult:
+    """What an import hook made: ``muscles`` (a MuscleSet or None), ``components`` (effects and contacts),
+    its report ``entries``, and the ``handled`` elements (their ``where`` strings)."""
+
+    muscles: Any = None
+    components: tuple = ()
+    entries: tuple[ReportEntry, ...] = ()
+    handled: tuple[str, ...] = ()
+
+
+#: ``hook(doc, skeleton) -> HookResult``.
+ImportHook = Callable[[OsimDocument, Skeleton], HookResult]
+
+
+@dataclass(frozen=True)
+class OsimImport:
+    """The parts of an imported OpenSim model (``model.py`` makes the Model of them)."""
+
+    name: str
+    pin_model: pin.Model
+    meta: dict
+    report: ImportReport
+    skeleton: Skeleton
+    muscles: Any = None
+    components: tuple = field(default_factory=tuple)
+
+
+def read_import(path, *, locked: str = "joint", nonlinear: str = "fit", gravity=None,
+                hooks: Sequence[ImportHook] = ()) -> OsimImport:
+    """The :class:`OsimImport` of the OpenSim model at ``path`` (see the module docstring).
 
     ``locked``: ``"joint"`` (default) keeps locked coordinates as joints, ``"weld"`` fixes them at their
     default values.  ``nonlinear``: ``"fit"`` (default) replaces joints whose axes are nonlinear in a
     coordinate by best-fitting fixed-axis joints (their errors are in the report); ``"exact"`` gives each
-    such axis a Pinocchio joint of its own (a dependent coordinate, filled by
-    ``model.meta['coordinate_map']``; the model then has more coordinates than OpenSim's).  ``gravity``
-    (3 numbers, m/s^2) replaces the model's.  ``hooks`` import muscles, actuators and contacts.
+    such axis a Pinocchio joint of its own (a dependent coordinate, filled by ``meta['coordinate_map']``;
+    the model then has more coordinates than OpenSim's).  ``gravity`` (3 finite numbers, m/s^2) replaces
+    the model's.  ``hooks`` import muscles, actuators and contacts.
     """
-    model, report, _ = _import(path, locked=locked, nonlinear=nonlinear, gravity=gravity, hooks=hooks)
-    return model, report
-
-
-def _import(path, *, locked, gravity, hooks, nonlinear="fit"):
-    from ..model import Model, _set_gravity
-
     p = Path(str(path))
     if p.suffix.lower() != ".osim":
         raise ModelError(f"{p}: an OpenSim model file ends in .osim")
+    if nonlinear not in NONLINEAR_MODES:
+        raise ModelError(f"nonlinear must be one of {NONLINEAR_MODES}, got {nonlinear!r}")
     doc = read_osim(p)
     skel = build_skeleton(doc, locked=locked, nonlinear=nonlinear)
     pm = skel.pin_model
-    _set_gravity(pm, gravity, "import_osim")
-    meta = _meta(doc, skel, p)
-    model = Model._make(name=p.stem, pin_model=pm, muscles=None, effects=(), contacts=(), meta=meta)
     entries = list(skel.entries)
     if gravity is not None:
-        entries.append(ReportEntry(element=f"{doc.source}: <gravity>", became=f"replaced by gravity "
-                                   f"{np.asarray(gravity, dtype=float).tolist()} m/s^2 (given to the import)",
-                                   status="note"))
+        g = _gravity(gravity)
+        pm.gravity = pin.Motion(np.concatenate([g, np.zeros(3)]))
+        entries.append(ReportEntry(element=f"{doc.source}: <gravity>", became=f"replaced by gravity {g.tolist()} "
+                                   "m/s^2 (given to the import)", status=NOTE))
     handled: set[str] = set()
+    muscles, components = None, []
     for hook in hooks:
-        model, new_entries, done = hook(doc, skel, model)
-        entries += list(new_entries)
-        handled.update(done)
+        res = hook(doc, skel)
+        if res.muscles is not None:
+            if muscles is not None:
+                raise ModelError(f"{p}: two import hooks both made the muscles")
+            muscles = res.muscles
+        components += list(res.components)
+        entries += list(res.entries)
+        handled.update(res.handled)
     entries += _not_imported(doc, handled)
     report = ImportReport(source=str(p), entries=tuple(entries), bounds=dict(skel.bounds))
-    meta = dict(model.meta)
+    meta = _meta(doc, skel, p)
     meta["import_report"] = report
     meta["description"] = (f"imported from OpenSim model '{doc.name}' ({p.name}): {len(report.approximations)} "
                            f"approximated joint(s), {len(report.not_imported)} element(s) not imported "
                            "(model.meta['import_report'])")
-    model = Model._make(name=model.name, pin_model=model.pin, muscles=model.muscles, effects=model.effects,
-                        contacts=model.contacts, meta=meta)
-    return model, report, skel
+    return OsimImport(name=p.stem, pin_model=pm, meta=meta, report=report, skeleton=skel, muscles=muscles,
+                      components=tuple(components))
+
+
+def _gravity(gravity) -> np.ndarray:
+    try:
+        g = np.asarray(gravity, dtype=float)
+    except (TypeError, ValueError):
+        g = None
+    if g is None or g.shape != (3,) or not np.all(np.isfinite(g)):
+        raise ModelError(f"import of an .osim: gravity must be 3 finite numbers (m/s^2), got {gravity}")
+    return g
 
 
 def warn_report(report: ImportReport, *, stacklevel: int = 3) -> None:
@@ -162,15 +201,6 @@ def _not_imported(doc: OsimDocument, handled: set) -> list[ReportEntry]:
     return out
 
 
-def marker_set(model):
-    """The :class:`~pinmsk.markers.MarkerSet` of an imported model (its OpenSim markers, body frames)."""
-    from ..markers import MarkerSet, ModelMarker
-
-    entries = model.meta.get("markers") or ()
-    ms = tuple(ModelMarker(name=m["name"], body=m["body"], position=tuple(m["position"])) for m in entries)
-    return MarkerSet(ms, {}, model.name, model.meta.get("osim"))
-
-
 # ---------------------------------------------------------------------------
 # URDF + sidecar
 # ---------------------------------------------------------------------------
@@ -180,8 +210,9 @@ def write_import(model_or_path, out_dir, *, name: str | None = None) -> dict[str
     :func:`pinmsk.load_model` reads), ``<name>_markers.toml`` (its marker set) and
     ``<name>_import_report.txt``, in ``out_dir`` (created if needed).  Nothing is left behind on error.
 
-    ``model_or_path``: the ``.osim`` path, or a model :func:`import_osim` made (it is re-imported from
-    its ``meta['osim']`` with the same options).  Returns ``{"urdf", "sidecar", "markers", "report"}`` paths.
+    ``model_or_path``: the ``.osim`` path, or a model imported from one (it is re-imported from its
+    ``meta['osim']`` with the same options and gravity).  Returns ``{"urdf", "sidecar", "markers", "report"}``
+    paths.
     """
     from ..io.output_files import atomic_write, output_folder, output_transaction
 
@@ -197,8 +228,8 @@ def write_import(model_or_path, out_dir, *, name: str | None = None) -> dict[str
     locked = options.get("locked", "joint")
     if locked not in LOCKED_MODES:
         raise ModelError(f"write_import: unknown locked option {locked!r}")
-    model, report, skel = _import(path, locked=locked, nonlinear=options.get("nonlinear", "fit"), gravity=gravity,
-                                  hooks=())
+    imp = read_import(path, locked=locked, nonlinear=options.get("nonlinear", "fit"), gravity=gravity)
+    report, skel = imp.report, imp.skeleton
     stem = name or re.sub(r"[^A-Za-z0-9_.-]", "_", path.stem)
     if not re.fullmatch(r"[A-Za-z0-9_.-]+", stem):
         raise ModelError(f"write_import: name {stem!r} must be letters, digits, '_', '.' or '-'")
@@ -209,8 +240,8 @@ def write_import(model_or_path, out_dir, *, name: str | None = None) -> dict[str
     with output_transaction():
         output_folder(out)
         atomic_write(files["urdf"], lambda fh: fh.write(urdf_text))
-        atomic_write(files["sidecar"], lambda fh: fh.write(_sidecar(model, report, stem, path)))
-        atomic_write(files["markers"], lambda fh: fh.write(_markers_toml(model, path)))
+        atomic_write(files["sidecar"], lambda fh: fh.write(_sidecar(imp, stem, path)))
+        atomic_write(files["markers"], lambda fh: fh.write(_markers_toml(imp.meta, path)))
         atomic_write(files["report"], lambda fh: fh.write(report.format(verbose=True) + "\n"))
     return files
 
@@ -278,9 +309,10 @@ def _toml_str(s: str) -> str:
     return json.dumps(str(s), ensure_ascii=False)
 
 
-def _sidecar(model, report: ImportReport, stem: str, source: Path) -> str:
-    order = ", ".join(_toml_str(c) for c in model.coordinate_order)
-    g = ", ".join(_num(x) for x in model.gravity)
+def _sidecar(imp: OsimImport, stem: str, source: Path) -> str:
+    report = imp.report
+    order = ", ".join(_toml_str(c) for c in imp.meta["coordinate_order"])
+    g = ", ".join(_num(x) for x in np.asarray(imp.pin_model.gravity.linear))
     lines = [f"# pinmsk model sidecar written by pinmsk's OpenSim import from {source.name}.",
              "# The skeleton only: bodies, joints, coordinates, gravity, markers (as frames; also in",
              f"# {stem}_markers.toml).  What was approximated or not imported: {stem}_import_report.txt.",
@@ -298,14 +330,17 @@ def _sidecar(model, report: ImportReport, stem: str, source: Path) -> str:
               f"urdf = {_toml_str(stem + '.urdf')}",
               f"gravity = [{g}]",
               'up_axis = "y"',
-              f"description = {_toml_str(model.meta.get('description', '').replace('model.meta[' + chr(39) + 'import_report' + chr(39) + ']', stem + '_import_report.txt'))}",
+              f"description = {_toml_str(imp.meta['description'].replace(_REPORT_KEY, stem + '_import_report.txt'))}",
               f"coordinate_order = [{order}]", ""]
     return "\n".join(lines)
 
 
-def _markers_toml(model, source: Path) -> str:
+_REPORT_KEY = "model.meta['import_report']"
+
+
+def _markers_toml(meta: dict, source: Path) -> str:
     lines = [f"# The marker set of OpenSim model {source.name} (positions in their bodies' frames, m).", ""]
-    for m in model.meta.get("markers") or ():
+    for m in meta.get("markers") or ():
         lines += ["[[markers]]", f"name = {_toml_str(m['name'])}", f"body = {_toml_str(m['body'])}",
                   f"position = [{', '.join(_num(x) for x in m['position'])}]", ""]
     return "\n".join(lines)
