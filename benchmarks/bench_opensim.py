@@ -119,8 +119,9 @@ def quiet(osim):
 
 
 def stage(src: Path, dst: Path) -> Path:
-    """Copy a model folder (without ``reference_outputs``) to ``dst``; OpenSim runs there."""
-    shutil.copytree(src, dst, ignore=shutil.ignore_patterns("reference_outputs"))
+    """Copy a model folder (without ``reference_outputs`` or a stray ``opensim.log`` another run left
+    there) to ``dst``; OpenSim runs there."""
+    shutil.copytree(src, dst, ignore=shutil.ignore_patterns("reference_outputs", "opensim.log"))
     return dst
 
 
@@ -336,6 +337,8 @@ def gait2d_inputs(model, ik: pinmsk.Trial, grf: pinmsk.Trial):
     """(kinematics, external forces) of the subject01 walk on gait2d."""
     from pinmsk.grf import external_forces
     from pinmsk.pipeline import opensim_to_gait2d
+
+    # gait10dof18musc, like gait2392, counts knee flexion negative (range [-120, 10] deg);
     # opensim_to_gait2d's knee_sign="auto" detects that and flips it
     kin = opensim_to_gait2d(ik, model, hip_offset=SUBJECT01_HIP_OFFSET, knee_sign="auto")
     g = uniform_grf(grf).resample(kin.time, method="linear", antialias=True)

@@ -40,6 +40,7 @@ matplotlib.use("Agg")
 
 from pinmsk.contact import synthetic_foot_trial  # noqa: E402
 from pinmsk.contact.identify import VARIANTS, fit_contact_models, settings_lines  # noqa: E402
+from pinmsk.presentation.plots import contact_fit_figures  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_DATA = HERE.parent.parent / "shared" / "data" / "real" / "csu-treadmill-leg2d" / "rawdata.txt"
@@ -93,7 +94,7 @@ def main(argv=None) -> dict:
                                     toe_range=args.toe_range, **opts)
         for (kind, relax), fit in models.items():
             name = f"{kind}{' relaxed' if relax else ''} (toe {toe})"
-            fit.plot(args.out / f"toe_{toe}")
+            contact_fit_figures(fit, args.out / f"toe_{toe}")
             fits[name] = fit
             if len(fits) == 1:
                 print("\n".join(settings_lines(fit.settings_())))

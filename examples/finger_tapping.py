@@ -48,7 +48,7 @@ def solve(model, f, *, jobs=2, steps=200, n_starts=2):
 
 
 def slow_muscle_variant(model, v_max=0.1):
-    """The finger with fibres short enough that v_max = 10 l_opt = ``v_max`` (m/s), tendons
+    """The finger with fibers short enough that v_max = 10 l_opt = ``v_max`` (m/s), tendons
     lengthened to keep l_mt(0) = l_slack + l_opt (a sensitivity case, not the model)."""
     from pinmsk.muscles.muscle_set import MuscleSet
     ms = model.muscles

@@ -125,7 +125,7 @@ def compare_designs(model, names, *, jobs, steps, path):
     table, results = {}, {}
     for name in names:
         # the compliant tendon starts from the rigid optimum (a cheap guess, Sec. 3.5.3): from
-        # the generic guesses it needs ~5x more iterations, each ~7x dearer (implicit fibres)
+        # the generic guesses it needs ~5x more iterations, each ~7x dearer (implicit fibers)
         x0 = results["ff_rigid"].x if name == "ff_compliant" and "ff_rigid" in results else None
         res, sec = solve(model, "J4", "fourier", jobs=jobs, steps=steps, x0=x0, **DESIGNS[name])
         results[name] = res

@@ -12,8 +12,7 @@ do not pay for Pinocchio and SciPy until something needs them.
 from __future__ import annotations
 
 from ._lazy import lazy_attributes
-from .errors import (ConvergenceError, InfeasibleError, ModelError, PinmskError, SolverError,
-                     TrialError)
+from .errors import ConvergenceError, InfeasibleError, ModelError, PinmskError, SolverError, TrialError
 
 __version__ = "0.1.0"
 
@@ -27,11 +26,13 @@ _LAZY = {
     "ExternalForce": "skeleton",
     "component_forces": "dynamics", "inverse_dynamics": "dynamics", "simulate": "dynamics",
     "builtin_names": "builtin_models",
+    "Fitter": "fitting", "FitStatistics": "fitting", "Result": "fitting",
 }
 
 __all__ = [
-    "Component", "ConvergenceError", "Data", "ExternalForce", "InfeasibleError", "Model", "ModelError",
-    "Motion", "Parameter", "Parameters", "PinmskError", "SolverError", "Trial", "TrialError", "builtin_names",
+    "Component", "ConvergenceError", "Data", "ExternalForce", "FitStatistics", "Fitter", "InfeasibleError",
+    "Model", "ModelError", "Motion", "Parameter", "Parameters", "PinmskError", "Result", "SolverError", "Trial",
+    "TrialError", "builtin_names",
     "component_forces", "inverse_dynamics", "load_model", "read_trial", "simulate", "write_trial",
 ]
 

@@ -31,10 +31,8 @@ import importlib.resources
 from pathlib import Path
 from typing import NamedTuple
 
-
 from pinmsk.errors import ModelError
 from pinmsk.io.toml_files import read_toml
-
 
 __all__ = [
     "EXAMPLE_ROBOT_DATA_MARKER",

@@ -10,8 +10,8 @@ Inputs are time-first ``(N, m)`` arrays (or anything broadcastable) and
 per-muscle ``(m,)`` parameters, SI units:
 
 - ``u`` excitation, ``a`` activation (0..1);
-- ``l_ce`` fibre length (m), ``v_ce`` fibre velocity (m/s);
-- ``f_ce`` contractile (active fibre) force (N), ``f_isom`` the normalized
+- ``l_ce`` fiber length (m), ``v_ce`` fiber velocity (m/s);
+- ``f_ce`` contractile (active fiber) force (N), ``f_isom`` the normalized
   active force-length factor ``f_L(l_ce)`` (0..1);
 - ``l_opt`` (m), ``f_max`` (N), ``fast_fraction`` (0..1).
 
@@ -214,7 +214,7 @@ def umberger2003(*, u, a, l_ce, v_ce, f_ce, f_isom, l_opt, f_max, fast_fraction,
     a_l = 4.0 * a_st
     l_opt = np.asarray(l_opt, dtype=float)
     vt = np.asarray(v_ce, dtype=float) / l_opt
-    dl = np.asarray(l_ce, dtype=float) / l_opt - 1.0          # > 0: long fibre
+    dl = np.asarray(l_ce, dtype=float) / l_opt - 1.0          # > 0: long fiber
     fl = np.asarray(f_isom, dtype=float)
     am_scale = _blend(dl, 0.4 + 0.6 * fl, 1.0, w)
     sl_scale = _blend(dl, fl, 1.0, w)

@@ -16,8 +16,9 @@ marker point's world velocity Jacobian), warm-started from the previous
 frame's solution, so after the first frame it typically converges in 2-3
 iterations.  Coordinates that no marker moves are held at ``q0``.
 
-:class:`InverseKinematics` follows the fitter habits: ``fit(model, markers)``
-returns self; ``result_`` (a Trial of coordinates in ``model.coordinate_order``),
+:class:`InverseKinematics` is a :class:`~pinmsk.fitting.Fitter`: ``fit(model, markers)``
+returns self; ``result_`` (a :class:`~pinmsk.fitting.Result`: the Trial of coordinates
+in ``model.coordinate_order`` and the statistics of the weighted marker residuals),
 ``marker_rms_`` (per-marker RMS error over frames, m), ``frame_rms_`` (per-frame RMS
 over markers, m), ``iterations_`` and ``converged_`` (per frame).
 """
@@ -30,6 +31,7 @@ import numpy as np
 import pinocchio as pin
 
 from .errors import ConvergenceError, ModelError, TrialError
+from .fitting import FitStatistics, Fitter, Result, format_report
 from .markers import MarkerSet, load_marker_set
 from .trial import Trial, marker_array, marker_names
 
@@ -77,7 +79,7 @@ def markers_trial(model, markers: MarkerSet, time, q: np.ndarray, *, axes: str =
     return Trial(time, chans, meta={"markers": markers.names, "format": "synthetic"})
 
 
-class InverseKinematics:
+class InverseKinematics(Fitter):
     """Marker-based inverse kinematics (weighted least squares, LM, warm-started).
 
     Parameters (keyword-only)
@@ -98,6 +100,13 @@ class InverseKinematics:
         Per-frame iteration limit and step tolerance (rad or m).
     max_step : float
         Largest change of any coordinate in one iteration (rad or m; a trust region).
+    strict : bool
+        Raise :class:`~pinmsk.errors.ConvergenceError` at the first frame that does not
+        converge in ``max_iter`` iterations (default: keep it, flagged in ``converged_``).
+
+    ``result_.stats``: ``n`` the measured marker coordinates used, ``k`` the free
+    coordinates times the frames, ``sse`` the weighted sum of squared marker errors (m^2),
+    AIC/BIC with the variance estimated, ``converged`` when every frame converged.
     """
 
     def __init__(self, *, markers, coordinates: Sequence[str] | None = None, axes: str | None = None,
@@ -114,6 +123,7 @@ class InverseKinematics:
         self.strict = strict
 
     def fit(self, model, trial: Trial, *, progress=None) -> "InverseKinematics":
+        """Solve every frame of the marker ``trial``; returns self."""
         mset = self.markers if isinstance(self.markers, MarkerSet) else load_marker_set(self.markers)
         measured = set(marker_names(trial))
         used = [m for m in mset.markers if m.name in measured]
@@ -242,18 +252,26 @@ class InverseKinematics:
         self.axes_ = axes
         self.q_ = Q
         chans = {c: Q[:, model.coordinate_index(c)] for c in model.coordinate_order}
-        self.result_ = Trial(trial.time, chans,
-                             meta={"analysis": "inverse_kinematics", "model": model.name,
-                                   "markers": mset.names, "axes": axes,
-                                   "marker_rms": self.marker_rms_})
+        used_k = np.isfinite(err)                        # (n, nm) markers measured in each frame
+        stats = FitStatistics(
+            n=int(used_k.sum()) * na, k=n * nf, sse=float(np.sum(np.where(used_k, w * err ** 2, 0.0))),
+            variance="estimated", converged=bool(conv.all()),
+            message=f"{int(conv.sum())}/{n} frames converged", iterations=int(iters.sum()),
+            objective=float(np.sum(np.where(used_k, w * err ** 2, 0.0))))
+        self.result_ = Result(trial.time, chans,
+                              meta={"analysis": "inverse_kinematics", "model": model.name,
+                                    "markers": mset.names, "axes": axes,
+                                    "marker_rms": self.marker_rms_},
+                              stats=stats, report=self._report_text(model, stats))
         return self
 
-    def report(self) -> str:
-        lines = [f"inverse kinematics: {len(self.frame_rms_)} frames, axes {self.axes_}, free "
-                 f"{', '.join(self.free_coordinates_)}; converged {int(self.converged_.sum())}/"
-                 f"{len(self.converged_)}; mean iterations {self.iterations_.mean():.2f}",
-                 "marker RMS error (mm): " + ", ".join(f"{m} {1000 * v:.1f}" for m, v in self.marker_rms_.items())]
-        return "\n".join(lines)
+    def _report_text(self, model, stats: FitStatistics) -> str:
+        return format_report(f"Inverse kinematics of model '{model.name}' from markers", [
+            ("frames", f"{len(self.frame_rms_)}, axes {self.axes_}, free {', '.join(self.free_coordinates_)}"),
+            ("solver", f"Levenberg-Marquardt, converged {int(self.converged_.sum())}/{len(self.converged_)} "
+                       f"frames; mean iterations {self.iterations_.mean():.2f}"),
+            ("marker rms", ", ".join(f"{m} {1000 * v:.1f} mm" for m, v in self.marker_rms_.items())),
+            *stats.rows()])
 
 
 def inverse_kinematics(model, trial: Trial, *, markers, **options) -> Trial:

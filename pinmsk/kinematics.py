@@ -45,7 +45,6 @@ from .signals.sampling import measured_rate
 from .skeleton import ExternalForce, world_wrench
 from .trial import Trial, parse_ground_reaction
 
-
 __all__ = ["DEFAULT_CUTOFF", "FILTER_ORDER", "Filtering", "TrialInputs", "motion", "as_motion", "prepare",
            "cutoff_value",
            "is_planar", "has_ground_reaction", "lowpass_external"]

@@ -65,12 +65,13 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from .contact.identify import ContactFit, load_contact_model, read_contact_trial, read_csu_foot2d
 from .dynamics import inverse_dynamics
 from .errors import PinmskError, TrialError
+from .fitting import Result
 from .grf import external_forces, grf_channels, torso_residuals, transfer_cop
 from .ik import InverseKinematics
 from .io.channel_map import RAJAGOPAL_HIP_OFFSET, apply_channel_map, opensim_gait2d_map
-from .contact.identify import read_csu_foot2d
 from .io.output_files import atomic_write, output_folder, write_json
 from .io.tables import read_trial, write_trial
 from .io.toml_files import read_toml
@@ -78,11 +79,15 @@ from .io.trc import read_trc
 from .kinematics import DEFAULT_CUTOFF, cutoff_value
 from .markers import load_marker_set
 from .model import load_model
+from .presentation import plots
+from .presentation.plots import contact_fit_figures
 from .presentation.progress import Progress
+from .solvers.dynamic import build_from_task, load_task
+from .solvers.static import StaticOptimization
 from .trial import Trial, moment_channel
 
 __all__ = ["opensim_to_gait2d", "frame_positions", "transferred_cops", "run_trial", "batch",
-           "batch_cli", "load_config", "RAJAGOPAL_HIP_OFFSET", "KINDS"]
+           "batch_cli", "load_config", "RAJAGOPAL_HIP_OFFSET", "KINDS", "contact_fit_task", "optimize_task"]
 
 KINDS = ("csu", "opensim", "trc")
 
@@ -255,8 +260,6 @@ def run_trial(spec: dict, *, model="gait2d", out_dir=None, base_dir=".") -> dict
             row[f"{c}_residual_rms"] = s["rms"]
         act = None
         if m.n_muscles and spec.get("so", True) is not False:
-            from .solvers.static import StaticOptimization
-
             opts = dict(spec.get("so") or {}) if isinstance(spec.get("so"), dict) else {}
             opts.setdefault("mode", "activation")
             opts.setdefault("reserves", True)
@@ -326,10 +329,6 @@ def _remove_partial_folders(out: Path, names) -> None:
 
 def _figures(model, d: Path, idt: Trial, res: Trial) -> int:
     """Per-trial PNGs (joint moments, torso residuals) via :mod:`pinmsk.presentation.plots`; returns how many."""
-    try:
-        from .presentation import plots
-    except ImportError:  # pragma: no cover - plots is optional for the batch
-        return 0
     joints = [moment_channel(c) for c in model.coordinate_order if c.startswith(("hip", "knee", "ankle"))]
     n = len(plots.save_channels(idt, joints, d, stem="moments", ylabel="N m"))
     n += len(plots.save_channels(res, list(res.names), d, stem="residuals"))
@@ -449,3 +448,46 @@ def batch_cli(config_path, *, scheduler: str | None = None, jobs: int | None = N
     failed = [r["name"] for r in rows if not str(r.get("status", "")).startswith("ok")]
     reasons = {r["name"]: str(r.get("status", "failed")) for r in rows if r["name"] in failed}
     return {"rows": rows, "table": str(out / "summary.csv"), "failed": failed, "reasons": reasons}
+
+
+# -- single tasks the CLI runs: an analysis, then its files -----------------------------------
+
+def contact_fit_task(model, trial, *, json_path=None, plot_dir=None, **options) -> dict:
+    """What ``pinmsk contact fit MODEL TRIAL [--contact ...] [--json] [--plot]`` runs.
+
+    ``model`` is a Model, a model name/path, or None (foot2d); ``trial`` a Trial or a
+    file (CSU leg2d text, .csv, .sto, .mot; see :func:`read_contact_trial`) with
+    ankle_x, ankle_y, foot_angle and ground_force_vx/vy/px.  ``options`` are
+    :class:`ContactFit`'s keywords, with its defaults (the CLI passes only what the
+    user gave).  Returns (and writes to ``json_path``) :meth:`ContactFit.to_dict`:
+    ``objective`` (Eq. 4.2), ``params`` ({site: {name: value}}), ``rmse``
+    (``normal_force``, ``friction_force`` in N, ``cop`` in m), ``seconds`` and
+    ``settings`` (:meth:`ContactFit.settings_`); ``plot_dir`` gets the GRF and COP
+    figures (their paths under ``figures``).
+    """
+    if model is None or isinstance(model, (str, Path)):
+        model = load_contact_model(model)
+    if isinstance(trial, (str, Path)):
+        trial = read_contact_trial(trial)
+    fit = ContactFit(**options).fit(model, trial)
+    out = fit.to_dict()
+    if plot_dir is not None:
+        out["figures"] = [str(p) for p in contact_fit_figures(fit, plot_dir)]
+    if json_path is not None:
+        write_json(json_path, out, parents=True)
+    return out
+
+
+def optimize_task(task_path, out_path=None, progress=None, *, precision: int | None = None) -> Result:
+    """Run the task file ``task_path``; write the result trial to ``out_path`` (.sto/.csv/.mot,
+    ``precision`` significant digits, default that of :func:`pinmsk.io.write_trial`)
+    and the JSON summary (:meth:`DynamicOptimization.to_dict`) next to it (``<out>.json``).
+    Returns the fit's :class:`~pinmsk.fitting.Result` (check ``converged``)."""
+    spec = load_task(task_path)
+    prob = build_from_task(spec, base_dir=Path(task_path).parent, progress=progress)
+    res = prob.fit().result_
+    if out_path is not None:
+        out = Path(out_path)
+        write_trial(res, out, precision=precision)
+        write_json(out.with_suffix(out.suffix + ".json"), prob.to_dict())
+    return res

@@ -81,7 +81,8 @@ class ResidualReport:
                 f"holding it up, so its residuals carry the whole external load ({c} peak {pk:.4g} {u}, "
                 f"{bw:.2f} x {per}); give the trial's GRF (--grf FILE or --external-loads XML)")
 
-    def summary(self) -> dict:
+    def to_dict(self) -> dict:
+        """Peak, RMS, threshold and failing frames per coordinate, as a JSON-ready dict."""
         out = {"peak_external_force_N": self.peak_external_force, "com_height_m": self.com_height,
                "ok": self.ok, "coordinates": {}}
         fail = self.failing

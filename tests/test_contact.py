@@ -10,9 +10,10 @@ from scipy.integrate import quad
 
 from pinmsk.components import Motion
 from pinmsk.contact import (HuntCrossley, HyperVolumetric, SiteKinematics, Volumetric, cap_centroid_depth,
-                            cap_volume, contact_candidates, foot_contacts, ground_reaction, load_foot2d,
+                            cap_volume, foot_contacts, ground_reaction, load_foot2d,
                             regularized_coulomb, site_kinematics)
 from pinmsk.contact.foot import SITES, Foot2dGeometry, foot2d_site_kinematics
+from pinmsk.diagnose.contact import contact_candidates
 from pinmsk.errors import ModelError
 from pinmsk.skeleton import ExternalForce, external_generalized_force
 

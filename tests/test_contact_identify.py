@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from pinmsk.contact import ContactFit, fit_cli_run, fourier_basis, stance_cycle, synthetic_foot_trial
+from pinmsk.contact import ContactFit, fourier_basis, stance_cycle, synthetic_foot_trial
+from pinmsk.pipeline import contact_fit_task
 from pinmsk.contact.identify import ALL_TERMS, map_values
 from pinmsk.errors import ModelError, SolverError, TrialError
 from pinmsk.trial import Trial
@@ -235,7 +236,7 @@ def test_multistart_and_relaxed_run(synth):
 
 
 def test_fit_cli_run_writes_json_and_plots(synth, tmp_path):
-    out = fit_cli_run(None, synth, contact="hypervolumetric", json_path=tmp_path / "fit.json",
+    out = contact_fit_task(None, synth, contact="hypervolumetric", json_path=tmp_path / "fit.json",
                       plot_dir=tmp_path / "plots", n_starts=1, max_nfev=5, cutoff=None)
     data = json.loads((tmp_path / "fit.json").read_text())
     assert set(data) >= {"objective", "params", "rmse", "seconds"}
@@ -382,7 +383,7 @@ def test_example_05_runs_headless(tmp_path):
 
 def test_fit_cli_run_from_files(shared_data, tmp_path):
     """The CLI path: model by name, trial as the CSU file, the library's defaults (one cycle)."""
-    out = fit_cli_run("foot2d", shared_data / CSU, contact="volumetric", json_path=tmp_path / "o.json",
+    out = contact_fit_task("foot2d", shared_data / CSU, contact="volumetric", json_path=tmp_path / "o.json",
                       n_starts=1, max_nfev=3)
     assert out["window"][0] == pytest.approx(7.99) and math.isfinite(out["objective"])
     assert json.loads((tmp_path / "o.json").read_text())["params"]["toe"]["R"] <= 0.045

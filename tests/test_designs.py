@@ -109,9 +109,9 @@ def errors(sim, ref, n):
 
 
 # --------------------------------------------------------------------------- stiffness
-def test_explicit_rk4_of_the_compliant_fibre_ode_fails_at_the_optimizer_step(models):
-    """Why an implicit fibre: classical RK4 of Eq. 3.9 on the forearm at h = 9.5 ms diverges
-    (time constants of the fibre-tendon pair are ~0.1-2 ms), while simulate_ff stays accurate."""
+def test_explicit_rk4_of_the_compliant_fiber_ode_fails_at_the_optimizer_step(models):
+    """Why an implicit fiber: classical RK4 of Eq. 3.9 on the forearm at h = 9.5 ms diverges
+    (time constants of the fiber-tendon pair are ~0.1-2 ms), while simulate_ff stays accurate."""
     model = models["forearm"]
     mu, sk = BatchMuscles(model), BatchSkeleton(model)
     T, q0 = CASES["forearm"]
@@ -197,7 +197,7 @@ def test_compliant_ff_is_smooth_in_the_inputs(models, name):
 
 # --------------------------------------------------------------------------- pieces
 @pytest.mark.parametrize("name", ["finger", "forearm"])
-def test_fibre_rate_equals_contraction_dynamics_and_its_slope(models, name):
+def test_fiber_rate_equals_contraction_dynamics_and_its_slope(models, name):
     mu = BatchMuscles(models[name])
     rng = np.random.default_rng(3)
     q = rng.uniform(-0.5, 2.0, (500, 1))
@@ -205,11 +205,11 @@ def test_fibre_rate_equals_contraction_dynamics_and_its_slope(models, name):
     l_mt = mu.lengths(q)
     l_ce = mu.l_opt * rng.uniform(0.5, 1.5, (500, mu.m))
     F, v_ce, _, _ = mu.compliant(a, l_mt, l_ce)
-    v, dv = mu.fibre_rate(a, l_mt, l_ce)
+    v, dv = mu.fiber_rate(a, l_mt, l_ce)
     assert np.allclose(v, v_ce, rtol=1e-12, atol=1e-10)
     assert np.allclose(mu.tendon_force(l_mt, l_ce), F, rtol=1e-13, atol=1e-10)
     dl = 1e-7 * mu.l_opt
-    fd = (mu.fibre_rate(a, l_mt, l_ce + dl)[0] - mu.fibre_rate(a, l_mt, l_ce - dl)[0]) / (2 * dl)
+    fd = (mu.fiber_rate(a, l_mt, l_ce + dl)[0] - mu.fiber_rate(a, l_mt, l_ce - dl)[0]) / (2 * dl)
     assert np.allclose(dv, fd, rtol=1e-5, atol=1e-6 * np.abs(dv).max())
 
 

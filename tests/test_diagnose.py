@@ -116,8 +116,8 @@ def test_two_hidden_effects_in_two_add_steps(tmp_path):
     final.write_json(tmp_path / "d.json")
     assert final.verdict == "at_noise_floor"
     assert [a.effect.label for a in final.added] == ["payload:hand", "joint_damping:elbow_flexion"]
-    assert final.added[0].values["mass"] == pytest.approx(0.5, rel=0.15)
-    assert final.added[1].values["c"] == pytest.approx(0.2, rel=0.15)
+    assert final.added[0].params["mass"] == pytest.approx(0.5, rel=0.15)
+    assert final.added[1].params["c"] == pytest.approx(0.2, rel=0.15)
     totals = [s.rmse["total"] for s in final.steps]
     assert totals[0] > totals[1] > totals[2]
     assert totals[2] <= 1.5 * final.noise_floor["total"]
@@ -138,7 +138,7 @@ def test_json_shape_and_summary():
     m = model("forearm")
     trial = make_trial(m, ["joint_damping:elbow_flexion:c=0.3"], seed=5)
     r = run(m, trial)
-    js = r.to_json_dict()
+    js = r.to_dict()
     assert list(js) == ["inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added"]
     assert set(js["rmse"]) == {"elbow_flexion_moment", "total"} == set(js["noise_floor"])
     for w in js["worst_windows"]:

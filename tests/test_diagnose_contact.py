@@ -62,7 +62,7 @@ def test_bare_foot_misses_a_volumetric_contact(first):
     point, best = first.score("point"), first.best
     assert point.rmse_after["ground_force_vy"] > 1.2 * best.rmse_after["ground_force_vy"]
     assert point.fit.bic_change > best.fit.bic_change + 10
-    out = first.to_json_dict()
+    out = first.to_dict()
     assert set(out) == {"inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added"}
     for entry in out["ranking"]:
         assert {"effect", "target", "params", "rmse_after", "explained_fraction", "significant"} <= set(entry)
@@ -102,7 +102,7 @@ def test_adding_the_winner_reaches_the_noise_floor(loop, first):
         assert final.rmse[ch] <= 1.5 * final.noise_floor[ch], ch
     assert final.verdict == "at_noise_floor"
     assert final.best is None
-    out = loop.to_json_dict()
+    out = loop.to_dict()
     assert out["added"][0]["effect"] == first.best.label
     assert out["rmse"]["ground_force_vy"] < first.rmse["ground_force_vy"] / 50
     assert "step 1: added" in loop.summary_text()

@@ -10,7 +10,7 @@ import pinmsk
 from pinmsk import effects
 from pinmsk.components import Parameter
 from pinmsk.demo import demo
-from pinmsk.diagnose import compare, diagnose, fit_effect, make_trial, run
+from pinmsk.diagnose import EffectFit, compare, diagnose, make_trial, run
 from pinmsk.io.shared_data import shipped_trial, shipped_trials
 from pinmsk.presentation.report import save_diagnosis, write_failure_report, write_report
 from pinmsk.errors import ConvergenceError, ModelError, TrialError
@@ -95,9 +95,9 @@ class _Broken(effects.JointEffect):
 def test_fit_that_does_not_converge(forearm, damped):
     c = compare(forearm, damped)
     with pytest.raises(ConvergenceError, match="passive_elastic:elbow_flexion did not converge after"):
-        fit_effect(c, effects.PassiveElastic("elbow_flexion"), max_nfev=1)
+        EffectFit(effects.PassiveElastic("elbow_flexion"), max_nfev=1).fit(c)
     with pytest.raises(ConvergenceError, match="test_broken_effect:elbow_flexion.*non-finite"):
-        fit_effect(c, _Broken("elbow_flexion"))
+        EffectFit(_Broken("elbow_flexion")).fit(c)
     # in a ranking the candidate is skipped with the reason, not a traceback
     d = diagnose(forearm, damped, candidates=[_Broken("elbow_flexion"), "joint_damping"])
     assert [s.label for s in d.ranking] == ["joint_damping:elbow_flexion"]
@@ -160,7 +160,7 @@ def test_shipped_gait_trial():
     g = pinmsk.load_model("gait2d")
     r = run(g, pinmsk.read_trial(shipped_trial("gait2d_hat_mass.csv")), add=["segment_mass:hat"])
     assert r.steps[0].best.label == "segment_mass:hat"
-    assert r.added[0].values["delta"] == pytest.approx(0.1, rel=0.15)
+    assert r.added[0].params["delta"] == pytest.approx(0.1, rel=0.15)
     assert r.verdict == "at_noise_floor"
 
 
@@ -186,7 +186,6 @@ def test_synth_bad_requests(forearm):
 
 
 def test_effect_fit_estimator(forearm, damped):
-    from pinmsk.diagnose import EffectFit
     est = EffectFit(effects.JointDamping("elbow_flexion"))
     assert not hasattr(est, "effect_")                       # the constructor only stores arguments
     assert est.fit(compare(forearm, damped)) is est

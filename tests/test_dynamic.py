@@ -8,8 +8,9 @@ import pytest
 import pinmsk
 from pinmsk.errors import ConvergenceError, ModelError
 from pinmsk.solvers.dynamic import (BatchSkeleton, DynamicOptimization, Target, BatchMuscles,
-                                    load_task, muscle_inverse, optimize_task, scale_masses,
+                                    load_task, muscle_inverse, scale_masses,
                                     simulate_ff, simulate_skeleton)
+from pinmsk.pipeline import optimize_task
 from pinmsk.solvers.parametrization import Fourier, Polynomial
 
 
@@ -63,7 +64,7 @@ def test_ifm_recovered_excitations_drive_ff_to_the_same_motion(finger, duration)
     gives excitations that, fed to the fully forward compliant-tendon model, reproduce
     the motion, the forces and the activations.  The first half period (default suite)
     already tells a wrong F'' (q off by 6e-4 rad without it); the whole period (slow) also
-    passes through low activations (u down to 0.04), where the fibre ODE is stiff."""
+    passes through low activations (u down to 0.04), where the fiber ODE is stiff."""
     T, h = 0.5, 2e-4
     par = Fourier(2, period=T)
     P = np.array([[20.0, 20.9], [0.05, -0.05], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]])
@@ -132,7 +133,7 @@ def test_unconverged_is_flagged_not_reported(finger, capsys):
     assert not res.converged
     assert "NOT CONVERGED" in res.report()
     assert "did not converge" in capsys.readouterr().err
-    assert res.summary()["converged"] is False
+    assert prob.to_dict()["converged"] is False
 
 
 def test_bad_problems_are_named(finger):
@@ -380,7 +381,7 @@ def _finger_tapping(frequency):
 def test_finger_tapping_ifm_converges_and_ift_bounds_are_flagged(finger, capsys):
     """Finger tapping at 4 Hz (Sec. 3.2.2 task) with the IFM design converges from the
     automatic guesses.  IFT fixes the flexor/extensor sharing, so the activations must follow
-    the force-velocity swings of the fibres: they would have to fall faster than
+    the force-velocity swings of the fibers: they would have to fall faster than
     deactivation allows (u < 0) -- the optimizer reports it as not converged, with the
     violated bound, and converges once the bounds are relaxed."""
     kw = _finger_tapping(4.0)
@@ -399,9 +400,9 @@ def test_finger_tapping_ifm_converges_and_ift_bounds_are_flagged(finger, capsys)
     assert res.max_tracking_error < 0.005
 
 
-def test_a_step_into_a_region_without_fibre_state_restarts_from_the_best_point(finger):
+def test_a_step_into_a_region_without_fiber_state_restarts_from_the_best_point(finger):
     """SLSQP's line search gives up after 10 backtracks and accepts its step, even where the
-    inverse muscle model has no fibre state (the simulation fails).  There is no gradient
+    inverse muscle model has no fiber state (the simulation fails).  There is no gradient
     to take there: the start restarts from its best point instead of failing (as the 7 Hz
     tapping below does on some CPU / BLAS kernels)."""
     T = 0.25
@@ -417,7 +418,7 @@ def test_a_step_into_a_region_without_fibre_state_restarts_from_the_best_point(f
 
     prob._gradient = jump
     res = prob.fit().result_
-    with pytest.raises(ConvergenceError):       # a point without fibre state indeed
+    with pytest.raises(ConvergenceError):       # a point without fiber state indeed
         prob.simulate(calls[2][None, :] + 1e4)
     assert len(calls) > 3                       # it went on after the failed point
     assert ref.converged and res.converged, res.status
@@ -430,7 +431,7 @@ def test_a_step_into_a_region_without_fibre_state_restarts_from_the_best_point(f
 def test_finger_tapping_ifm_at_7hz_recovers_from_steps_into_unsimulable_regions(finger):
     """Finger tapping at 7 Hz with IFM: SLSQP wanders off -- on some CPU / BLAS kernels its
     line search runs out of backtracks and accepts steps where the inverse muscle model has
-    no fibre state -- and still converges, by restarting from its best point with shorter
+    no fiber state -- and still converges, by restarting from its best point with shorter
     steps instead of abandoning the start (60-90 s on 2 cores)."""
     res = DynamicOptimization(finger, design="ifm", **_finger_tapping(7.0)).fit().result_
     assert res.converged, res.status

@@ -19,7 +19,7 @@ def test_mass_eq_b3():
     assert muscle_mass(0.1, 500.0) == pytest.approx(0.21194, rel=1e-12)
 
 
-def test_umberger_shortening_short_fibre():
+def test_umberger_shortening_short_fiber():
     # State: u = 0.6 > a = 0.4 -> beta = u = 0.6 (B.17); l_ce = 0.09 <= l_opt = 0.1 (B.15);
     # v_ce = -0.2 m/s -> v~ = -2 /s; f_fast = 0.4; F_max = 500 N; F_ce = 200 N; xi = 1.
     m = 1059.7 * 0.1 * 500 / 0.25e6
@@ -38,7 +38,7 @@ def test_umberger_shortening_short_fibre():
     assert out["total"] == pytest.approx(59.9698, abs=1e-3)
 
 
-def test_umberger_lengthening_long_fibre():
+def test_umberger_lengthening_long_fiber():
     # u = 0.2 <= a = 0.5 -> beta = 0.35; l_ce = 0.12 > l_opt (B.16) with f_isom = 0.7;
     # v_ce = +0.3 m/s -> v~ = 3 /s; f_fast = 0.5; F_max = 1000 N; F_ce = 600 N.
     m = 1059.7 * 0.1 * 1000 / 0.25e6
@@ -54,7 +54,7 @@ def test_umberger_lengthening_long_fibre():
 
 
 def test_umberger_cap_and_floor():
-    # all slow fibres, v~ = -10 /s: -alpha_S(ST) f_slow v~ = 250 W/kg is capped at 100 W/kg.
+    # all slow fibers, v~ = -10 /s: -alpha_S(ST) f_slow v~ = 250 W/kg is capped at 100 W/kg.
     beta = 1.0
     h = (128 * 0 + 25) * beta ** 0.6 + 100.0 * beta ** 0.2
     out = umberger2003(u=1.0, a=1.0, l_ce=0.1, v_ce=-1.0, f_ce=0.0, f_isom=1.0, l_opt=0.1,

@@ -11,7 +11,7 @@ Tolerances.  The inverse evaluates the *same* algebraic relations as the
 forward model at each sample, so the comparison is pointwise and does not
 depend on the integrator's accuracy: ``a``, ``l_ce`` and ``v_ce`` come back to
 roundoff (1e-12).  The excitation also depends on ``F_mt''``, which here needs
-the fibre acceleration, i.e. the time derivative of the contraction ODE's
+the fiber acceleration, i.e. the time derivative of the contraction ODE's
 right-hand side along the trajectory.  That one is taken by a central
 difference with a 1e-6 s step (truncation ~1e-12, roundoff ~1e-10 relative);
 the measured excitation errors are ~5e-9 (Thelen) and ~7e-10 (NG), asserted
@@ -85,7 +85,7 @@ def forces_from_states(mus, lmt, u_of, t, a, l, tendon_force, stiffness, curvatu
     eps = (L - x) / mus.l_slack - 1
     v = mus.contraction_rate(l, L, a)
     adot = mus.activation_rate(u_of(t), a)
-    # fibre acceleration: d/dt of the contraction ODE along (v_ce, v_mt, adot)
+    # fiber acceleration: d/dt of the contraction ODE along (v_ce, v_mt, adot)
     acc = (mus.contraction_rate(l + dt * v, lmt(t + dt)[0], a + dt * adot)
            - mus.contraction_rate(l - dt * v, lmt(t - dt)[0], a - dt * adot)) / (2 * dt)
     dx = l * v / x
@@ -156,7 +156,7 @@ def test_nagano_gerritsen_inverse_recovers_activation_and_excitation(ng_run):
 
 
 def test_second_force_derivative_matters(thelen_run):
-    # Without F_mt'' the tendon's part of the fibre acceleration is lost:
+    # Without F_mt'' the tendon's part of the fiber acceleration is lost:
     # a and l_ce are unchanged but the excitation is off by ~0.15 in this run.
     mus, u, a, l, s = thelen_run
     out = mus.inverse(s["F"], s["dF"], s["L"], s["V"], s["A"])
@@ -185,7 +185,7 @@ def test_pure_function_matches_object_and_loops(thelen_run):
 
 def test_force_below_passive_gives_zero_activation():
     mus = Thelen2003(f_max=1000.0, l_opt=0.1, l_slack=0.2, pennation=0.0)
-    # fibre at 1.4 l_opt carries f_pe = (e^(5*0.4/0.6) - 1)/(e^5 - 1) = 0.184 F_max passively
+    # fiber at 1.4 l_opt carries f_pe = (e^(5*0.4/0.6) - 1)/(e^5 - 1) = 0.184 F_max passively
     F_pe = 1000 * np.expm1(5 * 0.4 / 0.6) / np.expm1(5)
     from pinmsk.muscles import thelen_tendon_strain
     for F, expect_zero in ((0.5 * F_pe, True), (2 * F_pe, False)):
@@ -207,12 +207,12 @@ def test_bad_inputs():
     L = mus.l_slack * 1.02 + mus.l_opt
     with pytest.raises(TrialError, match=r"F_mt is nan for muscle 1 \('Vas'\) at frame 2"):
         mus.inverse(F, 0.0, L, 0.0, 0.0)
-    with pytest.raises(TrialError, match=r"no room for the fibre at muscle 0 \('Gl'\)"):
+    with pytest.raises(TrialError, match=r"no room for the fiber at muscle 0 \('Gl'\)"):
         mus.inverse(np.full(3, 500.0), 0.0, mus.l_slack * 0.9, 0.0, 0.0)
 
 
-def test_fibre_floor_keeps_wild_states_finite_and_normal_ones_exact():
-    """``fibre_floor`` (for optimizers): a unit shorter than its tendon gives a finite,
+def test_fiber_floor_keeps_wild_states_finite_and_normal_ones_exact():
+    """``fiber_floor`` (for optimizers): a unit shorter than its tendon gives a finite,
     grossly infeasible state instead of an error; a normal state is unchanged."""
     mus = Thelen2003(f_max=1000.0, l_opt=0.1, l_slack=0.2, pennation=0.1)
     t = np.linspace(0, 1, 51)
@@ -220,14 +220,14 @@ def test_fibre_floor_keeps_wild_states_finite_and_normal_ones_exact():
     dl, ddl = 0.02 * np.pi * np.cos(2 * np.pi * t), -0.04 * np.pi ** 2 * np.sin(2 * np.pi * t)
     F, dF, ddF = 300 + 50 * np.sin(2 * np.pi * t), 100 * np.pi * np.cos(2 * np.pi * t), 0 * t
     a = mus.inverse(F, dF, l_mt, dl, ddl, ddF)
-    b = mus.inverse(F, dF, l_mt, dl, ddl, ddF, fibre_floor=1e-3 * 0.1)
+    b = mus.inverse(F, dF, l_mt, dl, ddl, ddF, fiber_floor=1e-3 * 0.1)
     for k in ("a", "adot", "u", "l_ce", "v_ce"):
         np.testing.assert_array_equal(a[k], b[k])
     from pinmsk.muscles import thelen_tendon_strain
     F = np.full_like(t, 300.0)
     short = 0.2 * (1 + thelen_tendon_strain(0.3)) - 2e-4 + 0 * t    # 0.2 mm shorter than the tendon
-    with pytest.raises(TrialError, match="no room for the fibre"):
+    with pytest.raises(TrialError, match="no room for the fiber"):
         mus.inverse(F, 0 * t, short, 0 * t, 0 * t, ddF)
-    wild = mus.inverse(F, 0 * t, short, 0 * t, 0 * t, ddF, fibre_floor=1e-4)
+    wild = mus.inverse(F, 0 * t, short, 0 * t, 0 * t, ddF, fiber_floor=1e-4)
     assert all(np.all(np.isfinite(wild[k])) for k in ("a", "adot", "u"))
     assert np.min(wild["u"]) > 100          # far outside the bounds 0 <= u <= 1

@@ -65,7 +65,7 @@ def test_force_length_A13():
     assert ng_force_length(1.0, w) == 1.0
     assert ng_force_length(1 + w, w) == pytest.approx(0.0, abs=1e-15)
     assert ng_force_length(1 - w, w) == pytest.approx(0.0, abs=1e-15)
-    assert ng_force_length(1 + 1.5 * w, w) == 0.0         # parabola clipped, no pushing fibre
+    assert ng_force_length(1 + 1.5 * w, w) == 0.0         # parabola clipped, no pushing fiber
     l = np.linspace(1 - 0.99 * w, 1 + 0.99 * w, 1001)
     c = -1 / w ** 2
     np.testing.assert_allclose(ng_force_length(l, w), c * l ** 2 - 2 * c * l + c + 1, rtol=1e-12,
@@ -135,6 +135,19 @@ def test_partials_fd():
                                atol=1e-9)
 
 
+def test_zero_activation_gives_zero_force_and_one_sided_partials():
+    """a = 0 makes a_hat = 0 and Eq. A.12 a 0/0; the force is its limit, 0 (it was NaN)."""
+    v = np.array([-3.0, -0.1, 0.0, 0.1, 3.0])
+    fi = np.array([0.9, 0.5, 0.7, 0.6, 0.8])
+    a = np.zeros(5)
+    assert np.array_equal(ng_fiber_force(v, a, fi), np.zeros(5))
+    f, dv, da, dfi = ng_fiber_force_partials(v, a, fi)
+    assert np.array_equal(f, np.zeros(5)) and np.array_equal(dv, np.zeros(5)) and np.array_equal(dfi, np.zeros(5))
+    h = 1e-9
+    np.testing.assert_allclose(da, ng_fiber_force(v, h, fi) / h, rtol=1e-6)   # one-sided, a >= 0
+    assert da[0] == pytest.approx(-A) and da[2] == pytest.approx(0.7)
+
+
 def test_activation_closed_form():
     rng = np.random.default_rng(4)
     a = rng.uniform(0.0, 1.3, (500, 6))          # both a_hat branches
@@ -202,7 +215,7 @@ def test_equilibrium():
     np.testing.assert_allclose(mus.contraction_rate(l, l_mt, a) / mus.l_opt, 0.0, atol=1e-7)
     rows = np.array([mus.equilibrium(l_mt[k], a[k])["l_ce"] for k in range(30)])
     np.testing.assert_allclose(rows, l[:30], rtol=0, atol=1e-12)
-    # with the velocity share; shortening within what the fibre can do (a >= 0.3:
+    # with the velocity share; shortening within what the fiber can do (a >= 0.3:
     # unloaded shortening speed B f_isom / A >= 4 l_opt/s at f_isom >= 0.3)
     a_d = 0.3 + 0.7 * a[:500]
     v_d = np.random.default_rng(5).uniform(-2, 2, a_d.shape) * mus.l_opt

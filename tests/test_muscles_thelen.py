@@ -65,7 +65,7 @@ def test_tendon_derivatives_fd():
                                fd(thelen_tendon_stiffness, eps), rtol=1e-6, atol=1e-6)
 
 
-# ----------------------------------------------------------------------------- fibre curves
+# ----------------------------------------------------------------------------- fiber curves
 def test_active_force_length_peak_and_shape():
     assert thelen_active_force_length(1.0) == 1.0
     l = np.linspace(0.3, 1.7, 14001)
@@ -238,7 +238,7 @@ def test_bad_inputs_name_frame_and_muscle():
         mus.equilibrium(l_mt, a)
     l_mt, v_mt, a = states(mus, 10)
     l_mt[3, 1] = mus.l_slack[1] * 0.99
-    with pytest.raises(TrialError, match=r"no room for the fibre at muscle 1 \('BICLH'\) at frame 3"):
+    with pytest.raises(TrialError, match=r"no room for the fiber at muscle 1 \('BICLH'\) at frame 3"):
         mus.fiber_kinematics_rigid(l_mt, v_mt)
     l_mt, v_mt, a = states(mus, 10)
     a[4, 0] = -0.1
@@ -282,7 +282,7 @@ def test_force_limits():
     l_mt, v_mt, a = states(fa, 500)
     Fa, Fp = fa.force_limits(l_mt, v_mt)
     assert Fa.shape == Fp.shape == (500, 4)
-    # exact at a = 1 and a = 0; for all a when the fibre is isometric
+    # exact at a = 1 and a = 0; for all a when the fiber is isometric
     np.testing.assert_allclose(Fa + Fp, fa.force(1.0, l_mt, v_mt), rtol=1e-13)
     np.testing.assert_allclose(Fp, fa.force(0.0, l_mt, v_mt), rtol=1e-13, atol=1e-12)
     Fa0, Fp0 = fa.force_limits(l_mt, 0.0)
@@ -290,7 +290,7 @@ def test_force_limits():
 
 
 def equilibrium_residual(mus, l_mt, a, eq):
-    """Normalized |F_t - (F_ce + F_pe) cos(alpha)| from the returned fibre length."""
+    """Normalized |F_t - (F_ce + F_pe) cos(alpha)| from the returned fiber length."""
     l = eq["l_ce"]
     x = np.sqrt(l * l - mus.height ** 2)
     f_t = thelen_tendon_force((l_mt - x) / mus.l_slack - 1)
@@ -308,7 +308,7 @@ def test_equilibrium_isometric():
     assert res.max() < 1e-9
     np.testing.assert_array_equal(eq["v_ce"], 0.0)
     np.testing.assert_allclose(eq["force"], mus.f_max * f_t, rtol=1e-9)
-    # a fibre in equilibrium does not move: the contraction ODE returns ~0 there
+    # a fiber in equilibrium does not move: the contraction ODE returns ~0 there
     a_pos = np.maximum(a, 0.02)
     eq = mus.equilibrium(l_mt, a_pos)
     v = mus.contraction_rate(eq["l_ce"], l_mt, a_pos)
@@ -321,15 +321,15 @@ def test_equilibrium_isometric():
 def test_equilibrium_with_velocity_share():
     mus = forearm()
     l_mt, _, a = states(mus, 1000, seed=2)
-    # within what the fibres can follow: |v_mt| <= 3 l_opt/s, a >= 0.2 (max shortening >= 4 l_opt/s)
+    # within what the fibers can follow: |v_mt| <= 3 l_opt/s, a >= 0.2 (max shortening >= 4 l_opt/s)
     rng = np.random.default_rng(12)
     a = 0.2 + 0.8 * a
     v_mt = rng.uniform(-3, 3, a.shape) * mus.l_opt
     eq = mus.equilibrium(l_mt, a, v_mt)
     res, _ = equilibrium_residual(mus, l_mt, a, eq)
     assert res.max() < 1e-9
-    # the fibre takes the series-stiffness share of v_mt: x' = k_t v_mt / (k_t + k_m),
-    # k_t the tendon and k_m the isometric fibre stiffness along the line of action
+    # the fiber takes the series-stiffness share of v_mt: x' = k_t v_mt / (k_t + k_m),
+    # k_t the tendon and k_m the isometric fiber stiffness along the line of action
     l = eq["l_ce"]
     x = np.sqrt(l * l - mus.height ** 2)
     k_t = thelen_tendon_stiffness((l_mt - x) / mus.l_slack - 1) / mus.l_slack
@@ -342,8 +342,8 @@ def test_equilibrium_with_velocity_share():
     k_m = np.maximum(fd(along, x, 1e-8), 0.0)     # descending limb counted as 0
     np.testing.assert_allclose(eq["v_ce"], (x / l) * k_t * v_mt / (k_t + k_m), rtol=1e-5,
                                atol=1e-9)
-    # faster shortening than a weakly active fibre can follow has no equilibrium
-    with pytest.raises(ConvergenceError, match="shorten faster than the fibre can"):
+    # faster shortening than a weakly active fiber can follow has no equilibrium
+    with pytest.raises(ConvergenceError, match="shorten faster than the fiber can"):
         mus.equilibrium(l_mt[:5], 0.01, -2 * mus.v_max)
 
 
@@ -368,7 +368,7 @@ def test_equilibrium_vectorised_equals_loop():
 def test_equilibrium_compliant_force_vs_rigid():
     mus = forearm()
     l_mt, v_mt, a = states(mus, 300, seed=9)
-    # a stretched tendon shortens the fibre: compliant force is the force at a shorter fibre
+    # a stretched tendon shortens the fiber: compliant force is the force at a shorter fiber
     eq = mus.equilibrium(l_mt, a)
     l_rigid, _ = mus.fiber_kinematics_rigid(l_mt, 0.0)
     assert np.all(eq["l_ce"] <= l_rigid + 1e-15)
@@ -421,13 +421,13 @@ def test_force_velocity_smooth_blend_is_c2_and_local():
         thelen_force_velocity(w, smooth=0.05)
 
 
-def test_inverse_excitation_is_continuous_across_fibre_reversal_with_smoothing():
+def test_inverse_excitation_is_continuous_across_fiber_reversal_with_smoothing():
     """Eq. 5.4 contains df/dv: with the printed Thelen curve the recovered excitation jumps
-    where the fibre velocity changes sign; with ``fv_smooth`` it is continuous."""
+    where the fiber velocity changes sign; with ``fv_smooth`` it is continuous."""
     from pinmsk.muscles.inverse import inverse_thelen2003
     t = np.linspace(0.0, 0.5, 20001)
     w = 2 * np.pi * 2.0
-    l_mt = 0.20 + 0.004 * np.sin(w * t)              # m; the fibre reverses at the extremes
+    l_mt = 0.20 + 0.004 * np.sin(w * t)              # m; the fiber reverses at the extremes
     dl, ddl = 0.004 * w * np.cos(w * t), -0.004 * w * w * np.sin(w * t)
     F = np.full_like(t, 300.0)
     kw = dict(f_max=1000.0, l_opt=0.08, l_slack=0.12, pennation=0.1, ddF_mt=np.zeros_like(t))

@@ -512,7 +512,7 @@ def test_forearm_angle_variant_shape():
             assert np.all(np.diff(np.abs(r)) < 0)  # triceps: decreasing with flexion
 
 
-def test_forearm_fibres_optimal_at_mid_range():
+def test_forearm_fibers_optimal_at_mid_range():
     for m in _sidecar("forearm")["muscles"]:
         for variant, p in m["paths"].items():
             c = p["moment_arms"]["elbow_flexion"]

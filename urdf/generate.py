@@ -254,7 +254,7 @@ FINGER_MOMENT_ARM = F("0.010")  # m, Sec. 3.2.2 assumption 3
 FINGER_MUSCLES = (
     # name, sign of moment arm, l_opt, l_slack.  Chosen: of the order of the
     # extrinsic index-finger muscles (FDP/FDS index, EDC index) in published
-    # upper-limb models (optimal fibre length 6-9 cm, tendon slack 25-32 cm);
+    # upper-limb models (optimal fiber length 6-9 cm, tendon slack 25-32 cm);
     # not copied from one table.  Pennation 0 (assumed).
     ("flexor", +1, F("0.075"), F("0.28")),
     ("extensor", -1, F("0.070"), F("0.32")),
@@ -372,7 +372,7 @@ Muscles (Sec. 3.2.2): F_max = 100 N both (assumption 1); constant moment arms 10
 (assumption 3), flexor +, extensor - (r = -dl/dq).  Thelen (2003) parameters are
 our choice: l_opt, l_slack of the order of the extrinsic index-finger muscles
 (FDP/EDC index) in published upper-limb models, pennation 0.  l0 = l_slack + l_opt
-so the fibres are at optimal length at q = 0 (the centre of the +-0.21 rad tapping
+so the fibers are at optimal length at q = 0 (the centre of the +-0.21 rad tapping
 motion, Eq. 3.1) with a rigid tendon.  volume = F_max l_opt / sigma, sigma = 0.25 MPa (Eq. B.3).
 
 {SCHEMA_NOTE}
@@ -558,7 +558,7 @@ def forearm_muscles():
         l_opt_m = F(l_opt) / 100
         l_slack_m = F(l_slack) / 100
         alpha = math.radians(float(F(penn)))
-        # fibres at optimal length at mid-range with a rigid tendon:
+        # fibers at optimal length at mid-range with a rigid tendon:
         # l_mt(q_mid) = l_slack + l_opt cos(alpha)  =>  l0 = that + integral_0^{q_mid} r
         l_ref = float(l_slack_m) + float(l_opt_m) * math.cos(alpha)
         r_const = (1 if name in FLEXORS else -1) * F(TABLE_3_5[name]) / 100
@@ -620,9 +620,9 @@ Two path variants (r = -dl/dq; flexors BRD, BICLH, BICSH, BRA > 0, triceps < 0):
             triceps r(q) = s (1 - 0.25 q / 2.6): |r| falls by 25 % from extension to 2.6 rad;
             s chosen so the mean of r over [0, 2.6] rad equals the Table 3.5 value.
 l0 (= l_mt at q = 0) is chosen per muscle and variant so that, with a rigid tendon,
-the fibres are at optimal length at mid-range q = 1.3 rad:
+the fibers are at optimal length at mid-range q = 1.3 rad:
   l_mt(1.3) - l_slack = l_opt cos(pennation).
-Over the full range the rigid-tendon fibre excursion is +-r*1.3 rad; for the short-fibred
+Over the full range the rigid-tendon fiber excursion is +-r*1.3 rad; for the short-fibered
 TRIMH and TRILT that is about +-50 % of l_opt (Table 3.2 has long tendons for them).
 
 {SCHEMA_NOTE}
@@ -908,7 +908,7 @@ moment arms r = -dl/dq are  hip: r_H,  knee: -r_K,  ankle: r_A  (thesis sign: ex
 and plantarflexors positive); zero entries are omitted.  The path's l0 (length at q = 0)
 is Table 5.3's l_0^tm + r_A pi/2.  Reading phi_A as ankle + pi/2 instead would leave
 soleus (l0 0.201 m < l_slack 0.245 m) and gastrocnemius (0.404 < 0.420 m) shorter than
-their tendons at standing; with phi_A = ankle every fibre sits at 0.5-1.2 l_opt there.
+their tendons at standing; with phi_A = ankle every fiber sits at 0.5-1.2 l_opt there.
 volume = F_max l_opt / sigma with sigma = 0.25 MPa (thesis Eq. B.3).
 
 {SCHEMA_NOTE}

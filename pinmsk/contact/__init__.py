@@ -14,41 +14,42 @@ free moment.  Their ``generalized_force`` is ``J^T`` of the world wrench.
 Feet and fitting: :func:`load_foot2d`, :func:`foot_contacts`, :class:`ContactFit`
 (Eq. 4.2 identification, exact Jacobians through :class:`~pinmsk.contact.dual.Dual`
 numbers), :func:`fit_contact_models` (several models on one trial, each starting from the
-ones it contains), :func:`fit_cli_run` (what ``pinmsk contact fit`` calls),
+ones it contains), :func:`load_contact_model`,
 :func:`read_contact_trial` (CSU text or .csv/.sto/.mot), :func:`synthetic_foot_trial`,
-:func:`contact_candidates` (diagnosis hook), :func:`from_spec` (a sidecar
-``[[contacts]]`` entry -> component, see :mod:`pinmsk.contact.spec`).  The CSU reader is :func:`pinmsk.io.cleveland_gait.read_csu`.
+:func:`from_spec` (a sidecar ``[[contacts]]`` entry -> component, see
+:mod:`pinmsk.contact.spec`).  The CSU reader is :func:`pinmsk.io.cleveland_gait.read_csu`.  The
+contact models as diagnosis candidates (``contact_candidates``) are in :mod:`pinmsk.diagnose.contact`.
 
 Layers: the physics (spheres, laws, feet, sidecar entries) is imported with the package and
-imports no model; the identification, the synthetic trial and the diagnosis hook use models
+imports no model; the identification and the synthetic trial use models
 (:func:`pinmsk.load_model`, which builds contacts from this package), so their names are
 imported on first use (PEP 562), as :mod:`pinmsk` does.
 """
 from .._lazy import lazy_attributes
+from .foot import KINDS, SITES, GroundReaction, foot_contacts, ground_reaction, site_frames
 from .friction import friction_coefficient, regularized_coulomb
+from .hunt_crossley import HuntCrossley
+from .spec import from_spec
 from .sphere import (ContactForces, SiteKinematics, SphereContact, cap_centroid_depth, cap_volume,
                      site_kinematics, smooth_positive, wrench_generalized_force)
-from .hunt_crossley import HuntCrossley
 from .volumetric import HyperVolumetric, Volumetric
-from .foot import KINDS, SITES, GroundReaction, foot_contacts, ground_reaction, site_frames
-from .spec import from_spec
 
 #: Names of the model-level submodules, imported when first used.
 _LAZY = {
-    "ContactFit": "identify", "fit_cli_run": "identify", "fit_contact_models": "identify",
+    "ContactFit": "identify", "load_contact_model": "identify", "fit_contact_models": "identify",
     "fourier_basis": "identify", "load_foot2d": "identify", "read_contact_trial": "identify",
     "read_csu_foot2d": "identify",
     "stance_cycle": "identify", "toe_from_kinematics": "identify",
     "synthetic_foot_trial": "synthetic",
-    "contact_candidates": "diagnosis",
 }
 
 
 __all__ = [
     "ContactFit", "ContactForces", "GroundReaction", "HuntCrossley", "HyperVolumetric", "KINDS",
     "SITES", "SiteKinematics", "SphereContact", "Volumetric", "cap_centroid_depth", "cap_volume",
-    "contact_candidates", "fit_cli_run", "fit_contact_models", "from_spec", "foot_contacts", "fourier_basis",
-    "friction_coefficient", "ground_reaction", "load_foot2d", "read_contact_trial", "read_csu_foot2d", "regularized_coulomb", "site_frames",
+    "fit_contact_models", "load_contact_model", "from_spec", "foot_contacts", "fourier_basis",
+    "friction_coefficient", "ground_reaction", "load_foot2d", "read_contact_trial", "read_csu_foot2d",
+    "regularized_coulomb", "site_frames",
     "site_kinematics", "smooth_positive", "stance_cycle", "synthetic_foot_trial", "toe_from_kinematics",
     "wrench_generalized_force",
 ]

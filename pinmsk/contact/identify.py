@@ -57,14 +57,14 @@ from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
 from ..errors import ModelError, SolverError, TrialError
-from ..signals.filtering import differentiate
+from ..fitting import FitStatistics, Fitter, Result, format_report
 from ..io.cleveland_gait import read_csu
+from ..io.tables import read_trial
 from ..model import load_model
-from ..stats import aic, bic
+from ..signals.filtering import CONTACT_CUTOFF, differentiate
 from .dual import Dual
-from .foot import (KINDS, SITES, Foot2dGeometry, foot2d_site_kinematics, foot_contacts,
-                   ground_reaction)
-from .sphere import cap_volume
+from .foot import KINDS, SITES, Foot2dGeometry, foot2d_site_kinematics, foot_contacts, ground_reaction
+from .sphere import SiteKinematics, cap_volume
 
 DRIVE = ("ankle_x", "ankle_y", "foot_angle")
 GRF = ("ground_force_vy", "ground_force_vx", "ground_force_px")
@@ -133,7 +133,6 @@ def stance_cycle(trial, *, threshold: float = 20.0) -> tuple[float, float]:
                          f"found {off.size}")
     t = trial.time
     return float(t[off[0]]), float(t[off[1]])
-
 
 
 @dataclass
@@ -319,12 +318,11 @@ class _Residual:
 
 def _stack_kinematics(kins):
     """One SiteKinematics holding the frames of ``kins`` one after the other (plain or Dual fields)."""
-    from .sphere import SiteKinematics
     return SiteKinematics(*(np.concatenate([getattr(k, f) for k in kins])
                             for f in ("position", "rotation", "velocity", "omega")))
 
 
-class ContactFit:
+class ContactFit(Fitter):
     """Identify the contact parameters of foot2d from a trial (thesis Eq. 4.2).
 
     Keyword arguments (stored only; :meth:`fit` does the work).  These defaults are the
@@ -337,7 +335,8 @@ class ContactFit:
                    :func:`stance_cycle`, when the trial holds two; else the whole trial),
                    ``None`` (the whole trial) or ``(t0, t1)`` in s
     cutoff         low-pass (Hz) of the driving kinematics before differentiation (default
-                   12 Hz, for marker data; None: none, for noise-free synthetic kinematics).
+                   :data:`pinmsk.signals.filtering.CONTACT_CUTOFF` = 12 Hz, for marker data; None:
+                   none, for noise-free synthetic kinematics).
                    The GRF is not filtered.
     terms          the Eq. 4.2 terms minimised, a non-empty subset of ``ALL_TERMS`` =
                    ``("normal_force", "friction_force", "cop")``; default all three, for every
@@ -381,11 +380,16 @@ class ContactFit:
     could not be fitted, with the reason), ``seconds_`` (including
     the nested fits), ``nfev_`` (residual evaluations, nested fits included), ``aic_``,
     ``bic_``, ``reaction_`` (the model's GroundReaction), ``outputs_`` (per-sphere
-    ContactForces), ``residual_`` (the residual function, with ``.jacobian``), ``window_``.
+    ContactForces), ``residual_`` (the residual function, with ``.jacobian``), ``window_``,
+    ``result_`` (a :class:`~pinmsk.fitting.Result`: the fitted model's ``ground_force_vy``,
+    ``ground_force_vx``, ``ground_force_px`` over the window, and the statistics of the
+    minimised Eq. 4.2 residuals -- ``n`` of them, ``k = n_free_``, ``sse`` their sum of
+    squares, AIC/BIC with the variance estimated, the best start's convergence).
+    :meth:`to_dict` is the JSON summary ``pinmsk contact fit --json`` writes.
     """
 
     def __init__(self, *, contact: str = "hypervolumetric", relax: bool = False, window="cycle",
-                 cutoff: float | None = 12.0, terms=ALL_TERMS, toe: str = "kinematic", n_starts: int = 4,
+                 cutoff: float | None = CONTACT_CUTOFF, terms=ALL_TERMS, toe: str = "kinematic", n_starts: int = 4,
                  nested: bool = True, initial=None, bounds=None, fixed=(), ground_speed: float | None = None,
                  cop_threshold: float = 0.05, seed: int = 0, max_nfev: int = 400, ftol: float = 1e-6,
                  relax_range: float = 0.02, n_jobs: int = 1, toe_range: float = 0.02,
@@ -400,7 +404,7 @@ class ContactFit:
         self.nested = nested
         self.initial = initial
         self.bounds = bounds
-        self.fixed = tuple(fixed)
+        self.fixed = fixed
         self.ground_speed = ground_speed
         self.cop_threshold = cop_threshold
         self.seed = seed
@@ -560,7 +564,7 @@ class ContactFit:
 
     # -- fit ----------------------------------------------------------------
     def fit(self, model, trial, *, _cache=None) -> "ContactFit":
-        """Identify the parameters; returns self."""
+        """Identify the parameters (``model`` None: the built-in foot2d); returns self."""
         t_start = time.perf_counter()
         self._validate()
         if model is None:
@@ -575,28 +579,24 @@ class ContactFit:
         else:
             prob, gs = _cache["problem"]
         self.placement_ = foot_placement(trial)
-        self._fit_problem(model, prob, gs, {} if _cache is None else _cache)
-        self.seconds_ = time.perf_counter() - t_start
+        self._fit_problem(model, prob, gs, {} if _cache is None else _cache, t_start=t_start)
         return self
 
     def _sub(self, kind: str, relax: bool) -> "ContactFit":
         """These settings for a contained model (its own thesis initial values and bounds)."""
         names = {p.name for p in KINDS[kind].parameters}
-        return ContactFit(contact=kind, relax=relax, window=self.window, cutoff=self.cutoff, terms=self.terms,
-                          toe=self.toe, n_starts=self.n_starts, nested=self.nested,
-                          fixed=[f for f in self.fixed if f in names], ground_speed=self.ground_speed,
-                          cop_threshold=self.cop_threshold, seed=self.seed, max_nfev=self.max_nfev,
-                          ftol=self.ftol, relax_range=self.relax_range, n_jobs=self.n_jobs,
-                          toe_range=self.toe_range, jacobian=self.jacobian)
+        return self.clone().set_params(contact=kind, relax=relax, initial=None, bounds=None,
+                                       fixed=[f for f in self.fixed if f in names])
 
     def _contained(self) -> list:
         if self.relax:
             return [(self.contact, False)]
         return [(kind, False) for kind in CONTAINS[self.contact]]
 
-    def _fit_problem(self, model, prob: _Problem, gs: float, cache: dict):
-        """Fit on a prepared problem; ``cache`` holds the nested fits already done, by (kind, relax)."""
-        t_start = time.perf_counter()
+    def _fit_problem(self, model, prob: _Problem, gs: float, cache: dict, *, t_start: float | None = None):
+        """Fit on a prepared problem; ``cache`` holds the nested fits already done, by (kind, relax);
+        ``seconds_`` counts from ``t_start`` (default: now)."""
+        t_start = time.perf_counter() if t_start is None else t_start
         self.ground_speed_ = gs
         contacts = self._contacts(model, gs)
         self._check_contact(prob, contacts)
@@ -674,7 +674,6 @@ class ContactFit:
         self.toe_kinematic_ = prob.fourier0
         self.toe_deviation_ = (float(np.max(np.abs(prob.B @ (self.fourier_ - prob.fourier0))))
                                if self._fit_toe else 0.0)
-        self.result_ = best
         self.best_start_ = ib
         self.nfev_ = sum(int(r.nfev) for r in results) + nested_nfev
         self.njev_ = sum(int(r.njev or 0) for r in results)
@@ -682,8 +681,14 @@ class ContactFit:
         self.problem_ = prob
         self.residual_ = res
         self.window_ = (float(prob.t[0]), float(prob.t[-1]))
-        self._finish(prob)
+        stats = self._finish(prob, best)
+        self.aic_, self.bic_ = stats.aic, stats.bic
         self.seconds_ = time.perf_counter() - t_start
+        gr = self.reaction_
+        self.result_ = Result(prob.t, {GRF[0]: gr.normal, GRF[1]: gr.friction, GRF[2]: gr.cop[:, 0]},
+                              units={GRF[0]: "N", GRF[1]: "N", GRF[2]: "m"},
+                              meta={"analysis": "contact_fit", "contact": self.contact, "relax": str(bool(self.relax))},
+                              stats=stats, report=self._report_text(stats))
         return self
 
     def _check_contact(self, prob, contacts):
@@ -708,7 +713,8 @@ class ContactFit:
                 "contact sphere(s) never touch the ground in the fitted window: " + "; ".join(msgs)
                 + ". Check that ankle_y is in m with the ground (belt surface) at y = 0, and the window covers stance")
 
-    def _finish(self, prob):
+    def _finish(self, prob, best) -> FitStatistics:
+        """Reaction, terms, objective and RMSE of the fitted spheres; returns the fit's statistics."""
         outs, gr = self.residual_.reaction([c.values for c in self.contacts_],
                                            self.fourier_ if self._fit_toe else None)
         self.outputs_ = outs
@@ -718,19 +724,17 @@ class ContactFit:
         self.terms_ = {name: float(x) for name, x in zip(ALL_TERMS, terms)}
         self.objective_ = float(np.dot(terms, prob.weights))
         self.objective_full_ = float(terms.sum())
-        # information criteria on the minimised residuals, Gaussian errors of unknown variance:
-        # n ln(RSS/n) + 2k / + k ln n (pinmsk.stats; RSS floored at 1e-300 there)
-        n_res = int(prob.t.size * np.count_nonzero(prob.weights))
-        rss = self.objective_ * prob.t.size
-        k = int(self.n_free_)
-        self.aic_ = aic(rss, n=n_res, k=k, variance="estimated")
-        self.bic_ = bic(rss, n=n_res, k=k, variance="estimated")
         diff_n = gr.normal - prob.meas[0]
         diff_f = gr.friction - prob.meas[1]
         diff_c = (gr.cop[:, 0] - prob.meas[2])[prob.cop_mask]
         self.rmse_ = {"normal_force": float(np.sqrt(np.mean(diff_n ** 2))),
                       "friction_force": float(np.sqrt(np.mean(diff_f ** 2))),
                       "cop": float(np.sqrt(np.mean(diff_c ** 2))) if diff_c.size else float("nan")}
+        # information criteria on the minimised residuals, Gaussian errors of unknown variance:
+        # n ln(RSS/n) + 2k / + k ln n (pinmsk.stats; RSS floored at 1e-300 there)
+        return FitStatistics(n=int(prob.t.size * np.count_nonzero(prob.weights)), k=int(self.n_free_),
+                             sse=self.objective_ * prob.t.size, variance="estimated", converged=best.status > 0,
+                             message=str(best.message), iterations=self.nfev_, objective=self.objective_)
 
     # -- results ------------------------------------------------------------
     def params_(self) -> dict:
@@ -738,13 +742,15 @@ class ContactFit:
         return {s: dict(c.values) for s, c in zip(SITES, self.contacts_)}
 
     def to_dict(self) -> dict:
+        """The fit as a JSON-ready dict (what ``pinmsk contact fit --json`` writes)."""
+        self._check_fitted()
         return {"contact": self.contact, "relax": bool(self.relax), "toe": self.toe,
                 "objective": self.objective_, "objective_full": self.objective_full_,
                 "terms": self.terms_, "params": self.params_(),
                 "toe_fourier": None if self.fourier_ is None else [float(x) for x in self.fourier_],
                 "toe_max_deviation": self.toe_deviation_, "load_shares": self.load_shares(),
                 "rmse": self.rmse_, "seconds": self.seconds_, "n_free": int(self.n_free_),
-                "aic": self.aic_, "bic": self.bic_, "converged": bool(self.result_.status > 0),
+                "aic": self.aic_, "bic": self.bic_, "converged": self.result_.stats.converged,
                 "nfev": int(self.nfev_), "starts": self.starts_, "start_labels": self.start_labels_,
                 "best_start": self.best_start_,
                 "nested": {name: f.objective_ for name, f in self.nested_.items()},
@@ -771,18 +777,17 @@ class ContactFit:
                 "starts": list(self.start_labels_), "seed": self.seed, "nested": bool(self.nested),
                 "jacobian": self.jacobian, "n_jobs": self.n_jobs, "max_nfev": self.max_nfev}
 
-    def report(self) -> str:
-        lines = [f"contact fit ({self.contact}{', relaxed' if self.relax else ''}): "
-                 f"J (Eq. 4.2) = {self.objective_:.5f} (all terms {self.objective_full_:.5f}), "
-                 f"{self.n_free_} free parameters, {self.nfev_} evaluations, {self.seconds_:.2f} s, "
-                 f"AIC {self.aic_:.1f}, BIC {self.bic_:.1f}"
-                 f"{'' if self.result_.status > 0 else ' (best start hit max_nfev)'}",
-                 f"  RMSE: normal {self.rmse_['normal_force']:.1f} N, friction "
-                 f"{self.rmse_['friction_force']:.1f} N, COP {1000 * self.rmse_['cop']:.1f} mm",
-                 "  starts: " + "; ".join(f"{lab} -> J {j:.5f}" for lab, j in zip(self.start_labels_, self.starts_))]
-        for s, c in zip(SITES, self.contacts_):
-            lines.append(f"  {s:<10} " + ", ".join(f"{k}={v:.4g}" for k, v in c.values.items()))
-        return "\n".join(lines)
+    def _report_text(self, stats: FitStatistics) -> str:
+        rows = [("objective", f"J (Eq. 4.2) = {self.objective_:.5f} (all terms {self.objective_full_:.5f})"),
+                ("rmse", f"normal {self.rmse_['normal_force']:.1f} N, friction "
+                         f"{self.rmse_['friction_force']:.1f} N, COP {1000 * self.rmse_['cop']:.1f} mm"),
+                ("starts", "; ".join(f"{lab} -> J {j:.5f}" for lab, j in zip(self.start_labels_, self.starts_))
+                 + ("" if stats.converged else " (the best start hit max_nfev)"))]
+        rows += [(s, ", ".join(f"{k}={v:.4g}" for k, v in c.values.items())) for s, c in zip(SITES, self.contacts_)]
+        rows.append(("time", f"{self.seconds_:.2f} s"))
+        rows += stats.rows()
+        return format_report(f"Contact fit ({self.contact}{', relaxed' if self.relax else ''}) of the foot "
+                             f"over {self.window_[0]:.3f}-{self.window_[1]:.3f} s", rows)
 
     def sensitivity(self, *, factor: float = 1.1) -> dict:
         """Fig. 4.11: % change of the peak total normal force when each sphere's stiffness is scaled by ``factor``."""
@@ -833,49 +838,6 @@ class ContactFit:
                 "model_depth": depth(fe, j1, j2, jv) if j2 > j1 else 0.0,
                 "measured_events_s": [float(t[i1]), float(t[iv]), float(t[i2])],
                 "model_events_s": [float(t[j1]), float(t[jv]), float(t[j2])]}
-
-    def plot(self, out_dir) -> list[Path]:
-        """GRF (vertical, horizontal) and COP vs measured, as PNGs in ``out_dir``."""
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        from ..presentation.plots import save_figure
-
-        out_dir = Path(out_dir)
-        prob, gr = self.problem_, self.reaction_
-        t = prob.t
-        title = f"{self.contact}{' relaxed' if self.relax else ''}"
-        fig, ax = plt.subplots(2, 1, figsize=(6, 5.5), sharex=True)
-        ax[0].plot(t, prob.meas[0], "k", label="measured")
-        ax[0].plot(t, gr.normal, "C3", label="model")
-        for o, s in zip(self.outputs_, SITES):
-            ax[0].plot(t, o.normal, lw=0.8, ls="--", label=s)
-        ax[0].set_ylabel("vertical GRF (N)")
-        ax[0].legend(fontsize=7)
-        ax[0].set_title(f"{title}: J = {self.objective_:.4f}")
-        ax[1].plot(t, prob.meas[1], "k", label="measured")
-        ax[1].plot(t, gr.friction, "C3", label="model")
-        ax[1].set_ylabel("horizontal GRF (N)")
-        ax[1].set_xlabel("time (s)")
-        fig.tight_layout()
-        p1 = out_dir / f"grf_{self.contact}{'_relaxed' if self.relax else ''}.png"
-        save_figure(fig, p1, dpi=110)
-        plt.close(fig)
-        fig, ax = plt.subplots(figsize=(6, 3.2))
-        m = prob.cop_mask
-        ax.plot(t[m], prob.meas[2][m], "k.", ms=3, label="measured")
-        ax.plot(t[m], gr.cop[m, 0], "C3", label="model")
-        ax.set_ylabel("COP x (m)")
-        ax.set_xlabel("time (s)")
-        ax.set_title(title)
-        ax.legend(fontsize=7)
-        fig.tight_layout()
-        p2 = out_dir / f"cop_{self.contact}{'_relaxed' if self.relax else ''}.png"
-        save_figure(fig, p2, dpi=110)
-        plt.close(fig)
-        return [p1, p2]
-
 
 
 _JOB = None
@@ -1010,7 +972,6 @@ def read_contact_trial(path):
         first = fh.readline()
     if first.lstrip().startswith("%") and "TimeStamp" in first:
         return read_csu_foot2d(path)
-    from ..io.tables import read_trial
     return read_trial(path)
 
 
@@ -1031,7 +992,8 @@ def read_csu_foot2d(path, **options):
     return read_csu(path, **options)
 
 
-def _load_model_arg(model):
+def load_contact_model(model):
+    """The model a contact fit runs on: foot2d for None or its name/files, else :func:`pinmsk.load_model`."""
     if model is None or str(model) == "foot2d" or Path(str(model)).name in ("foot2d.toml", "foot2d.urdf"):
         return load_foot2d()
     return load_model(model)
@@ -1056,28 +1018,3 @@ def fit_contact_models(model, trial, variants=VARIANTS, **options) -> dict:
     return out
 
 
-def fit_cli_run(model, trial, *, json_path=None, plot_dir=None, **options) -> dict:
-    """What ``pinmsk contact fit MODEL TRIAL [--contact ...] [--json] [--plot]`` runs.
-
-    ``model`` is a Model, a model name/path, or None (foot2d); ``trial`` a Trial or a
-    file (CSU leg2d text, .csv, .sto, .mot; see :func:`read_contact_trial`) with
-    ankle_x, ankle_y, foot_angle and ground_force_vx/vy/px.  ``options`` are
-    :class:`ContactFit`'s keywords, with its defaults (the CLI passes only what the
-    user gave).  Returns (and writes to ``json_path``) :meth:`ContactFit.to_dict`:
-    ``objective`` (Eq. 4.2), ``params`` ({site: {name: value}}), ``rmse``
-    (``normal_force``, ``friction_force`` in N, ``cop`` in m), ``seconds`` and
-    ``settings`` (:meth:`ContactFit.settings_`); ``plot_dir`` gets the GRF and COP
-    figures (their paths under ``figures``).
-    """
-    if model is None or isinstance(model, (str, Path)):
-        model = _load_model_arg(model)
-    if isinstance(trial, (str, Path)):
-        trial = read_contact_trial(trial)
-    fit = ContactFit(**options).fit(model, trial)
-    out = fit.to_dict()
-    if plot_dir is not None:
-        out["figures"] = [str(p) for p in fit.plot(plot_dir)]
-    if json_path is not None:
-        from ..io.output_files import write_json
-        write_json(json_path, out, parents=True)
-    return out

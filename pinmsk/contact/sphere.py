@@ -320,6 +320,16 @@ class SphereContact(Component):
     def check_target(self, model) -> None:
         model.frame_id(self.target)
 
+    def _options(self) -> tuple:
+        return (self.ground_speed, self.smoothing, self.center)
+
+    # the options change the force as the parameters do, so equal spheres must share them
+    def __eq__(self, other) -> bool:
+        return super().__eq__(other) and self._options() == other._options()
+
+    def __hash__(self) -> int:
+        return hash((super().__hash__(), self._options()))
+
 
 def wrench_generalized_force(kin: SiteKinematics, force: np.ndarray, point: np.ndarray) -> np.ndarray:
     """``J_lin^T f + J_ang^T ((p - o) x f)`` over frames for a world force ``f`` at world point ``p``."""

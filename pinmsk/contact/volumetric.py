@@ -4,8 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..components import Parameter
-from .sphere import (FRICTION_PARAMETERS, OFFSET_PARAMETERS, SphereContact, cap_centroid_depth,
-                     cap_volume)
+from .sphere import FRICTION_PARAMETERS, OFFSET_PARAMETERS, SphereContact, cap_centroid_depth, cap_volume
 
 
 class Volumetric(SphereContact):

@@ -28,9 +28,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ..errors import ModelError
 from ..effects import registry
-from ..effects._base import hand_like_frames, moving_bodies
+from ..effects._base import hand_like_frames, moving_bodies, unactuated_coordinates
+from ..errors import ModelError
+from .compare import comparison_plan
 
 
 @dataclass(frozen=True)
@@ -53,7 +54,6 @@ def catalog(model, trial=None, *, frames=None, mode: str = "auto", families=None
     :func:`pinmsk.diagnose.compare`).
     """
     if context is None:
-        from .compare import catalog_context
         context = catalog_context(model, trial, mode=mode, frames=frames)
     names = registry.families() if families is None else list(families)
     for f in names:
@@ -97,3 +97,12 @@ def _default_candidates(cls, model, context) -> list:
     if kind == "model":
         return [cls(None)]
     return []
+
+
+def catalog_context(model, trial, *, mode: str = "auto", frames=None) -> CatalogContext:
+    """The :class:`~pinmsk.diagnose.catalog.CatalogContext` of a model and trial (no dynamics computed)."""
+    if trial is None:
+        return CatalogContext("torque", tuple(model.coordinates), tuple(unactuated_coordinates(model)),
+                              tuple(frames or ()))
+    plan = comparison_plan(model, trial, mode)
+    return CatalogContext(plan.mode, plan.coordinates, plan.unactuated, tuple(frames or ()))

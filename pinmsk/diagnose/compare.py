@@ -61,23 +61,27 @@ Noise floor (:class:`NoiseFloor`), estimated from the data, per channel::
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Mapping, Sequence
 
 import numpy as np
 
 from ..components import Motion
-from ..errors import ModelError, TrialError
-from ..signals.filtering import differentiate
-from ..kinematics import DEFAULT_CUTOFF, TrialInputs, prepare
-from ..skeleton import ExternalForce
-from ..trial import Trial, moment_channel, moment_channels, parse_ground_reaction
+from ..dynamics import inverse_dynamics_array, simulate
 from ..effects._base import SignalEffect, is_prismatic, unactuated_coordinates
-from .catalog import CatalogContext
+from ..errors import ModelError, TrialError
+from ..grf import external_forces
+from ..kinematics import DEFAULT_CUTOFF, TrialInputs, prepare
+from ..signals.filtering import differentiate
 from ..signals.sampling import median_step
+from ..skeleton import ExternalForce
+from ..trial import Trial, close_matches, moment_channel, moment_channels, parse_ground_reaction
+from . import contact as _contact
+from .comparison import Comparison, NoiseFloor, white_noise_sigma
+from .contact import compare_contact
 
 __all__ = ["DEFAULT_CUTOFF", "MODES", "Comparison", "EquationError", "NoiseFloor", "compare",
-           "catalog_context", "external_forces_from_trial", "white_noise_sigma"]
+           "comparison_plan", "external_forces_from_trial", "white_noise_sigma"]
 
 MODES = ("torque", "motion", "muscle", "contact")
 _N_PROPAGATE = 3
@@ -86,34 +90,7 @@ _N_PROPAGATE = 3
 MEASURED_LIMIT = 1e6
 
 
-@dataclass(frozen=True)
-class NoiseFloor:
-    """Per-channel noise floor ``sigma`` (same units as the channel) and how it was estimated."""
-
-    channels: tuple[str, ...]
-    sigma: np.ndarray
-    white: np.ndarray
-    propagated: np.ndarray
-    method: str
-
-    def as_dict(self) -> dict[str, float]:
-        out = {c: float(s) for c, s in zip(self.channels, self.sigma)}
-        out["total"] = float(np.sqrt(np.mean(self.sigma ** 2)))
-        return out
-
-
 # -- small numerical helpers ---------------------------------------------------
-
-def white_noise_sigma(x: np.ndarray, axis: int = 0) -> np.ndarray:
-    """White-noise standard deviation of ``x`` from third differences (robust to steps and spikes)."""
-    x = np.asarray(x, dtype=float)
-    d = np.diff(x, n=3, axis=axis) / np.sqrt(20.0)
-    med = np.median(d, axis=axis, keepdims=True)
-    mad = 1.4826 * np.median(np.abs(d - med), axis=axis, keepdims=True)
-    keep = np.abs(d - med) <= 5.0 * np.maximum(mad, 1e-300)
-    ss = np.sum(np.where(keep, d * d, 0.0), axis=axis)
-    n = np.maximum(np.sum(keep, axis=axis), 1)
-    return np.sqrt(ss / n)
 
 
 def _rows_for(t: np.ndarray, cutoff: float | None) -> np.ndarray:
@@ -136,7 +113,6 @@ def external_forces_from_trial(model, trial: Trial, *, grf_frames: Mapping[str, 
     ``calcn_s``, ``heel_s``, ... or ``grf_frames[s]``; unloaded samples get no
     force).
     """
-    from ..grf import external_forces
     return external_forces(model, trial, frames=grf_frames)
 
 
@@ -196,10 +172,10 @@ class _Plan:
     excitation_kind: str | None
 
 
-def _plan(model, trial, mode: str, *, has_grf: bool | None = None) -> _Plan:
+def comparison_plan(model, trial, mode: str, *, has_grf: bool | None = None) -> _Plan:
+    """Which level compares ``model`` with ``trial`` and on which coordinates (no dynamics computed)."""
     if mode not in ("auto",) + MODES:
         raise ModelError(f"unknown comparison mode {mode!r}; use one of auto, {', '.join(MODES)}")
-    from . import contact as _contact
     if mode == "contact" or (mode == "auto" and _contact.applicable(model, trial)):
         why = _contact._why_not(model, trial)
         if why:
@@ -213,7 +189,6 @@ def _plan(model, trial, mode: str, *, has_grf: bool | None = None) -> _Plan:
     kind, _ = _excitations(model, trial)
     missing_coords = [c for c in model.coordinates if c not in trial]
     if missing_coords:
-        from ..trial import close_matches
         hints = {c: close_matches(c, trial.names) for c in missing_coords[:3]}
         hint = "; ".join(f"{c}: did you mean {', '.join(map(repr, h))}?" for c, h in hints.items() if h)
         raise TrialError(
@@ -266,15 +241,6 @@ def _plan(model, trial, mode: str, *, has_grf: bool | None = None) -> _Plan:
     return _Plan(mode, coords, tuple(unact), kind)
 
 
-def catalog_context(model, trial, *, mode: str = "auto", frames=None) -> CatalogContext:
-    """The :class:`~pinmsk.diagnose.catalog.CatalogContext` of a model and trial (no dynamics computed)."""
-    if trial is None:
-        return CatalogContext("torque", tuple(model.coordinates), tuple(unactuated_coordinates(model)),
-                              tuple(frames or ()))
-    plan = _plan(model, trial, mode)
-    return CatalogContext(plan.mode, plan.coordinates, plan.unactuated, tuple(frames or ()))
-
-
 # -- the equation error (what effects are fitted to) ---------------------------------------
 
 class EquationError:
@@ -282,8 +248,6 @@ class EquationError:
 
     def __init__(self, *, model, motion: Motion, rows: np.ndarray, coordinates: Sequence[str],
                  mode: str, measured_tau: np.ndarray | None, external, excitation: np.ndarray | None):
-        from ..dynamics import inverse_dynamics_array
-
         self.model = model
         self.motion = motion
         self.rows = rows
@@ -371,8 +335,6 @@ class EquationError:
 
     # -- residual with perturbed kinematics (noise propagation) ----
     def residual_for(self, motion: Motion) -> np.ndarray:
-        from ..dynamics import inverse_dynamics_array
-
         mrows = motion.subset(self.rows)
         tau_id = inverse_dynamics_array(self.model, mrows, external=self._ext_rows)[:, self.columns]
         if self.mode == "muscle":
@@ -384,66 +346,6 @@ class EquationError:
 
 
 # -- the comparison ------------------------------------------------------------------------
-
-@dataclass
-class Comparison:
-    """Model against measurement on named channels, over the analysed frames.
-
-    ``measured``, ``modelled`` and ``residual = measured - modelled`` are
-    ``(n, C)`` over ``time`` (the analysed frames); ``noise`` the per-channel
-    noise floor; ``eq`` the equation error effects are fitted to.
-    """
-
-    mode: str
-    model: object
-    trial: Trial
-    cutoff: float | None
-    time: np.ndarray
-    channels: tuple[str, ...]
-    coordinates: tuple[str, ...]
-    measured: np.ndarray
-    modelled: np.ndarray
-    noise: NoiseFloor
-    eq: EquationError
-    states: dict = field(default_factory=dict)
-    options: dict = field(default_factory=dict)
-    eq_noise: NoiseFloor | None = None
-    mask: np.ndarray | None = None          # (n, C) frames where a channel is defined (contact: the COP)
-    inputs: TrialInputs | None = None        # the filtered motion and loads (what was applied)
-
-    def __post_init__(self):
-        if self.eq_noise is None:
-            self.eq_noise = self.noise
-
-    @property
-    def residual(self) -> np.ndarray:
-        return self.measured - self.modelled
-
-    def _channel_rms(self) -> np.ndarray:
-        if self.mask is None:
-            return np.sqrt(np.mean(self.residual ** 2, axis=0))
-        r2 = np.where(self.mask, self.residual ** 2, 0.0)
-        return np.sqrt(np.sum(r2, axis=0) / np.maximum(self.mask.sum(axis=0), 1))
-
-    def rmse(self) -> dict[str, float]:
-        r = self._channel_rms()
-        out = {c: float(v) for c, v in zip(self.channels, r)}
-        out["total"] = float(np.sqrt(np.mean(r ** 2)))
-        return out
-
-    def ratio(self) -> float:
-        """RMS over channels of ``rmse / noise floor`` (1 = at the floor)."""
-        r = self._channel_rms()
-        return float(np.sqrt(np.mean((r / self.noise.sigma) ** 2)))
-
-    def with_model(self, model) -> "Comparison":
-        """The same comparison (frames, noise floor) for another model, e.g. with an effect added."""
-        if self.mode == "contact":
-            from .contact import compare_contact
-            return compare_contact(model, self.trial, cutoff=self.cutoff, noise_floor=self.noise,
-                                   problem=self.eq.problem, options=self.options)
-        return compare(model, self.trial, mode=self.mode, cutoff=self.cutoff,
-                       noise_floor=self.noise, _inputs=self.inputs, **self.options)
 
 
 def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = DEFAULT_CUTOFF,
@@ -461,9 +363,8 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
         raise TrialError(f"compare needs a Trial, got {type(trial).__name__}; read one with pinmsk.read_trial")
     _check_measured(model, trial)
     external_given = grf is not None or external_loads is not None
-    plan = _plan(model, trial, mode, has_grf=_has_grf(trial) or external_given)
+    plan = comparison_plan(model, trial, mode, has_grf=_has_grf(trial) or external_given)
     if plan.mode == "contact":
-        from .contact import compare_contact
         return compare_contact(model, trial, cutoff=cutoff, noise_floor=noise_floor,
                                options={"grf_frames": grf_frames, "sim_window": sim_window})
     t = np.asarray(trial.time, dtype=float)
@@ -502,7 +403,7 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
         channels = tuple(plan.coordinates)
         eq_floor = _torque_floor(model, trial, motion, eq, cutoff, moment_channels(eq_coords))
         return Comparison("motion", model, trial, cutoff, t[rows], channels, tuple(plan.coordinates),
-                          meas, mod, floor, eq, states, options, eq_floor, inputs=inputs)
+                          meas, mod, floor, eq, states, options, eq_floor, inputs=inputs, remake=_remake)
     channels = moment_channels(eq_coords)
     if plan.mode == "muscle":
         # the measured side's noise passes through the model's own muscle-level chain: recompute it
@@ -511,7 +412,13 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
         floor = noise_floor if noise_floor is not None else _torque_floor(model, trial, motion, eq, cutoff,
                                                                          channels)
     return Comparison(plan.mode, model, trial, cutoff, t[rows], channels, eq_coords, eq.actuation.copy(),
-                      eq.tau_id.copy(), floor, eq, states, options, inputs=inputs)
+                      eq.tau_id.copy(), floor, eq, states, options, inputs=inputs, remake=_remake)
+
+
+def _remake(c: Comparison, model) -> Comparison:
+    """``c`` again for another model: the same frames, noise floor, inputs and options."""
+    return compare(model, c.trial, mode=c.mode, cutoff=c.cutoff, noise_floor=c.noise, _inputs=c.inputs,
+                   **c.options)
 
 
 def _torque_floor(model, trial, motion, eq, cutoff, channels) -> NoiseFloor:
@@ -590,8 +497,6 @@ def _windows(rows: np.ndarray, t: np.ndarray, length: float) -> list[np.ndarray]
 
 def simulate_windows(model, trial, motion, rows, window, *, tau_noise=None, state_noise=None):
     """Multiple-shooting simulation: q (n_rows, nv) restarted from the measured state each ``window`` s."""
-    from ..dynamics import simulate
-
     t = motion.t
     out = np.full((rows.size, model.nv), np.nan)
     pos = {r: k for k, r in enumerate(rows)}

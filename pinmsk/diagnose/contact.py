@@ -1,4 +1,12 @@
-"""Contact-level comparison: a foot model's ground reaction force against the force plate.
+"""Contact diagnosis: a foot model's ground reaction force against the force plate, and the contact
+models of the foot as candidates.
+
+This module holds all of the diagnosis's contact mode: the comparison, its
+noise floor, the candidates (:func:`contact_candidates`, one
+:class:`ContactCandidate` per contact model, each identified by
+:class:`~pinmsk.contact.ContactFit`), their scoring and the model with the
+chosen one added.  The physics (spheres, feet, the Eq. 4.2 identification)
+lives in :mod:`pinmsk.contact`.
 
 Mode ``"contact"`` of :func:`pinmsk.diagnose.compare` (chosen by ``mode="auto"``
 when the model has foot2d's contact sites ``heel, metatarsal, toe`` and driving
@@ -86,13 +94,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..components import Parameter
+from ..contact.foot import KINDS, SITES, foot2d_site_kinematics, foot_contacts, ground_reaction
+from ..contact.identify import (ALL_TERMS, DRIVE, GRF, SWING, VARIANTS, ContactFit, stance_cycle,
+                                toe_from_kinematics)
 from ..errors import ConvergenceError, ModelError, PinmskError, SolverError, TrialError
-from ..stats import bic_change, weighted_sse
-from .compare import NoiseFloor, white_noise_sigma
+from ..fitting import FitStatistics, Result
+from ..stats import weighted_sse
+from .comparison import Comparison, NoiseFloor, white_noise_sigma
+from .ranking import EffectScore, order_by_bic, windows_of
 
-__all__ = ["CHANNELS", "DELTA_BIC", "ContactEquationError", "ContactFitResult", "ContactSet",
-           "applicable", "compare_contact", "rank_contacts", "model_with_contacts"]
+__all__ = ["CHANNELS", "DELTA_BIC", "ContactCandidate", "ContactEquationError", "ContactSet",
+           "applicable", "compare_contact", "contact_candidates", "contact_problem", "drivable",
+           "model_with_contacts", "predict_reaction", "rank_contacts"]
 
 #: compared channels: normal force, friction force, COP x
 CHANNELS = ("ground_force_vy", "ground_force_vx", "ground_force_px")
@@ -107,17 +120,124 @@ _N_PROPAGATE = 3
 UNLOADED = 0.02
 
 
+# -- the candidates: the contact models of the foot ------------------------------------------
+
+@dataclass
+class ContactCandidate:
+    """One contact model offered to the diagnosis: ``name``, ``kind``, ``relax``, ``components``
+    (its three spheres at the thesis defaults), ``drivable`` (the model can be kinematically driven,
+    so the candidate can be identified) and ``options`` (:class:`~pinmsk.contact.ContactFit` keywords)."""
+
+    name: str
+    kind: str
+    relax: bool
+    components: list
+    drivable: bool
+    options: dict = field(default_factory=dict)
+
+    @property
+    def n_params(self) -> int:
+        # as ContactFit fits them with its default terms (all three: friction too, for every model)
+        return sum(sum(p.vary for p in c.params.values()) for c in self.components)
+
+    def fitter(self, model, **options) -> ContactFit:
+        """The (unfitted) :class:`~pinmsk.contact.ContactFit` that identifies this candidate on ``model``."""
+        if not self.drivable:
+            raise ModelError(f"contact candidate '{self.name}': model '{model.name}' cannot be kinematically "
+                             f"driven (needs coordinates {', '.join(DRIVE)}, mtp); use foot2d")
+        return ContactFit(contact=self.kind, relax=self.relax, **{**self.options, **options})
+
+
+def contact_candidates(model, trial=None, *, side: str | None = None) -> list[ContactCandidate]:
+    """Contact candidates for ``model`` (and ``trial``, if given: it must hold the GRF channels).
+
+    One per contact model (point, linear volumetric, hyper-volumetric, hyper-volumetric relaxed)
+    when the model has the heel/metatarsal/toe sites, else none.  Only foot2d-like models
+    (coordinates ankle_x, ankle_y, foot_angle, mtp) can be kinematically driven; for other models
+    with the sites (gait2d) the candidates are listed with ``drivable = False``.
+    """
+    try:
+        sets = {kind: foot_contacts(model, kind, side=side) for kind in KINDS}
+    except ModelError:
+        return []
+    if trial is not None and not all(c in trial for c in GRF):
+        return []
+    can_drive = all(c in model.coordinates for c in DRIVE + ("mtp",))
+    if can_drive and trial is not None and not all(c in trial for c in DRIVE):
+        can_drive = False
+    out = []
+    for kind, relax in VARIANTS:
+        comps = foot_contacts(model, kind, side=side, relax=relax) if relax else sets[kind]
+        out.append(ContactCandidate(f"{kind}{'_relaxed' if relax else ''}", kind, relax, comps, can_drive))
+    return out
+
+
+def drivable(model, trial=None) -> bool:
+    """True if ``model`` has foot2d's sites and driving coordinates (and ``trial`` the driving and GRF channels)."""
+    try:
+        foot_contacts(model, "point")
+    except ModelError:
+        return False
+    if not all(c in model.coordinates for c in DRIVE + ("mtp",)):
+        return False
+    return trial is None or all(c in trial for c in DRIVE + GRF)
+
+
+def contact_problem(model, trial, *, cutoff=None, window=None, toe: str = "kinematic",
+                    ground_speed: float | None = None, cop_threshold: float = 0.05):
+    """The parameter-independent part of a contact identification, exactly as :class:`ContactFit`
+    builds it with these options (kinematics, toe angle, measured GRF, COP mask): ``(problem, ground_speed)``.
+
+    Every candidate fitted with the same options sees the same kinematics, so a model's own
+    contacts can be evaluated on them (:func:`predict_reaction`) and compared like for like.
+    """
+    gs = ground_speed
+    if gs is None:
+        gs = float(trial.meta.get("ground_speed", 0.0)) if hasattr(trial, "meta") else 0.0
+    cf = ContactFit(contact="hypervolumetric", cutoff=cutoff, window=window, toe=toe,
+                    cop_threshold=cop_threshold, terms=ALL_TERMS)
+    prob = cf._problem(model, trial, gs)
+    if toe in ("kinematic", "fit"):
+        mtp = toe_from_kinematics(prob.geom, prob.q, swing=prob.meas[0] < SWING * prob.scale[0])
+        four = np.linalg.lstsq(prob.B, mtp, rcond=None)[0]
+        prob.q[:, 3], prob.v[:, 3] = prob.B @ four, prob.dB @ four
+    elif toe == "flat":
+        four = np.linalg.lstsq(prob.B, -np.maximum(prob.q[:, 2], 0.0), rcond=None)[0]
+        prob.q[:, 3], prob.v[:, 3] = prob.B @ four, prob.dB @ four
+    return prob, gs
+
+
+def site_kinematics_of(problem) -> dict:
+    """``{site: SiteKinematics}`` of foot2d over the problem's frames."""
+    return foot2d_site_kinematics(problem.geom, problem.q, problem.v)
+
+
+def predict_reaction(problem, contacts):
+    """The :class:`~pinmsk.contact.GroundReaction` of ``contacts`` (components on foot2d's
+    heel/metatarsal/toe frames) over the problem's kinematics; ``None`` when ``contacts`` is empty."""
+    contacts = list(contacts)
+    if not contacts:
+        return None
+    kin = site_kinematics_of(problem)
+    outs = []
+    for c in contacts:
+        if c.target not in SITES:
+            raise ModelError(f"contact {c.label}: the contact diagnosis evaluates spheres on foot2d's sites "
+                             f"({', '.join(SITES)}), not on frame '{c.target}'")
+        outs.append(c.evaluate_kinematics(kin[c.target]))
+    return ground_reaction(outs)
+
+
+# -- the comparison -----------------------------------------------------------------------
+
 def applicable(model, trial) -> bool:
     """The auto rule: contact sites and driving coordinates, GRF channels, no ``<coord>_moment``."""
-    from ..contact.diagnosis import drivable
     if any(f"{c}_moment" in trial for c in model.coordinates):
         return False
     return drivable(model, trial)
 
 
 def _why_not(model, trial) -> str:
-    from ..contact.diagnosis import drivable
-    from ..contact.identify import DRIVE, GRF
     if not drivable(model):
         return (f"model '{model.name}' is not a kinematically driven foot: the contact comparison needs "
                 f"frames heel, metatarsal, toe and coordinates {', '.join(DRIVE)}, mtp (foot2d)")
@@ -149,7 +269,6 @@ class ContactEquationError:
 
 
 def _window(trial):
-    from ..contact.identify import stance_cycle
     try:
         return stance_cycle(trial)
     except TrialError:
@@ -163,7 +282,6 @@ def _toe(trial) -> str:
 def _reaction_matrix(problem, gr) -> np.ndarray:
     n = problem.t.size
     if gr is None:
-        from ..contact.diagnosis import site_kinematics_of
         kin = site_kinematics_of(problem)
         cop = np.mean([k.position[:, 0] for k in kin.values()], axis=0)
         return np.column_stack([np.zeros(n), np.zeros(n), cop])
@@ -177,9 +295,6 @@ def _model_contacts(model):
 def compare_contact(model, trial, *, cutoff=None, noise_floor: NoiseFloor | None = None, problem=None,
                     options=None):
     """The contact-level :class:`~pinmsk.diagnose.compare.Comparison` (see the module docstring)."""
-    from ..contact.diagnosis import contact_problem, predict_reaction, site_kinematics_of
-    from .compare import Comparison
-
     if problem is None:
         why = _why_not(model, trial)
         if why:
@@ -213,16 +328,18 @@ def compare_contact(model, trial, *, cutoff=None, noise_floor: NoiseFloor | None
     opts = {"grf_frames": None, "sim_window": 0.5}
     opts.update(options or {})
     c = Comparison("contact", model, trial, cutoff, problem.t.copy(), CHANNELS, CHANNELS, measured, modelled,
-                   noise_floor, eq, states, opts, None, mask)
+                   noise_floor, eq, states, opts, None, mask, remake=_remake_contact)
     c.ground_speed = gs if gs is not None else float(trial.meta.get("ground_speed", 0.0))
     return c
 
 
-def _floor(model, trial, problem, cutoff, window, toe, mask, modelled) -> NoiseFloor:
-    from ..contact.diagnosis import contact_problem, predict_reaction
-    from ..contact.identify import DRIVE
-    from ..trial import Trial
+def _remake_contact(c: Comparison, model) -> Comparison:
+    """``c`` again for another model: the same stance problem, noise floor and options."""
+    return compare_contact(model, c.trial, cutoff=c.cutoff, noise_floor=c.noise, problem=c.eq.problem,
+                           options=c.options)
 
+
+def _floor(model, trial, problem, cutoff, window, toe, mask, modelled) -> NoiseFloor:
     meas = problem.meas
     unloaded = np.abs(meas[0]) < UNLOADED * np.max(np.abs(meas[0]))
     src = meas[:2, unloaded] if unloaded.sum() >= 20 else meas[:2]
@@ -305,37 +422,6 @@ class ContactSet:
         return f"<ContactSet {self.label} on {self.target}>"
 
 
-@dataclass
-class ContactFitResult:
-    """One identified contact model, shaped like :class:`~pinmsk.diagnose.fit.FitResult`."""
-
-    effect: ContactSet
-    values: dict
-    stderr: dict
-    sse: float            # chi2 after (noise-whitened)
-    sse_before: float     # chi2 of the model as given
-    n: int                # residuals
-    converged: bool
-    message: str
-    nfev: int
-    n_free: int
-    contact_fit: object = field(repr=False, default=None)
-    delta: np.ndarray = field(repr=False, default=None)
-
-    @property
-    def components(self) -> list:
-        return self.effect.components
-
-    @property
-    def n_params(self) -> int:
-        return self.n_free
-
-    @property
-    def bic_change(self) -> float:
-        """BIC(candidate) - BIC(model as given), ``chi2 + k ln n`` with the noise floor as sigma."""
-        return bic_change(self.sse, self.sse_before, n=self.n, k=self.n_free, variance="known")
-
-
 def _fit_candidates(c, cands) -> dict:
     """``{name: ContactFit or exception}`` for every candidate, with the comparison's kinematics."""
     out = {}
@@ -344,7 +430,7 @@ def _fit_candidates(c, cands) -> dict:
                 terms=("normal_force", "friction_force", "cop"), n_starts=N_STARTS)
     for cand in cands:
         try:
-            out[cand.name] = cand.fit(c.model, trial, **opts)
+            out[cand.name] = cand.fitter(c.model, **opts).fit(c.model, trial)
         except PinmskError as exc:
             out[cand.name] = exc
     return out
@@ -360,8 +446,6 @@ def polish(c, contacts, *, max_nfev: int = 200):
     """
     from scipy.optimize import least_squares
     from threadpoolctl import threadpool_limits
-    from ..contact.diagnosis import predict_reaction, site_kinematics_of
-    from ..contact.foot import ground_reaction
 
     problem = c.eq.problem
     kin = site_kinematics_of(problem)
@@ -420,10 +504,16 @@ def polish(c, contacts, *, max_nfev: int = 200):
 
 
 def rank_contacts(c, settings, fits=None):
-    """Fit (or reuse ``fits``) and score the contact candidates: ``(ranking, skipped, fits)``."""
-    from ..contact.diagnosis import contact_candidates, predict_reaction
-    from .diagnosis import EffectScore, _order_by_bic
+    """Fit (or reuse ``fits``) and score the contact candidates: ``(ranking, skipped, fits)``.
 
+    Each entry's ``fit`` is a :class:`~pinmsk.fitting.Result`: the change of the three compared
+    channels the candidate makes (its model GRF minus the model's as given) over the compared
+    frames, the statistics of the noise-whitened residual (``sse`` after, ``sse_before`` of the
+    model as given, ``k`` the identified parameters, ``variance = "known"``: the noise floor is
+    sigma, so ``bic_change = chi2 - chi2_before + k ln n``) and the details ``effect`` (a
+    :class:`ContactSet`), ``params``, ``stderr``, ``components`` (the fitted spheres),
+    ``contact_fit`` (the :class:`~pinmsk.contact.ContactFit`) and ``delta`` (the channels as an array).
+    """
     cands = contact_candidates(c.model, c.trial)
     if fits is None:
         fits = _fit_candidates(c, cands)
@@ -445,28 +535,31 @@ def rank_contacts(c, settings, fits=None):
         res = np.where(mask, c.measured - pred, 0.0)
         chi1 = weighted_sse(res, sig)
         cs = ContactSet(cand.name, comps)
-        conv = bool(fit.result_.status > 0)
-        res_fit = ContactFitResult(cs, cs.values, stderr, chi1, chi0, n, conv,
-                                   str(getattr(fit.result_, "message", "")), int(fit.nfev_), int(fit.n_free_),
-                                   fit, delta=np.where(mask, c.modelled - pred, 0.0))
+        conv = fit.result_.stats.converged
+        stats = FitStatistics(n=n, k=int(fit.n_free_), sse=chi1, sse_before=chi0, variance="known", converged=conv,
+                              message=fit.result_.stats.message, iterations=int(fit.nfev_), objective=chi1)
+        delta = np.where(mask, c.modelled - pred, 0.0)
+        res_fit = Result(problem.t, {ch: delta[:, j] for j, ch in enumerate(CHANNELS)},
+                         meta={"analysis": "contact_candidate", "effect": cand.name}, stats=stats,
+                         info={"effect": cs, "params": cs.values, "stderr": stderr, "components": comps,
+                               "contact_fit": fit, "delta": delta})
         rms = np.sqrt(np.sum(res ** 2, axis=0) / np.maximum(mask.sum(axis=0), 1))
         rmse_after = {ch: float(v) for ch, v in zip(CHANNELS, rms)}
         rmse_after["total"] = float(np.sqrt(np.mean(rms ** 2)))
         explained = max(1.0 - chi1 / chi0, -1.0) if chi0 > 0 else 0.0
-        dbic = res_fit.bic_change
+        dbic = stats.bic_change
         significant = conv and dbic < -settings.get("delta_bic", DELTA_BIC)
         note = "" if conv else "fit did not converge (best start hit max_nfev)"
         s = EffectScore(res_fit, rmse_after, explained, (chi0 - chi1) / max(n, 1), significant, conv, note)
         s.delta_bic = dbic
         s.worst_windows = _candidate_windows(c, res, settings)
         ranking.append(s)
-    return _order_by_bic(ranking), skipped, fits
+    return order_by_bic(ranking), skipped, fits
 
 
 def _candidate_windows(c, residual, settings) -> list:
-    from .diagnosis import _windows_of
     """The 3 worst windows of each channel (ordered by rmse / floor over all channels)."""
-    every = _windows_of(c.time, residual, c.channels, c.noise.as_dict(), contact_window(c, settings["window"]),
+    every = windows_of(c.time, residual, c.channels, c.noise.to_dict(), contact_window(c, settings["window"]),
                         k=10 ** 6, mask=c.mask)
     out, count = [], {}
     for w in every:

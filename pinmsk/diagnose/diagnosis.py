@@ -30,21 +30,24 @@ diagnose again.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
 from ..components import Component
-from ..errors import ConvergenceError, ModelError, PinmskError, TrialError
-from .catalog import catalog as effect_catalog
-from .catalog import CatalogContext
 from ..effects import registry
-from ..effects._base import unactuated_coordinates
-from .compare import DEFAULT_CUTOFF, Comparison, compare, simulate_windows
-from .fit import CandidateFit, FitResult
+from ..effects._base import is_prismatic, moving_bodies, unactuated_coordinates
+from ..errors import ConvergenceError, ModelError, PinmskError, TrialError
+from ..fitting import Result
+from ..io.output_files import write_json
 from ..signals.sampling import median_step
+from .catalog import CatalogContext
+from .catalog import catalog as effect_catalog
+from .compare import DEFAULT_CUTOFF, Comparison, compare, simulate_windows
+from .contact import DELTA_BIC, contact_window, model_with_contacts, rank_contacts, resolve
+from .fit import EffectFit, describe_fit
+from .ranking import EffectScore, finite_or_none, windows_of
 
 __all__ = ["Diagnosis", "DiagnosisRun", "EffectScore", "diagnose", "run", "parse_effect", "describe_fit",
            "AT_FLOOR", "THRESHOLD"]
@@ -54,85 +57,6 @@ THRESHOLD = 0.1
 #: error / noise floor at or below which the verdict is at_noise_floor
 AT_FLOOR = 1.5
 _MIN_BLOCK = 20
-
-
-@dataclass
-class EffectScore:
-    """One ranked candidate: the fitted effect and how much it explains out of sample."""
-
-    fit: FitResult
-    rmse_after: dict
-    explained_fraction: float
-    improvement: float
-    significant: bool
-    converged: bool
-    note: str = ""
-
-    @property
-    def effect(self) -> Component:
-        """The fitted component (add it with ``model.with_effect(score.effect)``)."""
-        return self.fit.effect
-
-    @property
-    def family(self) -> str:
-        return self.effect.family
-
-    @property
-    def target(self) -> str | None:
-        return self.effect.target
-
-    @property
-    def label(self) -> str:
-        return self.effect.label
-
-    @property
-    def params(self) -> dict:
-        return dict(self.fit.values)
-
-    @property
-    def stderr(self) -> dict:
-        return dict(self.fit.stderr)
-
-    def describe_params(self) -> str:
-        """``name = value ± stderr unit, ...`` of the fitted parameters."""
-        return describe_fit(self.fit)
-
-    def to_json(self) -> dict:
-        return {
-            "effect": self.family, "target": self.target,
-            "params": {k: float(v) for k, v in self.params.items()},
-            "rmse_after": {k: float(v) for k, v in self.rmse_after.items()},
-            "explained_fraction": float(self.explained_fraction),
-            "significant": bool(self.significant),
-            "stderr": {k: _finite(v) for k, v in self.stderr.items()},
-            **({"bic_change": float(self.fit.bic_change), "n_params": int(self.fit.n_params),
-                "worst_windows": [dict(w) for w in getattr(self, "worst_windows", [])]}
-               if getattr(self.effect, "kind", None) == "contact" else {}),
-        }
-
-
-def describe_fit(fit: FitResult) -> str:
-    """``name = value ± stderr unit, ...`` (``(at bound)`` where the fit stopped at a bound)."""
-    parts = []
-    decl = fit.effect.params
-    for k, v in fit.values.items():
-        se = fit.stderr.get(k)
-        unit = decl[k].unit
-        s = f"{k} = {v:.4g}"
-        if se is not None and np.isfinite(se):
-            s += f" ± {se:.2g}"
-        s += f" {unit}" if unit else ""
-        if se is not None and np.isnan(se):
-            s += " (at bound)"
-        elif se is not None and np.isinf(se):
-            s += " (not identifiable)"
-        parts.append(s)
-    return ", ".join(parts)
-
-
-def _finite(x):
-    x = float(x)
-    return x if np.isfinite(x) else None
 
 
 class Diagnosis:
@@ -155,7 +79,7 @@ class Diagnosis:
         self.settings = settings
         self.skipped = skipped
         self.rmse = comparison.rmse()
-        self.noise_floor = comparison.noise.as_dict()
+        self.noise_floor = comparison.noise.to_dict()
         self.ratio = comparison.ratio()
         self.channel_ratios = {ch: self.rmse[ch] / self.noise_floor[ch] for ch in comparison.channels}
         worst = max(self.channel_ratios.values())
@@ -180,14 +104,16 @@ class Diagnosis:
                 return s
         return None
 
-    def fit(self, effect, target: str | None = None, *, max_nfev: int = 100) -> FitResult:
-        """Fit an effect (family name, ``family:target`` or a Component) on all frames.
+    def fit(self, effect, target: str | None = None, *, max_nfev: int = 100) -> Result:
+        """The fit of an effect (family name, ``family:target`` or a Component) on all frames.
 
+        A name the ranking holds gives that entry's fit; anything else is
+        fitted by :class:`~pinmsk.diagnose.fit.EffectFit`.  Either way the
+        answer is a :class:`~pinmsk.fitting.Result` (see ``EffectFit``).
         Raises :class:`~pinmsk.errors.ConvergenceError` if the fit does not
         converge within ``max_nfev`` evaluations.
         """
         if self.comparison.mode == "contact":
-            from .contact import resolve
             return resolve(self, effect, target).fit
         comp = _resolve(effect, target, self)
         plain = isinstance(effect, str) and not parse_effect(effect)[2]
@@ -195,18 +121,11 @@ class Diagnosis:
             if plain and s.label == comp.label:
                 if not s.converged:
                     raise ConvergenceError(
-                        f"the fit of {s.label} did not converge ({s.fit.message}); it cannot be added as is. "
-                        "Check that the trial covers the effect or pass fixed parameter values"
+                        f"the fit of {s.label} did not converge ({s.fit.stats.message}); it cannot be added as "
+                        "is. Check that the trial covers the effect or pass fixed parameter values"
                     )
                 return s.fit
-        cf = CandidateFit(self.comparison.eq, self.comparison.eq_noise.sigma, comp)
-        x, conv, msg = cf.fit(max_nfev=max_nfev)
-        if not conv:
-            raise ConvergenceError(
-                f"the fit of {comp.label} did not converge after {cf.nfev} evaluations ({msg.rstrip('.')}); check that "
-                "the trial covers the effect, or fix some parameters (Parameter.vary=False)"
-            )
-        return cf.result(x, conv, msg)
+        return EffectFit(comp, max_nfev=max_nfev).fit(self.comparison).result_
 
     def with_effect(self, effect=None, target: str | None = None):
         """The model with an effect added, fitted (default: the best significant one)."""
@@ -218,14 +137,15 @@ class Diagnosis:
         return _model_plus(self.model, self.fit(effect, target))
 
     # -- reporting -----------------------------------------------------------------------
-    def to_json_dict(self, added: Sequence = ()) -> dict:
+    def to_dict(self, added: Sequence = ()) -> dict:
+        """The diagnosis as a JSON-ready dict (``added``: the fits added before it, for ``"added"``)."""
         inputs = self.comparison.inputs
         return {
             "inputs": inputs.meta() if inputs is not None else {},
             "rmse": dict(self.rmse),
             "noise_floor": dict(self.noise_floor),
             "worst_windows": [dict(w) for w in self.worst_windows],
-            "ranking": [s.to_json() for s in self.ranking],
+            "ranking": [s.to_dict() for s in self.ranking],
             "verdict": self.verdict,
             "added": [_added_json(a) for a in added],
         }
@@ -271,7 +191,7 @@ class Diagnosis:
                 sig = "yes" if s.significant else "no "
                 ww = s.worst_windows[0] if s.worst_windows else None
                 where = (f"  worst {ww['channel']} {ww['start']:.2f}-{ww['end']:.2f} s" if ww else "")
-                lines.append(f"  {k:>2}. {s.label:<{lw}}  k = {s.fit.n_params:>2}  dBIC {s.fit.bic_change:10.1f}  "
+                lines.append(f"  {k:>2}. {s.label:<{lw}}  k = {s.fit.stats.k:>2}  dBIC {s.fit.stats.bic_change:10.1f}  "
                              f"explained {100 * s.explained_fraction:6.1f}%  rmse after "
                              + ", ".join(f"{ch} {s.rmse_after[ch]:.3g}" for ch in c.channels)
                              + f"  significant {sig}{where}" + (f"  [{s.note}]" if s.note else ""))
@@ -301,7 +221,7 @@ class Diagnosis:
                  else f"the error is {self.ratio:.1f}x the noise floor over all channels, {worst:.1f}x on {ch}")
         if self.best is not None and self.comparison.mode == "contact":
             return (f"verdict: missing_effect -- {where}; best explanation: the {self.best.label} contact model "
-                    f"(BIC {self.best.fit.bic_change:+.4g}, fitted parameters above); add it with "
+                    f"(BIC {self.best.fit.stats.bic_change:+.4g}, fitted parameters above); add it with "
                     f"--add {self.best.label}")
         if self.best is not None:
             return (f"verdict: missing_effect -- {where}; best explanation: {self.best.label} "
@@ -318,13 +238,11 @@ class Diagnosis:
 def _model_plus(model, fit):
     """``model`` with a fitted effect; a contact model replaces the contacts on its frames."""
     if getattr(fit.effect, "kind", None) == "contact" and hasattr(fit, "components"):
-        from .contact import model_with_contacts
         return model_with_contacts(model, fit)
     return model.with_effect(fit.effect)
 
 
 def _unit(c: Comparison) -> str:
-    from ..effects._base import is_prismatic
     if c.mode == "contact":
         return "N and m"
     lin = [is_prismatic(c.model, x) for x in c.coordinates]
@@ -337,8 +255,8 @@ def _added_json(a) -> dict:
     fit = a.fit if isinstance(a, EffectScore) else a
     eff = fit.effect
     return {"effect": eff.family, "target": eff.target,
-            "params": {k: float(v) for k, v in fit.values.items()},
-            "stderr": {k: _finite(v) for k, v in fit.stderr.items()}}
+            "params": {k: float(v) for k, v in fit.params.items()},
+            "stderr": {k: finite_or_none(v) for k, v in fit.stderr.items()}}
 
 
 # -- building blocks -------------------------------------------------------------------------
@@ -400,7 +318,6 @@ def _targets(cls, model) -> str:
     if kind == "coordinate":
         return ", ".join(model.coordinates)
     if kind in ("frame", "body"):
-        from ..effects._base import moving_bodies
         names = list(moving_bodies(model)) if kind == "body" else list(model.frame_names)
         return ", ".join(names)
     if kind == "muscle":
@@ -412,39 +329,8 @@ def _targets(cls, model) -> str:
 
 def _worst_windows(c: Comparison, window: float, k: int = 5) -> list:
     if c.mode == "contact":
-        from .contact import contact_window
         window = contact_window(c, window)
-    return _windows_of(c.time, c.residual, c.channels, c.noise.as_dict(), window, k=k, mask=c.mask)
-
-
-def _windows_of(t, res, channels, floor: dict, window: float, k: int = 5, mask=None) -> list:
-    """The ``k`` (channel, time window) pairs with the largest RMS residual / noise floor."""
-    dur = t[-1] - t[0]
-    if dur / window < 3:
-        window = dur / 5
-    dt = median_step(t)
-    if window / dt < 10:
-        raise TrialError(
-            f"windows of {window:.3g} s hold {window / dt:.1f} samples at {1 / dt:.4g} Hz; need at least 10 "
-            "per window: pass a longer window= or a longer, denser trial"
-        )
-    out = []
-    starts = np.arange(t[0], t[-1] - 0.5 * window, window)
-    for a in starts:
-        sel = (t >= a) & (t < a + window)
-        if sel.sum() < 5:
-            continue
-        if mask is None:
-            r = np.sqrt(np.mean(res[sel] ** 2, axis=0))
-        else:
-            m = mask[sel]
-            r = np.sqrt(np.sum(np.where(m, res[sel] ** 2, 0.0), axis=0) / np.maximum(m.sum(axis=0), 1))
-            r = np.where(m.sum(axis=0) >= 3, r, 0.0)
-        for ch, v in zip(channels, r):
-            out.append({"channel": ch, "start": float(a), "end": float(min(a + window, t[-1])),
-                        "rmse": float(v)})
-    out.sort(key=lambda w: -w["rmse"] / floor[w["channel"]])
-    return out[:k]
+    return windows_of(c.time, c.residual, c.channels, c.noise.to_dict(), window, k=k, mask=c.mask)
 
 
 def _correlations(c: Comparison, k: int = 4) -> dict:
@@ -465,19 +351,18 @@ def _correlations(c: Comparison, k: int = 4) -> dict:
     return out
 
 
-def _score(c: Comparison, cf: CandidateFit, settings) -> EffectScore:
-    folds = settings["folds"]
-    guard = settings["guard"]
-    x, conv, msg = cf.fit()
-    fit = cf.result(x, conv, msg)
-    e_cv, cv_ok = cf.cross_validate(folds, guard, x_full=None if cf.linear else x)
+def _score(c: Comparison, est: EffectFit, settings) -> EffectScore:
+    """The ranking entry of a fitted candidate: held-out error by blocked cross-validation."""
+    fit = est.result_
+    conv, msg = fit.stats.converged, fit.stats.message
+    e_cv, cv_ok = est.cross_validate(folds=settings["folds"], guard=settings["guard"])
     sig = c.eq_noise.sigma
     mse0 = float(np.mean((c.eq.e / sig) ** 2))
     mse1 = float(np.mean((e_cv / sig) ** 2))
     # A muscle-level effect also filters the measured signals' noise; that part of the fall is not
     # physics.  Count only the fall beyond the change of the noise floor it causes.
     floor_change = 0.0
-    if cf.signal and c.mode == "muscle":
+    if est.problem_.signal and c.mode == "muscle":
         emg_after = c.eq.emg_noise(fit.effect)
         after2 = c.noise.propagated ** 2 + emg_after ** 2
         floor_change = float(np.mean((sig ** 2 - after2) / sig ** 2))
@@ -491,7 +376,7 @@ def _score(c: Comparison, cf: CandidateFit, settings) -> EffectScore:
         rmse_after["total"] = float(np.sqrt(np.mean(r ** 2)))
     converged = bool(conv)
     note = "" if converged else f"fit did not converge: {msg}"
-    significant = converged and improvement >= settings["threshold"] and fit.bic_change < 0
+    significant = converged and improvement >= settings["threshold"] and fit.stats.bic_change < 0
     return EffectScore(fit, rmse_after, explained, improvement, significant, converged, note)
 
 
@@ -561,8 +446,7 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
     ranking, skipped = [], []
     for comp in cands:
         try:
-            cf = CandidateFit(c.eq, c.eq_noise.sigma, comp)
-            ranking.append(_score(c, cf, settings))
+            ranking.append(_score(c, EffectFit(comp, strict=False).fit(c), settings))
         except PinmskError as exc:
             skipped.append((comp.label, str(exc)))
     ranking = _order(ranking)
@@ -572,7 +456,6 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
 
 
 def _diagnose_contact(c, candidates, folds, threshold, at_floor, window, cutoff, delta_bic, fits) -> Diagnosis:
-    from .contact import DELTA_BIC, rank_contacts
     if candidates is not None:
         raise ModelError("contact mode ranks the contact models of the foot (point, volumetric, "
                          "hypervolumetric, hypervolumetric_relaxed); candidates= does not apply")
@@ -585,11 +468,6 @@ def _diagnose_contact(c, candidates, folds, threshold, at_floor, window, cutoff,
     return d
 
 
-def _order_by_bic(ranking: list) -> list:
-    """Converged first, then lowest BIC (largest fall of BIC against the model as given)."""
-    return sorted(ranking, key=lambda s: (not s.converged, s.fit.bic_change))
-
-
 def _order(ranking: list, tie: float = 0.05) -> list:
     """Best held-out improvement first; within ``tie`` (noise variances) the fewer parameters first."""
     out = sorted(ranking, key=lambda s: (not s.converged, -s.improvement))
@@ -597,7 +475,7 @@ def _order(ranking: list, tie: float = 0.05) -> list:
         swapped = False
         for i in range(len(out) - 1):
             a, b = out[i], out[i + 1]
-            if (a.converged == b.converged and a.target == b.target and a.fit.n_params > b.fit.n_params
+            if (a.converged == b.converged and a.target == b.target and a.fit.stats.k > b.fit.stats.k
                     and a.improvement - b.improvement < tie):
                 out[i], out[i + 1] = b, a
                 swapped = True
@@ -632,8 +510,9 @@ class DiagnosisRun:
     ratio = property(lambda self: self.final.ratio)
     correlations = property(lambda self: self.final.correlations)
 
-    def to_json_dict(self) -> dict:
-        return self.final.to_json_dict(self.added)
+    def to_dict(self) -> dict:
+        """The loop as a JSON-ready dict: the final diagnosis and the effects added."""
+        return self.final.to_dict(self.added)
 
     def summary_text(self) -> str:
         first = self.steps[0]
@@ -651,8 +530,7 @@ class DiagnosisRun:
 
     def write_json(self, path) -> Path:
         """The JSON summary (parent folders created); refused if any number is NaN or infinite."""
-        from ..io.output_files import write_json
-        return write_json(path, self.to_json_dict(), parents=True)
+        return write_json(path, self.to_dict(), parents=True)
 
     def __repr__(self) -> str:
         return f"<DiagnosisRun {len(self.added)} added, final {self.final!r}>"

@@ -1,5 +1,12 @@
 """Fitting one effect's parameters to the equation error, in and out of sample.
 
+The one entry point is :class:`EffectFit`:
+``EffectFit(effect).fit(comparison).result_`` is a :class:`~pinmsk.fitting.Result`
+-- the change of the compared channels the fitted effect makes, with the
+fit's statistics and the details ``effect`` (the fitted component),
+``params`` and ``stderr`` -- the same type as every ranked candidate's
+``EffectScore.fit`` in :mod:`pinmsk.diagnose.diagnosis`.
+
 An effect with parameters ``theta`` changes the equation error ``e`` (see
 :mod:`pinmsk.diagnose.compare`) by ``d(theta)``; the fit minimises the
 noise-whitened sum of squares ``sum_c sum_k ((e_kc + d_kc(theta)) / sigma_c)^2``
@@ -21,7 +28,7 @@ the optimum and ``s^2`` the residual variance, inflated by
 AR(1) effective-sample-size correction; the filtered-kinematics part of the
 noise is not white).
 
-Blocked cross-validation (:meth:`CandidateFit.cross_validate`): the frames
+Blocked cross-validation (:meth:`EffectFit.cross_validate`): the frames
 are cut into ``folds`` contiguous blocks; each block is predicted by the fit
 on the others, leaving out a guard of ``guard`` frames on either side of the
 held-out block (the low-pass filter correlates neighbouring frames).
@@ -29,52 +36,28 @@ held-out block (the low-pass filter correlates neighbouring frames).
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares, lsq_linear
 
 from ..components import Component
-from ..errors import ConvergenceError, ModelError
 from ..effects._base import SignalEffect
-from ..stats import aic_change, bic_change, weighted_sse
+from ..errors import ConvergenceError, ModelError
+from ..fitting import FitStatistics, Fitter, Result, format_report
+from ..stats import weighted_sse
+from ..trial import moment_channel
 
-__all__ = ["CandidateFit", "EffectFit", "FitResult", "fit_effect"]
-
-
-@dataclass
-class FitResult:
-    """Fitted parameters of one effect on the equation error."""
-
-    effect: Component
-    values: dict
-    stderr: dict
-    sse: float
-    sse_before: float
-    n: int
-    converged: bool
-    message: str
-    nfev: int
-    delta: np.ndarray = field(repr=False, default=None)
-
-    @property
-    def n_params(self) -> int:
-        """The number of fitted (free) parameters; fixed ones (``vary=False``) do not count."""
-        return sum(self.effect.params[k].vary for k in self.values)
-
-    @property
-    def bic_change(self) -> float:
-        """BIC(with effect) - BIC(without), Gaussian likelihood with unknown (estimated) variance."""
-        return bic_change(self.sse, self.sse_before, n=self.n, k=self.n_params, variance="estimated")
-
-    @property
-    def aic_change(self) -> float:
-        """AIC(with effect) - AIC(without), Gaussian likelihood with unknown (estimated) variance."""
-        return aic_change(self.sse, self.sse_before, n=self.n, k=self.n_params, variance="estimated")
+__all__ = ["EffectFit", "EffectProblem", "describe_fit"]
 
 
-class CandidateFit:
-    """One candidate effect on one :class:`~pinmsk.diagnose.compare.EquationError`."""
+class EffectProblem:
+    """One effect on one :class:`~pinmsk.diagnose.compare.EquationError`, prepared for fitting.
+
+    Built once per effect (the component's caches, the channels it changes);
+    :meth:`solve` finds the parameters on any subset of the frames, which is
+    what the cross-validation repeats.  :class:`EffectFit` is the fitter
+    around it.
+    """
 
     def __init__(self, eq, sigma: np.ndarray, component: Component):
         self.eq = eq
@@ -207,7 +190,7 @@ class CandidateFit:
             out.extend(X[np.argsort(s)[:2]])
         return out
 
-    def fit(self, mask=None, x0=None, *, max_nfev: int = 100) -> tuple[np.ndarray, bool, str]:
+    def solve(self, mask=None, x0=None, *, max_nfev: int = 100) -> tuple[np.ndarray, bool, str]:
         """Best parameters on the ``mask`` rows: ``(x, converged, message)``."""
         n = self.eq.rows.size
         mask = np.ones(n, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
@@ -300,8 +283,8 @@ class CandidateFit:
         return least_squares(fun, x0, jac=jac, bounds=(self.lo, self.hi), method="trf",
                              x_scale="jac", max_nfev=max_nfev, xtol=1e-8, ftol=1e-9)
 
-    def result(self, x, converged: bool, message: str, mask=None) -> FitResult:
-        """A :class:`FitResult` with uncertainties at ``x`` (fit on ``mask``)."""
+    def result(self, x, converged: bool, message: str, mask=None) -> Result:
+        """The :class:`~pinmsk.fitting.Result` of the parameters ``x`` (fit on ``mask``), with uncertainties."""
         n_rows = self.eq.rows.size
         mask = np.ones(n_rows, dtype=bool) if mask is None else mask
         d = self.predict(x[None])[0] if self.names else np.zeros_like(self.e)
@@ -349,8 +332,15 @@ class CandidateFit:
         effect = self.component.with_params(clipped, stderr=stderr)
         full = np.zeros_like(self.eq.e)
         full[:, self.act] = d
-        return FitResult(effect, {k: clipped[k] for k in self.all_names}, stderr, sse, sse0, n_all,
-                         converged, message, self.nfev, full)
+        stats = FitStatistics(n=n_all, k=p, sse=sse, sse_before=sse0, variance="estimated", converged=converged,
+                              message=message, iterations=self.nfev, objective=sse)
+        info = {"effect": effect, "params": {k: clipped[k] for k in self.all_names}, "stderr": stderr,
+                "delta": full}
+        channels = {moment_channel(c): full[:, j] for j, c in enumerate(self.eq.coordinates)}
+        title = f"{effect.label}: {_describe(effect, info['params'], stderr)}"
+        return Result(self.eq.motion.t[self.eq.rows], channels, stats=stats, info=info,
+                      meta={"analysis": "effect_fit", "effect": effect.label},
+                      report=format_report(title, stats.rows()))
 
     def cross_validate(self, folds: int, guard: int, x_full=None) -> tuple[np.ndarray, bool]:
         """Held-out predictions: ``e`` plus each block's change predicted by the fit on the others."""
@@ -364,10 +354,10 @@ class CandidateFit:
             if not self.names:
                 x = np.zeros(0)
             elif self.linear or x_full is None:
-                x, conv, _ = self.fit(train)
+                x, conv, _ = self.solve(train)
                 ok &= conv
             else:
-                x, conv, _ = self.fit(train, x0=x_full, max_nfev=30)
+                x, conv, _ = self.solve(train, x0=x_full, max_nfev=30)
             d = self.predict(x[None])[0] if self.names else 0.0
             e_cv[np.ix_(blk, self.act)] = (self.e + d)[blk]
         return e_cv, ok
@@ -383,37 +373,49 @@ def _lag1(r: np.ndarray) -> float:
     return float(np.clip(rho, 0.0, 0.98))
 
 
-def fit_effect(comparison, component: Component, *, strict: bool = True, max_nfev: int = 100) -> FitResult:
-    """Fit ``component`` to a comparison's equation error (all analysed frames).
-
-    Raises :class:`~pinmsk.errors.ConvergenceError` when ``strict`` and the
-    optimiser stops without converging (after ``max_nfev`` evaluations).
-    """
-    cf = CandidateFit(comparison.eq, _eq_sigma(comparison), component)
-    x, conv, msg = cf.fit(max_nfev=max_nfev)
-    if strict and not conv:
-        raise ConvergenceError(
-            f"the fit of {component.label} did not converge after {cf.nfev} evaluations ({msg.rstrip('.')}); "
-            "check the trial covers the effect (e.g. the joint range for passive_elastic), "
-            "or fix some parameters (Parameter.vary=False) and fit again"
-        )
-    return cf.result(x, conv, msg)
+def describe_fit(fit: Result) -> str:
+    """``name = value ± stderr unit, ...`` of an effect fit (``(at bound)`` where it stopped at a bound)."""
+    return _describe(fit.effect, fit.params, fit.stderr)
 
 
-def _eq_sigma(comparison) -> np.ndarray:
-    """Noise floor of the equation-error channels (in motion mode: of the driving moments)."""
-    return comparison.eq_noise.sigma
+def _describe(effect, params: dict, stderr: dict) -> str:
+    parts = []
+    decl = effect.params
+    for k, v in params.items():
+        se = stderr.get(k)
+        unit = decl[k].unit
+        s = f"{k} = {v:.4g}"
+        if se is not None and np.isfinite(se):
+            s += f" ± {se:.2g}"
+        s += f" {unit}" if unit else ""
+        if se is not None and np.isnan(se):
+            s += " (at bound)"
+        elif se is not None and np.isinf(se):
+            s += " (not identifiable)"
+        parts.append(s)
+    return ", ".join(parts)
 
 
-class EffectFit:
-    """Fit one effect to a comparison, scikit-learn style.
+class EffectFit(Fitter):
+    """Fit one effect to a comparison's equation error on all its frames (the one way to fit an effect).
 
     ``EffectFit(effect, max_nfev=100).fit(comparison)`` returns the fitter
-    with ``effect_`` (the fitted component, parameter uncertainties in its
-    Parameters' ``stderr``), ``params_``, ``stderr_``, ``sse_`` (noise-whitened
-    sum of squares), ``n_params_``, ``aic_change_``, ``bic_change_`` and
-    ``converged_``; :meth:`report` prints them.  The constructor only stores
-    its arguments.
+    with ``result_`` (a :class:`~pinmsk.fitting.Result`: channels
+    ``<coord>_moment``, the change of the equation error the fitted effect
+    makes over the compared frames; statistics ``n`` residuals, ``k`` free
+    parameters, the noise-whitened ``sse`` and ``sse_before`` without the
+    effect, AIC/BIC with the residual variance estimated; details ``effect``,
+    ``params``, ``stderr`` and ``delta``, the channels as an array),
+    ``effect_`` (the fitted component, parameter uncertainties in its
+    Parameters' ``stderr``), ``params_``, ``stderr_``, ``sse_``,
+    ``n_params_`` (free parameters), ``aic_change_``, ``bic_change_``,
+    ``converged_``, ``theta_`` (the free parameter values) and ``problem_``
+    (the :class:`EffectProblem`, for :meth:`cross_validate`).
+
+    ``strict``: a fit that stops without converging (after ``max_nfev``
+    evaluations) raises :class:`~pinmsk.errors.ConvergenceError`; with
+    ``strict=False`` it is kept, flagged ``converged = False`` (the ranking
+    does so).
     """
 
     def __init__(self, effect: Component, *, max_nfev: int = 100, strict: bool = True):
@@ -422,23 +424,36 @@ class EffectFit:
         self.strict = strict
 
     def fit(self, comparison) -> "EffectFit":
-        r = fit_effect(comparison, self.effect, strict=self.strict, max_nfev=self.max_nfev)
+        """Fit ``effect`` to ``comparison`` (a :class:`~pinmsk.diagnose.compare.Comparison`); returns self."""
+        problem = EffectProblem(comparison.eq, comparison.eq_noise.sigma, self.effect)
+        x, conv, msg = problem.solve(max_nfev=self.max_nfev)
+        if self.strict and not conv:
+            raise ConvergenceError(
+                f"the fit of {self.effect.label} did not converge after {problem.nfev} evaluations "
+                f"({msg.rstrip('.')}); check the trial covers the effect (e.g. the joint range for "
+                "passive_elastic), or fix some parameters (Parameter.vary=False) and fit again"
+            )
+        r = problem.result(x, conv, msg)
+        self.problem_ = problem
+        self.theta_ = x
         self.result_ = r
         self.effect_ = r.effect
-        self.params_ = dict(r.values)
+        self.params_ = dict(r.params)
         self.stderr_ = dict(r.stderr)
-        self.sse_ = r.sse
-        self.n_params_ = r.n_params
-        self.bic_change_ = r.bic_change
-        self.aic_change_ = r.aic_change
-        self.converged_ = r.converged
+        self.sse_ = r.stats.sse
+        self.n_params_ = r.stats.k
+        self.bic_change_ = r.stats.bic_change
+        self.aic_change_ = r.stats.aic_change
+        self.converged_ = r.stats.converged
         return self
 
-    def report(self) -> str:
-        from .diagnosis import describe_fit
-        r = self.result_
-        return (f"{r.effect.label}: {describe_fit(r)}\n"
-                f"  whitened SSE {r.sse_before:.6g} -> {r.sse:.6g} over {r.n} residuals, "
-                f"{r.n_params} free parameter(s); AIC change {self.aic_change_:+.4g}, "
-                f"BIC change {self.bic_change_:+.4g}; "
-                f"{'converged' if r.converged else 'NOT converged'} ({r.message})")
+    def cross_validate(self, *, folds: int, guard: int) -> tuple[np.ndarray, bool]:
+        """Blocked cross-validation of the fitted effect: ``(e_cv, converged)``.
+
+        ``e_cv`` is the equation error with each of ``folds`` contiguous blocks
+        changed by the effect fitted on the other frames, leaving out
+        ``guard`` frames on either side of the block (see the module notes).
+        """
+        self._check_fitted()
+        p = self.problem_
+        return p.cross_validate(folds, guard, x_full=None if p.linear else self.theta_)

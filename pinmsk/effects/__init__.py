@@ -47,23 +47,23 @@ target (implement ``generalized_force(model, motion, params=None, cache=None)
 parameter-independent work, given back as ``cache``); see
 :mod:`pinmsk.diagnose.catalog` for how candidates are chosen.
 """
-from .registry import families, from_spec, get, register
+from ..errors import ModelError
+from . import registry as _r
 from ._base import JointEffect, SignalEffect
+from .activation import ActivationDynamics
 from .damping import JointDamping
+from .delay import ElectromechanicalDelay
 from .friction import CoulombFriction
-from .spring import JointSpring
 from .passive import PassiveElastic, RienerEdrich1999PassiveMoment
 from .payload import Payload
+from .registry import families, from_spec, get, register
 from .segment_mass import SegmentMass
-from .activation import ActivationDynamics
-from .delay import ElectromechanicalDelay
+from .spring import JointSpring
 
 
 def unregister(family: str) -> None:
     """Remove a user-registered family (built-in families cannot be removed)."""
-    from . import registry as _r
     if family in _BUILTIN:
-        from ..errors import ModelError
         raise ModelError(f"'{family}' is a built-in effect family and cannot be unregistered")
     _r._REGISTRY.pop(family, None)
 

@@ -1,7 +1,7 @@
 """Electromechanical delay: muscle force follows the measured EMG/excitation ``delay`` seconds late.
 
 Physics: the 10-100 ms between the electrical activity recorded by EMG and
-the rise of muscle force (propagation along the fibres, excitation-contraction
+the rise of muscle force (propagation along the fibers, excitation-contraction
 coupling, taking up slack in the series elastic element).  The measured
 signal is shifted before it drives the muscle::
 
@@ -25,9 +25,9 @@ import threading
 import numpy as np
 
 from ..components import Parameter
+from ..signals.sampling import median_step
 from ._base import SignalEffect
 from .registry import register
-from ..signals.sampling import median_step
 
 
 @register

@@ -20,6 +20,7 @@ import difflib
 import inspect
 
 from ..errors import ModelError
+from ..io.toml_files import check_keys
 
 _REGISTRY: dict[str, type] = {}
 
@@ -58,8 +59,6 @@ def from_spec(spec: dict, *, where: str = "[[effects]]"):
     Keys other than ``type``, ``target``, ``params``, the effect's keyword options and its
     parameter names are refused with a "did you mean" (``where`` names the entry).
     """
-    from ..io.toml_files import check_keys
-
     spec = dict(spec)
     try:
         family = spec.pop("type")

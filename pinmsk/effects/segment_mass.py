@@ -20,7 +20,6 @@ with a payload on the same body).
 """
 from __future__ import annotations
 
-
 from ..components import Component, Parameter
 from ..errors import ModelError
 from ._base import add_dynamic_parameters, moving_bodies, torque_regressor

@@ -74,7 +74,7 @@ def check_finite(names: Sequence[str] | None = None, **arrays) -> None:
 def check_active(a: np.ndarray, l_ce: np.ndarray, names: Sequence[str] | None = None) -> None:
     """Raise :class:`TrialError` at the first activation ``a <= 0`` (contraction dynamics needs ``a > 0``).
 
-    ``a`` broadcasts against the fibre lengths ``l_ce``; the message names the muscle and frame.
+    ``a`` broadcasts against the fiber lengths ``l_ce``; the message names the muscle and frame.
     """
     if not (a > 0).all():
         frame, muscle = where_first(~(np.broadcast_to(a, np.broadcast_shapes(a.shape, l_ce.shape)) > 0))

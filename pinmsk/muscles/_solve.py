@@ -6,7 +6,7 @@ the fallback (the ``rtsafe`` strategy), so every element converges even where
 the residual is non-monotone (descending limb of the force-length curve) or
 the derivative is only approximate.
 
-:func:`compliant_equilibrium` uses it for the fibre length of a compliant
+:func:`compliant_equilibrium` uses it for the fiber length of a compliant
 tendon muscle, ``F_tendon = (F_ce + F_pe) cos(alpha)``, shared by the
 Thelen 2003 and Nagano-Gerritsen models.
 """
@@ -16,9 +16,9 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from ..errors import ConvergenceError
 from ._common import locate, where_first
 from .pennation import check_along_positive
-from ..errors import ConvergenceError
 
 __all__ = ["safeguarded_newton", "compliant_equilibrium"]
 
@@ -113,19 +113,19 @@ def compliant_equilibrium(l_mt, *, l_opt, l_slack, height,
                           v_mt=None, v_scale=1.0, tol: float = 1e-10, max_iter: int = 100,
                           names: Sequence[str] | None = None,
                           inputs: Mapping[str, np.ndarray] | None = None):
-    """Fibre length where tendon and fibre forces balance along the line of action.
+    """Fiber length where tendon and fiber forces balance along the line of action.
 
     Solves ``R(x) = f_t(eps(x)) - f_fib(l_ce(x), v_ce) cos(alpha(x)) = 0`` for the
-    fibre projection ``x`` in ``(0, l_mt - l_slack]`` (normalized forces):
-    at ``x -> 0`` the fibre is fully pennated and R >= 0, at ``x = l_mt - l_slack``
+    fiber projection ``x`` in ``(0, l_mt - l_slack]`` (normalized forces):
+    at ``x -> 0`` the fiber is fully pennated and R >= 0, at ``x = l_mt - l_slack``
     the tendon is slack and R <= 0.  Tolerance: ``|dx| <= tol * l_opt``.
 
     ``tendon(eps) -> (f_t, df_t/deps)``, ``tendon_strain(f_t) -> eps``,
     ``fiber(l_norm, v_norm) -> (f_fib, df_fib/dl_norm)`` with ``v_norm = None``
     meaning isometric (v_ce = 0).
 
-    With ``v_mt`` given, the fibre velocity is the quasi-static series-stiffness
-    share of ``v_mt`` (``x' = k_t v_mt / (k_t + k_m)`` with the isometric fibre
+    With ``v_mt`` given, the fiber velocity is the quasi-static series-stiffness
+    share of ``v_mt`` (``x' = k_t v_mt / (k_t + k_m)`` with the isometric fiber
     stiffness ``k_m >= 0`` along the line of action, negative values on the
     descending limb counted as 0; OpenSim's initialisation heuristic): a
     consistent initial state, not an exact one.  The share inherits the jumps
@@ -157,9 +157,9 @@ def compliant_equilibrium(l_mt, *, l_opt, l_slack, height,
     def velocity(l, inv_l, cos, k_t):
         f0, df0 = fiber(l * inv_lopt, None)
         k_m = df0 * (cos * cos) * inv_lopt + f0 * h2 * inv_l * inv_l * inv_l
-        # A negative fibre stiffness (descending limb) would let k_t + k_m pass
+        # A negative fiber stiffness (descending limb) would let k_t + k_m pass
         # through zero and the share through a pole; count it as zero, so the
-        # share stays in [0, 1] and continuous in x (1: the fibre takes it all).
+        # share stays in [0, 1] and continuous in x (1: the fiber takes it all).
         k_m = np.maximum(k_m, 0.0)
         k_tx = k_t * inv_ls
         den = k_tx + k_m
@@ -172,12 +172,12 @@ def compliant_equilibrium(l_mt, *, l_opt, l_slack, height,
         v_norm = velocity(l, inv_l, cos, k_t) / v_scale if dynamic else None
         f, df = fiber(l * inv_lopt, v_norm)
         r = f_t - f * cos
-        # dR/dx: tendon stiffness plus the fibre's along-line stiffness
+        # dR/dx: tendon stiffness plus the fiber's along-line stiffness
         # d(f cos)/dx = f' cos^2 / l_opt + f h^2 / l^3 (velocity held fixed).
         dr = -k_t * inv_ls - (df * (cos * cos) * inv_lopt + f * h2 * inv_l * inv_l * inv_l)
         return r, dr
 
-    # Initial guess: the fibre force at the rigid-tendon length stretches the
+    # Initial guess: the fiber force at the rigid-tendon length stretches the
     # tendon by the inverse tendon curve; one cheap step that lands close to the
     # root for stiff tendons.
     l_r = np.sqrt(hi * hi + h2)
@@ -188,8 +188,8 @@ def compliant_equilibrium(l_mt, *, l_opt, l_slack, height,
     x0 = np.broadcast_to(x0, shape)
     x = safeguarded_newton(residual, x0, 0.0, hi, lo_sign=1.0,
                            tol=tol * np.broadcast_to(l_opt, shape), max_iter=max_iter,
-                           what="compliant-tendon fibre equilibrium" + (
-                               " (with v_mt: the unit may shorten faster than the fibre can at "
+                           what="compliant-tendon fiber equilibrium" + (
+                               " (with v_mt: the unit may shorten faster than the fiber can at "
                                "this activation; use the isometric equilibrium, v_mt=None)"
                                if dynamic else ""),
                            names=names, inputs=inputs, accept_jumps=dynamic)

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._common import as_array, check_finite
 from ..errors import TrialError
+from ._common import as_array, check_finite
 
 __all__ = ["TAU_RISE", "TAU_FALL", "he_activation_rate", "activation_rate",
            "excitation_from_activation", "activation_from_excitation"]

@@ -16,9 +16,9 @@ kinematics), the flow of Fig. 5.6 is:
    ``a' = (f_ce' - df/dl_ce l_ce' - df/dv_ce l_ce'') / (df/da)`` with analytic partials;
 6. excitation from ``(a, a')`` by inverse activation dynamics (Eq. A.5).
 
-The fibre acceleration in step 5 needs the tendon acceleration, hence
+The fiber acceleration in step 5 needs the tendon acceleration, hence
 ``F_mt''`` (the thesis lists ``f_tm, f_tm', f_tm''`` as inputs).  ``ddF_mt``
-defaults to 0, which neglects the tendon's share of the fibre acceleration;
+defaults to 0, which neglects the tendon's share of the fiber acceleration;
 pass the true value for exact activation rates and excitations.  ``a``,
 ``l_ce`` and ``v_ce`` do not depend on it.
 
@@ -38,8 +38,8 @@ from .nagano_gerritsen import (ng_activation_from_force, ng_fiber_force_partials
                                ng_force_length_derivative)
 from .pennation import check_along_positive, pennation_height
 from .tendon import (TENDON_STRAIN0, thelen_tendon_stiffness, thelen_tendon_stiffness_derivative,
-                     thelen_tendon_strain, winters_tendon_stiffness,
-                     winters_tendon_stiffness_derivative, winters_tendon_strain)
+                     thelen_tendon_strain, winters_tendon_stiffness, winters_tendon_stiffness_derivative,
+                     winters_tendon_strain)
 from .thelen2003 import (thelen_activation_from_force, thelen_active_force_length,
                          thelen_active_force_length_derivative, thelen_fiber_force_partials,
                          thelen_passive_force_length, thelen_passive_force_length_derivative)
@@ -54,7 +54,7 @@ def inverse_muscle(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, *, ddF_mt=0.0, f_max, l_opt
                    force_length: Callable, force_partials: Callable,
                    activation_from_force: Callable, passive: Callable | None = None,
                    tau_rise: float = TAU_RISE, tau_fall: float = TAU_FALL,
-                   names: Sequence[str] | None = None, fibre_floor=None) -> dict:
+                   names: Sequence[str] | None = None, fiber_floor=None) -> dict:
     """Generic inverse Hill muscle of thesis Fig. 5.6 (see the module docstring).
 
     Model pieces (all normalized): ``tendon_strain(f)``, ``tendon_stiffness(eps)``
@@ -62,14 +62,14 @@ def inverse_muscle(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, *, ddF_mt=0.0, f_max, l_opt
     ``force_partials(v_norm, a, f_isom) -> (f, df/dv_norm, df/da, df/df_isom)``;
     ``activation_from_force(f_ce, f_isom, v_norm) -> a``;
     ``passive(l_norm) -> (f_pe, df_pe)`` or None.  ``v_norm = v_ce / v_scale``.
-    ``fibre_floor`` (m, per muscle): where the unit is shorter than its tendon there is no
-    fibre state and this raises, unless a floor is given: the fibre's projection ``x`` is
+    ``fiber_floor`` (m, per muscle): where the unit is shorter than its tendon there is no
+    fiber state and this raises, unless a floor is given: the fiber's projection ``x`` is
     then replaced by the smooth ``x_f (log(1 + exp(x / x_f)) + 1e-6 sigmoid(-x / x_f))``
     (``x`` itself where ``x > 30 x_f``), so that an optimizer's wild iterate yields a finite,
     grossly infeasible state instead of an exception.
 
     Returns a dict of ``(N, m)`` arrays: ``a, adot, u`` (activation, its rate,
-    excitation), ``l_ce, v_ce, dv_ce`` (fibre length, velocity, acceleration)
+    excitation), ``l_ce, v_ce, dv_ce`` (fiber length, velocity, acceleration)
     and ``l_t`` (tendon length).
     """
     check_finite(names, F_mt=F_mt, dF_mt=dF_mt, ddF_mt=ddF_mt, l_mt=l_mt, dl_mt=dl_mt,
@@ -96,17 +96,17 @@ def inverse_muscle(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, *, ddF_mt=0.0, f_max, l_opt
     x = np.asarray(l_mt, dtype=float) - l_t
     dx = np.asarray(dl_mt, dtype=float) - l_slack * deps
     ddx = np.asarray(ddl_mt, dtype=float) - l_slack * ddeps
-    if fibre_floor is not None:
+    if fiber_floor is not None:
         # x_f g(x / x_f), g(z) = softplus(z) + 1e-6 sigmoid(-z): smooth, never below
         # 1e-6 x_f, and x itself (to 1e-13 x_f) where z > 30, where x is taken as is
-        z = x / fibre_floor
+        z = x / fiber_floor
         sig = 0.5 * (1.0 + np.tanh(0.5 * z))
         s1 = sig * (1.0 - sig)
         g1 = sig - 1e-6 * s1
         g2 = s1 - 1e-6 * s1 * (1.0 - 2.0 * sig)
         far = z > 30.0
-        x = np.where(far, x, fibre_floor * (np.logaddexp(0.0, z) + 1e-6 * (1.0 - sig)))
-        ddx = np.where(far, ddx, g1 * ddx + g2 / fibre_floor * dx * dx)
+        x = np.where(far, x, fiber_floor * (np.logaddexp(0.0, z) + 1e-6 * (1.0 - sig)))
+        ddx = np.where(far, ddx, g1 * ddx + g2 / fiber_floor * dx * dx)
         dx = np.where(far, dx, g1 * dx)
     check_along_positive(x, l_mt, names, what="inverse muscle model")
     h = np.asarray(height, dtype=float)
@@ -149,16 +149,16 @@ def inverse_thelen2003(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, *, ddF_mt=0.0, f_max, l
                        pennation, v_max=None, tendon_strain0: float = TENDON_STRAIN0,
                        tau_rise: float = TAU_RISE, tau_fall: float = TAU_FALL,
                        names: Sequence[str] | None = None, fv_smooth: float = 0.0,
-                       fibre_floor=None) -> dict:
+                       fiber_floor=None) -> dict:
     """Inverse Thelen 2003 muscle (compliant Thelen tendon + parallel element), Fig. 5.6 / Eq. 5.2-5.4.
 
     Activation from Eq. A.9 by vectorised Newton (the activation scaling of
     v_max makes it nonlinear in ``a``).  See :func:`inverse_muscle`.  ``fv_smooth``
     blends the force-velocity slope jump at zero velocity (width in ``v/v_max``
     units, :func:`~pinmsk.muscles.thelen2003.thelen_fiber_force_partials`): without
-    it the excitation jumps wherever a fibre reverses, because Eq. 5.4 contains
+    it the excitation jumps wherever a fiber reverses, because Eq. 5.4 contains
     ``df/dv``; dynamic optimization of the IFM/IFT designs needs it continuous.
-    ``fibre_floor``: see :func:`inverse_muscle`.
+    ``fiber_floor``: see :func:`inverse_muscle`.
     """
     l_opt = np.asarray(l_opt, dtype=float)
     v_max = 10.0 * l_opt if v_max is None else np.asarray(v_max, dtype=float)
@@ -176,7 +176,7 @@ def inverse_thelen2003(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, *, ddF_mt=0.0, f_max, l
             f, fi, v, names=names, smooth=fv_smooth),
         passive=lambda l: (thelen_passive_force_length(l),
                            thelen_passive_force_length_derivative(l)),
-        tau_rise=tau_rise, tau_fall=tau_fall, names=names, fibre_floor=fibre_floor)
+        tau_rise=tau_rise, tau_fall=tau_fall, names=names, fiber_floor=fiber_floor)
 
 
 def inverse_nagano_gerritsen(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, *, ddF_mt=0.0, f_max, l_opt,

@@ -23,17 +23,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import ModelError, TrialError
 from ._common import check_finite, locate, muscle_parameter, n_muscles, where_first
 from .activation import (TAU_FALL, TAU_RISE, activation_from_excitation, activation_rate,
                          excitation_from_activation)
 from .inverse import inverse_nagano_gerritsen, inverse_thelen2003
-from .nagano_gerritsen import (ng_contraction_rate, ng_equilibrium, ng_fiber_force,
-                               ng_force_length)
+from .nagano_gerritsen import ng_contraction_rate, ng_equilibrium, ng_fiber_force, ng_force_length
 from .pennation import check_along_positive, pennation_height
 from .tendon import TENDON_STRAIN0, thelen_tendon_force, winters_tendon_force
-from .thelen2003 import (GAMMA, K_PE, PASSIVE_STRAIN0, thelen_contraction_rate,
-                         thelen_equilibrium, thelen_fiber_force, thelen_force_velocity)
-from ..errors import ModelError, TrialError
+from .thelen2003 import (GAMMA, K_PE, PASSIVE_STRAIN0, thelen_contraction_rate, thelen_equilibrium,
+                         thelen_fiber_force, thelen_force_velocity)
 
 __all__ = ["MUSCLE_PARAMETERS", "MuscleParameter", "NaganoGerritsen", "Thelen2003"]
 
@@ -67,13 +66,13 @@ class MuscleParameter:
 #: Every per-muscle parameter of the muscle-tendon models, by name (SI units).
 MUSCLE_PARAMETERS = {p.name: p for p in (
     MuscleParameter("f_max", "N", "maximum isometric force"),
-    MuscleParameter("l_opt", "m", "optimal fibre length"),
+    MuscleParameter("l_opt", "m", "optimal fiber length"),
     MuscleParameter("l_slack", "m", "tendon slack length"),
-    MuscleParameter("pennation", "rad", "pennation angle at optimal fibre length", 0.0, math.pi / 2,
+    MuscleParameter("pennation", "rad", "pennation angle at optimal fiber length", 0.0, math.pi / 2,
                     low_open=False, high_open=True),
     MuscleParameter("v_max", "m/s", "maximum shortening velocity (Thelen 2003; default 10 l_opt)"),
     MuscleParameter("width", "", "force-length half-width in units of l_opt (Nagano & Gerritsen)"),
-    MuscleParameter("fast_fraction", "", "fraction of fast-twitch fibres (energy models)", 0.0, 1.0,
+    MuscleParameter("fast_fraction", "", "fraction of fast-twitch fibers (energy models)", 0.0, 1.0,
                     low_open=False),
     MuscleParameter("volume", "m^3", "muscle volume (energy models, PCSA weights)"),
 )}
@@ -157,7 +156,7 @@ class _MuscleModel:
     def _taut(self, l_mt):
         """``(l_mt', slack)``: frames where the unit is not longer than its tendon are
         slack (a rigid tendon cannot transmit force there); ``l_mt'`` moves them just
-        past the slack length so the fibre geometry stays defined."""
+        past the slack length so the fiber geometry stays defined."""
         l_mt = np.asarray(l_mt, dtype=float)
         slack = l_mt - self.l_slack <= 1e-9 * self.l_opt
         if slack.any():
@@ -197,7 +196,7 @@ class _MuscleModel:
         return l_ce, np.asarray(v_mt, dtype=float) * cos, cos
 
     def fiber_kinematics_rigid(self, l_mt, v_mt):
-        """Fibre length and velocity ``(l_ce, v_ce)`` (m, m/s) for an inextensible tendon.
+        """Fiber length and velocity ``(l_ce, v_ce)`` (m, m/s) for an inextensible tendon.
 
         ``x = l_mt - l_slack``, ``l_ce = sqrt(x^2 + h^2)`` (constant-thickness
         pennation), ``v_ce = v_mt cos(alpha)``.
@@ -209,8 +208,8 @@ class _MuscleModel:
     def force(self, a, l_mt, v_mt, tendon: str = "rigid"):
         """Muscle-tendon force (N) at activation ``a``.
 
-        ``tendon="rigid"``: the fibre follows the unit (``fiber_kinematics_rigid``);
-        ``"compliant"``: the fibre length from :meth:`equilibrium` (with the
+        ``tendon="rigid"``: the fiber follows the unit (``fiber_kinematics_rigid``);
+        ``"compliant"``: the fiber length from :meth:`equilibrium` (with the
         quasi-static velocity share of ``v_mt``).
         """
         if tendon not in _TENDONS:
@@ -219,7 +218,7 @@ class _MuscleModel:
             return self.equilibrium(l_mt, a, v_mt)["force"]
         if v_mt is None:
             raise TrialError("the rigid-tendon force needs the muscle-tendon velocity v_mt "
-                             "(pass 0.0 for an isometric fibre)")
+                             "(pass 0.0 for an isometric fiber)")
         self._check(a=a, l_mt=l_mt, v_mt=v_mt)
         a = self._check_activation(a)
         return self._rigid_force(a, l_mt, v_mt)
@@ -297,10 +296,10 @@ class Thelen2003(_MuscleModel):
         return f_act, f_pas
 
     def equilibrium(self, l_mt, a, v_mt=None, *, tol: float = 1e-10, max_iter: int = 100):
-        """Compliant-tendon fibre equilibrium ``F_t = (F_ce + F_pe) cos(alpha)`` (App. A.3).
+        """Compliant-tendon fiber equilibrium ``F_t = (F_ce + F_pe) cos(alpha)`` (App. A.3).
 
-        Isometric fibre (``v_ce = 0``) unless ``v_mt`` is given, in which case the
-        fibre takes the series-stiffness share of ``v_mt`` (an initial-state
+        Isometric fiber (``v_ce = 0``) unless ``v_mt`` is given, in which case the
+        fiber takes the series-stiffness share of ``v_mt`` (an initial-state
         heuristic).  Returns ``{"l_ce", "v_ce", "force"}`` (m, m/s, N).
         Raises :class:`pinmsk.errors.ConvergenceError` naming muscle and frame.
         """
@@ -318,19 +317,19 @@ class Thelen2003(_MuscleModel):
                                                 strain0=self.tendon_strain0)
 
     def contraction_rate(self, l_ce, l_mt, a):
-        """Fibre velocity ``l_ce' = f_CD(l_ce, l_mt, a)`` (m/s), compliant tendon (thesis Eq. 3.9)."""
+        """Fiber velocity ``l_ce' = f_CD(l_ce, l_mt, a)`` (m/s), compliant tendon (thesis Eq. 3.9)."""
         self._check(l_ce=l_ce, l_mt=l_mt, a=a)
         return thelen_contraction_rate(l_ce, l_mt, a, l_opt=self.l_opt, l_slack=self.l_slack,
                                        pennation=self.pennation, v_max=self.v_max,
                                        tendon_strain0=self.tendon_strain0, names=self.names)
 
     def inverse(self, F_mt, dF_mt, l_mt, dl_mt, ddl_mt, ddF_mt=0.0, *, fv_smooth: float = 0.0,
-                fibre_floor=None):
+                fiber_floor=None):
         """Activation, its rate and excitation from muscle-tendon force (thesis Fig. 5.6, Eq. 5.2-5.4).
 
-        ``ddF_mt`` (the force's second derivative) enters the fibre acceleration;
+        ``ddF_mt`` (the force's second derivative) enters the fiber acceleration;
         the default 0 neglects it (see :mod:`pinmsk.muscles.inverse`).  ``fv_smooth`` and
-        ``fibre_floor``: see :func:`~pinmsk.muscles.inverse.inverse_thelen2003`.
+        ``fiber_floor``: see :func:`~pinmsk.muscles.inverse.inverse_thelen2003`.
         Returns ``{"a", "adot", "u", "l_ce", "v_ce", "dv_ce", "l_t"}``.
         """
         return inverse_thelen2003(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, ddF_mt=ddF_mt,
@@ -338,7 +337,7 @@ class Thelen2003(_MuscleModel):
                                   pennation=self.pennation, v_max=self.v_max,
                                   tendon_strain0=self.tendon_strain0, tau_rise=self.tau_rise,
                                   tau_fall=self.tau_fall, names=self.names, fv_smooth=fv_smooth,
-                                  fibre_floor=fibre_floor)
+                                  fiber_floor=fiber_floor)
 
 
 class NaganoGerritsen(_MuscleModel):
@@ -391,7 +390,7 @@ class NaganoGerritsen(_MuscleModel):
         return f_act, np.zeros_like(f_act)
 
     def equilibrium(self, l_mt, a, v_mt=None, *, tol: float = 1e-10, max_iter: int = 100):
-        """Compliant (Winters) tendon fibre equilibrium ``F_t = F_ce cos(alpha)``.
+        """Compliant (Winters) tendon fiber equilibrium ``F_t = F_ce cos(alpha)``.
 
         Returns ``{"l_ce", "v_ce", "force"}``; see :meth:`Thelen2003.equilibrium`.
         """
@@ -409,7 +408,7 @@ class NaganoGerritsen(_MuscleModel):
                                                  strain0=self.tendon_strain0)
 
     def contraction_rate(self, l_ce, l_mt, a):
-        """Fibre velocity ``l_ce' = f_CD(l_ce, l_mt, a)`` (m/s), Winters tendon (thesis Eq. 3.9)."""
+        """Fiber velocity ``l_ce' = f_CD(l_ce, l_mt, a)`` (m/s), Winters tendon (thesis Eq. 3.9)."""
         self._check(l_ce=l_ce, l_mt=l_mt, a=a)
         return ng_contraction_rate(l_ce, l_mt, a, l_opt=self.l_opt, l_slack=self.l_slack,
                                    pennation=self.pennation, width=self.width,

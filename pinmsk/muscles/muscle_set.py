@@ -105,7 +105,7 @@ class MuscleSet(Component):
 
     @property
     def fast_fraction(self) -> np.ndarray:
-        """Fraction of fast-twitch fibres per muscle (0.5 where the model gives none)."""
+        """Fraction of fast-twitch fibers per muscle (0.5 where the model gives none)."""
         if self.mtu.fast_fraction is not None:
             return self.mtu.fast_fraction
         ff = np.full(self.n, 0.5)
@@ -114,7 +114,7 @@ class MuscleSet(Component):
 
     @property
     def pcsa(self) -> np.ndarray:
-        """Physiological cross-sectional area, volume / optimal fibre length (m^2)."""
+        """Physiological cross-sectional area, volume / optimal fiber length (m^2)."""
         return self.volume / self.l_opt
 
     @property
@@ -212,7 +212,7 @@ class MuscleSet(Component):
         """Rigid-tendon force capacity ``(F_active, F_passive)``, each (N, m).
 
         Muscle force is ``F = a * F_active + F_passive`` with ``0 <= a <= 1``:
-        ``F_active = F_max f_L f_V cos(alpha)`` at the current fibre length and
+        ``F_active = F_max f_L f_V cos(alpha)`` at the current fiber length and
         velocity, ``F_passive`` the parallel element along the tendon (zero for
         models without one).
         """
@@ -233,9 +233,9 @@ class MuscleSet(Component):
         return self.joint_moments(motion.q, F)
 
     def __eq__(self, other) -> bool:
-        """Same muscles, muscle model (all its parameters), tendon and parameter flags (paths are not compared)."""
+        """Same muscles, muscle model (all its parameters), paths, tendon and parameter flags."""
         return (type(other) is type(self) and self.names == other.names and self.mtu == other.mtu
-                and self.tendon == other.tendon and self._params == other._params)
+                and self.path == other.path and self.tendon == other.tendon and self._params == other._params)
 
     def __hash__(self) -> int:
         return hash((type(self).__name__, self.names, self.tendon))

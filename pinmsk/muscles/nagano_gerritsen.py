@@ -18,7 +18,7 @@ solved for the force: ``q = (f_isom B_rel + A_rel w)/(B_rel - w)`` with
 slopes of the two branches match at v = 0 (the curve is C1 there).
 
 The force-length parabola (Eq. A.13) is negative for ``|l_norm - 1| > width``;
-it is clipped to zero there (no fibre pushes).
+it is clipped to zero there (no fiber pushes).
 """
 from __future__ import annotations
 
@@ -72,7 +72,7 @@ def _k(f_isom, b_rel, f_hat, a_rel, gamma):
 
 def ng_fiber_force(v_norm, a, f_isom, *, a_rel=A_REL, b_rel=B_REL, f_hat=F_HAT,
                    gamma=GAMMA_SLOPE):
-    """CE force ``f_ce / F_max`` from fibre velocity: the exact inverse of Eq. A.12.
+    """CE force ``f_ce / F_max`` from fiber velocity: the exact inverse of Eq. A.12.
 
     ``a q`` with the concentric hyperbola ``q = (f_isom B + A w)/(B - w)``,
     ``w = v_norm / a_hat``, or the eccentric ``q = f_isom [1 + (f_hat - 1) v/(a_hat K + v)]``.
@@ -86,12 +86,14 @@ def ng_fiber_force(v_norm, a, f_isom, *, a_rel=A_REL, b_rel=B_REL, f_hat=F_HAT,
         w = vc / ah
         q_con = (f_isom * b_rel + a_rel * w) / (b_rel - w)
         q_ecc = f_isom * (1.0 + (f_hat - 1.0) * ve / (ah * _k(f_isom, b_rel, f_hat, a_rel, gamma) + ve))
-    return a * np.where(v <= 0.0, q_con, q_ecc)
+    f = a * np.where(v <= 0.0, q_con, q_ecc)
+    # a = 0 makes a_hat = 0 and q a 0/0 (w = v / 0); the force there is its limit a -> 0+, zero
+    return np.where(a == 0.0, 0.0, f) if np.any(a == 0.0) else f
 
 
 def ng_fiber_velocity(f_ce, a, f_isom, *, a_rel=A_REL, b_rel=B_REL, f_hat=F_HAT,
                       gamma=GAMMA_SLOPE):
-    """Fibre velocity (in l_opt/s) from CE force ``f_ce / F_max``, thesis Eq. A.12.
+    """Fiber velocity (in l_opt/s) from CE force ``f_ce / F_max``, thesis Eq. A.12.
 
     ``q = f_ce/a``; concentric (``q <= f_isom``): ``a_hat B (q - f_isom)/(q + A)``;
     eccentric: ``a_hat K (q - f_isom)/(f_isom f_hat - q)``.  Defined for
@@ -147,6 +149,13 @@ def ng_fiber_force_partials(v_norm, a, f_isom, *, a_rel=A_REL, b_rel=B_REL, f_ha
     dq_dv = np.where(concentric, dqv_c, dqv_e)
     dq_dah = np.where(concentric, dqa_c, dqa_e)
     dq_df = np.where(concentric, dqf_c, dqf_e)
+    # a = 0 (a_hat = 0): q is a 0/0 there; use the limits a -> 0+: f = 0 and its v and f_isom
+    # slopes vanish, df/da = lim q (-A_rel shortening, f_isom isometric, f_hat f_isom lengthening)
+    off = a == 0.0
+    if np.any(off):
+        q0 = np.where(v < 0.0, -a_rel, np.where(v > 0.0, f_hat * f_isom, f_isom))
+        return (np.where(off, 0.0, a * q), np.where(off, 0.0, a * dq_dv),
+                np.where(off, q0, q + a * dq_dah * dah), np.where(off, 0.0, a * dq_df))
     return a * q, a * dq_dv, q + a * dq_dah * dah, a * dq_df
 
 
@@ -160,7 +169,7 @@ def _positive_root(p, b, c):
 
 def ng_activation_from_force(f_ce, f_isom, v_norm, *, a_rel=A_REL, b_rel=B_REL, f_hat=F_HAT,
                              gamma=GAMMA_SLOPE):
-    """Activation from CE force, fibre length and velocity -- closed form (thesis Eq. 5.2 for a).
+    """Activation from CE force, fiber length and velocity -- closed form (thesis Eq. 5.2 for a).
 
     ``f = a q(v, a_hat, f_isom)`` is increasing in ``a``.  For ``a >= 0.3``
     (``a_hat = 1``) it is linear: ``a = f / q(v, 1)``.  Below, ``a_hat = 10a/3``
@@ -205,7 +214,7 @@ def _fiber_closure(a, width, *, a_rel=A_REL, b_rel=B_REL, f_hat=F_HAT, gamma=GAM
 def ng_equilibrium(l_mt, a, *, l_opt, l_slack, pennation, width, v_mt=None,
                    tendon_strain0: float = TENDON_STRAIN0, tol: float = 1e-10,
                    max_iter: int = 100, names: Sequence[str] | None = None):
-    """Compliant (Winters) tendon fibre equilibrium ``F_t = F_ce cos(alpha)`` for the NG muscle.
+    """Compliant (Winters) tendon fiber equilibrium ``F_t = F_ce cos(alpha)`` for the NG muscle.
 
     As :func:`pinmsk.muscles.thelen2003.thelen_equilibrium`, without a parallel
     element.  Returns ``(l_ce, v_ce, f_t)``, ``f_t`` normalized by F_max.

@@ -29,7 +29,7 @@ import numpy as np
 
 from pinmsk.errors import ModelError, PinmskError
 
-__all__ = ["MomentArmPath", "DisplayPoints", "display_points_from_sidecar", "path_variants"]
+__all__ = ["MomentArmPath", "PolynomialPath", "DisplayPoints", "display_points_from_sidecar", "path_variants"]
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -108,6 +108,16 @@ class MomentArmPath:
 
     def __reduce__(self):
         return (_rebuild, (type(self), self._muscles, self._coordinates, np.array(self._l0), np.array(self._coeffs)))
+
+    def __eq__(self, other) -> bool:
+        """Same muscles, coordinates, lengths at q = 0 and moment-arm coefficients."""
+        if type(other) is not type(self):
+            return NotImplemented
+        return (self._muscles == other._muscles and self._coordinates == other._coordinates
+                and np.array_equal(self._l0, other._l0) and np.array_equal(self._coeffs, other._coeffs))
+
+    def __hash__(self) -> int:
+        return hash((self._muscles, self._coordinates, self._l0.tobytes(), self._coeffs.tobytes()))
 
     def __repr__(self) -> str:
         return (
@@ -338,3 +348,226 @@ def display_points_from_sidecar(muscle_entries, *, bodies=None, source=None) -> 
             rows.append(p)
         out.append(DisplayPoints(muscle=name, bodies=[r[0] for r in rows], positions=[r[1:] for r in rows]))
     return tuple(out)
+
+
+def _poly_rebuild(cls, muscles, coordinates, terms):  # pickle support
+    return cls(muscles=muscles, coordinates=coordinates, terms=terms)
+
+
+class PolynomialPath:
+    """Multivariate polynomial paths of ``m`` muscles over a model's ``nv`` coordinates.
+
+    Muscle ``i`` depends on the coordinates it crosses, ``q_v`` for ``v`` in its
+    ``coordinates``, through scaled variables ``x_v = (q_v - center_v) / scale_v``:
+
+        l_i(q) = sum_t c_t prod_v x_v**e_tv,      r_ij = -dl_i/dq_j
+
+    (lengths in m, moment arms in m, the same polynomial for both, as OpenSim's
+    PolynomialPathFitter and PredSim fit them).  The methods are those of
+    :class:`MomentArmPath`; a :class:`~pinmsk.muscles.muscle_set.MuscleSet`
+    takes either.
+
+    Parameters (keyword-only)
+    -------------------------
+    muscles : tuple of str, length m
+    coordinates : tuple of str, length nv -- the model's velocity coordinates, in order
+    terms : sequence (one per muscle) of mappings with ``coordinates`` (names of the
+        coordinates crossed, k of them), ``center`` and ``scale`` (k,), ``exponents``
+        (T, k) non-negative integers and ``coefficients`` (T,) in m
+    """
+
+    __slots__ = ("_muscles", "_coordinates", "_terms", "_cidx", "_center", "_scale", "_tmus", "_exps",
+                 "_coef", "_starts", "_degree")
+
+    def __init__(self, *, muscles, coordinates, terms):
+        muscles = tuple(str(m) for m in muscles)
+        coordinates = tuple(str(c) for c in coordinates)
+        for what, names in (("muscle", muscles), ("coordinate", coordinates)):
+            dupes = sorted({n for n in names if names.count(n) > 1})
+            if dupes:
+                raise ModelError(f"PolynomialPath: {what} names must be unique; repeated: {', '.join(dupes)}")
+        terms = list(terms)
+        if len(terms) != len(muscles):
+            raise ModelError(f"PolynomialPath: {len(terms)} term tables for {len(muscles)} muscles")
+        index = {c: j for j, c in enumerate(coordinates)}
+        V = max([len(t["coordinates"]) for t in terms] + [1])
+        m = len(muscles)
+        cidx = np.full((m, V), -1, dtype=int)
+        center = np.zeros((m, V))
+        scale = np.ones((m, V))
+        tmus, exps, coef, clean = [], [], [], []
+        for i, (name, t) in enumerate(zip(muscles, terms)):
+            names = tuple(str(c) for c in t["coordinates"])
+            k = len(names)
+            for c in names:
+                if c not in index:
+                    close = difflib.get_close_matches(c, coordinates, n=1)
+                    hint = f"; did you mean {close[0]!r}?" if close else ""
+                    raise ModelError(f"PolynomialPath: muscle {name!r} crosses coordinate {c!r}, which the model "
+                                     f"does not have{hint}")
+            e = np.asarray(t["exponents"], dtype=int).reshape(-1, k) if k else np.zeros((len(t["coefficients"]), 0), int)
+            c_ = np.asarray(t["coefficients"], dtype=float).reshape(-1)
+            ce = np.asarray(t.get("center", np.zeros(k)), dtype=float).reshape(k)
+            sc = np.asarray(t.get("scale", np.ones(k)), dtype=float).reshape(k)
+            if e.shape[0] != c_.size or c_.size == 0 or np.any(e < 0):
+                raise ModelError(f"PolynomialPath: muscle {name!r} needs as many exponent rows (non-negative) as "
+                                 f"coefficients (at least one); got {e.shape} and {c_.size}")
+            if not (np.all(np.isfinite(c_)) and np.all(np.isfinite(ce)) and np.all(np.isfinite(sc)) and np.all(sc > 0)):
+                raise ModelError(f"PolynomialPath: muscle {name!r} has non-finite coefficients or a scale <= 0")
+            cidx[i, :k] = [index[c] for c in names]
+            center[i, :k], scale[i, :k] = ce, sc
+            pad = np.zeros((e.shape[0], V), dtype=int)
+            pad[:, :k] = e
+            tmus.append(np.full(e.shape[0], i))
+            exps.append(pad)
+            coef.append(c_)
+            clean.append({"coordinates": names, "center": tuple(ce), "scale": tuple(sc),
+                          "exponents": tuple(map(tuple, e.tolist())), "coefficients": tuple(c_.tolist())})
+        tmus = np.concatenate(tmus) if tmus else np.zeros(0, int)
+        counts = np.bincount(tmus, minlength=m)
+        set_ = object.__setattr__
+        set_(self, "_muscles", muscles)
+        set_(self, "_coordinates", coordinates)
+        set_(self, "_terms", tuple(clean))
+        set_(self, "_cidx", cidx)
+        set_(self, "_center", center)
+        set_(self, "_scale", scale)
+        set_(self, "_tmus", tmus)
+        set_(self, "_exps", np.concatenate(exps) if exps else np.zeros((0, V), int))
+        set_(self, "_coef", np.concatenate(coef) if coef else np.zeros(0))
+        set_(self, "_starts", np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int))
+        set_(self, "_degree", int(self._exps.sum(axis=1).max()) if self._exps.size else 0)
+
+    def __setattr__(self, name, value):
+        raise AttributeError(f"PolynomialPath is immutable; build a new one instead of setting {name!r}")
+
+    def __delattr__(self, name):
+        raise AttributeError("PolynomialPath is immutable")
+
+    def __reduce__(self):
+        return (_poly_rebuild, (type(self), self._muscles, self._coordinates, [dict(t) for t in self._terms]))
+
+    def __repr__(self) -> str:
+        return (f"PolynomialPath({len(self._muscles)} muscles x {len(self._coordinates)} coordinates, "
+                f"degree {self.degree}, {self._coef.size} terms)")
+
+    # the same read-only views and frame checks as MomentArmPath (same slot names)
+    muscles = MomentArmPath.muscles
+    coordinates = MomentArmPath.coordinates
+    n_muscles = MomentArmPath.n_muscles
+    nv = MomentArmPath.nv
+    _frames = MomentArmPath._frames
+
+    @property
+    def terms(self) -> tuple:
+        """Per muscle: its coordinates, center, scale, exponents and coefficients."""
+        return self._terms
+
+    @property
+    def degree(self) -> int:
+        """Highest total degree of the length polynomials (0 = constant lengths)."""
+        return self._degree
+
+    # --- evaluation ---------------------------------------------------------------
+    def _x(self, q):
+        x = (q[:, np.maximum(self._cidx, 0)] - self._center) / self._scale
+        return np.where(self._cidx >= 0, x, 0.0)                         # (N, m, V)
+
+    def _monomial_parts(self, q, orders):
+        """Per term and variable v, d^o(x_v^e)/dx_v^o for each o in orders -> {o: (N, T, V)}."""
+        x = self._x(q)
+        K = self._degree
+        pw = x[..., None] ** np.arange(K + 1)                              # (N, m, V, K+1)
+        out = {}
+        v = np.arange(self._exps.shape[1])[None, :]
+        for o in orders:
+            k = np.arange(K + 1)
+            fall = np.ones(K + 1)
+            for s in range(o):
+                fall = fall * (k - s)
+            e = self._exps - o
+            ok = e >= 0
+            vals = pw[:, self._tmus[:, None], v, np.maximum(e, 0)]             # (N, T, V)
+            out[o] = np.where(ok, vals * fall[np.maximum(self._exps, 0)], 0.0)
+        return out
+
+    def _reduce(self, a):
+        """Sum over each muscle's terms: (N, T, ...) -> (N, m, ...)."""
+        return np.add.reduceat(a, self._starts, axis=1) if a.shape[1] else np.zeros((a.shape[0], self.n_muscles) + a.shape[2:])
+
+    def _grad_x(self, parts):
+        """dl/dx_v (N, m, V) from parts {0, 1}."""
+        p0, p1 = parts[0], parts[1]
+        V = p0.shape[2]
+        g = []
+        for v in range(V):
+            others = np.prod(np.delete(p0, v, axis=2), axis=2) if V > 1 else np.ones(p0.shape[:2])
+            g.append(self._reduce(self._coef * p1[:, :, v] * others))
+        return np.stack(g, axis=2)
+
+    def _scatter(self, gx):
+        """(N, m, V) derivatives in x -> (N, m, nv) in q (divided by the scales)."""
+        N, m = gx.shape[:2]
+        out = np.zeros((N, m, self.nv))
+        g = gx / self._scale
+        for v in range(gx.shape[2]):
+            rows = np.flatnonzero(self._cidx[:, v] >= 0)
+            out[:, rows, self._cidx[rows, v]] += g[:, rows, v]
+        return out
+
+    def lengths(self, q) -> np.ndarray:
+        """Muscle-tendon lengths l(q): (N, m), or (m,) for one frame."""
+        (q,), single = self._frames(q=q)
+        p0 = self._monomial_parts(q, (0,))[0]
+        out = self._reduce(self._coef * np.prod(p0, axis=2))
+        return out[0] if single else out
+
+    def moment_arms(self, q) -> np.ndarray:
+        """Moment arms r = -dl/dq: (N, m, nv), or (m, nv) for one frame."""
+        (q,), single = self._frames(q=q)
+        out = -self._scatter(self._grad_x(self._monomial_parts(q, (0, 1))))
+        return out[0] if single else out
+
+    def moment_arm_derivative(self, q, order: int = 1) -> np.ndarray:
+        """``d^order r_ij / dq_j^order`` along each arm's own coordinate (the diagonal; cross terms
+        are in :meth:`accelerations`): (N, m, nv), or (m, nv) for one frame."""
+        (q,), single = self._frames(q=q)
+        o = int(order) + 1
+        parts = self._monomial_parts(q, (0, o))
+        p0, po = parts[0], parts[o]
+        V = p0.shape[2]
+        g = []
+        for v in range(V):
+            others = np.prod(np.delete(p0, v, axis=2), axis=2) if V > 1 else np.ones(p0.shape[:2])
+            g.append(self._reduce(self._coef * po[:, :, v] * others))
+        gx = np.stack(g, axis=2) / self._scale ** (o - 1)
+        out = -self._scatter(gx)
+        return out[0] if single else out
+
+    def velocities(self, q, v) -> np.ndarray:
+        """Lengthening velocities dl/dt = -sum_j r_j v_j: (N, m), or (m,)."""
+        (q, v), single = self._frames(q=q, v=v)
+        out = -np.einsum("nmj,nj->nm", self.moment_arms(q), v)
+        return out[0] if single else out
+
+    def accelerations(self, q, v, a) -> np.ndarray:
+        """d2l/dt2 = sum_j dl/dq_j a_j + sum_jk d2l/dq_j dq_k v_j v_k: (N, m), or (m,)."""
+        (q, v, a), single = self._frames(q=q, v=v, a=a)
+        parts = self._monomial_parts(q, (0, 1, 2))
+        p0, p1, p2 = parts[0], parts[1], parts[2]
+        grad = self._scatter(self._grad_x({0: p0, 1: p1}))
+        # the velocities of each muscle's own variables, in x units
+        vx = np.where(self._cidx >= 0, v[:, np.maximum(self._cidx, 0)], 0.0) / self._scale      # (N, m, V)
+        vt = vx[:, self._tmus]                                                               # (N, T, V)
+        V = p0.shape[2]
+        quad = np.zeros(p0.shape[:2])
+        for i in range(V):
+            for j in range(V):
+                if i == j:
+                    f = p2[:, :, i] * np.prod(np.delete(p0, i, axis=2), axis=2) if V > 1 else p2[:, :, i]
+                else:
+                    rest = np.prod(np.delete(p0, [i, j], axis=2), axis=2) if V > 2 else 1.0
+                    f = p1[:, :, i] * p1[:, :, j] * rest
+                quad = quad + f * vt[:, :, i] * vt[:, :, j]
+        out = np.einsum("nmj,nj->nm", grad, a) + self._reduce(self._coef * quad)
+        return out[0] if single else out

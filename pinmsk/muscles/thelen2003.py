@@ -5,7 +5,7 @@ arrays; the :class:`pinmsk.muscles.Thelen2003` object binds per-muscle
 parameters to them.  Conventions:
 
 - lengths normalized by ``l_opt`` (``l_norm = l_ce / l_opt``);
-- fibre velocity normalized by ``v_max`` (``v_norm = v_ce / v_max``,
+- fiber velocity normalized by ``v_max`` (``v_norm = v_ce / v_max``,
   ``v_max = 10 l_opt /s`` by default), negative when shortening;
 - forces normalized by ``F_max``.
 
@@ -32,11 +32,11 @@ from typing import Sequence
 
 import numpy as np
 
-from ._common import check_active
+from ..errors import ConvergenceError
+from ._common import check_active, locate, where_first
 from ._solve import compliant_equilibrium, safeguarded_newton
 from .pennation import check_along_positive, pennation_height
 from .tendon import TENDON_STRAIN0, thelen_tendon_force, thelen_tendon_stiffness, thelen_tendon_strain
-from ..errors import ConvergenceError
 
 __all__ = [
     "K_PE", "PASSIVE_STRAIN0", "GAMMA", "A_F", "F_HAT", "FV_EXTRAPOLATION",
@@ -102,7 +102,7 @@ def _fv_blend(w, fv, dfv, smooth):
 
     The Thelen curve's slope jumps at ``w = 0`` (5 concentric, 10 eccentric).  The
     inverse muscle model's activation rate (Eq. 5.4) contains ``df/dv``, so with the
-    kink the recovered excitation jumps whenever a fibre reverses.  The blend
+    kink the recovered excitation jumps whenever a fiber reverses.  The blend
     ``(1 - S) fv_con + S fv_ecc`` with the quintic smoothstep ``S`` of
     ``(w + smooth) / (2 smooth)`` matches each piece to the second derivative at the
     band edges; it is increasing for ``smooth <= FV_SMOOTH_MAX``.
@@ -128,7 +128,7 @@ def thelen_force_velocity(v_norm, *, smooth: float = 0.0):
 
     ``f_V(0) = 1``, ``f_V(-1) = 0`` (maximum shortening velocity), increasing,
     ``-> 1.4`` for lengthening until the linear tail at ``0.95 * 1.4``.  At
-    activation ``a`` the active fibre force is ``a f_isom f_V(v_norm / (0.25 + 0.75 a))``;
+    activation ``a`` the active fiber force is ``a f_isom f_V(v_norm / (0.25 + 0.75 a))``;
     "activation-mode" static optimization uses ``f_V(v_norm)`` (the a = 1 curve).
     ``smooth > 0`` blends the slope jump at 0 over ``|w| < smooth`` (see :func:`_fv_blend`).
     """
@@ -178,7 +178,7 @@ def _speed_scale(a):
 
 
 def thelen_fiber_velocity(f_ce, a, f_isom, *, v_max=1.0):
-    """Fibre velocity from active fibre force, thesis Eq. A.9 (with the linear tails).
+    """Fiber velocity from active fiber force, thesis Eq. A.9 (with the linear tails).
 
     ``v = (0.25 + 0.75 a) v_max (f - a f_isom) / b`` with
     ``b = a f_isom + f/A_f`` (concentric) or
@@ -194,7 +194,7 @@ def thelen_fiber_velocity(f_ce, a, f_isom, *, v_max=1.0):
 
 
 def thelen_fiber_force(v_ce, a, f_isom, *, v_max=1.0):
-    """Active fibre force (normalized) from fibre velocity: the exact inverse of Eq. A.9.
+    """Active fiber force (normalized) from fiber velocity: the exact inverse of Eq. A.9.
 
     ``f = a f_isom f_V(v / ((0.25 + 0.75 a) v_max))``.
     """
@@ -260,13 +260,12 @@ def thelen_activation_from_force(f_ce, f_isom, v_norm, *, tol: float = 1e-13,
             break
         hi = np.where(short, 2.0 * hi, hi)
     else:
-        from ._common import locate, where_first
         frame, muscle = where_first(short)
         raise ConvergenceError(
-            f"no activation produces the fibre force at {locate(frame, muscle, names)}: "
-            "the force-length factor f_isom is ~0 there (fibre far from l_opt)")
+            f"no activation produces the fiber force at {locate(frame, muscle, names)}: "
+            "the force-length factor f_isom is ~0 there (fiber far from l_opt)")
     a = safeguarded_newton(residual, np.minimum(a0, hi), 0.0, hi, lo_sign=-1.0, tol=tol,
-                           max_iter=max_iter, what="activation from fibre force", names=names)
+                           max_iter=max_iter, what="activation from fiber force", names=names)
     return np.where(positive, a, 0.0)
 
 
@@ -304,7 +303,7 @@ def _tendon_closure(strain0):
 def thelen_equilibrium(l_mt, a, *, l_opt, l_slack, pennation, v_max=None, v_mt=None,
                        tendon_strain0: float = TENDON_STRAIN0, tol: float = 1e-10,
                        max_iter: int = 100, names: Sequence[str] | None = None):
-    """Compliant-tendon fibre equilibrium ``F_t = (F_ce + F_pe) cos(alpha)`` (thesis App. A.3).
+    """Compliant-tendon fiber equilibrium ``F_t = (F_ce + F_pe) cos(alpha)`` (thesis App. A.3).
 
     Solves for ``l_ce`` at muscle-tendon length ``l_mt`` and activation ``a``,
     isometric (``v_ce = 0``) unless ``v_mt`` is given (then see
@@ -331,9 +330,9 @@ def thelen_contraction_rate(l_ce, l_mt, a, *, l_opt, l_slack, pennation, v_max=N
     """Contraction dynamics ``l_ce' = f_CD(l_ce, l_mt, a)`` for the compliant tendon (thesis Eq. 3.9).
 
     The tendon force at ``l_t = l_mt - l_ce cos(alpha)`` (Eq. A.6) divided by
-    ``cos(alpha)``, minus the parallel force (Eq. A.7), is the active fibre force;
-    Eq. A.9 turns it into the fibre velocity (m/s).  Needs ``a > 0`` (the
-    velocity is undetermined for an inactive fibre; use a minimum activation
+    ``cos(alpha)``, minus the parallel force (Eq. A.7), is the active fiber force;
+    Eq. A.9 turns it into the fiber velocity (m/s).  Needs ``a > 0`` (the
+    velocity is undetermined for an inactive fiber; use a minimum activation
     such as 0.01) and ``l_ce > l_opt sin(alpha_opt)``.
     """
     l_ce = np.asarray(l_ce, dtype=float)

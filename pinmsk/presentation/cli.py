@@ -3,6 +3,12 @@
 Every command has ``--help``.  Errors pinmsk recognises (bad files, unknown
 names, infeasible problems) print one line ``pinmsk: error: ...`` on stderr
 and exit with status 2, never a traceback.
+
+The CLI is the one place that runs analyses on the user's behalf.  Each command
+imports its analysis (Pinocchio, SciPy, matplotlib and meshcat behind it) when
+it runs, so ``pinmsk --help`` and argument errors answer in a fraction of a
+second (``tests/test_longtrials.py`` holds that); the light modules the parser
+and the error handling need are imported here.
 """
 from __future__ import annotations
 
@@ -10,13 +16,19 @@ import argparse
 import os
 import sys
 import warnings
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import PinmskError
+from ..builtin_models import builtin_names
+from ..errors import PinmskError, RepairWarning
+from ..io.channel_map import read_mapped
+from ..io.output_files import check_output_file, output_folder, output_transaction
+from ..io.tables import write_trial
 from ..signals.filtering import DEFAULT_CUTOFF
 from ..trial import moment_channels, parse_ground_reaction
+from .progress import Progress
 
 
 def _model(args):
@@ -30,10 +42,6 @@ def _read(path, model=None, args=None, *, coordinates: bool = True):
     Each repair of a lenient read is one ``pinmsk: warning:`` line, each choice a map made
     one ``pinmsk: note:`` line.
     """
-    import warnings
-
-    from ..io.channel_map import read_mapped
-    from ..errors import RepairWarning
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RepairWarning)
         trial = read_mapped(path, model=model, cmap=getattr(args, "map", None),
@@ -60,7 +68,6 @@ def _add_read_flags(s) -> None:
 
 
 def _write(trial, path, precision=None):
-    from ..io.tables import write_trial
     write_trial(trial, path, precision=precision)
     print(f"wrote {path}")
 
@@ -83,7 +90,6 @@ def _precision_flag(s) -> None:
 
 def _progress(total, label, unit=""):
     """A progress line on stderr for a step that may take long (drawn on a terminal only)."""
-    from .progress import Progress
     return Progress(total, label, unit=unit)
 
 
@@ -118,7 +124,6 @@ def _plot(args, trial, channels, stem, ylabel) -> None:
 # -- commands ------------------------------------------------------------------
 
 def cmd_models(args) -> int:
-    from ..builtin_models import builtin_names
     from ..model import load_model
     print(f"{'model':<10} {'dof':>4} {'muscles':>8}  description")
     for name in builtin_names():
@@ -253,8 +258,8 @@ def cmd_synth(args) -> int:
 
 
 def cmd_contact_fit(args) -> int:
-    from ..contact import fit_cli_run
     from ..contact.identify import settings_lines
+    from ..pipeline import contact_fit_task
     opts = {}   # only what the user gave: the rest are ContactFit's defaults (printed below)
     if args.contact:
         opts["contact"] = args.contact
@@ -268,7 +273,7 @@ def cmd_contact_fit(args) -> int:
         opts["toe"] = args.toe
     if args.cutoff is not None:
         opts["cutoff"] = args.cutoff or None
-    out = fit_cli_run(args.model, args.trial, json_path=args.json, plot_dir=args.plot, **opts)
+    out = contact_fit_task(args.model, args.trial, json_path=args.json, plot_dir=args.plot, **opts)
     print("\n".join(settings_lines(out["settings"])))
     for k, (label, j) in enumerate(zip(out["start_labels"], out["starts"])):
         print(f"  start {k + 1}, {label}: J {j:.5g}{' (best)' if k == out['best_start'] else ''}")
@@ -295,15 +300,14 @@ _OPTIMIZE_EPILOG = (
 
 
 def cmd_optimize(args) -> int:
-    from ..solvers.dynamic import optimize_task
+    from ..pipeline import optimize_task
     with _progress(None, "optimize", "iterations") as bar:
         res = optimize_task(args.task, args.output, progress=bar, precision=args.precision)
     print(res.report())
-    result = res.to_trial()
-    _plot(args, result, [n for n in result.names if n.endswith(("_excitation", "_activation"))],
+    _plot(args, res, [n for n in res.names if n.endswith(("_excitation", "_activation"))],
           "optimize_controls", "excitation / activation")
-    _plot(args, result, [n for n in result.names if n.endswith("_desired")]
-          + [n[: -len("_desired")] for n in result.names if n.endswith("_desired")],
+    _plot(args, res, [n for n in res.names if n.endswith("_desired")]
+          + [n[: -len("_desired")] for n in res.names if n.endswith("_desired")],
           "optimize_motion", "coordinate (rad)")
     if args.output:
         print(f"wrote {args.output} and {args.output}.json")
@@ -337,7 +341,6 @@ def cmd_batch(args) -> int:
 
 def _version() -> str:
     """The installed distribution's version, or the package's own when not installed."""
-    from importlib.metadata import PackageNotFoundError, version
     try:
         return version("pinmsk")
     except PackageNotFoundError:
@@ -555,7 +558,6 @@ _OUTPUT_FOLDERS = ("plot", "out")
 
 def _check_outputs(args) -> None:
     """Refuse, before any work, outputs whose folder is missing or read-only; create --plot folders."""
-    from ..io.output_files import check_output_file, output_folder
     for name in _OUTPUT_FILES:
         if getattr(args, name, None):
             check_output_file(getattr(args, name))
@@ -570,7 +572,6 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 
 
 def _run(argv) -> int:
-    from ..io.output_files import output_transaction
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

@@ -37,6 +37,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from ..contact.foot import SITES
 from ..errors import PinmskError
 from ..io.output_files import atomic_write
 from ..trial import moment_channel, moment_channels
@@ -555,3 +556,39 @@ def _short(text: str, n: int = 70) -> str:
 def _title(d) -> str:
     eff = ", ".join(x.label for x in d.model.components) or "no effects"
     return f"{d.model.name} ({eff}), {d.verdict}"
+
+
+def contact_fit_figures(fit, out_dir) -> list[Path]:
+    """A fitted :class:`~pinmsk.contact.ContactFit`: GRF (vertical, horizontal) and COP against the
+    measurement, as PNGs in ``out_dir``; the paths written."""
+    out_dir = Path(out_dir)
+    prob, gr = fit.problem_, fit.reaction_
+    t = prob.t
+    title = f"{fit.contact}{' relaxed' if fit.relax else ''}"
+    fig = new_figure(6, 5.5)
+    ax = fig.subplots(2, 1, sharex=True)
+    ax[0].plot(t, prob.meas[0], "k", label="measured")
+    ax[0].plot(t, gr.normal, "C3", label="model")
+    for o, s in zip(fit.outputs_, SITES):
+        ax[0].plot(t, o.normal, lw=0.8, ls="--", label=s)
+    ax[0].set_ylabel("vertical GRF (N)")
+    ax[0].legend(fontsize=7)
+    ax[0].set_title(f"{title}: J = {fit.objective_:.4f}")
+    ax[1].plot(t, prob.meas[1], "k", label="measured")
+    ax[1].plot(t, gr.friction, "C3", label="model")
+    ax[1].set_ylabel("horizontal GRF (N)")
+    ax[1].set_xlabel("time (s)")
+    p1 = out_dir / f"grf_{fit.contact}{'_relaxed' if fit.relax else ''}.png"
+    save_figure(fig, p1, dpi=110)
+    fig = new_figure(6, 3.2)
+    ax = fig.subplots()
+    m = prob.cop_mask
+    ax.plot(t[m], prob.meas[2][m], "k.", ms=3, label="measured")
+    ax.plot(t[m], gr.cop[m, 0], "C3", label="model")
+    ax.set_ylabel("COP x (m)")
+    ax.set_xlabel("time (s)")
+    ax.set_title(title)
+    ax.legend(fontsize=7)
+    p2 = out_dir / f"cop_{fit.contact}{'_relaxed' if fit.relax else ''}.png"
+    save_figure(fig, p2, dpi=110)
+    return [p1, p2]

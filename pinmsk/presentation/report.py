@@ -96,7 +96,7 @@ def render_report(run, *, title: str | None = None) -> str:
         parts.append("<h2>Effects added</h2>")
         rows = []
         for a in added:
-            for k, v in a.values.items():
+            for k, v in a.params.items():
                 se = a.stderr.get(k)
                 rows.append([a.effect.label, k, _g(v), _g(se), a.effect.params[k].unit])
         parts.append(_table(["effect", "parameter", "value", "std. error", "unit"], rows, left=2))

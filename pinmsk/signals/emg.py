@@ -22,9 +22,9 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..errors import TrialError
+from ..trial import Trial
 from .filtering import filter_padlen, lowpass
 from .sampling import check_rate, measured_rate
-from ..trial import Trial
 
 __all__ = ["envelope", "envelopes", "normalize", "on_off", "onset_times", "DEFAULT_BAND",
            "DEFAULT_LOWPASS"]
@@ -56,7 +56,7 @@ def envelope(x, *, rate: float, band: tuple[float, float] | None = DEFAULT_BAND,
             raise TrialError(f"{n} EMG samples are too few to band-pass")
         if not np.all(np.isfinite(x)):
             raise TrialError("EMG contains NaN/inf; cut or fill the gap before the envelope")
-        from scipy.signal import butter, sosfiltfilt   # here, not at import (slow)
+        from scipy.signal import butter, sosfiltfilt  # here, not at import (slow)
 
         sos = butter(order, [lo / (0.5 * rate), hi / (0.5 * rate)], btype="band", output="sos")
         x = sosfiltfilt(sos, x, axis=0, padtype="odd", padlen=filter_padlen(order))

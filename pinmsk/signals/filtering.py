@@ -28,11 +28,14 @@ import numpy as np
 from ..errors import TrialError
 from .sampling import check_increasing, uniform_rate
 
-__all__ = ["lowpass", "differentiate", "filter_padlen", "DEFAULT_CUTOFF", "FILTER_ORDER"]
+__all__ = ["lowpass", "differentiate", "filter_padlen", "DEFAULT_CUTOFF", "CONTACT_CUTOFF", "FILTER_ORDER"]
 
 #: Default low-pass cut-off (Hz) of kinematics and ground reaction forces in every analysis
 #: (:func:`pinmsk.kinematics.prepare`); ``cutoff=0`` / ``--cutoff 0`` turns filtering off.
 DEFAULT_CUTOFF = 6.0
+#: Cut-off (Hz) of the foot kinematics that drive a contact fit (:class:`pinmsk.contact.ContactFit`):
+#: contact damping acts on the penetration rate at heel strike, a transient that 6 Hz would erase.
+CONTACT_CUTOFF = 12.0
 #: Order of the designed Butterworth filter (run forwards and backwards).
 FILTER_ORDER = 4
 

@@ -7,11 +7,11 @@
 - :mod:`pinmsk.solvers.analytical` -- closed-form 1-dof solutions and the Fig. 3.13 motion.
 - :mod:`pinmsk.solvers.qp` -- the shared proxsuite / batched layer.
 """
-from .static import StaticOptimization, SOProblem, build_problem
+from . import analytical
+from .eid import EID, ExtendedInverseDynamics
 from .fso import FSO, ForwardStaticOptimization
 from .mso import ModifiedStaticOptimization
-from .eid import EID, ExtendedInverseDynamics
-from . import analytical
+from .static import SOProblem, StaticOptimization, build_problem
 
 __all__ = ["StaticOptimization", "SOProblem", "build_problem", "ForwardStaticOptimization", "FSO",
            "ModifiedStaticOptimization", "ExtendedInverseDynamics", "EID", "analytical"]

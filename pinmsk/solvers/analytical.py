@@ -40,7 +40,6 @@ from ..components import Motion
 from ..errors import InfeasibleError, SolverError
 from ..trial import Trial
 
-
 # ---------------------------------------------------------------------------
 # the thesis's formulas, as printed
 # ---------------------------------------------------------------------------

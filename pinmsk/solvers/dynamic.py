@@ -11,14 +11,14 @@ Simulation designs (Sec. 5.1)
     the signals are muscle excitations ``u``; the state ``[q, v, a(, l_ce)]``
     is integrated: activation dynamics (Eq. A.2) -> muscle force (Thelen 2003,
     rigid tendon, or compliant tendon with the contraction dynamics of
-    Eq. 3.9 / A.6-A.9 and fibre lengths as states) -> skeleton (Pinocchio ABA).
+    Eq. 3.9 / A.6-A.9 and fiber lengths as states) -> skeleton (Pinocchio ABA).
 ``"ifm"`` (inverse-forward from muscle forces)
     the signals are muscle-tendon forces ``F`` (Eq. 5.5); only the skeleton is
     integrated (``tau = R(q)^T F``), then activations, activation rates and
     excitations come from the inverse muscle model (Fig. 5.6, Eq. 5.2-5.4,
     compliant tendon) fed with the *analytic* ``F, F', F''`` of the
     parametrization and ``l_mt, l_mt', l_mt''`` of the simulated kinematics.
-    The contractile force the fibre must supply is constrained to at least
+    The contractile force the fiber must supply is constrained to at least
     ``F_CE_MIN`` (0.2 % of F_max) on the grid of the excitation bounds: below
     zero the inverse model switches to ``a = 0``, a kink no gradient method
     crosses.
@@ -35,7 +35,7 @@ Simulation designs (Sec. 5.1)
 
 In IFM and IFT the recovered excitation contains ``df/dv`` (Eq. 5.4), and
 Thelen's force-velocity slope jumps at zero velocity (5 concentric, 10
-eccentric): the excitation would jump at every fibre reversal and the bound
+eccentric): the excitation would jump at every fiber reversal and the bound
 constraints with it.  These designs therefore use the force-velocity curve
 blended over ``|v/v_max| < fv_smooth`` (C2, within 1.2 % of Eq. A.9 in the
 band; :func:`~pinmsk.muscles.thelen2003.thelen_force_velocity`), in the
@@ -54,7 +54,7 @@ Excitations are clipped to [-0.2, 1.2] inside the FF simulation only to keep
 infeasible iterates finite: the bounds themselves are constraints (Eq. 3.8),
 and clipping exactly at 0 would make the problem non-smooth where
 excitations rest on their lower bound and the compliant contraction dynamics
-use ``max(a, 0.01)`` (the fibre velocity is undetermined at zero activation).
+use ``max(a, 0.01)`` (the fiber velocity is undetermined at zero activation).
 
 Objectives (``objective=``)
 ---------------------------
@@ -90,26 +90,42 @@ An optimizer that stops without converging, or converges to a point that
 violates the constraints by more than ``constraint_tol``, is flagged in the
 result (``converged=False``, ``status``) and on stderr; its numbers are
 never reported as a solution.
+
+The result (``result_``) is a :class:`~pinmsk.fitting.Result`: the Trial of
+``<coord>``, ``<coord>_speed``, ``<coord>_desired`` and ``<muscle>_excitation``,
+``_activation``, ``_force`` on the RK4 grid; its statistics (``converged``,
+``objective``, ``k`` the decision variables, ``iterations``, ``violation`` the
+largest excitation-bound violation) and details (``status``, ``terms``,
+``max_bound_violation``, ``max_tracking_error``, ``coeffs``,
+``parametrization``, ``design``, ``q``, ``v``, ``a``, ``u``, ``force``,
+``target`` as (N, .) arrays, ``seconds``, ``nit``, ``nfev``, ``starts``,
+``coordinates``, ``muscles``, ``x``) are attributes of it.
+:meth:`DynamicOptimization.to_dict` is the JSON summary ``pinmsk optimize`` writes.
 """
 from __future__ import annotations
 
 import json
 import sys
 import time as _time
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
+from .. import energy
 from ..errors import ConvergenceError, ModelError, SolverError, TrialError
+from ..fitting import FitStatistics, Fitter, Result, format_report
+from ..io.tables import read_trial
+from ..io.toml_files import check_keys, read_toml
+from ..model import Model, load_model
 from ..muscles.activation import excitation_from_activation
 from ..muscles.thelen2003 import GAMMA, K_PE, PASSIVE_STRAIN0, thelen_passive_force_length
-from .simulation_designs import BatchMuscles, BatchSkeleton, muscle_inverse, simulate_ff, simulate_skeleton
+from ..skeleton import rnea
 from .parametrization import Fourier, Parametrization, Polynomial, Spline
+from .simulation_designs import BatchMuscles, BatchSkeleton, muscle_inverse, simulate_ff, simulate_skeleton
 
 __all__ = ["BatchSkeleton", "simulate_ff", "simulate_skeleton", "muscle_inverse",
-           "DynamicOptimization", "DynamicResult", "Target", "optimize_task",
+           "DynamicOptimization", "Target",
            "load_task", "TASK_SCHEMA"]
 
 DESIGNS = ("ff", "ifm", "ift")
@@ -130,9 +146,9 @@ class _Unsimulable(SolverError):
 def passive_floor(mu: BatchMuscles, l_mt, dl_mt=None, ddl_mt=None):
     """Smooth upper bound of a muscle-tendon unit's passive force, with its time derivatives.
 
-    ``F_max (FLOOR + exp(K_PE (l - 1)/eps0) / (exp(K_PE) - 1))`` at the rigid-tendon fibre
+    ``F_max (FLOOR + exp(K_PE (l - 1)/eps0) / (exp(K_PE) - 1))`` at the rigid-tendon fiber
     length ``l = sqrt((l_mt - l_slack)^2 + h^2) / l_opt``.  It exceeds the Thelen
-    passive force (Eq. A.7) everywhere, because the compliant fibre is never longer
+    passive force (Eq. A.7) everywhere, because the compliant fiber is never longer
     than the rigid one and ``cos(alpha) <= 1``, and unlike Eq. A.7 it is C-infinity.
     A force above it leaves a positive contractile force, so the inverse muscle model
     (Fig. 5.6) returns ``a > 0`` and no switch to ``a = 0`` (a kink the optimizer of
@@ -202,81 +218,14 @@ class Target:
         return float(np.max(self(t) ** 2))
 
 
-# =============================================================================== result
-@dataclass
-class DynamicResult:
-    """Outcome of :class:`DynamicOptimization`.  ``converged`` False means: not a solution."""
-
-    converged: bool
-    status: str
-    objective: float
-    terms: dict
-    max_bound_violation: float
-    max_tracking_error: float
-    coeffs: np.ndarray
-    parametrization: Parametrization
-    design: str
-    time: np.ndarray
-    q: np.ndarray
-    v: np.ndarray
-    a: np.ndarray
-    u: np.ndarray
-    force: np.ndarray
-    target: np.ndarray
-    seconds: float
-    nit: int
-    nfev: int
-    starts: list = field(default_factory=list)
-    coordinates: tuple = ()
-    muscles: tuple = ()
-    x: np.ndarray | None = None
-
-    def summary(self) -> dict:
-        return {"converged": bool(self.converged), "status": self.status,
-                "objective": float(self.objective),
-                "terms": {k: float(v) for k, v in self.terms.items()},
-                "max_bound_violation": float(self.max_bound_violation),
-                "max_tracking_error": float(self.max_tracking_error),
-                "seconds": float(self.seconds), "nit": int(self.nit), "nfev": int(self.nfev),
-                "design": self.design, "parametrization": self.parametrization.describe(),
-                "coefficients": np.asarray(self.coeffs).tolist(),
-                "starts": self.starts}
-
-    def report(self) -> str:
-        flag = "CONVERGED" if self.converged else "NOT CONVERGED (not a solution)"
-        lines = [f"dynamic optimization ({self.design}, {self.parametrization!r}): {flag}",
-                 f"  status: {self.status}",
-                 f"  objective {self.objective:.6g}  "
-                 + "  ".join(f"{k} {v:.6g}" for k, v in self.terms.items()),
-                 f"  max excitation-bound violation {self.max_bound_violation:.3g}, "
-                 f"max tracking error {self.max_tracking_error:.4g} rad, integration check "
-                 f"{self.terms.get('integration_error', float('nan')):.2g} rad",
-                 f"  {self.nit} iterations, {self.nfev} batched evaluations, {self.seconds:.2f} s"]
-        return "\n".join(lines)
-
-    def to_trial(self):
-        """Coordinates, speeds, excitations, activations and forces as a :class:`~pinmsk.trial.Trial`."""
-        from ..trial import Trial
-        ch = {}
-        for j, c in enumerate(self.coordinates):
-            ch[c] = self.q[:, j]
-            ch[f"{c}_speed"] = self.v[:, j]
-            ch[f"{c}_desired"] = self.target[:, j]
-        for i, n in enumerate(self.muscles):
-            ch[f"{n}_excitation"] = self.u[:, i]
-            ch[f"{n}_activation"] = self.a[:, i]
-            ch[f"{n}_force"] = self.force[:, i]
-        return Trial(self.time, ch)
-
-
 # =============================================================================== problem
 _OBJ_KEYS = {"kind", "exponent", "weights", "normalize", "model"}
 
 
-class DynamicOptimization:
+class DynamicOptimization(Fitter):
     """Parametrized dynamic optimization of a musculoskeletal model (thesis Ch. 3).
 
-    Keyword arguments (stored; :meth:`fit` solves):
+    Arguments (stored only; :meth:`fit` solves), the model first and the rest keyword-only:
 
     - ``design``: ``"ff"``, ``"ifm"`` or ``"ift"`` (Sec. 5.1);
     - ``parametrization``: a :class:`Parametrization` (one per signal, shared basis);
@@ -508,7 +457,7 @@ class DynamicOptimization:
         flat = lambda x: x.reshape(n * B, -1)   # noqa: E731
         mu = self._mu
         inv = muscle_inverse(self.model, flat(q), flat(v), flat(acc), flat(F), flat(dF), flat(ddF),
-                             muscles=mu, fv_smooth=self.fv_smooth, fibre_floor=1e-3 * mu.l_opt)
+                             muscles=mu, fv_smooth=self.fv_smooth, fiber_floor=1e-3 * mu.l_opt)
         sim = {"q": q, "v": v, "acc": acc, "force": F}
         for k in ("a", "u", "l_ce", "v_ce"):
             sim[k] = inv[k].reshape(n, B, -1)
@@ -516,7 +465,7 @@ class DynamicOptimization:
         d = sim["l_ce"] / mu.l_opt - 1.0
         sim["f_isom"] = np.exp(d * d * (-1.0 / GAMMA))
         x = np.sqrt(np.maximum(sim["l_ce"] ** 2 - mu.h2, 1e-12))
-        # normalized contractile force demanded of the fibre (Fig. 5.6 step 3), unclipped
+        # normalized contractile force demanded of the fiber (Fig. 5.6 step 3), unclipped
         sim["f_ce_raw"] = (F * sim["l_ce"] / x) / mu.f_max \
             - thelen_passive_force_length(sim["l_ce"] / mu.l_opt)
         sim["f_ce"] = mu.f_max * np.maximum(sim["f_ce_raw"], 0.0)
@@ -639,7 +588,6 @@ class DynamicOptimization:
     def _energy(self, sim, w: float = 0.0):
         """Metabolic rates (N, B, m): exact (``w = 0``, reported) or with the C1 switches
         of width ``w`` (optimized; :mod:`pinmsk.energy`), u and a clipped to [0, 1] alike."""
-        from .. import energy
         mu = self._mu
         kw = dict(u=energy.smooth_clip(sim["u"], 0.0, 1.0, w),
                   a=energy.smooth_clip(sim["a"], 0.0, 1.0, w), l_ce=sim["l_ce"],
@@ -685,7 +633,7 @@ class DynamicOptimization:
         try:
             sim = self.simulate(x[None, :])
         except (TrialError, ConvergenceError) as exc:
-            # e.g. the inverse muscle model has no fibre state at a wild iterate: a
+            # e.g. the inverse muscle model has no fiber state at a wild iterate: a
             # large objective and violated constraints make the line search back off.
             if self._c_size is None:
                 raise
@@ -736,7 +684,7 @@ class DynamicOptimization:
         """``(df/dx, dc/dx)`` by finite differences, all perturbations in one batch.
 
         Central differences; where one side of a perturbation fails (the inverse muscle
-        model has no fibre state there, or the simulation blows up) the other side is
+        model has no fiber state there, or the simulation blows up) the other side is
         used one-sided, so an iterate near such a region keeps a usable gradient."""
         key = x.tobytes()
         hit = self._gcache.get(key)
@@ -764,7 +712,7 @@ class DynamicOptimization:
         okp, okm = ok(fp, cp), ok(fm, cm)
         if not np.all(okp | okm):
             raise SolverError("a finite-difference simulation failed on both sides of the "
-                              "current point (non-finite state or no fibre state); reduce "
+                              "current point (non-finite state or no fiber state); reduce "
                               "the step or change the start")
         both = okp & okm
         w = np.where(both, 2.0 * h, h)                    # (f+ - f-)/2h, (f+ - f0)/h, (f0 - f-)/h
@@ -795,7 +743,6 @@ class DynamicOptimization:
 
     def _target_torque(self):
         """Inverse dynamics (N, nv) of the target motion: what the muscles must supply."""
-        from ..skeleton import rnea
         return rnea(self.model, *self._target_states())
 
     def initial_guesses(self) -> list[np.ndarray]:
@@ -946,7 +893,7 @@ class DynamicOptimization:
                               + "; ".join(r["message"] for r in records))
         _, x, rec = best
         self.result_ = self._result(x, rec, records, _time.perf_counter() - t0)
-        if not self.result_.converged:
+        if not self.result_.stats.converged:
             print(f"pinmsk: WARNING dynamic optimization did not converge ({self.result_.status}); "
                   "the result is not a solution", file=sys.stderr)
         return self
@@ -1187,14 +1134,53 @@ class DynamicOptimization:
         tn = {"J": f, "physiological": float(terms["physiological"][0]),
               "tracking": float(terms["tracking"][0]), "integration_error": ierr,
               "J_optimized": f_opt}
-        return DynamicResult(
-            converged=bool(ok), status=status, objective=f, terms=tn,
-            max_bound_violation=bound_viol, max_tracking_error=err,
-            coeffs=self._coeffs(x)[0], parametrization=self._parametrization_at(x), design=self.design,
-            time=self._t.copy(), q=sim["q"][:, 0], v=sim["v"][:, 0], a=sim["a"][:, 0], u=u,
-            force=sim["force"][:, 0], target=qd, seconds=seconds, nit=int(rec["nit"]),
-            nfev=int(rec["nfev"]), starts=records, x=np.array(x), coordinates=self.model.coordinates,
-            muscles=self.model.muscle_names)
+        info = dict(status=status, terms=tn, max_bound_violation=bound_viol, max_tracking_error=err,
+                    coeffs=self._coeffs(x)[0], parametrization=self._parametrization_at(x), design=self.design,
+                    q=sim["q"][:, 0], v=sim["v"][:, 0], a=sim["a"][:, 0], u=u, force=sim["force"][:, 0],
+                    target=qd, seconds=seconds, nit=int(rec["nit"]), nfev=int(rec["nfev"]), starts=records,
+                    x=np.array(x), coordinates=self.model.coordinates, muscles=self.model.muscle_names)
+        stats = FitStatistics(k=np.size(x), converged=bool(ok), message=status, iterations=int(rec["nit"]),
+                              violation=bound_viol, objective=f)
+        ch = {}
+        for j, c in enumerate(info["coordinates"]):
+            ch[c] = info["q"][:, j]
+            ch[f"{c}_speed"] = info["v"][:, j]
+            ch[f"{c}_desired"] = qd[:, j]
+        for i, n in enumerate(info["muscles"]):
+            ch[f"{n}_excitation"] = u[:, i]
+            ch[f"{n}_activation"] = info["a"][:, i]
+            ch[f"{n}_force"] = info["force"][:, i]
+        return Result(self._t.copy(), ch, stats=stats, info=info, report=self._report_text(stats, info))
+
+    def _report_text(self, stats: FitStatistics, info: dict) -> str:
+        flag = "CONVERGED" if stats.converged else "NOT CONVERGED (not a solution)"
+        terms = info["terms"]
+        return format_report(
+            f"Dynamic optimization ({info['design']} design, {info['parametrization']!r}) of model "
+            f"'{self.model.name}': {flag}", [
+                ("status", info["status"]),
+                ("objective", f"{stats.objective:.6g} (" + ", ".join(f"{k} {v:.6g}" for k, v in terms.items()) + ")"),
+                ("violation", f"max excitation-bound violation {info['max_bound_violation']:.3g}"),
+                ("tracking", f"max error {info['max_tracking_error']:.4g} rad, integration check "
+                             f"{terms.get('integration_error', float('nan')):.2g} rad"),
+                ("solver", f"SLSQP, {info['nit']} iterations, {info['nfev']} batched evaluations, "
+                           f"{np.size(info['x'])} decision variables"),
+                ("time", f"{info['seconds']:.2f} s"),
+            ])
+
+    def to_dict(self) -> dict:
+        """The fit as a JSON-ready dict (what ``pinmsk optimize`` writes to ``<out>.json``)."""
+        self._check_fitted()
+        r = self.result_
+        return {"converged": bool(r.converged), "status": r.status,
+                "objective": float(r.objective),
+                "terms": {k: float(v) for k, v in r.terms.items()},
+                "max_bound_violation": float(r.max_bound_violation),
+                "max_tracking_error": float(r.max_tracking_error),
+                "seconds": float(r.seconds), "nit": int(r.nit), "nfev": int(r.nfev),
+                "design": r.design, "parametrization": r.parametrization.describe(),
+                "coefficients": np.asarray(r.coeffs).tolist(),
+                "starts": r.starts}
 
 
 _ACTIVE = None
@@ -1240,7 +1226,6 @@ TASK_SCHEMA = {
 
 
 def _check_keys(table: dict, section: str, where: str):
-    from ..io.toml_files import check_keys
     check_keys(table, TASK_SCHEMA[section], where=where, section=f"[{section}]")
 
 
@@ -1252,7 +1237,6 @@ def load_task(task_path) -> dict:
     if p.suffix.lower() == ".json":
         spec = json.loads(p.read_text())
     else:
-        from ..io.toml_files import read_toml
         spec = read_toml(p, what="task file")
     for k in spec:
         if k not in TASK_SCHEMA:
@@ -1269,7 +1253,6 @@ def load_task(task_path) -> dict:
 
 def build_from_task(spec: dict, *, base_dir=None, progress=None) -> DynamicOptimization:
     """A :class:`DynamicOptimization` from a validated task dict."""
-    from ..model import load_model
     ms = spec["model"]
     name = ms["name"]
     if base_dir is not None and str(name).endswith((".toml", ".urdf")) and not Path(name).is_absolute():
@@ -1283,7 +1266,6 @@ def build_from_task(spec: dict, *, base_dir=None, progress=None) -> DynamicOptim
     coord = mo.get("coordinate", model.coordinates[0])
     model.coordinate_index(coord)
     if kind == "file":
-        from ..io.tables import read_trial
         f = Path(mo["file"])
         if base_dir is not None and not f.is_absolute():
             f = Path(base_dir) / f
@@ -1332,7 +1314,6 @@ def build_from_task(spec: dict, *, base_dir=None, progress=None) -> DynamicOptim
 
 def scale_masses(model, factor: float):
     """A new model whose segment masses and inertias are scaled by ``factor``."""
-    from ..model import Model
     if not factor > 0:
         raise ModelError(f"mass_scale must be > 0, got {factor}")
     pm = pin.Model(model.pin)
@@ -1343,18 +1324,3 @@ def scale_masses(model, factor: float):
                  contacts=model.contacts, meta=model.meta)
 
 
-def optimize_task(task_path, out_path=None, progress=None, *, precision: int | None = None) -> DynamicResult:
-    """Run the task file ``task_path``; write the result trial to ``out_path`` (.sto/.csv/.mot,
-    ``precision`` significant digits, default that of :func:`pinmsk.io.write_trial`)
-    and a JSON summary next to it (``<out>.json``).  Returns the :class:`DynamicResult`
-    (check ``converged``)."""
-    spec = load_task(task_path)
-    prob = build_from_task(spec, base_dir=Path(task_path).parent, progress=progress)
-    res = prob.fit().result_
-    if out_path is not None:
-        from ..io.tables import write_trial
-        from ..io.output_files import write_json
-        out = Path(out_path)
-        write_trial(res.to_trial(), out, precision=precision)
-        write_json(out.with_suffix(out.suffix + ".json"), res.summary())
-    return res

@@ -30,9 +30,10 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import ConvergenceError, InfeasibleError, SolverError
-from . import qp as _qp
+from ..fitting import Fitter, format_report
 from ..kinematics import DEFAULT_CUTOFF
-from .mso import TAU_FALL, TAU_RISE, activation_problem, set_results
+from . import qp as _qp
+from .mso import TAU_FALL, TAU_RISE, activation_problem, result_of, set_results
 
 #: P = 1: proxsuite's sparse solver reported feasible whole-trial LPs as
 #: infeasible; a proximal term ``LP_REGULARISATION * w a^2`` (activations are
@@ -41,12 +42,14 @@ from .mso import TAU_FALL, TAU_RISE, activation_problem, set_results
 LP_REGULARISATION = 1e-6
 
 
-class ExtendedInverseDynamics:
+class ExtendedInverseDynamics(Fitter):
     """EID over a whole trial as one sparse proxsuite QP (see the module notes).
 
     Parameters (keyword-only): ``exponent`` (>= 1), ``weights`` (``S_i``),
     ``tau_rise``, ``tau_fall``, ``reserves``, ``reserve_weight``, ``tol``,
     ``dofs``, ``max_iter`` (proxsuite iterations), ``sqp_max_iter``.
+    ``result_`` as :class:`~pinmsk.solvers.mso.ModifiedStaticOptimization`'s;
+    its ``objective`` is the time integral of the criterion.
     """
 
     def __init__(self, *, exponent: float = 2, weights: str = "none", tau_rise: float = TAU_RISE,
@@ -62,10 +65,6 @@ class ExtendedInverseDynamics:
         self.dofs = dofs
         self.max_iter = max_iter
         self.sqp_max_iter = sqp_max_iter
-
-    def get_params(self) -> dict:
-        return {k: getattr(self, k) for k in ("exponent", "weights", "tau_rise", "tau_fall", "reserves",
-                                              "reserve_weight", "tol", "dofs", "max_iter", "sqp_max_iter")}
 
     def fit(self, model, trial, *, moments=None, cutoff=DEFAULT_CUTOFF, progress=None):
         """Solve the whole trial at once; returns ``self``."""
@@ -199,8 +198,9 @@ class ExtendedInverseDynamics:
         self.n_qp_ = nqp
         self.n_variables_ = n
         self.n_constraints_ = (Aeq.shape[0], C.shape[0])
-        set_results(self, model, prob, a, rho, t0=t0, analysis="extended_inverse_dynamics")
+        channels = set_results(self, model, prob, a, rho, t0=t0, analysis="extended_inverse_dynamics")
         self.objective_ = float(np.sum(np.diff(t) * 0.5 * (self.cost_[1:] + self.cost_[:-1])))
+        self.result_ = result_of(self, prob, channels, objective=self.objective_, report=self._report_text())
         return self
 
     def _fail(self, status, prob):
@@ -211,21 +211,20 @@ class ExtendedInverseDynamics:
                 "to find frames where the muscles are too weak, or pass reserves=True")
         raise ConvergenceError(f"EID: proxsuite sparse stopped with {status}; raise max_iter or loosen tol")
 
-    def report(self) -> str:
-        if not hasattr(self, "result_"):
-            raise SolverError("this ExtendedInverseDynamics is not fitted yet; call fit(model, trial)")
+    def _report_text(self) -> str:
         prob = self.problem_
-        return "\n".join([
-            f"Extended inverse dynamics (one sparse QP over the trial) of model '{self.model_name_}'",
-            f"  criterion      integral sum_i S_i a_i^{float(self.exponent):g} dt, S = {self.weights}; "
-            f"value {self.objective_:.6g}",
-            f"  dynamics       Winters-Stark, tau_rise {self.tau_rise * 1e3:g} ms, tau_fall {self.tau_fall * 1e3:g} ms",
-            f"  size           {self.n_variables_} variables, {self.n_constraints_[0]} equalities, "
-            f"{self.n_constraints_[1]} inequalities ({prob.n_frames} frames)",
-            f"  solver         proxsuite sparse, {self.n_qp_} QP(s), {self.n_iter_} iterations",
-            f"  violation      max {np.max(self.violation_):.3g} N m",
-            f"  time           {self.time_ * 1e3:.1f} ms",
-        ])
+        return format_report(
+            f"Extended inverse dynamics (one sparse QP over the trial) of model '{self.model_name_}'", [
+                ("criterion", f"integral sum_i S_i a_i^{float(self.exponent):g} dt, S = {self.weights}; "
+                              f"value {self.objective_:.6g}"),
+                ("dynamics", f"Winters-Stark, tau_rise {self.tau_rise * 1e3:g} ms, "
+                             f"tau_fall {self.tau_fall * 1e3:g} ms"),
+                ("size", f"{self.n_variables_} variables, {self.n_constraints_[0]} equalities, "
+                         f"{self.n_constraints_[1]} inequalities ({prob.n_frames} frames)"),
+                ("solver", f"proxsuite sparse, {self.n_qp_} QP(s), {self.n_iter_} iterations"),
+                ("violation", f"max {np.max(self.violation_):.3g} N m"),
+                ("time", f"{self.time_ * 1e3:.1f} ms"),
+            ])
 
 
 #: Short name used in the thesis.

@@ -69,11 +69,11 @@ from scipy.interpolate import CubicHermiteSpline
 from ..components import Motion
 from ..dynamics import skeleton_with_inertias
 from ..errors import ConvergenceError, InfeasibleError, ModelError, SolverError
-from ..skeleton import integrate
+from ..fitting import FitStatistics, Fitter, Result, format_report
+from ..kinematics import DEFAULT_CUTOFF, as_motion, prepare
+from ..skeleton import ExternalForce, external_generalized_force, integrate, world_wrench
 from ..trial import Trial
 from . import qp as _qp
-from ..kinematics import DEFAULT_CUTOFF, as_motion, prepare
-from ..skeleton import ExternalForce, external_generalized_force, world_wrench
 from .static import MODES, WEIGHTS, _muscle_property, check_model
 
 TRACKING = ("q", "qv", "qva", "pid")
@@ -127,7 +127,7 @@ def _external_drive(model, t, external):
     return drive
 
 
-class ForwardStaticOptimization:
+class ForwardStaticOptimization(Fitter):
     """Forward static optimization over a reference motion (thesis Sec. 3.4, Eq. 3.15-3.19).
 
     Parameters (keyword-only)
@@ -172,9 +172,12 @@ class ForwardStaticOptimization:
     (``{"time", "control_point", "coordinate", "error"}`` of the first
     tolerance violation, or None); forces_, activations_ (K, m) held
     from each control point; reserves_; cost_; trajectory_ (a Trial on the
-    integration grid); n_qp_, n_iter_; time_ (s); result_ (a Trial with
-    ``<coord>``, ``<coord>_speed``, ``<coord>_desired``, ``<coord>_error``,
-    ``<muscle>_force``, ``<muscle>_activation``, ``cost``).
+    integration grid); n_qp_, n_iter_; time_ (s); result_ (a
+    :class:`~pinmsk.fitting.Result`: the Trial of ``<coord>``,
+    ``<coord>_speed``, ``<coord>_desired``, ``<coord>_error``,
+    ``<muscle>_force``, ``<muscle>_activation``, ``cost``, and its statistics:
+    ``converged`` False when the run diverged, ``violation`` how far the
+    largest tracking error exceeds ``max_tracking_error``).
     """
 
     def __init__(self, *, mode: str = "force", exponent: float = 2, weights: str = "none",
@@ -202,12 +205,6 @@ class ForwardStaticOptimization:
         self.atol = atol
         self.max_tracking_error = max_tracking_error
         self.allow_divergence = allow_divergence
-
-    def get_params(self) -> dict:
-        return {k: getattr(self, k) for k in (
-            "mode", "exponent", "weights", "tracking", "enforce", "tracking_weight", "gains", "omega",
-            "control_points", "integrator", "substeps", "reserves", "reserve_weight", "tol", "rtol", "atol",
-            "max_tracking_error", "allow_divergence")}
 
     def _check_params(self):
         if self.mode not in MODES:
@@ -489,7 +486,7 @@ class ForwardStaticOptimization:
         self.muscles_ = muscles.names
         cost = np.sum(k * np.maximum(X, 0.0) ** P, axis=1)
         self.cost_ = cost
-        self.result_ = self._result_trial()
+        self.result_ = self._result()
         return self
 
     run = fit
@@ -510,7 +507,18 @@ class ForwardStaticOptimization:
         return {"time": float(t), "control_point": int(k), "coordinate": c, "error": float(error),
                 "message": msg}
 
-    def _result_trial(self) -> Trial:
+    def _result(self) -> Result:
+        K, m = self.forces_.shape
+        over = float(np.max(np.abs(self.tracking_error_))) - float(self.max_tracking_error)
+        stats = FitStatistics(
+            k=K * (m + (self.reserves_.shape[1] if self.reserves_ is not None else 0)),
+            converged=not self.diverged_,
+            message=self.divergence_["message"] if self.diverged_ else
+            "tracked the motion within max_tracking_error", iterations=self.n_iter_,
+            violation=max(over, 0.0), objective=float(np.sum(self.cost_)))
+        return Result.from_trial(self._channels(), stats=stats, report=self._report_text())
+
+    def _channels(self) -> Trial:
         ch = {}
         for j, c in enumerate(self.coordinates_):
             ch[c] = self.q_[:, j]
@@ -525,7 +533,8 @@ class ForwardStaticOptimization:
             for j, c in enumerate(self.coordinates_):
                 ch[f"{c}_reserve"] = self.reserves_[:, j]
         ch["cost"] = self.cost_
-        meta = {"analysis": "forward_static_optimization", **{k: str(v) for k, v in self.get_params().items()}}
+        meta = {"analysis": "forward_static_optimization",
+                **{k: str(v) for k, v in self.get_params(deep=False).items()}}
         if getattr(self, "inputs_", None) is not None:
             meta.update(self.inputs_.meta())
         if self.allow_divergence:
@@ -534,32 +543,29 @@ class ForwardStaticOptimization:
             meta["diverged"] = self.divergence_["message"] if self.diverged_ else "no"
         return Trial(self.t_, ch, meta=meta)
 
-    def report(self) -> str:
-        if not hasattr(self, "result_"):
-            raise SolverError("this ForwardStaticOptimization has not run yet; call fit(model, trial)")
+    def _report_text(self) -> str:
         err = np.abs(self.tracking_error_)
         rms = np.sqrt(np.mean(self.tracking_error_ ** 2, axis=0))
         form = {"q": "Eq. 3.16", "qv": "Eq. 3.17", "qva": "Eq. 3.18", "pid": "Eq. 3.19 (PID)"}[self.tracking]
-        lines = [
-            f"Forward static optimization ({self.mode} mode) of model '{self.model_name_}'",
-            f"  cost           sum (F/N)^{float(self.exponent):g} (Eq. 3.15) with tracking {form} "
-            f"as a {self.enforce}",
-            f"  control points {self.t_.size} over {self.t_[0]:.4g}-{self.t_[-1]:.4g} s, integrator "
-            f"{self.integrator}" + (f" ({self.substeps} steps per interval)" if str(self.integrator).lower() == "rk4" else ""),
-            "  tracking error max |q - q_d| = " + ", ".join(
+        rk4 = str(self.integrator).lower() == "rk4"
+        rows = [
+            ("cost", f"sum (F/N)^{float(self.exponent):g} (Eq. 3.15) with tracking {form} as a {self.enforce}"),
+            ("control points", f"{self.t_.size} over {self.t_[0]:.4g}-{self.t_[-1]:.4g} s, integrator "
+                               f"{self.integrator}" + (f" ({self.substeps} steps per interval)" if rk4 else "")),
+            ("tracking error", "max |q - q_d| = " + ", ".join(
                 f"{c} {np.rad2deg(e):.3g} deg (rms {np.rad2deg(r):.3g})"
-                for c, e, r in zip(self.coordinates_, err.max(axis=0), rms)),
-            f"  solver         {self.n_qp_} proxsuite QPs, {self.n_iter_} iterations",
-            f"  time           {self.time_ * 1e3:.1f} ms",
+                for c, e, r in zip(self.coordinates_, err.max(axis=0), rms))),
+            ("solver", f"{self.n_qp_} proxsuite QPs, {self.n_iter_} iterations"),
+            ("time", f"{self.time_ * 1e3:.1f} ms"),
         ]
         if getattr(self, "inputs_", None) is not None:
-            lines += [f"  {ln}" for ln in self.inputs_.describe()]
+            rows += list(self.inputs_.describe())
         if self.reserves_ is not None:
-            lines.append(f"  reserves       max {np.max(np.abs(self.reserves_)):.4g} N m")
+            rows.append(("reserves", f"max {np.max(np.abs(self.reserves_)):.4g} N m"))
         if self.diverged_:
-            lines.append(f"  DIVERGED       from t = {self.divergence_['time']:.4g} s "
-                         f"('{self.divergence_['coordinate']}'); the result does not track the motion")
-        return "\n".join(lines)
+            rows.append(("DIVERGED", f"from t = {self.divergence_['time']:.4g} s "
+                                     f"('{self.divergence_['coordinate']}'); the result does not track the motion"))
+        return format_report(f"Forward static optimization ({self.mode} mode) of model '{self.model_name_}'", rows)
 
 
 #: Short name used in the thesis and the CLI.

@@ -29,9 +29,9 @@ from ..components import Motion
 from ..dynamics import inverse_dynamics_array
 from ..errors import InfeasibleError, TrialError
 from ..kinematics import TrialInputs
-from ..trial import Trial, moment_channels
 from ..signals.filtering import lowpass
 from ..signals.sampling import median_step
+from ..trial import Trial, moment_channels
 
 __all__ = ["MomentPlan", "plan_moments", "required_moments", "spanned_coordinates", "MOMENT_SOURCES"]
 

@@ -28,9 +28,10 @@ import time as _time
 import numpy as np
 
 from ..errors import InfeasibleError, SolverError
+from ..fitting import FitStatistics, Fitter, Result, format_report
+from ..kinematics import DEFAULT_CUTOFF, as_motion
 from ..trial import Trial
 from . import qp as _qp
-from ..kinematics import DEFAULT_CUTOFF, as_motion
 from .static import WEIGHTS, build_problem, diagnose_infeasible, infeasible_message
 
 try:  # the foundation's constants (thesis A.2: 11 ms and 68 ms)
@@ -96,14 +97,15 @@ def excitations(time, a, *, tau_rise: float = TAU_RISE, tau_fall: float = TAU_FA
     return u
 
 
-class ModifiedStaticOptimization:
+class ModifiedStaticOptimization(Fitter):
     """MSO: activation-mode SO whose activations obey activation dynamics between frames.
 
     Parameters (keyword-only): ``exponent``, ``weights`` (``S_i`` of Eq. 2.14),
     ``tau_rise``, ``tau_fall`` (s, thesis A.2: 0.011 and 0.068), ``a0``
     (activations before the first frame, (m,) or scalar; None: frame 0 is
     free), ``reserves``, ``reserve_weight``, ``tol``, ``dofs`` as
-    :class:`~pinmsk.solvers.static.StaticOptimization`.
+    :class:`~pinmsk.solvers.static.StaticOptimization`.  ``result_`` as
+    StaticOptimization's, with ``<muscle>_excitation`` channels.
     """
 
     def __init__(self, *, exponent: float = 2, weights: str = "none", tau_rise: float = TAU_RISE,
@@ -118,10 +120,6 @@ class ModifiedStaticOptimization:
         self.reserve_weight = reserve_weight
         self.tol = tol
         self.dofs = dofs
-
-    def get_params(self) -> dict:
-        return {k: getattr(self, k) for k in ("exponent", "weights", "tau_rise", "tau_fall", "a0",
-                                              "reserves", "reserve_weight", "tol", "dofs")}
 
     def fit(self, model, trial, *, moments=None, cutoff=DEFAULT_CUTOFF, progress=None):
         """Solve frame after frame; returns ``self`` (results as StaticOptimization's, plus excitations)."""
@@ -167,27 +165,28 @@ class ModifiedStaticOptimization:
         self.bounds_ = (lo_all, hi_all)
         self.n_iter_ = iters
         self.n_qp_ = nqp
-        set_results(self, model, prob, x, rho, t0=t0, analysis="modified_static_optimization")
+        channels = set_results(self, model, prob, x, rho, t0=t0, analysis="modified_static_optimization")
+        self.result_ = result_of(self, prob, channels, objective=float(np.sum(self.cost_)),
+                                 report=self._report_text())
         return self
 
-    def report(self) -> str:
-        if not hasattr(self, "result_"):
-            raise SolverError("this ModifiedStaticOptimization is not fitted yet; call fit(model, trial)")
+    def _report_text(self) -> str:
         prob = self.problem_
         lo, hi = self.bounds_
         at_bound = np.sum((self.activations_ <= lo + 1e-9) & (lo > 1e-9)) + np.sum(
             (self.activations_ >= hi - 1e-9) & (hi < 1 - 1e-9))
-        return "\n".join([
-            f"Modified static optimization (activation dynamics between frames) of model '{self.model_name_}'",
-            f"  criterion      sum_i S_i a_i^{float(self.exponent):g} (Eq. 2.14), S = {self.weights}",
-            f"  dynamics       Winters-Stark, tau_rise {self.tau_rise * 1e3:g} ms, tau_fall {self.tau_fall * 1e3:g} ms",
-            f"  frames         {prob.n_frames}, muscles {len(prob.muscles)}, dofs {', '.join(prob.dofs)}",
-            f"  objective      sum over frames {np.sum(self.cost_):.6g}",
-            f"  rate limits    active at {at_bound} muscle-frames",
-            f"  solver         {self.n_qp_} proxsuite QPs, {self.n_iter_} iterations",
-            f"  violation      max {np.max(self.violation_):.3g} N m",
-            f"  time           {self.time_ * 1e3:.1f} ms",
-        ])
+        return format_report(
+            f"Modified static optimization (activation dynamics between frames) of model '{self.model_name_}'", [
+                ("criterion", f"sum_i S_i a_i^{float(self.exponent):g} (Eq. 2.14), S = {self.weights}"),
+                ("dynamics", f"Winters-Stark, tau_rise {self.tau_rise * 1e3:g} ms, "
+                             f"tau_fall {self.tau_fall * 1e3:g} ms"),
+                ("frames", f"{prob.n_frames}, muscles {len(prob.muscles)}, dofs {', '.join(prob.dofs)}"),
+                ("objective", f"sum over frames {np.sum(self.cost_):.6g}"),
+                ("rate limits", f"active at {at_bound} muscle-frames"),
+                ("solver", f"{self.n_qp_} proxsuite QPs, {self.n_iter_} iterations"),
+                ("violation", f"max {np.max(self.violation_):.3g} N m"),
+                ("time", f"{self.time_ * 1e3:.1f} ms"),
+            ])
 
 
 def _bounded(prob, k, lo, hi):
@@ -211,12 +210,13 @@ def activation_problem(est, model, trial, *, moments, cutoff):
     return P, prob
 
 
-def set_results(est, model, prob, a, rho, *, t0: float, analysis: str) -> None:
+def set_results(est, model, prob, a, rho, *, t0: float, analysis: str) -> Trial:
     """Store the activations ``a`` (N, m) and scaled reserves ``rho`` (N, nd) of MSO or EID ``est``.
 
     Sets ``problem_``, ``activations_``, ``forces_``, ``excitations_``,
     ``reserves_`` (None without reserves), ``violation_``, ``cost_``,
-    ``time_`` (since ``t0``), ``model_name_`` and ``result_``.
+    ``time_`` (since ``t0``) and ``model_name_``; returns the result's channels
+    (:func:`result_of` makes ``result_`` of them once the fitter is done).
     """
     est.problem_ = prob
     F = prob.forces(a)
@@ -229,8 +229,18 @@ def set_results(est, model, prob, a, rho, *, t0: float, analysis: str) -> None:
     est.cost_ = prob.cost(a, False)
     est.time_ = _time.perf_counter() - t0
     est.model_name_ = model.name
-    est.result_ = result_trial(prob, F, a, est.excitations_, est.reserves_, est.cost_, est.violation_,
-                               meta={"analysis": analysis, **{k: str(v) for k, v in est.get_params().items()}})
+    return result_trial(prob, F, a, est.excitations_, est.reserves_, est.cost_, est.violation_,
+                        meta={"analysis": analysis, **{k: str(v) for k, v in est.get_params(deep=False).items()}})
+
+
+def result_of(est, prob, channels: Trial, *, objective: float, report: str) -> Result:
+    """``result_`` of MSO or EID ``est`` after :func:`set_results`: its channels, statistics and report."""
+    N, m = est.activations_.shape
+    nd = len(prob.dofs)
+    stats = FitStatistics(k=N * (m + (nd if est.reserves else 0)), converged=True,
+                          message=f"all {N} frames solved to tol {float(est.tol):g}", iterations=est.n_iter_,
+                          violation=float(np.max(est.violation_)), objective=objective)
+    return Result.from_trial(channels, stats=stats, report=report)
 
 
 def result_trial(prob, F, a, u, reserves, cost, violation, *, meta) -> Trial:

@@ -3,7 +3,7 @@
 ``simulate_ff`` (fully forward): excitation -> activation dynamics (Eq. A.2) ->
 Thelen 2003 muscle (rigid tendon, or compliant tendon with the contraction
 dynamics of Eq. 3.9 / A.6-A.9) -> skeleton (Pinocchio ABA).  Rigid: classical
-RK4.  Compliant: the fibre-tendon equation is stiff (see :func:`simulate_ff`),
+RK4.  Compliant: the fiber-tendon equation is stiff (see :func:`simulate_ff`),
 so it is integrated implicitly inside an IMEX Runge-Kutta scheme.
 ``simulate_skeleton`` (IFM/IFT): the skeleton alone under muscle forces or
 joint torques.  ``muscle_inverse``: the inverse muscle model (Fig. 5.6,
@@ -67,7 +67,10 @@ class BatchSkeleton:
 
 # =============================================================================== muscles
 from ..muscles.tendon import _thelen_constants as _tendon_consts
-from ..muscles.thelen2003 import A_F as _A_F, F_HAT as _F_HAT, _C as _FV_C, _K_CON, _K_ECC, _W_THR
+from ..muscles.thelen2003 import _C as _FV_C
+from ..muscles.thelen2003 import _K_CON, _K_ECC, _W_THR
+from ..muscles.thelen2003 import A_F as _A_F
+from ..muscles.thelen2003 import F_HAT as _F_HAT
 from ..muscles.thelen2003 import FV_EXTRAPOLATION as _FV_EXTRA
 
 _FV_ECC = _FV_C * (_F_HAT - 1.0)
@@ -186,9 +189,9 @@ class BatchMuscles:
 
     # -- compliant tendon -----------------------------------------------------
     def compliant(self, a, l_mt, l_ce):
-        """``(F, v_ce, f_ce, f_isom)`` from the fibre-length state (Eq. 3.9)."""
+        """``(F, v_ce, f_ce, f_isom)`` from the fiber-length state (Eq. 3.9)."""
         a = np.maximum(a, A_MIN)
-        l_ce = np.maximum(l_ce, self._fibre_bounds())
+        l_ce = np.maximum(l_ce, self._fiber_bounds())
         x = np.sqrt(np.maximum(l_ce * l_ce - self.h2, 0.0))
         F = self.f_max * thelen_tendon_force((l_mt - x) / self.l_slack - 1.0, strain0=self.strain0)
         v_ce = thelen_contraction_rate(l_ce, np.maximum(l_mt, x + 1e-9), a, l_opt=self.l_opt,
@@ -199,25 +202,25 @@ class BatchMuscles:
         f_ce = F * l_ce / x - self.f_max * thelen_passive_force_length(l_ce / self.l_opt)
         return F, v_ce, np.maximum(f_ce, 0.0), fl
 
-    def _fibre_bounds(self):
+    def _fiber_bounds(self):
         return 1.0001 * np.sqrt(self.h2) + 1e-6 * self.l_opt
 
     def tendon_force(self, l_mt, l_ce):
         """Tendon force (N), Eq. A.6 at ``l_t = l_mt - l_ce cos(alpha)``: ``compliant()[0]``."""
-        l_ce = np.maximum(l_ce, self._fibre_bounds())
+        l_ce = np.maximum(l_ce, self._fiber_bounds())
         x = np.sqrt(np.maximum(l_ce * l_ce - self.h2, 0.0))
         return self.f_max * _tendon_f((l_mt - x) / self.l_slack - 1.0, self.strain0)[0]
 
-    def fibre_rate(self, a, l_mt, l_ce):
+    def fiber_rate(self, a, l_mt, l_ce):
         """``(v_ce, d v_ce / d l_ce)`` of the contraction dynamics (Eq. 3.9) with bare ufuncs.
 
         ``v_ce`` equals ``compliant()[1]`` (tested); the partial derivative at
-        fixed ``l_mt`` and ``a`` is the Newton slope of the implicit fibre
+        fixed ``l_mt`` and ``a`` is the Newton slope of the implicit fiber
         stages in :func:`simulate_ff` -- analytic, so one evaluation per
         iteration, and exact so that the iteration converges quadratically.
         """
         a = np.maximum(a, A_MIN)
-        l = np.maximum(l_ce, self._fibre_bounds())
+        l = np.maximum(l_ce, self._fiber_bounds())
         if self.no_pennation:
             x, sec, dsec = l, 1.0, 0.0
         else:
@@ -232,7 +235,7 @@ class BatchMuscles:
         e = np.exp(self._kpe * np.maximum(d, 0.0))
         fpe = (e - 1.0) * self._pe_scale
         dfpe = (self._kpe * self._pe_scale * self._inv_lopt) * e * (d >= 0.0)
-        f_ce = ft * sec - fpe                           # active fibre force / F_max (Eq. A.9 input)
+        f_ce = ft * sec - fpe                           # active fiber force / F_max (Eq. A.9 input)
         df_ce = dft * sec + ft * dsec - dfpe
         afl = a * fl
         p = f_ce / afl
@@ -277,10 +280,10 @@ _ARS_W = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (-1 / 9, 8 / 9, 2 / 9), (0.0, 1.0, 0
 NEWTON_ITERS = 4   # fixed: the trajectory must stay a smooth function of the inputs
 
 
-def _imex_ars443(f_exp, fibre, y0, l0, t, inputs, inputs_mid, *, dl_max, n_newton=None):
+def _imex_ars443(f_exp, fiber, y0, l0, t, inputs, inputs_mid, *, dl_max, n_newton=None):
     """IMEX ARS(4,4,3) of ``y' = f_exp(y, l, w)`` (explicit) and ``l' = f(l; y)`` (implicit).
 
-    ``fibre(y)`` returns ``l -> (f, df/dl)`` at the stage's ``y`` (paths evaluated once),
+    ``fiber(y)`` returns ``l -> (f, df/dl)`` at the stage's ``y`` (paths evaluated once),
     elementwise in ``l`` (B, m): each implicit stage
     ``l = L + h/2 f(l; y_i)`` is a scalar equation per (batch, muscle), solved by a fixed
     number of Newton steps warm-started from an explicit predictor.  Steps are capped
@@ -291,7 +294,7 @@ def _imex_ars443(f_exp, fibre, y0, l0, t, inputs, inputs_mid, *, dl_max, n_newto
     Y = np.empty((n,) + y0.shape)
     Lc = np.empty((n,) + l0.shape)
     Y[0], Lc[0] = y, l = y0, l0
-    kI_prev = fibre(y)(l)[0]
+    kI_prev = fiber(y)(l)[0]
     kE_next = f_exp(y, l, inputs[0])
     kE = [None] * 4
     for i in range(n - 1):
@@ -304,7 +307,7 @@ def _imex_ars443(f_exp, fibre, y0, l0, t, inputs, inputs_mid, *, dl_max, n_newto
             ys = y + h * sum(c * kE[j] for j, c in enumerate(_ARS_AE[s]))
             base = l + h * sum(c * kI[j] for j, c in enumerate(_ARS_AI[s][:-1]) if j > 0)
             ls = base + hg * kI_prev
-            rate = fibre(ys)
+            rate = fiber(ys)
             for _ in range(n_newton):
                 f, df = rate(ls)
                 step = (base + hg * f - ls) / np.maximum(1.0 - hg * df, 0.5)
@@ -327,14 +330,14 @@ def simulate_ff(model, t, u, u_mid, q0, v0, *, a0=None, l_ce0=None, tendon: str 
     ``u`` (N, B, m) at the grid points and ``u_mid`` (N-1, B, m) at the interval
     midpoints (B parameter sets at once; (N, m) for one).  ``q0, v0`` (nv,) or
     (B, nv); ``a0`` defaults to the clipped ``u[0]`` (steady state); with
-    ``tendon="compliant"`` the fibres start in isometric equilibrium unless
+    ``tendon="compliant"`` the fibers start in isometric equilibrium unless
     ``l_ce0`` is given.  Returns time-first arrays (N, B, ...): ``q, v, acc, a,
     u, force, l_ce, v_ce, f_ce, f_isom``.  Non-finite values mean the run diverged.
 
     Rigid tendon: classical RK4 of ``(q, v, a)``, 4th order.
 
-    Compliant tendon: the contraction dynamics (Eq. 3.9; tendon Eq. A.6, fibre
-    Eq. A.7-A.9) are stiff -- the force-velocity damping of the fibre scales
+    Compliant tendon: the contraction dynamics (Eq. 3.9; tendon Eq. A.6, fiber
+    Eq. A.7-A.9) are stiff -- the force-velocity damping of the fiber scales
     with activation and sits in series with a stiff tendon, so their time
     constant falls to ~0.1 ms (forearm) at a = 0.01, far below the optimizer's
     steps (0.83 ms finger, 9.5 ms forearm), where RK4 diverges.  They are
@@ -343,8 +346,8 @@ def simulate_ff(model, t, u, u_mid, q0, v0, *, a0=None, l_ce0=None, tendon: str 
     ``(q, v, a)`` -- skeleton (ABA) and activation dynamics (Eq. A.2) -- are
     explicit, the tendon lengths ``l_t = l_mt - l_ce cos(alpha)`` implicit,
     ``l_t' = v_mt - v_ce(l_t; q, v, a) / cos(alpha)``.  The tendon length (not
-    the fibre length) is the implicit unknown because the tendon force is
-    then a function of it alone: the explicit stages see the fibre's damping,
+    the fiber length) is the implicit unknown because the tendon force is
+    then a function of it alone: the explicit stages see the fiber's damping,
     as with a rigid tendon, instead of a tendon spring stretched by ``q`` at
     frozen ``l_ce`` (stiff again).  Each implicit stage is a scalar equation
     per (batch, muscle), solved by ``NEWTON_ITERS`` Newton steps with the
@@ -399,10 +402,10 @@ def simulate_ff(model, t, u, u_mid, q0, v0, *, a0=None, l_ce0=None, tendon: str 
 
     # The implicit unknown is the tendon length l_t = l_mt - l_ce cos(alpha), not l_ce: the
     # tendon force is then a function of the implicit state alone, so the explicit (q, v)
-    # stages see the fibre's force-velocity damping (as with a rigid tendon) rather than a
+    # stages see the fiber's force-velocity damping (as with a rigid tendon) rather than a
     # stiff tendon spring stretched by q at frozen l_ce -- which the explicit half could not
     # integrate at the optimizer's steps.
-    l_floor = mu._fibre_bounds()
+    l_floor = mu._fiber_bounds()
     x_floor = np.sqrt(np.maximum(l_floor * l_floor - mu.h2, 0.0)) + 1e-9
 
     def deriv_exp(y, l_t, w):
@@ -415,7 +418,7 @@ def simulate_ff(model, t, u, u_mid, q0, v0, *, a0=None, l_ce0=None, tendon: str 
         out[:, iv] = sk.accel(q, v, mu.moments(q, F))
         return out
 
-    def fibre(y):
+    def fiber(y):
         # l_t' = v_mt - v_ce / cos(alpha) (Eq. 3.9 through x = l_ce cos(alpha) = l_mt - l_t)
         q, a = y[:, iq], y[:, ia]
         l_mt = mu.lengths(q)
@@ -424,10 +427,10 @@ def simulate_ff(model, t, u, u_mid, q0, v0, *, a0=None, l_ce0=None, tendon: str 
         def rate(l_t):
             x = np.maximum(l_mt - l_t, x_floor)
             if mu.no_pennation:
-                v_ce, dv = mu.fibre_rate(a, l_mt, x)
+                v_ce, dv = mu.fiber_rate(a, l_mt, x)
                 return v_mt - v_ce, dv
             l_ce = np.sqrt(x * x + mu.h2)
-            v_ce, dv = mu.fibre_rate(a, l_mt, l_ce)
+            v_ce, dv = mu.fiber_rate(a, l_mt, l_ce)
             # d(v_ce sec)/d l_t = -(dv sec + v_ce dsec/dl) dl/dx; dl/dx = 1/sec, dsec/dl = -h^2/x^3
             return v_mt - v_ce * l_ce / x, dv - v_ce * mu.h2 / (x * x * l_ce)
         return rate
@@ -436,7 +439,7 @@ def simulate_ff(model, t, u, u_mid, q0, v0, *, a0=None, l_ce0=None, tendon: str 
         l_ce0 = x0[:, il]
         lt0 = mu.lengths(q0) - np.sqrt(np.maximum(l_ce0 * l_ce0 - mu.h2, 0.0))
         with np.errstate(all="ignore"):   # a diverging run ends non-finite; the caller checks
-            Y, Lt = _imex_ars443(deriv_exp, fibre, x0[:, :il.start], lt0, t, uc, ucm,
+            Y, Lt = _imex_ars443(deriv_exp, fiber, x0[:, :il.start], lt0, t, uc, ucm,
                                  dl_max=0.1 * mu.l_slack)
         x = mu.lengths(Y[..., iq].reshape(n * B, nv)).reshape(n, B, m) - Lt
         X = np.concatenate([Y, np.sqrt(x * x + mu.h2)], axis=2)
@@ -495,15 +498,15 @@ def simulate_skeleton(model, t, tau, tau_mid, q0, v0, *, skeleton=None, muscles=
 
 
 def muscle_inverse(model, q, v, acc, F, dF, ddF, *, muscles=None, fv_smooth: float = 0.0,
-                   fibre_floor=None) -> dict:
+                   fiber_floor=None) -> dict:
     """Inverse muscle model (Fig. 5.6, Eq. 5.2-5.4) over frames: ``a, adot, u, l_ce, v_ce``.
 
     ``q, v, acc`` (N, nv) kinematics; ``F, dF, ddF`` (N, m) muscle-tendon force and its
-    exact time derivatives.  Compliant Thelen tendon.  ``fv_smooth`` and ``fibre_floor``:
+    exact time derivatives.  Compliant Thelen tendon.  ``fv_smooth`` and ``fiber_floor``:
     see :func:`~pinmsk.muscles.inverse.inverse_thelen2003`.
     """
     mu = muscles or BatchMuscles(model)
     l_mt = mu.lengths(q)
     dl = mu.velocities(q, v)
     ddl = mu.path.accelerations(q, v, acc)
-    return mu.mtu.inverse(F, dF, l_mt, dl, ddl, ddF, fv_smooth=fv_smooth, fibre_floor=fibre_floor)
+    return mu.mtu.inverse(F, dF, l_mt, dl, ddl, ddF, fv_smooth=fv_smooth, fiber_floor=fiber_floor)

@@ -56,6 +56,7 @@ import numpy as np
 
 from ..components import Motion
 from ..errors import ConvergenceError, InfeasibleError, ModelError, ResidualWarning, SolverError
+from ..fitting import FitStatistics, Fitter, Result, format_report
 from ..kinematics import DEFAULT_CUTOFF, as_motion, prepare
 from ..residuals import floating_base_residuals
 from ..trial import Trial
@@ -615,7 +616,7 @@ def infeasible_message(prob: SOProblem, frames, deficits, *, limit: int = 8, not
 # The fitter
 # ---------------------------------------------------------------------------
 
-class StaticOptimization:
+class StaticOptimization(Fitter):
     """Static optimization of muscle forces over a whole trial (thesis Eq. 2.11-2.14, 3.13-3.14).
 
     Parameters (keyword-only)
@@ -648,7 +649,7 @@ class StaticOptimization:
     chunk_size : int
         Frames built and solved at a time (default :data:`CHUNK_FRAMES`): a
         long motion's per-frame problem arrays are never all in memory.  It
-        changes memory and speed only, not the result (not in ``get_params``).
+        changes memory and speed only, not the result (so not recorded in the result's meta).
 
     Attributes (after ``fit``)
     --------------------------
@@ -659,10 +660,16 @@ class StaticOptimization:
     ``max F/N`` for min/max); violation_ (N,) ``max_j |R^T F + r - tau|`` in
     N m; dofs_, muscles_; n_iter_, n_qp_, n_batched_; timing_; problem_ (the
     scaled :class:`SOProblem`, or :class:`ChunkedSOProblem` for motions longer
-    than ``chunk_size``); result_ (a Trial with ``<muscle>_force``,
-    ``<muscle>_activation``, ``<coord>_reserve`` with reserves, ``status``,
-    ``cost``, ``violation``; write it with :func:`pinmsk.write_trial`).
+    than ``chunk_size``); result_ (a :class:`~pinmsk.fitting.Result`: the
+    Trial of ``<muscle>_force``, ``<muscle>_activation``, ``<coord>_reserve``
+    with reserves, ``status``, ``cost``, ``violation`` -- write it with
+    :func:`pinmsk.write_trial` -- and its statistics: ``k`` the free
+    variables, ``objective`` the summed criterion, ``violation`` the largest
+    moment residual in N m; an effort minimisation has no AIC/BIC).
     """
+
+    #: parameters that change speed or memory only, left out of the result's meta
+    _NOT_RECORDED = ("chunk_size",)
 
     def __init__(self, *, mode: str = "force", exponent: float = 2, weights: str = "none",
                  minmax: bool = False, reserves: bool = False, reserve_weight: float = 1000.0,
@@ -677,10 +684,6 @@ class StaticOptimization:
         self.dofs = dofs
         self.method = method
         self.chunk_size = chunk_size
-
-    def get_params(self) -> dict:
-        return {k: getattr(self, k) for k in ("mode", "exponent", "weights", "minmax", "reserves",
-                                              "reserve_weight", "tol", "dofs", "method")}
 
     def _check_params(self):
         if self.mode not in MODES:
@@ -735,6 +738,7 @@ class StaticOptimization:
         t2 = _time.perf_counter()
         self.timing_ = {"setup_s": t1 - t0, "solve_s": t2 - t1, "total_s": t2 - t0}
         self.model_name_ = getattr(model, "name", "?")
+        self.result_ = self._result(prob)
         return self
 
     def fit_problem(self, prob: SOProblem, progress=None):
@@ -742,10 +746,12 @@ class StaticOptimization:
         self._check_params()
         self.plan_ = self.inputs_ = self.residuals_ = None
         t0 = _time.perf_counter()
+        self._model_rot = ()
         self._solve(prob, progress=progress)
         self.timing_ = {"setup_s": 0.0, "solve_s": _time.perf_counter() - t0,
                         "total_s": _time.perf_counter() - t0}
         self.model_name_ = "?"
+        self.result_ = self._result(prob)
         return self
 
     def _solve(self, prob: SOProblem, progress=None):
@@ -788,11 +794,23 @@ class StaticOptimization:
         self.n_batched_ = fr.batched_frames
         self.dofs_ = prob.dofs
         self.muscles_ = prob.muscles
-        del fr, x, moment     # (N, m) and (N, nd) arrays not kept: free them before the result trial
-        self.result_ = self._result_trial(prob)
         return self
 
-    def _result_trial(self, prob: SOProblem) -> Trial:
+    def _recorded_params(self) -> dict:
+        """The parameters written into the result's meta (as strings)."""
+        return {k: str(v) for k, v in self.get_params(deep=False).items() if k not in self._NOT_RECORDED}
+
+    def _result(self, prob: SOProblem) -> Result:
+        """The result: the channels of :meth:`_channels`, the statistics and the report."""
+        N, m = self.forces_.shape
+        nd = len(prob.dofs)
+        stats = FitStatistics(
+            k=N * (m + (nd if self.reserves_ is not None else 0)), converged=True,
+            message=f"all {N} frames optimal to tol {float(self.tol):g}", iterations=self.n_iter_,
+            violation=float(np.max(self.violation_)), objective=float(np.sum(self.cost_)))
+        return Result.from_trial(self._channels(prob), stats=stats, report=self._report_text())
+
+    def _channels(self, prob: SOProblem) -> Trial:
         ch = {}
         for i, name in enumerate(prob.muscles):
             ch[f"{name}_force"] = self.forces_[:, i]
@@ -815,7 +833,7 @@ class StaticOptimization:
         ch["status"] = self.status_.astype(float)
         ch["cost"] = self.cost_
         ch["violation"] = self.violation_
-        meta = {"analysis": "static_optimization", **{k: str(v) for k, v in self.get_params().items()}}
+        meta = {"analysis": "static_optimization", **self._recorded_params()}
         if plan is not None:
             meta.update(self.inputs_.meta())
             meta["balanced_moments"] = plan.source
@@ -824,10 +842,6 @@ class StaticOptimization:
         return Trial(prob.time, ch, units=units, meta=meta)
 
     # -- reporting -----------------------------------------------------------
-    def _check_fitted(self):
-        if not hasattr(self, "result_"):
-            raise SolverError("this StaticOptimization is not fitted yet; call fit(model, trial) first")
-
     def criterion(self) -> str:
         if self.minmax:
             what = "max_i F_i/N_i" if self.mode == "force" else "max_i S_i a_i"
@@ -840,55 +854,47 @@ class StaticOptimization:
         s = {"none": "", "fmax": "F_max ", "pcsa": "PCSA ", "volume": "V "}[self.weights]
         return f"sum_i {s}a_i^{ps} (Eq. 2.14)"
 
-    def report(self) -> str:
-        """Objective, iterations, convergence and constraint violation, as text."""
-        self._check_fitted()
+    def _report_text(self) -> str:
+        """Objective, iterations, convergence and constraint violation, in the one report format."""
         prob = self.problem_
         N, m = self.forces_.shape
-        lines = [
-            f"Static optimization ({prob.mode} mode) of model '{self.model_name_}'",
-            f"  criterion      {self.criterion()}",
-            f"  frames         {N} ({prob.time[0]:.4g}-{prob.time[-1]:.4g} s), muscles {m}, "
-            f"balanced dofs {', '.join(prob.dofs)}",
-            f"  free variables {N * m} ({m} per frame)",
-            f"  objective      sum over frames {np.sum(self.cost_):.6g}, per frame "
-            f"min {np.min(self.cost_):.6g} max {np.max(self.cost_):.6g}",
-            f"  solver         {self.n_batched_} frames verified in the batched solve, "
-            f"{N - self.n_batched_} by proxsuite ({self.n_qp_} QPs); {self.n_iter_} iterations in all",
-            f"  convergence    all {N} frames optimal to tol {float(self.tol):g} "
-            f"(moment residual / dof capacity)",
-            f"  violation      max |R^T F - tau| = {np.max(self.violation_):.3g} N m "
-            f"(capacity {', '.join(f'{d} {s:.4g}' for d, s in zip(prob.dofs, prob.scale))} N m)",
+        rows = [
+            ("criterion", self.criterion()),
+            ("frames", f"{N} ({prob.time[0]:.4g}-{prob.time[-1]:.4g} s), muscles {m}, "
+                       f"balanced dofs {', '.join(prob.dofs)}"),
+            ("free variables", f"{N * m} ({m} per frame)"),
+            ("objective", f"sum over frames {np.sum(self.cost_):.6g}, per frame "
+                          f"min {np.min(self.cost_):.6g} max {np.max(self.cost_):.6g}"),
+            ("solver", f"{self.n_batched_} frames verified in the batched solve, "
+                       f"{N - self.n_batched_} by proxsuite ({self.n_qp_} QPs); {self.n_iter_} iterations in all"),
+            ("convergence", f"all {N} frames optimal to tol {float(self.tol):g} (moment residual / dof capacity)"),
+            ("violation", f"max |R^T F - tau| = {np.max(self.violation_):.3g} N m "
+                          f"(capacity {', '.join(f'{d} {s:.4g}' for d, s in zip(prob.dofs, prob.scale))} N m)"),
         ]
-        plan = getattr(self, "plan_", None)
+        plan = self.plan_
         if plan is not None:
-            lines.append(f"  moments        {plan.source}")
-            lines += [f"  {ln}" for ln in self.inputs_.describe()]
-            lines += [f"  note           {n}" for n in plan.notes]
+            rows.append(("moments", plan.source))
+            rows += list(self.inputs_.describe())
+            rows += [("note", n) for n in plan.notes]
             if plan.unspanned:
                 how = ("left out by request (dofs=)" if plan.by_request else
                        "ideal reserves (no muscle can share them)" if self.reserves else "need no force")
-                lines.append(f"  not spanned by any muscle: {', '.join(plan.unspanned)} -- {how}; force needed:")
-                lines += ["  " + ln for ln in plan.table_lines(self.problem_.time, self._model_rot)]
+                rows.append(f"not spanned by any muscle: {', '.join(plan.unspanned)} -- {how}; force needed:")
+                rows += plan.table_lines(prob.time, self._model_rot)
             if self.residuals_ is not None and self.residuals_.coordinates:
-                lines += [f"  {ln}" for ln in self.residuals_.lines()]
+                rows += list(self.residuals_.lines())
         if self.reserves_ is not None:
             used = np.abs(self.reserves_) > 1e-6 * prob.scale
             parts = []
             for j, d in enumerate(prob.dofs):
                 if used[:, j].any():
                     parts.append(f"{d}: {used[:, j].sum()} frames, max {np.max(np.abs(self.reserves_[:, j])):.4g} N m")
-            lines.append("  reserves       " + ("; ".join(parts) if parts else "not used")
-                         + (" (N for translational dofs)" if parts else ""))
-        if hasattr(self, "timing_"):
-            t = self.timing_
-            lines.append(f"  time           {t['total_s'] * 1e3:.1f} ms (setup {t['setup_s'] * 1e3:.1f} ms, "
-                         f"solve {t['solve_s'] * 1e3:.1f} ms, {t['solve_s'] / N * 1e6:.1f} us/frame)")
-        return "\n".join(lines)
-
-    def __repr__(self) -> str:
-        args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
-        return f"StaticOptimization({args})"
+            rows.append(("reserves", ("; ".join(parts) if parts else "not used")
+                         + (" (N for translational dofs)" if parts else "")))
+        t = self.timing_
+        rows.append(("time", f"{t['total_s'] * 1e3:.1f} ms (setup {t['setup_s'] * 1e3:.1f} ms, "
+                             f"solve {t['solve_s'] * 1e3:.1f} ms, {t['solve_s'] / N * 1e6:.1f} us/frame)"))
+        return format_report(f"Static optimization ({prob.mode} mode) of model '{self.model_name_}'", rows)
 
 
 # ---------------------------------------------------------------------------
