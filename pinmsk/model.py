@@ -501,10 +501,16 @@ def import_osim(path, *, locked: str = "joint", nonlinear: str = "fit", gravity=
     """``(Model, ImportReport)`` of an OpenSim ``.osim`` (the parts: :func:`pinmsk.opensim.importer.read_import`,
     whose docstring gives the options; ``load_model`` takes the defaults)."""
     from .opensim.importer import read_import
-    imp = read_import(path, locked=locked, nonlinear=nonlinear, gravity=gravity, hooks=hooks)
+    from .opensim.report import NOTE, ReportEntry
+    imp = read_import(path, locked=locked, nonlinear=nonlinear, hooks=hooks)
+    report = imp.report
+    if gravity is not None:
+        _set_gravity(imp.pin_model, gravity, f"{path}: import_osim")
+        report = report.with_entries([ReportEntry(element=f"{path}: <gravity>", status=NOTE, became=(
+            f"replaced by gravity {imp.pin_model.gravity.linear.tolist()} m/s^2 (given to the import)"))])
     model = Model._make(name=imp.name, pin_model=imp.pin_model, muscles=imp.muscles, effects=(), contacts=(),
-                        meta=imp.meta)
-    return (model.with_effect(*imp.components) if imp.components else model), imp.report
+                        meta={**imp.meta, "import_report": report})
+    return (model.with_effect(*imp.components) if imp.components else model), report
 
 
 def _warn_default_gravity(where) -> None:

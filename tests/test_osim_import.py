@@ -656,6 +656,15 @@ def test_locked_clamped_and_coupled_coordinates(leg_path, leg_skeleton, leg_impo
     assert model.meta["osim_motion_types"]["pelvis_tx"] == "Translational"
 
 
+def test_gravity_given_to_the_import_replaces_the_models(leg_path, tmp_path):
+    model, report = import_osim(leg_path, gravity=[0.0, 0.0, -9.81])
+    assert np.allclose(model.gravity, [0.0, 0.0, -9.81]) and "replaced by gravity" in report.format()
+    with pytest.raises(ModelError, match="gravity must be 3 finite numbers"):
+        import_osim(leg_path, gravity=[0.0, "down"])
+    files = write_import(model, tmp_path)            # the sidecar keeps the model's gravity
+    assert "gravity = [0.0, 0.0, -9.81]" in files["sidecar"].read_text()
+
+
 def test_report_lists_what_is_not_imported_and_hooks_replace_it(leg_path, leg_import):
     model, report = leg_import
     missing = {e.element.split(": ", 1)[1] for e in report.not_imported}

@@ -43,6 +43,13 @@ TINY_NUMBER = 1e-7
 ROUNDOFF_ERROR = 2e-13
 
 
+def _coefficients(values, at_least: int, what: str) -> np.ndarray:
+    c = np.asarray(values, dtype=float).ravel()
+    if c.size < at_least or not np.all(np.isfinite(c)):
+        raise ValueError(f"a {what} needs at least {at_least} finite coefficient(s), got {c.tolist()}")
+    return c
+
+
 def _samples(x) -> tuple[int, ...]:
     """The sample shape of an argument array: ``(N,)`` (``()`` for a scalar)."""
     return np.shape(np.asarray(x, dtype=float))[:1]
@@ -103,11 +110,8 @@ class LinearFunction(Function):
     """``f(x) = a_0 x_0 + ... + a_{k-1} x_{k-1} + b`` from OpenSim's coefficients ``[a_0 .. a_{k-1}, b]``."""
 
     def __init__(self, coefficients):
-        c = np.asarray(coefficients, dtype=float).ravel()
-        if c.size < 2:
-            raise ValueError("a LinearFunction needs at least 2 coefficients (slope, intercept)")
-        self.coefficients = c
-        self.n_args = c.size - 1
+        self.coefficients = _coefficients(coefficients, 2, "LinearFunction (slopes, then the intercept)")
+        self.n_args = self.coefficients.size - 1
 
     def value(self, x):
         x = np.asarray(x, dtype=float)
@@ -130,10 +134,7 @@ class PolynomialFunction(Function):
     """``f(x) = c_0 x^n + c_1 x^(n-1) + ... + c_n`` (OpenSim's order: highest power first)."""
 
     def __init__(self, coefficients):
-        c = np.asarray(coefficients, dtype=float).ravel()
-        if c.size < 1:
-            raise ValueError("a PolynomialFunction needs at least one coefficient")
-        self.coefficients = c
+        self.coefficients = c = _coefficients(coefficients, 1, "PolynomialFunction")
         self._d1 = np.polyder(c) if c.size > 1 else np.zeros(1)
         self._d2 = np.polyder(self._d1) if self._d1.size > 1 else np.zeros(1)
 
@@ -178,7 +179,8 @@ class MultiplierFunction(Function):
 
 
 class _Knotted(Function):
-    """Shared by the knot-based functions: validated knots, OpenSim's end handling and bisection."""
+    """The knot-based functions: validated knots, OpenSim's end handling and bisection, and the pieces
+    ``y_k + t (b_k + t (c_k + t d_k))`` with ``t = x - x_k`` (subclasses set ``b``, ``c``, ``d``)."""
 
     def __init__(self, x, y, *, what: str):
         x = np.asarray(x, dtype=float).ravel()
@@ -230,6 +232,49 @@ class _Knotted(Function):
     @staticmethod
     def _out(v, scalar):
         return v[0] if scalar else v
+
+    def value(self, x):
+        a, scalar, lo, hi, at0, at1, inner = self._regions(x)
+        out = np.empty(a.shape)
+        out[lo] = self.y[0] + (a[lo] - self.x[0]) * self.b[0]
+        out[hi] = self.y[-1] + (a[hi] - self.x[-1]) * self.b[-1]
+        out[at0] = self.y[0]
+        out[at1] = self.y[-1]
+        ai = a[inner]
+        k = self._interval(ai)
+        t = ai - self.x[k]
+        out[inner] = self.y[k] + t * (self.b[k] + t * (self.c[k] + t * self.d[k]))
+        out[np.isnan(a)] = np.nan
+        return self._out(out, scalar)
+
+    def derivative(self, x, order=1, component=0):
+        self._check_order(order)
+        a, scalar, lo, hi, at0, at1, inner = self._regions(x)
+        out = np.empty(a.shape)
+        if order == 1:
+            out[lo | at0] = self.b[0]
+            out[hi | at1] = self.b[-1]
+        else:
+            out[lo | hi] = 0.0
+            out[at0] = 2.0 * self.c[0]
+            out[at1] = 2.0 * self.c[-1]
+        ai = a[inner]
+        k = self._interval(ai)
+        t = ai - self.x[k]
+        if order == 1:
+            out[inner] = self.b[k] + t * (2.0 * self.c[k] + 3.0 * t * self.d[k])
+        else:
+            out[inner] = 2.0 * self.c[k] + 6.0 * t * self.d[k]
+        out[np.isnan(a)] = np.nan
+        return self._out(out, scalar)
+
+    def affine(self):
+        if self.x.size == 2:
+            return float(self.b[0]), float(self.y[0] - self.b[0] * self.x[0])
+        return None
+
+    def __repr__(self):
+        return f"{type(self).__name__}(x={self.x.tolist()}, y={self.y.tolist()})"
 
 
 class SimmSpline(_Knotted):
@@ -287,91 +332,18 @@ class SimmSpline(_Knotted):
         d[-1] = d[-2]
         return b, 3.0 * s, d
 
-    def value(self, x):
-        a, scalar, lo, hi, at0, at1, inner = self._regions(x)
-        out = np.empty(a.shape)
-        out[lo] = self.y[0] + (a[lo] - self.x[0]) * self.b[0]
-        out[hi] = self.y[-1] + (a[hi] - self.x[-1]) * self.b[-1]
-        out[at0] = self.y[0]
-        out[at1] = self.y[-1]
-        ai = a[inner]
-        k = self._interval(ai)
-        t = ai - self.x[k]
-        out[inner] = self.y[k] + t * (self.b[k] + t * (self.c[k] + t * self.d[k]))
-        out[np.isnan(a)] = np.nan
-        return self._out(out, scalar)
-
-    def derivative(self, x, order=1, component=0):
-        self._check_order(order)
-        a, scalar, lo, hi, at0, at1, inner = self._regions(x)
-        out = np.empty(a.shape)
-        if order == 1:
-            out[lo | at0] = self.b[0]
-            out[hi | at1] = self.b[-1]
-        else:
-            out[lo | hi] = 0.0
-            out[at0] = 2.0 * self.c[0]
-            out[at1] = 2.0 * self.c[-1]
-        ai = a[inner]
-        k = self._interval(ai)
-        t = ai - self.x[k]
-        if order == 1:
-            out[inner] = self.b[k] + t * (2.0 * self.c[k] + 3.0 * t * self.d[k])
-        else:
-            out[inner] = 2.0 * self.c[k] + 6.0 * t * self.d[k]
-        out[np.isnan(a)] = np.nan
-        return self._out(out, scalar)
-
-    def affine(self):
-        if self.x.size == 2:
-            return float(self.b[0]), float(self.y[0] - self.b[0] * self.x[0])
-        return None
-
-    def __repr__(self):
-        return f"SimmSpline(x={self.x.tolist()}, y={self.y.tolist()})"
-
-
 class PiecewiseLinearFunction(_Knotted):
-    """OpenSim's PiecewiseLinearFunction: straight pieces, end slopes outside the knots, zero curvature."""
+    """OpenSim's PiecewiseLinearFunction: straight pieces, end slopes outside the knots, zero curvature.
+
+    The pieces are cubics with zero quadratic and cubic coefficients, evaluated as the spline's are: the
+    arithmetic is OpenSim's ``y_k + (x - x_k) b_k`` exactly (OpenSim's second derivative is zero too).
+    """
 
     def __init__(self, x, y):
         super().__init__(x, y, what="PiecewiseLinearFunction")
         s = np.diff(self.y) / np.maximum(TINY_NUMBER, np.diff(self.x))
         self.b = np.append(s, s[-1])
-
-    def value(self, x):
-        a, scalar, lo, hi, at0, at1, inner = self._regions(x)
-        out = np.empty(a.shape)
-        out[lo] = self.y[0] + (a[lo] - self.x[0]) * self.b[0]
-        out[hi] = self.y[-1] + (a[hi] - self.x[-1]) * self.b[-1]
-        out[at0] = self.y[0]
-        out[at1] = self.y[-1]
-        ai = a[inner]
-        k = self._interval(ai)
-        out[inner] = self.y[k] + (ai - self.x[k]) * self.b[k]
-        out[np.isnan(a)] = np.nan
-        return self._out(out, scalar)
-
-    def derivative(self, x, order=1, component=0):
-        self._check_order(order)
-        a, scalar, lo, hi, at0, at1, inner = self._regions(x)
-        if order == 2:
-            out = np.zeros(a.shape)
-        else:
-            out = np.empty(a.shape)
-            out[lo | at0] = self.b[0]
-            out[hi | at1] = self.b[-1]
-            out[inner] = self.b[self._interval(a[inner])]
-        out[np.isnan(a)] = np.nan
-        return self._out(out, scalar)
-
-    def affine(self):
-        if self.x.size == 2:
-            return float(self.b[0]), float(self.y[0] - self.b[0] * self.x[0])
-        return None
-
-    def __repr__(self):
-        return f"PiecewiseLinearFunction(x={self.x.tolist()}, y={self.y.tolist()})"
+        self.c = self.d = np.zeros(self.x.size)
 
 
 #: OpenSim function type -> pinmsk class (the 3.x spline names read as SimmSpline, as in OpenSim 4).

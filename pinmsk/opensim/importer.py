@@ -42,7 +42,7 @@ import pinocchio as pin
 
 from ..errors import ModelError
 from ..io.osim import OsimDocument, read_osim
-from .report import NOT_IMPORTED, NOTE, ImportReport, ReportEntry
+from .report import NOT_IMPORTED, ImportReport, ReportEntry
 from .skeleton import LOCKED_MODES, NONLINEAR_MODES, Skeleton, build_skeleton
 
 __all__ = ["OsimImport", "HookResult", "ImportHook", "read_import", "write_import", "warn_report",
@@ -77,7 +77,7 @@ class OsimImport:
     components: tuple = field(default_factory=tuple)
 
 
-def read_import(path, *, locked: str = "joint", nonlinear: str = "fit", gravity=None,
+def read_import(path, *, locked: str = "joint", nonlinear: str = "fit",
                 hooks: Sequence[ImportHook] = ()) -> OsimImport:
     """The :class:`OsimImport` of the OpenSim model at ``path`` (see the module docstring).
 
@@ -85,8 +85,7 @@ def read_import(path, *, locked: str = "joint", nonlinear: str = "fit", gravity=
     default values.  ``nonlinear``: ``"fit"`` (default) replaces joints whose axes are nonlinear in a
     coordinate by best-fitting fixed-axis joints (their errors are in the report); ``"exact"`` gives each
     such axis a Pinocchio joint of its own (a dependent coordinate, filled by ``meta['coordinate_map']``;
-    the model then has more coordinates than OpenSim's).  ``gravity`` (3 finite numbers, m/s^2) replaces
-    the model's.  ``hooks`` import muscles, actuators and contacts.
+    the model then has more coordinates than OpenSim's).  ``hooks`` import muscles, actuators and contacts.
     """
     p = Path(str(path))
     if p.suffix.lower() != ".osim":
@@ -97,11 +96,6 @@ def read_import(path, *, locked: str = "joint", nonlinear: str = "fit", gravity=
     skel = build_skeleton(doc, locked=locked, nonlinear=nonlinear)
     pm = skel.pin_model
     entries = list(skel.entries)
-    if gravity is not None:
-        g = _gravity(gravity)
-        pm.gravity = pin.Motion(np.concatenate([g, np.zeros(3)]))
-        entries.append(ReportEntry(element=f"{doc.source}: <gravity>", became=f"replaced by gravity {g.tolist()} "
-                                   "m/s^2 (given to the import)", status=NOTE))
     handled: set[str] = set()
     muscles, components = None, []
     for hook in hooks:
@@ -122,16 +116,6 @@ def read_import(path, *, locked: str = "joint", nonlinear: str = "fit", gravity=
                            "(model.meta['import_report'])")
     return OsimImport(name=p.stem, pin_model=pm, meta=meta, report=report, skeleton=skel, muscles=muscles,
                       components=tuple(components))
-
-
-def _gravity(gravity) -> np.ndarray:
-    try:
-        g = np.asarray(gravity, dtype=float)
-    except (TypeError, ValueError):
-        g = None
-    if g is None or g.shape != (3,) or not np.all(np.isfinite(g)):
-        raise ModelError(f"import of an .osim: gravity must be 3 finite numbers (m/s^2), got {gravity}")
-    return g
 
 
 def warn_report(report: ImportReport, *, stacklevel: int = 3) -> None:
@@ -217,7 +201,7 @@ def write_import(model_or_path, out_dir, *, name: str | None = None) -> dict[str
     from ..io.output_files import atomic_write, output_folder, output_transaction
 
     if isinstance(model_or_path, (str, Path)):
-        path, options, gravity = Path(model_or_path), {}, None
+        path, options, gravity = Path(model_or_path), {}, None     # the file's own gravity
     else:
         meta = getattr(model_or_path, "meta", None)
         if meta is None or not meta.get("osim"):
@@ -228,8 +212,9 @@ def write_import(model_or_path, out_dir, *, name: str | None = None) -> dict[str
     locked = options.get("locked", "joint")
     if locked not in LOCKED_MODES:
         raise ModelError(f"write_import: unknown locked option {locked!r}")
-    imp = read_import(path, locked=locked, nonlinear=options.get("nonlinear", "fit"), gravity=gravity)
+    imp = read_import(path, locked=locked, nonlinear=options.get("nonlinear", "fit"))
     report, skel = imp.report, imp.skeleton
+    gravity = np.asarray(skel.doc.gravity, dtype=float) if gravity is None else gravity
     stem = name or re.sub(r"[^A-Za-z0-9_.-]", "_", path.stem)
     if not re.fullmatch(r"[A-Za-z0-9_.-]+", stem):
         raise ModelError(f"write_import: name {stem!r} must be letters, digits, '_', '.' or '-'")
@@ -240,7 +225,7 @@ def write_import(model_or_path, out_dir, *, name: str | None = None) -> dict[str
     with output_transaction():
         output_folder(out)
         atomic_write(files["urdf"], lambda fh: fh.write(urdf_text))
-        atomic_write(files["sidecar"], lambda fh: fh.write(_sidecar(imp, stem, path)))
+        atomic_write(files["sidecar"], lambda fh: fh.write(_sidecar(imp, stem, path, gravity)))
         atomic_write(files["markers"], lambda fh: fh.write(_markers_toml(imp.meta, path)))
         atomic_write(files["report"], lambda fh: fh.write(report.format(verbose=True) + "\n"))
     return files
@@ -309,10 +294,10 @@ def _toml_str(s: str) -> str:
     return json.dumps(str(s), ensure_ascii=False)
 
 
-def _sidecar(imp: OsimImport, stem: str, source: Path) -> str:
+def _sidecar(imp: OsimImport, stem: str, source: Path, gravity) -> str:
     report = imp.report
     order = ", ".join(_toml_str(c) for c in imp.meta["coordinate_order"])
-    g = ", ".join(_num(x) for x in np.asarray(imp.pin_model.gravity.linear))
+    g = ", ".join(_num(x) for x in gravity)
     lines = [f"# pinmsk model sidecar written by pinmsk's OpenSim import from {source.name}.",
              "# The skeleton only: bodies, joints, coordinates, gravity, markers (as frames; also in",
              f"# {stem}_markers.toml).  What was approximated or not imported: {stem}_import_report.txt.",
