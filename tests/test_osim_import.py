@@ -518,11 +518,8 @@ def test_functions_match_opensim_to_1e12():
             v = osim.Vector(1, float(x))
             if order == 0:
                 out.append(f.calcValue(v))
-            else:
-                d = osim.StdVectorInt()
-                for _ in range(order):
-                    d.append(0)
-                out.append(f.calcDerivative(d, v))
+            else:   # a list, not a StdVectorInt: opensim's modules each wrap their own std::vector<int>
+                out.append(f.calcDerivative([0] * order, v))
         return np.array(out)
 
     for n in (2, 3, 4, 7, 13):
