@@ -449,7 +449,8 @@ class Data:
 def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
                tendon: str | None = None, gravity=None) -> Model:
     """Load a built-in model by name (``finger``, ``forearm``, ``gait2d``, ``human3d``)
-    or a user's model from a sidecar ``.toml`` (which names its URDF) or a bare ``.urdf``.
+    or a user's model from a sidecar ``.toml`` (which names its URDF), a bare ``.urdf`` or an
+    OpenSim ``.osim`` (:func:`pinmsk.opensim.import_osim`; its report is ``meta['import_report']``).
 
     ``moment_arms`` picks a path variant declared in the sidecar (e.g.
     ``"constant"`` or ``"angle"``); ``tendon`` overrides the sidecar's
@@ -459,6 +460,14 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
     (z up), with a warning saying so.
     """
     p = Path(str(name_or_path))
+    if p.suffix.lower() == ".osim":
+        if moment_arms is not None or tendon is not None:
+            raise ModelError(f"{p}: moment_arms and tendon do not apply to an OpenSim model (its muscles "
+                             "are not imported yet)")
+        from .opensim.importer import warn_report
+        model, report = import_osim(p, gravity=gravity)
+        warn_report(report)
+        return model
     if p.suffix.lower() == ".urdf":
         if not p.exists():
             raise ModelError(f"URDF file not found: {p}")
@@ -482,10 +491,26 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
             hint = f"; did you mean {', '.join(map(repr, close))}?" if close else ""
             raise ModelError(
                 f"no built-in model '{name_or_path}'{hint} (built-ins: {', '.join(names)}); "
-                "or pass the path of a .toml sidecar or a .urdf file"
+                "or pass the path of a .toml sidecar, a .urdf or an OpenSim .osim file"
             )
         sidecar = builtin_models.builtin_sidecar(str(name_or_path))
     return _load_sidecar(sidecar, moment_arms=moment_arms, tendon=tendon, gravity=gravity)
+
+
+def import_osim(path, *, locked: str = "joint", nonlinear: str = "fit", gravity=None, hooks=()):
+    """``(Model, ImportReport)`` of an OpenSim ``.osim`` (the parts: :func:`pinmsk.opensim.importer.read_import`,
+    whose docstring gives the options; ``load_model`` takes the defaults)."""
+    from .opensim.importer import read_import
+    from .opensim.report import NOTE, ReportEntry
+    imp = read_import(path, locked=locked, nonlinear=nonlinear, hooks=hooks)
+    report = imp.report
+    if gravity is not None:
+        _set_gravity(imp.pin_model, gravity, f"{path}: import_osim")
+        report = report.with_entries([ReportEntry(element=f"{path}: <gravity>", status=NOTE, became=(
+            f"replaced by gravity {imp.pin_model.gravity.linear.tolist()} m/s^2 (given to the import)"))])
+    model = Model._make(name=imp.name, pin_model=imp.pin_model, muscles=imp.muscles, effects=(), contacts=(),
+                        meta={**imp.meta, "import_report": report})
+    return (model.with_effect(*imp.components) if imp.components else model), report
 
 
 def _warn_default_gravity(where) -> None:

@@ -1,1 +1,25 @@
-"""OpenSim model layer: skeletons, functions, muscle paths and muscles built from an .osim document."""
+"""OpenSim model layer: skeletons, functions, muscle paths and muscles built from an .osim document.
+
+Below ``model.py`` (which builds the Model from these parts), above the reader :mod:`pinmsk.io.osim`:
+
+* :mod:`.functions` -- OpenSim's Function types, evaluated exactly (value, first and second derivative);
+* :mod:`.skeleton` -- the Pinocchio skeleton of an OpenSim model, OpenSim's exact kinematics, the
+  measured error of whatever a Pinocchio joint cannot hold, and the map from OpenSim's coordinates;
+* :mod:`.report` -- :class:`ImportReport`: what became what, and each approximation's error;
+* :mod:`.importer` -- :func:`read_import` (the parts of an imported model) and :func:`write_import`
+  (URDF + TOML sidecar); :func:`pinmsk.model.import_osim` and ``load_model("x.osim")`` use them;
+* :mod:`.paths` -- geometric muscle paths and their polynomial surrogates.
+
+Reading needs no ``opensim`` package; it is an optional peer for the tests that compare with OpenSim.
+"""
+from __future__ import annotations
+
+from .._lazy import lazy_attributes
+
+_EXPORTS = {
+    "read_import": "importer", "write_import": "importer", "ImportReport": "report", "ReportEntry": "report",
+    "build_skeleton": "skeleton", "OsimKinematics": "skeleton", "CoordinateMap": "skeleton",
+    "from_osim": "functions",
+}
+__all__ = sorted(_EXPORTS)
+__getattr__, __dir__ = lazy_attributes(__name__, _EXPORTS, __all__)
