@@ -1062,3 +1062,29 @@ def test_cli_info_accepts_an_osim(capsys):
     assert main(["info", str(path)]) == 0
     out = capsys.readouterr().out
     assert "10 dof" in out and "knee_angle_r" in out and "approximated" in out
+
+
+# -- pinmsk import (the CLI) -----------------------------------------------------------------------
+
+def test_cli_import_writes_the_sidecar_and_prints_the_report(leg_path, tmp_path, capsys):
+    """`pinmsk import` writes what load_model reads back, and prints the approximations it made."""
+    from pinmsk.presentation.cli import main
+    out = tmp_path / "imp"
+    assert main(["import", str(leg_path), "-o", str(out), "--name", "leg"]) == 0
+    text = capsys.readouterr().out
+    assert "import report of" in text and "approximated" in text and "max error" in text
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["leg.toml", "leg.urdf", "leg_import_report.txt", "leg_markers.toml"]
+    back, direct = pinmsk.load_model(out / "leg.toml"), pinmsk.load_model(leg_path)
+    assert back.nv == direct.nv and back.mass == pytest.approx(direct.mass, rel=1e-12)
+
+
+def test_cli_import_of_a_file_that_is_not_xml_is_one_line_and_writes_nothing(tmp_path, capsys):
+    from pinmsk.presentation.cli import main
+    bad = tmp_path / "bad.osim"
+    bad.write_text("<OpenSimDocument><Model name='x'>\n<BodySet>")      # cut off mid-file
+    out = tmp_path / "imp"
+    assert main(["import", str(bad), "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("pinmsk: error:") and "bad.osim" in err[0]
+    assert not out.exists()

@@ -142,6 +142,15 @@ def cmd_info(args) -> int:
     return 0
 
 
+def cmd_import(args) -> int:
+    from ..opensim.importer import read_import, write_import
+    files = write_import(args.model, args.out, name=args.name)
+    print(read_import(args.model).report.format(verbose=args.verbose))
+    for what in ("urdf", "sidecar", "markers", "report"):
+        print(f"wrote {files[what]}")
+    return 0
+
+
 def cmd_id(args) -> int:
     from ..dynamics import inverse_dynamics_result
     model = _model(args)
@@ -387,11 +396,22 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("models", help="list the built-in models with dof and muscle counts")
     s.set_defaults(func=cmd_models)
 
-    s = sub.add_parser("info", help="describe a model (built-in name or path to .toml/.urdf)")
+    s = sub.add_parser("info", help="describe a model (built-in name or path to .toml/.urdf/.osim)")
     s.add_argument("model")
     s.add_argument("--moment-arms", choices=["constant", "angle"], default=None,
                    help="muscle path variant (models that declare several)")
     s.set_defaults(func=cmd_info)
+
+    s = sub.add_parser("import", help="an OpenSim .osim model as URDF + TOML sidecar, with the import report",
+                       description="Write MODEL.osim as <name>.urdf, <name>.toml (the sidecar pinmsk.load_model "
+                                   "reads), <name>_markers.toml and <name>_import_report.txt in OUT, and print "
+                                   "the report: what became what, and each approximation with its measured "
+                                   "error over the coordinate ranges.")
+    s.add_argument("model", metavar="MODEL.osim")
+    s.add_argument("-o", "--out", required=True, metavar="DIR", help="folder for the files (created)")
+    s.add_argument("--name", default=None, help="file stem (default: the .osim's)")
+    s.add_argument("--verbose", action="store_true", help="also list what was imported exactly")
+    s.set_defaults(func=cmd_import)
 
     s = sub.add_parser("id", help="inverse dynamics of a trial: <coord>_moment channels")
     s.add_argument("model")
