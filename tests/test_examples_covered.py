@@ -5,9 +5,8 @@ Each script in ``examples/`` has exactly one entry below (a new script without o
 
 * ``RUN_HERE``: run by ``test_example_runs`` in this file -- in-process, as ``python examples/<script>``
   would run it (``run_example`` in conftest.py), or, for the viewer examples, its ``main`` called
-  with the viewer it builds captured -- and something real about its output asserted.  An entry
-  that names default-suite tests covering its code is marked slow (see the note at RUN_HERE), and
-  ``test_code_of_slow_examples_run_here_is_covered_by_default`` checks those tests exist and run by default;
+  with the viewer it builds captured -- and something real about its output asserted, in the
+  default suite;
 * ``RUN_ELSEWHERE``: run by the named test of another file, next to the code it exercises;
   ``test_example_is_run_elsewhere`` checks that this test exists, is not marked slow or skipped,
   and calls the script (parsed, not grepped: a comment or a slow test naming the script does not count);
@@ -93,28 +92,14 @@ def check_viewer(animated: set[str]):
 
 
 #: script: (arguments, check, None or the default-suite tests covering its code when it is marked slow).
-#: The data examples get an output folder as their argument.
-#: Marked slow although under 20 s: the default suite must stay under 3 minutes (it was at 161 s
-#: before this file ran examples), and these three cost 4.5-6 s each (warm, 2 loaded cores)
-#: while the named default tests exercise the same code; view_human3d.py (2.5 s) and
-#: 04_so_mso_eid.py (3.3 s) run by default.
+#: The data examples get an output folder as their argument.  All run by default (4.5-6 s each
+#: at most, on two test workers the suite has the room).
 RUN_HERE = {
-    "01_diagnose_forearm.py": (["{out}"], check_01, (
-        # the same two-step loop on the same trial, its numbers; the same figures and report
-        "tests/test_golden.py::test_diagnosis_json_matches_golden",
-        "tests/test_diagnose.py::test_two_hidden_effects_in_two_add_steps",
-        "tests/test_diagnose_io.py::test_demo_writes_everything")),
-    "03_forward_static_optimization.py": (["{out}"], check_03, (
-        # FSO against SO, its tracking forms and integrators
-        "tests/test_solvers_fso.py::test_fso_tracks_and_matches_so",
-        "tests/test_solvers_fso.py::test_fso_variants_track",
-        "tests/test_golden.py::test_forward_static_optimization_matches_golden")),
+    "01_diagnose_forearm.py": (["{out}"], check_01, None),
+    "03_forward_static_optimization.py": (["{out}"], check_03, None),
     "04_so_mso_eid.py": (["{out}"], check_04, None),
     "view_gait2d.py": (["--no-block"], check_viewer({"model/skeleton", "model/muscles", "model/residuals",
-                                                       "grf/l", "grf/r", "ghost/skeleton"}), (
-        # the gait2d viewer, and play() with muscles, ghost, residuals and GRF arrows
-        "tests/test_viewer.py::test_other_builtin_models_build",
-        "tests/test_viewer.py::test_play_with_ghost_residual_and_grf")),
+                                                       "grf/l", "grf/r", "ghost/skeleton"}), None),
     "view_human3d.py": (["--no-block"], check_viewer({"model/skeleton", "ghost/skeleton"}), None),
 }
 
@@ -256,8 +241,3 @@ def test_slow_example_is_run_and_its_code_covered(script):
     assert "slow" in _marks(tree, fn) and _calls_example(fn, script), f"{slow_ref} does not run {script}"
     _assert_default(fast_ref)
 
-
-@pytest.mark.parametrize("script", sorted(s for s in RUN_HERE if RUN_HERE[s][2]))
-def test_code_of_slow_examples_run_here_is_covered_by_default(script):
-    for ref in RUN_HERE[script][2]:
-        _assert_default(ref)
