@@ -141,3 +141,66 @@ def test_motion_and_moments_map_by_virtual_work():
     curv = dep.function.derivative(knee, 2) * w ** 2
     assert np.max(np.abs(curv)) > 1e-3      # the term is there to be missed
     assert np.allclose(mo.a[:, j], curv, atol=1e-6)
+
+
+#: Rajagopal coordinates whose ID is not yet within 1 % of OpenSim's (see the test below), with a bound.
+RAJAGOPAL_KNOWN = {"pelvis_tilt": 7.0, "pelvis_tx": 7.0, "pelvis_ty": 3.0, "pelvis_tz": 3.0,
+                   "pelvis_list": 2.0, "pelvis_rotation": 2.0, "hip_flexion_r": 2.0, "hip_flexion_l": 2.0}
+
+
+@pytest.mark.slow
+def test_id_of_rajagopal_against_opensims_inverse_dynamics_tool(tmp_path):
+    """RajagopalWalk against OpenSim's InverseDynamicsTool run here (results in tmp_path, no filter on
+    either side).  Slow (~5 s); the fast test of the same path is
+    test_id_of_gait10dof18musc_matches_opensims_reference_with_the_same_filter."""
+    osim = _opensim()
+    d = shared_data_dir()
+    model_path = None if d is None else d / "opensim-models" / "RajagopalWalk" / "subject_walk_scaled.osim"
+    walk = None if d is None else d / "real" / "opensim-moco-walk-emg"
+    if model_path is None or not model_path.is_file() or not (walk / "coordinates.sto").is_file():
+        pytest.skip("../shared/data RajagopalWalk or opensim-moco-walk-emg is absent")
+    model, _ = import_osim(model_path, nonlinear="exact")
+    cmap = coordinate_map(model)
+    raw = read_trial(walk / "coordinates.sto", strict=False)    # its nColumns header is off (40 for 32)
+    ch = {n.split("/")[-2]: np.asarray(raw[n]) for n in raw.names}    # /jointset/<joint>/<coord>/value
+    # the file lacks the locked mtp angles (OpenSim takes their defaults) and its patella angles
+    # (knee_angle_*_beta, coupled to the knee) are not the coupling's: both sides get the coupled values
+    ch.update({c: np.full(raw.n_frames, cmap.defaults[c]) for c in cmap.osim_coordinates if c not in ch})
+    for dep, indep, f, scale in cmap.couplers:
+        ch[dep] = scale * f.value(ch[indep[0]])
+    trial = Trial(raw.time, {c: ch[c] for c in cmap.osim_coordinates})
+    names = list(cmap.osim_coordinates)
+    X = np.column_stack([trial.time] + [trial[c] for c in names])
+    coords = tmp_path / "coordinates.sto"
+    with open(coords, "w") as fh:
+        fh.write(f"Coordinates\nversion=1\nnRows={X.shape[0]}\nnColumns={X.shape[1]}\ninDegrees=no\nendheader\n")
+        fh.write("\t".join(["time"] + names) + "\n")
+        np.savetxt(fh, X, delimiter="\t", fmt="%.12g")
+    xml = (model_path.parent / "grf_walk.xml").read_text()
+    loads = tmp_path / "grf_walk.xml"       # its datafile is named relative to the model's folder
+    loads.write_text(xml.replace("<datafile>grf_walk.mot</datafile>", f"<datafile>{walk / 'grf_walk.mot'}</datafile>"))
+    om = osim.Model(str(model_path))
+    om.initSystem()
+    tool = osim.InverseDynamicsTool()
+    tool.setModel(om)
+    tool.setCoordinatesFileName(str(coords))
+    tool.setExternalLoadsFileName(str(loads))
+    tool.setLowpassCutoffFrequency(-1)
+    tool.setStartTime(float(trial.time[0]))
+    tool.setEndTime(float(trial.time[-1]))
+    excluded = osim.ArrayStr()
+    excluded.append("Muscles")
+    tool.setExcludedForces(excluded)
+    tool.setResultsDir(str(tmp_path))
+    tool.setOutputGenForceFileName("id.sto")
+    assert tool.run()
+    ref = read_trial(tmp_path / "id.sto")
+    out = inverse_dynamics_result(model, trial, cutoff=0, grf_cutoff=0, external_loads=loads).trial
+    errs = _errors(ref, out, skip_ends=5)     # 5 ms at each end: the splines' end conditions
+    assert set(errs) == set(cmap.osim_coordinates)
+    # within 1 % of the peak except RAJAGOPAL_KNOWN: there the error grows with the knee speed squared in
+    # swing (~8 rad/s), the walker knee's velocity term that Simbody's FunctionBased mobilizer has and the
+    # exact chain lacks (tests/test_osim_import.py::test_exact_mode_inverse_dynamics_matches_opensim);
+    # the pelvis rows are residuals of ~20 N / 20 N m peak, so their % is of a small peak
+    over = {c: round(e, 3) for c, (e, _) in errs.items() if e >= RAJAGOPAL_KNOWN.get(c, 1.0)}
+    assert not over, f"ID differs from OpenSim's by more than allowed (% of peak): {over}"
