@@ -10,6 +10,7 @@ The knee translations are functions of the knee angle, held exactly by dependent
 import numpy as np
 import pytest
 
+from pinmsk import errors as pinmsk_errors
 from pinmsk.dynamics import inverse_dynamics_result
 from pinmsk.io.shared_data import shared_data_dir
 from pinmsk.io.tables import read_trial
@@ -204,3 +205,15 @@ def test_id_of_rajagopal_against_opensims_inverse_dynamics_tool(tmp_path):
     # the pelvis rows are residuals of ~20 N / 20 N m peak, so their % is of a small peak
     over = {c: round(e, 3) for c, (e, _) in errs.items() if e >= RAJAGOPAL_KNOWN.get(c, 1.0)}
     assert not over, f"ID differs from OpenSim's by more than allowed (% of peak): {over}"
+
+
+def test_a_trial_needs_opensims_coordinates_not_the_dependent_joints():
+    d = _gait_dir()
+    model = _exact(d)
+    ik = read_trial(d / "IK" / "subject01_walk_IK.mot")
+    mo = motion(model, ik, cutoff=6)        # the trial has no knee_r_translation1: the map fills it
+    assert mo.q.shape == (ik.n_frames, model.nv)
+    short = Trial(ik.time, {n: ik[n] for n in ik.names if n != "knee_angle_r"})
+    with pytest.raises(pinmsk_errors.TrialError, match=r"missing coordinate channel\(s\): 'knee_angle_r'") as e:
+        motion(model, short, cutoff=6)
+    assert "translation" not in str(e.value).split(";")[0]
