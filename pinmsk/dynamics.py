@@ -26,7 +26,7 @@ import pinocchio as pin
 from . import skeleton
 from .components import Motion
 from .errors import ResidualWarning, TrialError
-from .kinematics import DEFAULT_CUTOFF, TrialInputs, lowpass_external, prepare
+from .kinematics import DEFAULT_CUTOFF, TrialInputs, lowpass_external, prepare, source_coordinates
 from .residuals import ResidualReport, floating_base_residuals
 from .signals.sampling import median_step
 from .trial import Trial, moment_channels
@@ -91,9 +91,9 @@ def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, ex
     motion = inputs.motion
     tau = inverse_dynamics_array(model, motion, external=ext, components=components, progress=progress)
     residuals = floating_base_residuals(model, motion, tau, ext)
-    idx = [model.coordinate_index(c) for c in model.coordinate_order]
-    chans = {c: motion.q[:, i] for c, i in zip(model.coordinate_order, idx)}
-    chans.update({moment_channels([c])[0]: tau[:, i] for c, i in zip(model.coordinate_order, idx)})
+    names, q_out, tau_out = source_coordinates(model, motion, tau)
+    chans = {c: q_out[:, i] for i, c in enumerate(names)}
+    chans.update({m: tau_out[:, i] for i, m in enumerate(moment_channels(names))})
     meta = {"analysis": "inverse_dynamics", "model": model.name, **inputs.meta()}
     if external:
         meta["ground_reaction"] = "given by the caller: " + ", ".join(e.frame for e in ext)

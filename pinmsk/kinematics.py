@@ -46,7 +46,7 @@ from .skeleton import ExternalForce, world_wrench
 from .trial import Trial, parse_ground_reaction
 
 __all__ = ["DEFAULT_CUTOFF", "FILTER_ORDER", "Filtering", "TrialInputs", "motion", "as_motion", "prepare",
-           "cutoff_value",
+           "cutoff_value", "coordinate_map", "source_coordinates",
            "is_planar", "has_ground_reaction", "lowpass_external"]
 
 #: Vertical force (N) below which a plate counts as unloaded.
@@ -182,7 +182,10 @@ def _plate_loads(model, grf: Trial, motion: Motion, *, cutoff, external_loads, f
     _grf.check_vertical_force(grf, min_force=MIN_FORCE)
     plist = _grf.plates(model, grf, external_loads=external_loads, frames=frames, q=q_on_grf_time,
                         min_force=MIN_FORCE)
-    wrenches = [_grf.plate_wrench(grf, p, min_force=MIN_FORCE, planar=planar) for p in plist]
+    # an OpenSim ExternalLoads file says which columns load which body, and OpenSim applies them at every
+    # frame (its GRF files carry a processed COP); only plates found by pinmsk drop their unloaded frames
+    wrench_min = -np.inf if external_loads is not None else MIN_FORCE
+    wrenches = [_grf.plate_wrench(grf, p, min_force=wrench_min, planar=planar) for p in plist]
     W = np.concatenate([np.hstack([F, M]) for F, M in wrenches], axis=1) if wrenches else np.zeros((grf.n_frames, 0))
     if cutoff is not None:
         W = lowpass_wrenches(W, rate=measured_rate(grf), cutoff=cutoff)
@@ -210,10 +213,49 @@ def motion(model, trial, *, cutoff=DEFAULT_CUTOFF, signals: Iterable[str] | None
     All other channels (or those named in ``signals``) are passed as signals.
     Analyses use :func:`prepare`, which adds the external loads.
     """
-    trial.require(model.coordinates)
-    q, v, a = trial.kinematics(model.coordinates, cutoff=cutoff_value(cutoff))
-    names = [n for n in trial.names if n not in model.coordinates] if signals is None else list(signals)
-    return Motion(np.asarray(trial.time, dtype=float), q, v, a, {n: trial[n] for n in names})
+    cmap = coordinate_map(model)
+    if cmap is None:
+        trial.require(model.coordinates)
+        q, v, a = trial.kinematics(model.coordinates, cutoff=cutoff_value(cutoff))
+        measured = model.coordinates
+    else:
+        # dependent joints (an exact OpenSim import): the trial holds OpenSim's coordinates, which are
+        # filtered and differentiated, then mapped: q_pin = f(q), v_pin = J v, a_pin = J a + dJ v
+        measured = cmap.osim_coordinates
+        trial.require(measured)
+        q_os, v_os, a_os = trial.kinematics(measured, cutoff=cutoff_value(cutoff))
+        q, v, a = cmap.expand(q_os, v_os, a_os)
+    names = [n for n in trial.names if n not in measured] if signals is None else list(signals)
+    sig = {n: trial[n] for n in names}
+    if cmap is not None:
+        # OpenSim coordinates that drive only dependent joints are no column of q: they ride along as
+        # (filtered) signals, so moments map back at the same coordinates (source_coordinates)
+        sig.update({c: q_os[:, i] for i, c in enumerate(measured) if c not in model.coordinates})
+    return Motion(np.asarray(trial.time, dtype=float), q, v, a, sig)
+
+
+def coordinate_map(model):
+    """The model's map from its source's coordinates to its joints (``model.meta['coordinate_map']``,
+    a :class:`pinmsk.opensim.skeleton.CoordinateMap`), or None when every joint is a coordinate."""
+    cmap = model.meta.get("coordinate_map")
+    return None if cmap is None or cmap.identity else cmap
+
+
+def source_coordinates(model, motion: Motion, tau: np.ndarray) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+    """``(names, q, tau)`` per coordinate of the model's source (OpenSim's coordinates of an exact import:
+    ``tau = J^T tau_pin`` by virtual work), or the model's own coordinates and arrays without a map.
+
+    Coupled coordinates keep their own generalized force (``couplers=False``), as OpenSim's ID reports
+    them (it ignores constraints)."""
+    cmap = coordinate_map(model)
+    if cmap is None:
+        idx = [model.coordinate_index(c) for c in model.coordinate_order]
+        return model.coordinate_order, motion.q[:, idx], tau[:, idx]
+    cols = {c: (motion.q[:, model.coordinate_index(c)] if c in model.coordinates else motion.signals[c])
+            for c in cmap.osim_coordinates if c in model.coordinates or c in motion.signals}
+    q = np.column_stack([cols[c] if c in cols else np.full(motion.n_frames, cmap.welded.get(c, cmap.defaults[c]))
+                         for c in cmap.osim_coordinates])
+    return cmap.osim_coordinates, q, cmap.generalized_forces(cols, tau, couplers=False)
 
 
 def as_motion(model, data, cutoff=DEFAULT_CUTOFF) -> Motion:
