@@ -1,0 +1,119 @@
+"""OpenSim import and inverse dynamics on an imported model: pinmsk against OpenSim, in one run.
+
+    python benchmarks/bench_osim_import.py [--repeat 5] [--data DIR]
+
+Issue 14's speed targets, each measured here in the same run (one core: BLAS/OpenMP threads are
+limited to 1):
+
+* **import**: ``pinmsk.model.import_osim`` of RajagopalWalk's ``subject_walk_scaled.osim`` and of
+  gait10dof18musc's ``subject01.osim`` (target <= 5 s).  Reading the XML needs no ``opensim``.
+* **ID on the imported model vs a bare Pinocchio RNEA loop**: ``pinmsk.skeleton.rnea`` over the
+  151 frames of ``IK/subject01_walk_IK.mot`` on the imported subject01 (exact knee, the
+  configuration that matches OpenSim) against a plain Python loop of ``pinocchio.rnea`` on the
+  same Pinocchio model and the same (q, v, a) (target >= 0.8x the loop's throughput).
+* **ID compute vs OpenSim's InverseDynamicsTool** on the same model, motion and
+  ``subject01_walk_grf.xml``: pinmsk's compute = coordinates -> dependent joints, 6 Hz filter and
+  spline derivatives, external loads, RNEA, moments mapped back (``inverse_dynamics_result``
+  with the trial and the ExternalLoads file already read); OpenSim's = its tool's ``run()``
+  (model loading, reading, filtering, solving, writing: it cannot be split).  Target >= 50x.
+
+Without ``../shared/data/opensim-models`` (or ``--data``) the script says so and exits 0; without
+the optional peer ``opensim`` it times pinmsk only.
+"""
+from __future__ import annotations
+
+import os
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+
+import argparse  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import bench_opensim as harness  # noqa: E402
+
+from pinmsk.dynamics import inverse_dynamics_result  # noqa: E402
+from pinmsk.io.external_loads import read_external_loads  # noqa: E402
+from pinmsk.io.shared_data import shared_data_dir  # noqa: E402
+from pinmsk.io.tables import read_trial  # noqa: E402
+from pinmsk.kinematics import motion  # noqa: E402
+from pinmsk.model import import_osim  # noqa: E402
+from pinmsk.skeleton import rnea  # noqa: E402
+
+
+def _best(fn, repeat: int) -> float:
+    best = float("inf")
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--data", type=Path, default=None, help="the shared data folder (default ../shared/data)")
+    args = ap.parse_args(argv)
+    data = args.data or shared_data_dir()
+    models = None if data is None else Path(data) / "opensim-models"
+    if models is None or not (models / "Gait10dof18musc" / "subject01.osim").is_file():
+        print("bench_osim_import: ../shared/data/opensim-models is absent; nothing to time")
+        return 0
+    gait = models / "Gait10dof18musc"
+    raj = models / "RajagopalWalk" / "subject_walk_scaled.osim"
+
+    t_raj = _best(lambda: import_osim(raj), args.repeat) if raj.is_file() else float("nan")
+    t_sub = _best(lambda: import_osim(gait / "subject01.osim", nonlinear="exact"), args.repeat)
+    model, _ = import_osim(gait / "subject01.osim", nonlinear="exact")
+
+    ik = read_trial(gait / "IK" / "subject01_walk_IK.mot")
+    loads = read_external_loads(gait / "ExperimentalData" / "subject01_walk_grf.xml")
+    grf = read_trial(Path(loads.datafile), strict=False)      # files read once, outside the timing
+    mo = motion(model, ik, cutoff=6.0)
+    pm = model.pin
+    pd = pm.createData()
+    import pinocchio as pin
+
+    def bare():
+        out = np.empty_like(mo.q)
+        for k in range(mo.n_frames):
+            out[k] = pin.rnea(pm, pd, mo.q[k], mo.v[k], mo.a[k])
+        return out
+
+    t_bare = _best(bare, args.repeat)
+    t_rnea = _best(lambda: rnea(model, mo.q, mo.v, mo.a, data=pd), args.repeat)
+    assert np.allclose(rnea(model, mo.q, mo.v, mo.a, data=pd), bare(), atol=1e-9)
+    t_id = _best(lambda: inverse_dynamics_result(model, ik, cutoff=6.0, grf=grf, grf_cutoff=0,
+                                                 external_loads=loads), args.repeat)
+
+    print(f"machine: {harness.machine()}")
+    print(f"frames: {mo.n_frames} (subject01 walk); best of {args.repeat}")
+    print(f"import Rajagopal (subject_walk_scaled.osim): {t_raj:.3f} s (target <= 5 s)")
+    print(f"import subject01.osim, exact knee:            {t_sub:.3f} s")
+    print(f"RNEA, bare pinocchio loop:                    {1e3 * t_bare:.2f} ms")
+    print(f"RNEA, pinmsk.skeleton.rnea (imported model):  {1e3 * t_rnea:.2f} ms  -> "
+          f"{t_bare / t_rnea:.2f}x the loop's throughput (target >= 0.8x)")
+    print(f"ID compute, pinmsk (map, filter, loads, RNEA): {1e3 * t_id:.2f} ms")
+    osim, why = harness.import_opensim()
+    if osim is None:
+        print(f"OpenSim: {why}; its ID tool is not timed")
+        return 0
+    with tempfile.TemporaryDirectory() as tmp:
+        staged = harness.stage(gait, Path(tmp) / "Gait10dof18musc")
+        times = [harness.opensim_id(osim, staged / "ID" / "walk_Setup_ID.xml",
+                                    results=Path(tmp) / f"id_{r}")[0] for r in range(args.repeat)]
+    t_os = min(times)
+    print(f"ID, OpenSim InverseDynamicsTool (run):       {1e3 * t_os:.1f} ms  -> pinmsk compute "
+          f"{t_os / t_id:.0f}x faster (target >= 50x)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
