@@ -112,10 +112,11 @@ def rnea(model, q, v, a, *, external: Sequence[ExternalForce] = (),
     fext = pin.StdVec_Force()
     for _ in range(pm.njoints):
         fext.append(pin.Force.Zero())
+    loaded = sorted(set(joints))          # only these entries are ever non-zero: reset just them
     for start in range(0, n, PROGRESS_CHUNK):
         for i in range(start, min(start + PROGRESS_CHUNK, n)):
             pin.forwardKinematics(pm, pd, q[i])
-            for j in range(pm.njoints):
+            for j in loaded:
                 fext[j].setZero()
             for jid, w in zip(joints, wrenches):
                 fext[jid] = fext[jid] + pd.oMi[jid].actInv(pin.Force(w[i]))
