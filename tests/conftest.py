@@ -83,3 +83,16 @@ def run_pinmsk(*args: str) -> str:
     with _as_command(["pinmsk", *map(str, args)]) as out:
         runpy.run_module("pinmsk", run_name="__main__")
     return out.getvalue()
+
+
+def import_opensim():
+    """``(opensim, "")`` with its logger off (no ``opensim.log`` in the working directory), or
+    ``(None, why)`` when the optional peer is not installed."""
+    try:
+        import opensim
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        return None, f"opensim is not importable ({exc}); `pip install opensim` to compare with OpenSim"
+    opensim.Logger.setLevelString("Off")
+    with contextlib.suppress(Exception):
+        opensim.Logger.removeFileSink()
+    return opensim, ""

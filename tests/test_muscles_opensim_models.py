@@ -29,15 +29,9 @@ from pinmsk.opensim.muscles import (muscle_from_osim, muscle_model_from_osim,
                                     opensim_static_optimization_capacity, properties_from_xml,
                                     summarize_notes)
 
-try:
-    import opensim as osim
-except ImportError as _exc:  # pragma: no cover - depends on the environment
-    osim = None
-    _WHY = f"opensim is not importable ({_exc}); `pip install opensim` to compare with OpenSim"
-else:
-    _WHY = ""
-    osim.Logger.setLevelString("Off")      # no opensim.log in the working directory, no info lines
-    osim.Logger.removeFileSink()
+from conftest import import_opensim
+
+osim, _WHY = import_opensim()
 needs_opensim = pytest.mark.skipif(osim is None, reason=_WHY or "opensim importable")
 
 

@@ -14,15 +14,9 @@ import pinmsk
 from pinmsk import skeleton
 from pinmsk.io.shared_data import shared_data_dir
 
-from conftest import REPO
+from conftest import REPO, import_opensim
 
-try:
-    import opensim as osim
-except ImportError as _exc:  # pragma: no cover - depends on the environment
-    osim = None
-    _WHY = f"opensim is not importable ({_exc}); `pip install opensim` to run the OpenSim peer tests"
-else:
-    _WHY = ""
+osim, _WHY = import_opensim()
 
 needs_opensim = pytest.mark.skipif(osim is None, reason=_WHY or "opensim importable")
 
