@@ -30,7 +30,7 @@ def _imported(relative):
 
 
 def _reference(relative, every):
-    """OpenSim's lengths and moment arms over every ``every``-th frame of the model's IK motion."""
+    """OpenSim's model and every ``every``-th pose of the model's IK motion."""
     osim = pytest.importorskip("opensim")
     osim.Logger.setLevelString("Off")
     osim.Logger.removeFileSink()
@@ -39,10 +39,18 @@ def _reference(relative, every):
     return ref, q
 
 
+def _reference_paths(relative, every, muscles):
+    """(ref, q, OpenSim's lengths, moment arms) over the IK poses, computed once per session."""
+    key = ("paths", relative, every)
+    if key not in _CACHE:
+        ref, q = _reference(relative, every)
+        _CACHE[key] = (ref, q) + tuple(ref.paths(list(muscles), q))
+    return _CACHE[key]
+
+
 def _compare(relative, every, model=None):
     model, report = _imported(relative)[:2] if model is None else (model, model.meta["import_report"])
-    ref, q_osim = _reference(relative, every)
-    L_ref, A_ref = ref.paths(list(model.muscle_names), q_osim)
+    ref, q_osim, L_ref, A_ref = _reference_paths(relative, every, model.muscle_names)
     q = np.zeros((len(q_osim), model.nv))
     for j, c in enumerate(ref.independent):
         q[:, model.coordinate_index(c)] = q_osim[:, j]
@@ -140,12 +148,11 @@ def test_max_isometric_force_round_trip_and_report():
 
 def test_muscles_command_on_arm26(tmp_path, capsys):
     model, _, _ = _imported(ARM26)
-    ref, q_osim = _reference(ARM26, 1)
+    ref, q_osim, L_ref, A_ref = _reference_paths(ARM26, 1, model.muscle_names)
     out = tmp_path / "arm26_muscles.sto"
     assert main(["muscles", _model(ARM26), _model(MOTIONS[ARM26]), "-o", str(out), "--cutoff", "0"]) == 0
     from pinmsk.io.tables import read_trial
     tr = read_trial(out)
-    L_ref, A_ref = ref.paths(list(model.muscle_names), q_osim)
     elbow = ref.independent.index("r_elbow_flex")
     for i, m in enumerate(model.muscle_names):
         # the analysis takes the geometric paths: OpenSim's lengths to the .mot's 6 digits
@@ -166,3 +173,35 @@ def test_muscles_command_refuses_a_model_without_muscles(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith("pinmsk: error:") and "has no muscles" in err[-1]
     assert not out.exists()
+
+
+def _leg_without_path(tmp_path):
+    import test_osim_import as t
+    text = t.leg()
+    start = text.index('<Thelen2003Muscle name="vas">')
+    a = text.index("<objects>", start)
+    b = text.index("</objects", a)
+    p = tmp_path / "nopath.osim"
+    p.write_text(text[:a + len("<objects>")] + text[b:])
+    return p
+
+
+def test_a_muscle_without_a_path_is_named(tmp_path):
+    from pinmsk.errors import ModelError
+    from pinmsk.model import import_osim
+    with pytest.raises(ModelError, match=r'nopath\.osim:\d+: <Thelen2003Muscle name="vas">: the muscle has no '
+                                         r"path points"):
+        import_osim(_leg_without_path(tmp_path))
+
+
+def test_fit_ranges_naming_an_unknown_coordinate_are_refused(tmp_path):
+    from functools import partial
+
+    import test_osim_import as t
+    from pinmsk.errors import ModelError
+    from pinmsk.model import import_osim
+    from pinmsk.opensim.muscle_import import muscle_hook
+    p = tmp_path / "leg.osim"
+    p.write_text(t.leg())
+    with pytest.raises(ModelError, match=r"fit ranges name coordinate\(s\) \['knee_angel'\]"):
+        import_osim(p, hooks=(partial(muscle_hook, ranges={"knee_angel": (-1.0, 0.0)}),))
