@@ -47,7 +47,8 @@ from .paths import GeometricPaths, fit_polynomial_paths, path_specs_from_xml
 from .report import APPROXIMATED, NOTE, ReportEntry
 from .skeleton import OsimKinematics, Skeleton
 
-__all__ = ["muscle_hook", "default_muscle_hook", "DEFAULT_HOOKS", "MAX_MUSCLES", "geometric_paths", "MAX_ROTATION_SPAN", "FIT_SAMPLES", "TEST_SAMPLES", "MAX_DEGREE", "TOLERANCE"]
+__all__ = ["muscle_hook", "default_muscle_hook", "DEFAULT_HOOKS", "MAX_MUSCLES", "geometric_paths",
+           "MAX_ROTATION_SPAN", "FIT_SAMPLES", "TEST_SAMPLES", "MAX_DEGREE", "TOLERANCE"]
 
 #: Training and held-out poses of the polynomial fit (per fit; the fit's cost grows with them).
 FIT_SAMPLES = 250
@@ -77,7 +78,7 @@ def muscle_hook(doc: OsimDocument, skeleton: Skeleton, *, ranges=None, max_muscl
     if max_muscles is not None and len(chosen) > max_muscles:
         return HookResult(entries=(ReportEntry(
             element=f"{doc.source}: <ForceSet> {len(chosen)} muscles",
-            became=(f"muscles not imported by default: fitting {len(chosen)} muscle paths takes about 0.4 s per "
+            became=(f"muscles not imported by default: fitting {len(chosen)} muscle paths takes about 0.3 s per "
                     f"muscle (more than {max_muscles} muscles); import them with pinmsk.model.import_osim(path, "
                     "hooks=[pinmsk.opensim.muscle_import.muscle_hook])"), status=NOTE),))
     names = [m.name for m in chosen]
@@ -114,6 +115,14 @@ def muscle_hook(doc: OsimDocument, skeleton: Skeleton, *, ranges=None, max_muscl
     muscles = MuscleSet(names=names, model_type=imp.model_type, mtu=imp.mtu, path=path, tendon=imp.tendon)
 
     entries = _fit_entries(doc, chosen, fits, ranges)
+    coupled = sorted({c["dependent"] for c in skeleton.couplings} & set(fit_coords))
+    if coupled:
+        # the fit samples a coupled coordinate on its own; OpenSim's moment arm about the independent
+        # coordinate would include the coupling
+        entries.append(ReportEntry(
+            element=f"{doc.source}: <ConstraintSet>", status=NOTE,
+            became=(f"muscle paths fitted with the coupled coordinate(s) {', '.join(coupled)} as independent "
+                    "variables (sampled over their own ranges); their moment arms do not include the coupling")))
     notes = summarize_notes(imp.notes)
     entries.append(ReportEntry(
         element=f"{doc.source}: <ForceSet> {len(chosen)} muscles",
@@ -123,7 +132,7 @@ def muscle_hook(doc: OsimDocument, skeleton: Skeleton, *, ranges=None, max_muscl
     return HookResult(muscles=muscles, entries=tuple(entries), handled=tuple(m.where for m in chosen))
 
 
-#: The most muscles the default hook fits at import (Rajagopal's 80 take about 35 s on 2 shared cores).
+#: The most muscles the default hook fits at import (Rajagopal's 80 take 22-35 s on 2 shared cores).
 MAX_MUSCLES = 40
 
 
