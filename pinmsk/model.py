@@ -463,7 +463,7 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
     if p.suffix.lower() == ".osim":
         if moment_arms is not None or tendon is not None:
             raise ModelError(f"{p}: moment_arms and tendon do not apply to an OpenSim model (its muscles "
-                             "are not imported yet)")
+                             "come from the .osim: their paths are fitted polynomials, their tendons as OpenSim sets them)")
         from .opensim.importer import warn_report
         model, report = import_osim(p, gravity=gravity)
         warn_report(report)
@@ -497,10 +497,13 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
     return _load_sidecar(sidecar, moment_arms=moment_arms, tendon=tendon, gravity=gravity)
 
 
-def import_osim(path, *, locked: str = "joint", nonlinear: str = "fit", gravity=None, hooks=()):
+def import_osim(path, *, locked: str = "joint", nonlinear: str = "fit", gravity=None, hooks=None):
     """``(Model, ImportReport)`` of an OpenSim ``.osim`` (the parts: :func:`pinmsk.opensim.importer.read_import`,
-    whose docstring gives the options; ``load_model`` takes the defaults)."""
+    whose docstring gives the options; ``load_model`` takes the defaults).  ``hooks`` default: the
+    muscle import (:func:`pinmsk.opensim.muscle_import.muscle_hook`); ``()`` imports the skeleton only."""
     from .opensim.importer import read_import
+    from .opensim.muscle_import import DEFAULT_HOOKS
+    hooks = DEFAULT_HOOKS if hooks is None else hooks
     from .opensim.report import NOTE, ReportEntry
     imp = read_import(path, locked=locked, nonlinear=nonlinear, hooks=hooks)
     report = imp.report

@@ -112,7 +112,7 @@ def read_import(path, *, locked: str = "joint", nonlinear: str = "fit",
     meta = _meta(doc, skel, p)
     meta["import_report"] = report
     meta["description"] = (f"imported from OpenSim model '{doc.name}' ({p.name}): {len(report.approximations)} "
-                           f"approximated joint(s), {len(report.not_imported)} element(s) not imported "
+                           f"approximated element(s), {len(report.not_imported)} element(s) not imported "
                            "(model.meta['import_report'])")
     return OsimImport(name=p.stem, pin_model=pm, meta=meta, report=report, skeleton=skel, muscles=muscles,
                       components=tuple(components))
@@ -124,18 +124,26 @@ def warn_report(report: ImportReport, *, stacklevel: int = 3) -> None:
     import warnings
 
     parts = []
-    if report.approximations:
+    paths = [e for e in report.approximations if e.details.get("kind") == "muscle paths"]
+    joints = [e for e in report.approximations if e.details.get("kind") != "muscle paths"]
+    if joints:
         each = []
-        for e in report.approximations:
+        for e in joints:
             name = e.element.split("name=", 1)[-1].strip(">").strip('"')
             rot = e.details.get("max_rotation_error_rad")
             each.append(f"{name} {e.max_error * 1000:.3g} mm" + (f" / {np.degrees(rot):.2g} deg" if rot and rot > 1e-6 else ""))
-        text = (f"{len(report.approximations)} joint(s) approximated by fixed-axis joints (max error of the "
+        text = (f"{len(joints)} joint(s) approximated by fixed-axis joints (max error of the "
                 f"child body's origin / orientation: {', '.join(each)})")
         if report.bounds:
             frame, worst = max(report.bounds.items(), key=lambda kv: kv[1])
             text += f", positions below them off by up to {worst * 1000:.3g} mm (a bound; at {frame})"
         parts.append(text)
+    if paths:
+        worst = max(paths, key=lambda e: e.max_error)
+        parts.append(f"{sum(len(e.details.get('muscles', ())) for e in paths)} muscle path(s) fitted by polynomials "
+                     f"(max length error {1e3 * max(e.details['length_max'] for e in paths):.3g} mm, max moment-arm "
+                     f"error {1e3 * max(e.details['moment_arm_max'] for e in paths):.3g} mm; worst group "
+                     f"{', '.join(worst.details['muscles'][:3])})")
     if report.not_imported:
         kinds = sorted({e.element.split("<", 1)[-1].split(" ", 1)[0] for e in report.not_imported})
         parts.append(f"{len(report.not_imported)} element(s) not imported yet ({', '.join(kinds)})")

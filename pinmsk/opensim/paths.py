@@ -1949,8 +1949,9 @@ def fit_polynomial_paths(paths: GeometricPaths, *, ranges: Mapping[str, tuple], 
         return q
 
     q_tr, q_te = poses(n_train, seed), poses(n_test, seed + 1)
-    l_tr, r_tr = paths.lengths_and_moment_arms(q_tr, coordinates=fit_names)
-    l_te, r_te = paths.lengths_and_moment_arms(q_te, coordinates=fit_names)
+    # one evaluation of both sets: the wrapping code's cost is mostly per call, not per pose
+    l_all, r_all = paths.lengths_and_moment_arms(np.concatenate([q_tr, q_te]), coordinates=fit_names)
+    l_tr, r_tr, l_te, r_te = l_all[:len(q_tr)], r_all[:len(q_tr)], l_all[len(q_tr):], r_all[len(q_tr):]
     terms, reports = [], []
     for i, muscle in enumerate(paths.muscles):
         crossed = [k for k in range(len(cols)) if np.max(np.abs(r_tr[:, i, k])) > threshold]

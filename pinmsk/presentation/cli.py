@@ -164,6 +164,15 @@ def cmd_id(args) -> int:
     return 0
 
 
+def cmd_muscles(args) -> int:
+    from ..solvers.muscle_analysis import muscle_analysis
+    model = _model(args)
+    trial = _read(args.trial, model, args)
+    out = muscle_analysis(model, trial, **_inputs(args))
+    _write(out, args.output, args.precision)
+    return 0
+
+
 def cmd_simulate(args) -> int:
     from ..dynamics import simulate
     model = _model(args)
@@ -423,6 +432,16 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
     _add_read_flags(s)
     s.set_defaults(func=cmd_id)
+
+    s = sub.add_parser("muscles", help="muscle analysis of a trial: <muscle>_length, _fiber_length, "
+                                       "_moment_arm_<coord> channels")
+    s.add_argument("model")
+    s.add_argument("trial", help="trial file (.csv with a time column, .sto or .mot)")
+    s.add_argument("-o", "--output", required=True, help="output .sto or .csv")
+    _precision_flag(s)
+    input_flags(s)
+    _add_read_flags(s)
+    s.set_defaults(func=cmd_muscles)
 
     s = sub.add_parser("simulate", help="forward dynamics driven by <coord>_moment channels (or none)")
     s.add_argument("model")

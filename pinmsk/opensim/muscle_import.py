@@ -1,0 +1,253 @@
+"""The muscle import hook of an OpenSim model: :func:`muscle_hook`.
+
+For the model's Thelen2003Muscle, Millard2012EquilibriumMuscle and
+DeGrooteFregly2016Muscle elements it builds one
+:class:`~pinmsk.muscles.muscle_set.MuscleSet`:
+
+* the muscle-tendon model from their properties
+  (:func:`pinmsk.opensim.muscles.muscle_model_from_osim`);
+* their geometric paths (:class:`pinmsk.opensim.paths.GeometricPaths`, OpenSim's
+  path and wrapping algorithm) placed by OpenSim's exact kinematics of the XML
+  (:class:`pinmsk.opensim.skeleton.OsimKinematics`), so the approximations of the
+  Pinocchio skeleton (fitted joints) do not enter the paths;
+* a :class:`~pinmsk.muscles.paths.PolynomialPath` fitted to them
+  (:func:`pinmsk.opensim.paths.fit_polynomial_paths`) over the ranges of the
+  coordinates each muscle crosses -- the OpenSim coordinates' ``range``
+  properties, a rotation's at most :data:`MAX_ROTATION_SPAN` (180 degrees) wide
+  around the middle of its range (no polynomial of degree <= 10 follows the
+  wrapping transitions of arm26's 270-degree shoulder: 14 mm over the full range;
+  ``ranges=`` gives a motion's ranges instead, as OpenSim's PolynomialPathFitter
+  samples).  The coordinates a muscle can cross are those of the joints
+  between its bodies in the tree (its path points', moving and conditional
+  points' coordinates and wrap objects' bodies); unlocked ones are sampled
+  (Latin hypercube, :data:`FIT_SAMPLES` training and :data:`TEST_SAMPLES`
+  held-out poses), locked ones stay at their default values (their moment
+  arms are 0 in pinmsk).
+
+The report gets one entry per muscle group (the muscles crossing the same
+coordinates) with the fit's largest length and moment-arm errors on the
+held-out poses, and one entry with the muscle-curve notes
+(:func:`pinmsk.opensim.muscles.summarize_notes`).  Muscles of other types and
+path forces that are not muscles are left to the "not imported" entries.
+"""
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from collections import defaultdict
+
+import numpy as np
+
+from ..errors import ModelError
+from ..io.osim import OsimDocument, _parse_xml
+from ..muscles.muscle_set import MuscleSet
+from .muscles import MUSCLE_TYPES, muscle_model_from_osim, properties_from_xml, summarize_notes
+from .importer import HookResult
+from .paths import GeometricPaths, fit_polynomial_paths, path_specs_from_xml
+from .report import APPROXIMATED, NOTE, ReportEntry
+from .skeleton import OsimKinematics, Skeleton
+
+__all__ = ["muscle_hook", "default_muscle_hook", "DEFAULT_HOOKS", "MAX_MUSCLES", "geometric_paths",
+           "MAX_ROTATION_SPAN", "FIT_SAMPLES", "TEST_SAMPLES", "MAX_DEGREE", "TOLERANCE"]
+
+#: Training and held-out poses of the polynomial fit (per fit; the fit's cost grows with them).
+FIT_SAMPLES = 250
+TEST_SAMPLES = 120
+#: Highest polynomial degree tried, and the error (m) below which a lower degree is kept.
+MAX_DEGREE = 10
+TOLERANCE = 1e-4
+#: Rotational coordinates whose range is wider than this (rad) are sampled over this span around the
+#: middle of their range (a polynomial cannot follow the wrapping transitions of 240-270 degree ranges).
+MAX_ROTATION_SPAN = math.pi
+
+
+def muscle_hook(doc: OsimDocument, skeleton: Skeleton, *, ranges=None, max_muscles: int | None = None):
+    """``hook(doc, skeleton) -> HookResult``: the model's muscles as one MuscleSet (see the module docstring).
+
+    ``ranges`` (``{coordinate: (lo, hi)}``, e.g. :func:`pinmsk.opensim.paths.motion_ranges` of a motion, as
+    OpenSim's PolynomialPathFitter samples) replaces the sampling ranges of the coordinates it names; bind
+    it with ``functools.partial(muscle_hook, ranges=...)`` to pass the hook to ``import_osim(hooks=...)``.
+
+    ``max_muscles`` (default :data:`MAX_MUSCLES` for the default hook, None = no limit when called
+    directly): a model with more muscles is not fitted (its muscles stay "not imported", with one
+    report entry saying why and how to import them), so that ``load_model`` stays quick.
+    """
+    chosen = [m for m in doc.muscles if m.type in MUSCLE_TYPES]
+    if not chosen:
+        return HookResult()
+    if max_muscles is not None and len(chosen) > max_muscles:
+        return HookResult(entries=(ReportEntry(
+            element=f"{doc.source}: <ForceSet> {len(chosen)} muscles",
+            became=(f"muscles not imported by default: fitting {len(chosen)} muscle paths takes about 0.3 s per "
+                    f"muscle (more than {max_muscles} muscles); import them with pinmsk.model.import_osim(path, "
+                    "hooks=[pinmsk.opensim.muscle_import.muscle_hook])"), status=NOTE),))
+    names = [m.name for m in chosen]
+    root = _etree(doc.source)
+    elements = {e.get("name"): e for e in root.iter() if e.tag in MUSCLE_TYPES}
+    for m in chosen:
+        if m.path is None or not m.path.points:
+            raise ModelError(f"{m.where}: the muscle has no path points (<GeometryPath>/<PathPointSet>)")
+    imp = muscle_model_from_osim([(m.name, m.type, properties_from_xml(elements[m.name])) for m in chosen],
+                                 where=[m.where for m in chosen])
+    specs = {s.muscle: s for s in path_specs_from_xml(root)}
+    specs = [specs[n] for n in names]
+
+    kin = OsimKinematics(doc)
+    locked = {c.name: c.default_value for c in doc.coordinates if c.locked}
+    model_coords = tuple(skeleton.pin_model.names[j] for j in range(1, skeleton.pin_model.njoints))
+    crossing = _crossed_coordinates(doc, kin, specs)
+    fit_coords = tuple(c for c in kin.coordinates if c not in locked and any(c in cs for cs in crossing.values()))
+    missing = sorted(c for c in fit_coords if c not in model_coords)
+    if missing:
+        raise ModelError(f"{doc.source}: the muscle paths depend on coordinate(s) {missing}, which the imported "
+                         "skeleton does not have as joints")
+    lock_cols = [(kin.coordinates.index(c), v) for c, v in locked.items()]
+
+    geometric = GeometricPaths(specs, coordinates=kin.coordinates, placements=_Placements(kin, lock_cols))
+    given = dict(ranges or {})
+    unknown = sorted(set(given) - set(kin.coordinates))
+    if unknown:
+        raise ModelError(f"{doc.source}: muscle fit ranges name coordinate(s) {unknown} the model does not have")
+    ranges = {**_fit_ranges(doc, skeleton), **{c: (float(lo), float(hi)) for c, (lo, hi) in given.items()}}
+    path, fits = fit_polynomial_paths(geometric, ranges=ranges, coordinates=fit_coords, n_train=FIT_SAMPLES,
+                                      n_test=TEST_SAMPLES, max_degree=MAX_DEGREE, tolerance=TOLERANCE,
+                                      model_coordinates=model_coords)
+    muscles = MuscleSet(names=names, model_type=imp.model_type, mtu=imp.mtu, path=path, tendon=imp.tendon)
+
+    entries = _fit_entries(doc, chosen, fits, ranges)
+    coupled = sorted({c["dependent"] for c in skeleton.couplings} & set(fit_coords))
+    if coupled:
+        # the fit samples a coupled coordinate on its own; OpenSim's moment arm about the independent
+        # coordinate would include the coupling
+        entries.append(ReportEntry(
+            element=f"{doc.source}: <ConstraintSet>", status=NOTE,
+            became=(f"muscle paths fitted with the coupled coordinate(s) {', '.join(coupled)} as independent "
+                    "variables (sampled over their own ranges); their moment arms do not include the coupling")))
+    notes = summarize_notes(imp.notes)
+    entries.append(ReportEntry(
+        element=f"{doc.source}: <ForceSet> {len(chosen)} muscles",
+        became=(f"MuscleSet of {len(chosen)} {imp.model_type} muscles ({imp.tendon} tendon)"
+                + ("; curve notes: " + " | ".join(notes) if notes else "; curves exact")),
+        status=NOTE, details={"notes": tuple(notes), "geometric_paths": geometric}))
+    return HookResult(muscles=muscles, entries=tuple(entries), handled=tuple(m.where for m in chosen))
+
+
+#: The most muscles the default hook fits at import (Rajagopal's 80 take 22-35 s on 2 shared cores).
+MAX_MUSCLES = 40
+
+
+def default_muscle_hook(doc: OsimDocument, skeleton: Skeleton):
+    """The muscle hook of ``load_model``: :func:`muscle_hook` up to :data:`MAX_MUSCLES` muscles."""
+    return muscle_hook(doc, skeleton, max_muscles=MAX_MUSCLES)
+
+
+#: The hooks :func:`pinmsk.model.import_osim` (and ``load_model``) runs by default: the muscles.
+DEFAULT_HOOKS = (default_muscle_hook,)
+
+
+class _Placements:
+    """Body placements of OpenSim's kinematics, locked coordinates at their defaults (picklable, so the
+    model that keeps the geometric paths in its report pickles)."""
+
+    def __init__(self, kin: OsimKinematics, lock_cols):
+        self.kin, self.lock_cols = kin, tuple(lock_cols)
+
+    def __call__(self, bodies, q):
+        if self.lock_cols:
+            q = np.array(q, dtype=float)
+            for j, v in self.lock_cols:
+                q[:, j] = v
+        poses = self.kin.body_poses(q)
+        T = np.stack([poses[b] for b in bodies], axis=1)
+        return T[..., :3, :3], T[..., :3, 3]
+
+
+def geometric_paths(report) -> GeometricPaths | None:
+    """The exact (geometric) paths an import's muscle hook fitted its polynomials to, from its report."""
+    for e in getattr(report, "entries", ()):
+        gp = e.details.get("geometric_paths")
+        if gp is not None:
+            return gp
+    return None
+
+
+def _etree(source) -> ET.Element:
+    """The .osim as an ``xml.etree`` tree, read by :mod:`pinmsk.io.osim`'s parser (which takes OpenSim's
+    ``A::B`` tags that a namespace-aware parser refuses, and renames OpenSim's renamed types)."""
+    def convert(node):
+        e = ET.Element(node.tag, dict(node.attrib))
+        e.text = node.text
+        e.extend(convert(c) for c in node.children)
+        return e
+    with open(source, "rb") as fh:
+        return convert(_parse_xml(fh.read(), str(source)))
+
+
+def _fit_ranges(doc, skeleton) -> dict[str, tuple[float, float]]:
+    """The sampling range of each coordinate: its OpenSim range, rotations at most :data:`MAX_ROTATION_SPAN`
+    wide (around the middle of the range)."""
+    out = {}
+    for c in doc.coordinates:
+        lo, hi = (float(v) for v in c.range)
+        if skeleton.motion_types.get(c.name) == "Rotational" and hi - lo > MAX_ROTATION_SPAN:
+            mid = 0.5 * (lo + hi)
+            lo, hi = mid - 0.5 * MAX_ROTATION_SPAN, mid + 0.5 * MAX_ROTATION_SPAN
+        out[c.name] = (lo, hi)
+    return out
+
+
+def _fit_entries(doc, chosen, fits, ranges) -> list[ReportEntry]:
+    """One report entry per group of muscles crossing the same coordinates."""
+    groups = defaultdict(list)
+    for m, f in zip(chosen, fits):
+        groups[f.coordinates].append((m, f))
+    out = []
+    for coords, members in groups.items():
+        l_max = max(f.length_max for _, f in members)
+        r_max = max(f.moment_arm_max for _, f in members)
+        worst = max(members, key=lambda mf: max(mf[1].length_max, mf[1].moment_arm_max))[0].name
+        span = ", ".join(f"{c} [{ranges[c][0]:.3g}, {ranges[c][1]:.3g}]" for c in coords) or "no coordinate"
+        muscle_names = [m.name for m, _ in members]
+        out.append(ReportEntry(
+            element=f"{doc.source}: muscles {', '.join(muscle_names)}",
+            became=f"{len(members)} muscle path(s) as polynomials of degree <= "
+                   f"{max(f.degree for _, f in members)} in {', '.join(coords) or 'no coordinate'}",
+            approximation=(f"geometric paths fitted over the coordinate ranges {span}: max length error "
+                           f"{1e3 * l_max:.3g} mm, max moment-arm error {1e3 * r_max:.3g} mm (worst {worst}; "
+                           f"{members[0][1].n_test} held-out poses)"),
+            max_error=max(l_max, r_max), status=APPROXIMATED,
+            details={"kind": "muscle paths", "muscles": tuple(muscle_names), "coordinates": coords, "length_max": l_max,
+                     "moment_arm_max": r_max, "fits": tuple(f for _, f in members)}))
+    return out
+
+
+def _crossed_coordinates(doc, kin: OsimKinematics, specs) -> dict[str, set]:
+    """Per muscle: the coordinates whose joints lie between its bodies in the tree, and those its
+    moving and conditional points name."""
+    parent = {jk.child: jk for jk in kin.joints}
+
+    def chain(body):
+        out = []
+        while body in parent:
+            out.append(parent[body])
+            body = parent[body].parent
+        return out
+
+    out = {}
+    for s in specs:
+        bodies = set(s.bodies)
+        # a joint lies between the bodies if some but not all of them are below it
+        below = defaultdict(int)
+        joints = {}
+        for b in bodies:
+            for jk in chain(b):
+                key = id(jk)
+                below[key] += 1
+                joints[key] = jk
+        coords = set(s.coordinates)
+        for key, n in below.items():
+            if n < len(bodies):
+                coords.update(joints[key].coordinates)
+        out[s.muscle] = coords
+    return out
+
