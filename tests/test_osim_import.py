@@ -1013,9 +1013,9 @@ def _shared(key):
 @pytest.mark.parametrize("key", sorted(SHARED))
 def test_shared_models_parse_build_and_report(key):
     path = _shared(key)
-    model, report, seconds = _shared_import(key)
+    model, report, _ = _shared_import(key)
     doc = read_osim(path)
-    assert seconds < 5.0          # issue 14: importing Rajagopal takes <= 5 s (measured: about 1 s)
+    # the import time (issue 14: <= 5 s for Rajagopal) is measured by benchmarks/bench_osim_import.py, not here
     assert model.nq == len([c for c in doc.coordinates]) and model.mass == pytest.approx(
         sum(b.mass for b in doc.bodies), abs=1e-9)
     assert np.allclose(model.gravity, doc.gravity)
