@@ -118,17 +118,6 @@ def test_gait10dof18musc_muscles_match_opensim_over_every_ik_frame():
     assert np.max(np.abs(A - A_ref)) < 3.5e-3
 
 
-@pytest.mark.slow
-def test_import_times():
-    """Each import <= 5 s (measured 2-4 s on 2 shared cores; timing, so not in the default suite)."""
-    from pinmsk import load_model
-    for relative in (ARM26, GAIT):
-        t0 = time.perf_counter()
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)
-            load_model(_model(relative))
-        assert time.perf_counter() - t0 < 5.0, relative
-
 
 def test_max_isometric_force_round_trip_and_report():
     osim = pytest.importorskip("opensim")
