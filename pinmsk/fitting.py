@@ -298,7 +298,16 @@ class Fitter:
 
     @classmethod
     def _param_names(cls) -> tuple[str, ...]:
-        """The constructor's parameter names, in the signature's order."""
+        """The constructor's parameter names, in the signature's order (read once per class)."""
+        cached = cls.__dict__.get("_PARAM_NAMES")
+        if cached is not None:
+            return cached
+        names = cls._read_param_names()
+        cls._PARAM_NAMES = names
+        return names
+
+    @classmethod
+    def _read_param_names(cls) -> tuple[str, ...]:
         init = cls.__init__
         if init is object.__init__:
             return ()

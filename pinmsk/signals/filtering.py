@@ -23,6 +23,8 @@ cutoff, rate, number of samples or the offending column and row.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from ..errors import TrialError
@@ -127,10 +129,22 @@ def lowpass(x, *, rate: float, cutoff: float, order: int = 4) -> np.ndarray:
         )
     padlen = filter_padlen(order, rate=rate, cutoff=cutoff, n=n)
     _check_finite(x, "lowpass input")
-    from scipy.signal import butter, sosfiltfilt  # here, not at import: scipy.signal costs ~1 s
+    from scipy.signal import sosfiltfilt  # here, not at import: scipy.signal costs ~1 s
 
-    sos = butter(order, cutoff / nyquist, btype="low", output="sos")
-    return sosfiltfilt(sos, x, axis=0, padtype="odd", padlen=padlen)
+    # a copy of the cached design: scipy's filter needs a writable array
+    return sosfiltfilt(_butterworth(int(order), float(cutoff / nyquist)).copy(), x, axis=0, padtype="odd",
+                       padlen=padlen)
+
+
+@functools.lru_cache(maxsize=64)
+def _butterworth(order: int, wn: float) -> np.ndarray:
+    """Second-order sections of the low-pass Butterworth design (cached: analyses filter many
+    short trials at the same few cut-offs, and the design costs more than filtering them)."""
+    from scipy.signal import butter
+
+    sos = butter(order, wn, btype="low", output="sos")
+    sos.flags.writeable = False            # shared by every caller: never changed
+    return sos
 
 
 def differentiate(time, x, *, cutoff: float | None = None, order: int = 4):
