@@ -417,3 +417,21 @@ def test_csu_reader_needs_the_foot_models_heel_site_to_anchor_by_the_heel(tmp_pa
     from pinmsk.io.cleveland_gait import read_csu
     with pytest.raises(TrialError, match="heel_site=.*read_csu_foot2d"):
         read_csu(tmp_path / "walk.txt")
+
+
+def test_ground_speed_is_given_or_its_source_is_said(synth):
+    """A treadmill's belt speed is an input: given, it is used; else the trial's, else 0, and the settings say which."""
+    from pinmsk.contact.identify import settings_lines
+
+    fit = dict(contact="point", n_starts=1, max_nfev=3, cutoff=None)
+    given = contact_fit_task(None, synth, ground_speed=0.4, **fit)["settings"]
+    assert given["ground_speed"] == 0.4 and given["ground_speed_source"] == "given"
+    assert "(given)" in "\n".join(settings_lines(given))
+    own = contact_fit_task(None, synth, **fit)["settings"]
+    assert synth.meta["ground_speed"] == -1.0                      # the synthetic treadmill's belt
+    assert own["ground_speed"] == -1.0 and own["ground_speed_source"] == "the trial's"
+    channels = synth.to_dict()
+    channels.pop("time")
+    bare = Trial(synth.time, channels, meta={k: v for k, v in synth.meta.items() if k != "ground_speed"})
+    none = contact_fit_task(None, bare, **fit)["settings"]
+    assert none["ground_speed"] == 0.0 and "overground" in none["ground_speed_source"]

@@ -570,14 +570,17 @@ class ContactFit(Fitter):
         if model is None:
             model = load_foot2d()
         if _cache is None or "problem" not in _cache:
-            gs = self.ground_speed
+            gs, self.ground_speed_source_ = self.ground_speed, "given"
             if gs is None:
-                gs = float(trial.meta.get("ground_speed", 0.0)) if hasattr(trial, "meta") else 0.0
+                meta = getattr(trial, "meta", {})
+                gs = float(meta.get("ground_speed", 0.0))
+                self.ground_speed_source_ = ("the trial's" if "ground_speed" in meta
+                                             else "none given: overground (give ground_speed for a treadmill)")
             prob = self._problem(model, trial, gs)
             if _cache is not None:
-                _cache["problem"] = (prob, gs)
+                _cache["problem"] = (prob, gs, self.ground_speed_source_)
         else:
-            prob, gs = _cache["problem"]
+            prob, gs, self.ground_speed_source_ = _cache["problem"]
         self.placement_ = foot_placement(trial)
         self._fit_problem(model, prob, gs, {} if _cache is None else _cache, t_start=t_start)
         return self
@@ -772,7 +775,8 @@ class ContactFit(Fitter):
                 "window": list(self.window_), "window_source": prob.window_source, "frames": int(prob.t.size),
                 "cutoff_hz": self.cutoff, "grf_filter": None, "toe": self.toe,
                 "toe_fitted": self._fit_toe, "foot_placement": self.placement_,
-                "ground_speed": self.ground_speed_, "cop_threshold": self.cop_threshold,
+                "ground_speed": self.ground_speed_, "ground_speed_source": self.ground_speed_source_,
+                "cop_threshold": self.cop_threshold,
                 "free": free, "fixed": fixed, "n_free": int(self.n_free_) + 0,
                 "starts": list(self.start_labels_), "seed": self.seed, "nested": bool(self.nested),
                 "jacobian": self.jacobian, "n_jobs": self.n_jobs, "max_nfev": self.max_nfev}
@@ -953,7 +957,8 @@ def settings_lines(settings: dict) -> list[str]:
     return [f"settings: {s['contact']} contact{' (relaxed centres)' if s['relax'] else ''}, "
             f"Eq. 4.2 terms: {' + '.join(s['terms'])}",
             f"  window {w[0]:.3f}-{w[1]:.3f} s ({s['frames']} frames; {s['window_source']}); kinematics: "
-            f"{cut} (GRF unfiltered); ground speed {s['ground_speed']:.3f} m/s",
+            f"{cut} (GRF unfiltered); ground speed {s['ground_speed']:.3f} m/s"
+            + (f" ({s['ground_speed_source']})" if s.get("ground_speed_source") else ""),
             f"  foot placement: {s['foot_placement']}",
             f"  toe angle: {toe}",
             f"  free ({s['n_free']}): {free}",

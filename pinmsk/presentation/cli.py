@@ -291,6 +291,8 @@ def cmd_contact_fit(args) -> int:
         opts["toe"] = args.toe
     if args.cutoff is not None:
         opts["cutoff"] = args.cutoff or None
+    if args.ground_speed is not None:
+        opts["ground_speed"] = args.ground_speed
     out = contact_fit_task(args.model, args.trial, json_path=args.json, plot_dir=args.plot, **opts)
     print("\n".join(settings_lines(out["settings"])))
     for k, (label, j) in enumerate(zip(out["start_labels"], out["starts"])):
@@ -553,6 +555,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="toe angle: from the kinematics, held fixed (default); fitted; legacy flat; the mtp channel")
     c.add_argument("--cutoff", type=float, default=None, metavar="HZ",
                    help="low-pass of the driving kinematics (default 12 Hz; 0 = none)")
+    c.add_argument("--ground-speed", type=float, default=None, metavar="M/S",
+                   help="belt speed of a treadmill trial (m/s, along x); default the trial's own "
+                        "(a CSU file measures it), else 0 (overground)")
     c.add_argument("--json", metavar="OUT.json", default=None,
                    help="write objective, params, rmse and seconds as JSON")
     c.add_argument("--plot", metavar="DIR", default=None, help="write GRF and COP figures (PNG) to DIR")
