@@ -258,6 +258,15 @@ def source_coordinates(model, motion: Motion, tau: np.ndarray) -> tuple[tuple[st
     return cmap.osim_coordinates, q, cmap.generalized_forces(cols, tau, couplers=False)
 
 
+def first_non_finite(x: np.ndarray) -> tuple[int, int] | None:
+    """``(frame, column)`` of the first NaN or infinity of a time-first ``(N, k)`` array, or None."""
+    bad = ~np.isfinite(x)
+    if not bad.any():
+        return None
+    k, j = np.argwhere(bad)[0]
+    return int(k), int(j)
+
+
 def as_motion(model, data, cutoff=DEFAULT_CUTOFF) -> Motion:
     """A :class:`Motion` of the model from a Trial (by :func:`motion`) or a Motion, checked:
     its width is the model's, it has frames, and q, v, a are finite (the frame and
@@ -274,10 +283,9 @@ def as_motion(model, data, cutoff=DEFAULT_CUTOFF) -> Motion:
     if mo.n_frames == 0:
         raise TrialError("the trial has no frames; an analysis needs at least one")
     for name in ("q", "v", "a"):
-        arr = getattr(mo, name)
-        bad = ~np.isfinite(arr)
-        if bad.any():
-            k, j = np.argwhere(bad)[0]
+        where = first_non_finite(getattr(mo, name))
+        if where is not None:
+            k, j = where
             raise TrialError(f"the motion's {name} is not finite at frame {k} (t = {mo.t[k]:.6g} s), "
                              f"coordinate '{model.coordinates[j]}'; fill or cut the gaps first")
     return mo

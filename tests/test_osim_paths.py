@@ -12,6 +12,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
+import pinmsk.opensim.functions as osf
 import pinmsk.opensim.paths as op
 from pinmsk.errors import ModelError
 from pinmsk.io.shared_data import shared_data_dir
@@ -105,7 +106,7 @@ def test_ellipsoid_of_equal_radii_gives_opensims_polyline_over_the_sphere():
 
 def test_conditional_and_moving_points():
     cond = op.ConditionalPathPointSpec(body="ground", location=(0.0, 0.1, 0.0), coordinate="x", range=(0.0, 1.0))
-    moving = op.MovingPathPointSpec(body="slide", x=op.LinearFunction(0.5, 0.0), y=0.2, z=op.Constant(0.0),
+    moving = op.MovingPathPointSpec(body="slide", x=osf.LinearFunction([0.5, 0.0]), y=0.2, z=osf.Constant(0.0),
                                     coordinates=("x", None, None), clamp=((-1.0, 2.0), None, None))
     spec = op.PathSpec("m", (op.PathPointSpec("ground", (0.0, 0.0, 0.0)), cond, moving))
     gp = op.GeometricPaths([spec], coordinates=COORDS, placements=placements)
@@ -120,22 +121,6 @@ def test_conditional_and_moving_points():
     u = (tip - via) / np.linalg.norm(tip - via, axis=1)[:, None]
     speed = np.where((x > -1.0) & (x < 2.0), 1.5, 1.0)
     np.testing.assert_allclose(A[:, 0, 1], -u[:, 0] * speed, atol=1e-8)
-
-
-def test_simm_spline_matches_opensim_definition():
-    """Natural-like cubic through the knots, linear beyond them with the end slopes."""
-    x = np.array([-1.0, -0.2, 0.3, 1.1, 2.0])
-    y = np.sin(x)
-    f = op.SimmSpline(x, y)
-    np.testing.assert_allclose(f(x), y, atol=1e-15)
-    d1, d2 = f.derivative(), f.derivative().derivative()
-    v = np.linspace(-0.99, 1.99, 41)
-    h = 1e-6
-    np.testing.assert_allclose(d1(v), (f(v + h) - f(v - h)) / (2 * h), atol=1e-7)
-    np.testing.assert_allclose(d2(v), (d1(v + h) - d1(v - h)) / (2 * h), atol=1e-6)
-    assert f(3.0) == pytest.approx(y[-1] + (3.0 - 2.0) * d1(2.0))
-    m = op.MultiplierFunction(f, 2.0)
-    assert m(0.1) == pytest.approx(2.0 * f(0.1))
 
 
 def test_polynomial_path_values_derivatives_and_pickle():

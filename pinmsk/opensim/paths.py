@@ -67,13 +67,16 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from ..errors import ModelError, PinmskError
+from .functions import (Constant, LinearFunction, MultiplierFunction, PiecewiseLinearFunction,
+                        PolynomialFunction, SimmSpline)
+
+_ROUNDOFF = 2e-13     # SIMM's ROUNDOFF_ERROR (the wrap solvers' tolerance)
 
 __all__ = [
     "PathPointSpec", "ConditionalPathPointSpec", "MovingPathPointSpec", "WrapSpec", "PathWrapSpec",
     "PathSpec", "path_specs_from_xml", "coordinate_ranges_from_xml", "GeometricPaths",
     "PolynomialFitReport", "fit_polynomial_paths", "sample_poses", "motion_ranges", "body_fixed_xyz",
-    "SimmSpline", "LinearFunction", "Constant", "PolynomialFunction", "PiecewiseLinearFunction",
-    "MultiplierFunction", "function_from_xml",
+    "function_from_xml",
 ]
 
 GROUND = "ground"
@@ -310,201 +313,6 @@ def body_fixed_xyz(angles) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------------------------
-# OpenSim functions used by moving path points (self-contained; pinmsk.opensim.functions may replace them)
-# --------------------------------------------------------------------------------------------
-_TINY = 1e-7          # SIMM's TINY_NUMBER
-_ROUNDOFF = 2e-13     # SIMM's ROUNDOFF_ERROR
-
-
-class _Function:
-    def derivative(self):
-        raise NotImplementedError
-
-
-@dataclass(frozen=True)
-class Constant(_Function):
-    """f(x) = value."""
-
-    value: float
-
-    def __call__(self, x):
-        return np.full(np.shape(x), float(self.value))
-
-    def derivative(self):
-        return Constant(0.0)
-
-
-@dataclass(frozen=True)
-class LinearFunction(_Function):
-    """f(x) = slope x + intercept."""
-
-    slope: float
-    intercept: float
-
-    def __call__(self, x):
-        return self.slope * np.asarray(x, dtype=float) + self.intercept
-
-    def derivative(self):
-        return Constant(self.slope)
-
-
-@dataclass(frozen=True)
-class PolynomialFunction(_Function):
-    """OpenSim's PolynomialFunction: coefficients from the highest power down."""
-
-    coefficients: tuple
-
-    def __call__(self, x):
-        return np.polyval(np.asarray(self.coefficients, dtype=float), np.asarray(x, dtype=float))
-
-    def derivative(self):
-        c = np.polyder(np.asarray(self.coefficients, dtype=float))
-        return PolynomialFunction(tuple(c) if c.size else (0.0,))
-
-
-@dataclass(frozen=True)
-class PiecewiseLinearFunction(_Function):
-    """Linear interpolation between knots, extrapolated with the end slopes (OpenSim's PiecewiseLinearFunction)."""
-
-    x: tuple
-    y: tuple
-
-    def __call__(self, v):
-        x, y = np.asarray(self.x, dtype=float), np.asarray(self.y, dtype=float)
-        v = np.asarray(v, dtype=float)
-        if x.size == 1:
-            return np.full(v.shape, y[0])
-        k = np.clip(np.searchsorted(x, v, side="right") - 1, 0, x.size - 2)
-        slope = (y[k + 1] - y[k]) / np.maximum(x[k + 1] - x[k], _TINY)
-        return y[k] + slope * (v - x[k])
-
-    def derivative(self):
-        x, y = np.asarray(self.x, dtype=float), np.asarray(self.y, dtype=float)
-        slopes = np.diff(y) / np.maximum(np.diff(x), _TINY)
-        return _StepFunction(tuple(x), tuple(slopes))
-
-
-@dataclass(frozen=True)
-class _StepFunction(_Function):
-    x: tuple
-    values: tuple
-
-    def __call__(self, v):
-        x = np.asarray(self.x, dtype=float)
-        k = np.clip(np.searchsorted(x, np.asarray(v, dtype=float), side="right") - 1, 0, len(self.values) - 1)
-        return np.asarray(self.values)[k]
-
-    def derivative(self):
-        return Constant(0.0)
-
-
-@dataclass(frozen=True)
-class MultiplierFunction(_Function):
-    """f(x) = scale * g(x) (OpenSim's MultiplierFunction)."""
-
-    function: object
-    scale: float
-
-    def __call__(self, x):
-        return self.scale * np.asarray(self.function(x), dtype=float)
-
-    def derivative(self):
-        return MultiplierFunction(self.function.derivative(), self.scale)
-
-
-class SimmSpline(_Function):
-    """OpenSim's SimmSpline: a cubic spline with end conditions from divided differences, extrapolated
-    linearly with the end slopes (the coefficients follow SimmSpline::calcCoefficients)."""
-
-    __slots__ = ("x", "y", "_b", "_c", "_d", "_order")
-
-    def __init__(self, x, y, _coeffs=None, _order=0):
-        x = np.asarray(x, dtype=float).reshape(-1)
-        y = np.asarray(y, dtype=float).reshape(-1)
-        if x.size != y.size or x.size < 1:
-            raise ModelError(f"SimmSpline needs as many x as y values (at least 1), got {x.size} and {y.size}")
-        if x.size == 1:
-            x, y = np.array([x[0], x[0] + 1.0]), np.array([y[0], y[0]])
-        self.x, self.y, self._order = x, y, _order
-        self._b, self._c, self._d = _coeffs if _coeffs is not None else self._coefficients(x, y)
-
-    @staticmethod
-    def _coefficients(x, y):
-        n = x.size
-        b, c, d = np.zeros(n), np.zeros(n), np.zeros(n)
-        if n == 2:
-            t = max(_TINY, x[1] - x[0])
-            b[:] = (y[1] - y[0]) / t
-            return b, c, d
-        nm1, nm2 = n - 1, n - 2
-        d[0] = max(_TINY, x[1] - x[0])
-        c[1] = (y[1] - y[0]) / d[0]
-        for i in range(1, nm1):
-            d[i] = max(_TINY, x[i + 1] - x[i])
-            b[i] = 2.0 * (d[i - 1] + d[i])
-            c[i + 1] = (y[i + 1] - y[i]) / d[i]
-            c[i] = c[i + 1] - c[i]
-        b[0], b[nm1] = -d[0], -d[nm2]
-        c[0] = c[nm1] = 0.0
-        if n > 3:
-            d31 = max(_TINY, x[3] - x[1])
-            d20 = max(_TINY, x[2] - x[0])
-            d1 = max(_TINY, x[nm1] - x[n - 3])
-            d2 = max(_TINY, x[nm2] - x[n - 4])
-            d30 = max(_TINY, x[3] - x[0])
-            d3 = max(_TINY, x[nm1] - x[n - 4])
-            c[0] = c[2] / d31 - c[1] / d20
-            c[nm1] = c[nm2] / d1 - c[n - 3] / d2
-            c[0] = c[0] * d[0] * d[0] / d30
-            c[nm1] = -c[nm1] * d[nm2] * d[nm2] / d3
-        for i in range(1, n):
-            t = d[i - 1] / b[i - 1]
-            b[i] -= t * d[i - 1]
-            c[i] -= t * c[i - 1]
-        c[nm1] /= b[nm1]
-        for j in range(nm1):
-            i = nm2 - j
-            c[i] = (c[i] - d[i] * c[i + 1]) / b[i]
-        b[nm1] = (y[nm1] - y[nm2]) / d[nm2] + d[nm2] * (c[nm2] + 2.0 * c[nm1])
-        for i in range(nm1):
-            b[i] = (y[i + 1] - y[i]) / d[i] - d[i] * (c[i + 1] + 2.0 * c[i])
-            d[i] = (c[i + 1] - c[i]) / d[i]
-            c[i] *= 3.0
-        c[nm1] *= 3.0
-        d[nm1] = d[nm2]
-        return b, c, d
-
-    def __call__(self, v):
-        v = np.asarray(v, dtype=float)
-        x, y, b, c, d = self.x, self.y, self._b, self._c, self._d
-        n = x.size
-        k = np.clip(np.searchsorted(x, v, side="left") - 1, 0, n - 2)
-        dx = v - x[k]
-        if self._order == 0:
-            out = y[k] + dx * (b[k] + dx * (c[k] + dx * d[k]))
-            lo, hi = y[0] + (v - x[0]) * b[0], y[-1] + (v - x[-1]) * b[-1]
-            at_lo, at_hi = y[0], y[-1]
-        elif self._order == 1:
-            out = b[k] + dx * (2.0 * c[k] + 3.0 * dx * d[k])
-            lo, hi, at_lo, at_hi = b[0], b[-1], b[0], b[-1]
-        else:
-            out = 2.0 * c[k] + 6.0 * dx * d[k]
-            lo, hi, at_lo, at_hi = 0.0, 0.0, 2.0 * c[0], 2.0 * c[-1]
-        out = np.where(np.abs(v - x[-1]) <= _ROUNDOFF, at_hi, out)
-        out = np.where(np.abs(v - x[0]) <= _ROUNDOFF, at_lo, out)
-        out = np.where(v > x[-1], hi, out)
-        return np.where(v < x[0], lo, out)
-
-    def derivative(self):
-        if self._order >= 2:
-            raise ModelError("SimmSpline: derivatives above the second are not defined")
-        return SimmSpline(self.x, self.y, _coeffs=(self._b, self._c, self._d), _order=self._order + 1)
-
-    def __repr__(self):
-        return f"SimmSpline({self.x.size} knots{', derivative %d' % self._order if self._order else ''})"
-
-
-# --------------------------------------------------------------------------------------------
 # reading the specs from an .osim XML tree
 # --------------------------------------------------------------------------------------------
 def _where(elem) -> str:
@@ -544,8 +352,9 @@ def _last_name(path: str | None) -> str | None:
 
 
 def function_from_xml(elem) -> object:
-    """A vectorised callable for an OpenSim function element (Constant, LinearFunction,
-    PolynomialFunction, SimmSpline, PiecewiseLinearFunction, or a wrapper around one)."""
+    """The :mod:`pinmsk.opensim.functions` function (a vectorised callable) of an OpenSim function
+    element (Constant, LinearFunction, PolynomialFunction, SimmSpline, PiecewiseLinearFunction, or a
+    MultiplierFunction around one)."""
     kids = list(elem)
     fn = kids[0] if elem.tag in ("x_location", "y_location", "z_location", "function") and kids else elem
     tag = fn.tag
@@ -553,7 +362,7 @@ def function_from_xml(elem) -> object:
         return Constant(_floats(fn, "value", 1)[0])
     if tag == "LinearFunction":
         s, i = _floats(fn, "coefficients", 2)
-        return LinearFunction(s, i)
+        return LinearFunction([s, i])
     if tag == "PolynomialFunction":
         return PolynomialFunction(_floats(fn, "coefficients"))
     if tag == "SimmSpline":

@@ -28,7 +28,7 @@ import numpy as np
 from ..components import Motion
 from ..dynamics import inverse_dynamics_array
 from ..errors import InfeasibleError, TrialError
-from ..kinematics import TrialInputs
+from ..kinematics import TrialInputs, first_non_finite
 from ..signals.filtering import lowpass
 from ..signals.sampling import median_step
 from ..trial import Trial, moment_channels
@@ -96,9 +96,9 @@ def _measured(model, trial: Trial, motion: Motion, coords, cutoff) -> np.ndarray
         raise TrialError(f"moments='measured' needs the trial's {', '.join(missing)} channel(s); it has "
                          f"{', '.join(n for n in trial.names if n.endswith('_moment')) or 'no _moment channels'}")
     tau = np.column_stack([np.asarray(trial[c], dtype=float) for c in cols])
-    bad = ~np.isfinite(tau)
-    if bad.any():
-        k, j = np.argwhere(bad)[0]
+    where = first_non_finite(tau)
+    if where is not None:
+        k, j = where
         raise TrialError(f"measured moment {cols[j]!r} is {tau[k, j]!r} at row {k} (t = {motion.t[k]:.6g} s)")
     if cutoff is not None:
         tau = lowpass(tau, rate=1.0 / median_step(motion.t), cutoff=cutoff)
@@ -206,9 +206,9 @@ def required_moments(model, motion: Motion, moments, idx, dofs) -> np.ndarray:
         elif tau.shape[1] != len(idx):
             raise TrialError(f"moments has {tau.shape[1]} columns; expected {model.nv} (all "
                              f"coordinates) or {len(idx)} (the dofs {', '.join(dofs)})")
-    bad = ~np.isfinite(tau)
-    if bad.any():
-        k, j = np.argwhere(bad)[0]
+    where = first_non_finite(tau)
+    if where is not None:
+        k, j = where
         raise TrialError(f"the moment of '{dofs[j]}' is not finite at frame {k} "
                          f"(t = {motion.t[k]:.6g} s); check the trial and its inverse dynamics")
     return tau
