@@ -41,6 +41,7 @@ import numpy as np
 from ..errors import ModelError
 from ..io.osim import OsimDocument, _parse_xml
 from ..muscles.muscle_set import MuscleSet
+from .actuators import actuator_hook
 from .muscles import MUSCLE_TYPES, muscle_model_from_osim, properties_from_xml, summarize_notes
 from .importer import HookResult
 from .paths import GeometricPaths, fit_polynomial_paths, path_specs_from_xml
@@ -48,6 +49,7 @@ from .report import APPROXIMATED, NOTE, ReportEntry
 from .skeleton import OsimKinematics, Skeleton
 
 __all__ = ["muscle_hook", "default_muscle_hook", "DEFAULT_HOOKS", "MAX_MUSCLES", "geometric_paths",
+           "muscle_control_bounds",
            "MAX_ROTATION_SPAN", "FIT_SAMPLES", "TEST_SAMPLES", "MAX_DEGREE", "TOLERANCE"]
 
 #: Training and held-out poses of the polynomial fit (per fit; the fit's cost grows with them).
@@ -128,7 +130,8 @@ def muscle_hook(doc: OsimDocument, skeleton: Skeleton, *, ranges=None, max_muscl
         element=f"{doc.source}: <ForceSet> {len(chosen)} muscles",
         became=(f"MuscleSet of {len(chosen)} {imp.model_type} muscles ({imp.tendon} tendon)"
                 + ("; curve notes: " + " | ".join(notes) if notes else "; curves exact")),
-        status=NOTE, details={"notes": tuple(notes), "geometric_paths": geometric}))
+        status=NOTE, details={"notes": tuple(notes), "geometric_paths": geometric,
+                              "control_bounds": {m.name: m.control_bounds for m in imp.muscles}}))
     return HookResult(muscles=muscles, entries=tuple(entries), handled=tuple(m.where for m in chosen))
 
 
@@ -141,8 +144,9 @@ def default_muscle_hook(doc: OsimDocument, skeleton: Skeleton):
     return muscle_hook(doc, skeleton, max_muscles=MAX_MUSCLES)
 
 
-#: The hooks :func:`pinmsk.model.import_osim` (and ``load_model``) runs by default: the muscles.
-DEFAULT_HOOKS = (default_muscle_hook,)
+#: The hooks :func:`pinmsk.model.import_osim` (and ``load_model``) runs by default: the muscles and the
+#: actuators (:func:`pinmsk.opensim.actuators.actuator_hook`).
+DEFAULT_HOOKS = (default_muscle_hook, actuator_hook)
 
 
 class _Placements:
@@ -168,6 +172,16 @@ def geometric_paths(report) -> GeometricPaths | None:
         gp = e.details.get("geometric_paths")
         if gp is not None:
             return gp
+    return None
+
+
+def muscle_control_bounds(report) -> dict | None:
+    """``{muscle: (min_control, max_control)}`` of an import's muscles (OpenSim's excitation bounds, which its
+    static optimization takes as activation bounds), from its report; None if it has none."""
+    for e in getattr(report, "entries", ()):
+        cb = e.details.get("control_bounds")
+        if cb is not None:
+            return dict(cb)
     return None
 
 

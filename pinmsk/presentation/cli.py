@@ -237,7 +237,8 @@ def _run_solver(args, solver, total: int | None, label: str, title: str) -> int:
 def cmd_so(args) -> int:
     from ..solvers.static import StaticOptimization
     dofs = [d.strip() for d in args.dofs.split(",") if d.strip()] if args.dofs else None
-    so = StaticOptimization(**_so_options(args), minmax=args.minmax, dofs=dofs)
+    so = StaticOptimization(**_so_options(args), minmax=args.minmax, dofs=dofs, actuators=args.actuators,
+                            convention=args.convention)
     return _run_solver(args, so, None, "SO", "static_optimization")
 
 
@@ -492,6 +493,14 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--dofs", metavar="COORD,COORD", default=None,
                    help="balance only these coordinates (default: every coordinate a muscle spans; the "
                         "others must need no force, or --reserves)")
+    s.add_argument("--actuators", metavar="FILE.xml", default=None,
+                   help="an OpenSim force set file of reserve and residual actuators (CoordinateActuator, "
+                        "PointActuator, TorqueActuator) sharing the moments with the muscles, besides the model's "
+                        "own; each costs |control|^P and gets <name>_control and <name>_force channels")
+    s.add_argument("--convention", choices=["pinmsk", "opensim"], default="pinmsk",
+                   help="muscle model: pinmsk's (passive forces included, default) or OpenSim's "
+                        "StaticOptimization (F = a F_opt without passive force, activations within the muscles' "
+                        "min/max controls), for like-for-like comparisons")
     s.set_defaults(func=cmd_so)
 
     s = sub.add_parser("fso", help="forward static optimization: track a motion forward in time (thesis Sec. 3.4)")
