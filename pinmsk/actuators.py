@@ -139,8 +139,8 @@ class IdealActuator(Component):
         return hash((super().__hash__(), self._options()))
 
     def __repr__(self) -> str:
-        return (f"{type(self).__name__}({self.name!r}, {self.target!r}, optimal_force={self.values['optimal_force']:.6g}, "
-                f"controls [{self.min_control:g}, {self.max_control:g}])")
+        return (f"{type(self).__name__}({self.name!r}, {self.target!r}, "
+                f"optimal_force={self.values['optimal_force']:.6g}, controls [{self.min_control:g}, {self.max_control:g}])")
 
 
 class CoordinateActuator(IdealActuator):

@@ -175,7 +175,8 @@ def test_an_actuator_on_a_missing_coordinate_or_body_is_refused(gait2d):
 # -- force set files ------------------------------------------------------------------
 
 def _xml(body: str) -> str:
-    return f'<?xml version="1.0"?>\n<OpenSimDocument Version="30000">\n<ForceSet name="r">\n<objects>\n{body}</objects>\n</ForceSet>\n</OpenSimDocument>\n'
+    return ('<?xml version="1.0"?>\n<OpenSimDocument Version="30000">\n<ForceSet name="r">\n<objects>\n'
+            f'{body}</objects>\n</ForceSet>\n</OpenSimDocument>\n')
 
 
 def test_a_force_set_file_is_read_with_its_defaults():
@@ -217,6 +218,10 @@ def test_the_strong_actuators_file_makes_ten_actuators(shared_data):
      '</CoordinateActuator>\n', r"r.xml:5: .*<optimal_force> must be a number, got 'big'"),
     ('<PointActuator name="p"><body>hat</body><direction>1 0</direction></PointActuator>\n',
      r"r.xml:5: .*<direction> must hold 3 finite numbers"),
+    ('<CoordinateActuator name="a"><coordinate>knee_r</coordinate><optimal_force>-5</optimal_force>'
+     '</CoordinateActuator>\n', r"r.xml:5: <CoordinateActuator name=\"a\">: optimal_force must be a finite value >= 0, got -5"),
+    ('<TorqueActuator name="t"><axis>0 0 1</axis></TorqueActuator>\n',
+     r"r.xml:5: <TorqueActuator name=\"t\">: names no body \(<bodyA>\)"),
     ('<BodyActuator name="b"><body>hat</body></BodyActuator>\n',
      r"r.xml:5: <BodyActuator name=\"b\">: pinmsk makes CoordinateActuator, .* a BodyActuator is not one of them"),
 ])
@@ -241,6 +246,17 @@ def test_a_file_that_is_not_a_force_set_of_actuators_is_refused(tmp_path, text, 
     p.write_text(text)
     with pytest.raises(ModelError, match=message):
         read_force_set(p)
+
+
+def test_a_disabled_actuator_is_left_out_with_a_note(tmp_path, gait2d):
+    from pinmsk.opensim.actuators import read_actuators
+    p = tmp_path / "r.xml"
+    p.write_text(_xml('<CoordinateActuator name="off"><appliesForce>false</appliesForce><coordinate>knee_r'
+                      '</coordinate></CoordinateActuator>\n<CoordinateActuator name="on"><isDisabled>false'
+                      '</isDisabled><coordinate>knee_r</coordinate></CoordinateActuator>\n'))
+    comps, entries = read_actuators(p, gait2d)
+    assert [c.name for c in comps] == ["on"]
+    assert entries[0].status == "note" and "disabled" in entries[0].became and 'name="off"' in entries[0].element
 
 
 def test_a_missing_force_set_file_is_named(tmp_path):
@@ -316,6 +332,15 @@ def test_so_with_a_reserve_matches_the_analytical_optimum(forearm, motion, P, bo
     assert so.violation_.max() < 1e-6
 
 
+def test_so_with_actuators_in_chunks_is_the_same_problem(forearm, motion):
+    res = CoordinateActuator("elbow_reserve", "elbow_flexion", optimal_force=30.0, min_control=-0.002)
+    whole = StaticOptimization(weights="fmax", actuators=[res]).fit(forearm, motion)
+    parts = StaticOptimization(weights="fmax", actuators=[res], chunk_size=16).fit(forearm, motion)
+    np.testing.assert_allclose(parts.controls_, whole.controls_, atol=1e-9)
+    np.testing.assert_allclose(parts.forces_, whole.forces_, atol=1e-6)
+    assert parts.violation_.max() < 1e-6
+
+
 def test_so_takes_the_models_own_actuators(forearm, motion):
     res = CoordinateActuator("elbow_reserve", "elbow_flexion", optimal_force=30.0)
     given = StaticOptimization(weights="fmax", actuators=[res]).fit(forearm, motion)
@@ -332,7 +357,8 @@ def test_residual_actuators_let_so_balance_a_floating_base(gait2d):
     from pinmsk.diagnose.synth import walking_motion
     from pinmsk.errors import InfeasibleError
     mo = walking_motion(gait2d, n_frames=40)
-    residuals = [CoordinateActuator(f"mtp_{s}_reserve", f"mtp_{s}") for s in "lr"] + [PointActuator("FX", "hat", direction=(1, 0, 0), force_is_global=True, optimal_force=1000.0),
+    residuals = [CoordinateActuator(f"mtp_{s}_reserve", f"mtp_{s}") for s in "lr"] + [
+                 PointActuator("FX", "hat", direction=(1, 0, 0), force_is_global=True, optimal_force=1000.0),
                  PointActuator("FY", "hat", direction=(0, 1, 0), force_is_global=True, optimal_force=1000.0),
                  TorqueActuator("MZ", "hat", axis=(0, 0, 1), optimal_force=1000.0)]
     with pytest.raises(InfeasibleError, match="no muscle spans .*torso_x"):
@@ -392,3 +418,38 @@ def test_so_from_the_command_line_with_an_actuator_file(tmp_path, capsys):
     assert "pinmsk: error: " in err and "bad.xml:5: <CoordinateActuator name=\"k\">: model 'gait2d' has no " \
                                         "coordinate 'knee'" in err
     assert not (tmp_path / "no.sto").exists()
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_so_of_an_exact_import_balances_opensims_coordinates(tmp_path):
+    """Dependent joints (knee translations, a coupled patella): SO balances OpenSim's independent
+    coordinates, tau = J^T tau_pin, so the power of the balanced moments is that of the joint torques."""
+    from pinmsk.kinematics import coordinate_map
+    from pinmsk.model import import_osim
+    from pinmsk.solvers.moments import balance_space
+    from pinmsk.trial import Trial
+    from test_osim_import import leg
+    p = tmp_path / "leg.osim"
+    p.write_text(leg())
+    model, _ = import_osim(p, nonlinear="exact")
+    cmap = coordinate_map(model)
+    assert cmap is not None and cmap.couplers and "knee_translation1" in model.coordinates
+    t = np.linspace(0.0, 1.0, 101)
+    base = {"pelvis_ty": 0.9, "knee_angle": -0.6}
+    trial = Trial(t, {c: base.get(c, 0.0) + 0.2 * np.sin(2 * np.pi * t + i)
+                      for i, c in enumerate(cmap.osim_coordinates)})
+    so = StaticOptimization(reserves=True).fit(model, trial, cutoff=0)
+    mo, plan = so.inputs_.motion, so.plan_
+    space = balance_space(model, mo)
+    assert "knee_beta" not in space.names and "knee_translation1" not in space.names     # coupled, dependent
+    assert set(plan.dofs) | set(plan.unspanned) == set(space.names)
+    tau = np.zeros((mo.n_frames, space.n))
+    tau[:, [space.names.index(c) for c in plan.dofs]] = plan.tau
+    tau[:, [space.names.index(c) for c in plan.unspanned]] = plan.unspanned_tau
+    v = mo.v[:, [model.coordinate_index(c) for c in space.names]]
+    power_pin = np.sum(plan.tau_full * mo.v, axis=1)
+    np.testing.assert_allclose(np.sum(tau * v, axis=1), power_pin, rtol=1e-9, atol=1e-9 * np.abs(power_pin).max())
+    assert np.abs(power_pin).max() > 1.0
+    # the model's actuators (lumbar reserve, pelvis FX and MZ) are in the problem, in the same coordinates
+    assert so.actuators_ and {a.name for a in so.actuators_} == {"lumbar_reserve", "FX", "MZ"}
+    assert so.violation_.max() < 1e-6

@@ -1027,7 +1027,8 @@ def parse_force_set(data: bytes | str, *, source: str = "<string>") -> ForceSetD
     fs = root.child("ForceSet") if root.tag == "OpenSimDocument" else root
     if fs is None or fs.tag != "ForceSet":
         inside = ", ".join(f"<{c.tag}>" for c in root.children[:3]) or "nothing"
-        what = f"<OpenSimDocument> holds {inside}" if root.tag == "OpenSimDocument" else f"the root element is <{root.tag}>"
+        what = (f"<OpenSimDocument> holds {inside}" if root.tag == "OpenSimDocument"
+                else f"the root element is <{root.tag}>")
         raise ModelError(f"{source}:{root.line}: not an OpenSim force set file: {what}, not a <ForceSet> "
                          "(of CoordinateActuator, PointActuator and TorqueActuator elements)")
     version = int(float(root.attrib.get("Version", "0") or 0)) if root.tag == "OpenSimDocument" else 0

@@ -173,7 +173,8 @@ def _vector(a: Actuator, props, key: str, default) -> tuple[float, float, float]
     if v is None or v == "":
         return tuple(default)
     vals = (v,) if isinstance(v, float) else v
-    if not isinstance(vals, tuple) or len(vals) != 3 or not all(isinstance(x, float) and math.isfinite(x) for x in vals):
+    finite = isinstance(vals, tuple) and all(isinstance(x, float) and math.isfinite(x) for x in vals)
+    if not finite or len(vals) != 3:
         raise ModelError(f"{a.where}: <{key}> must hold 3 finite numbers, got {v!r}")
     return vals
 

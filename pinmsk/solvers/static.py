@@ -132,7 +132,7 @@ class SOProblem:
     split: np.ndarray | None = None       # (ns,) the actuator of each actuator variable
     sign: np.ndarray | None = None        # (ns,) +1 / -1: u = sum sign x
     optimal_force: np.ndarray | None = None   # (na,)
-    stand_in: np.ndarray | None = None    # (ns,) True where hi is a finite stand-in for an infinite bound
+    stand_in: np.ndarray | None = None    # (ns,) the finite stand-in hi of an infinite bound (NaN: a real bound)
 
     @property
     def n_frames(self) -> int:
@@ -397,13 +397,16 @@ class ChunkedSOProblem:
         self.f_max = f_max
         self.exponent = P
         # finite stand-ins for infinite control bounds (see STAND_IN_FACTOR)
-        self.stand_in = ~np.isfinite(self._v_hi)
-        if self.stand_in.any():
+        infinite = ~np.isfinite(self._v_hi)
+        self.stand_in = np.full(self.split.size, np.nan)
+        if infinite.any():
             cols = np.abs(self._C_all[:, self.split, :][:, :, idx]) / scale       # (N, ns, nd)
             col_max = np.max(cols, axis=(0, 2), initial=0.0)
-            b_max = float(np.max(np.abs(tau) / scale, initial=0.0)) + float(m) * float(np.max(np.abs(hi_m), initial=1.0))
+            b_max = (float(np.max(np.abs(tau) / scale, initial=0.0))
+                     + float(m) * float(np.max(np.abs(hi_m), initial=1.0)))
             need = np.where(col_max > 0, (1.0 + b_max) / np.where(col_max > 0, col_max, 1.0), 1.0)
-            self._v_hi = np.where(self.stand_in, STAND_IN_FACTOR * need, self._v_hi)
+            self._v_hi = np.where(infinite, STAND_IN_FACTOR * need, self._v_hi)
+            self.stand_in = np.where(infinite, self._v_hi, np.nan)
         self._full = None
 
     def _arms_and_forces(self, rows):
@@ -1022,15 +1025,15 @@ class StaticOptimization(Fitter):
         x = fr.x
         m = len(prob.muscles)
         stand_in = getattr(prob, "stand_in", None)
-        if stand_in is not None and stand_in.any():
-            at = (x[:, m:][:, stand_in] >= 0.999 * prob.hi[:, m:][:, stand_in])
+        if stand_in is not None and np.isfinite(stand_in).any():
+            cols = np.flatnonzero(np.isfinite(stand_in))
+            at = x[:, m + cols] >= 0.999 * stand_in[cols]
             if at.any():
                 k, j = np.argwhere(at)[0]
-                name = prob.actuators[int(prob.split[np.flatnonzero(stand_in)[j]])]
+                name = prob.actuators[int(prob.split[cols[j]])]
                 raise SolverError(f"actuator '{name}' (no control bound) reached the solver's stand-in bound "
-                                  f"{prob.hi[k, m + np.flatnonzero(stand_in)[j]]:.4g} at frame {k} "
-                                  f"(t = {prob.time[k]:.4g} s): give it min_control / max_control, or a larger "
-                                  "optimal_force")
+                                  f"{stand_in[cols[j]]:.4g} at frame {k} (t = {prob.time[k]:.4g} s): give it "
+                                  "min_control / max_control, or a larger optimal_force")
         F = prob.forces(x) if fr.forces is None else fr.forces
         u = prob.controls(x)
         reserves = fr.rho * prob.scale
