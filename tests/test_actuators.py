@@ -453,3 +453,13 @@ def test_so_of_an_exact_import_balances_opensims_coordinates(tmp_path):
     # the model's actuators (lumbar reserve, pelvis FX and MZ) are in the problem, in the same coordinates
     assert so.actuators_ and {a.name for a in so.actuators_} == {"lumbar_reserve", "FX", "MZ"}
     assert so.violation_.max() < 1e-6
+
+
+def test_actuator_channels_are_not_plotted_as_muscles(forearm, motion, tmp_path):
+    from pinmsk import read_trial, write_trial
+    from pinmsk.presentation.plots import muscles_in
+    res = CoordinateActuator("elbow_reserve", "elbow_flexion", optimal_force=30.0)
+    out = StaticOptimization(weights="fmax", actuators=[res]).fit(forearm, motion).result_
+    assert "elbow_reserve_force" in out.names and muscles_in(out) == list(forearm.muscle_names)
+    write_trial(out, tmp_path / "so.sto")
+    assert muscles_in(read_trial(tmp_path / "so.sto")) == list(forearm.muscle_names)

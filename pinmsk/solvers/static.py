@@ -42,6 +42,18 @@ problem, where a muscle at full force costs at most 1.  With the default
 produce the moment at a marginal cost below 1000 fully-active muscles per
 unit of capacity, i.e. in practice only where they cannot.
 
+Ideal actuators (:mod:`pinmsk.actuators`: the model's, and ``actuators=`` -- an
+OpenSim force set file of reserve and residual actuators) are further variables,
+as in OpenSim's StaticOptimization: a control ``min_control <= u <= max_control``
+whose generalized force is ``u F_opt B(q)``, costing ``|u|^P`` (times the largest
+muscle coefficient); a control that may take both signs is split into two
+non-negative variables, so every solver below is unchanged.  ``convention="opensim"``
+takes OpenSim's muscle model (``F = a F_opt``, no passive force, activations
+within the muscles' controls).  For an exact OpenSim import (dependent joints,
+:func:`pinmsk.kinematics.coordinate_map`) the equations are OpenSim's coordinates'
+(:func:`pinmsk.solvers.moments.balance_space`): moment arms, actuator columns and
+moments all map by ``J^T``.
+
 Fitters follow scikit-learn's habits: the constructor only stores arguments,
 ``fit`` returns ``self``, learned values end in ``_``, :meth:`report` prints
 the objective, iterations, convergence and constraint violation.
