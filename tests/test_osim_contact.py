@@ -226,6 +226,25 @@ def test_moco_contacts_hold_the_walker_up_and_give_its_grf(moco):
     print(f"pelvis_ty residual RMS: {rms[True]:.3g} N with the contacts, {rms[False]:.3g} N without")
 
 
+def test_a_measured_grf_on_a_foot_with_contacts_is_refused(moco):
+    """Contacts and a measured GRF on the same foot would count the ground twice: refused by name;
+    a load on a body without contacts (a push on the torso) is not."""
+    from pinmsk.errors import TrialError
+    from pinmsk.skeleton import ExternalForce
+
+    model, mo, *_ = moco
+    n = mo.n_frames
+    push = np.tile([0.0, 500.0, 0.0], (n, 1))
+    with pytest.raises(TrialError, match=r"contacts on the bodies the trial's ground reaction forces load "
+                                         r"\(smooth_sphere_half_space:heel_r on calcn_r, smooth_sphere_half_space:front_r "
+                                         r"on calcn_r\): the ground would act twice"):
+        inverse_dynamics_array(model, mo, external=[ExternalForce("calcn_r", push, np.zeros((n, 3)))])
+    tau = inverse_dynamics_array(model, mo, external=[ExternalForce("torso", push, np.zeros((n, 3)))])
+    assert np.all(np.isfinite(tau))
+    assert np.all(np.isfinite(inverse_dynamics_array(model, mo, external=[ExternalForce("calcn_r", push, push * 0)],
+                                                     components=False)))
+
+
 def test_load_model_imports_the_contacts_by_default(tmp_path):
     path = tmp_path / "ball.osim"
     path.write_text(ball_osim())
