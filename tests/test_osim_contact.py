@@ -81,20 +81,31 @@ def _u_order(osim_model, state) -> list[str]:
     return sorted(where, key=where.get)
 
 
-def _check_records(model, mo, k, comp, rec, pd):
-    """(error of the force and torque on the sphere's body, of those on the ground, force scale) at frame k."""
+def _outputs(model, mo):
+    """``{label: (ContactForces, (N, 3) origin of the sphere's body)}`` over the motion."""
     import pinocchio as pin
 
-    out = comp.evaluate(model, mo.subset(slice(k, k + 1)))
-    F, point = out.force[0], out.point[0]
-    pm = model.pin
-    body = pm.frames[pm.frames[model.frame_id(comp.target)].parentFrame]
-    pin.framesForwardKinematics(pm, pd, mo.q[k])
-    origin = pd.oMf[pm.getFrameId(body.name)].translation
-    mine = np.concatenate([F, np.cross(point - origin, F), -F, np.cross(point, -F)])
+    pm, pd = model.pin, model.pin.createData()
+    out = {}
+    for comp in model.contacts:
+        body = pm.frames[model.frame_id(comp.target)].parentFrame
+        origin = np.empty((mo.n_frames, 3))
+        for k in range(mo.n_frames):
+            pin.framesForwardKinematics(pm, pd, mo.q[k])
+            origin[k] = pd.oMf[body].translation
+        out[comp.label] = (comp.evaluate(model, mo), origin)
+    return out
+
+
+def _check_records(comp, outputs, k, rec):
+    """(error of the force and torque on the sphere's body and on the ground, error of the normal /
+    friction split, |F|) at frame k against OpenSim's record values ``rec``."""
+    out, origin = outputs[comp.label]
+    F, point = out.force[k], out.point[k]
+    mine = np.concatenate([F, np.cross(point - origin[k], F), -F, np.cross(point, -F)])
     n = np.asarray(comp.plane_normal)
     normal = rec[:3] @ n                                  # OpenSim's force split into normal and friction
-    split = max(abs(normal - out.normal[0]), np.abs(rec[:3] - normal * n - out.friction[0]).max())
+    split = max(abs(normal - out.normal[k]), np.abs(rec[:3] - normal * n - out.friction[k]).max())
     return np.abs(mine - rec).max(), split, np.linalg.norm(rec[:3])
 
 
@@ -150,15 +161,14 @@ def test_moco_contact_forces_match_opensim(moco, moco_opensim):
     model, mo, names, Q, V = moco
     osim, om, state = moco_opensim
     forces = {name: osim.Force.safeDownCast(om.getComponent("/" + name)) for name in FORCES}
-    pd = model.pin.createData()
+    outputs = _outputs(model, mo)
     worst, worst_split, loaded = 0.0, 0.0, 0
     for k in range(mo.n_frames):
         _set_state(om, state, names, Q[k], V[k])
         om.realizeDynamics(state)
         for name, frame in FORCES.items():
-            rec = _records(forces[name], state)
-            err, split, scale = _check_records(model, mo, k, model.component(f"smooth_sphere_half_space:{frame}"),
-                                               rec, pd)
+            err, split, scale = _check_records(model.component(f"smooth_sphere_half_space:{frame}"), outputs, k,
+                                               _records(forces[name], state))
             worst = max(worst, err / max(scale, 1.0))
             worst_split = max(worst_split, split / max(scale, 1.0))
             loaded += scale > 100.0
@@ -369,18 +379,18 @@ def test_ball_contacts_match_opensim(tmp_path):
     q, v = _ball_states(model, rng)
     names = list(model.coordinates)
     mo = Motion(np.arange(len(q)) * 0.01, q, v, np.zeros_like(q))
-    pd = model.pin.createData()
+    outputs = _outputs(model, mo)
     worst = {"hc": 0.0, "smooth": 0.0}
-    seen = {"touching": 0, "rebound": 0, "clear": 0}
     for k in range(len(q)):
         _set_state(om, state, names, q[k], v[k])
         om.realizeDynamics(state)
         for key, (f, comp) in forces.items():
             # both record the ball's body (force, torque about its origin), then the ground's
-            err, split, scale = _check_records(model, mo, k, comp, _records(f, state), pd)
+            err, split, scale = _check_records(comp, outputs, k, _records(f, state))
             worst[key] = max(worst[key], err / max(scale, 1.0), split / max(scale, 1.0))
-        out = hc.evaluate(model, mo.subset(slice(k, k + 1)))
-        seen["touching" if out.normal[0] > 0 else "rebound" if out.penetration[0] > 0 else "clear"] += 1
+    out = outputs[hc.label][0]
+    seen = {"touching": int(np.sum(out.normal > 0)), "rebound": int(np.sum((out.normal == 0) & (out.penetration > 0))),
+            "clear": int(np.sum(out.penetration <= 0))}
     print(f"\nball vs OpenSim: HuntCrossleyForce max error {worst['hc']:.2e}, SmoothSphereHalfSpaceForce "
           f"{worst['smooth']:.2e} (relative to max(|F|, 1 N)); HC frames {seen}")
     assert min(seen.values()) >= 2          # in contact, pulling off faster than 2/(3c) (no force), clear
@@ -392,7 +402,8 @@ def test_ball_contacts_match_opensim(tmp_path):
 UNSUPPORTED_GEOMETRY = """
       <ContactMesh name="plate"><socket_frame>/ground</socket_frame><filename>plate.obj</filename></ContactMesh>
       <ContactHalfSpace name="wall"><socket_frame>/bodyset/ball</socket_frame></ContactHalfSpace>
-      <ContactSphere name="post"><socket_frame>/ground</socket_frame><radius>0.02</radius></ContactSphere>"""
+      <ContactSphere name="post"><socket_frame>/ground</socket_frame><radius>0.02</radius></ContactSphere>
+      <ContactEllipsoid name="egg"><socket_frame>/bodyset/ball</socket_frame><radii>0.03 0.02 0.01</radii></ContactEllipsoid>"""
 
 
 def _smooth(name, sphere, half, extra=""):
@@ -415,6 +426,12 @@ UNSUPPORTED_FORCES = (
           <HuntCrossleyForce::ContactParameters><geometry>floor</geometry><stiffness>2e6</stiffness>
           </HuntCrossleyForce::ContactParameters>
         </objects></HuntCrossleyForce::ContactParametersSet>
+      </HuntCrossleyForce>
+      <HuntCrossleyForce name="mixed">
+        <HuntCrossleyForce::ContactParametersSet name="contact_parameters"><objects>
+          <HuntCrossleyForce::ContactParameters><geometry>ball2 floor plate egg</geometry><stiffness>1e6</stiffness>
+          </HuntCrossleyForce::ContactParameters>
+        </objects></HuntCrossleyForce::ContactParametersSet>
       </HuntCrossleyForce>"""
     + _smooth("on_wall", "ball2", "wall") + _smooth("on_post", "post", "floor") + _smooth("on_mesh", "plate", "floor")
     + _smooth("unknown", "ball2", "nowhere") + _smooth("off", "ball2", "floor", "<appliesForce>false</appliesForce>"))
@@ -424,12 +441,16 @@ def test_report_says_what_became_what_and_names_what_is_not_imported(tmp_path):
     path = tmp_path / "ball.osim"
     path.write_text(ball_osim(extra_forces=UNSUPPORTED_FORCES, extra_geometry=UNSUPPORTED_GEOMETRY))
     model, report = import_osim(path, hooks=(contact_hook,))
-    assert {c.label for c in model.contacts} == {"hunt_crossley_force:ball_sphere", "smooth_sphere_half_space:ball2"}
+    assert {c.label for c in model.contacts} == {"hunt_crossley_force:ball_sphere", "smooth_sphere_half_space:ball2",
+                                                 "hunt_crossley_force:ball2"}
+    assert model.component("hunt_crossley_force:ball2").target == "ball2"       # one frame, two forces
     why = {e.element.split(": ", 1)[1]: e.became for e in report.not_imported}
     assert set(why) == {'<ElasticFoundationForce name="foundation">', '<HuntCrossleyForce name="stiff">',
                         '<SmoothSphereHalfSpaceForce name="on_wall">', '<SmoothSphereHalfSpaceForce name="on_post">',
                         '<SmoothSphereHalfSpaceForce name="on_mesh">', '<SmoothSphereHalfSpaceForce name="unknown">',
-                        '<ContactMesh name="plate">'}
+                        '<ContactMesh name="plate">', '<ContactEllipsoid name="egg">', '<HuntCrossleyForce name="mixed">'}
+    assert "contacts with ContactEllipsoid 'egg'" in why['<HuntCrossleyForce name="mixed">']
+    assert any("ignores a ContactMesh's contacts" in e.became for e in report.find('name="mixed"'))
     assert "elastic-foundation" in why['<ElasticFoundationForce name="foundation">']
     assert "differ in stiffness" in why['<HuntCrossleyForce name="stiff">']
     assert "fixed to body 'ball'" in why['<SmoothSphereHalfSpaceForce name="on_wall">']

@@ -44,9 +44,8 @@ SMOOTH_PROPERTIES = ("stiffness", "dissipation", "static_friction", "dynamic_fri
 HUNT_CROSSLEY_PROPERTIES = ("stiffness", "dissipation", "static_friction", "dynamic_friction", "viscous_friction")
 #: Properties that change no force (sockets, display) or are handled apart (appliesForce).
 _NO_FORCE = {"socket_sphere", "socket_half_space", "sphere", "half_space", "force_visualization_radius",
-             "force_visualization_scale_factor", "appliesForce", "isDisabled", "contact_parameters",
-             "transition_velocity"}
-_LAWS = {"SmoothSphereHalfSpaceForce": "smooth_sphere_half_space", "HuntCrossleyForce": "hunt_crossley_force"}
+             "force_visualization_scale_factor", "appliesForce", "isDisabled", "contact_parameters"}
+_LAWS = ("SmoothSphereHalfSpaceForce", "HuntCrossleyForce")
 
 
 def contact_hook(doc: OsimDocument, skeleton: Skeleton) -> HookResult:
@@ -74,7 +73,9 @@ def contact_hook(doc: OsimDocument, skeleton: Skeleton) -> HookResult:
         for comp, text in made:
             components.append(comp)
             entries.append(ReportEntry(element=force.where, became=text, status=EXACT))
-        entries += [ReportEntry(element=force.where, became=n, status=NOTE) for n in notes]
+        for n in notes:             # a note, or (status, text)
+            status, text = n if isinstance(n, tuple) else (NOTE, n)
+            entries.append(ReportEntry(element=force.where, became=text, status=status))
     for g in doc.contact_geometry:
         if g.type not in ("ContactSphere", "ContactHalfSpace"):
             entries.append(ReportEntry(element=g.where, status=NOT_IMPORTED,
@@ -157,25 +158,33 @@ def _hunt_crossley(force: ContactForce, geometry: dict, frames: "_Frames"):
     if not spheres or not halves:
         raise _NotImported(f"it has {len(spheres)} sphere(s) and {len(halves)} half space(s); pinmsk's "
                            "HuntCrossleyForce is a sphere against a half space")
+    for s in spheres:                 # checked before any frame is added
+        for h in halves:
+            ks, kh = material[s.name]["stiffness"], material[h.name]["stiffness"]
+            if ks != kh:
+                raise _NotImported(f"sphere '{s.name}' (stiffness {ks:g}) and half space '{h.name}' ({kh:g}) differ "
+                                   "in stiffness: Simbody then moves the contact point off the midway plane, which "
+                                   "pinmsk's HuntCrossleyForce does not")
     vt = _number(force, force.properties, "transition_velocity", 0.01)
+    planes = {h.name: frames.half_space(h) for h in halves}
     made = []
     for h in halves:
-        plane = frames.half_space(h)
         for s in spheres:
             ms, mh = material[s.name], material[h.name]
-            if ms["stiffness"] != mh["stiffness"]:
-                raise _NotImported(f"sphere '{s.name}' (stiffness {ms['stiffness']:g}) and half space '{h.name}' "
-                                   f"({mh['stiffness']:g}) differ in stiffness: Simbody then moves the contact "
-                                   "point off the midway plane, which pinmsk's HuntCrossleyForce does not")
             values = {"stiffness": ms["stiffness"], "dissipation": 0.5 * (ms["dissipation"] + mh["dissipation"]),
                       "transition_velocity": vt}
             for k in ("static_friction", "dynamic_friction", "viscous_friction"):
                 values[k] = _combined(ms[k], mh[k])
-            made.append(frames.component(HuntCrossleyForce, force, s, h, plane, values))
+            made.append(frames.component(HuntCrossleyForce, force, s, h, planes[h.name], values))
     notes = []
-    if others:
-        notes.append(f"{', '.join(f'{g.type} {g.name!r}' for g in others)}: Simbody's HuntCrossleyForce applies "
-                     "forces at point contacts only (spheres and half spaces), so it ignores them, as pinmsk does")
+    meshes = [g for g in others if g.type == "ContactMesh"]
+    if meshes:
+        notes.append(f"{', '.join(repr(g.name) for g in meshes)}: Simbody's HuntCrossleyForce applies forces at "
+                     "point contacts only, so it ignores a ContactMesh's contacts, as pinmsk does")
+    if len(meshes) < len(others):
+        notes.append((NOT_IMPORTED, "not imported: its contacts with "
+                      + ", ".join(f"{g.type} {g.name!r}" for g in others if g not in meshes)
+                      + " (pinmsk's HuntCrossleyForce is a sphere against a half space)"))
     if len(spheres) > 1:
         notes.append(f"{len(spheres)} spheres in one force: contacts between them (Simbody's sphere-sphere "
                      "contacts, only where they overlap) are not modelled; and where one sphere would pull, "
@@ -183,7 +192,7 @@ def _hunt_crossley(force: ContactForce, geometry: dict, frames: "_Frames"):
     if any(material[s.name] != material[h.name] for s in spheres for h in halves):
         notes.append("sphere and half space have different dissipation or friction: combined as Simbody does "
                      "(c = (c1 + c2) / 2 at equal stiffness, u = 2 u1 u2 / (u1 + u2))")
-    return made, notes + _unread(force, force.properties, ())
+    return made, notes + _unread(force, force.properties, ("transition_velocity",))
 
 
 def _combined(a: float, b: float) -> float:
