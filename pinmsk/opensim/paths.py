@@ -54,6 +54,13 @@ the derivative of the length (the arc's change is of second order); it does not
 see the polyline steps of OpenSim's ellipsoid arc, which a difference of the
 total length would.
 
+For drawing, :meth:`GeometricPaths.polylines` gives every path over many
+frames as a polyline in ground (:class:`PathPolylines`): the points OpenSim's
+``getCurrentPath`` returns (active points and each wrap's tangent points, at the
+same locations, tests/test_viewer_paths.py) with points along each wrapped arc
+in between, as long as the path's length (the arc points sit a few microns off
+the surface to make up the chords' shortfall).
+
 Arrays are time-first; units SI (m, rad).
 """
 from __future__ import annotations
