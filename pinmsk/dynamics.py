@@ -45,13 +45,27 @@ def component_forces(model, motion: Motion, *, data=None) -> dict[str, np.ndarra
 def inverse_dynamics_array(model, motion: Motion, *, external: Sequence[skeleton.ExternalForce] = (),
                            components: bool = True, progress=None, data=None) -> np.ndarray:
     """Actuator generalized forces ``(N, nv)`` for a Motion (see :func:`inverse_dynamics`);
-    ``data`` as for :func:`component_forces`."""
+    ``data`` as for :func:`component_forces`.  A contact on a body that ``external`` loads (a
+    measured GRF on a foot that has contact spheres) is refused: the ground would act twice."""
+    if components and external and model.contacts:
+        _ground_acts_once(model, external)
     tau = skeleton.rnea(model, motion.q, motion.v, motion.a, external=external,
                                     progress=progress)
     if components:
         for f in component_forces(model, motion, data=data).values():
             tau -= f
     return tau
+
+
+def _ground_acts_once(model, external) -> None:
+    pm = model.pin
+    loaded = {pm.frames[model.frame_id(e.frame)].parentJoint: e.frame for e in external}
+    both = [f"{c.label} on {loaded[j]}" for c in model.contacts
+            if (j := pm.frames[model.frame_id(c.target)].parentJoint) in loaded]
+    if both:
+        raise TrialError(f"model '{model.name}' has contacts on the bodies the trial's ground reaction forces load "
+                         f"({', '.join(both)}): the ground would act twice; leave the measured GRF out "
+                         "(ground_reaction='ignore', CLI --no-grf) or the contacts (model.without(label))")
 
 
 @dataclass(frozen=True)

@@ -500,10 +500,12 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
 def import_osim(path, *, locked: str = "joint", nonlinear: str = "fit", gravity=None, hooks=None):
     """``(Model, ImportReport)`` of an OpenSim ``.osim`` (the parts: :func:`pinmsk.opensim.importer.read_import`,
     whose docstring gives the options; ``load_model`` takes the defaults).  ``hooks`` default: the
-    muscle import (:func:`pinmsk.opensim.muscle_import.muscle_hook`); ``()`` imports the skeleton only."""
+    muscle import (:func:`pinmsk.opensim.muscle_import.muscle_hook`) and the contacts
+    (:func:`pinmsk.opensim.contacts.contact_hook`); ``()`` imports the skeleton only."""
     from .opensim.importer import read_import
+    from .opensim.contacts import contact_hook
     from .opensim.muscle_import import DEFAULT_HOOKS
-    hooks = DEFAULT_HOOKS if hooks is None else hooks
+    hooks = (*DEFAULT_HOOKS, contact_hook) if hooks is None else hooks
     from .opensim.report import NOTE, ReportEntry
     imp = read_import(path, locked=locked, nonlinear=nonlinear, hooks=hooks)
     report = imp.report

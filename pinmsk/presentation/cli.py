@@ -341,8 +341,9 @@ def cmd_optimize(args) -> int:
 
 def cmd_view(args) -> int:
     from .viewer import view_cli
-    trial = _read(args.trial, _model(args), args) if args.trial else None
-    view_cli(args.model, trial, args.results, open_browser=args.open,
+    model = _model(args)          # loaded once (an .osim import is not quick)
+    trial = _read(args.trial, model, args) if args.trial else None
+    view_cli(model, trial, args.results, open_browser=args.open,
              block=not args.no_block, timeout=args.timeout)
     return 0
 
