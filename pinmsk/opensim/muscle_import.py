@@ -42,7 +42,7 @@ from ..errors import ModelError
 from ..io.osim import OsimDocument, _parse_xml
 from ..muscles.muscle_set import MuscleSet
 from .muscles import MUSCLE_TYPES, muscle_model_from_osim, properties_from_xml, summarize_notes
-from .importer import HookResult
+from .hooks import HookResult
 from .paths import GeometricPaths, fit_polynomial_paths, path_specs_from_xml
 from .report import APPROXIMATED, NOTE, ReportEntry
 from .skeleton import OsimKinematics, Skeleton

@@ -28,7 +28,7 @@ import numpy as np
 from ..components import Motion
 from ..dynamics import inverse_dynamics_array
 from ..errors import InfeasibleError, TrialError
-from ..kinematics import TrialInputs, first_non_finite
+from ..kinematics import TrialInputs, coordinate_map, first_non_finite
 from ..signals.filtering import lowpass
 from ..signals.sampling import median_step
 from ..trial import Trial, moment_channels
@@ -120,7 +120,16 @@ def plan_moments(model, trial, inputs: TrialInputs, *, moments=None, dofs=None, 
         if len(set(idx.tolist())) != idx.size:
             raise TrialError(f"dofs lists a coordinate twice: {names}")
         by_request = True
-    rest = np.array([j for j in range(model.nv) if j not in set(idx.tolist())], dtype=int)
+    # the dependent joints of a coordinate map are driven by no actuator (their share of the load is
+    # mapped onto OpenSim's coordinates: kinematics.actuated_forces): neither balanced nor reserves
+    cmap = coordinate_map(model)
+    dependent = set(cmap.dependent) if cmap is not None else set()
+    asked = sorted(dependent & {coords[j] for j in idx})
+    if asked:
+        raise TrialError(f"dofs names {', '.join(asked)}, dependent joint(s) of model '{model.name}' (functions of "
+                         "OpenSim's coordinates, driven by no actuator); name OpenSim's coordinates instead")
+    rest = np.array([j for j in range(model.nv) if j not in set(idx.tolist()) and coords[j] not in dependent],
+                    dtype=int)
     notes = []
     tau_full = None
     src = moments if moments is not None else "id"
