@@ -348,3 +348,49 @@ def test_a_coordinate_a_builtin_model_lacks_gets_a_did_you_mean(tmp_path):
     path = _coordinates_file(tmp_path / "typo.mot", {"elbow_flexon": np.linspace(0, 1, 20)})
     with pytest.raises(TrialError, match=r"'elbow_flexon' \(did you mean 'elbow_flexion'\?\)"):
         forearm.motion(pinmsk.read_trial(path))
+
+
+# -- muscles across a coupled coordinate that drives only dependent joints --------------------------------
+
+def test_a_muscle_on_the_coupled_patella_is_fitted_along_its_coupler(tmp_path):
+    # a muscle from the femur to the patella crosses only knee_beta, which (exact mode) drives only dependent
+    # joints and follows the knee by its coupler: the path is fitted in knee_angle with the coupling, as OpenSim
+    # enforces it, and its moment arm about the knee is -dl/dknee along the coupled motion
+    from pinmsk.opensim.muscle_import import geometric_paths
+    text = t.leg()
+    start = text.index('<Thelen2003Muscle name="vas">')
+    end = text.index("</Thelen2003Muscle>", start) + len("</Thelen2003Muscle>")
+    vas = text[start:end]
+    a, b = vas.index("<PathPointSet>"), vas.index("</PathWrapSet>") + len("</PathWrapSet>")
+    points = ('<PathPointSet><objects>'
+              '<PathPoint name="rf-P1"><socket_parent_frame>/bodyset/femur</socket_parent_frame>'
+              '<location>0.03 -0.2 0.03</location></PathPoint>'
+              '<PathPoint name="rf-P2"><socket_parent_frame>/bodyset/patella</socket_parent_frame>'
+              '<location>0.01 0.02 0.0</location></PathPoint></objects></PathPointSet>')
+    rf = vas[:a].replace('name="vas"', 'name="rf"') + points + vas[b:]
+    p = tmp_path / "leg_rf.osim"
+    p.write_text(text[:end] + rf + text[end:])
+    model, report = import_osim(p)
+    assert "knee_beta" not in model.coordinates and "rf" in model.muscle_names
+    (note,) = [e for e in report.entries if "following their couplers" in e.became]
+    assert "knee_beta" in note.became and "knee_angle" in note.became
+    i, j = model.muscle_names.index("rf"), model.coordinate_index("knee_angle")
+    assert model.muscles.path.terms[i]["coordinates"] == ("knee_angle",)
+    # the geometric path along the coupled motion (knee_beta = knee_angle: the leg's coupler)
+    gp = geometric_paths(report)
+    knee = np.linspace(-1.8, 0.1, 25)
+    h = 1e-6
+
+    def length(k):
+        q = np.zeros((k.size, len(gp.coordinates)))
+        q[:, gp.coordinates.index("pelvis_ty")] = 0.95
+        q[:, gp.coordinates.index("knee_angle")] = q[:, gp.coordinates.index("knee_beta")] = k
+        return gp.lengths_and_moment_arms(q, coordinates=())[0][:, gp.muscles.index("rf")]
+
+    arm = -(length(knee + h) - length(knee - h)) / (2 * h)
+    q = np.zeros((knee.size, model.nq))
+    q[:, model.coordinate_index("pelvis_ty")] = 0.95
+    q[:, j] = knee
+    fit = model.muscles.moment_arms(q)[:, i, j]
+    err = next(f.moment_arm_max for e in report.entries for f in e.details.get("fits", ()) if f.muscle == "rf")
+    assert np.max(np.abs(arm)) > 5e-3 and np.max(np.abs(fit - arm)) <= err + 1e-6
