@@ -48,13 +48,28 @@ def inverse_dynamics_array(model, motion: Motion, *, external: Sequence[skeleton
     """Actuator generalized forces ``(N, nv)`` for a Motion (see :func:`inverse_dynamics`);
     ``data`` as for :func:`component_forces`.  On a model with dependent joints (an exact OpenSim
     import) they are OpenSim's coordinates' forces at their joints and 0 at the dependent joints
-    (:func:`pinmsk.kinematics.actuated_forces`); ``actuated=False`` gives Pinocchio's ``tau`` of every joint."""
+    (:func:`pinmsk.kinematics.actuated_forces`); ``actuated=False`` gives Pinocchio's ``tau`` of every joint.
+    A contact on a body that ``external`` loads (a measured GRF on a foot that has contact spheres) is
+    refused: the ground would act twice."""
+    if components and external and model.contacts:
+        _ground_acts_once(model, external)
     tau = skeleton.rnea(model, motion.q, motion.v, motion.a, external=external,
                                     progress=progress)
     if components:
         for f in component_forces(model, motion, data=data).values():
             tau -= f
     return actuated_forces(model, motion, tau) if actuated else tau
+
+
+def _ground_acts_once(model, external) -> None:
+    pm = model.pin
+    loaded = {pm.frames[model.frame_id(e.frame)].parentJoint: e.frame for e in external}
+    both = [f"{c.label} on {loaded[j]}" for c in model.contacts
+            if (j := pm.frames[model.frame_id(c.target)].parentJoint) in loaded]
+    if both:
+        raise TrialError(f"model '{model.name}' has contacts on the bodies the trial's ground reaction forces load "
+                         f"({', '.join(both)}): the ground would act twice; leave the measured GRF out "
+                         "(ground_reaction='ignore', CLI --no-grf) or the contacts (model.without(label))")
 
 
 @dataclass(frozen=True)

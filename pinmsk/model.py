@@ -550,18 +550,20 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
 def import_osim(path, *, locked: str = "joint", nonlinear: str = "exact", gravity=None, hooks=None):
     """``(Model, ImportReport)`` of an OpenSim ``.osim`` (the parts: :func:`pinmsk.opensim.importer.read_import`,
     whose docstring gives the options; ``load_model`` takes the defaults).  ``hooks`` default: the
-    muscle import (:func:`pinmsk.opensim.muscle_import.muscle_hook`); ``()`` imports the skeleton only.
+    muscle import (:func:`pinmsk.opensim.muscle_import.muscle_hook`) and the contacts
+    (:func:`pinmsk.opensim.contacts.contact_hook`); ``()`` imports the skeleton only.
 
-    Imports are cached in this process, keyed by the file (resolved path, modification time in ns and
-    size) and the options (``locked``, ``nonlinear``, ``gravity``, the hook objects): importing the same
+    Imports are cached in this process, keyed by the file (resolved path, modification time in ns, size
+    and a digest of its content) and the options (``locked``, ``nonlinear``, ``gravity``, the hook objects): importing the same
     unchanged file with the same options returns the same Model and report (the Model is frozen, so
     sharing it is safe), without refitting the muscle paths (arm26: 2-4 s).  A changed file is imported
     again.  :func:`clear_import_cache` empties the cache; ``pinmsk import`` writes a sidecar that loads
     fast in a new process.
     """
     from .opensim.importer import read_import
+    from .opensim.contacts import contact_hook
     from .opensim.muscle_import import DEFAULT_HOOKS
-    hooks = tuple(DEFAULT_HOOKS if hooks is None else hooks)
+    hooks = tuple((*DEFAULT_HOOKS, contact_hook) if hooks is None else hooks)
     key = _import_key(path, locked, nonlinear, gravity, hooks)
     if key is not None and key in _IMPORTS:
         _IMPORTS[key] = _IMPORTS.pop(key)            # most recently used last
@@ -596,11 +598,15 @@ def clear_import_cache() -> None:
 def _import_key(path, locked, nonlinear, gravity, hooks):
     """The cache key of an import, or None (not cached) if the file cannot be stat'ed or an option is not
     hashable; the import itself then says what is wrong."""
+    import hashlib
     try:
         p = Path(str(path)).resolve()
         st = p.stat()
+        # the content's digest too: a file rewritten within the file system's time resolution (tests, scripts)
+        # with the same size is not taken for the old one (~1 ms for a 1 MB .osim)
+        digest = hashlib.blake2b(p.read_bytes(), digest_size=16).hexdigest()
         g = None if gravity is None else tuple(float(x) for x in np.asarray(gravity, dtype=float).reshape(-1))
-        key = (str(p), st.st_mtime_ns, st.st_size, locked, nonlinear, g, hooks)
+        key = (str(p), st.st_mtime_ns, st.st_size, digest, locked, nonlinear, g, hooks)
         hash(key)
     except (OSError, TypeError, ValueError):
         return None

@@ -71,8 +71,16 @@ def _frame_positions(model, q):
 
 
 def _round_trip(direct, out_dir, trial, **id_options):
-    """The sidecar ``pinmsk import`` writes, loaded back, against the model it was written from."""
-    files = write_import(direct, out_dir)
+    """The sidecar ``pinmsk import`` writes, loaded back, against the model it was written from (its contact
+    components aside: the sidecar has no entry for them yet, which a warning says)."""
+    if direct.contacts:
+        with pytest.warns(UserWarning, match=r"write_import: \d+ component\(s\) .* not written .*"
+                                             + re.escape(direct.contacts[0].label)):
+            files = write_import(direct, out_dir)
+        for c in direct.contacts:
+            direct = direct.without(c.label)
+    else:
+        files = write_import(direct, out_dir)
     back = pinmsk.load_model(files["sidecar"])
     assert back.coordinates == direct.coordinates and back.coordinate_order == direct.coordinate_order
     ca, cb = coordinate_map(direct), coordinate_map(back)
@@ -82,7 +90,9 @@ def _round_trip(direct, out_dir, trial, **id_options):
     assert np.array_equal(ma.q, mb.q) and np.array_equal(ma.v, mb.v) and np.array_equal(ma.a, mb.a)
     names_a, pa = _frame_positions(direct, ma.q)
     names_b, pb = _frame_positions(back, mb.q)
-    assert names_a == names_b and np.max(np.abs(pa - pb)) < 1e-12
+    keep = [names_a.index(n) for n in names_b]            # the import adds a frame per contact sphere
+    assert set(names_b) <= set(names_a) and len(names_b) >= direct.pin.nbodies
+    assert np.max(np.abs(pa[:, keep] - pb)) < 1e-12
     # the same inverse dynamics (per OpenSim coordinate)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", pinmsk.errors.ResidualWarning)       # a trial without its GRF
@@ -185,8 +195,14 @@ def test_load_model_of_an_osim_is_cached_until_the_file_changes(tmp_path):
     os.utime(p, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000))
     b = _load(p)
     assert b is not a and b.nq == a.nq                        # a changed file is imported again
+    # new content of the same size and modification time (a rewrite within the clock's resolution)
+    st = p.stat()
+    p.write_text(t.leg().replace("<max_isometric_force>1200<", "<max_isometric_force>1300<"))
+    os.utime(p, ns=(st.st_atime_ns, st.st_mtime_ns))
+    c = _load(p)
+    assert c is not b and c.muscles.f_max[c.muscle_names.index("vas")] == 1300.0
     clear_import_cache()
-    assert _load(p) is not b
+    assert _load(p) is not c
 
 
 # -- downstream analyses take OpenSim's coordinates, or refuse by name -------------------------------------

@@ -195,10 +195,11 @@ def write_import(model_or_path, out_dir, *, name: str | None = None, hooks: Sequ
     samples; :meth:`~pinmsk.opensim.skeleton.CoordinateMap.to_spec`) and the muscles (``[muscle_model]``,
     ``[[muscles]]``: the muscle model's type and parameters, each path polynomial with its fit errors).
 
-    ``model_or_path``: the ``.osim`` path (imported with the muscle hook, or ``hooks``, and ``nonlinear``,
-    default ``"exact"``), or a model imported from one (its muscles, gravity and report are written; the
-    skeleton is rebuilt from its ``meta['osim']`` with the same options).  Returns ``{"urdf", "sidecar",
-    "markers", "report"}`` paths.
+    ``model_or_path``: the ``.osim`` path (imported with ``import_osim``'s default hooks, or ``hooks``, and
+    ``nonlinear``, default ``"exact"``), or a model imported from one (its muscles, gravity and report are
+    written; the skeleton is rebuilt from its ``meta['osim']`` with the same options).  Contact and other
+    components of the import have no sidecar entry yet: a UserWarning and a comment in the sidecar name
+    them.  Returns ``{"urdf", "sidecar", "markers", "report"}`` paths.
     """
     from ..io.output_files import atomic_write, output_folder, output_transaction
 
@@ -207,6 +208,7 @@ def write_import(model_or_path, out_dir, *, name: str | None = None, hooks: Sequ
         if nonlinear is not None:
             options["nonlinear"] = nonlinear
         muscles = report = description = None
+        components = ()
     else:
         meta = getattr(model_or_path, "meta", None)
         if meta is None or not meta.get("osim"):
@@ -218,15 +220,23 @@ def write_import(model_or_path, out_dir, *, name: str | None = None, hooks: Sequ
         path, options = Path(meta["osim"]), dict(meta.get("osim_import_options") or {})
         gravity = np.asarray(model_or_path.gravity, dtype=float)
         muscles, report, description = model_or_path.muscles, meta.get("import_report"), meta.get("description")
+        components = tuple(model_or_path.components)
     locked = options.get("locked", "joint")
     if locked not in LOCKED_MODES:
         raise ModelError(f"write_import: unknown locked option {locked!r}")
     if hooks is None and muscles is None and report is None:
+        from .contacts import contact_hook
         from .muscle_import import DEFAULT_HOOKS
-        hooks = DEFAULT_HOOKS
+        hooks = (*DEFAULT_HOOKS, contact_hook)          # import_osim's defaults
     imp = read_import(path, locked=locked, nonlinear=options.get("nonlinear", "exact"), hooks=hooks or ())
     if report is None:
-        report, muscles = imp.report, imp.muscles
+        report, muscles, components = imp.report, imp.muscles, imp.components
+    unwritten = [c.label for c in components]
+    if unwritten:
+        import warnings
+        warnings.warn(f"write_import: {len(unwritten)} component(s) of the import are not written to the sidecar "
+                      f"(its format has no entry for them yet): {', '.join(unwritten)}; load the .osim to have them",
+                      UserWarning, stacklevel=2)
     skel = imp.skeleton
     gravity = np.asarray(skel.doc.gravity, dtype=float) if gravity is None else gravity
     stem = name or re.sub(r"[^A-Za-z0-9_.-]", "_", path.stem)
@@ -234,7 +244,7 @@ def write_import(model_or_path, out_dir, *, name: str | None = None, hooks: Sequ
         raise ModelError(f"write_import: name {stem!r} must be letters, digits, '_', '.' or '-'")
     urdf_text = urdf_string(skel, name=stem)
     sidecar_text = _sidecar(imp, stem, path, gravity, report=report, muscles=muscles,
-                            description=description or imp.meta["description"])
+                            description=description or imp.meta["description"], unwritten=unwritten)
     out = Path(out_dir)
     files = {"urdf": out / f"{stem}.urdf", "sidecar": out / f"{stem}.toml",
              "markers": out / f"{stem}_markers.toml", "report": out / f"{stem}_import_report.txt"}
@@ -337,7 +347,7 @@ def _toml_value(v) -> str:
 
 
 def _sidecar(imp: OsimImport, stem: str, source: Path, gravity, *, report: ImportReport, muscles,
-             description: str) -> str:
+             description: str, unwritten=()) -> str:
     order = ", ".join(_toml_str(c) for c in imp.meta["coordinate_order"])
     g = ", ".join(_num(x) for x in gravity)
     cmap = imp.skeleton.coordinate_map
@@ -350,6 +360,8 @@ def _sidecar(imp: OsimImport, stem: str, source: Path, gravity, *, report: Impor
              f"# What was approximated or not imported: {stem}_import_report.txt.  Format: urdf/README.md of pinmsk.",
              ""]
     head = len(lines)
+    if unwritten:
+        lines.append(f"# NOT WRITTEN (no sidecar entry for them yet; the .osim has them): {', '.join(unwritten)}")
     for e in report.approximations:
         lines.append(f"# APPROXIMATED: {e.line()}")
     for e in report.entries:
