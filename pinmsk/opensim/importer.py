@@ -18,8 +18,10 @@ contacts), its report entries, and the ``where`` strings
 muscle, actuator, contact force and other element no hook handled gets a
 "not imported" entry, so nothing is dropped silently.
 
-:func:`write_import` writes the skeleton as a URDF plus a TOML sidecar (and the
-marker set and the report) that ``load_model`` reads back to the same skeleton.
+:func:`write_import` writes the model as a URDF plus a TOML sidecar (and the
+marker set and the report) that ``load_model`` reads back to the same model: the
+skeleton, the coordinate map of an exact import (its OpenSim functions) and the
+muscles (parameters, fitted path polynomials and their errors).
 
 The ``meta`` carries what the skeleton does not hold: ``osim`` (the source),
 ``coordinate_order`` (OpenSim's), ``locked_coordinates``, ``clamped_coordinates``,
