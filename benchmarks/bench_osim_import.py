@@ -70,7 +70,7 @@ def main(argv=None) -> int:
     raj = models / "RajagopalWalk" / "subject_walk_scaled.osim"
 
     def fresh(path):
-        clear_import_cache()        # time the import, not the in-process cache's lookup
+        clear_import_cache(path)        # time the import, not the in-process cache's lookup
         return import_osim(path)
 
     t_raj = _best(lambda: fresh(raj), args.repeat) if raj.is_file() else float("nan")

@@ -586,13 +586,19 @@ def import_osim(path, *, locked: str = "joint", nonlinear: str = "exact", gravit
 
 
 #: How many imported models :func:`import_osim` keeps (least recently used dropped first).
-MAX_CACHED_IMPORTS = 8
+MAX_CACHED_IMPORTS = 16
 _IMPORTS: dict = {}
 
 
-def clear_import_cache() -> None:
-    """Forget the models :func:`import_osim` cached (the next import reads and fits the file again)."""
-    _IMPORTS.clear()
+def clear_import_cache(path=None) -> None:
+    """Forget the models :func:`import_osim` cached (the next import reads and fits the file again): all of
+    them, or those of the file at ``path``."""
+    if path is None:
+        _IMPORTS.clear()
+        return
+    p = str(Path(str(path)).resolve())
+    for key in [k for k in _IMPORTS if k[0] == p]:
+        del _IMPORTS[key]
 
 
 def _import_key(path, locked, nonlinear, gravity, hooks):

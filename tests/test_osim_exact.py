@@ -187,7 +187,6 @@ def test_a_parameter_the_muscle_type_lacks_is_refused_by_name(leg_path, tmp_path
 def test_load_model_of_an_osim_is_cached_until_the_file_changes(tmp_path):
     p = tmp_path / "leg.osim"
     p.write_text(t.leg())
-    clear_import_cache()
     a = _load(p)
     assert _load(p) is a and import_osim(p)[0] is a          # the same frozen model: no refit
     assert _load(p, nonlinear="fit") is not a                 # other options: another import
@@ -201,7 +200,7 @@ def test_load_model_of_an_osim_is_cached_until_the_file_changes(tmp_path):
     os.utime(p, ns=(st.st_atime_ns, st.st_mtime_ns))
     c = _load(p)
     assert c is not b and c.muscles.f_max[c.muscle_names.index("vas")] == 1300.0
-    clear_import_cache()
+    clear_import_cache(p)                                    # this file's imports (clear_import_cache(): all)
     assert _load(p) is not c
 
 
