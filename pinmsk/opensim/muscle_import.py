@@ -48,7 +48,7 @@ from .report import APPROXIMATED, NOTE, ReportEntry
 from .skeleton import OsimKinematics, Skeleton
 
 __all__ = ["muscle_hook", "default_muscle_hook", "DEFAULT_HOOKS", "MAX_MUSCLES", "geometric_paths",
-           "MAX_ROTATION_SPAN", "FIT_SAMPLES", "TEST_SAMPLES", "MAX_DEGREE", "TOLERANCE"]
+           "osim_geometric_paths", "MAX_ROTATION_SPAN", "FIT_SAMPLES", "TEST_SAMPLES", "MAX_DEGREE", "TOLERANCE"]
 
 #: Training and held-out poses of the polynomial fit (per fit; the fit's cost grows with them).
 FIT_SAMPLES = 250
@@ -191,6 +191,22 @@ def geometric_paths(report) -> GeometricPaths | None:
         if gp is not None:
             return gp
     return None
+
+
+def osim_geometric_paths(source) -> GeometricPaths | None:
+    """The geometric paths of every ``<GeometryPath>`` of an .osim file (muscles of any type, path
+    actuators, ligaments), placed as :func:`muscle_hook` places them (OpenSim's kinematics of the XML,
+    locked coordinates at their default values); None if the model has no path.  Cheap (no fit): what
+    the viewer draws when an import kept no geometric paths (a skeleton-only import, or more muscles
+    than :data:`MAX_MUSCLES`)."""
+    from ..io.osim import read_osim
+    doc = read_osim(source)
+    specs = path_specs_from_xml(_etree(doc.source))
+    if not specs:
+        return None
+    kin = OsimKinematics(doc)
+    lock_cols = [(kin.coordinates.index(c.name), c.default_value) for c in doc.coordinates if c.locked]
+    return GeometricPaths(specs, coordinates=kin.coordinates, placements=_Placements(kin, lock_cols))
 
 
 def _etree(source) -> ET.Element:

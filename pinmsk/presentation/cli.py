@@ -352,7 +352,7 @@ def cmd_optimize(args) -> int:
 
 def cmd_view(args) -> int:
     from .viewer import view_cli
-    model = _model(args)
+    model = _model(args)          # loaded once (an .osim import is not quick)
     trial = _read(args.trial, model, args) if args.trial else None
     view_cli(model, trial, args.results, open_browser=args.open,
              block=not args.no_block, timeout=args.timeout)
