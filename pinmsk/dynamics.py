@@ -26,7 +26,8 @@ import pinocchio as pin
 from . import skeleton
 from .components import Motion
 from .errors import ResidualWarning, TrialError
-from .kinematics import DEFAULT_CUTOFF, TrialInputs, lowpass_external, prepare, source_coordinates
+from .kinematics import (DEFAULT_CUTOFF, TrialInputs, actuated_forces, lowpass_external, prepare,
+                         require_independent_joints, source_coordinates)
 from .residuals import ResidualReport, floating_base_residuals
 from .signals.sampling import median_step
 from .trial import Trial, moment_channels
@@ -43,10 +44,13 @@ def component_forces(model, motion: Motion, *, data=None) -> dict[str, np.ndarra
 
 
 def inverse_dynamics_array(model, motion: Motion, *, external: Sequence[skeleton.ExternalForce] = (),
-                           components: bool = True, progress=None, data=None) -> np.ndarray:
+                           components: bool = True, progress=None, data=None, actuated: bool = True) -> np.ndarray:
     """Actuator generalized forces ``(N, nv)`` for a Motion (see :func:`inverse_dynamics`);
-    ``data`` as for :func:`component_forces`.  A contact on a body that ``external`` loads (a
-    measured GRF on a foot that has contact spheres) is refused: the ground would act twice."""
+    ``data`` as for :func:`component_forces`.  On a model with dependent joints (an exact OpenSim
+    import) they are OpenSim's coordinates' forces at their joints and 0 at the dependent joints
+    (:func:`pinmsk.kinematics.actuated_forces`); ``actuated=False`` gives Pinocchio's ``tau`` of every joint.
+    A contact on a body that ``external`` loads (a measured GRF on a foot that has contact spheres) is
+    refused: the ground would act twice."""
     if components and external and model.contacts:
         _ground_acts_once(model, external)
     tau = skeleton.rnea(model, motion.q, motion.v, motion.a, external=external,
@@ -54,7 +58,7 @@ def inverse_dynamics_array(model, motion: Motion, *, external: Sequence[skeleton
     if components:
         for f in component_forces(model, motion, data=data).values():
             tau -= f
-    return tau
+    return actuated_forces(model, motion, tau) if actuated else tau
 
 
 def _ground_acts_once(model, external) -> None:
@@ -103,7 +107,8 @@ def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, ex
                          notes=inputs.notes + ("external wrenches given by the caller on "
                                                + ", ".join(e.frame for e in ext),))
     motion = inputs.motion
-    tau = inverse_dynamics_array(model, motion, external=ext, components=components, progress=progress)
+    tau = inverse_dynamics_array(model, motion, external=ext, components=components, progress=progress,
+                                 actuated=False)
     residuals = floating_base_residuals(model, motion, tau, ext)
     names, q_out, tau_out = source_coordinates(model, motion, tau)
     chans = {c: q_out[:, i] for i, c in enumerate(names)}
@@ -168,6 +173,7 @@ def simulate(model, *, t, q0, v0, moments=None, method: str = "rk4", rtol: float
     their generalized force at each evaluation.  Returns a Trial with the
     coordinates and ``<coord>_speed`` channels.
     """
+    require_independent_joints(model, "simulate (forward dynamics)")
     t = np.asarray(t, dtype=float)
     tau_fn = _torque_function(model, moments)
     comps = [c for c in model.components if not getattr(c, "inertial", False)]

@@ -71,7 +71,7 @@ from ..dynamics import inverse_dynamics_array, simulate
 from ..effects._base import SignalEffect, is_prismatic, unactuated_coordinates
 from ..errors import ModelError, TrialError
 from ..grf import external_forces
-from ..kinematics import DEFAULT_CUTOFF, TrialInputs, prepare
+from ..kinematics import DEFAULT_CUTOFF, TrialInputs, prepare, require_independent_joints
 from ..signals.filtering import differentiate
 from ..signals.sampling import median_step
 from ..skeleton import ExternalForce
@@ -361,6 +361,8 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
     """
     if not isinstance(trial, Trial):
         raise TrialError(f"compare needs a Trial, got {type(trial).__name__}; read one with pinmsk.read_trial")
+    # the candidate effects' generalized forces and the motion-level simulation are in the Pinocchio joints
+    require_independent_joints(model, "the diagnosis")
     _check_measured(model, trial)
     external_given = grf is not None or external_loads is not None
     plan = comparison_plan(model, trial, mode, has_grf=_has_grf(trial) or external_given)

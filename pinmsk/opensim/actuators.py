@@ -34,7 +34,7 @@ import numpy as np
 from ..actuators import CoordinateActuator, PointActuator, TorqueActuator
 from ..errors import ModelError
 from ..io.osim import Actuator, read_force_set
-from .importer import HookResult
+from .hooks import HookResult
 from .report import EXACT, NOTE, ReportEntry
 
 __all__ = ["actuator_hook", "actuator_components", "read_actuators", "IMPORTED_TYPES"]

@@ -31,7 +31,7 @@ import pinocchio as pin
 from ..contact import HuntCrossleyForce, SmoothSphereHalfSpaceForce
 from ..errors import ModelError
 from ..io.osim import ContactForce, ContactGeometry, OsimDocument
-from .importer import HookResult
+from .hooks import HookResult
 from .report import EXACT, NOT_IMPORTED, NOTE, ReportEntry
 from .skeleton import Skeleton, _chain, _offset
 

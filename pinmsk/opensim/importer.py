@@ -18,8 +18,10 @@ contacts), its report entries, and the ``where`` strings
 muscle, actuator, contact force and other element no hook handled gets a
 "not imported" entry, so nothing is dropped silently.
 
-:func:`write_import` writes the skeleton as a URDF plus a TOML sidecar (and the
-marker set and the report) that ``load_model`` reads back to the same skeleton.
+:func:`write_import` writes the model as a URDF plus a TOML sidecar (and the
+marker set and the report) that ``load_model`` reads back to the same model: the
+skeleton, the coordinate map of an exact import (its OpenSim functions) and the
+muscles (parameters, fitted path polynomials and their errors).
 
 The ``meta`` carries what the skeleton does not hold: ``osim`` (the source),
 ``coordinate_order`` (OpenSim's), ``locked_coordinates``, ``clamped_coordinates``,
@@ -34,7 +36,7 @@ import json
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Mapping, Sequence
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
@@ -42,26 +44,12 @@ import pinocchio as pin
 
 from ..errors import ModelError
 from ..io.osim import OsimDocument, read_osim
+from .hooks import HookResult, ImportHook
 from .report import NOT_IMPORTED, ImportReport, ReportEntry
 from .skeleton import LOCKED_MODES, NONLINEAR_MODES, Skeleton, build_skeleton
 
 __all__ = ["OsimImport", "HookResult", "ImportHook", "read_import", "write_import", "warn_report",
            "urdf_string"]
-
-
-@dataclass(frozen=True)
-class HookResult:
-    """What an import hook made: ``muscles`` (a MuscleSet or None), ``components`` (effects and contacts),
-    its report ``entries``, and the ``handled`` elements (their ``where`` strings)."""
-
-    muscles: Any = None
-    components: tuple = ()
-    entries: tuple[ReportEntry, ...] = ()
-    handled: tuple[str, ...] = ()
-
-
-#: ``hook(doc, skeleton) -> HookResult``.
-ImportHook = Callable[[OsimDocument, Skeleton], HookResult]
 
 
 @dataclass(frozen=True)
@@ -77,15 +65,16 @@ class OsimImport:
     components: tuple = field(default_factory=tuple)
 
 
-def read_import(path, *, locked: str = "joint", nonlinear: str = "fit",
+def read_import(path, *, locked: str = "joint", nonlinear: str = "exact",
                 hooks: Sequence[ImportHook] = ()) -> OsimImport:
     """The :class:`OsimImport` of the OpenSim model at ``path`` (see the module docstring).
 
     ``locked``: ``"joint"`` (default) keeps locked coordinates as joints, ``"weld"`` fixes them at their
-    default values.  ``nonlinear``: ``"fit"`` (default) replaces joints whose axes are nonlinear in a
-    coordinate by best-fitting fixed-axis joints (their errors are in the report); ``"exact"`` gives each
-    such axis a Pinocchio joint of its own (a dependent coordinate, filled by ``meta['coordinate_map']``;
-    the model then has more coordinates than OpenSim's).  ``hooks`` import muscles, actuators and contacts.
+    default values.  ``nonlinear``: ``"exact"`` (default) gives each joint axis that is a nonlinear function
+    of a coordinate a Pinocchio joint of its own (a dependent joint, filled from OpenSim's coordinates by
+    ``meta['coordinate_map']``, so the skeleton has more joints than OpenSim has coordinates; analyses take
+    and report OpenSim's coordinates); ``"fit"`` replaces such joints by best-fitting fixed-axis joints
+    (their errors are in the report).  ``hooks`` import muscles, actuators and contacts.
     """
     p = Path(str(path))
     if p.suffix.lower() != ".osim":
@@ -197,43 +186,74 @@ def _not_imported(doc: OsimDocument, handled: set) -> list[ReportEntry]:
 # URDF + sidecar
 # ---------------------------------------------------------------------------
 
-def write_import(model_or_path, out_dir, *, name: str | None = None) -> dict[str, Path]:
-    """Write the skeleton of an OpenSim model as ``<name>.urdf`` + ``<name>.toml`` (the sidecar that
-    :func:`pinmsk.load_model` reads), ``<name>_markers.toml`` (its marker set) and
-    ``<name>_import_report.txt``, in ``out_dir`` (created if needed).  Nothing is left behind on error.
+def write_import(model_or_path, out_dir, *, name: str | None = None, hooks: Sequence[ImportHook] | None = None,
+                 nonlinear: str | None = None) -> dict[str, Path]:
+    """Write an OpenSim model as ``<name>.urdf`` + ``<name>.toml`` (the sidecar that :func:`pinmsk.load_model`
+    reads back to the same model), ``<name>_markers.toml`` (its marker set) and ``<name>_import_report.txt``,
+    in ``out_dir`` (created if needed).  Nothing is left behind on error.
 
-    ``model_or_path``: the ``.osim`` path, or a model imported from one (it is re-imported from its
-    ``meta['osim']`` with the same options and gravity).  Returns ``{"urdf", "sidecar", "markers", "report"}``
-    paths.
+    The sidecar carries the skeleton's gravity and coordinate order, the map from OpenSim's coordinates to
+    the dependent joints of an exact skeleton (``[coordinate_map]``: each joint's OpenSim function, not
+    samples; :meth:`~pinmsk.opensim.skeleton.CoordinateMap.to_spec`) and the muscles (``[muscle_model]``,
+    ``[[muscles]]``: the muscle model's type and parameters, each path polynomial with its fit errors).
+
+    ``model_or_path``: the ``.osim`` path (imported with ``import_osim``'s default hooks, or ``hooks``, and
+    ``nonlinear``, default ``"exact"``), or a model imported from one (its muscles, gravity and report are
+    written; the skeleton is rebuilt from its ``meta['osim']`` with the same options).  Contact and other
+    components of the import have no sidecar entry yet: a UserWarning and a comment in the sidecar name
+    them.  Returns ``{"urdf", "sidecar", "markers", "report"}`` paths.
     """
     from ..io.output_files import atomic_write, output_folder, output_transaction
 
     if isinstance(model_or_path, (str, Path)):
         path, options, gravity = Path(model_or_path), {}, None     # the file's own gravity
+        if nonlinear is not None:
+            options["nonlinear"] = nonlinear
+        muscles = report = description = None
+        components = ()
     else:
         meta = getattr(model_or_path, "meta", None)
         if meta is None or not meta.get("osim"):
             raise ModelError("write_import takes an .osim path or a model imported from one "
                              f"(model '{getattr(model_or_path, 'name', model_or_path)}' has no meta['osim'])")
+        if nonlinear is not None or hooks is not None:
+            raise ModelError("write_import: nonlinear= and hooks= apply to an .osim path; a model is written "
+                             "as it was imported")
         path, options = Path(meta["osim"]), dict(meta.get("osim_import_options") or {})
         gravity = np.asarray(model_or_path.gravity, dtype=float)
+        muscles, report, description = model_or_path.muscles, meta.get("import_report"), meta.get("description")
+        components = tuple(model_or_path.components)
     locked = options.get("locked", "joint")
     if locked not in LOCKED_MODES:
         raise ModelError(f"write_import: unknown locked option {locked!r}")
-    imp = read_import(path, locked=locked, nonlinear=options.get("nonlinear", "fit"))
-    report, skel = imp.report, imp.skeleton
+    if hooks is None and muscles is None and report is None:
+        from .contacts import contact_hook
+        from .muscle_import import DEFAULT_HOOKS
+        hooks = (*DEFAULT_HOOKS, contact_hook)          # import_osim's defaults
+    imp = read_import(path, locked=locked, nonlinear=options.get("nonlinear", "exact"), hooks=hooks or ())
+    if report is None:
+        report, muscles, components = imp.report, imp.muscles, imp.components
+    unwritten = [c.label for c in components]
+    if unwritten:
+        import warnings
+        warnings.warn(f"write_import: {len(unwritten)} component(s) of the import are not written to the sidecar "
+                      f"(its format has no entry for them yet): {', '.join(unwritten)}; load the .osim to have them",
+                      UserWarning, stacklevel=2)
+    skel = imp.skeleton
     gravity = np.asarray(skel.doc.gravity, dtype=float) if gravity is None else gravity
     stem = name or re.sub(r"[^A-Za-z0-9_.-]", "_", path.stem)
     if not re.fullmatch(r"[A-Za-z0-9_.-]+", stem):
         raise ModelError(f"write_import: name {stem!r} must be letters, digits, '_', '.' or '-'")
     urdf_text = urdf_string(skel, name=stem)
+    sidecar_text = _sidecar(imp, stem, path, gravity, report=report, muscles=muscles,
+                            description=description or imp.meta["description"], unwritten=unwritten)
     out = Path(out_dir)
     files = {"urdf": out / f"{stem}.urdf", "sidecar": out / f"{stem}.toml",
              "markers": out / f"{stem}_markers.toml", "report": out / f"{stem}_import_report.txt"}
     with output_transaction():
         output_folder(out)
         atomic_write(files["urdf"], lambda fh: fh.write(urdf_text))
-        atomic_write(files["sidecar"], lambda fh: fh.write(_sidecar(imp, stem, path, gravity)))
+        atomic_write(files["sidecar"], lambda fh: fh.write(sidecar_text))
         atomic_write(files["markers"], lambda fh: fh.write(_markers_toml(imp.meta, path)))
         atomic_write(files["report"], lambda fh: fh.write(report.format(verbose=True) + "\n"))
     return files
@@ -302,30 +322,136 @@ def _toml_str(s: str) -> str:
     return json.dumps(str(s), ensure_ascii=False)
 
 
-def _sidecar(imp: OsimImport, stem: str, source: Path, gravity) -> str:
-    report = imp.report
+_BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
+
+
+def _toml_key(k: str) -> str:
+    return k if _BARE_KEY.fullmatch(k) else _toml_str(k)
+
+
+def _toml_value(v) -> str:
+    """A TOML value (strings, numbers, booleans, lists, inline tables) with floats that read back exactly."""
+    if isinstance(v, str):
+        return _toml_str(v)
+    if isinstance(v, (bool, np.bool_)):
+        return "true" if v else "false"
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, (float, np.floating)):
+        return _num(v)
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{_toml_key(k)} = {_toml_value(x)}" for k, x in v.items()) + " }" if v else "{}"
+    if isinstance(v, np.ndarray):
+        v = v.tolist()
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise ModelError(f"write_import: cannot write {v!r} as TOML")
+
+
+def _sidecar(imp: OsimImport, stem: str, source: Path, gravity, *, report: ImportReport, muscles,
+             description: str, unwritten=()) -> str:
     order = ", ".join(_toml_str(c) for c in imp.meta["coordinate_order"])
     g = ", ".join(_num(x) for x in gravity)
+    cmap = imp.skeleton.coordinate_map
+    exact = cmap is not None and not cmap.identity
     lines = [f"# pinmsk model sidecar written by pinmsk's OpenSim import from {source.name}.",
-             "# The skeleton only: bodies, joints, coordinates, gravity, markers (as frames; also in",
-             f"# {stem}_markers.toml).  What was approximated or not imported: {stem}_import_report.txt.",
-             "# Sidecar format: urdf/README.md of pinmsk.",
+             "# Bodies, joints, coordinates, gravity and markers (as frames; also in "
+             f"{stem}_markers.toml), the muscles",
+             "# (their paths as the fitted polynomials, with the fits' errors)"
+             + (" and the map from OpenSim's coordinates to the dependent joints." if exact else "."),
+             f"# What was approximated or not imported: {stem}_import_report.txt.  Format: urdf/README.md of pinmsk.",
              ""]
+    head = len(lines)
+    if unwritten:
+        lines.append(f"# NOT WRITTEN (no sidecar entry for them yet; the .osim has them): {', '.join(unwritten)}")
     for e in report.approximations:
         lines.append(f"# APPROXIMATED: {e.line()}")
     for e in report.entries:
         if e.status == "note" and any(w in e.became for w in ("coupled", "locked", "dependent", "angular-velocity")):
             lines.append(f"# NOTE: {e.line()}")
-    if len(lines) > 5:
+    if len(lines) > head:
         lines.append("")
+    paths = _path_errors(report) if muscles is not None else {}
     lines += ["[model]",
               f"name = {_toml_str(stem)}",
               f"urdf = {_toml_str(stem + '.urdf')}",
               f"gravity = [{g}]",
               'up_axis = "y"',
-              f"description = {_toml_str(imp.meta['description'].replace(_REPORT_KEY, stem + '_import_report.txt'))}",
-              f"coordinate_order = [{order}]", ""]
-    return "\n".join(lines)
+              f"description = {_toml_str(description.replace(_REPORT_KEY, stem + '_import_report.txt'))}",
+              f"coordinate_order = [{order}]"]
+    if muscles is not None:
+        lines.append(f"default_paths = {_toml_str(FITTED_PATHS)}")
+        lines += [""] + _muscles_toml(muscles, paths)
+    if exact:
+        lines += [""] + _coordinate_map_toml(cmap)
+    return "\n".join(lines) + "\n"
+
+
+#: The path variant name of an imported model's fitted polynomials in its sidecar.
+FITTED_PATHS = "fitted"
+#: Muscle-model constructor arguments written in ``[muscle_model]`` (one value per model), by sidecar key.
+_MODEL_SCALARS = {"tendon_strain0": "tendon_strain", "tau_rise": "tau_rise", "tau_fall": "tau_fall"}
+
+
+def _path_errors(report: ImportReport) -> dict[str, tuple[float, float]]:
+    """``{muscle: (max length error, max moment-arm error)}`` of the polynomial fits in the report (m)."""
+    out = {}
+    for e in report.entries:
+        for f in e.details.get("fits", ()) if e.details.get("kind") == "muscle paths" else ():
+            out[f.muscle] = (float(f.length_max), float(f.moment_arm_max))
+    return out
+
+
+def _muscles_toml(muscles, errors: Mapping[str, tuple[float, float]]) -> list[str]:
+    """``[muscle_model]`` and ``[[muscles]]`` of a MuscleSet with a PolynomialPath (the sidecar's format)."""
+    from ..muscles.paths import PolynomialPath
+
+    path = muscles.path
+    if not isinstance(path, PolynomialPath):
+        raise ModelError(f"write_import: the muscles' paths are a {type(path).__name__}; an imported model's "
+                         "are a PolynomialPath")
+    kwargs = muscles.mtu._kwargs()      # the muscle model's constructor arguments (what replace() rebuilds)
+    lines = ["[muscle_model]", f"type = {_toml_str(muscles.model_type)}", f"tendon = {_toml_str(muscles.tendon)}"]
+    per_muscle = []
+    for key, value in kwargs.items():
+        if key == "names" or value is None:
+            continue
+        if key in _MODEL_SCALARS:
+            lines.append(f"{_MODEL_SCALARS[key]} = {_toml_value(float(value))}")
+        elif np.ndim(value) == 1 and np.size(value) == muscles.n:
+            per_muscle.append(key)
+        else:
+            raise ModelError(f"write_import: muscle model {muscles.model_type} argument {key!r} = {value!r} has no "
+                             "sidecar key")
+    by_name = dict(zip(path.muscles, path.terms))
+    for i, name in enumerate(muscles.names):
+        lines += ["", "[[muscles]]", f"name = {_toml_str(name)}"]
+        lines += [f"{k} = {_toml_value(float(np.asarray(kwargs[k])[i]))}" for k in per_muscle]
+        t = by_name[name]
+        lines += [f"[muscles.paths.{FITTED_PATHS}]",
+                  f"coordinates = {_toml_value(list(t['coordinates']))}",
+                  f"center = {_toml_value([float(x) for x in t['center']])}",
+                  f"scale = {_toml_value([float(x) for x in t['scale']])}",
+                  f"exponents = {_toml_value([list(map(int, e)) for e in t['exponents']])}",
+                  f"coefficients = {_toml_value([float(x) for x in t['coefficients']])}"]
+        if name in errors:
+            lines += [f"max_length_error = {_toml_value(errors[name][0])}",
+                      f"max_moment_arm_error = {_toml_value(errors[name][1])}"]
+    return lines
+
+
+def _coordinate_map_toml(cmap) -> list[str]:
+    """The ``[coordinate_map]`` table (:meth:`~pinmsk.opensim.skeleton.CoordinateMap.to_spec`)."""
+    spec = cmap.to_spec()
+    lines = ["# OpenSim's coordinates -> the Pinocchio joints: each dependent joint is its OpenSim function of",
+             "# its coordinates (the CustomJoint axis' function), so motions are given in OpenSim's coordinates.",
+             "[coordinate_map]"]
+    for key in ("osim_coordinates", "defaults", "welded"):
+        lines.append(f"{key} = {_toml_value(spec[key])}")
+    for what in ("dependent", "couplers"):
+        for rec in spec[what]:
+            lines += ["", f"[[coordinate_map.{what}]]"] + [f"{k} = {_toml_value(v)}" for k, v in rec.items()]
+    return lines
 
 
 _REPORT_KEY = "model.meta['import_report']"

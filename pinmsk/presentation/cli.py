@@ -33,7 +33,16 @@ from .progress import Progress
 
 def _model(args):
     from ..model import load_model
-    return load_model(args.model, moment_arms=getattr(args, "moment_arms", None))
+    return load_model(args.model, moment_arms=getattr(args, "moment_arms", None),
+                      nonlinear=getattr(args, "nonlinear", None))
+
+
+def _nonlinear_flag(s) -> None:
+    """``--nonlinear`` on a command that takes a MODEL: how an .osim's nonlinear joint axes are imported."""
+    s.add_argument("--nonlinear", choices=["exact", "fit"], default=None,
+                   help="an .osim MODEL's joint axes that are nonlinear functions of a coordinate (a spline "
+                        "knee): 'exact' (default) dependent joints computed from OpenSim's coordinates; 'fit' "
+                        "best-fitting fixed-axis joints (their errors are in the import report)")
 
 
 def _read(path, model=None, args=None, *, coordinates: bool = True):
@@ -143,9 +152,11 @@ def cmd_info(args) -> int:
 
 
 def cmd_import(args) -> int:
-    from ..opensim.importer import read_import, write_import
-    files = write_import(args.model, args.out, name=args.name)
-    print(read_import(args.model).report.format(verbose=args.verbose))
+    from ..model import import_osim
+    from ..opensim.importer import write_import
+    model, report = import_osim(args.model, nonlinear=args.nonlinear or "exact")     # the report is printed
+    files = write_import(model, args.out, name=args.name)
+    print(report.format(verbose=args.verbose))
     for what in ("urdf", "sidecar", "markers", "report"):
         print(f"wrote {files[what]}")
     return 0
@@ -160,7 +171,8 @@ def cmd_id(args) -> int:
     print(res.report())
     out = res.trial
     _write(out, args.output, args.precision)
-    _plot(args, out, list(moment_channels(model.coordinate_order)), "inverse_dynamics", "moment (N m)")
+    _plot(args, out, [n for n in moment_channels(model.coordinate_order) if n in out]    # OpenSim's, with a map
+          or [n for n in out.names if n.endswith("_moment")], "inverse_dynamics", "moment (N m)")
     return 0
 
 
@@ -413,6 +425,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("model")
     s.add_argument("--moment-arms", choices=["constant", "angle"], default=None,
                    help="muscle path variant (models that declare several)")
+    _nonlinear_flag(s)
     s.set_defaults(func=cmd_info)
 
     s = sub.add_parser("import", help="an OpenSim .osim model as URDF + TOML sidecar, with the import report",
@@ -424,6 +437,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-o", "--out", required=True, metavar="DIR", help="folder for the files (created)")
     s.add_argument("--name", default=None, help="file stem (default: the .osim's)")
     s.add_argument("--verbose", action="store_true", help="also list what was imported exactly")
+    _nonlinear_flag(s)
     s.set_defaults(func=cmd_import)
 
     s = sub.add_parser("id", help="inverse dynamics of a trial: <coord>_moment channels")
@@ -435,6 +449,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
     _add_read_flags(s)
+    _nonlinear_flag(s)
     s.set_defaults(func=cmd_id)
 
     s = sub.add_parser("muscles", help="muscle analysis of a trial: <muscle>_length, _fiber_length, "
@@ -445,6 +460,7 @@ def build_parser() -> argparse.ArgumentParser:
     _precision_flag(s)
     input_flags(s)
     _add_read_flags(s)
+    _nonlinear_flag(s)
     s.set_defaults(func=cmd_muscles)
 
     s = sub.add_parser("simulate", help="forward dynamics driven by <coord>_moment channels (or none)")
@@ -460,6 +476,7 @@ def build_parser() -> argparse.ArgumentParser:
     _precision_flag(s)
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
     _add_read_flags(s)
+    _nonlinear_flag(s)
     s.set_defaults(func=cmd_simulate)
 
     s = sub.add_parser("demo", help="the diagnosis loop on a shipped forearm trial with a hidden effect")
@@ -484,6 +501,7 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
         s.add_argument("--report", metavar="OUT.html", default=None, help="write a self-contained HTML report")
         _add_read_flags(s)
+        _nonlinear_flag(s)
 
     s = sub.add_parser("so", help="static optimization: muscle forces and activations frame by frame")
     so_flags(s)
@@ -532,6 +550,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="frames to try frame effects (e.g. a payload) at, besides the defaults")
     s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
     _add_read_flags(s)
+    _nonlinear_flag(s)
     s.set_defaults(func=cmd_diagnose)
 
     s = sub.add_parser("synth", help="write a synthetic trial of a model with hidden effects and noise")
@@ -594,6 +613,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-block", action="store_true", help="return at once instead of serving until Ctrl-C")
     s.add_argument("--timeout", type=float, default=None, help="serve for this many seconds, then stop")
     _add_read_flags(s)
+    _nonlinear_flag(s)
     s.set_defaults(func=cmd_view)
 
     s = sub.add_parser("batch", help="run IK -> ID -> SO -> report over the trials of a config file")

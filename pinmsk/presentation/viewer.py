@@ -793,7 +793,15 @@ def _require_finite(x: np.ndarray, labels, what: str) -> np.ndarray:
 
 
 def _coordinates_of(trial, model, what: str) -> np.ndarray:
-    """``(N, nq)`` configuration of ``model`` from a trial's coordinate channels (finite)."""
+    """``(N, nq)`` configuration of ``model`` from a trial's coordinate channels (finite); a model with
+    dependent joints (an exact OpenSim import) takes OpenSim's coordinates, mapped to its joints."""
+    from ..kinematics import coordinate_map, trial_coordinates
+    cmap = coordinate_map(model)
+    if cmap is not None:
+        given = trial_coordinates(model)
+        trial.require(given)
+        trial.check_finite(given, what=f"in the {what} before viewing ({_NO_DRAW})")
+        return cmap.expand({c: np.asarray(trial[c], dtype=float) for c in given})[0]
     names = set(trial.names)
     missing = [c for c in model.coordinates if c not in names]
     if missing:

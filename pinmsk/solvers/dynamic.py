@@ -266,6 +266,8 @@ class DynamicOptimization(Fitter):
                  free_period: bool = False, period_bounds=(0.5, 2.0), fv_smooth: float = 0.02,
                  precondition: bool | None = None,
                  progress=None, verbose: bool = False):
+        from ..kinematics import require_independent_joints
+        require_independent_joints(model, "dynamic optimization")
         self.model = model
         self.parametrization = parametrization
         self.target = target

@@ -70,7 +70,7 @@ from ..components import Motion
 from ..dynamics import skeleton_with_inertias
 from ..errors import ConvergenceError, InfeasibleError, ModelError, SolverError
 from ..fitting import FitStatistics, Fitter, Result, format_report
-from ..kinematics import DEFAULT_CUTOFF, as_motion, prepare
+from ..kinematics import DEFAULT_CUTOFF, as_motion, prepare, require_independent_joints
 from ..skeleton import ExternalForce, external_generalized_force, integrate, world_wrench
 from ..trial import Trial
 from . import qp as _qp
@@ -267,6 +267,7 @@ class ForwardStaticOptimization(Fitter):
         """
         self._check_params()
         t_start = _time.perf_counter()
+        require_independent_joints(model, "forward static optimization (FSO)")
         muscles = check_model(model)
         inputs = prepare(model, trial, cutoff=cutoff, grf=grf, external_loads=external_loads, frames=frames,
                          ground_reaction=ground_reaction, grf_cutoff=grf_cutoff)

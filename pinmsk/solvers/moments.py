@@ -33,7 +33,7 @@ import numpy as np
 from ..components import Motion
 from ..dynamics import inverse_dynamics_array
 from ..errors import InfeasibleError, TrialError
-from ..kinematics import TrialInputs, first_non_finite
+from ..kinematics import TrialInputs, coordinate_map, first_non_finite
 from ..signals.filtering import lowpass
 from ..signals.sampling import median_step
 from ..trial import Trial, moment_channels
@@ -125,7 +125,6 @@ def without_actuators(model):
 def balance_space(model, motion: Motion) -> BalanceSpace:
     """The :class:`BalanceSpace` of ``model`` on ``motion``: its own coordinates, or, with dependent joints
     (an exact OpenSim import), OpenSim's coordinates other than the dependent ones of enforced couplers."""
-    from ..kinematics import coordinate_map
     cmap = coordinate_map(model)
     rot = model.rotational_coordinates
     if cmap is None:
@@ -243,7 +242,9 @@ def plan_moments(model, trial, inputs: TrialInputs, *, moments=None, dofs=None, 
                 f", low-passed at {inputs.filtering.cutoff:g} Hz" if inputs.filtering.cutoff else "")
         else:
             # the actuators are what the moments are for: none of their force is taken out first
-            tau_full = inverse_dynamics_array(without_actuators(model), motion, external=inputs.external)
+            # Pinocchio's tau of every joint: the balance space maps it to the coordinates (J^T tau) itself
+            tau_full = inverse_dynamics_array(without_actuators(model), motion, external=inputs.external,
+                                              actuated=False)
             tau_space = space.forces(tau_full)
             tau = tau_space[:, idx]
             un = tau_space[:, rest]

@@ -67,15 +67,18 @@ from pathlib import Path
 
 import numpy as np
 
-from ..actuators import actuator_columns
+from ..actuators import IdealActuator, actuator_columns
 from ..components import Motion
 from ..errors import ConvergenceError, InfeasibleError, ModelError, ResidualWarning, SolverError
 from ..fitting import FitStatistics, Fitter, Result, format_report
 from ..kinematics import DEFAULT_CUTOFF, as_motion, prepare
+from ..opensim.actuators import read_actuators
+from ..opensim.muscle_import import muscle_control_bounds
+from ..opensim.muscles import opensim_static_optimization_capacity
 from ..residuals import floating_base_residuals
 from ..trial import Trial
 from . import qp as _qp
-from .moments import balance_space, plan_moments, required_moments
+from .moments import balance_space, plan_moments, required_moments, without_actuators
 
 MODES = ("force", "activation")
 WEIGHTS = ("none", "fmax", "pcsa", "volume")
@@ -375,9 +378,7 @@ class ChunkedSOProblem:
                                 else self._C_all], axis=1)
         names, idx = resolve_dofs(model, spans, dofs, allow_unspanned=reserves, names=coord_names)
         if moments is None and space is not None and not space.identity:
-            from .moments import without_actuators
-            from ..dynamics import inverse_dynamics_array
-            moments = space.forces(inverse_dynamics_array(without_actuators(model), motion))
+            moments = space.forces(inverse_dynamics_array(without_actuators(model), motion, actuated=False))
         tau = required_moments(model, motion, moments, idx, names, width=nv)
         if convention == "opensim":
             if weights != "none":
@@ -432,7 +433,6 @@ class ChunkedSOProblem:
             f_max = np.asarray(muscles.f_max, dtype=float)
             return R, np.broadcast_to(f_max, (n, f_max.size)).copy(), np.zeros((n, f_max.size))
         if self.convention == "opensim":
-            from ..opensim.muscles import opensim_static_optimization_capacity
             c = opensim_static_optimization_capacity(muscles.mtu, muscles.lengths(q), muscles.velocities(q, v))
             c = np.asarray(c, dtype=float)
             d = np.zeros_like(c)
@@ -962,13 +962,11 @@ class StaticOptimization(Fitter):
 
     def _actuators(self, model) -> tuple:
         """The model's actuator components and those of ``actuators=`` (a force set file or components)."""
-        from ..actuators import IdealActuator
         own = [c for c in model.components if c.kind == "actuator"]
         given = self.actuators
         if given is None:
             extra = []
         elif isinstance(given, (str, Path)):
-            from ..opensim.actuators import read_actuators
             extra = list(read_actuators(given, model)[0])
         else:
             extra = list(given)
@@ -988,7 +986,6 @@ class StaticOptimization(Fitter):
         """The muscles' activation bounds: [0, 1], or with ``convention="opensim"`` their min/max controls."""
         if self.convention != "opensim":
             return None
-        from ..opensim.muscle_import import muscle_control_bounds
         cb = muscle_control_bounds(model.meta.get("import_report")) or {}
         names = model.muscles.names
         lo = np.array([cb.get(n, (0.0, 1.0))[0] for n in names], dtype=float)
