@@ -126,8 +126,7 @@ def test_so_of_gait10dof18musc_with_the_strong_actuators_matches_opensims(gait):
     u_mine, u_theirs = _on_frames(so.result_, ref, acts, "_control")
     assert np.max(np.abs(u_mine - u_theirs)) < 0.01                               # measured 0.0023
     assert np.max(np.abs(u_theirs[:, :3])) > 0.2                                   # the residuals are used
-    # all 151 frames in the time OpenSim takes for 10 (measured 0.1-0.2 s against 0.8 s)
-    assert so.timing_["total_s"] < gait["opensim_s"] * 5
+    # speed against OpenSim's SO is measured in benchmarks/bench_osim_so.py, not asserted here
 
 
 def test_opensims_muscle_model_is_what_makes_the_match(gait):
