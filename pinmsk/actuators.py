@@ -34,17 +34,20 @@ frames, ``(N, n_actuators, nv)``.  The law is linear in ``u`` (exact derivative
 """
 from __future__ import annotations
 
+import difflib
 import math
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from .components import Component, Motion, Parameter, motion_cached
+from .components import (Component, Motion, Parameter, motion_cached, parameter_settings,
+                         read_parameter_settings)
 from .contact.sphere import site_kinematics, wrench_generalized_force
 from .errors import ModelError
+from .io.toml_files import check_keys
 
 __all__ = ["IdealActuator", "CoordinateActuator", "PointActuator", "TorqueActuator", "actuator_columns",
-           "ACTUATOR_FAMILIES"]
+           "ACTUATOR_FAMILIES", "ACTUATOR_TYPES", "from_spec", "to_spec"]
 
 #: fixed (``vary=False``) unless freed: a fit of the model's parameters leaves the actuators' strength alone
 _OPTIMAL_FORCE = Parameter("optimal_force", 1.0, 0.0, math.inf, "N or N m",
@@ -132,6 +135,10 @@ class IdealActuator(Component):
     def _options(self) -> tuple:
         return (self.name, self.min_control, self.max_control)
 
+    def _spec_options(self) -> dict:
+        """The sidecar keys of the target and the options (subclasses)."""
+        raise NotImplementedError
+
     def __eq__(self, other) -> bool:
         return super().__eq__(other) and self._options() == other._options()
 
@@ -159,6 +166,9 @@ class CoordinateActuator(IdealActuator):
 
     def actuation_unit(self, model) -> str:
         return "N*m" if self.target in model.rotational_coordinates else "N"
+
+    def _spec_options(self) -> dict:
+        return {"coordinate": self.target}
 
 
 class PointActuator(IdealActuator):
@@ -203,6 +213,10 @@ class PointActuator(IdealActuator):
 
     def _options(self) -> tuple:
         return super()._options() + (self.point, self.direction, self.point_is_global, self.force_is_global)
+
+    def _spec_options(self) -> dict:
+        return {"body": self.target, "point": list(self.point), "direction": list(self.direction),
+                "point_is_global": self.point_is_global, "force_is_global": self.force_is_global}
 
 
 class TorqueActuator(IdealActuator):
@@ -252,9 +266,86 @@ class TorqueActuator(IdealActuator):
     def _options(self) -> tuple:
         return super()._options() + (self.body_b, self.axis, self.torque_is_global)
 
+    def _spec_options(self) -> dict:
+        return {"body_a": self.target, **({} if self.body_b is None else {"body_b": self.body_b}),
+                "axis": list(self.axis), "torque_is_global": self.torque_is_global}
+
 
 #: The actuator classes by family.
 ACTUATOR_FAMILIES = {c.family: c for c in (CoordinateActuator, PointActuator, TorqueActuator)}
+#: The actuator classes by OpenSim's class names (the ``type`` of a sidecar's ``[[actuators]]`` entry).
+ACTUATOR_TYPES = {c.__name__: c for c in (CoordinateActuator, PointActuator, TorqueActuator)}
+#: Keys of an ``[[actuators]]`` entry: the common ones, then the target and options of each type.
+_COMMON_KEYS = ("type", "name", "optimal_force", "min_control", "max_control", "bounds", "fixed", "free")
+_TYPE_KEYS = {CoordinateActuator: ("coordinate",),
+              PointActuator: ("body", "point", "direction", "point_is_global", "force_is_global"),
+              TorqueActuator: ("body_a", "body_b", "axis", "torque_is_global")}
+
+
+def to_spec(actuator: IdealActuator) -> dict:
+    """The sidecar ``[[actuators]]`` table of an actuator (OpenSim's property names; :func:`from_spec` reads
+    it back to an equal actuator with the same bounds and ``vary`` flag; infinite control bounds are TOML's
+    ``inf``)::
+
+        [[actuators]]
+        type = "CoordinateActuator"      # | "PointActuator" | "TorqueActuator" (or their families)
+        name = "lumbarAct"
+        coordinate = "lumbar"            # PointActuator: body, point, direction, point_is_global,
+        optimal_force = 1.0              #   force_is_global; TorqueActuator: body_a, body_b (optional),
+        min_control = -150.0             #   axis, torque_is_global (OpenSim's defaults where absent)
+        max_control = 150.0
+    """
+    if type(actuator) not in _TYPE_KEYS:
+        raise ModelError(f"{actuator.label}: a sidecar [[actuators]] entry holds the types "
+                         f"{', '.join(ACTUATOR_TYPES)}, not a {type(actuator).__name__}")
+    return {"type": type(actuator).__name__, "name": actuator.name, **actuator._spec_options(),
+            "optimal_force": actuator.values["optimal_force"], "min_control": actuator.min_control,
+            "max_control": actuator.max_control, **parameter_settings(actuator)}
+
+
+def from_spec(spec: Mapping[str, Any], *, where: str = "[[actuators]]") -> IdealActuator:
+    """The actuator of a sidecar ``[[actuators]]`` table (:func:`to_spec` gives the schema); unknown keys are
+    refused with a "did you mean", bad values by name (``where`` names the entry)."""
+    if not isinstance(spec, Mapping):
+        raise ModelError(f"{where}: expected a table, got {type(spec).__name__}")
+    typ = spec.get("type")
+    cls = ACTUATOR_TYPES.get(typ) or ACTUATOR_FAMILIES.get(typ)
+    if cls is None:
+        known = [*ACTUATOR_TYPES, *ACTUATOR_FAMILIES]
+        close = difflib.get_close_matches(str(typ), known, n=1)
+        hint = f" (did you mean '{close[0]}'?)" if close else ""
+        raise ModelError(f"{where}: 'type' must be one of {', '.join(known)}, got {typ!r}{hint}")
+    name = spec.get("name")
+    entry = f"{where} '{name}'" if isinstance(name, str) and name else where
+    check_keys(spec, [*_COMMON_KEYS, *_TYPE_KEYS[cls]], where=entry, section=f"a {cls.__name__}")
+    target_key = _TYPE_KEYS[cls][0]
+    if not isinstance(name, str) or not name:
+        raise ModelError(f"{where}: give the actuator's 'name'")
+    if not isinstance(spec.get(target_key), str) or not spec[target_key]:
+        raise ModelError(f"{entry}: give '{target_key}', the {cls.target_kind} it acts on")
+    kw = {}
+    for key in ("optimal_force", "min_control", "max_control"):
+        if key in spec:
+            v = spec[key]
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise ModelError(f"{entry}: {key} must be a number, got {v!r}")
+            kw[key] = float(v)
+    for key in _TYPE_KEYS[cls][1:]:
+        if key in spec:
+            v = spec[key]
+            flag = key.endswith("_global")
+            if (flag and not isinstance(v, bool)) or (key == "body_b" and not isinstance(v, str)):
+                raise ModelError(f"{entry}: {key} must be {'true or false' if flag else 'a body name'}, got {v!r}")
+            kw[key] = v
+    bounds, vary = read_parameter_settings(spec, [p.name for p in cls.parameters], where=entry)
+    value = kw.pop("optimal_force", None)
+    try:
+        act = cls(name, spec[target_key], **kw)
+        if value is not None or bounds or vary:
+            act = act.with_params({} if value is None else {"optimal_force": value}, bounds=bounds, vary=vary)
+    except ModelError as exc:
+        raise ModelError(f"{entry}: {exc}") from None
+    return act
 
 
 def actuator_columns(model, motion: Motion, actuators: Sequence[IdealActuator], *, data=None) -> np.ndarray:

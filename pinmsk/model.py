@@ -32,6 +32,7 @@ import numpy as np
 import pinocchio as pin
 
 from . import builtin_models
+from .actuators import from_spec as actuator_from_spec
 from .components import Component, Motion, ParameterKeyError, Parameters
 from .contact.spec import from_spec as contact_from_spec
 from .effects import registry
@@ -46,12 +47,16 @@ from .io.toml_files import check_keys, read_toml
 
 #: Every key a model sidecar may hold (``urdf/README.md``), per table; others are errors.
 #: ``[[effects]]`` keys are the effect's own (type, target, params, its options and
-#: parameters) and ``[[contacts]]`` keys the contact's, checked where they are built.
+#: parameters), ``[[actuators]]`` and ``[[contacts]]`` keys the actuator's and the contact's,
+#: checked where they are built.
 SIDECAR_SCHEMA = {
     "model": {"name": "model name (default: the file name)", "urdf": "the skeleton (required)",
               "gravity": "[gx, gy, gz] m/s^2, world frame", "up_axis": "'x' | 'y' | 'z' (display)",
               "description": "one line", "default_paths": "path variant used by default",
-              "coordinate_order": "order of q, v, tau in pinmsk (a permutation of the joints)"},
+              "coordinate_order": "order of q, v, tau in pinmsk (a permutation of the joints)",
+              "osim": "the OpenSim model it was imported from (relative to the sidecar; the viewer draws its "
+                      "geometric muscle paths)",
+              "osim_digest": "blake2b digest of that .osim when the sidecar was written"},
     "muscle_model": {"type": "'thelen2003' | 'nagano_gerritsen' | (imported models) 'thelen2003_opensim' | "
                              "'millard2012' | 'degroote2016'",
                      "tendon": "'rigid' | 'compliant' (default for static analyses)",
@@ -68,6 +73,7 @@ SIDECAR_SCHEMA = {
                 **{k: f"{p.unit or '-'}: {p.doc}" for k, p in MUSCLE_PARAMETERS.items()
                    if k not in ("f_max", "l_opt", "l_slack", "pennation", "volume", "fast_fraction", "width")}},
     "effects": None,
+    "actuators": None,
     "contacts": None,
     "coordinate_map": "OpenSim's coordinates -> dependent joints (pinmsk.opensim.skeleton.MAP_KEYS)",
 }
@@ -666,6 +672,9 @@ def _load_sidecar(sidecar: Path, *, moment_arms: str | None, tendon: str | None,
         "description": mspec.get("description", ""), "up_axis": mspec.get("up_axis", "z"),
         "coordinate_order": list(order) if order else None,
     }
+    if mspec.get("osim"):           # where the viewer finds the geometric muscle paths of an imported model
+        meta["source_osim"] = str((sidecar.parent / str(mspec["osim"])).resolve())
+        meta["source_osim_digest"] = mspec.get("osim_digest")
     if "coordinate_map" in spec:
         from .opensim.skeleton import CoordinateMap
         cmap = CoordinateMap.from_spec(spec["coordinate_map"], joints=coords, where=str(sidecar))
@@ -684,6 +693,8 @@ def _load_sidecar(sidecar: Path, *, moment_arms: str | None, tendon: str | None,
         muscles = _build_muscles(entries, mm, path, tendon or mm.get("tendon", "rigid"), sidecar)
     effects = [registry.from_spec(e, where=f"{sidecar} [[effects]] #{i + 1}")
                for i, e in enumerate(spec.get("effects", []))]
+    effects += [actuator_from_spec(a, where=f"{sidecar} [[actuators]] #{i + 1}")
+                for i, a in enumerate(spec.get("actuators", []))]
     contacts = [contact_from_spec(c, where=f"{sidecar} [[contacts]] #{i + 1}")
                 for i, c in enumerate(spec.get("contacts", []))]
     model = Model._make(name=name, pin_model=pm, muscles=muscles, effects=(), contacts=(), meta=meta)
@@ -697,11 +708,12 @@ def _check_sidecar(spec: dict, sidecar: Path) -> None:
             close = difflib.get_close_matches(section, list(SIDECAR_SCHEMA), n=1)
             hint = f" (did you mean '{close[0]}'?)" if close else ""
             raise ModelError(f"{sidecar}: unknown table '{section}'{hint}; a model sidecar has "
-                             "[model], [muscle_model], [[muscles]], [[effects]], [[contacts]] and [coordinate_map]")
+                             "[model], [muscle_model], [[muscles]], [[effects]], [[actuators]], [[contacts]] and "
+                             "[coordinate_map]")
     for section in ("model", "muscle_model"):
         if section in spec:
             check_keys(spec[section], SIDECAR_SCHEMA[section], where=str(sidecar), section=f"[{section}]")
-    for section in ("muscles", "effects", "contacts"):
+    for section in ("muscles", "effects", "actuators", "contacts"):
         if section in spec and not (isinstance(spec[section], list)
                                     and all(isinstance(e, dict) for e in spec[section])):
             raise ModelError(f"{sidecar}: '{section}' must be an array of tables, [[{section}]]")

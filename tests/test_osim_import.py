@@ -10,6 +10,7 @@ and by gait10dof18musc.
 """
 import pickle
 import time
+import warnings
 
 import numpy as np
 import pinocchio as pin
@@ -662,8 +663,7 @@ def test_gravity_given_to_the_import_replaces_the_models(leg_path, tmp_path):
     assert np.allclose(model.gravity, [0.0, 0.0, -9.81]) and "replaced by gravity" in report.format()
     with pytest.raises(ModelError, match="gravity must be 3 finite numbers"):
         import_osim(leg_path, gravity=[0.0, "down"])
-    with pytest.warns(UserWarning, match="not written to the sidecar"):     # the leg's contacts
-        files = write_import(model, tmp_path)            # the sidecar keeps the model's gravity
+    files = write_import(model, tmp_path)            # the sidecar keeps the model's gravity
     assert "gravity = [0.0, 0.0, -9.81]" in files["sidecar"].read_text()
 
 
@@ -888,11 +888,10 @@ def test_load_model_and_write_import_round_trip(leg_path, tmp_path):
         assert pinmsk.load_model(leg_path, nonlinear="fit").nq == 9
     assert np.allclose(model.gravity, [0.0, -9.80665, 0.0])
     assert model.coordinate_order[:3] == ("pelvis_tilt", "pelvis_tx", "pelvis_ty")
-    with pytest.warns(UserWarning, match=r"5 component\(s\) of the import are not written to the sidecar .*: "
-                                         r"coordinate_actuator:lumbar_reserve, point_actuator:FX, torque_actuator:MZ, "
-                                         r"hunt_crossley_force:heel, smooth_sphere_half_space:heel"):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")            # every component is written: no "not written" warning
         files = write_import(model, tmp_path / "out")
-    assert "# NOT WRITTEN" in files["sidecar"].read_text()
+    assert "# NOT WRITTEN" not in files["sidecar"].read_text()
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == sorted(p.name for p in files.values())
     back = pinmsk.load_model(files["sidecar"])
     assert back.coordinates == model.coordinates and back.coordinate_order == model.coordinate_order
@@ -900,10 +899,11 @@ def test_load_model_and_write_import_round_trip(leg_path, tmp_path):
     a, b = model.pin, back.pin
     for j in range(a.njoints):
         assert np.allclose(a.inertias[j].matrix(), b.inertias[j].matrix(), atol=1e-12)
-    # the skeleton's frames (the sidecar holds the skeleton: not the muscles, nor the contacts and their frames)
-    spheres = {c.target for c in model.contacts}
-    assert spheres == {"heel"} and not back.contacts
-    names = [f.name for f in a.frames if f.type in (pin.FrameType.BODY, pin.FrameType.OP_FRAME) and f.name not in spheres]
+    # the components (tests/test_osim_sidecar.py: their forces and SO) and the frames, the spheres' included
+    assert back.effects == model.effects and back.contacts == model.contacts
+    assert {c.target for c in model.contacts} == {"heel"}
+    names = [f.name for f in a.frames if f.type in (pin.FrameType.BODY, pin.FrameType.OP_FRAME)]
+    assert "heel" in names
     rng = np.random.default_rng(5)
     da, db = a.createData(), b.createData()
     for _ in range(20):

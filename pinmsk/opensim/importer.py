@@ -20,8 +20,10 @@ muscle, actuator, contact force and other element no hook handled gets a
 
 :func:`write_import` writes the model as a URDF plus a TOML sidecar (and the
 marker set and the report) that ``load_model`` reads back to the same model: the
-skeleton, the coordinate map of an exact import (its OpenSim functions) and the
-muscles (parameters, fitted path polynomials and their errors).
+skeleton (with a link for each contact sphere's frame), the coordinate map of an
+exact import (its OpenSim functions), the muscles (parameters, fitted path
+polynomials and their errors), the actuators, the contacts and the effects, and
+the path of the source ``.osim`` (whose geometric muscle paths the viewer draws).
 
 The ``meta`` carries what the skeleton does not hold: ``osim`` (the source),
 ``coordinate_order`` (OpenSim's), ``locked_coordinates``, ``clamped_coordinates``,
@@ -49,7 +51,7 @@ from .report import NOT_IMPORTED, ImportReport, ReportEntry
 from .skeleton import LOCKED_MODES, NONLINEAR_MODES, Skeleton, build_skeleton
 
 __all__ = ["OsimImport", "HookResult", "ImportHook", "read_import", "write_import", "warn_report",
-           "urdf_string"]
+           "urdf_string", "osim_digest"]
 
 
 @dataclass(frozen=True)
@@ -194,14 +196,22 @@ def write_import(model_or_path, out_dir, *, name: str | None = None, hooks: Sequ
 
     The sidecar carries the skeleton's gravity and coordinate order, the map from OpenSim's coordinates to
     the dependent joints of an exact skeleton (``[coordinate_map]``: each joint's OpenSim function, not
-    samples; :meth:`~pinmsk.opensim.skeleton.CoordinateMap.to_spec`) and the muscles (``[muscle_model]``,
-    ``[[muscles]]``: the muscle model's type and parameters, each path polynomial with its fit errors).
+    samples; :meth:`~pinmsk.opensim.skeleton.CoordinateMap.to_spec`), the muscles (``[muscle_model]``,
+    ``[[muscles]]``: the muscle model's type and parameters, each path polynomial with its fit errors), the
+    actuators (``[[actuators]]``, :func:`pinmsk.actuators.to_spec`), the contacts (``[[contacts]]``,
+    :func:`pinmsk.contact.spec.to_spec`; the frame of each OpenSim contact sphere becomes a link of the URDF,
+    fixed to its body where OpenSim places the sphere), the effects (``[[effects]]``: type, target,
+    parameter values and options) and ``[model] osim``, the source ``.osim`` relative to the sidecar (with
+    its digest), from which the viewer draws the geometric muscle paths.  Each component's entry is read
+    back and compared with the component before anything is written; one that would not come back equal
+    (a component type the format has no entry for, an effect with bounds or fixed parameters, which
+    ``[[effects]]`` cannot hold) is left out with a UserWarning and a ``# NOT WRITTEN`` comment naming it.
+    Standard errors of fitted parameters are not written.
 
     ``model_or_path``: the ``.osim`` path (imported with ``import_osim``'s default hooks, or ``hooks``, and
-    ``nonlinear``, default ``"exact"``), or a model imported from one (its muscles, gravity and report are
-    written; the skeleton is rebuilt from its ``meta['osim']`` with the same options).  Contact and other
-    components of the import have no sidecar entry yet: a UserWarning and a comment in the sidecar name
-    them.  Returns ``{"urdf", "sidecar", "markers", "report"}`` paths.
+    ``nonlinear``, default ``"exact"``), or a model imported from one (its muscles, components, gravity and
+    report are written; the skeleton is rebuilt from its ``meta['osim']`` with the same options).  Returns
+    ``{"urdf", "sidecar", "markers", "report"}`` paths.
     """
     from ..io.output_files import atomic_write, output_folder, output_transaction
 
@@ -209,7 +219,7 @@ def write_import(model_or_path, out_dir, *, name: str | None = None, hooks: Sequ
         path, options, gravity = Path(model_or_path), {}, None     # the file's own gravity
         if nonlinear is not None:
             options["nonlinear"] = nonlinear
-        muscles = report = description = None
+        muscles = report = description = frames_model = None
         components = ()
     else:
         meta = getattr(model_or_path, "meta", None)
@@ -222,7 +232,7 @@ def write_import(model_or_path, out_dir, *, name: str | None = None, hooks: Sequ
         path, options = Path(meta["osim"]), dict(meta.get("osim_import_options") or {})
         gravity = np.asarray(model_or_path.gravity, dtype=float)
         muscles, report, description = model_or_path.muscles, meta.get("import_report"), meta.get("description")
-        components = tuple(model_or_path.components)
+        components, frames_model = tuple(model_or_path.components), model_or_path.pin
     locked = options.get("locked", "joint")
     if locked not in LOCKED_MODES:
         raise ModelError(f"write_import: unknown locked option {locked!r}")
@@ -233,21 +243,23 @@ def write_import(model_or_path, out_dir, *, name: str | None = None, hooks: Sequ
     imp = read_import(path, locked=locked, nonlinear=options.get("nonlinear", "exact"), hooks=hooks or ())
     if report is None:
         report, muscles, components = imp.report, imp.muscles, imp.components
-    unwritten = [c.label for c in components]
+    skel = imp.skeleton
+    entries, unwritten = _component_entries(components)
     if unwritten:
         import warnings
-        warnings.warn(f"write_import: {len(unwritten)} component(s) of the import are not written to the sidecar "
-                      f"(its format has no entry for them yet): {', '.join(unwritten)}; load the .osim to have them",
-                      UserWarning, stacklevel=2)
-    skel = imp.skeleton
+        warnings.warn(f"write_import: {len(unwritten)} component(s) are not written to the sidecar: "
+                      f"{'; '.join(f'{label} ({why})' for label, why in unwritten)}; add them to the loaded "
+                      "model again (model + component)", UserWarning, stacklevel=2)
+    frames = _component_frames(entries, skel, imp.pin_model if frames_model is None else frames_model)
     gravity = np.asarray(skel.doc.gravity, dtype=float) if gravity is None else gravity
     stem = name or re.sub(r"[^A-Za-z0-9_.-]", "_", path.stem)
     if not re.fullmatch(r"[A-Za-z0-9_.-]+", stem):
         raise ModelError(f"write_import: name {stem!r} must be letters, digits, '_', '.' or '-'")
-    urdf_text = urdf_string(skel, name=stem)
-    sidecar_text = _sidecar(imp, stem, path, gravity, report=report, muscles=muscles,
-                            description=description or imp.meta["description"], unwritten=unwritten)
     out = Path(out_dir)
+    urdf_text = urdf_string(skel, name=stem, frames=frames)
+    sidecar_text = _sidecar(imp, stem, path, gravity, report=report, muscles=muscles,
+                            description=description or imp.meta["description"], entries=entries,
+                            unwritten=[label for label, _ in unwritten], source_path=_relative(path, out))
     files = {"urdf": out / f"{stem}.urdf", "sidecar": out / f"{stem}.toml",
              "markers": out / f"{stem}_markers.toml", "report": out / f"{stem}_import_report.txt"}
     with output_transaction():
@@ -267,13 +279,19 @@ def _vec(v) -> str:
     return " ".join(_num(x) for x in v)
 
 
-def urdf_string(skel: Skeleton, *, name: str) -> str:
-    """The URDF of a skeleton (links, joints in the parser's order, marker links), as text."""
+def urdf_string(skel: Skeleton, *, name: str, frames: Mapping[str, tuple[str, np.ndarray]] | None = None) -> str:
+    """The URDF of a skeleton (links, joints in the parser's order, marker links), as text; ``frames``
+    (``{name: (link, 4x4 placement in it)}``, e.g. the contact spheres' frames) become links too, each fixed
+    to its link by a joint ``<name>_frame_joint``."""
     lines = ['<?xml version="1.0"?>',
              f"<!-- written by pinmsk from {skel.doc.source}; an OpenSim model's skeleton: y is up, gravity "
              f"{list(skel.doc.gravity)} m/s^2 (in the sidecar) -->",
              f"<robot name={quoteattr(name)}>"]
     marker_links = {n: b for n, (b, _) in skel.markers.items()}
+    frames = dict(frames or {})
+    clash = sorted(set(frames) & (set(skel.links) | set(marker_links)))
+    if clash:
+        raise ModelError(f"urdf_string: frame(s) {clash} are already links of the skeleton")
     for link in skel.links.values():
         if link.inertia is None:
             lines.append(f"  <link name={quoteattr(link.name)}/>")
@@ -287,18 +305,19 @@ def urdf_string(skel: Skeleton, *, name: str) -> str:
                   f'iyy="{_num(I[1][1])}" iyz="{_num(I[1][2])}" izz="{_num(I[2][2])}"/>',
                   "    </inertial>",
                   "  </link>"]
-    for mname in marker_links:
+    for mname in [*marker_links, *frames]:
         lines.append(f"  <link name={quoteattr(mname)}/>")
-    used = {j.name for j in skel.joints} | set(skel.links) | set(marker_links)
+    used = {j.name for j in skel.joints} | set(skel.links) | set(marker_links) | set(frames)
     for uj in skel.joints:
         lines += _urdf_joint(uj.name, uj.kind, uj.parent, uj.child, uj.origin, uj.axis, uj.limits)
-    for mname, (body, T) in skel.markers.items():
-        jname = f"{mname}_marker_joint"
-        i = 1
-        while jname in used:
-            jname, i = f"{mname}_marker_joint_{i}", i + 1
-        used.add(jname)
-        lines += _urdf_joint(jname, "fixed", body, mname, T, None, None)
+    for suffix, fixed in (("marker_joint", skel.markers), ("frame_joint", frames)):
+        for mname, (body, T) in fixed.items():
+            jname = f"{mname}_{suffix}"
+            i = 1
+            while jname in used:
+                jname, i = f"{mname}_{suffix}_{i}", i + 1
+            used.add(jname)
+            lines += _urdf_joint(jname, "fixed", body, mname, T, None, None)
     lines.append("</robot>")
     return "\n".join(lines) + "\n"
 
@@ -330,7 +349,8 @@ def _toml_key(k: str) -> str:
 
 
 def _toml_value(v) -> str:
-    """A TOML value (strings, numbers, booleans, lists, inline tables) with floats that read back exactly."""
+    """A TOML value (strings, numbers, booleans, lists, inline tables) with floats that read back exactly
+    (infinities as TOML's ``inf``)."""
     if isinstance(v, str):
         return _toml_str(v)
     if isinstance(v, (bool, np.bool_)):
@@ -338,7 +358,9 @@ def _toml_value(v) -> str:
     if isinstance(v, (int, np.integer)):
         return str(int(v))
     if isinstance(v, (float, np.floating)):
-        return _num(v)
+        if np.isnan(v):
+            raise ModelError("write_import: cannot write NaN as a TOML value")
+        return repr(float(v)) if np.isfinite(v) else ("inf" if v > 0 else "-inf")
     if isinstance(v, dict):
         return "{ " + ", ".join(f"{_toml_key(k)} = {_toml_value(x)}" for k, x in v.items()) + " }" if v else "{}"
     if isinstance(v, np.ndarray):
@@ -349,21 +371,27 @@ def _toml_value(v) -> str:
 
 
 def _sidecar(imp: OsimImport, stem: str, source: Path, gravity, *, report: ImportReport, muscles,
-             description: str, unwritten=()) -> str:
+             description: str, entries: Mapping[str, list] | None = None, unwritten=(), source_path=None) -> str:
     order = ", ".join(_toml_str(c) for c in imp.meta["coordinate_order"])
     g = ", ".join(_num(x) for x in gravity)
     cmap = imp.skeleton.coordinate_map
     exact = cmap is not None and not cmap.identity
+    entries = dict(entries or {})
+    parts = [what for what, key in (("the actuators", "actuators"), ("the contacts (their spheres' frames are "
+                                     "links of the URDF)", "contacts"), ("the effects", "effects")) if entries.get(key)]
+    if exact:
+        parts.append("the map from OpenSim's coordinates to the dependent joints")
     lines = [f"# pinmsk model sidecar written by pinmsk's OpenSim import from {source.name}.",
              "# Bodies, joints, coordinates, gravity and markers (as frames; also in "
              f"{stem}_markers.toml), the muscles",
              "# (their paths as the fitted polynomials, with the fits' errors)"
-             + (" and the map from OpenSim's coordinates to the dependent joints." if exact else "."),
+             + "".join(f",\n# {p}" for p in parts[:-1]) + (f" and\n# {parts[-1]}." if parts else "."),
              f"# What was approximated or not imported: {stem}_import_report.txt.  Format: urdf/README.md of pinmsk.",
              ""]
     head = len(lines)
     if unwritten:
-        lines.append(f"# NOT WRITTEN (no sidecar entry for them yet; the .osim has them): {', '.join(unwritten)}")
+        lines.append(f"# NOT WRITTEN (they would not read back equal; see the warning of write_import): "
+                     f"{', '.join(unwritten)}")
     for e in report.approximations:
         lines.append(f"# APPROXIMATED: {e.line()}")
     for e in report.entries:
@@ -379,12 +407,119 @@ def _sidecar(imp: OsimImport, stem: str, source: Path, gravity, *, report: Impor
               'up_axis = "y"',
               f"description = {_toml_str(description.replace(_REPORT_KEY, stem + '_import_report.txt'))}",
               f"coordinate_order = [{order}]"]
+    if source_path is not None:
+        lines += [f"osim = {_toml_str(source_path)}", f"osim_digest = {_toml_str(osim_digest(source))}"]
     if muscles is not None:
         lines.append(f"default_paths = {_toml_str(FITTED_PATHS)}")
         lines += [""] + _muscles_toml(muscles, paths)
+    for section in ("effects", "actuators", "contacts"):
+        for spec in entries.get(section, ()):
+            lines += ["", f"[[{section}]]"] + [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in spec.items()]
     if exact:
         lines += [""] + _coordinate_map_toml(cmap)
     return "\n".join(lines) + "\n"
+
+
+def osim_digest(path) -> str:
+    """The digest ``[model] osim_digest`` of a sidecar records of its source .osim (blake2b, 128 bits, hex)."""
+    import hashlib
+    return hashlib.blake2b(Path(path).read_bytes(), digest_size=16).hexdigest()
+
+
+def _relative(path: Path, out: Path) -> str:
+    """``path`` relative to the folder ``out`` (POSIX separators), or absolute where it cannot be (another drive)."""
+    import os
+    try:
+        return Path(os.path.relpath(Path(path).resolve(), Path(out).resolve())).as_posix()
+    except ValueError:
+        return Path(path).resolve().as_posix()
+
+
+def _component_entries(components) -> tuple[dict[str, list[dict]], list[tuple[str, str]]]:
+    """``({"effects" | "actuators" | "contacts": [sidecar tables]}, [(label, why not written)])``: each
+    component's table, kept only if it reads back (through TOML text, as ``load_model`` reads it) to a
+    component equal to it in parameters (values, bounds, vary; not standard errors) and options."""
+    from ..actuators import IdealActuator
+    from ..actuators import from_spec as actuator_from_spec
+    from ..actuators import to_spec as actuator_to_spec
+    from ..contact.spec import from_spec as contact_from_spec
+    from ..contact.spec import to_spec as contact_to_spec
+    from ..effects import registry
+    from ..io.toml_files import tomllib
+
+    out: dict[str, list[dict]] = {"effects": [], "actuators": [], "contacts": []}
+    unwritten = []
+    for comp in components:
+        if isinstance(comp, IdealActuator):
+            section, write, read = "actuators", actuator_to_spec, actuator_from_spec
+        elif comp.kind == "contact":
+            section, write, read = "contacts", contact_to_spec, contact_from_spec
+        else:
+            section, write, read = "effects", _effect_spec, registry.from_spec
+        try:
+            spec = write(comp)
+            spec = tomllib.loads(f"x = {_toml_value(spec)}")["x"]          # what load_model will read
+            back = read(dict(spec), where=f"the sidecar's [[{section}]] entry of {comp.label}")
+        except ModelError as exc:
+            unwritten.append((comp.label, str(exc)))
+            continue
+        if not _same_component(back, comp):
+            unwritten.append((comp.label, f"its [[{section}]] entry does not hold all of its settings "
+                                          "(bounds or fixed parameters of an effect, or an option)"))
+            continue
+        out[section].append(spec)
+    return out, unwritten
+
+
+def _effect_spec(effect) -> dict:
+    """An effect's ``[[effects]]`` table (:func:`pinmsk.effects.registry.from_spec`): its family, target,
+    parameter values and keyword options (the attributes of the same names)."""
+    import inspect
+    from ..effects import registry
+    cls = registry.get(effect.family)
+    if cls is not type(effect):
+        raise ModelError(f"effect class {type(effect).__name__} is not the registered '{effect.family}'")
+    options = {n: getattr(effect, n) for n, p in inspect.signature(cls.__init__).parameters.items()
+               if p.kind is inspect.Parameter.KEYWORD_ONLY and getattr(effect, n, None) is not None}
+    return {"type": effect.family, **({} if effect.target is None else {"target": effect.target}), **options,
+            **effect.values}
+
+
+def _same_component(a, b) -> bool:
+    """``a`` and ``b`` are the same component: equal (type, target, values, options) with the same parameter
+    table (bounds and vary flags; standard errors aside) and the same public attributes (its options)."""
+    from dataclasses import replace
+
+    def state(c):
+        return ({k: replace(p, stderr=None) for k, p in c.params.items()},
+                {k: v for k, v in vars(c).items() if not k.startswith("_")})
+    try:
+        return type(a) is type(b) and a == b and state(a) == state(b)
+    except (TypeError, ValueError):          # attributes that do not compare (arrays): not known to be the same
+        return False
+
+
+def _component_frames(entries: Mapping[str, list], skel: Skeleton, pm: pin.Model) -> dict[str, tuple[str, np.ndarray]]:
+    """``{frame: (link, 4x4 placement in it)}`` of the frames the written components are fixed to that the
+    skeleton's URDF has not (the contact spheres' frames the contact hook added to ``pm``)."""
+    have = set(skel.links) | set(skel.markers) | {j.name for j in skel.joints}
+    names = [e["frame"] for e in entries.get("contacts", ())]
+    names += [e["target"] for e in entries.get("effects", ()) if e.get("target") and pm.existFrame(e["target"])]
+    out = {}
+    for name in dict.fromkeys(names):
+        if name in have:
+            continue
+        if not pm.existFrame(name):
+            raise ModelError(f"write_import: a component is fixed to frame '{name}', which the model lacks")
+        f = pm.frames[pm.getFrameId(name)]
+        k = f.parentFrame
+        while k > 0 and not (pm.frames[k].name in skel.links and pm.frames[k].type == pin.FrameType.BODY):
+            k = pm.frames[k].parentFrame
+        body = pm.frames[k]
+        if body.name not in skel.links or body.parentJoint != f.parentJoint:
+            raise ModelError(f"write_import: frame '{name}' is on no body of the skeleton")
+        out[name] = (body.name, (body.placement.inverse() * f.placement).homogeneous)
+    return out
 
 
 #: The path variant name of an imported model's fitted polynomials in its sidecar.

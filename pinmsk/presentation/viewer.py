@@ -35,7 +35,9 @@ model's path geometry (:func:`muscle_polylines`): the display points of a
 built-in model or sidecar (fixed in bodies), or, for a model imported from an
 OpenSim ``.osim``, its geometric paths (:meth:`pinmsk.opensim.paths.GeometricPaths.polylines`:
 active points, tangent points and points along the wrapped arcs, OpenSim's
-path algorithm) for all frames of a trial in one batch.  Muscles whose paths
+path algorithm) for all frames of a trial in one batch; for the sidecar ``pinmsk
+import`` wrote, those of the ``.osim`` it names (``[model] osim``; a warning says so
+if that file is gone or changed since).  Muscles whose paths
 are only functions of the coordinates (no display points) are named in a
 warning, not drawn.  An imported model's bodies are capsules between its joints
 (OpenSim's ``.vtp`` meshes are not read) and its wrap objects translucent
@@ -57,6 +59,7 @@ import sys
 import time
 import warnings
 from collections import namedtuple
+from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -966,10 +969,13 @@ def muscle_polylines(model, *, arc_points: int = 8):
     muscles = getattr(model, "muscles", None)
     names = tuple(muscles.names) if muscles is not None else ()
     radii = dict(zip(names, _muscle_radii(muscles))) if muscles is not None else {}
-    source = None
-    if model.meta.get("osim"):
+    source, said = None, False
+    if model.meta.get("osim") or model.meta.get("source_osim"):
         from ..opensim.muscle_import import geometric_paths, osim_geometric_paths
-        gp = geometric_paths(model.meta.get("import_report")) or osim_geometric_paths(model.meta["osim"])
+        if model.meta.get("osim"):
+            gp = geometric_paths(model.meta.get("import_report")) or osim_geometric_paths(model.meta["osim"])
+        else:
+            gp, said = _sidecar_osim_paths(model, osim_geometric_paths)
         if gp is not None:
             source = _GeometricLines(model, gp, [radii.get(n, 0.006) for n in gp.muscles], arc_points=arc_points)
     elif muscles is not None and getattr(muscles, "display_points", None):
@@ -989,11 +995,35 @@ def muscle_polylines(model, *, arc_points: int = 8):
         if drawn:
             source = _DisplayPointLines(model, drawn, fids, pts, [radii[n] for n in drawn])
     missing = [n for n in names if source is None or n not in source.names]
-    if missing:
+    if missing and not said:
         warnings.warn(f"model '{model.name}': {len(missing)} muscle(s) have no path geometry to draw (their paths "
                       f"are functions of the coordinates only, {type(muscles.path).__name__}; give [[muscles]] "
                       f"display 'points' to draw them): {', '.join(missing)}", stacklevel=3)
     return source
+
+
+def _sidecar_osim_paths(model, read_paths):
+    """``(geometric paths or None, warned)`` of the .osim a sidecar written by ``pinmsk import`` names
+    (``[model] osim``, ``meta['source_osim']``): a warning says why none are drawn (the file is gone or
+    unreadable), or that the file changed since the sidecar was written (its digest differs)."""
+    from ..errors import PinmskError
+    from ..opensim.importer import osim_digest
+    src = Path(model.meta["source_osim"])
+    where = f"model '{model.name}' ({model.meta.get('sidecar', 'its sidecar')}, [model] osim)"
+    if not src.is_file():
+        warnings.warn(f"{where}: the OpenSim model it was imported from, {src}, is not found, so no muscle paths "
+                      "are drawn (the sidecar's paths are polynomials of the coordinates); put the .osim there or "
+                      "correct [model] osim", stacklevel=4)
+        return None, True
+    digest = model.meta.get("source_osim_digest")
+    if digest and osim_digest(src) != digest:
+        warnings.warn(f"{where}: {src} changed since the sidecar was written; the muscle paths drawn are the "
+                      "file's as it is now", stacklevel=4)
+    try:
+        return read_paths(src), False
+    except PinmskError as exc:
+        warnings.warn(f"{where}: no muscle paths drawn: {exc}", stacklevel=4)
+        return None, True
 
 
 def add_wrap_objects(geom_model: pin.GeometryModel, model, paths) -> list[str]:
