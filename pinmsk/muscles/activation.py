@@ -162,6 +162,73 @@ def held_step_excitation(a_prev, a_next, h, *, tau_rise=TAU_RISE, tau_fall=TAU_F
     return np.clip(u, 0.0, 1.0)
 
 
+#: Signals per frame above which :func:`_held_steps` goes step by step rather than by scans.
+_SCAN_WIDTH = 256
+
+
+def _affine_scan(e, b, x0):
+    """``x_1..x_n`` of ``x_{k+1} = e_k x_k + b_k`` (``e``, ``b`` (n, ...)) from ``x_0``, by doubling.
+
+    The composition of the affine steps is an associative scan (Hillis & Steele):
+    ``log2 n`` vectorised passes instead of ``n`` Python steps.  Only products of
+    the ``e_k`` in (0, 1] appear, so it cannot overflow.
+    """
+    E = np.array(e, dtype=float)
+    B = np.array(b, dtype=float)
+    s = 1
+    while s < E.shape[0]:
+        B[s:] = E[s:] * B[:-s] + B[s:]
+        E[s:] = E[s:] * E[:-s]
+        s *= 2
+    return E * x0 + B
+
+
+def _held_steps(a0, um, e_rise, e_fall, max_rounds: int = 40):
+    """Activations after each held step (the recurrence of :func:`held_step`), all frames at once.
+
+    Each step is affine in the activation once its branch (rising: ``um >= a``)
+    is known, so the branches are guessed (rising where the excitation rises),
+    the affine recurrence solved by :func:`_affine_scan`, the branches read off
+    the result, and so on until they agree with it -- then the answer is the
+    step-by-step one (same branch at every step).  What is still inconsistent
+    after ``max_rounds`` rounds is finished step by step from the first
+    disagreement.  Wide problems (many parameter sets, where a numpy call per
+    step costs little beside the data it moves) go step by step from the start.
+    """
+    n = um.shape[0]
+    if int(np.prod(um.shape[1:])) > _SCAN_WIDTH:
+        return _steps(a0, um, e_rise, e_fall, 0, np.empty(um.shape))
+    rise = np.empty(um.shape, dtype=bool)
+    rise[0] = um[0] >= a0
+    rise[1:] = um[1:] >= um[:-1]
+    for _ in range(max_rounds):
+        e = np.where(rise, e_rise, e_fall)
+        a = _affine_scan(e, (1.0 - e) * um, a0)
+        prev = np.concatenate([np.broadcast_to(a0, a.shape[1:])[None], a[:-1]])
+        now = um >= prev
+        if np.array_equal(now, rise):
+            return a
+        rise = now
+    bad = np.flatnonzero(np.any((um >= prev) != rise, axis=tuple(range(1, um.ndim))))
+    return _steps(prev[int(bad[0])] if bad.size else a0, um, e_rise, e_fall, int(bad[0]) if bad.size else n, a)
+
+
+def _steps(start, um, e_rise, e_fall, k0, out):
+    """``out[k0:]`` by :func:`held_step`'s recurrence from the activation ``start`` before step ``k0``."""
+    shape = um.shape[1:]
+    cur = np.array(np.broadcast_to(start, shape), dtype=float)
+    d = np.empty(shape)
+    f = np.empty(shape)
+    for k in range(k0, um.shape[0]):
+        np.subtract(um[k], cur, out=d)
+        np.copyto(f, e_fall[k])
+        np.copyto(f, e_rise[k], where=d >= 0)
+        np.multiply(d, f, out=d)
+        np.subtract(um[k], d, out=cur)
+        out[k] = cur
+    return out
+
+
 def activation_from_excitation(t, u, a0=None, *, tau_rise=TAU_RISE, tau_fall=TAU_FALL):
     """Activation ``a`` (N, ...) from a sampled excitation ``u`` (N, ...) at times ``t`` (N,), Eq. A.2.
 
@@ -173,9 +240,11 @@ def activation_from_excitation(t, u, a0=None, *, tau_rise=TAU_RISE, tau_fall=TAU
     coarse EMG sampling cannot make it blow up as explicit RK4 would
     (RK4 needs ``h < 2.8 tau_rise ~ 30 ms``).
 
-    The recurrence is sequential in time; the loop runs over frames with all
-    other axes (muscles, parameter sets) vectorised and the exponentials
-    precomputed for all frames.  ``tau_rise``, ``tau_fall`` broadcast against
+    The recurrence is sequential in time, but affine in the activation once
+    each step's branch is known: it is solved for all frames at once by an
+    associative scan, iterated until the branches agree with the result
+    (:func:`_held_steps`), with all other axes (muscles, parameter sets)
+    vectorised.  ``tau_rise``, ``tau_fall`` broadcast against
     ``u``'s trailing axes (e.g. ``(m,)`` per muscle, ``(P, 1)`` per parameter set).
 
     ``a0`` defaults to ``u[0]`` (steady state, ``adot = 0`` at the first sample).
@@ -194,6 +263,7 @@ def activation_from_excitation(t, u, a0=None, *, tau_rise=TAU_RISE, tau_fall=TAU
     if (h <= 0).any():
         k = int(np.flatnonzero(h <= 0)[0])
         raise TrialError(f"time must increase strictly; t[{k + 1}] = {t[k + 1]} <= t[{k}] = {t[k]}")
+    u = np.ascontiguousarray(u)                       # frames first in memory: the recurrence reads frame by frame
     n = u.shape[0]
     shape = np.broadcast_shapes(u.shape[1:], np.shape(t1), np.shape(t2))
     a = np.empty((n,) + shape)
@@ -202,13 +272,11 @@ def activation_from_excitation(t, u, a0=None, *, tau_rise=TAU_RISE, tau_fall=TAU
     a[0] = np.broadcast_to(u[0], shape) if a0 is None else np.broadcast_to(as_array(a0, "a0"), shape)
     if n == 1:
         return a[:, 0] if squeeze else a
-    um = 0.5 * (u[1:] + u[:-1])                       # (N-1, ...) step excitations
+    um = 0.5 * (u[1:] + u[:-1])                                            # (N-1, ...) step excitations
+    if um.shape[1:] != shape:
+        um = np.ascontiguousarray(np.broadcast_to(um, (n - 1,) + shape))
     hb = h.reshape((-1,) + (1,) * len(shape))
-    e_rise = np.exp(-(t1 * um + t2) * hb)             # decay factors of both branches (held_step's k)
-    e_fall = np.broadcast_to(np.exp(-t2 * hb), e_rise.shape)
-    prev = a[0].copy()
-    for k in range(n - 1):
-        d = um[k] - prev
-        prev = um[k] - d * np.where(d >= 0, e_rise[k], e_fall[k])
-        a[k + 1] = prev
+    e_rise = np.exp(-(t1 * um + t2) * hb)                                  # held_step's decay factors
+    e_fall = np.broadcast_to(np.exp(-t2 * hb), um.shape)
+    a[1:] = _held_steps(a[0], um, e_rise, e_fall)
     return a[:, 0] if squeeze else a
