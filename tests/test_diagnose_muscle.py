@@ -23,13 +23,8 @@ CASES = [
 ]
 
 
-@pytest.fixture(scope="module")
-def forearm():
-    return pinmsk.load_model("forearm")
-
-
 @pytest.mark.parametrize("family,truth", CASES, ids=["delay", "activation", "both"])
-def test_delay_activation_or_both(forearm, family, truth):
+def test_delay_activation_or_both(forearm, family, truth):          # forearm: tests/conftest.py's
     hidden = pinmsk.effects.get(family)("muscles", **truth)
     trial = make_trial(forearm, [hidden], duration=8.0, rate=100.0, seed=4)
     d = diagnose(forearm, trial, candidates=CANDIDATES)

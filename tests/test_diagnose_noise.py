@@ -19,12 +19,7 @@ RATE = 100.0
 
 
 @pytest.fixture(scope="module")
-def forearm():
-    return pinmsk.load_model("forearm")
-
-
-@pytest.fixture(scope="module")
-def gait2d():
+def gait2d():          # forearm: tests/conftest.py's
     return pinmsk.load_model("gait2d")
 
 

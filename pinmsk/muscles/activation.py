@@ -208,9 +208,10 @@ def _held_steps(a0, um, e_rise, e_fall, max_rounds: int = 40):
         now = um >= prev
         if np.array_equal(now, rise):
             return a
-        rise = now
-    bad = np.flatnonzero(np.any((um >= prev) != rise, axis=tuple(range(1, um.ndim))))
-    return _steps(prev[int(bad[0])] if bad.size else a0, um, e_rise, e_fall, int(bad[0]) if bad.size else n, a)
+        wrong, rise = now != rise, now
+    # steps before the first wrong branch are exact (they saw only right branches): finish from there
+    k0 = int(np.flatnonzero(np.any(wrong, axis=tuple(range(1, um.ndim))))[0])
+    return _steps(prev[k0], um, e_rise, e_fall, k0, a)
 
 
 def _steps(start, um, e_rise, e_fall, k0, out):
