@@ -137,3 +137,19 @@ def test_time_constant_arguments_are_refused_by_name(forearm, motion):
     twice = forearm.with_effect(ActivationDynamics("muscles"), ActivationDynamics("BRD"))
     with pytest.raises(ModelError, match="two activation dynamics on BRD.*activation_dynamics:muscles"):
         ModifiedStaticOptimization().fit(twice, motion)
+
+
+def test_an_unknown_muscle_level_component_is_refused_by_name(forearm, motion):
+    """A muscle-level component that is neither a delay nor activation dynamics: MSO cannot represent it."""
+    from pinmsk.effects import SignalEffect
+
+    class Gain(SignalEffect):
+        family = "excitation_gain"
+        parameters = ()
+
+        def transform_batch(self, t, u, params, mask=None):
+            return 2.0 * np.broadcast_to(u, (1,) + np.shape(u)[-2:])
+
+    with pytest.raises(ModelError, match="excitation_gain:muscles is a muscle-level component the analyses "
+                                         "cannot represent"):
+        ModifiedStaticOptimization().fit(forearm.with_effect(Gain("muscles")), motion)
