@@ -148,6 +148,7 @@ class Diagnosis:
             "ranking": [s.to_dict() for s in self.ranking],
             "verdict": self.verdict,
             "added": [_added_json(a) for a in added],
+            "noise_model": self.comparison.noise.to_json(),
         }
 
     def summary_text(self, *, header: bool = True) -> str:

@@ -25,7 +25,7 @@ import pinocchio as pin
 from ..components import Component, Motion, motion_cached
 from ..errors import ModelError
 
-__all__ = ["JointEffect", "SignalEffect", "frame_point_kinematics", "torque_regressor",
+__all__ = ["JointEffect", "SignalEffect", "signal_parts", "frame_point_kinematics", "torque_regressor",
            "unactuated_coordinates", "moving_bodies", "hand_like_frames"]
 
 
@@ -108,6 +108,11 @@ class SignalEffect(Component):
         if self.target != "muscles":
             model.muscles.index(self.target)
 
+    def parts(self) -> tuple["SignalEffect", ...]:
+        """The elementary muscle-level effects this one is made of, in chain order (itself by default;
+        a composite such as delay-then-activation-dynamics gives its two)."""
+        return (self,)
+
     def muscle_mask(self, model) -> np.ndarray:
         """Boolean ``(m,)``: the muscles this effect applies to."""
         m = model.n_muscles
@@ -149,6 +154,12 @@ class SignalEffect(Component):
 
 
 # -- model structure helpers ---------------------------------------------------
+
+def signal_parts(model) -> list:
+    """The elementary parts of the model's muscle-level effects, in chain order."""
+    chain = sorted([c for c in model.effects if isinstance(c, SignalEffect)], key=lambda c: c.order)
+    return [p for c in chain for p in c.parts()]
+
 
 def unactuated_coordinates(model) -> tuple[str, ...]:
     """Coordinates no actuator drives: the model's floating base.
