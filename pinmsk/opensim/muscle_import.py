@@ -96,7 +96,14 @@ def muscle_hook(doc: OsimDocument, skeleton: Skeleton, *, ranges=None, max_muscl
     locked = {c.name: c.default_value for c in doc.coordinates if c.locked}
     model_coords = tuple(skeleton.pin_model.names[j] for j in range(1, skeleton.pin_model.njoints))
     crossing = _crossed_coordinates(doc, kin, specs)
-    fit_coords = tuple(c for c in kin.coordinates if c not in locked and any(c in cs for cs in crossing.values()))
+    # coupled coordinates (CoordinateCouplerConstraint) are set from their independent ones in every
+    # sampled pose, as the model ties them: no pose the model cannot take, moment arms with the coupling
+    couplers = tuple(c for c in skeleton.coordinate_map.couplers if c[0] not in locked)
+    coupled = {c[0] for c in couplers}
+    # a coupled coordinate's muscles cross its independent coordinates
+    crossing = {m: cs | {c for d, ind, _, _ in couplers if d in cs for c in ind} for m, cs in crossing.items()}
+    crossed = set().union(*crossing.values())
+    fit_coords = tuple(c for c in kin.coordinates if c in crossed and c not in locked and c not in coupled)
     missing = sorted(c for c in fit_coords if c not in model_coords)
     if missing:
         raise ModelError(f"{doc.source}: the muscle paths depend on coordinate(s) {missing}, which the imported "
@@ -109,20 +116,22 @@ def muscle_hook(doc: OsimDocument, skeleton: Skeleton, *, ranges=None, max_muscl
     if unknown:
         raise ModelError(f"{doc.source}: muscle fit ranges name coordinate(s) {unknown} the model does not have")
     ranges = {**_fit_ranges(doc, skeleton), **{c: (float(lo), float(hi)) for c, (lo, hi) in given.items()}}
-    path, fits = fit_polynomial_paths(geometric, ranges=ranges, coordinates=fit_coords, n_train=FIT_SAMPLES,
-                                      n_test=TEST_SAMPLES, max_degree=MAX_DEGREE, tolerance=TOLERANCE,
-                                      model_coordinates=model_coords)
+    path, fits = fit_polynomial_paths(geometric, ranges=ranges, coordinates=fit_coords, couplings=couplers,
+                                      crossing=crossing,
+                                      n_train=FIT_SAMPLES, n_test=TEST_SAMPLES, max_degree=MAX_DEGREE,
+                                      tolerance=TOLERANCE, model_coordinates=model_coords)
     muscles = MuscleSet(names=names, model_type=imp.model_type, mtu=imp.mtu, path=path, tendon=imp.tendon)
 
     entries = _fit_entries(doc, chosen, fits, ranges)
-    coupled = sorted({c["dependent"] for c in skeleton.couplings} & set(fit_coords))
-    if coupled:
-        # the fit samples a coupled coordinate on its own; OpenSim's moment arm about the independent
-        # coordinate would include the coupling
+    used = [c for c in couplers if c[0] in crossed]
+    if used:
         entries.append(ReportEntry(
             element=f"{doc.source}: <ConstraintSet>", status=NOTE,
-            became=(f"muscle paths fitted with the coupled coordinate(s) {', '.join(coupled)} as independent "
-                    "variables (sampled over their own ranges); their moment arms do not include the coupling")))
+            became=("muscle paths fitted along the coupling(s) " + "; ".join(
+                f"{d} = {s:g} * {f!r}({', '.join(ind)})" for d, ind, f, s in used)
+                + ": every sampled pose sets the coupled coordinate as the model ties it; the polynomials are "
+                "in the independent coordinates and their moment arms include the coupling (as OpenSim's "
+                "MomentArmSolver computes them); about the coupled coordinates they are 0")))
     notes = summarize_notes(imp.notes)
     entries.append(ReportEntry(
         element=f"{doc.source}: <ForceSet> {len(chosen)} muscles",
