@@ -416,41 +416,54 @@ class CoordinateMap:
                     else dict.fromkeys(self.osim_coordinates, 0.0))
         return _columns(q, self.osim_coordinates, defaults, f"CoordinateMap: {what}")
 
-    def _chain(self, f: fns.Function, x, J, v, a):
-        """Value, Jacobian row, speed and acceleration of ``f`` at argument columns ``x`` (N, k)."""
-        k = x.shape[1]     # >= 1: a dependent coordinate or coupler always has an argument
-        arg = x[:, 0] if k == 1 else x
-        val = f.value(arg)
-        d1 = [f.derivative(arg, 1, i) for i in range(k)]
-        Jrow = sum(d1[i][:, None] * J[:, i, :] for i in range(k))
-        vel = None if v is None else sum(d1[i] * v[:, i] for i in range(k))
+    def _chain(self, f: fns.Function, cols, Q, V, A, rows, *, value: bool = True):
+        """Value, Jacobian row, speed and acceleration of ``x = f(Q[:, cols])`` (None where not asked).
+
+        ``rows[c]`` is the Jacobian row of column ``c`` as ``{OpenSim column: (N,) coefficient}`` (the
+        sparse form: a coordinate depends on one or two others, so a dense (N, n, n) matrix would be
+        mostly zeros); the result's row is the chain rule through them."""
+        k = len(cols)       # >= 1: a dependent coordinate or coupler always has an argument
+        arg = Q[:, cols[0]] if k == 1 else Q[:, cols]
+        if k == 1 and A is not None:       # value, slope and curvature from one evaluation
+            val, d, dd = f.evaluate(arg)
+            d1 = [d]
+        else:
+            val = f.value(arg) if value else None
+            d1 = [f.derivative(arg, 1, i) for i in range(k)]
+            dd = None
+        row: dict[int, np.ndarray] = {}
+        for i, c in enumerate(cols):
+            for j, coef in rows[c].items():
+                row[j] = row[j] + d1[i] * coef if j in row else d1[i] * coef
+        vel = None if V is None else sum(d1[i] * V[:, c] for i, c in enumerate(cols))
         acc = None
-        if a is not None:
-            acc = sum(d1[i] * a[:, i] for i in range(k))
+        if A is not None:
+            acc = sum(d1[i] * A[:, c] for i, c in enumerate(cols))
             if k == 1:     # multi-argument functions are linear (LinearFunction): no curvature term
-                acc = acc + f.derivative(arg, 2) * v[:, 0] ** 2
-        return val, Jrow, vel, acc
+                acc = acc + dd * V[:, cols[0]] ** 2
+        return val, row, vel, acc
 
     def _resolve(self, q, v, a, couplers):
+        """OpenSim's ``(Q, V, A)`` with the couplers applied (if asked) and each column's sparse Jacobian row."""
         Q = self._osim(q, "q")
         V = self._osim(v, "v") if v is not None else None
         A = self._osim(a, "a") if a is not None else None
         if A is not None and V is None:
             raise ModelError("CoordinateMap: accelerations need speeds too")
-        n, n_os = Q.shape
-        J = np.broadcast_to(np.eye(n_os), (n, n_os, n_os)).copy()
+        n = Q.shape[0]
+        one = np.ones(n)
+        rows = [{i: one} for i in range(Q.shape[1])]
         if couplers:
             for dep, indep, f, scale in self.couplers:
-                cols = [self._col[c] for c in indep]
-                val, Jrow, vel, acc = self._chain(f, Q[:, cols], J[:, cols, :], None if V is None else V[:, cols],
-                                                  None if A is None else A[:, cols])
+                val, row, vel, acc = self._chain(f, [self._col[c] for c in indep], Q, V, A, rows)
                 i = self._col[dep]
-                Q[:, i], J[:, i, :] = scale * val, scale * Jrow
+                Q[:, i] = scale * val
+                rows[i] = {j: scale * c for j, c in row.items()}
                 if V is not None:
                     V[:, i] = scale * vel
                 if A is not None:
                     A[:, i] = scale * acc
-        return Q, V, A, J
+        return Q, V, A, rows
 
     def expand(self, q, v=None, a=None, *, couplers: bool = True):
         """Pinocchio ``(q, v, a)`` (N, nq) from OpenSim coordinates (``v``/``a`` None if not given)."""
@@ -459,41 +472,64 @@ class CoordinateMap:
 
     def jacobian(self, q, *, couplers: bool = True) -> np.ndarray:
         """``d q_pinocchio / d q_osim`` (N, nq, n_osim)."""
-        return self._expand(q, None, None, couplers)[3]
+        Q, rows = self._rows(q, couplers)
+        J = np.zeros((Q.shape[0], len(self.joints), Q.shape[1]))
+        for jp, row in enumerate(rows):
+            for i, c in row.items():
+                J[:, jp, i] = c
+        return J
 
     def generalized_forces(self, q, tau, *, couplers: bool = True) -> np.ndarray:
         """OpenSim coordinates' generalized forces (N, n_osim) from Pinocchio's ``tau`` (N, nq): J^T tau."""
-        J = self.jacobian(q, couplers=couplers)
-        return np.einsum("nji,nj->ni", J, np.atleast_2d(np.asarray(tau, dtype=float)))
+        Q, rows = self._rows(q, couplers)
+        tau = np.atleast_2d(np.asarray(tau, dtype=float))
+        out = np.zeros((Q.shape[0], Q.shape[1]))
+        for jp, row in enumerate(rows):
+            for i, c in row.items():
+                out[:, i] += c * tau[:, jp]
+        return out
+
+    def _rows(self, q, couplers):
+        """OpenSim's ``Q`` and the sparse Jacobian row of each Pinocchio joint (no values of the dependent
+        joints computed: the rows need the functions' slopes only)."""
+        Q, _, _, rows = self._resolve(q, None, None, couplers)
+        out = []
+        for name in self.joints:
+            d = self.dependent.get(name)
+            if d is None:
+                out.append(rows[self._col[name]])
+            else:
+                out.append(self._chain(d.function, [self._col[c] for c in d.of], Q, None, None, rows,
+                                       value=False)[1])
+        return Q, out
 
     def _expand(self, q, v, a, couplers):
-        Q, V, A, J = self._resolve(q, v, a, couplers)
+        Q, V, A, rows = self._resolve(q, v, a, couplers)
         n = Q.shape[0]
         nq = len(self.joints)
         qp = np.empty((n, nq))
         vp = None if V is None else np.empty((n, nq))
         ap = None if A is None else np.empty((n, nq))
-        Jp = np.empty((n, nq, Q.shape[1]))
+        prows = []
         for j, name in enumerate(self.joints):
             d = self.dependent.get(name)
             if d is None:
                 i = self._col[name]
-                qp[:, j], Jp[:, j, :] = Q[:, i], J[:, i, :]
+                qp[:, j] = Q[:, i]
+                prows.append(rows[i])
                 if vp is not None:
                     vp[:, j] = V[:, i]
                 if ap is not None:
                     ap[:, j] = A[:, i]
                 continue
-            cols = [self._col[c] for c in d.of]
-            val, Jrow, vel, acc = self._chain(d.function, Q[:, cols], J[:, cols, :],
-                                              None if V is None else V[:, cols], None if A is None else A[:, cols])
+            val, row, vel, acc = self._chain(d.function, [self._col[c] for c in d.of], Q, V, A, rows)
             qp[:, j] = val
-            Jp[:, j, :] = Jrow
+            prows.append(row)
             if vp is not None:
                 vp[:, j] = vel
             if ap is not None:
                 ap[:, j] = acc
-        return qp, vp, ap, Jp
+        return qp, vp, ap, prows
 
 
 # ---------------------------------------------------------------------------
