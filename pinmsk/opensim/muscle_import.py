@@ -78,7 +78,7 @@ def muscle_hook(doc: OsimDocument, skeleton: Skeleton, *, ranges=None, max_muscl
     if max_muscles is not None and len(chosen) > max_muscles:
         return HookResult(entries=(ReportEntry(
             element=f"{doc.source}: <ForceSet> {len(chosen)} muscles",
-            became=(f"muscles not imported by default: fitting {len(chosen)} muscle paths takes about 0.3 s per "
+            became=(f"muscles not imported by default: fitting {len(chosen)} muscle paths takes about 0.05 s per "
                     f"muscle (more than {max_muscles} muscles); import them with pinmsk.model.import_osim(path, "
                     "hooks=[pinmsk.opensim.muscle_import.muscle_hook])"), status=NOTE),))
     names = [m.name for m in chosen]
@@ -141,8 +141,9 @@ def muscle_hook(doc: OsimDocument, skeleton: Skeleton, *, ranges=None, max_muscl
     return HookResult(muscles=muscles, entries=tuple(entries), handled=tuple(m.where for m in chosen))
 
 
-#: The most muscles the default hook fits at import (Rajagopal's 80 take 22-35 s on 2 shared cores).
-MAX_MUSCLES = 40
+#: The most muscles the default hook fits at import (Rajagopal's 80, the largest shared model, take
+#: 3-4.5 s of CPU with its skeleton on 2 loaded shared cores: benchmarks/bench_osim_import.py).
+MAX_MUSCLES = 120
 
 
 def default_muscle_hook(doc: OsimDocument, skeleton: Skeleton):
