@@ -255,7 +255,7 @@ def source_coordinates(model, motion: Motion, tau: np.ndarray) -> tuple[tuple[st
             for c in cmap.osim_coordinates if c in model.coordinates or c in motion.signals}
     q = np.column_stack([cols[c] if c in cols else np.full(motion.n_frames, cmap.welded.get(c, cmap.defaults[c]))
                          for c in cmap.osim_coordinates])
-    return cmap.osim_coordinates, q, cmap.generalized_forces(cols, tau, couplers=False)
+    return cmap.osim_coordinates, q, cmap.generalized_forces(q, tau, couplers=False)
 
 
 def first_non_finite(x: np.ndarray) -> tuple[int, int] | None:
@@ -352,12 +352,13 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
         return TrialInputs(mo, (), (), Filtering(c, grf_cutoff=gc))
     data = grf if grf is not None else trial
     planar = is_planar(model)
-    if grf is not None:
+    if external_loads is not None or model.nq != model.nv:
+        q_g = None          # an ExternalLoads file names each load's body: no foot search, no poses needed
+    elif grf is not None:
         tg = np.asarray(grf.time, dtype=float)
-        q_g = np.column_stack([np.interp(tg, mo.t, mo.q[:, j]) for j in range(model.nq)]) \
-            if model.nq == model.nv else None
+        q_g = np.column_stack([np.interp(tg, mo.t, mo.q[:, j]) for j in range(model.nq)])
     else:
-        q_g = mo.q if model.nq == model.nv else None
+        q_g = mo.q
     try:
         plist, ext = _plate_loads(model, data, mo, cutoff=gc, external_loads=external_loads, frames=frames,
                                   planar=planar, q_on_grf_time=q_g, same_time=grf is None)
