@@ -256,6 +256,13 @@ class OsimReference:
 
     def __init__(self, path_or_model):
         osim = self.osim = pytest.importorskip("opensim")
+        # logger off before loading: OpenSim opens its opensim.log lazily, in the working directory of
+        # the moment -- the model's folder while it reads the model (the shared data must stay clean)
+        osim.Logger.setLevelString("Off")
+        try:
+            osim.Logger.removeFileSink()
+        except Exception:  # pragma: no cover - older opensim
+            pass
         self.model = osim.Model(path_or_model) if isinstance(path_or_model, str) else path_or_model
         self.state = self.model.initSystem()
         cs = self.model.getCoordinateSet()
