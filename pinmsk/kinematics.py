@@ -144,10 +144,26 @@ def has_ground_reaction(trial: Trial) -> bool:
     return any(parse_ground_reaction(n) is not None for n in trial.names)
 
 
+#: is_planar's answers by skeleton (its Data costs ms to create on a large model, each ID asks): a few
+#: skeletons, kept alive with their answers so that their ids stay theirs.
+_PLANAR: dict[int, tuple[object, bool]] = {}
+
+
 def is_planar(model) -> bool:
     """Whether every joint moves in the x-y plane (translations in x, y; rotations about z)."""
-    import pinocchio as pin
     pm = model.pin
+    hit = _PLANAR.get(id(pm))
+    if hit is not None and hit[0] is pm:
+        return hit[1]
+    out = _is_planar(pm)
+    if len(_PLANAR) >= 16:
+        _PLANAR.pop(next(iter(_PLANAR)))
+    _PLANAR[id(pm)] = (pm, out)
+    return out
+
+
+def _is_planar(pm) -> bool:
+    import pinocchio as pin
     if pm.nv == 0:
         return False
     pd = pm.createData()
