@@ -220,40 +220,6 @@ def _simbody_hdot_term(model, path, q, v):
     return out
 
 
-def _opensim_solver(osim, path):
-    """``solve(q, u, udot) -> {coordinate: generalized force}``: OpenSim's InverseDynamicsSolver on ``path``
-    with every force off (gravity stays), and the model and state (for kinematics)."""
-    om = osim.Model(str(path))
-    om.finalizeFromProperties()
-    for comp in om.getComponentsList():
-        force = osim.Force.safeDownCast(comp)
-        if force is not None:
-            force.set_appliesForce(False)
-    s = om.initSystem()
-    cs = om.getCoordinateSet()
-    names = [cs.get(i).getName() for i in range(cs.getSize())]
-    order = [None] * s.getNU()                  # which coordinate each mobility is
-    for i, c in enumerate(names):
-        for k in range(len(names)):
-            cs.get(k).setSpeedValue(s, 0.0)
-        cs.get(i).setSpeedValue(s, 1.0)
-        order[int(np.argmax([s.getU().get(k) for k in range(s.getNU())]))] = c
-    solver = osim.InverseDynamicsSolver(om)
-
-    def solve(q, u, udot):
-        for c in names:
-            cs.get(c).setValue(s, float(q[c]), False)
-            cs.get(c).setSpeedValue(s, float(u[c]))
-        om.realizeVelocity(s)
-        a = osim.Vector(len(order), 0.0)
-        for i, c in enumerate(order):
-            a.set(i, float(udot[c]))
-        tau = solver.solve(s, a)
-        return {c: tau.get(i) for i, c in enumerate(order)}
-
-    return solve, om, s
-
-
 def test_rajagopal_id_is_opensims_but_for_simbodys_walker_knee_term():
     """At random states (knee speeds up to 8 rad/s): pinmsk's ID of the exact chain plus the term Simbody's
     FunctionBased mobilizer adds (``_simbody_hdot_term``) is OpenSim's InverseDynamicsSolver to 1e-9 of
@@ -263,9 +229,9 @@ def test_rajagopal_id_is_opensims_but_for_simbodys_walker_knee_term():
     import pinocchio as pin
     osim = _opensim()
     path = _rajagopal()
+    from test_osim_import import _opensim_inverse_dynamics
     model, _ = import_osim(path, nonlinear="exact", hooks=())
     cmap = coordinate_map(model)
-    solve, om, s = _opensim_solver(osim, path)
     rng = np.random.default_rng(3)
     n = 6
     q = {c: np.full(n, cmap.defaults[c]) for c in cmap.osim_coordinates}
@@ -277,6 +243,9 @@ def test_rajagopal_id_is_opensims_but_for_simbodys_walker_knee_term():
     for side in "rl":
         u[f"knee_angle_{side}"] = u[f"knee_angle_{side}_beta"] = rng.uniform(-8.0, 8.0, n)
     a = {c: rng.normal(size=n) for c in cmap.osim_coordinates}
+    u0 = {c: (np.zeros(n) if c.startswith("knee_angle") else u[c]) for c in u}     # no knee speed
+    samples = [tuple({c: x[c][k] for c in x} for x in (q, speeds, a)) for speeds in (u, u0) for k in range(n)]
+    ref_all = np.array([[r[c] for c in cmap.osim_coordinates] for r in _opensim_inverse_dynamics(path, samples)])
     qp, vp, ap = cmap.expand(q, u, a, couplers=False)      # OpenSim's ID does not enforce the couplers
     extra = _simbody_hdot_term(model, path, q, u)
     data = model.pin.createData()
@@ -284,22 +253,20 @@ def test_rajagopal_id_is_opensims_but_for_simbodys_walker_knee_term():
     simbody = np.array([pin.rnea(model.pin, data, qp[k], vp[k], ap[k] + extra[k]) for k in range(n)])
     exact = cmap.generalized_forces(q, exact, couplers=False)
     simbody = cmap.generalized_forces(q, simbody, couplers=False)
-    ref = np.array([[r[c] for c in cmap.osim_coordinates] for r in
-                    (solve(*({c: x[c][k] for c in x} for x in (q, u, a))) for k in range(n))])
+    ref = ref_all[:n]
     scale = np.max(np.abs(ref))
     assert np.max(np.abs(simbody - ref)) < 1e-9 * scale
     assert np.max(np.abs(exact - ref)) > 1e-4 * scale          # the term is there (~1 N m)
     # without knee speed the term vanishes and the two agree to round-off
-    u0 = {c: (np.zeros(n) if c.startswith("knee_angle") else u[c]) for c in u}
     qp, vp, ap = cmap.expand(q, u0, a, couplers=False)
     assert not np.any(_simbody_hdot_term(model, path, q, u0))
     exact = cmap.generalized_forces(q, np.array([pin.rnea(model.pin, data, qp[k], vp[k], ap[k])
                                                  for k in range(n)]), couplers=False)
-    ref = np.array([[solve(*({c: x[c][k] for c in x} for x in (q, u0, a)))[c] for c in cmap.osim_coordinates]
-                    for k in range(n)])
-    assert np.max(np.abs(exact - ref)) < 1e-9 * scale
+    assert np.max(np.abs(exact - ref_all[n:])) < 1e-9 * scale
     # which is right: the tibia's angular acceleration at a knee speed of 8 rad/s (no acceleration), against
     # the finite difference of OpenSim's own tibia orientations along q(t) = q0 + u t
+    om = osim.Model(str(path))
+    s = om.initSystem()
     cs = om.getCoordinateSet()
     tibia = om.getBodySet().get("tibia_r")
     q0, w, h = 0.9, 8.0, 1e-4
