@@ -88,6 +88,8 @@ def test_id_of_gait10dof18musc_matches_opensims_reference_with_the_same_filter()
     model = _exact(d)
     cmap = coordinate_map(model)
     assert cmap is not None and "knee_r_translation1" in cmap.dependent
+    # one rotation axis per coordinate: Simbody's FunctionBased term does not arise (no report note)
+    assert not [e for e in model.meta["import_report"].entries if "FunctionBased velocity term" in e.became]
     ik = read_trial(d / "IK" / "subject01_walk_IK.mot")
     trial = _opensim_filtered(osim, d / "IK" / "subject01_walk_IK.mot", 6.0, np.asarray(ik.time))
     res = inverse_dynamics_result(model, trial, cutoff=0, grf_cutoff=0,
@@ -162,56 +164,22 @@ def _rajagopal():
 
 
 def _simbody_hdot_term(model, path, q, v):
-    """The spatial-acceleration term that Simbody's ``MobilizedBody::FunctionBased`` (OpenSim's CustomJoint)
-    adds to the exact one, as extra accelerations (N, nv) of the model's joints.
-
-    ``FunctionBasedImpl::CacheInfo::buildHdot`` (simbody, MobilizedBodyImpl.h) differentiates the
-    columns ``R_F1 a2`` and ``R_F2 a3`` of the angular-velocity matrix W with the angular velocities of
-    the first mobility only (``uv1``) and of all but the third (``uv2``), where the exact derivatives take
-    those of the first rotation (``a1 theta1'``) and of the first two.  The two agree when rotation i is
-    driven by mobility i alone; Rajagopal's walker knee drives all three rotations by the knee angle, which
-    leaves ``theta2' theta3' u^2 (R_F2 a3 x R_F1 a2)``.  Made here as the joint accelerations ``W^-1 dA``
-    of the chain's rotations (they all turn about the origin of the joint's M frame).  ``q``, ``v``:
-    ``{OpenSim coordinate: (N,)}``."""
+    """The acceleration term Simbody's FunctionBased mobilizer (OpenSim's CustomJoint) adds to the exact
+    one (:func:`pinmsk.opensim.skeleton.simbody_rotation_term`: Rajagopal's walker knee), as extra
+    accelerations (N, nv) of the model's joints: ``W^-1 dA`` on the chain's rotations (they all turn
+    about the origin of the joint's M frame).  ``q``, ``v``: ``{OpenSim coordinate: (N,)}``."""
     from pinmsk.io.osim import read_osim
-    from pinmsk.opensim.skeleton import OsimKinematics, rotation
-    kin = OsimKinematics(read_osim(path))
+    from pinmsk.opensim.skeleton import OsimKinematics, simbody_rotation_term
     n = len(next(iter(q.values())))
     out = np.zeros((n, model.nv))
-    for jk in kin.joints:
+    for jk in OsimKinematics(read_osim(path)).joints:
         if jk.joint.type != "CustomJoint" or not jk.coordinates:
             continue
-        ax = jk.axes[:3]
-        cs = list(jk.coordinates)                 # Simbody's mobilities, in the joint's order
-        U = np.column_stack([v[c] for c in cs])
-        th, Fq = [], []                           # rotation angles (N,) and their d/dq (N, nu)
-        for a in ax:
-            x = np.column_stack([q[c] for c in a.coordinates]) if a.coordinates else np.zeros((n, 0))
-            arg = x[:, 0] if x.shape[1] == 1 else (x if x.shape[1] else np.zeros(n))
-            th.append(a.function.value(arg))
-            d = np.zeros((n, len(cs)))
-            for k, c in enumerate(a.coordinates):
-                d[:, cs.index(c)] = a.function.derivative(arg, 1, k)
-            Fq.append(d)
-        R1 = rotation(ax[0].direction, th[0])
-        R2 = R1 @ rotation(ax[1].direction, th[1])
-        W = np.stack([np.broadcast_to(ax[0].direction, (n, 3)), R1 @ ax[1].direction, R2 @ ax[2].direction], axis=2)
-        thd = np.column_stack([np.sum(F * U, axis=1) for F in Fq])           # rotation rates (N, 3)
-        U1 = U.copy()
-        U1[:, 1:] = 0.0
-        U2 = U.copy()
-        if len(cs) > 2:
-            U2[:, 2] = 0.0
-        Fm = np.stack(Fq, axis=1)                                             # (N, 3, nu)
-        V1 = np.einsum("nij,njk,nk->ni", W, Fm, U1)
-        V2 = np.einsum("nij,njk,nk->ni", W, Fm, U2)
-        w1 = W[:, :, 0] * thd[:, :1]
-        w12 = w1 + W[:, :, 1] * thd[:, 1:2]
-        dA = (np.cross(V1 - w1, W[:, :, 1]) * thd[:, 1:2] + np.cross(V2 - w12, W[:, :, 2]) * thd[:, 2:3])
+        dA, W = simbody_rotation_term(jk, q, v, n)
         if not np.any(np.abs(dA) > 0):
             continue
         dth = np.linalg.solve(W, dA[..., None])[..., 0]
-        for i, a in enumerate(ax):
+        for i, a in enumerate(jk.axes[:3]):
             dep = f"{jk.joint.name}_rotation{i + 1}"
             if dep in model.coordinates:
                 out[:, model.coordinate_index(dep)] += dth[:, i]
@@ -230,8 +198,11 @@ def test_rajagopal_id_is_opensims_but_for_simbodys_walker_knee_term():
     osim = _opensim()
     path = _rajagopal()
     from test_osim_import import _opensim_inverse_dynamics
-    model, _ = import_osim(path, nonlinear="exact", hooks=())
+    model, report = import_osim(path, nonlinear="exact", hooks=())
     cmap = coordinate_map(model)
+    # the import report says which joints carry the term: the walker knees (not the hips, pelvis, ...)
+    noted = {e.element.split('"')[1] for e in report.entries if "FunctionBased velocity term" in e.became}
+    assert noted == {"walker_knee_r", "walker_knee_l"}
     rng = np.random.default_rng(3)
     n = 6
     q = {c: np.full(n, cmap.defaults[c]) for c in cmap.osim_coordinates}

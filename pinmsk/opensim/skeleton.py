@@ -57,7 +57,8 @@ from . import functions as fns
 from .report import APPROXIMATED, EXACT, NOT_IMPORTED, NOTE, ReportEntry
 
 __all__ = ["JointKinematics", "OsimKinematics", "Skeleton", "build_skeleton", "rotation", "rotation_xyz",
-           "UrdfLink", "UrdfJoint", "DependentCoordinate", "CoordinateMap", "LOCKED_MODES", "NONLINEAR_MODES"]
+           "UrdfLink", "UrdfJoint", "DependentCoordinate", "CoordinateMap", "LOCKED_MODES", "NONLINEAR_MODES",
+           "simbody_rotation_term"]
 
 LOCKED_MODES = ("joint", "weld")
 NONLINEAR_MODES = ("fit", "exact")
@@ -249,6 +250,49 @@ def _chain(frames) -> np.ndarray:
     for f in frames:
         T = T @ _offset(f.translation, f.orientation)
     return T
+
+
+def simbody_rotation_term(jk: JointKinematics, values: Mapping[str, np.ndarray],
+                           speeds: Mapping[str, np.ndarray], n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The angular acceleration (N, 3), in the joint's parent frame F, that Simbody's FunctionBased
+    mobilizer (OpenSim's CustomJoint) adds to the exact one, and the matrix W (N, 3, 3) whose columns
+    ``a1, R1 a2, R1 R2 a3`` turn rotation rates into the angular velocity.
+
+    ``FunctionBasedImpl::CacheInfo::buildHdot`` (simbody, MobilizedBodyImpl.h) differentiates W's second
+    and third columns with the angular velocity of the first mobility alone and of all but the third,
+    where the derivatives are those of the first rotation and of the first two.  The two agree when
+    rotation i is driven by mobility i only (or a rotation's axis is constant); otherwise -- Rajagopal's
+    walker knee turns about three axes, all functions of the knee angle -- OpenSim's accelerations (and so
+    its inverse dynamics) carry this velocity-product term, ``theta2' theta3' u^2 (R1 R2 a3 x R1 a2)``
+    for one coordinate.  pinmsk's chains are exact: this is for reporting and comparing."""
+    ax = jk.axes[:3]
+    mob = list(jk.coordinates)                       # Simbody's mobilities, in the joint's order
+    U = np.column_stack([np.broadcast_to(speeds[c], (n,)) for c in mob]) if mob else np.zeros((n, 0))
+    th, F = [], []
+    for a in ax:
+        x = np.column_stack([np.broadcast_to(values[c], (n,)) for c in a.coordinates]) if a.coordinates else None
+        arg = np.zeros(n) if x is None else (x[:, 0] if x.shape[1] == 1 else x)
+        th.append(a.function.value(arg))
+        d = np.zeros((n, len(mob)))
+        for k, c in enumerate(a.coordinates):
+            d[:, mob.index(c)] = a.function.derivative(arg, 1, k)
+        F.append(d)
+    R1 = rotation(ax[0].direction, th[0])
+    R2 = R1 @ rotation(ax[1].direction, th[1])
+    W = np.stack([np.broadcast_to(ax[0].direction, (n, 3)), R1 @ ax[1].direction, R2 @ ax[2].direction], axis=2)
+    Fm = np.stack(F, axis=1)                                             # (N, 3 rotations, n_mobilities)
+    rates = np.einsum("nrk,nk->nr", Fm, U)
+    U1 = U.copy()
+    U1[:, 1:] = 0.0
+    U2 = U.copy()
+    if len(mob) > 2:
+        U2[:, 2] = 0.0
+    V1 = np.einsum("nij,njk,nk->ni", W, Fm, U1)
+    V2 = np.einsum("nij,njk,nk->ni", W, Fm, U2)
+    w1 = W[:, :, 0] * rates[:, :1]
+    w12 = w1 + W[:, :, 1] * rates[:, 1:2]
+    dA = np.cross(V1 - w1, W[:, :, 1]) * rates[:, 1:2] + np.cross(V2 - w12, W[:, :, 2]) * rates[:, 2:3]
+    return dA, W
 
 
 class OsimKinematics:
@@ -650,6 +694,9 @@ def build_skeleton(doc: OsimDocument, *, locked: str = "joint", nonlinear: str =
                 links[uj.child] = UrdfLink(uj.child)
         reach[jk.child] = _max_translation(jk, fit, ranges, welded)
         entries.append(_joint_entry(jk, new, fit, text, deps))
+        note = _simbody_note(jk, welded, fit_ranges)
+        if note is not None:
+            entries.append(note)
         if fit is not None:
             approx[jk.child] = (fit, jk)
 
@@ -1155,6 +1202,29 @@ def _joint_entry(jk: JointKinematics, new: list[UrdfJoint], fit: _Fit | None, te
                     f"up to {np.degrees(fit.max_rotation_error):.3g} deg")
     return ReportEntry(element=jk.joint.where, became=became, approximation=approx_text,
                        max_error=fit.max_translation_error, status=APPROXIMATED, details=details)
+
+
+def _simbody_note(jk: JointKinematics, welded, fit_ranges) -> ReportEntry | None:
+    """A note where OpenSim's own accelerations of a CustomJoint carry Simbody's FunctionBased velocity
+    term (:func:`simbody_rotation_term`): its largest size over the coordinates' ranges at unit speeds."""
+    free = [c for c in jk.coordinates if c not in welded]
+    if jk.joint.type != "CustomJoint" or not free:
+        return None
+    k = 41 if len(free) == 1 else 9
+    grids = np.meshgrid(*[np.linspace(*fit_ranges[c], k) for c in free], indexing="ij")
+    n = grids[0].size
+    values = {c: np.full(n, welded[c]) for c in jk.coordinates if c in welded}
+    values.update({c: g.ravel() for c, g in zip(free, grids)})
+    speeds = {c: np.zeros(n) if c in welded else np.ones(n) for c in jk.coordinates}
+    dA, _ = simbody_rotation_term(jk, values, speeds, n)
+    worst = float(np.max(np.linalg.norm(dA, axis=1)))
+    if not worst > 1e-9:
+        return None
+    return ReportEntry(element=jk.joint.where, status=NOTE, details={"max_term_rad_s2": worst}, became=(
+        f"OpenSim's accelerations of this joint carry Simbody's FunctionBased velocity term (its rotations "
+        f"are functions of shared coordinates; simbody_rotation_term): up to {worst:.3g} rad/s^2 at 1 rad/s "
+        f"of {', '.join(free)} (it grows with the speed squared), so OpenSim's inverse dynamics differs from "
+        "the exact one pinmsk computes by it (tests/test_osim_id.py)"))
 
 
 def _short(text: str, n: int = 60) -> str:
