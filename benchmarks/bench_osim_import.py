@@ -116,7 +116,66 @@ def main(argv=None) -> int:
     t_os = min(times)
     print(f"ID, OpenSim InverseDynamicsTool (run):       {1e3 * t_os:.1f} ms  -> pinmsk compute "
           f"{t_os / t_id:.0f}x faster (target >= 50x)")
+    walk = Path(data) / "real" / "opensim-moco-walk-emg"
+    if raj.is_file() and (walk / "coordinates.sto").is_file():
+        _rajagopal_id(osim, raj, walk, args.repeat)
     return 0
+
+
+def _rajagopal_id(osim, raj: Path, walk: Path, repeat: int) -> None:
+    """RajagopalWalk's walk (1350 frames, exact walker knee and patella), no filter on either side, as
+    tests/test_osim_id.py compares them: pinmsk's ID compute against OpenSim's InverseDynamicsTool run."""
+    from pinmsk.kinematics import coordinate_map
+    from pinmsk.trial import Trial
+    model, _ = import_osim(raj, nonlinear="exact", hooks=())
+    cmap = coordinate_map(model)
+    raw = read_trial(walk / "coordinates.sto", strict=False)
+    ch = {n.split("/")[-2]: np.asarray(raw[n]) for n in raw.names}
+    ch.update({c: np.full(raw.n_frames, cmap.defaults[c]) for c in cmap.osim_coordinates if c not in ch})
+    for dep, indep, f, scale in cmap.couplers:        # the file's patella angles are not the coupling's
+        ch[dep] = scale * f.value(ch[indep[0]])
+    trial = Trial(raw.time, {c: ch[c] for c in cmap.osim_coordinates})
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        X = np.column_stack([trial.time] + [trial[c] for c in cmap.osim_coordinates])
+        coords = tmp / "coordinates.sto"
+        with open(coords, "w") as fh:
+            fh.write(f"Coordinates\nversion=1\nnRows={X.shape[0]}\nnColumns={X.shape[1]}\ninDegrees=no\nendheader\n")
+            fh.write("\t".join(["time", *cmap.osim_coordinates]) + "\n")
+            np.savetxt(fh, X, delimiter="\t", fmt="%.12g")
+        xml = (raj.parent / "grf_walk.xml").read_text().replace(
+            "<datafile>grf_walk.mot</datafile>", f"<datafile>{walk / 'grf_walk.mot'}</datafile>")
+        (tmp / "grf_walk.xml").write_text(xml)
+        loads = read_external_loads(tmp / "grf_walk.xml")
+        grf = read_trial(Path(loads.datafile), strict=False)
+        t_id = _best(lambda: inverse_dynamics_result(model, trial, cutoff=0, grf=grf, grf_cutoff=0,
+                                                     external_loads=loads), repeat)
+
+        def opensim():
+            with harness.quiet(osim):
+                t0 = time.perf_counter()
+                om = osim.Model(str(raj))       # kept alive: the tool holds only a pointer to it
+                tool = osim.InverseDynamicsTool()
+                tool.setModel(om)
+                tool.setCoordinatesFileName(str(coords))
+                tool.setExternalLoadsFileName(str(tmp / "grf_walk.xml"))
+                tool.setLowpassCutoffFrequency(-1)
+                tool.setStartTime(float(trial.time[0]))
+                tool.setEndTime(float(trial.time[-1]))
+                excluded = osim.ArrayStr()
+                excluded.append("Muscles")
+                tool.setExcludedForces(excluded)
+                tool.setResultsDir(str(tmp))
+                ok = tool.run()
+                dt = time.perf_counter() - t0
+            assert ok, "OpenSim's InverseDynamicsTool failed on RajagopalWalk"
+            return dt
+
+        t_os = min(opensim() for _ in range(repeat))
+    print(f"Rajagopal walk ({trial.n_frames} frames), exact knee, no filter:")
+    print(f"  ID compute, pinmsk:                        {1e3 * t_id:.2f} ms")
+    print(f"  ID, OpenSim InverseDynamicsTool (run):     {1e3 * t_os:.1f} ms  -> pinmsk compute "
+          f"{t_os / t_id:.0f}x faster (target >= 50x)")
 
 
 if __name__ == "__main__":

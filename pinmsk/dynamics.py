@@ -54,8 +54,8 @@ def inverse_dynamics_array(model, motion: Motion, *, external: Sequence[skeleton
     if components and external and model.contacts:
         _ground_acts_once(model, external)
     tau = skeleton.rnea(model, motion.q, motion.v, motion.a, external=external,
-                                    progress=progress)
-    if components:
+                        progress=progress, data=None if data is None else data.pin)
+    if components and model.components:
         for f in component_forces(model, motion, data=data).values():
             tau -= f
     return actuated_forces(model, motion, tau) if actuated else tau
@@ -107,9 +107,10 @@ def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, ex
                          notes=inputs.notes + ("external wrenches given by the caller on "
                                                + ", ".join(e.frame for e in ext),))
     motion = inputs.motion
-    tau = inverse_dynamics_array(model, motion, external=ext, components=components, progress=progress,
+    data = model.create_data()      # one workspace for the whole analysis (a Data costs ms on a large model)
+    tau = inverse_dynamics_array(model, motion, external=ext, components=components, progress=progress, data=data,
                                  actuated=False)
-    residuals = floating_base_residuals(model, motion, tau, ext)
+    residuals = floating_base_residuals(model, motion, tau, ext, data=data.pin)
     names, q_out, tau_out = source_coordinates(model, motion, tau)
     chans = {c: q_out[:, i] for i, c in enumerate(names)}
     chans.update({m: tau_out[:, i] for i, m in enumerate(moment_channels(names))})

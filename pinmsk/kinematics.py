@@ -146,10 +146,26 @@ def has_ground_reaction(trial: Trial) -> bool:
     return any(parse_ground_reaction(n) is not None for n in trial.names)
 
 
+#: is_planar's answers by skeleton (its Data costs ms to create on a large model, each ID asks): a few
+#: skeletons, kept alive with their answers so that their ids stay theirs.
+_PLANAR: dict[int, tuple[object, bool]] = {}
+
+
 def is_planar(model) -> bool:
     """Whether every joint moves in the x-y plane (translations in x, y; rotations about z)."""
-    import pinocchio as pin
     pm = model.pin
+    hit = _PLANAR.get(id(pm))
+    if hit is not None and hit[0] is pm:
+        return hit[1]
+    out = _is_planar(pm)
+    if len(_PLANAR) >= 16:
+        _PLANAR.pop(next(iter(_PLANAR)))
+    _PLANAR[id(pm)] = (pm, out)
+    return out
+
+
+def _is_planar(pm) -> bool:
+    import pinocchio as pin
     if pm.nv == 0:
         return False
     pd = pm.createData()
@@ -258,7 +274,7 @@ def source_coordinates(model, motion: Motion, tau: np.ndarray) -> tuple[tuple[st
             for c in cmap.osim_coordinates if c in model.coordinates or c in motion.signals}
     q = np.column_stack([cols[c] if c in cols else np.full(motion.n_frames, cmap.welded.get(c, cmap.defaults[c]))
                          for c in cmap.osim_coordinates])
-    return cmap.osim_coordinates, q, cmap.generalized_forces(cols, tau, couplers=False)
+    return cmap.osim_coordinates, q, cmap.generalized_forces(q, tau, couplers=False)
 
 
 def trial_coordinates(model) -> tuple[str, ...]:
@@ -431,12 +447,13 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
         return TrialInputs(mo, (), (), Filtering(c, grf_cutoff=gc))
     data = grf if grf is not None else trial
     planar = is_planar(model)
-    if grf is not None:
+    if external_loads is not None or model.nq != model.nv:
+        q_g = None          # an ExternalLoads file names each load's body: no foot search, no poses needed
+    elif grf is not None:
         tg = np.asarray(grf.time, dtype=float)
-        q_g = np.column_stack([np.interp(tg, mo.t, mo.q[:, j]) for j in range(model.nq)]) \
-            if model.nq == model.nv else None
+        q_g = np.column_stack([np.interp(tg, mo.t, mo.q[:, j]) for j in range(model.nq)])
     else:
-        q_g = mo.q if model.nq == model.nv else None
+        q_g = mo.q
     try:
         plist, ext = _plate_loads(model, data, mo, cutoff=gc, external_loads=external_loads, frames=frames,
                                   planar=planar, q_on_grf_time=q_g, same_time=grf is None)

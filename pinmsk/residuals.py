@@ -127,13 +127,14 @@ def _spans(t: np.ndarray, idx: np.ndarray, most: int = 6) -> str:
     return ", ".join(parts)
 
 
-def floating_base_residuals(model, motion, tau: np.ndarray, external=()) -> ResidualReport:
+def floating_base_residuals(model, motion, tau: np.ndarray, external=(), *, data=None) -> ResidualReport:
     """Residuals of ``tau`` (N, nv, inverse dynamics) at the model's unactuated coordinates.
 
     ``external`` are the :class:`pinmsk.skeleton.ExternalForce` s used in that
     inverse dynamics; their summed force gives the peak external force.  The COM
     height is the mean height of the model's centre of mass above the lowest
-    point of application of the loads (the ground), or above ``y = 0``.
+    point of application of the loads (the ground), or above ``y = 0``.  ``data``: a Pinocchio Data of
+    the model to work in (default a new one).
     """
     import pinocchio as pin
 
@@ -152,7 +153,7 @@ def floating_base_residuals(model, motion, tau: np.ndarray, external=()) -> Resi
     else:
         f_peak = 0.0
     pm = model.pin
-    pd = pm.createData()
+    pd = pm.createData() if data is None else data
     rows = np.unique(np.linspace(0, t.size - 1, min(t.size, 50)).astype(int))
     heights = [float(pin.centerOfMass(pm, pd, motion.q[k]) @ up) for k in rows]
     com_h = float(np.mean(heights))

@@ -109,20 +109,25 @@ def rnea(model, q, v, a, *, external: Sequence[ExternalForce] = (),
         return out
     joints = [_frame_joint(pm, e.frame) for e in external]
     wrenches = [world_wrench(e, n) for e in external]
-    fext = pin.StdVec_Force()
-    for _ in range(pm.njoints):
-        fext.append(pin.Force.Zero())
-    loaded = sorted(set(joints))          # only these entries are ever non-zero: reset just them
+    # tau = rnea(q, v, a) - sum_j J_j(q)^T W_j, with W_j the world wrench about the origin and J_j the
+    # joint's Jacobian in the world frame (WORLD: the motion subspaces of its supporting joints, at the
+    # origin, as computeJointJacobians leaves them in data.J): two Pinocchio calls a frame, the products
+    # batched over frames, instead of a Force built, moved and summed per load and frame
+    loaded = sorted(set(joints))
+    W = {j: sum(w for jj, w in zip(joints, wrenches) if jj == j) for j in loaded}
+    cols = {j: [pm.joints[s].idx_v + k for s in pm.supports[j][1:] for k in range(pm.joints[s].nv)] for j in loaded}
+    used = sorted({c for cs in cols.values() for c in cs})
+    J = np.empty((n, 6, len(used)))
     for start in range(0, n, PROGRESS_CHUNK):
         for i in range(start, min(start + PROGRESS_CHUNK, n)):
-            pin.forwardKinematics(pm, pd, q[i])
-            for j in loaded:
-                fext[j].setZero()
-            for jid, w in zip(joints, wrenches):
-                fext[jid] = fext[jid] + pd.oMi[jid].actInv(pin.Force(w[i]))
-            out[i] = rnea(pm, pd, q[i], v[i], a[i], fext)
+            out[i] = rnea(pm, pd, q[i], v[i], a[i])
+            J[i] = pin.computeJointJacobians(pm, pd, q[i])[:, used]
         if progress is not None:
             progress.update(min(PROGRESS_CHUNK, n - start))
+    where = {c: k for k, c in enumerate(used)}
+    for j in loaded:
+        k = [where[c] for c in cols[j]]
+        out[:, cols[j]] -= np.einsum("nrc,nr->nc", J[:, :, k], W[j])
     return out
 
 

@@ -383,7 +383,7 @@ def test_a_muscle_on_the_coupled_patella_is_fitted_along_its_coupler(tmp_path):
     p.write_text(text[:end] + rf + text[end:])
     model, report = import_osim(p)
     assert "knee_beta" not in model.coordinates and "rf" in model.muscle_names
-    (note,) = [e for e in report.entries if "following their couplers" in e.became]
+    (note,) = [e for e in report.entries if "fitted along the coupling" in e.became]
     assert "knee_beta" in note.became and "knee_angle" in note.became
     i, j = model.muscle_names.index("rf"), model.coordinate_index("knee_angle")
     assert model.muscles.path.terms[i]["coordinates"] == ("knee_angle",)

@@ -1039,10 +1039,11 @@ def test_shared_models_parse_build_and_report(key):
     assert (model.nq if cmap is None else len(cmap.osim_coordinates)) == len(doc.coordinates)
     assert model.mass == pytest.approx(sum(b.mass for b in doc.bodies), abs=1e-9)
     assert np.allclose(model.gravity, doc.gravity)
-    # each muscle is imported (the default hook: up to 40 muscles) or reported as not imported
+    # each muscle is imported (the default hook: up to MAX_MUSCLES muscles) or reported as not imported
     missing = {e.element for e in report.not_imported}
     assert {m.name for m in doc.muscles if m.where not in missing} <= set(model.muscle_names)
-    assert (model.n_muscles > 0) == (len(doc.muscles) <= 40)
+    from pinmsk.opensim.muscle_import import MAX_MUSCLES
+    assert (model.n_muscles > 0) == (len(doc.muscles) <= MAX_MUSCLES)
     approx = [e for e in report.approximations if e.details.get("kind") != "muscle paths"]   # the joints
     assert not approx                   # the default (nonlinear="exact") holds every joint exactly
     if key in KNEE_FIT:

@@ -334,8 +334,9 @@ def test_moco_2d_gait_full_import_round_trip(tmp_path):
 def test_rajagopals_thirteen_actuators_round_trip(tmp_path):
     path = _shared(RAJAGOPAL)
     direct = _quiet(pinmsk.load_model, path)
-    assert direct.muscles is None                                  # 80 muscles: not fitted by default
+    assert len(direct.muscle_names) == 80                          # fitted along the patella couplers
     back = pinmsk.load_model(write_import(direct, tmp_path)["sidecar"])
+    assert back.muscle_names == direct.muscle_names
     _same_components(direct, back)
     assert len(back.effects) == 13 and not back.contacts
     m = _one_muscle(direct, "knee_angle_r")

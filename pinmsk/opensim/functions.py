@@ -175,6 +175,9 @@ class MultiplierFunction(Function):
     def derivative(self, x, order=1, component=0):
         return self.scale * self.function.derivative(x, order, component)
 
+    def evaluate(self, x):
+        return tuple(self.scale * v for v in self.function.evaluate(x))
+
     def affine(self):
         a = self.function.affine()
         return None if a is None else (self.scale * a[0], self.scale * a[1])
@@ -272,6 +275,27 @@ class _Knotted(Function):
             out[inner] = 2.0 * self.c[k] + 6.0 * t * self.d[k]
         out[np.isnan(a)] = np.nan
         return self._out(out, scalar)
+
+    def evaluate(self, x):
+        # value() and both derivative()s from one region split and one bisection (the same numbers)
+        a, scalar, lo, hi, at0, at1, inner = self._regions(x)
+        f, d1, d2 = np.empty(a.shape), np.empty(a.shape), np.empty(a.shape)
+        f[lo] = self.y[0] + (a[lo] - self.x[0]) * self.b[0]
+        f[hi] = self.y[-1] + (a[hi] - self.x[-1]) * self.b[-1]
+        f[at0], f[at1] = self.y[0], self.y[-1]
+        d1[lo | at0], d1[hi | at1] = self.b[0], self.b[-1]
+        d2[lo | hi] = 0.0
+        d2[at0], d2[at1] = 2.0 * self.c[0], 2.0 * self.c[-1]
+        ai = a[inner]
+        k = self._interval(ai)
+        t = ai - self.x[k]
+        b, c, d = self.b[k], self.c[k], self.d[k]
+        f[inner] = self.y[k] + t * (b + t * (c + t * d))
+        d1[inner] = b + t * (2.0 * c + 3.0 * t * d)
+        d2[inner] = 2.0 * c + 6.0 * t * d
+        nan = np.isnan(a)
+        f[nan] = d1[nan] = d2[nan] = np.nan
+        return self._out(f, scalar), self._out(d1, scalar), self._out(d2, scalar)
 
     def affine(self):
         if self.x.size == 2:

@@ -80,7 +80,7 @@ def muscle_hook(doc: OsimDocument, skeleton: Skeleton, *, ranges=None, max_muscl
     if max_muscles is not None and len(chosen) > max_muscles:
         return HookResult(entries=(ReportEntry(
             element=f"{doc.source}: <ForceSet> {len(chosen)} muscles",
-            became=(f"muscles not imported by default: fitting {len(chosen)} muscle paths takes about 0.3 s per "
+            became=(f"muscles not imported by default: fitting {len(chosen)} muscle paths takes about 0.05 s per "
                     f"muscle (more than {max_muscles} muscles); import them with pinmsk.model.import_osim(path, "
                     "hooks=[pinmsk.opensim.muscle_import.muscle_hook])"), status=NOTE),))
     names = [m.name for m in chosen]
@@ -98,24 +98,22 @@ def muscle_hook(doc: OsimDocument, skeleton: Skeleton, *, ranges=None, max_muscl
     locked = {c.name: c.default_value for c in doc.coordinates if c.locked}
     model_coords = tuple(skeleton.pin_model.names[j] for j in range(1, skeleton.pin_model.njoints))
     crossing = _crossed_coordinates(doc, kin, specs)
-    fit_coords = tuple(c for c in kin.coordinates if c not in locked and any(c in cs for cs in crossing.values()))
-    # an exact skeleton's coordinate that drives only dependent joints (Rajagopal's patella angle) and is
-    # coupled to joints (an enforced CoordinateCouplerConstraint) follows its coupler in the paths' placements,
-    # as OpenSim enforces it: the paths are fitted in the independent coordinates, their moment arms include
-    # the coupling (refused below if a path point names the coordinate itself)
-    couplers = {dep: (indep, f, scale) for dep, indep, f, scale in skeleton.coordinate_map.couplers} \
-        if skeleton.coordinate_map is not None else {}
-    by_coupler = [c for c in fit_coords if c not in model_coords and c in couplers
-                  and all(i in model_coords for i in couplers[c][0]) and not any(c in sp.coordinates for sp in specs)]
-    need = {c for c in fit_coords if c not in by_coupler} | {i for c in by_coupler for i in couplers[c][0]}
-    fit_coords = tuple(c for c in kin.coordinates if c in need and c not in locked)
+    # coupled coordinates (CoordinateCouplerConstraint) are set from their independent ones in every
+    # sampled pose, as the model ties them: no pose the model cannot take, moment arms with the coupling
+    couplers = tuple(c for c in skeleton.coordinate_map.couplers if c[0] not in locked)
+    coupled = {c[0] for c in couplers}
+    # a coupled coordinate's muscles cross its independent coordinates
+    crossing = {m: cs | {c for d, ind, _, _ in couplers if d in cs for c in ind} for m, cs in crossing.items()}
+    crossed = set().union(*crossing.values())
+    fit_coords = tuple(c for c in kin.coordinates if c in crossed and c not in locked and c not in coupled)
     missing = sorted(c for c in fit_coords if c not in model_coords)
     if missing:
         raise ModelError(f"{doc.source}: the muscle paths depend on coordinate(s) {missing}, which the imported "
                          "skeleton does not have as joints (import with nonlinear='fit')")
     lock_cols = [(kin.coordinates.index(c), v) for c, v in locked.items()]
-    coupled_cols = [(kin.coordinates.index(c), [kin.coordinates.index(i) for i in couplers[c][0]], couplers[c][1],
-                     float(couplers[c][2])) for c in by_coupler]
+    # the geometric paths hold the couplers too (muscle analysis, the viewer): OpenSim enforces them
+    coupled_cols = [(kin.coordinates.index(d), [kin.coordinates.index(i) for i in ind], f, float(scale))
+                    for d, ind, f, scale in couplers]
 
     geometric = GeometricPaths(specs, coordinates=kin.coordinates,
                                placements=_Placements(kin, lock_cols, coupled_cols))
@@ -124,26 +122,22 @@ def muscle_hook(doc: OsimDocument, skeleton: Skeleton, *, ranges=None, max_muscl
     if unknown:
         raise ModelError(f"{doc.source}: muscle fit ranges name coordinate(s) {unknown} the model does not have")
     ranges = {**_fit_ranges(doc, skeleton), **{c: (float(lo), float(hi)) for c, (lo, hi) in given.items()}}
-    path, fits = fit_polynomial_paths(geometric, ranges=ranges, coordinates=fit_coords, n_train=FIT_SAMPLES,
-                                      n_test=TEST_SAMPLES, max_degree=MAX_DEGREE, tolerance=TOLERANCE,
-                                      model_coordinates=model_coords)
+    path, fits = fit_polynomial_paths(geometric, ranges=ranges, coordinates=fit_coords, couplings=couplers,
+                                      crossing=crossing,
+                                      n_train=FIT_SAMPLES, n_test=TEST_SAMPLES, max_degree=MAX_DEGREE,
+                                      tolerance=TOLERANCE, model_coordinates=model_coords)
     muscles = MuscleSet(names=names, model_type=imp.model_type, mtu=imp.mtu, path=path, tendon=imp.tendon)
 
     entries = _fit_entries(doc, chosen, fits, ranges)
-    if by_coupler:
+    used = [c for c in couplers if c[0] in crossed]
+    if used:
         entries.append(ReportEntry(
             element=f"{doc.source}: <ConstraintSet>", status=NOTE,
-            became=(f"muscle paths fitted with the coupled coordinate(s) {', '.join(by_coupler)} following their "
-                    "couplers (as OpenSim enforces them; they drive only dependent joints): the moment arms about "
-                    f"{', '.join(sorted({i for c in by_coupler for i in couplers[c][0]}))} include the coupling")))
-    coupled = sorted({c["dependent"] for c in skeleton.couplings} & set(fit_coords))
-    if coupled:
-        # the fit samples a coupled coordinate on its own; OpenSim's moment arm about the independent
-        # coordinate would include the coupling
-        entries.append(ReportEntry(
-            element=f"{doc.source}: <ConstraintSet>", status=NOTE,
-            became=(f"muscle paths fitted with the coupled coordinate(s) {', '.join(coupled)} as independent "
-                    "variables (sampled over their own ranges); their moment arms do not include the coupling")))
+            became=("muscle paths fitted along the coupling(s) " + "; ".join(
+                f"{d} = {s:g} * {f!r}({', '.join(ind)})" for d, ind, f, s in used)
+                + ": every sampled pose sets the coupled coordinate as the model ties it; the polynomials are "
+                "in the independent coordinates and their moment arms include the coupling (as OpenSim's "
+                "MomentArmSolver computes them); about the coupled coordinates they are 0")))
     notes = summarize_notes(imp.notes)
     entries.append(ReportEntry(
         element=f"{doc.source}: <ForceSet> {len(chosen)} muscles",
@@ -154,8 +148,9 @@ def muscle_hook(doc: OsimDocument, skeleton: Skeleton, *, ranges=None, max_muscl
     return HookResult(muscles=muscles, entries=tuple(entries), handled=tuple(m.where for m in chosen))
 
 
-#: The most muscles the default hook fits at import (Rajagopal's 80 take 22-35 s on 2 shared cores).
-MAX_MUSCLES = 40
+#: The most muscles the default hook fits at import (Rajagopal's 80, the largest shared model, take
+#: 3-4.5 s of CPU with its skeleton on 2 loaded shared cores: benchmarks/bench_osim_import.py).
+MAX_MUSCLES = 120
 
 
 def default_muscle_hook(doc: OsimDocument, skeleton: Skeleton):

@@ -1945,26 +1945,145 @@ def _design(x, scale, exps):
     return A, D
 
 
-def fit_polynomial_paths(paths: GeometricPaths, *, ranges: Mapping[str, tuple], coordinates=None,
-                         n_train: int = 2000, n_test: int = 500, max_degree: int = 6,
+def _apply_couplings(q, names, couplings, fit_cols):
+    """Set the coupled coordinates of poses ``q`` (n, nq) from their independent ones, in the order given,
+    and return the Jacobian ``d q / d q[:, fit_cols]`` (n, nq, nf) of the whole pose in the sampled
+    coordinates (the chain rule through each coupling)."""
+    n, nq = q.shape
+    J = np.zeros((n, nq, len(fit_cols)))
+    J[:, fit_cols, np.arange(len(fit_cols))] = 1.0
+    index = {c: j for j, c in enumerate(names)}
+    for dep, indep, function, scale in couplings:
+        cols = [index[c] for c in indep]
+        x = q[:, cols[0]] if len(cols) == 1 else q[:, cols]
+        q[:, index[dep]] = scale * function.value(x)
+        J[:, index[dep]] = scale * sum(function.derivative(x, 1, k)[:, None] * J[:, j] for k, j in enumerate(cols))
+    return J
+
+
+def _lengths_and_total_arms(paths: GeometricPaths, q, J, fit_names, dependent, crossing):
+    """Lengths (n, m) and moment arms about ``fit_names`` (n, m, nf), total derivatives through the
+    couplings (``J`` = d q / d q_fit, (n, nq, nf)).  With ``crossing``, muscles are evaluated in sets
+    that share no coordinate (e.g. one leg's, the other's), each differentiated only in its own
+    coordinates: the finite differences' cost is per coordinate."""
+    names = paths.coordinates
+    every = fit_names + dependent
+    jcols = [names.index(c) for c in every]
+    sets = [[i] for i in range(len(paths.muscles))] if crossing is not None else [list(range(len(paths.muscles)))]
+    need = [set(every) if crossing is None else set(crossing.get(paths.muscles[i], ())) & set(every)
+            for i in range(len(paths.muscles))]
+    merged: list[tuple[list[int], set]] = []
+    for members, c in zip(sets, need if crossing is not None else [set(every)]):
+        joined = [k for k, (_, s) in enumerate(merged) if s & c]
+        for k in reversed(joined):
+            m2, s2 = merged.pop(k)
+            members, c = m2 + members, s2 | c
+        merged.append((members, c))
+    n = q.shape[0]
+    lengths = np.zeros((n, len(paths.muscles)))
+    arms = np.zeros((n, len(paths.muscles), len(fit_names)))
+    for members, c in merged:
+        members = sorted(members)
+        sub = paths if len(members) == len(paths.muscles) else GeometricPaths(
+            [paths.specs[i] for i in members], coordinates=names, placements=paths._placements,
+            match_opensim=paths.match_opensim)
+        use = [k for k, name in enumerate(every) if name in c]
+        l, r = sub.lengths_and_moment_arms(q, coordinates=[every[k] for k in use])
+        lengths[:, members] = l
+        arms[:, members] = np.einsum("nmc,ncf->nmf", r, J[:, [jcols[k] for k in use]])
+    return lengths, arms
+
+
+def _fit_group(members, x_tr, x_te, scale, l_tr, r_tr, l_te, r_te, r_rest, *, max_degree, tolerance):
+    """Polynomials of the muscles ``members`` that cross the same k coordinates (scaled poses ``x_tr``,
+    ``x_te`` (n, k)), fitted together: one design matrix per degree, the muscles as right-hand sides.
+    ``r_tr``/``r_te`` (n, m, k) are the moment arms about those coordinates, ``r_rest`` (n_te, m, *) the
+    held-out arms about the others (the polynomial's are 0 there).  Returns ``{muscle: (degree,
+    exponents, coefficients, (length max, length rms, arm max, arm rms))}``, each muscle at the lowest
+    degree whose held-out errors are below ``tolerance``, else at its best one."""
+    import scipy.linalg
+
+    n_tr, k = x_tr.shape
+    top = 0            # the degrees tried: 1 .. max_degree while the terms do not outnumber half the equations
+    for degree in range(1, (max_degree if k else 0) + 1):
+        if _monomials(k, degree).shape[0] > n_tr * (1 + k) // 2:
+            break
+        top = degree
+    exps = _monomials(k, top)                           # by degree: a lower degree's design is a leading slice
+    A_tr, D_tr = _design(x_tr, scale, exps)
+    A_te, D_te = _design(x_te, scale, exps)
+    total = exps.sum(axis=1)
+    rest = np.abs(r_rest).max(axis=(0, 2), initial=0.0)
+    rest_sq = (r_rest ** 2).sum(axis=(0, 2))
+    n_arm = r_te.shape[0] * (k + r_rest.shape[2])
+    todo, best = list(members), {}
+    for degree in range(1 if k else 0, top + 1):
+        T = int(np.count_nonzero(total <= degree))
+        M = np.concatenate([A_tr[:, :T], -D_tr[:, :, :T].transpose(1, 0, 2).reshape(-1, T)])
+        Y = np.concatenate([l_tr[:, todo], r_tr[:, todo].transpose(2, 0, 1).reshape(-1, len(todo))])
+        # QR with column pivoting (LAPACK gelsy): the minimum-norm least-squares solution, faster than SVD
+        coef = scipy.linalg.lstsq(M, Y, lapack_driver="gelsy", check_finite=False)[0]      # (T, len(todo))
+        el = A_te[:, :T] @ coef - l_te[:, todo]                                              # (n_te, len(todo))
+        er = -np.einsum("nvt,tm->nmv", D_te[:, :, :T], coef) - r_te[:, todo]                 # (n_te, len(todo), k)
+        still = []
+        for col, i in enumerate(todo):
+            stats = (float(np.abs(el[:, col]).max()), float(np.sqrt(np.mean(el[:, col] ** 2))),
+                     float(max(np.abs(er[:, col]).max(initial=0.0), rest[i])) if n_arm else 0.0,
+                     float(np.sqrt(((er[:, col] ** 2).sum() + rest_sq[i]) / n_arm)) if n_arm else 0.0)
+            worst = max(stats[0], stats[2])
+            if i not in best or worst < best[i][0]:
+                best[i] = (worst, degree, exps[:T], coef[:, col].copy(), stats)
+            if worst >= tolerance:
+                still.append(i)
+        todo = still
+        if not todo:
+            break
+    return {i: b[1:] for i, b in best.items()}
+
+
+def fit_polynomial_paths(paths: GeometricPaths, *, ranges: Mapping[str, tuple], coordinates=None, couplings=(),
+                         crossing: Mapping[str, Sequence[str]] | None = None, n_train: int = 2000, n_test: int = 500, max_degree: int = 6,
                          tolerance: float = 1e-4, threshold: float = 1e-6, seed: int = 0,
                          model_coordinates=None):
     """Fit each muscle's length with a polynomial in the coordinates it crosses.
 
     Poses are sampled in ``ranges`` (Latin hypercube) over ``coordinates``
-    (default: all of ``paths.coordinates``; the others stay at 0).  A muscle
-    crosses coordinate j where some sampled moment arm exceeds ``threshold``
-    (m).  Lengths and moment arms are fitted together by least squares (the
-    moment arms are ``-dl/dq`` of the same polynomial); the degree is the lowest
-    (1 .. ``max_degree``) whose largest length and moment-arm errors on ``n_test``
-    held-out poses are below ``tolerance`` (m), else the one with the smallest
-    such error.  Returns ``(PolynomialPath, reports)``; the path's coordinates
-    are ``model_coordinates`` (default ``paths.coordinates``).
+    (default: all of ``paths.coordinates`` but the coupled ones; the others stay at 0).
+    ``couplings`` -- ``(dependent, independent names, function, scale)`` each, OpenSim's
+    CoordinateCouplerConstraint ``dependent = scale * function(*independent)`` (as
+    :attr:`pinmsk.opensim.skeleton.CoordinateMap.couplers` holds them) -- sets each
+    dependent coordinate in every pose as the model ties it, so no pose is one the model
+    cannot take; the dependent coordinates are no variables of the polynomials and the
+    moment arms about the independent ones are total derivatives, the coupling included
+    (as OpenSim's ``MomentArmSolver`` computes them).  A muscle crosses coordinate j where
+    some sampled moment arm exceeds ``threshold`` (m) and, if ``crossing`` (``{muscle:
+    coordinates}``, e.g. those of the joints between its bodies) is given, j is among its
+    coordinates there: OpenSim's moment arm of a path over several wrap objects is not
+    always zero about a joint that moves all its bodies together (its cached tangent
+    points, :class:`GeometricPaths` ``match_opensim``), while the length does not change.  Lengths and moment arms are fitted
+    together by least squares (the moment arms are ``-dl/dq`` of the same polynomial); the
+    degree is the lowest (1 .. ``max_degree``) whose largest length and moment-arm errors on
+    ``n_test`` held-out poses are below ``tolerance`` (m), else the one with the smallest
+    such error.  Returns ``(PolynomialPath, reports)``; the path's coordinates are
+    ``model_coordinates`` (default ``paths.coordinates``).
     """
+    from threadpoolctl import threadpool_limits
+
     from ..muscles.paths import PolynomialPath
 
     names = tuple(paths.coordinates)
-    fit_names = tuple(names if coordinates is None else coordinates)
+    couplings = tuple(c for c in couplings if c[0] in names)
+    dependent = tuple(c[0] for c in couplings)
+    for dep, indep, _, _ in couplings:
+        missing = [c for c in indep if c not in names]
+        if missing:
+            raise ModelError(f"coupling of {dep!r}: its independent coordinate(s) {missing} are not among the "
+                             f"paths' coordinates")
+    fit_names = tuple(c for c in names if c not in dependent) if coordinates is None else tuple(coordinates)
+    tied = [c for c in fit_names if c in dependent]
+    if tied:
+        raise ModelError(f"coordinate(s) {tied} are coupled to others (couplings=): they are set from the "
+                         "coupling in every pose, not sampled; leave them out of coordinates=")
     cols = paths._coordinate_columns(fit_names)
     model_coordinates = tuple(names if model_coordinates is None else model_coordinates)
 
@@ -1973,49 +2092,42 @@ def fit_polynomial_paths(paths: GeometricPaths, *, ranges: Mapping[str, tuple], 
         q[:, cols] = sample_poses(ranges, fit_names, n, seed=s)
         return q
 
-    q_tr, q_te = poses(n_train, seed), poses(n_test, seed + 1)
+    q_all = np.concatenate([poses(n_train, seed), poses(n_test, seed + 1)])
+    J = _apply_couplings(q_all, names, couplings, cols)
     # one evaluation of both sets: the wrapping code's cost is mostly per call, not per pose
-    l_all, r_all = paths.lengths_and_moment_arms(np.concatenate([q_tr, q_te]), coordinates=fit_names)
-    l_tr, r_tr, l_te, r_te = l_all[:len(q_tr)], r_all[:len(q_tr)], l_all[len(q_tr):], r_all[len(q_tr):]
-    terms, reports = [], []
-    for i, muscle in enumerate(paths.muscles):
-        crossed = [k for k in range(len(cols)) if np.max(np.abs(r_tr[:, i, k])) > threshold]
-        cnames = tuple(fit_names[k] for k in crossed)
-        lo = np.array([ranges[c][0] for c in cnames], dtype=float)
-        hi = np.array([ranges[c][1] for c in cnames], dtype=float)
-        center, scale = 0.5 * (lo + hi), np.maximum(0.5 * (hi - lo), 1e-9)
-        qc_tr = q_tr[:, [cols[k] for k in crossed]]
-        qc_te = q_te[:, [cols[k] for k in crossed]]
-        x_tr, x_te = (qc_tr - center) / scale, (qc_te - center) / scale
-        best = None
-        for degree in range(0 if not crossed else 1, (0 if not crossed else max_degree) + 1):
-            exps = _monomials(len(crossed), degree)
-            if exps.shape[0] > n_train * (1 + len(crossed)) // 2:
-                break
-            A, D = _design(x_tr, scale, exps)
-            M = np.concatenate([A, -D.transpose(1, 0, 2).reshape(-1, exps.shape[0])])
-            y = np.concatenate([l_tr[:, i], r_tr[:, i, crossed].T.reshape(-1)])
-            coef = np.linalg.lstsq(M, y, rcond=None)[0]
-            At, Dt = _design(x_te, scale, exps)
-            el = At @ coef - l_te[:, i]
-            er = (-(Dt @ coef)).T - r_te[:, i, crossed].T if crossed else np.zeros((0, len(q_te)))
-            # coordinates not crossed: the polynomial's arm is 0; their sampled arms are <= threshold
-            others = [k for k in range(len(cols)) if k not in crossed]
-            er_all = np.concatenate([er.reshape(-1), r_te[:, i, others].reshape(-1)])
-            stats = (float(np.max(np.abs(el))), float(np.sqrt(np.mean(el ** 2))),
-                     float(np.max(np.abs(er_all))) if er_all.size else 0.0,
-                     float(np.sqrt(np.mean(er_all ** 2))) if er_all.size else 0.0)
-            worst = max(stats[0], stats[2])
-            if best is None or worst < best[0]:
-                best = (worst, degree, exps, coef, stats)
-            if worst < tolerance:
-                break
-        _, degree, exps, coef, stats = best
-        terms.append({"coordinates": cnames, "center": center, "scale": scale, "exponents": exps,
-                      "coefficients": coef})
-        reports.append(PolynomialFitReport(muscle=muscle, coordinates=cnames, degree=degree, n_terms=len(coef),
-                                           length_max=stats[0], length_rms=stats[1], moment_arm_max=stats[2],
-                                           moment_arm_rms=stats[3], n_train=int(n_train), n_test=int(n_test)))
+    l_all, r_all = _lengths_and_total_arms(paths, q_all, J, fit_names, dependent, crossing)
+    ntr = int(n_train)
+    l_tr, r_tr, l_te, r_te = l_all[:ntr], r_all[:ntr], l_all[ntr:], r_all[ntr:]
+    q_tr, q_te = q_all[:ntr], q_all[ntr:]
+    # muscles crossing the same coordinates share their design matrices: one least-squares solve per
+    # group and degree, with the group's muscles as right-hand sides (the same numbers as one by one)
+    crossed = [tuple(k for k in range(len(cols)) if np.max(np.abs(r_tr[:, i, k]), initial=0.0) > threshold
+                     and (crossing is None or fit_names[k] in crossing.get(muscle, ())))
+               for i, muscle in enumerate(paths.muscles)]
+    groups: dict[tuple, list[int]] = {}
+    for i, c in enumerate(crossed):
+        groups.setdefault(c, []).append(i)
+    terms, reports = [None] * len(paths.muscles), [None] * len(paths.muscles)
+    # one BLAS thread: OpenBLAS's threads slow these many mid-sized solves down several-fold on a busy
+    # machine (Rajagopal's 80 muscles: 18 s with two threads, 4.4 s with one, on 2 loaded cores)
+    with threadpool_limits(limits=1):
+        for group, members in groups.items():
+            cnames = tuple(fit_names[j] for j in group)
+            lo = np.array([ranges[c][0] for c in cnames], dtype=float)
+            hi = np.array([ranges[c][1] for c in cnames], dtype=float)
+            center, scale = 0.5 * (lo + hi), np.maximum(0.5 * (hi - lo), 1e-9)
+            sel = [cols[j] for j in group]
+            others = [j for j in range(len(cols)) if j not in group]
+            fits = _fit_group(members, (q_tr[:, sel] - center) / scale, (q_te[:, sel] - center) / scale, scale,
+                              l_tr, r_tr[:, :, list(group)], l_te, r_te[:, :, list(group)], r_te[:, :, others],
+                              max_degree=max_degree, tolerance=tolerance)
+            for i, (degree, exps, coef, stats) in fits.items():
+                terms[i] = {"coordinates": cnames, "center": center, "scale": scale, "exponents": exps,
+                            "coefficients": coef}
+                reports[i] = PolynomialFitReport(muscle=paths.muscles[i], coordinates=cnames, degree=degree,
+                                                 n_terms=len(coef), length_max=stats[0], length_rms=stats[1],
+                                                 moment_arm_max=stats[2], moment_arm_rms=stats[3], n_train=ntr,
+                                                 n_test=int(n_test))
     path = PolynomialPath(muscles=paths.muscles, coordinates=model_coordinates, terms=terms)
     return path, tuple(reports)
 

@@ -60,7 +60,8 @@ from . import functions as fns
 from .report import APPROXIMATED, EXACT, NOT_IMPORTED, NOTE, ReportEntry
 
 __all__ = ["JointKinematics", "OsimKinematics", "Skeleton", "build_skeleton", "rotation", "rotation_xyz",
-           "UrdfLink", "UrdfJoint", "DependentCoordinate", "CoordinateMap", "LOCKED_MODES", "NONLINEAR_MODES"]
+           "UrdfLink", "UrdfJoint", "DependentCoordinate", "CoordinateMap", "LOCKED_MODES", "NONLINEAR_MODES",
+           "simbody_rotation_term"]
 
 LOCKED_MODES = ("joint", "weld")
 NONLINEAR_MODES = ("fit", "exact")
@@ -252,6 +253,49 @@ def _chain(frames) -> np.ndarray:
     for f in frames:
         T = T @ _offset(f.translation, f.orientation)
     return T
+
+
+def simbody_rotation_term(jk: JointKinematics, values: Mapping[str, np.ndarray],
+                           speeds: Mapping[str, np.ndarray], n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The angular acceleration (N, 3), in the joint's parent frame F, that Simbody's FunctionBased
+    mobilizer (OpenSim's CustomJoint) adds to the exact one, and the matrix W (N, 3, 3) whose columns
+    ``a1, R1 a2, R1 R2 a3`` turn rotation rates into the angular velocity.
+
+    ``FunctionBasedImpl::CacheInfo::buildHdot`` (simbody, MobilizedBodyImpl.h) differentiates W's second
+    and third columns with the angular velocity of the first mobility alone and of all but the third,
+    where the derivatives are those of the first rotation and of the first two.  The two agree when
+    rotation i is driven by mobility i only (or a rotation's axis is constant); otherwise -- Rajagopal's
+    walker knee turns about three axes, all functions of the knee angle -- OpenSim's accelerations (and so
+    its inverse dynamics) carry this velocity-product term, ``theta2' theta3' u^2 (R1 R2 a3 x R1 a2)``
+    for one coordinate.  pinmsk's chains are exact: this is for reporting and comparing."""
+    ax = jk.axes[:3]
+    mob = list(jk.coordinates)                       # Simbody's mobilities, in the joint's order
+    U = np.column_stack([np.broadcast_to(speeds[c], (n,)) for c in mob]) if mob else np.zeros((n, 0))
+    th, F = [], []
+    for a in ax:
+        x = np.column_stack([np.broadcast_to(values[c], (n,)) for c in a.coordinates]) if a.coordinates else None
+        arg = np.zeros(n) if x is None else (x[:, 0] if x.shape[1] == 1 else x)
+        th.append(a.function.value(arg))
+        d = np.zeros((n, len(mob)))
+        for k, c in enumerate(a.coordinates):
+            d[:, mob.index(c)] = a.function.derivative(arg, 1, k)
+        F.append(d)
+    R1 = rotation(ax[0].direction, th[0])
+    R2 = R1 @ rotation(ax[1].direction, th[1])
+    W = np.stack([np.broadcast_to(ax[0].direction, (n, 3)), R1 @ ax[1].direction, R2 @ ax[2].direction], axis=2)
+    Fm = np.stack(F, axis=1)                                             # (N, 3 rotations, n_mobilities)
+    rates = np.einsum("nrk,nk->nr", Fm, U)
+    U1 = U.copy()
+    U1[:, 1:] = 0.0
+    U2 = U.copy()
+    if len(mob) > 2:
+        U2[:, 2] = 0.0
+    V1 = np.einsum("nij,njk,nk->ni", W, Fm, U1)
+    V2 = np.einsum("nij,njk,nk->ni", W, Fm, U2)
+    w1 = W[:, :, 0] * rates[:, :1]
+    w12 = w1 + W[:, :, 1] * rates[:, 1:2]
+    dA = np.cross(V1 - w1, W[:, :, 1]) * rates[:, 1:2] + np.cross(V2 - w12, W[:, :, 2]) * rates[:, 2:3]
+    return dA, W
 
 
 class OsimKinematics:
@@ -529,41 +573,54 @@ class CoordinateMap:
                     else dict.fromkeys(self.osim_coordinates, 0.0))
         return _columns(q, self.osim_coordinates, defaults, f"CoordinateMap: {what}")
 
-    def _chain(self, f: fns.Function, x, J, v, a):
-        """Value, Jacobian row, speed and acceleration of ``f`` at argument columns ``x`` (N, k)."""
-        k = x.shape[1]     # >= 1: a dependent coordinate or coupler always has an argument
-        arg = x[:, 0] if k == 1 else x
-        val = f.value(arg)
-        d1 = [f.derivative(arg, 1, i) for i in range(k)]
-        Jrow = sum(d1[i][:, None] * J[:, i, :] for i in range(k))
-        vel = None if v is None else sum(d1[i] * v[:, i] for i in range(k))
+    def _chain(self, f: fns.Function, cols, Q, V, A, rows, *, value: bool = True):
+        """Value, Jacobian row, speed and acceleration of ``x = f(Q[:, cols])`` (None where not asked).
+
+        ``rows[c]`` is the Jacobian row of column ``c`` as ``{OpenSim column: (N,) coefficient}`` (the
+        sparse form: a coordinate depends on one or two others, so a dense (N, n, n) matrix would be
+        mostly zeros); the result's row is the chain rule through them."""
+        k = len(cols)       # >= 1: a dependent coordinate or coupler always has an argument
+        arg = Q[:, cols[0]] if k == 1 else Q[:, cols]
+        if k == 1 and A is not None:       # value, slope and curvature from one evaluation
+            val, d, dd = f.evaluate(arg)
+            d1 = [d]
+        else:
+            val = f.value(arg) if value else None
+            d1 = [f.derivative(arg, 1, i) for i in range(k)]
+            dd = None
+        row: dict[int, np.ndarray] = {}
+        for i, c in enumerate(cols):
+            for j, coef in rows[c].items():
+                row[j] = row[j] + d1[i] * coef if j in row else d1[i] * coef
+        vel = None if V is None else sum(d1[i] * V[:, c] for i, c in enumerate(cols))
         acc = None
-        if a is not None:
-            acc = sum(d1[i] * a[:, i] for i in range(k))
+        if A is not None:
+            acc = sum(d1[i] * A[:, c] for i, c in enumerate(cols))
             if k == 1:     # multi-argument functions are linear (LinearFunction): no curvature term
-                acc = acc + f.derivative(arg, 2) * v[:, 0] ** 2
-        return val, Jrow, vel, acc
+                acc = acc + dd * V[:, cols[0]] ** 2
+        return val, row, vel, acc
 
     def _resolve(self, q, v, a, couplers):
+        """OpenSim's ``(Q, V, A)`` with the couplers applied (if asked) and each column's sparse Jacobian row."""
         Q = self._osim(q, "q")
         V = self._osim(v, "v") if v is not None else None
         A = self._osim(a, "a") if a is not None else None
         if A is not None and V is None:
             raise ModelError("CoordinateMap: accelerations need speeds too")
-        n, n_os = Q.shape
-        J = np.broadcast_to(np.eye(n_os), (n, n_os, n_os)).copy()
+        n = Q.shape[0]
+        one = np.ones(n)
+        rows = [{i: one} for i in range(Q.shape[1])]
         if couplers:
             for dep, indep, f, scale in self.couplers:
-                cols = [self._col[c] for c in indep]
-                val, Jrow, vel, acc = self._chain(f, Q[:, cols], J[:, cols, :], None if V is None else V[:, cols],
-                                                  None if A is None else A[:, cols])
+                val, row, vel, acc = self._chain(f, [self._col[c] for c in indep], Q, V, A, rows)
                 i = self._col[dep]
-                Q[:, i], J[:, i, :] = scale * val, scale * Jrow
+                Q[:, i] = scale * val
+                rows[i] = {j: scale * c for j, c in row.items()}
                 if V is not None:
                     V[:, i] = scale * vel
                 if A is not None:
                     A[:, i] = scale * acc
-        return Q, V, A, J
+        return Q, V, A, rows
 
     def expand(self, q, v=None, a=None, *, couplers: bool = True):
         """Pinocchio ``(q, v, a)`` (N, nq) from OpenSim coordinates (``v``/``a`` None if not given)."""
@@ -572,41 +629,64 @@ class CoordinateMap:
 
     def jacobian(self, q, *, couplers: bool = True) -> np.ndarray:
         """``d q_pinocchio / d q_osim`` (N, nq, n_osim)."""
-        return self._expand(q, None, None, couplers)[3]
+        Q, rows = self._rows(q, couplers)
+        J = np.zeros((Q.shape[0], len(self.joints), Q.shape[1]))
+        for jp, row in enumerate(rows):
+            for i, c in row.items():
+                J[:, jp, i] = c
+        return J
 
     def generalized_forces(self, q, tau, *, couplers: bool = True) -> np.ndarray:
         """OpenSim coordinates' generalized forces (N, n_osim) from Pinocchio's ``tau`` (N, nq): J^T tau."""
-        J = self.jacobian(q, couplers=couplers)
-        return np.einsum("nji,nj->ni", J, np.atleast_2d(np.asarray(tau, dtype=float)))
+        Q, rows = self._rows(q, couplers)
+        tau = np.atleast_2d(np.asarray(tau, dtype=float))
+        out = np.zeros((Q.shape[0], Q.shape[1]))
+        for jp, row in enumerate(rows):
+            for i, c in row.items():
+                out[:, i] += c * tau[:, jp]
+        return out
+
+    def _rows(self, q, couplers):
+        """OpenSim's ``Q`` and the sparse Jacobian row of each Pinocchio joint (no values of the dependent
+        joints computed: the rows need the functions' slopes only)."""
+        Q, _, _, rows = self._resolve(q, None, None, couplers)
+        out = []
+        for name in self.joints:
+            d = self.dependent.get(name)
+            if d is None:
+                out.append(rows[self._col[name]])
+            else:
+                out.append(self._chain(d.function, [self._col[c] for c in d.of], Q, None, None, rows,
+                                       value=False)[1])
+        return Q, out
 
     def _expand(self, q, v, a, couplers):
-        Q, V, A, J = self._resolve(q, v, a, couplers)
+        Q, V, A, rows = self._resolve(q, v, a, couplers)
         n = Q.shape[0]
         nq = len(self.joints)
         qp = np.empty((n, nq))
         vp = None if V is None else np.empty((n, nq))
         ap = None if A is None else np.empty((n, nq))
-        Jp = np.empty((n, nq, Q.shape[1]))
+        prows = []
         for j, name in enumerate(self.joints):
             d = self.dependent.get(name)
             if d is None:
                 i = self._col[name]
-                qp[:, j], Jp[:, j, :] = Q[:, i], J[:, i, :]
+                qp[:, j] = Q[:, i]
+                prows.append(rows[i])
                 if vp is not None:
                     vp[:, j] = V[:, i]
                 if ap is not None:
                     ap[:, j] = A[:, i]
                 continue
-            cols = [self._col[c] for c in d.of]
-            val, Jrow, vel, acc = self._chain(d.function, Q[:, cols], J[:, cols, :],
-                                              None if V is None else V[:, cols], None if A is None else A[:, cols])
+            val, row, vel, acc = self._chain(d.function, [self._col[c] for c in d.of], Q, V, A, rows)
             qp[:, j] = val
-            Jp[:, j, :] = Jrow
+            prows.append(row)
             if vp is not None:
                 vp[:, j] = vel
             if ap is not None:
                 ap[:, j] = acc
-        return qp, vp, ap, Jp
+        return qp, vp, ap, prows
 
 
 # ---------------------------------------------------------------------------
@@ -727,6 +807,9 @@ def build_skeleton(doc: OsimDocument, *, locked: str = "joint", nonlinear: str =
                 links[uj.child] = UrdfLink(uj.child)
         reach[jk.child] = _max_translation(jk, fit, ranges, welded)
         entries.append(_joint_entry(jk, new, fit, text, deps))
+        note = _simbody_note(jk, welded, fit_ranges)
+        if note is not None:
+            entries.append(note)
         if fit is not None:
             approx[jk.child] = (fit, jk)
 
@@ -1232,6 +1315,29 @@ def _joint_entry(jk: JointKinematics, new: list[UrdfJoint], fit: _Fit | None, te
                     f"up to {np.degrees(fit.max_rotation_error):.3g} deg")
     return ReportEntry(element=jk.joint.where, became=became, approximation=approx_text,
                        max_error=fit.max_translation_error, status=APPROXIMATED, details=details)
+
+
+def _simbody_note(jk: JointKinematics, welded, fit_ranges) -> ReportEntry | None:
+    """A note where OpenSim's own accelerations of a CustomJoint carry Simbody's FunctionBased velocity
+    term (:func:`simbody_rotation_term`): its largest size over the coordinates' ranges at unit speeds."""
+    free = [c for c in jk.coordinates if c not in welded]
+    if jk.joint.type != "CustomJoint" or not free:
+        return None
+    k = 41 if len(free) == 1 else 9
+    grids = np.meshgrid(*[np.linspace(*fit_ranges[c], k) for c in free], indexing="ij")
+    n = grids[0].size
+    values = {c: np.full(n, welded[c]) for c in jk.coordinates if c in welded}
+    values.update({c: g.ravel() for c, g in zip(free, grids)})
+    speeds = {c: np.zeros(n) if c in welded else np.ones(n) for c in jk.coordinates}
+    dA, _ = simbody_rotation_term(jk, values, speeds, n)
+    worst = float(np.max(np.linalg.norm(dA, axis=1)))
+    if not worst > 1e-9:
+        return None
+    return ReportEntry(element=jk.joint.where, status=NOTE, details={"max_term_rad_s2": worst}, became=(
+        f"OpenSim's accelerations of this joint carry Simbody's FunctionBased velocity term (its rotations "
+        f"are functions of shared coordinates; simbody_rotation_term): up to {worst:.3g} rad/s^2 at 1 rad/s "
+        f"of {', '.join(free)} (it grows with the speed squared), so OpenSim's inverse dynamics differs from "
+        "the exact one pinmsk computes by it (tests/test_osim_id.py)"))
 
 
 def _short(text: str, n: int = 60) -> str:
