@@ -116,18 +116,20 @@ def rnea(model, q, v, a, *, external: Sequence[ExternalForce] = (),
     loaded = sorted(set(joints))
     W = {j: sum(w for jj, w in zip(joints, wrenches) if jj == j) for j in loaded}
     cols = {j: [pm.joints[s].idx_v + k for s in pm.supports[j][1:] for k in range(pm.joints[s].nv)] for j in loaded}
-    used = sorted({c for cs in cols.values() for c in cs})
-    J = np.empty((n, 6, len(used)))
+    # the whole data.J copied per frame (one contiguous copy, cheaper than a fancy-indexed column pick),
+    # a chunk of frames at a time so long trials keep a bounded workspace
+    J = np.empty((min(n, PROGRESS_CHUNK), 6, pm.nv))
+    jac = pin.computeJointJacobians
     for start in range(0, n, PROGRESS_CHUNK):
-        for i in range(start, min(start + PROGRESS_CHUNK, n)):
-            out[i] = rnea(pm, pd, q[i], v[i], a[i])
-            J[i] = pin.computeJointJacobians(pm, pd, q[i])[:, used]
+        stop = min(start + PROGRESS_CHUNK, n)
+        for k, (qi, vi, ai) in enumerate(zip(q[start:stop], v[start:stop], a[start:stop])):
+            out[start + k] = rnea(pm, pd, qi, vi, ai)
+            J[k] = jac(pm, pd, qi)
+        m = stop - start
+        for j in loaded:
+            out[start:stop, cols[j]] -= np.einsum("nrc,nr->nc", J[:m][:, :, cols[j]], W[j][start:stop])
         if progress is not None:
-            progress.update(min(PROGRESS_CHUNK, n - start))
-    where = {c: k for k, c in enumerate(used)}
-    for j in loaded:
-        k = [where[c] for c in cols[j]]
-        out[:, cols[j]] -= np.einsum("nrc,nr->nc", J[:, :, k], W[j])
+            progress.update(m)
     return out
 
 
