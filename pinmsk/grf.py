@@ -33,7 +33,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .errors import TrialError
-from .skeleton import ExternalForce
+from .skeleton import ExternalForce, cross3
 from .trial import Trial, moment_channel, parse_ground_reaction
 
 __all__ = ["cop_from_plate", "check_vertical_force", "external_forces", "grf_channels", "Plate", "plates",
@@ -325,7 +325,7 @@ def plate_wrench(trial: Trial, plate: Plate, *, min_force: float = 20.0, planar:
         F[:, 2] = 0.0
         P[:, 2] = 0.0
         T[:, :2] = 0.0
-    return F, np.cross(P, F) + T
+    return F, cross3(P, F) + T
 
 
 def external_forces(model, trial: Trial, *, frames: Mapping[str, str] | None = None,

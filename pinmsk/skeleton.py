@@ -36,6 +36,20 @@ def _frames(x: np.ndarray, n: int, what: str) -> np.ndarray:
     return np.ascontiguousarray(x)
 
 
+def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of ``(N, 3)`` arrays, the same numbers as ``np.cross`` (its formula and
+    operation order) without its axis handling, which costs ~10x the arithmetic on a trial's arrays."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    out[..., 0] = a1 * b2 - a2 * b1
+    out[..., 1] = a2 * b0 - a0 * b2
+    out[..., 2] = a0 * b1 - a1 * b0
+    return out
+
+
 @dataclass(frozen=True)
 class ExternalForce:
     """A world-frame force (and optional free torque) applied at a world point on a body.
@@ -71,7 +85,7 @@ def world_wrench(ext: ExternalForce, n: int) -> np.ndarray:
             f"external force on '{ext.frame}' has {f.shape[0]} frames and its point {p.shape[0]}; "
             f"the motion has {n}"
         )
-    m = np.cross(p, f)
+    m = cross3(p, f)
     if ext.torque is not None:
         tq = _frames(ext.torque, 3, f"external torque on '{ext.frame}'")
         m = m + tq
