@@ -43,7 +43,7 @@ from .io.external_loads import read_external_loads
 from .io.tables import read_trial
 from .signals.filtering import DEFAULT_CUTOFF, FILTER_ORDER, lowpass
 from .signals.sampling import measured_rate
-from .skeleton import ExternalForce, world_wrench
+from .skeleton import ExternalForce, skeleton_constant, world_wrench
 from .trial import Trial, parse_ground_reaction
 
 __all__ = ["DEFAULT_CUTOFF", "FILTER_ORDER", "Filtering", "TrialInputs", "motion", "as_motion", "prepare",
@@ -148,20 +148,9 @@ def has_ground_reaction(trial: Trial) -> bool:
 
 #: is_planar's answers by skeleton (its Data costs ms to create on a large model, each ID asks): a few
 #: skeletons, kept alive with their answers so that their ids stay theirs.
-_PLANAR: dict[int, tuple[object, bool]] = {}
-
-
 def is_planar(model) -> bool:
     """Whether every joint moves in the x-y plane (translations in x, y; rotations about z)."""
-    pm = model.pin
-    hit = _PLANAR.get(id(pm))
-    if hit is not None and hit[0] is pm:
-        return hit[1]
-    out = _is_planar(pm)
-    if len(_PLANAR) >= 16:
-        _PLANAR.pop(next(iter(_PLANAR)))
-    _PLANAR[id(pm)] = (pm, out)
-    return out
+    return skeleton_constant(model.pin, "is_planar", _is_planar)
 
 
 def _is_planar(pm) -> bool:

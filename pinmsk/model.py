@@ -37,6 +37,7 @@ from .components import Component, Motion, ParameterKeyError, Parameters
 from .contact.spec import from_spec as contact_from_spec
 from .effects import registry
 from .errors import ModelError
+from .skeleton import skeleton_constant
 from . import kinematics
 from .kinematics import DEFAULT_CUTOFF
 from .muscles import NaganoGerritsen, Thelen2003
@@ -262,7 +263,9 @@ class Model:
 
     @property
     def frame_names(self) -> tuple[str, ...]:
-        return tuple(f.name for f in self._pin.frames)
+        # keyed by the frame count too: import hooks may add frames (contact spheres) to a built skeleton
+        pm = self._pin
+        return skeleton_constant(pm, f"frame_names:{pm.nframes}", lambda m: tuple(f.name for f in m.frames))
 
     def with_gravity(self, gravity) -> "Model":
         """A new model whose skeleton (a copy) has ``gravity`` (3 finite numbers, m/s^2)."""

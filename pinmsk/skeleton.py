@@ -26,6 +26,25 @@ def _pin(model) -> pin.Model:
     return model.pin if hasattr(model, "pin") else model
 
 
+_CONSTANTS: dict[tuple[int, str], tuple[pin.Model, object]] = {}
+
+
+def skeleton_constant(pmodel: pin.Model, key: str, compute: Callable[[pin.Model], object]):
+    """``compute(pmodel)``, kept per Pinocchio model object and ``key``: what analyses derive from the
+    skeleton alone (frame names, joint column maps, is-planar) is computed once, not per call.  Keyed
+    by the model object's identity (checked, so a recycled id recomputes); at most 256 entries kept.
+    The answer must be immutable (a tuple, a frozen mapping): every caller shares it."""
+    k = (id(pmodel), key)
+    hit = _CONSTANTS.get(k)
+    if hit is not None and hit[0] is pmodel:
+        return hit[1]
+    out = compute(pmodel)
+    if len(_CONSTANTS) >= 256:
+        _CONSTANTS.pop(next(iter(_CONSTANTS)))
+    _CONSTANTS[k] = (pmodel, out)
+    return out
+
+
 def _frames(x: np.ndarray, n: int, what: str) -> np.ndarray:
     """``x`` as a C-contiguous float (N, n) array; a single (n,) row becomes (1, n)."""
     x = np.asarray(x, dtype=float)
@@ -121,7 +140,8 @@ def rnea(model, q, v, a, *, external: Sequence[ExternalForce] = (),
             if progress is not None:
                 progress.update(min(PROGRESS_CHUNK, n - start))
         return out
-    joints = [_frame_joint(pm, e.frame) for e in external]
+    joints = [skeleton_constant(pm, "frame_joint:" + e.frame, lambda m, f=e.frame: _frame_joint(m, f))
+              for e in external]
     wrenches = [world_wrench(e, n) for e in external]
     # tau = rnea(q, v, a) - sum_j J_j(q)^T W_j, with W_j the world wrench about the origin and J_j the
     # joint's Jacobian in the world frame (WORLD: the motion subspaces of its supporting joints, at the
@@ -129,7 +149,7 @@ def rnea(model, q, v, a, *, external: Sequence[ExternalForce] = (),
     # batched over frames, instead of a Force built, moved and summed per load and frame
     loaded = sorted(set(joints))
     W = {j: sum(w for jj, w in zip(joints, wrenches) if jj == j) for j in loaded}
-    cols = {j: [pm.joints[s].idx_v + k for s in pm.supports[j][1:] for k in range(pm.joints[s].nv)] for j in loaded}
+    cols = {j: skeleton_constant(pm, f"support_columns:{j}", lambda m, j=j: _support_columns(m, j)) for j in loaded}
     # the whole data.J copied per frame (one contiguous copy, cheaper than a fancy-indexed column pick),
     # a chunk of frames at a time so long trials keep a bounded workspace
     J = np.empty((min(n, PROGRESS_CHUNK), 6, pm.nv))
@@ -145,6 +165,14 @@ def rnea(model, q, v, a, *, external: Sequence[ExternalForce] = (),
         if progress is not None:
             progress.update(m)
     return out
+
+
+def _support_columns(pm: pin.Model, j: int) -> np.ndarray:
+    """The velocity columns of the joints supporting joint ``j`` (its world Jacobian's nonzero columns)."""
+    cols = np.array([pm.joints[s].idx_v + k for s in pm.supports[j][1:] for k in range(pm.joints[s].nv)],
+                    dtype=np.intp)
+    cols.flags.writeable = False
+    return cols
 
 
 def external_generalized_force(model, q, external: Sequence[ExternalForce]) -> np.ndarray:

@@ -24,6 +24,7 @@ import pinocchio as pin
 
 from ..components import Component, Motion, motion_cached
 from ..errors import ModelError
+from ..skeleton import skeleton_constant
 
 __all__ = ["JointEffect", "SignalEffect", "signal_parts", "frame_point_kinematics", "torque_regressor",
            "unactuated_coordinates", "moving_bodies", "hand_like_frames"]
@@ -173,7 +174,11 @@ def unactuated_coordinates(model) -> tuple[str, ...]:
     declared = model.meta.get("unactuated") if hasattr(model, "meta") else None
     if declared is not None:
         return tuple(declared)
-    pm = model.pin
+    return skeleton_constant(model.pin, "unactuated_root_chain", _root_chain)
+
+
+def _root_chain(pm) -> tuple[str, ...]:
+    """The joints of the root chain when it holds a prismatic joint (a planar floating base), else ()."""
     children = {j: [k for k in range(1, pm.njoints) if pm.parents[k] == j] for j in range(pm.njoints)}
     root, j = [], 0
     while len(children[j]) == 1:
