@@ -209,6 +209,17 @@ class _Knotted(Function):
         n = self.x.size
         if n < 3:
             return np.zeros(a.shape, dtype=int)
+        # strictly between two knots the piece is unique: a sorted search finds it; only a value on a
+        # knot (where the bisection's choice of the two pieces matters) goes through the bisection
+        k = np.clip(np.searchsorted(self.x, a, side="right") - 1, 0, n - 2)
+        tie = (a == self.x[k]) | (a == self.x[k + 1])
+        if tie.any():
+            k[tie] = self._bisect(a[tie])
+        return k
+
+    def _bisect(self, a: np.ndarray) -> np.ndarray:
+        """OpenSim's bisection (SimmSpline::calcValue's search), vectorised over ``a``."""
+        n = self.x.size
         i = np.zeros(a.shape, dtype=int)
         j = np.full(a.shape, n)
         k = np.zeros(a.shape, dtype=int)
