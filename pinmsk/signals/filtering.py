@@ -192,4 +192,29 @@ def differentiate(time, x, *, cutoff: float | None = None, order: int = 4):
     from scipy.interpolate import make_interp_spline
 
     spline = make_interp_spline(t, x, k=5, axis=0)
-    return x, spline.derivative(1)(t), spline.derivative(2)(t)
+    d1, d2 = _derivative_splines(spline)
+    return x, d1(t), d2(t)
+
+
+def _derivative_splines(spline):
+    """The spline's first and second derivative B-splines, as ``spline.derivative(1)`` and ``(2)`` build
+    them (scipy's ``splder`` formula, Schumaker ch. 5, the same operations in the same order: the same
+    numbers), the second from the first, without scipy's array-API dispatch, which costs more than the
+    arithmetic on a trial's splines."""
+    from scipy.interpolate import BSpline
+
+    t, k = spline.t, spline.k
+    c = np.asarray(spline.c, dtype=float)
+    if t.shape[0] > c.shape[0]:          # FITPACK convention: as many coefficients as knots
+        c = np.concatenate([c, np.zeros((t.shape[0] - c.shape[0],) + c.shape[1:])])
+    out = []
+    sh = (slice(None),) + (None,) * (c.ndim - 1)
+    with np.errstate(invalid="raise", divide="raise"):
+        for _ in range(2):
+            dt = (t[k + 1:-1] - t[1:-k - 1])[sh]
+            c = (c[1:-1 - k, ...] - c[:-2 - k, ...]) * k / dt
+            c = np.concatenate([c, np.zeros((k,) + c.shape[1:])])
+            t = t[1:-1]
+            k -= 1
+            out.append(BSpline.construct_fast(t, c, k, extrapolate=spline.extrapolate, axis=spline.axis))
+    return out[0], out[1]
