@@ -129,11 +129,28 @@ def lowpass(x, *, rate: float, cutoff: float, order: int = 4) -> np.ndarray:
         )
     padlen = filter_padlen(order, rate=rate, cutoff=cutoff, n=n)
     _check_finite(x, "lowpass input")
-    from scipy.signal import sosfiltfilt  # here, not at import: scipy.signal costs ~1 s
+    from scipy.signal import sosfilt  # here, not at import: scipy.signal costs ~1 s
 
-    # a copy of the cached design: scipy's filter needs a writable array
-    return sosfiltfilt(_butterworth(int(order), float(cutoff / nyquist)).copy(), x, axis=0, padtype="odd",
-                       padlen=padlen)
+    # scipy's sosfiltfilt (padtype="odd", axis 0) step by step, with the design's initial state kept
+    # with the design (scipy solves for it on every call): the same operations, the same numbers
+    sos, zi = _butterworth_state(int(order), float(cutoff / nyquist))
+    zi = zi.reshape(zi.shape + (1,) * (x.ndim - 1))          # (sections, 2[, 1]): broadcast over columns
+    ext = np.concatenate((2 * x[0:1] - x[padlen:0:-1], x, 2 * x[-1:] - x[-2:-(padlen + 2):-1]), axis=0)
+    y, _ = sosfilt(sos.copy(), ext, axis=0, zi=zi * ext[0:1])
+    y, _ = sosfilt(sos.copy(), y[::-1], axis=0, zi=zi * y[-1:])
+    return y[::-1][padlen:-padlen]
+
+
+@functools.lru_cache(maxsize=64)
+def _butterworth_state(order: int, wn: float) -> tuple[np.ndarray, np.ndarray]:
+    """The design and its steady-state initial conditions per unit step (``scipy.signal.sosfilt_zi``),
+    cached together (read-only)."""
+    from scipy.signal import sosfilt_zi
+
+    sos = _butterworth(order, wn)
+    zi = sosfilt_zi(sos.copy())
+    zi.flags.writeable = False
+    return sos, zi
 
 
 @functools.lru_cache(maxsize=64)
