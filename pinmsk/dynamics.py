@@ -16,7 +16,9 @@ on the acceleration), and inverse dynamics through their generalized force.
 """
 from __future__ import annotations
 
+import threading
 import warnings
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from typing import Callable, Sequence
 
@@ -107,10 +109,10 @@ def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, ex
                          notes=inputs.notes + ("external wrenches given by the caller on "
                                                + ", ".join(e.frame for e in ext),))
     motion = inputs.motion
-    data = model.create_data()      # one workspace for the whole analysis (a Data costs ms on a large model)
-    tau = inverse_dynamics_array(model, motion, external=ext, components=components, progress=progress, data=data,
-                                 actuated=False)
-    residuals = floating_base_residuals(model, motion, tau, ext, data=data.pin)
+    with _workspace(model) as data:     # one workspace for the whole analysis
+        tau = inverse_dynamics_array(model, motion, external=ext, components=components, progress=progress,
+                                     data=data, actuated=False)
+        residuals = floating_base_residuals(model, motion, tau, ext, data=data.pin)
     names, q_out, tau_out = source_coordinates(model, motion, tau)
     chans = {c: q_out[:, i] for i, c in enumerate(names)}
     chans.update({m: tau_out[:, i] for i, m in enumerate(moment_channels(names))})
@@ -125,6 +127,35 @@ def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, ex
     if residuals.warning():
         warnings.warn(residuals.warning(), ResidualWarning, stacklevel=3)
     return InverseDynamicsResult(out, inputs, residuals)
+
+
+_WORKSPACES = threading.local()
+
+
+@contextmanager
+def _workspace(model):
+    """A :class:`pinmsk.model.Data` of ``model`` for one analysis, kept per thread between analyses (a
+    Data costs milliseconds on a large model, as much as a short trial's dynamics): emptied of cached
+    kinematics before each use (no motion outlives its analysis in it), lent to one analysis at a time
+    (a nested analysis of the same model gets a fresh one)."""
+    pool = getattr(_WORKSPACES, "pool", None)
+    if pool is None:
+        pool = _WORKSPACES.pool = {}
+    hit = pool.get(id(model))
+    if hit is None or hit[0] is not model or hit[2]:
+        if hit is not None and hit[0] is model:          # lent already: a nested analysis
+            yield model.create_data()
+            return
+        if len(pool) >= 8:
+            pool.pop(next(iter(pool)))
+        hit = pool[id(model)] = [model, model.create_data(), False]
+    hit[1].clear()
+    hit[2] = True
+    try:
+        yield hit[1]
+    finally:
+        hit[2] = False
+        hit[1].clear()
 
 
 def inverse_dynamics(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, external_loads=None, frames=None,
