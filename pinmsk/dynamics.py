@@ -114,8 +114,6 @@ def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, ex
                                      data=data, actuated=False)
         residuals = floating_base_residuals(model, motion, tau, ext, data=data.pin)
     names, q_out, tau_out = source_coordinates(model, motion, tau)
-    chans = {c: q_out[:, i] for i, c in enumerate(names)}
-    chans.update({m: tau_out[:, i] for i, m in enumerate(moment_channels(names))})
     meta = {"analysis": "inverse_dynamics", "model": model.name, **inputs.meta()}
     if external:
         meta["ground_reaction"] = "given by the caller: " + ", ".join(e.frame for e in ext)
@@ -123,7 +121,9 @@ def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, ex
         meta["residuals"] = "; ".join(
             f"{c} peak {p:.4g} {u} (threshold {th:.4g})" for c, p, u, th in
             zip(residuals.coordinates, residuals.peak, residuals.units, residuals.thresholds))
-    out = Trial(motion.t, chans, meta=meta)
+    # the channels as one (N, 2n) array: no per-channel columns split and stacked again
+    out = Trial.from_array(motion.t, tuple(names) + tuple(moment_channels(names)), np.hstack([q_out, tau_out]),
+                           meta=meta)
     if residuals.warning():
         warnings.warn(residuals.warning(), ResidualWarning, stacklevel=3)
     return InverseDynamicsResult(out, inputs, residuals)
