@@ -310,11 +310,15 @@ def plate_wrench(trial: Trial, plate: Plate, *, min_force: float = 20.0, planar:
     if missing:
         raise TrialError(f"ground reaction {plate.name} lacks {', '.join(missing)} channels "
                          "(need ground_force_v[xyz] and ground_force_p[xyz])")
-    zero = np.zeros(trial.n_frames)
-    F = np.column_stack([trial[ch[("force", a)]] if ("force", a) in ch else zero for a in "xyz"])
-    P = (np.asarray(cop, dtype=float) if cop is not None else
-         np.column_stack([trial[ch[("point", a)]] if ("point", a) in ch else zero for a in "xyz"]))
-    T = np.column_stack([trial[ch[("torque", a)]] if ("torque", a) in ch else zero for a in "xyz"])
+    # force, point and torque as one (N, 9) block read in one call; absent components are zero
+    kinds = ("force", "torque") if cop is not None else ("force", "point", "torque")
+    keys = [(k, a) for k in kinds for a in "xyz"]
+    have = [i for i, key in enumerate(keys) if key in ch]
+    X = np.zeros((trial.n_frames, len(keys)))
+    X[:, have] = trial.get([ch[keys[i]] for i in have])
+    F = X[:, 0:3]
+    P = np.asarray(cop, dtype=float) if cop is not None else X[:, 3:6]
+    T = X[:, -3:]
     on = F[:, 1] >= min_force
     bad = on & ~(np.isfinite(F).all(axis=1) & np.isfinite(T).all(axis=1))
     if bad.any():
