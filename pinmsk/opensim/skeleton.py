@@ -442,6 +442,28 @@ COUPLER_KEYS = {"dependent": "coordinate", "independent": "coordinates", "scale_
                 "function": "the OpenSim function { type = ... }"}
 
 
+#: id(function) -> (function, argument, slope) of the last evaluation with a slope: the moments mapped back
+#: (``generalized_forces``) need the slopes the motion's mapping (``expand``) computed at the same angles
+_SLOPES: dict[int, tuple[fns.Function, np.ndarray, np.ndarray]] = {}
+
+
+def _slope(f: fns.Function, arg: np.ndarray) -> np.ndarray:
+    """``f.derivative(arg)`` of a one-argument function, reused when ``arg`` equals the last argument it was
+    evaluated at (``evaluate`` and ``derivative`` compute the slope with the same operations)."""
+    hit = _SLOPES.get(id(f))
+    if hit is not None and hit[0] is f and hit[1].shape == arg.shape and np.array_equal(hit[1], arg):
+        return hit[2]
+    d = f.derivative(arg, 1, 0)
+    _remember_slope(f, arg, d)
+    return d
+
+
+def _remember_slope(f: fns.Function, arg: np.ndarray, d: np.ndarray) -> None:
+    if len(_SLOPES) >= 256 and id(f) not in _SLOPES:
+        _SLOPES.pop(next(iter(_SLOPES)))
+    _SLOPES[id(f)] = (f, arg.copy(), d)
+
+
 class CoordinateMap:
     """OpenSim's coordinates -> the Pinocchio model's ``q`` (with speeds, accelerations, Jacobian).
 
@@ -583,10 +605,11 @@ class CoordinateMap:
         arg = Q[:, cols[0]] if k == 1 else Q[:, cols]
         if k == 1 and A is not None:       # value, slope and curvature from one evaluation
             val, d, dd = f.evaluate(arg)
+            _remember_slope(f, arg, d)
             d1 = [d]
         else:
             val = f.value(arg) if value else None
-            d1 = [f.derivative(arg, 1, i) for i in range(k)]
+            d1 = [_slope(f, arg) if k == 1 else f.derivative(arg, 1, i) for i in range(k)]
             dd = None
         row: dict[int, np.ndarray] = {}
         for i, c in enumerate(cols):
