@@ -153,12 +153,14 @@ def rnea(model, q, v, a, *, external: Sequence[ExternalForce] = (),
     # the whole data.J copied per frame (one contiguous copy, cheaper than a fancy-indexed column pick),
     # a chunk of frames at a time so long trials keep a bounded workspace
     J = np.empty((min(n, PROGRESS_CHUNK), 6, pm.nv))
+    # eigenpy hands a 6 x 1 matrix back as a vector (a one-dof model): fill J through a (6,) view then
+    Jw = J if pm.nv > 1 else J[:, :, 0]
     jac = pin.computeJointJacobians
     for start in range(0, n, PROGRESS_CHUNK):
         stop = min(start + PROGRESS_CHUNK, n)
         for k, (qi, vi, ai) in enumerate(zip(q[start:stop], v[start:stop], a[start:stop])):
             out[start + k] = rnea(pm, pd, qi, vi, ai)
-            J[k] = jac(pm, pd, qi)
+            Jw[k] = jac(pm, pd, qi)
         m = stop - start
         for j in loaded:
             out[start:stop, cols[j]] -= np.einsum("nrc,nr->nc", J[:m][:, :, cols[j]], W[j][start:stop])
