@@ -42,7 +42,9 @@ FOREARM_JOINT = [
     ("joint_damping", "elbow_flexion", {"c": 0.3}),
     ("coulomb_friction", "elbow_flexion", {"F_c": 0.5}),
     ("joint_spring", "elbow_flexion", {"k": 2.0, "q0": 1.0}),
-    ("passive_elastic", "elbow_flexion", {"theta_lo": 0.5, "k_lo": 6.0, "theta_hi": 2.1, "k_hi": 6.0}),
+    # from_limits(theta_lo=0.5, k_lo=6, theta_hi=2.1, k_hi=6): rest at 1.3 rad, 8.2 mN m at rest, 6 N m at the ends
+    ("passive_elastic", "elbow_flexion", {"amplitude": float(np.exp(-4.8)), "theta_0": 1.3, "k_lo": 6.0,
+                                          "k_hi": 6.0}),
     ("payload", "hand", {"mass": 1.0}),
     ("segment_mass", "forearm_hand", {"delta": 0.2}),
 ]
@@ -123,7 +125,8 @@ def test_two_hidden_effects_in_two_add_steps(tmp_path):
     assert totals[2] <= 1.5 * final.noise_floor["total"]
     assert [c.label for c in final.model.components] == ["payload:hand", "joint_damping:elbow_flexion"]
     data = json.loads((tmp_path / "d.json").read_text())
-    assert set(data) == {"inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added"}
+    assert set(data) == {"inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added",
+                         "refit", "pairs", "outside_catalog", "stopping"}
     assert data["verdict"] == "at_noise_floor"
     assert [(a["effect"], a["target"]) for a in data["added"]] == [("payload", "hand"),
                                                                   ("joint_damping", "elbow_flexion")]
@@ -139,7 +142,8 @@ def test_json_shape_and_summary():
     trial = make_trial(m, ["joint_damping:elbow_flexion:c=0.3"], seed=5)
     r = run(m, trial)
     js = r.to_dict()
-    assert list(js) == ["inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added"]
+    assert list(js) == ["inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added",
+                        "refit", "pairs", "outside_catalog", "stopping"]
     assert set(js["rmse"]) == {"elbow_flexion_moment", "total"} == set(js["noise_floor"])
     for w in js["worst_windows"]:
         assert set(w) == {"channel", "start", "end", "rmse"} and w["end"] > w["start"]
@@ -239,8 +243,8 @@ def test_synth_effect_strings():
     e = synth.effect_from_text("joint_spring:elbow_flexion:k=2,q0=0.5")
     assert e.label == "joint_spring:elbow_flexion" and e.values == {"k": 2.0, "q0": 0.5}
     assert synth.effect_from_text("activation_dynamics").target == "muscles"
-    e = synth.effect_from_text("passive_elastic:elbow_flexion:theta_lo=0.3:k_lo=5")
-    assert e.values["theta_lo"] == 0.3 and e.values["k_lo"] == 5.0
+    e = synth.effect_from_text("passive_elastic:elbow_flexion:theta_0=0.3:k_lo=5")
+    assert e.values["theta_0"] == 0.3 and e.values["k_lo"] == 5.0
     with pytest.raises(pinmsk.ModelError, match="needs a target"):
         synth.effect_from_text("joint_damping")
     with pytest.raises(pinmsk.ModelError, match="NAME=VALUE"):

@@ -1,11 +1,31 @@
-"""Ranking candidates: one ranked entry, the order by BIC, and the worst windows of a residual.
+"""Ranking candidates: one ranked entry, the held-out test, the order by BIC, and the worst windows.
 
 Shared by the effect ranking (:mod:`pinmsk.diagnose.diagnosis`) and the contact
 ranking (:mod:`pinmsk.diagnose.contact`).
+
+:func:`held_out_test` is the significance test of the effect ranking, a test
+of equal predictive accuracy on held-out data in the manner of Diebold &
+Mariano (1995).  With ``r0`` and ``r1`` the noise-whitened held-out residuals
+without and with the candidate and ``d = r0 - r1`` the change the
+candidate's out-of-sample fit makes, the per-frame loss differential is
+``r0^2 - r1^2 = d^2 + 2 r1 d``: ``D``, its mean, is the held-out improvement
+per frame (in noise variances).  Given the fitted change ``d``, the noise
+enters only through ``2 r1 d``, whose long-run variance -- the residuals of
+filtered kinematics and slow disturbances are strongly autocorrelated -- is
+estimated by Newey & West's Bartlett-kernel sum of autocovariances with the
+bandwidth of Andrews (1991) for an AR(1) plug-in (``L = 1.1447 (a n)^(1/3)``,
+``a = 4 rho^2 / ((1 - rho)^2 (1 + rho)^2)``).  ``z = D / se``.  Taking the
+variance of the whole differential instead, as the plain Diebold-Mariano test
+does, would count the effect's own envelope (``d^2``, large near the ends of
+the range for a passive moment) as noise and miss strong effects; a residual
+``r1`` that still holds a slow disturbance has a long bandwidth and a large
+variance, so a chance fit to it is not significant.  Under the null the
+out-of-sample change is fitted noise, independent of the held-out noise, and
+``E[D] = -E[d^2] < 0``.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -15,7 +35,7 @@ from ..fitting import Result
 from ..signals.sampling import median_step
 from .fit import describe_fit
 
-__all__ = ["EffectScore", "finite_or_none", "order_by_bic", "windows_of"]
+__all__ = ["EffectScore", "finite_or_none", "held_out_test", "order_by_bic", "windows_of"]
 
 
 @dataclass
@@ -30,6 +50,28 @@ class EffectScore:
     significant: bool
     converged: bool
     note: str = ""
+    #: the held-out test (:func:`held_out_test`) against the model as it is (earlier effects refitted)
+    test: dict = field(default_factory=dict)
+    #: rank and condition number of the sensitivity matrix, profile intervals, flags
+    identifiability: dict = field(default_factory=dict)
+    #: how the earlier effects' parameters move when this candidate joins them (None at the first step)
+    refit: dict | None = None
+    #: every component of the joint fit (earlier effects refitted, this candidate last)
+    components: list = field(default_factory=list)
+    #: candidates that explain the same on this trial (label, correlation of the fitted changes)
+    aliases: list = field(default_factory=list)
+    #: the held-out equation error (n, C) with this candidate, and the joint fit's stacked parameters
+    heldout: np.ndarray | None = field(default=None, repr=False, compare=False)
+    x: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def identifiable(self) -> bool:
+        """False when a parameter sits at a bound or the data do not determine it (never suggested)."""
+        return bool(self.identifiability.get("identifiable", True))
+
+    @property
+    def flags(self) -> list:
+        return list(self.identifiability.get("flags", []))
 
     @property
     def effect(self) -> Component:
@@ -72,6 +114,11 @@ class EffectScore:
             **({"bic_change": float(self.fit.stats.bic_change), "n_params": int(self.fit.stats.k),
                 "worst_windows": [dict(w) for w in getattr(self, "worst_windows", [])]}
                if getattr(self.effect, "kind", None) == "contact" else {}),
+            **({"held_out_test": _json(self.test)} if self.test else {}),
+            **({"identifiability": _json(self.identifiability)} if self.identifiability else {}),
+            **({"refit": _json(self.refit)} if self.refit else {}),
+            **({"aliases": [{"effect": a, "correlation": finite_or_none(r)} for a, r in self.aliases]}
+               if self.aliases else {}),
         }
 
 
@@ -79,6 +126,60 @@ def finite_or_none(x):
     """``float(x)``, or None where it is not finite (JSON has no NaN)."""
     x = float(x)
     return x if np.isfinite(x) else None
+
+
+def _json(x):
+    """``x`` with numpy scalars as Python numbers and non-finite floats as None (JSON-ready)."""
+    if isinstance(x, dict):
+        return {str(k): _json(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_json(v) for v in x]
+    if isinstance(x, (bool, np.bool_)):
+        return bool(x)
+    if isinstance(x, (int, np.integer)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        return finite_or_none(x)
+    return x
+
+
+def held_out_test(r0: np.ndarray, r1: np.ndarray, *, offset: float = 0.0) -> dict:
+    """Held-out accuracy of ``r1`` against ``r0`` (whitened residuals ``(n, C)``, each predicted out of
+    sample; see the module notes).
+
+    ``offset`` (noise variances per channel and frame) is subtracted from the improvement: the part of the
+    fall that is no physics (a muscle-level effect also filters the noise).  Returns ``{"improvement": D,
+    "stderr": se(D), "z": D / se, "bandwidth": L, "frames": n}``.
+    """
+    r0 = np.asarray(r0, dtype=float).reshape(len(r0), -1)
+    r1 = np.asarray(r1, dtype=float).reshape(len(r1), -1)
+    C = r0.shape[1]
+    mean = float(np.mean(r0 ** 2 - r1 ** 2)) - offset
+    u = np.sum(2.0 * r1 * (r0 - r1), axis=1) / C
+    n = u.size
+    lrv, L = _long_run_variance(u)
+    se = float(np.sqrt(lrv / n)) if n else 0.0
+    if se <= 0:
+        return {"improvement": mean, "stderr": 0.0, "z": float("inf") if mean > 0 else 0.0, "bandwidth": L,
+                "frames": n}
+    return {"improvement": mean, "stderr": se, "z": mean / se, "bandwidth": L, "frames": n}
+
+
+def _long_run_variance(u: np.ndarray) -> tuple[float, int]:
+    """Newey-West (Bartlett) long-run variance of ``u`` with Andrews' AR(1) bandwidth: ``(lrv, L)``."""
+    n = u.size
+    uc = u - np.mean(u) if n else u
+    g0 = float(uc @ uc) / max(n, 1)
+    if n < 3 or g0 <= 0:
+        return g0, 0
+    rho = float(np.clip(np.dot(uc[1:], uc[:-1]) / (n * g0), 0.0, 0.995))
+    a = 4 * rho ** 2 / ((1 - rho) ** 2 * (1 + rho) ** 2)
+    L = int(min(max(np.ceil(1.1447 * (a * n) ** (1 / 3)), 1), n // 4))
+    m = 1 << int(np.ceil(np.log2(2 * n)))
+    f = np.fft.rfft(uc, m)
+    acov = np.fft.irfft(f * np.conj(f), m)[:L + 1] / n
+    w = 1.0 - np.arange(1, L + 1) / (L + 1)
+    return max(acov[0] + 2.0 * float(np.dot(w, acov[1:])), acov[0] / n), L
 
 
 def windows_of(t, res, channels, floor: dict, window: float, k: int = 5, mask=None) -> list:
