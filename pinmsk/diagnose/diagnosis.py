@@ -67,7 +67,7 @@ from .catalog import catalog as effect_catalog
 from .compare import DEFAULT_CUTOFF, Comparison, compare
 from .contact import DELTA_BIC, contact_window, model_with_contacts, rank_contacts, resolve
 from .fit import EffectFit, JointProblem, describe_fit
-from .ranking import EffectScore, _json, finite_or_none, windows_of
+from .ranking import EffectScore, _json, finite_or_none, held_out_test, windows_of
 from .scoring import (ALIAS_CORRELATION, Scorer, consistent_with_noise, critical_z, cycle_edges,
                       describe_character, model_with_components, residual_character)
 
@@ -381,8 +381,7 @@ class Diagnosis:
                     remedy = f"; {best.effect.describe_remedy(self.model)}"
                 parts.append(f"best explanation: {best.label} ({best.describe_params()}; held-out z "
                              f"{best.test['z']:.1f}){alias}{remedy}; add it with --add {best.label}")
-            if pair is not None and (best is None or best.label not in pair["effects"]
-                                     or pair["improvement_over_best"] > 0):
+            if pair is not None and (best is None or best.label not in pair["effects"]):
                 adds = " ".join(f"--add {e}" for e in pair["effects"])
                 parts.append(f"the pair {' + '.join(pair['effects'])} fitted jointly explains significantly more "
                              f"than {'any single effect' if best is None else best.label + ' alone'} "
@@ -671,21 +670,33 @@ def _refit_components(model, refit) -> list:
     return out
 
 
-def _aliases(ranking: list, sigma) -> None:
-    """Record, on each significant candidate, the candidates whose fitted change it cannot be told from."""
-    pool = [s for s in ranking if s.converged and s.fit.info.get("delta") is not None and s.improvement > 0]
-    if not any(s.significant for s in pool):
+def _aliases(ranking: list, sigma, *, top: int = 3) -> None:
+    """Record, on the leading significant candidates, the others this trial cannot tell them from: their
+    fitted changes correlate (``|r| >= 0.9``) and the held-out test between the two is not significant
+    (``|z| < 2``)."""
+    pool = [s for s in ranking if s.converged and s.fit.info.get("delta") is not None and s.improvement > 0
+            and s.heldout is not None]
+    lead = [s for s in pool if s.significant][:top]
+    if not lead:
         return
-    V = np.array([(s.fit.info["delta"] / sigma).ravel() for s in pool])
-    norms = np.linalg.norm(V, axis=1)
-    keep = norms > 0
-    V = V[keep] / norms[keep, None]
-    pool = [s for s, k in zip(pool, keep) if k]
-    G = V @ V.T
-    for i, s in enumerate(pool):
-        if s.significant:
-            s.aliases.extend((t.label, float(G[i, j])) for j, t in enumerate(pool)
-                             if j != i and abs(G[i, j]) >= ALIAS_CORRELATION)
+    vec = {}
+    for s in pool:
+        d = (s.fit.info["delta"] / sigma).ravel()
+        nrm = np.linalg.norm(d)
+        if nrm > 0:
+            vec[s.label] = d / nrm
+    for s in lead:
+        if s.label not in vec:
+            continue
+        for t in pool:
+            if t is s or t.label not in vec:
+                continue
+            r = float(np.dot(vec[s.label], vec[t.label]))
+            if abs(r) < ALIAS_CORRELATION:
+                continue
+            z = held_out_test(t.heldout / sigma, s.heldout / sigma)["z"]
+            if abs(z) < 2.0:
+                s.aliases.append((t.label, r))
 
 
 def _diagnose_contact(c, candidates, folds, threshold, at_floor, window, cutoff, delta_bic, fits) -> Diagnosis:
@@ -703,7 +714,9 @@ def _diagnose_contact(c, candidates, folds, threshold, at_floor, window, cutoff,
 
 def _order(ranking: list, tie: float = 0.05) -> list:
     """Best held-out improvement first; within ``tie`` (noise variances) the fewer parameters first."""
-    out = sorted(ranking, key=lambda s: (not s.converged, -s.improvement))
+    # exact aliases (a gain and a segment mass on one body) tie: the physical effect first
+    out = sorted(ranking, key=lambda s: (not s.converged, -float(f"{s.improvement:.9g}"),
+                                         getattr(s.effect, "level", "") == "sensor"))
     for _ in range(len(out)):
         swapped = False
         for i in range(len(out) - 1):

@@ -10,18 +10,22 @@ without and with the candidate and ``d = r0 - r1`` the change the
 candidate's out-of-sample fit makes, the per-frame loss differential is
 ``r0^2 - r1^2 = d^2 + 2 r1 d``: ``D``, its mean, is the held-out improvement
 per frame (in noise variances).  Given the fitted change ``d``, the noise
-enters only through ``2 r1 d``, whose long-run variance -- the residuals of
-filtered kinematics and slow disturbances are strongly autocorrelated -- is
-estimated by Newey & West's Bartlett-kernel sum of autocovariances with the
-bandwidth of Andrews (1991) for an AR(1) plug-in (``L = 1.1447 (a n)^(1/3)``,
-``a = 4 rho^2 / ((1 - rho)^2 (1 + rho)^2)``).  ``z = D / se``.  Taking the
-variance of the whole differential instead, as the plain Diebold-Mariano test
-does, would count the effect's own envelope (``d^2``, large near the ends of
-the range for a passive moment) as noise and miss strong effects; a residual
-``r1`` that still holds a slow disturbance has a long bandwidth and a large
-variance, so a chance fit to it is not significant.  Under the null the
-out-of-sample change is fitted noise, independent of the held-out noise, and
-``E[D] = -E[d^2] < 0``.
+enters only through ``2 r1 d``; its variance is that of the noise projected on
+``d``, ``4 sum_j w_j sum_cc' Gamma_cc'(j) A_cc'(j)``, with ``Gamma`` the
+auto- and cross-covariances of the held-out residual ``r1`` (the noise, when the
+candidate explains the rest), ``A_cc'(j) = sum_k d_kc d_(k+j)c'`` and Bartlett
+weights ``w_j = 1 - |j| / (L + 1)`` up to the bandwidth of Andrews (1991) for
+an AR(1) plug-in (``L = 1.1447 (a n)^(1/3)``, ``a = 4 rho^2 / ((1 - rho)^2 (1 +
+rho)^2)``, ``rho`` the lag-1 autocorrelation of ``r1``): the residuals of
+filtered kinematics and slow disturbances are strongly autocorrelated, and a
+test that took the frames as independent would find structure in every slow
+wiggle.  ``z = D / se``.  The plain Diebold-Mariano test takes the variance of
+the whole differential instead, which counts the effect's own envelope
+(``d^2``, large near the ends of the range for a passive moment) as noise and
+misses effects that act in a few excursions; a residual ``r1`` that still holds
+a slow disturbance has a long bandwidth and a large variance, so a chance fit to
+it is not significant.  Under the null the out-of-sample change is fitted
+noise, independent of the held-out noise, and ``E[D] = -E[d^2] < 0``.
 """
 from __future__ import annotations
 
@@ -153,33 +157,29 @@ def held_out_test(r0: np.ndarray, r1: np.ndarray, *, offset: float = 0.0) -> dic
     """
     r0 = np.asarray(r0, dtype=float).reshape(len(r0), -1)
     r1 = np.asarray(r1, dtype=float).reshape(len(r1), -1)
-    C = r0.shape[1]
+    n, C = r0.shape
     mean = float(np.mean(r0 ** 2 - r1 ** 2)) - offset
-    u = np.sum(2.0 * r1 * (r0 - r1), axis=1) / C
-    n = u.size
-    lrv, L = _long_run_variance(u)
-    se = float(np.sqrt(lrv / n)) if n else 0.0
+    d = r0 - r1
+    res = r1 - r1.mean(axis=0)
+    g0 = float(np.sum(res * res))
+    rho = float(np.clip(np.sum(res[1:] * res[:-1]) / g0, 0.0, 0.995)) if g0 > 0 else 0.0
+    a = 4 * rho ** 2 / ((1 - rho) ** 2 * (1 + rho) ** 2)
+    L = int(min(max(np.ceil(1.1447 * (a * n) ** (1 / 3)), 1), n // 4)) if n >= 4 else 0
+    m = 1 << int(np.ceil(np.log2(2 * max(n, 1))))
+    fr = np.fft.rfft(res, m, axis=0)                       # (F, C)
+    fd = np.fft.rfft(d, m, axis=0)
+    # lags -L..L of Gamma_cc'(j) = sum_k r_kc r_(k+j)c' / n and A_cc'(j) = sum_k d_kc d_(k+j)c'
+    G = np.fft.irfft(np.conj(fr)[:, :, None] * fr[:, None, :], m, axis=0) / n
+    A = np.fft.irfft(np.conj(fd)[:, :, None] * fd[:, None, :], m, axis=0)
+    lags = np.r_[0:L + 1, m - L:m] if L > 0 else np.array([0])
+    w = 1.0 - np.abs(np.r_[0:L + 1, -L:0] if L > 0 else np.array([0])) / (L + 1)
+    var = 4.0 * float(np.sum(w[:, None, None] * G[lags] * A[lags]))
+    var = max(var, 4.0 * float(np.sum(G[0] * A[0])) / max(n, 1), 0.0)
+    se = float(np.sqrt(var)) / (n * C) if n else 0.0
     if se <= 0:
         return {"improvement": mean, "stderr": 0.0, "z": float("inf") if mean > 0 else 0.0, "bandwidth": L,
                 "frames": n}
     return {"improvement": mean, "stderr": se, "z": mean / se, "bandwidth": L, "frames": n}
-
-
-def _long_run_variance(u: np.ndarray) -> tuple[float, int]:
-    """Newey-West (Bartlett) long-run variance of ``u`` with Andrews' AR(1) bandwidth: ``(lrv, L)``."""
-    n = u.size
-    uc = u - np.mean(u) if n else u
-    g0 = float(uc @ uc) / max(n, 1)
-    if n < 3 or g0 <= 0:
-        return g0, 0
-    rho = float(np.clip(np.dot(uc[1:], uc[:-1]) / (n * g0), 0.0, 0.995))
-    a = 4 * rho ** 2 / ((1 - rho) ** 2 * (1 + rho) ** 2)
-    L = int(min(max(np.ceil(1.1447 * (a * n) ** (1 / 3)), 1), n // 4))
-    m = 1 << int(np.ceil(np.log2(2 * n)))
-    f = np.fft.rfft(uc, m)
-    acov = np.fft.irfft(f * np.conj(f), m)[:L + 1] / n
-    w = 1.0 - np.arange(1, L + 1) / (L + 1)
-    return max(acov[0] + 2.0 * float(np.dot(w, acov[1:])), acov[0] / n), L
 
 
 def windows_of(t, res, channels, floor: dict, window: float, k: int = 5, mask=None) -> list:

@@ -44,8 +44,9 @@ __all__ = ["Scorer", "identifiability", "model_with_components", "motion_rmse_af
 PROFILE_LEVEL = 3.841
 #: condition number (unit-norm columns) beyond which parameters are taken as not identifiable together
 COND_MAX = 1e6
-#: candidates whose fitted changes correlate beyond this are reported as aliases of each other
-ALIAS_CORRELATION = 0.99
+#: candidates whose fitted changes correlate beyond this, and whose held-out errors the test cannot tell
+#: apart, are reported as aliases of each other
+ALIAS_CORRELATION = 0.9
 #: leading candidates combined into pairs
 PAIR_POOL = 4
 
@@ -277,9 +278,9 @@ class Scorer:
 
     # -- pairs ---------------------------------------------------------------------------
     def pairs(self, ranking: list) -> list:
-        """Pairs of the leading candidates fitted jointly (with the earlier effects) and tested against the
-        best single candidate; sorted by held-out improvement."""
-        pool = [s for s in ranking if s.converged and s.improvement > 0][:PAIR_POOL]
+        """Pairs of the leading significant candidates fitted jointly (with the earlier effects) and tested
+        against the best single candidate; sorted by held-out improvement."""
+        pool = [s for s in ranking if s.significant][:PAIR_POOL]
         if len(pool) < 2:
             return []
         best = pool[0]

@@ -91,38 +91,44 @@ def walking_motion(model, *, n_frames: int = 200, duration: float = 1.0, period:
     differences (step 1e-5 s) of the closed-form coordinates.
     """
     t = np.linspace(0.0, duration, n_frames)
-    w = 2 * np.pi / period
-
-    def coords(tt):
-        q = np.zeros((tt.size, model.nv))
-        ix = model.coordinate_index
-        q[:, ix("torso_x")] = speed * tt
-        q[:, ix("torso_y")] = 1.0 + 0.02 * np.cos(2 * w * tt)
-        q[:, ix("torso_angle")] = 0.05 + 0.02 * np.sin(2 * w * tt)
-        for side, ph in (("r", 0.0), ("l", np.pi)):
-            q[:, ix(f"hip_{side}")] = -0.1 + 0.35 * np.sin(w * tt + ph)
-            q[:, ix(f"knee_{side}")] = 0.6 + 0.5 * np.sin(w * tt + ph - 1.2)
-            q[:, ix(f"ankle_{side}")] = 0.05 + 0.2 * np.sin(w * tt + ph + 0.5)
-        return q
-
     h = 1e-5
-    q = coords(t)
-    v = (coords(t + h) - coords(t - h)) / (2 * h)
-    a = (coords(t + h) - 2 * q + coords(t - h)) / h ** 2
+    q = _walk_coords(model, t, period=period, speed=speed)
+    v = (_walk_coords(model, t + h, period=period, speed=speed)
+         - _walk_coords(model, t - h, period=period, speed=speed)) / (2 * h)
+    a = (_walk_coords(model, t + h, period=period, speed=speed) - 2 * q
+         + _walk_coords(model, t - h, period=period, speed=speed)) / h ** 2
     return Motion(t, q, v, a)
+
+
+def _walk_coords(model, tt, *, period: float = 1.0, speed: float = 1.2, amplitude: float = 1.0):
+    """The closed-form walking coordinates of :func:`walking_motion` at times ``tt`` ``(N, nv)``."""
+    w = 2 * np.pi / period
+    q = np.zeros((tt.size, model.nv))
+    ix = model.coordinate_index
+    q[:, ix("torso_x")] = speed * tt
+    q[:, ix("torso_y")] = 1.0 + 0.02 * np.cos(2 * w * tt)
+    q[:, ix("torso_angle")] = 0.05 + 0.02 * np.sin(2 * w * tt)
+    for side, ph in (("r", 0.0), ("l", np.pi)):
+        q[:, ix(f"hip_{side}")] = -0.1 + amplitude * 0.35 * np.sin(w * tt + ph)
+        q[:, ix(f"knee_{side}")] = 0.6 + amplitude * 0.5 * np.sin(w * tt + ph - 1.2)
+        q[:, ix(f"ankle_{side}")] = 0.05 + amplitude * 0.2 * np.sin(w * tt + ph + 0.5)
+    return q
 
 
 def make_trial(model, effects: Sequence = (), *, duration: float = 10.0, rate: float = 100.0,
                noise="realistic", seed: int = 0, measure: Sequence[str] | None = None,
-               amplitude: float = 1.0) -> Trial:
+               amplitude: float = 1.0, motion: str = "default") -> Trial:
     """A synthetic trial of ``model`` with hidden ``effects`` (Components or effect strings).
 
     ``measure`` picks the recorded channel groups among ``"moments"``,
     ``"excitations"``, ``"grf"`` (default: moments for fixed-base models,
     excitations when a muscle-level effect is hidden, ground reaction forces
     for a floating base).  ``amplitude`` scales the motion (1 = the default
-    range).  Returns a :class:`~pinmsk.trial.Trial` whose ``meta`` records the
-    hidden effects and noise levels.
+    range).  ``motion``: ``"default"`` (the multi-sine, or the squat-and-sway
+    of a floating base) or ``"walk"`` (a floating base: :func:`walking_motion`,
+    1 s strides at 1.2 m/s, the phase seeded; both feet carry the load as in
+    the squat).  Returns a :class:`~pinmsk.trial.Trial` whose ``meta`` records
+    the hidden effects and noise levels.
     """
     model = _load(model)
     effs = [effect_from_text(e) if isinstance(e, str) else e for e in effects]
@@ -154,7 +160,13 @@ def make_trial(model, effects: Sequence = (), *, duration: float = 10.0, rate: f
     n = int(round(duration * rate)) + 1
     t = np.arange(n) / rate
     lead = 0.3 if signal else 0.0            # extra time so a delayed signal exists at the end
-    if unact:
+    if motion not in ("default", "walk"):
+        raise ModelError(f"motion is 'default' or 'walk', got {motion!r}")
+    if motion == "walk":
+        if not unact:
+            raise ModelError(f"motion='walk' needs a floating-base leg model; '{model.name}' is fixed to the world")
+        q, v, a = _walk(model, t, rng, amplitude)
+    elif unact:
         q, v, a = _squat(model, t, rng, amplitude)
     else:
         q, v, a = _multisine(model, np.arange(int(round((duration + lead) * rate)) + 1) / rate,
@@ -228,6 +240,18 @@ def _multisine(model, t, rng, amplitude):
         dds = (-np.sin(np.outer(t, w) + ph) * w ** 2) @ amp
         k = half / np.max(np.abs(s))
         q[:, i], v[:, i], a[:, i] = mid + k * s, k * ds, k * dds
+    return q, v, a
+
+
+def _walk(model, t, rng, amplitude):
+    """:func:`walking_motion`'s coordinates on ``t`` from a seeded phase (``amplitude`` scales the joint
+    swings), with the same central-difference derivatives."""
+    tt = t + rng.uniform(0.0, 1.0)
+    h = 1e-5
+    q = _walk_coords(model, tt, amplitude=amplitude)
+    v = (_walk_coords(model, tt + h, amplitude=amplitude) - _walk_coords(model, tt - h, amplitude=amplitude)) / (2 * h)
+    a = (_walk_coords(model, tt + h, amplitude=amplitude) - 2 * q
+         + _walk_coords(model, tt - h, amplitude=amplitude)) / h ** 2
     return q, v, a
 
 
