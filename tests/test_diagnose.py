@@ -42,8 +42,8 @@ FOREARM_JOINT = [
     ("joint_damping", "elbow_flexion", {"c": 0.3}),
     ("coulomb_friction", "elbow_flexion", {"F_c": 0.5}),
     ("joint_spring", "elbow_flexion", {"k": 2.0, "q0": 1.0}),
-    # from_limits(theta_lo=0.5, k_lo=6, theta_hi=2.1, k_hi=6): rest at 1.3 rad, 8.2 mN m at rest, 6 N m at the ends
-    ("passive_elastic", "elbow_flexion", {"amplitude": float(np.exp(-4.8)), "theta_0": 1.3, "k_lo": 6.0,
+    # from_limits(theta_lo=0.5, k_lo=6, theta_hi=2.1, k_hi=6): rest at 1.3 rad, 20 N m at each end of the range
+    ("passive_elastic", "elbow_flexion", {"amplitude": 2 * float(np.exp(3.0)), "theta_0": 1.3, "k_lo": 6.0,
                                           "k_hi": 6.0}),
     ("payload", "hand", {"mass": 1.0}),
     ("segment_mass", "forearm_hand", {"delta": 0.2}),

@@ -48,11 +48,16 @@ def test_joint_effects_closed_forms(forearm):
                                -1.5 * np.tanh(v / 0.01))
     np.testing.assert_allclose(JointSpring("elbow_flexion", k=3.0, q0=0.4).generalized_force(forearm, mo)[:, 0],
                                -3.0 * (q - 0.4))
-    pe = PassiveElastic("elbow_flexion", amplitude=0.02, theta_0=1.4, k_lo=8.0, k_hi=12.0)
+    pe = PassiveElastic("elbow_flexion", amplitude=2.0, theta_0=1.4, k_lo=8.0, k_hi=12.0)
+    z = np.exp(8.0 * (1.4 - 0.0)) + np.exp(12.0 * (2.6 - 1.4))          # the branches at the range ends
     np.testing.assert_allclose(pe.generalized_force(forearm, mo)[:, 0],
-                               0.02 * (np.exp(-8.0 * (q - 1.4)) - np.exp(12.0 * (q - 1.4))))
+                               2.0 * (np.exp(-8.0 * (q - 1.4)) - np.exp(12.0 * (q - 1.4))) / z, rtol=1e-12)
+    # at the ends of the range (0, 2.6 rad) the moments add up to the amplitude, within the other branch's share
+    ends = Motion(np.zeros(2), np.array([[0.0], [2.6]]), np.zeros((2, 1)), np.zeros((2, 1)))
+    Q = pe.generalized_force(forearm, ends)[:, 0]
+    assert Q[0] > 0 > Q[1] and Q[0] - Q[1] == pytest.approx(2.0, rel=1e-3)
     # the published form (1 N m at theta_lo from the lower branch, at theta_hi from the upper one) maps exactly
-    pub = PassiveElastic.from_limits("elbow_flexion", theta_lo=0.3, k_lo=8.0, theta_hi=2.2, k_hi=12.0)
+    pub = PassiveElastic.from_limits("elbow_flexion", forearm, theta_lo=0.3, k_lo=8.0, theta_hi=2.2, k_hi=12.0)
     np.testing.assert_allclose(pub.generalized_force(forearm, mo)[:, 0],
                                np.exp(-8.0 * (q - 0.3)) - np.exp(12.0 * (q - 2.2)), rtol=1e-12)
     assert pub.values["theta_0"] == pytest.approx((8.0 * 0.3 + 12.0 * 2.2) / 20.0)

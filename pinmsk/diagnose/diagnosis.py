@@ -125,7 +125,9 @@ class Diagnosis:
         held = scorer.base_cv
         ok, ratio_cv, limit, _ = consistent_with_noise(held, comparison.eq_noise.sigma, settings["at_floor"])
         unidentified = [c.label for c, info in zip(scorer.refit, scorer.base_ident)
-                        if not info.get("identifiable", True)]
+                        if not info.get("determined", True)]
+        switched_off = [c.label for c, info in zip(scorer.refit, scorer.base_ident)
+                        if info.get("determined", True) and not info.get("identifiable", True)]
         self.stopping = {
             "rule": "held-out test (Diebold-Mariano, HAC variance) at family-wise level alpha over the "
                     "candidates (Bonferroni), in-sample BIC falls, identifiable parameters",
@@ -133,7 +135,7 @@ class Diagnosis:
             "candidates_tested": len(ranking), "blocks": settings["blocks"],
             "held_out_ratio": ratio_cv, "consistent_limit": limit, "consistent_with_noise": ok,
             "noise_floor_method": comparison.noise.method,
-            "not_identifiable_in_model": unidentified,
+            "not_identifiable_in_model": unidentified, "switched_off_in_model": switched_off,
         }
         if self.best is not None or self.best_pair is not None:
             self.verdict = "missing_effect"
@@ -391,10 +393,13 @@ class Diagnosis:
             return (f"verdict: missing_effect -- {where}, consistent with the noise, but only through "
                     f"{', '.join(st['not_identifiable_in_model'])}, whose parameters this trial does not "
                     "determine (see the flags): the effect that is really missing is another one; remove it")
+        held = st.get("not_identifiable_in_model") or []
+        also = (f"; the model holds {', '.join(held)}, whose parameters this trial does not determine (held at "
+                "their values, see the flags): remove it and diagnose again" if held else "")
         return (f"verdict: missing_effect -- {where} (held-out {st['held_out_ratio']:.2f}x, more than the noise "
                 f"model allows, {st['consistent_limit']:.2f}x), but no catalog effect explains it out of sample: "
                 "the gap is outside the catalog (see what the residual follows above: segment lengths, moment "
-                "arms, a time-varying disturbance, ...) or the noise floor is underestimated")
+                "arms, a time-varying disturbance, ...) or the noise floor is underestimated" + also)
 
     def __repr__(self) -> str:
         return (f"<Diagnosis {self.model.name} {self.comparison.mode}: total rmse {self.rmse['total']:.4g}, "
@@ -605,8 +610,7 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
     refit_comps = _refit_components(c.model, refit)
     dt = median_step(c.eq.motion.t)
     guard = int(np.ceil(1.0 / (cutoff * dt))) if cutoff else 2
-    q_rows = c.eq.motion_rows.q[:, [c.model.coordinate_index(x) for x in c.coordinates]]
-    cyc = cycle_edges(c.time, q_rows, folds)
+    cyc = cycle_edges(c.time, _main_coordinate(c), folds)
     if cyc is not None and min(np.diff([0, *cyc[0], n])) < _MIN_BLOCK:
         cyc = None
     blocks = (f"{folds}-fold blocked cross-validation over whole cycles (period {cyc[1]:.3g} s)" if cyc
@@ -651,6 +655,17 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
     windows = _worst_windows(c, window)
     cors = _correlations(c)
     return Diagnosis(c, ranking, windows, cors, settings, skipped, scorer=scorer, pairs=found)
+
+
+def _main_coordinate(c) -> np.ndarray:
+    """The coordinate that moves most (rotations before translations, trend removed): the movement's cycle."""
+    q = c.eq.motion_rows.q
+    s = np.linspace(-1.0, 1.0, q.shape[0])[:, None]
+    x = q - q.mean(axis=0)
+    x = x - s * (np.sum(s * x, axis=0) / np.sum(s * s))
+    rot = np.array([not is_prismatic(c.model, n) for n in c.model.coordinates])
+    sd = np.where(rot, x.std(axis=0), 0.0) if rot.any() else x.std(axis=0)
+    return q[:, [int(np.argmax(sd))]]
 
 
 def _refit_components(model, refit) -> list:

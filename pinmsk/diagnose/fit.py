@@ -714,6 +714,10 @@ class JointProblem:
         bound (left out of the inversion: their error is NaN)."""
         mask = np.ones(self.n, dtype=bool) if mask is None else mask
         r = ((self.e + self.delta(x)) / self.sigma)[mask]
+        if self.p == 0:
+            return {"cov": np.zeros((0, 0)), "rank": 0, "cond": 1.0, "at_bound": np.zeros(0, bool),
+                    "s2": float(np.mean(r ** 2)) if r.size else 1.0, "inflation": 1.0,
+                    "singular_values": np.zeros(0)}
         J = (self.jacobian(x)[mask] / self.sigma[None, :, None]).reshape(-1, self.p)
         span = self.hi - self.lo
         tol = np.where(np.isfinite(span), 1e-8 * span, 1e-9)
@@ -730,12 +734,21 @@ class JointProblem:
         cov = np.full((p, p), np.nan)
         inner = ~at_bound & (norms > 0)
         if np.any(inner):
-            JtJ = J[:, inner].T @ J[:, inner]
-            if np.all(np.isfinite(JtJ)) and np.linalg.cond(JtJ) < 1e14:
-                sub = np.linalg.inv(JtJ) * s2 * infl
-                cov[np.ix_(inner, inner)] = sub
-            else:
+            Ji = J[:, inner] / norms[inner]
+            JtJ = Ji.T @ Ji
+            if not np.all(np.isfinite(JtJ)):
                 cov[np.ix_(inner, inner)] = np.inf
+            else:
+                # pseudo-inverse on the identifiable subspace; a parameter with a share in a null direction
+                # (a combination the data do not see) has no finite error, the others keep theirs
+                w, V = np.linalg.eigh(JtJ)
+                keep = w > max(w.max(), 1e-300) * 1e-12
+                sub = (V[:, keep] / w[keep]) @ V[:, keep].T / np.outer(norms[inner], norms[inner])
+                sub = sub * s2 * infl
+                blind = np.any(np.abs(V[:, ~keep]) > 0.05, axis=1) if np.any(~keep) else np.zeros(sub.shape[0], bool)
+                sub[blind, :] = np.inf
+                sub[:, blind] = np.inf
+                cov[np.ix_(inner, inner)] = sub
         return {"cov": cov, "rank": rank, "cond": cond, "at_bound": at_bound, "s2": s2, "inflation": infl,
                 "singular_values": sv}
 

@@ -60,16 +60,19 @@ def critical_z(alpha: float, m: int) -> float:
 def cycle_edges(t: np.ndarray, q: np.ndarray, folds: int, *, min_corr: float = 0.8):
     """Block edges (row indices) at whole cycles when the motion is cyclic, else None.
 
-    The period is the first peak of the autocorrelation of the compared coordinates (each standardised,
-    summed) after its first zero crossing, taken when the peak exceeds ``min_corr`` and the trial holds
+    The period is the first peak of the autocorrelation of the compared coordinates (each without its
+    linear trend, standardised, summed) after its first zero crossing, taken when the peak exceeds ``min_corr`` and the trial holds
     at least ``folds`` cycles; each block is then a whole number of cycles.  Returns ``(edges, period_s)``.
     """
     n = q.shape[0]
     if n < 4 * folds:
         return None
+    s = np.linspace(-1.0, 1.0, n)[:, None]
     x = q - q.mean(axis=0)
+    x = x - s * (np.sum(s * x, axis=0) / np.sum(s * s))      # without the trend (a walk's forward travel)
     sd = x.std(axis=0)
-    x = x[:, sd > 0] / sd[sd > 0]
+    moving = sd > 1e-6 * (np.abs(q).max(axis=0) + 1e-9)     # what is left of a pure ramp is round-off
+    x = x[:, moving] / sd[moving]
     if x.shape[1] == 0:
         return None
     m = 1 << int(np.ceil(np.log2(2 * n)))
@@ -113,7 +116,8 @@ def consistent_with_noise(residual: np.ndarray, sigma: np.ndarray, allowance: fl
 
 # -- identifiability ---------------------------------------------------------------------
 
-def identifiability(jp: JointProblem, x: np.ndarray, which: int = -1, *, profile: bool = True) -> dict:
+def identifiability(jp: JointProblem, x: np.ndarray, which: int = -1, *, profile: bool = True,
+                    base: tuple | None = None) -> dict:
     """Identifiability of component ``which`` of a joint fit at its optimum ``x``.
 
     ``rank`` and ``condition_number`` of the whole joint sensitivity matrix (the whitened Jacobian with
@@ -121,7 +125,9 @@ def identifiability(jp: JointProblem, x: np.ndarray, which: int = -1, *, profile
     ``intervals``: the 95 % profile-likelihood interval of each of the component's free parameters, the
     others re-minimised (linear components: Wald's, which is the profile there), ``[low, high]`` with
     ``open`` naming the sides that reach a bound before the likelihood falls that far; ``flags``: why
-    the component is not identifiable (empty when it is).  A parameter whose interval reaches the value
+    the component is not identifiable (empty when it is).  ``base`` is ``(rank, condition number)`` of the
+    joint fit without the component: a rank or conditioning that the earlier effects already lack is not
+    held against it.  A parameter whose interval reaches the value
     that switches the effect off (``zero_params``) is consistent with no effect, which the held-out test
     judges: that is no flag.
     """
@@ -133,11 +139,12 @@ def identifiability(jp: JointProblem, x: np.ndarray, which: int = -1, *, profile
     se, corr = jp.stderr_corr(cov["cov"])
     names = prob.names
     zero = getattr(comp, "zero_params", None) or {}
-    flags, intervals = [], {}
+    flags, intervals, off = [], {}, []
     p_all = jp.p
-    if cov["rank"] < p_all:
+    base_rank, base_cond = base if base is not None else (0, 1.0)
+    if cov["rank"] < base_rank + len(names):
         flags.append(f"the sensitivity matrix has rank {cov['rank']} < {p_all} parameters")
-    elif cov["cond"] > COND_MAX:
+    elif cov["cond"] > COND_MAX and cov["cond"] > 10 * base_cond:
         flags.append(f"the sensitivity matrix is ill-conditioned (condition number {cov['cond']:.3g})")
     threshold = PROFILE_LEVEL * cov["s2"] * cov["inflation"]
     linear = jp.linear or prob.linear
@@ -148,6 +155,7 @@ def identifiability(jp: JointProblem, x: np.ndarray, which: int = -1, *, profile
             b = lo_b if at == "lower" else hi_b
             if name in zero and np.isclose(b, zero[name]):
                 flags.append(f"{name} = {b:.4g} at its bound: the fit switches the effect off")
+                off.append(name)
             else:
                 flags.append(f"{name} = {b:.4g} at its {at} bound")
             intervals[name] = {"low": None, "high": None, "open": [at]}
@@ -176,7 +184,8 @@ def identifiability(jp: JointProblem, x: np.ndarray, which: int = -1, *, profile
         for m in range(p_all):
             if m != k and np.isfinite(corr[k, m]) and abs(corr[k, m]) >= 0.5:
                 corr_out[f"{jp.names[k]}~{jp.names[m]}"] = float(corr[k, m])
-    return {"identifiable": not flags, "flags": flags, "rank": cov["rank"], "n_params": p_all,
+    return {"identifiable": not flags, "flags": flags, "determined": len(flags) == len(off),
+            "rank": cov["rank"], "n_params": p_all,
             "condition_number": cov["cond"], "intervals": intervals, "level": 0.95,
             "correlations": corr_out, "stderr": {n: float(se[k]) for n, k in zip(names, range(sl.start, sl.stop))}}
 
@@ -200,21 +209,38 @@ class Scorer:
         self.base_x = np.zeros(0)
         self.base_info = None
         if self.refit:
-            self.base = JointProblem(self.eq, self.sigma, self.refit)
-            self.problems.update({c.label: p for c, p in zip(self.refit, self.base.problems)})
-            x, conv, msg = self.base.solve(x0=self.base.x_start, max_nfev=100)
-            self.base_x, self.base_converged, self.base_message = x, conv, msg
-            self.base_cv, _ = self.base.cross_validate(self.blocks, self.guard, x, max_nfev=settings["cv_nfev"])
-            self.base_sse = self.base.sse(x)
-            cov = self.base.covariance(x)
-            self.base_se, self.base_corr = self.base.stderr_corr(cov["cov"])
-            self.base_ident = [identifiability(self.base, x, k, profile=False) for k in range(len(self.refit))]
+            self._fit_base()
+            self.base_ident = [identifiability(self.base, self.base_x, k, profile=False)
+                               for k in range(len(self.refit))]
+            # an earlier effect the data do not determine is held at its value in the model: refitting it
+            # with every candidate would only let it wander (and take the candidates with it)
+            held = [k for k, info in enumerate(self.base_ident) if not info["determined"]]
+            if held:
+                self.refit = [c.fix(*[n for n, p in c.params.items() if p.vary]) if k in held else c
+                              for k, c in enumerate(self.refit)]
+                for k in held:
+                    self.problems.pop(self.refit[k].label, None)
+                self._fit_base()
         else:
             self.base_cv = self.eq.e
             self.base_sse = float(np.sum((self.eq.e / self.sigma) ** 2))
             self.base_ident = []
+            self.base_rank_cond = (0, 1.0)
         self.r0 = self.base_cv / self.sigma
         self.mse0 = float(np.mean(self.r0 ** 2))
+
+    def _fit_base(self):
+        """The earlier effects alone: fitted on all rows and cross-validated on the blocks."""
+        settings = self.settings
+        self.base = JointProblem(self.eq, self.sigma, self.refit, problems=self.problems)
+        self.problems.update({c.label: p for c, p in zip(self.refit, self.base.problems)})
+        x, conv, msg = self.base.solve(x0=self.base.x_start, max_nfev=100)
+        self.base_x, self.base_converged, self.base_message = x, conv, msg
+        self.base_cv, _ = self.base.cross_validate(self.blocks, self.guard, x, max_nfev=settings["cv_nfev"])
+        self.base_sse = self.base.sse(x)
+        cov = self.base.covariance(x)
+        self.base_rank_cond = (cov["rank"], cov["cond"])
+        self.base_se, self.base_corr = self.base.stderr_corr(cov["cov"])
 
     # -- one candidate --------------------------------------------------------------
     def score(self, comp) -> EffectScore:
@@ -264,7 +290,8 @@ class Scorer:
         # profile-likelihood intervals where they decide something (a candidate the test passes); Wald's
         # elsewhere, which is the profile for linear effects
         try:
-            ident = identifiability(jp, x, -1, profile=settings.get("profile", True) and passes)
+            ident = identifiability(jp, x, -1, profile=settings.get("profile", True) and passes,
+                                    base=self.base_rank_cond)
         except PinmskError as exc:            # a profile refit that fails: the candidate is not identifiable
             ident = {"identifiable": False, "flags": [f"profile likelihood failed: {exc}"]}
         note = "" if conv else f"fit did not converge: {fit.stats.message}"

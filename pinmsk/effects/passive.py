@@ -1,25 +1,34 @@
 """Passive elastic joint moments: a fitted double exponential per joint, and Riener & Edrich (1999).
 
 :class:`PassiveElastic` (``passive_elastic``) -- the Riener & Edrich form
-(thesis Eq. 5.11) for one joint, written as an amplitude times a shape about
-the joint's rest angle::
+(thesis Eq. 5.11) for one joint, written as an amplitude times a restoring
+shape about the joint's rest angle ``theta_0``::
 
-    Q = A [exp(-k_lo (q - theta_0)) - exp(k_hi (q - theta_0))]
+    Q = A [exp(-k_lo (q - theta_0)) - exp(k_hi (q - theta_0))] / Z,
+    Z = exp(k_lo (theta_0 - q_lo)) + exp(k_hi (q_hi - theta_0))
 
-The first term is the moment that resists motion towards the lower end of the
-range (it pushes towards +q), the second the one towards the upper end.  The
-general double exponential ``k1 exp(-k2 (q - theta1)) - k3 exp(-k4 (theta2 - q))``
-is over-parametrised -- ``k1`` and ``theta1`` (likewise ``k3`` and ``theta2``)
-only enter through ``k1 exp(k2 theta1)`` -- and its one-branch limits are
-degenerate: with ``k4 -> 0`` a branch becomes a constant offset, which a sensor
-bias or a gravity error produces as well.  Here every member of the family is a
-*restoring* moment (``dQ/dq = -A (k_lo e_lo + k_hi e_hi) < 0``) that vanishes at
-the rest angle ``theta_0``, where both branches equal ``A``:
+with ``[q_lo, q_hi]`` the joint's range of motion (the model's position
+limits; ``theta_0 -+ 1 rad`` for a joint without them).  The first term is the
+moment that resists motion towards the lower end of the range (it pushes
+towards +q), the second the one towards the upper end.  ``Z`` normalises the
+shape by its two branches' values at the ends of the range, so the moment
+there is at most ``A``, whatever the stiffening rates: the ends' moments add up
+to ``A`` up to the small share of the opposite branch.
 
-* ``amplitude`` ``A`` (N m, >= 0; 0 = no moment): each branch's moment at rest;
+Why this form.  The general double exponential ``k1 exp(-k2 (q - theta1)) -
+k3 exp(-k4 (theta2 - q))`` is over-parametrised -- ``k1`` and ``theta1``
+(likewise ``k3`` and ``theta2``) only enter through ``k1 exp(k2 theta1)`` -- and
+its one-branch limits are degenerate: with ``k4 -> 0`` a branch becomes a
+constant offset, which a sensor bias or a gravity error produces as well, and
+with a large rate at a tiny amplitude it becomes a wall far outside the data
+that a fit on part of the range extrapolates into kilonewton-metres.  Here
+every member of the family is a *restoring* moment (``dQ/dq < 0``) that
+vanishes at the rest angle and stays within ``A`` over the range:
+
+* ``amplitude`` ``A`` (N m, >= 0; 0 = no moment): the scale of the moments at
+  the ends of the range;
 * ``theta_0`` (rad): the rest angle, bounded to the joint's range of motion
-  when the diagnosis builds the candidate (:meth:`PassiveElastic.for_model`),
-  so it cannot run off to +-2 pi and turn a branch into a constant;
+  when the diagnosis builds the candidate (:meth:`PassiveElastic.for_model`);
 * ``k_lo``, ``k_hi`` (1/rad, >= 1): how fast each branch stiffens (e-folding
   angle ``1/k`` at most 57 deg, the physiological range: Riener & Edrich's
   exponents are 1.2-11 /rad).  Below 1/rad the shape would be a near-linear
@@ -28,12 +37,11 @@ the rest angle ``theta_0``, where both branches equal ``A``:
 
 No member of the family is a constant offset (that is ``sensor_offset``).
 The published form with ``theta_lo``, ``theta_hi`` (the angles where each branch
-is ``M_ref``) maps onto this one exactly: ``theta_0 = (k_lo theta_lo + k_hi
-theta_hi) / (k_lo + k_hi)``, ``A = M_ref exp(-k_lo (theta_0 - theta_lo))``
-(:meth:`PassiveElastic.from_limits`).  Exponents are clipped at 50 to keep far
-extrapolation finite.  ``A`` enters linearly, so the fit starts from a
-variable-projection grid over ``(theta_0, k_lo, k_hi)`` with ``A`` solved by
-non-negative least squares (:meth:`PassiveElastic.initial_guess`).
+is ``M_ref``) maps onto this one exactly (:meth:`PassiveElastic.from_limits`).
+The exponents are evaluated as ``exp(a - log Z)`` (no overflow within the
+range) and clipped at 50 beyond it.  ``A`` enters linearly, so the fit starts
+from a variable-projection grid over ``(theta_0, k_lo, k_hi)`` with ``A`` solved
+by non-negative least squares (:meth:`PassiveElastic.initial_guess`).
 
 :class:`RienerEdrich1999PassiveMoment` (``riener_edrich_1999``) -- thesis
 Eq. 5.11 as published for the hip, knee and ankle of one leg (angles in
@@ -59,7 +67,7 @@ import numpy as np
 
 from ..components import Parameter
 from ..errors import ModelError
-from ._base import JointEffect, bounded_to_range
+from ._base import JointEffect, bounded_to_range, joint_range
 from .registry import register
 
 _EXP_CLIP = 50.0
@@ -71,11 +79,11 @@ def _exp(x):
 
 @register
 class PassiveElastic(JointEffect):
-    """Restoring double exponential ``A [exp(-k_lo (q - theta_0)) - exp(k_hi (q - theta_0))]`` about the rest angle."""
+    """Restoring double exponential about the rest angle, normalised at the ends of the joint's range."""
 
     family = "passive_elastic"
     parameters = (
-        Parameter("amplitude", 0.1, 0.0, 1.0e3, "N m", "moment of each branch at the rest angle"),
+        Parameter("amplitude", 1.0, 0.0, 1.0e3, "N m", "scale of the moments at the ends of the range"),
         Parameter("theta_0", 0.0, -np.pi, np.pi, "rad", "rest angle (zero moment); bounded to the joint's range"),
         Parameter("k_lo", 5.0, 1.0, 100.0, "1/rad", "stiffening rate of the lower-limit branch"),
         Parameter("k_hi", 5.0, 1.0, 100.0, "1/rad", "stiffening rate of the upper-limit branch"),
@@ -85,38 +93,60 @@ class PassiveElastic(JointEffect):
     range_parameters = ("theta_0",)
 
     @classmethod
-    def from_limits(cls, target, *, theta_lo: float, k_lo: float, theta_hi: float, k_hi: float,
+    def from_limits(cls, target, model, *, theta_lo: float, k_lo: float, theta_hi: float, k_hi: float,
                     moment_ref: float = 1.0) -> "PassiveElastic":
-        """The published parametrisation ``M_ref [exp(-k_lo (q - theta_lo)) - exp(k_hi (q - theta_hi))]``."""
+        """The published parametrisation ``M_ref [exp(-k_lo (q - theta_lo)) - exp(k_hi (q - theta_hi))]``
+        on ``model``'s range of ``target``."""
         theta_0 = (k_lo * theta_lo + k_hi * theta_hi) / (k_lo + k_hi)
-        amp = moment_ref * float(np.exp(-k_lo * (theta_0 - theta_lo)))
+        lo, hi = _range(model, target, theta_0)
+        log_z = np.logaddexp(k_lo * (theta_0 - lo), k_hi * (hi - theta_0))
+        amp = moment_ref * float(np.exp(-k_lo * (theta_0 - theta_lo) + log_z))
         return cls(target, amplitude=amp, theta_0=theta_0, k_lo=k_lo, k_hi=k_hi)
 
     def for_model(self, model) -> "PassiveElastic":
         """This effect with ``theta_0`` bounded to the target coordinate's range of motion."""
         return bounded_to_range(self, model, self.range_parameters)
 
-    def _branches(self, q, p):
-        d = q - p["theta_0"]
-        return _exp(-p["k_lo"] * d), _exp(p["k_hi"] * d), d
+    # -- the law, on the model's range -----------------------------------------------
+    def _terms(self, model, q, p):
+        t0, kl, kh = p["theta_0"], p["k_lo"], p["k_hi"]
+        lo, hi = _range(model, self.target, t0)
+        d = q - t0
+        e_l, e_h = kl * (t0 - lo), kh * (hi - t0)
+        log_z = np.logaddexp(e_l, e_h)
+        u = _exp(-kl * d - log_z)
+        w = _exp(kh * d - log_z)
+        s_l, s_h = np.exp(e_l - log_z), np.exp(e_h - log_z)      # softmax shares, s_l + s_h = 1
+        dz = {"theta_0": s_l * kl - s_h * kh, "k_lo": s_l * (t0 - lo), "k_hi": s_h * (hi - t0)}
+        return u, w, d, dz
 
-    def _force(self, q, v, p):
-        lo, hi, _ = self._branches(q, p)
-        return p["amplitude"] * (lo - hi)
+    def generalized_force(self, model, motion, params=None, cache=None):
+        i = model.coordinate_index(self.target)
+        p = self._p(params)
+        u, w, _, _ = self._terms(model, motion.q[:, i], p)
+        out = np.zeros((motion.n_frames, model.nv))
+        out[:, i] = p["amplitude"] * (u - w)
+        return out
 
-    def _dforce_dparams(self, q, v, p):
-        lo, hi, d = self._branches(q, p)
+    def param_jacobian(self, model, motion, params=None, cache=None):
+        i = model.coordinate_index(self.target)
+        p = self._p(params)
+        u, w, d, dz = self._terms(model, motion.q[:, i], p)
         a = p["amplitude"]
-        return np.column_stack([
-            lo - hi,                                   # d/dA
-            a * (p["k_lo"] * lo + p["k_hi"] * hi),     # d/dtheta_0
-            -a * d * lo,                               # d/dk_lo
-            -a * d * hi,                               # d/dk_hi
-        ])
+        out = np.zeros((motion.n_frames, model.nv, 4))
+        out[:, i, 0] = u - w                                                    # d/dA
+        out[:, i, 1] = a * (u * (p["k_lo"] - dz["theta_0"]) + w * (p["k_hi"] + dz["theta_0"]))
+        out[:, i, 2] = a * (-u * d - (u - w) * dz["k_lo"])
+        out[:, i, 3] = a * (-w * d - (u - w) * dz["k_hi"])
+        return out
 
-    def _dforce_dstate(self, q, v, p):
-        lo, hi, _ = self._branches(q, p)
-        return -p["amplitude"] * (p["k_lo"] * lo + p["k_hi"] * hi), np.zeros_like(v)
+    def state_derivatives(self, model, motion, params=None, cache=None):
+        i = model.coordinate_index(self.target)
+        p = self._p(params)
+        u, w, _, _ = self._terms(model, motion.q[:, i], p)
+        dq = np.zeros((motion.n_frames, model.nv, model.nv))
+        dq[:, i, i] = -p["amplitude"] * (p["k_lo"] * u + p["k_hi"] * w)
+        return dq, np.zeros_like(dq)
 
     def initial_guess(self, model, motion, target, cache=None) -> list[dict]:
         """Variable projection: on a grid of ``(theta_0, k_lo, k_hi)`` within the bounds, ``A`` by
@@ -135,10 +165,12 @@ class PassiveElastic(JointEffect):
         thetas = np.linspace(t_lo, t_hi, 13)
         ks = np.geomspace(max(decl["k_lo"].min, 1e-3), min(decl["k_lo"].max, 60.0), 8)
         kh = np.geomspace(max(decl["k_hi"].min, 1e-3), min(decl["k_hi"].max, 60.0), 8)
-        d = q[None, :] - thetas[:, None]                                     # (T, n)
-        e_lo = _exp(-ks[:, None, None] * d[None])                            # (K, T, n)
-        e_hi = _exp(kh[:, None, None] * d[None])
-        S = e_lo[:, None] - e_hi[None, :]                                    # (Kl, Kh, T, n)
+        S = np.empty((ks.size, kh.size, thetas.size, q.size))
+        for a, kl in enumerate(ks):
+            for b, kk in enumerate(kh):
+                for t, t0 in enumerate(thetas):
+                    u, w, _, _ = self._terms(model, q, {"theta_0": t0, "k_lo": kl, "k_hi": kk})
+                    S[a, b, t] = u - w
         ss = np.einsum("abtn,abtn->abt", S, S)
         sy = np.einsum("abtn,n->abt", S, y)
         amp = np.clip(sy / np.maximum(ss, 1e-300), 0.0, decl["amplitude"].max)
@@ -150,6 +182,12 @@ class PassiveElastic(JointEffect):
             out.append({"amplitude": float(amp[a, b, t]), "theta_0": float(thetas[t]),
                         "k_lo": float(ks[a]), "k_hi": float(kh[b])})
         return out
+
+
+def _range(model, coordinate, theta_0):
+    """The normalising range ``(q_lo, q_hi)``: the joint's range of motion, else ``theta_0 -+ 1 rad``."""
+    rng = joint_range(model, coordinate)
+    return rng if rng is not None else (theta_0 - 1.0, theta_0 + 1.0)
 
 
 @register
