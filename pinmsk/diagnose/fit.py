@@ -32,6 +32,15 @@ Blocked cross-validation (:meth:`EffectFit.cross_validate`): the frames
 are cut into ``folds`` contiguous blocks; each block is predicted by the fit
 on the others, leaving out a guard of ``guard`` frames on either side of the
 held-out block (the low-pass filter correlates neighbouring frames).
+
+Several effects at once (:class:`JointProblem`): the earlier effects of a
+diagnosis loop and a candidate, fitted together -- linear ones exactly, the
+others by trust-region least squares from warm starts -- with the covariance of
+all their parameters (a pseudo-inverse on the identifiable subspace), the rank
+and condition number of the sensitivity matrix, and profile-likelihood
+intervals (:meth:`JointProblem.profile_interval`).  Measurement effects
+(``sensor_gain``, ``sensor_offset``) change the model's reading of their
+channel, ``tau - measure(tau)``, where ``tau`` is what reaches that sensor.
 """
 from __future__ import annotations
 
@@ -47,7 +56,7 @@ from ..fitting import FitStatistics, Fitter, Result, format_report
 from ..stats import weighted_sse
 from ..trial import moment_channel
 
-__all__ = ["EffectFit", "EffectProblem", "describe_fit"]
+__all__ = ["EffectFit", "EffectProblem", "JointProblem", "cv_blocks", "describe_fit"]
 
 
 class EffectProblem:
