@@ -30,14 +30,24 @@ def model(name):
     return _MODELS[name]
 
 
-def follow(m, trial, steps=4, **kw):
-    """The loop as a user runs it: add the suggested effect until nothing is suggested."""
-    adds = []
-    r = run(m, trial, **kw)
-    while r.final.best is not None and len(adds) < steps:
-        adds.append(r.final.best.label)
-        r = run(m, trial, add=adds, **kw)
-    return adds, r
+class Loop:
+    """The loop as a user runs it: add the suggested effect until nothing is suggested (one ``--add`` per
+    step, each diagnosis reused as the next step's start)."""
+
+    def __init__(self, m, trial, steps=4):
+        self.adds, self.refits = [], []
+        r = run(m, trial)
+        while r.final.best is not None and len(self.adds) < steps:
+            self.adds.append(r.final.best.label)
+            r = run(m, trial, add=[self.adds[-1]], first=r.final)
+            self.refits += r.refits
+        self.final = r.final
+        self.verdict, self.model, self.ratio = r.verdict, r.model, r.ratio
+
+
+def follow(m, trial, steps=4):
+    loop = Loop(m, trial, steps)
+    return loop.adds, loop
 
 
 # -- joint refit ----------------------------------------------------------------------------------
@@ -54,12 +64,13 @@ def test_damping_and_coulomb_of_similar_size_refit_jointly(tmp_path):
     pair = first.best_pair
     assert pair is not None and set(pair["effects"]) == {"joint_damping:elbow_flexion",
                                                          "coulomb_friction:elbow_flexion"}
-    adds, r = follow(m, trial)
-    assert adds == ["joint_damping:elbow_flexion", "coulomb_friction:elbow_flexion"]
+    r = run(m, trial, add=["joint_damping", "coulomb_friction"])
     assert r.verdict == "at_noise_floor"
     final = {c.label: c.values for c in r.model.components}
     assert final["joint_damping:elbow_flexion"]["c"] == pytest.approx(0.3, rel=0.05)
     assert final["coulomb_friction:elbow_flexion"]["F_c"] == pytest.approx(0.5, rel=0.06)
+    assert r.steps[1].best.label == "coulomb_friction:elbow_flexion"        # the loop suggested both
+    adds = [a.effect.label for a in r.added]
     # what the second add did to the first: recorded, printed, and in the JSON
     moved = r.refits[1]["effects"][0]["params"]["c"]
     assert moved["before"] > 0.45 and moved["after"] == pytest.approx(0.3, rel=0.05)
@@ -85,6 +96,7 @@ def test_payload_and_spring_refit_jointly():
     assert final["joint_spring:elbow_flexion"]["k"] == pytest.approx(3.0, rel=0.05)
     assert final["joint_spring:elbow_flexion"]["q0"] == pytest.approx(1.0, rel=0.05)
     # the spring found first (0.24 rad rest angle, biased by the load) moved to the truth
+    assert adds[0] == "joint_spring:elbow_flexion"
     assert r.refits[1]["effects"][0]["params"]["q0"]["before"] < 0.5
 
 

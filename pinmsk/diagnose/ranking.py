@@ -160,7 +160,13 @@ def held_out_test(r0: np.ndarray, r1: np.ndarray, *, offset: float = 0.0) -> dic
     n, C = r0.shape
     mean = float(np.mean(r0 ** 2 - r1 ** 2)) - offset
     d = r0 - r1
-    res = r1 - r1.mean(axis=0)
+    # only the channels the candidate changes carry its noise term (a joint effect: one channel)
+    act = np.flatnonzero(np.any(d != 0.0, axis=0))
+    if act.size == 0:
+        return {"improvement": mean, "stderr": 0.0, "z": 0.0 if mean <= 0 else float("inf"), "bandwidth": 0,
+                "frames": n}
+    d = d[:, act]
+    res = r1[:, act] - r1[:, act].mean(axis=0)
     g0 = float(np.sum(res * res))
     rho = float(np.clip(np.sum(res[1:] * res[:-1]) / g0, 0.0, 0.995)) if g0 > 0 else 0.0
     a = 4 * rho ** 2 / ((1 - rho) ** 2 * (1 + rho) ** 2)

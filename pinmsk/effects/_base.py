@@ -25,7 +25,7 @@ import pinocchio as pin
 from ..components import Component, Motion, motion_cached
 from ..errors import ModelError
 
-__all__ = ["JointEffect", "SignalEffect", "frame_point_kinematics", "torque_regressor",
+__all__ = ["JointEffect", "ScaledBasisEffect", "SignalEffect", "frame_point_kinematics", "torque_regressor",
            "unactuated_coordinates", "moving_bodies", "hand_like_frames", "joint_range", "bounded_to_range"]
 
 
@@ -85,6 +85,24 @@ class JointEffect(Component):
 
     def _dforce_dstate(self, q, v, p):  # pragma: no cover - abstract
         raise NotImplementedError
+
+
+class ScaledBasisEffect(Component):
+    """An effect ``Q = -theta * B(q, v, a)``: its one parameter times a parameter-free basis that
+    :meth:`prepare` computes once per motion (a payload's ``J_p^T (a_p - g)``, a body's ``Y_j pi_j``, the
+    skeleton's ``Y pi``).  Linear, so the diagnosis fits it exactly."""
+
+    linear = True
+
+    def generalized_force(self, model, motion: Motion, params: Mapping[str, float] | None = None,
+                          cache: Any = None) -> np.ndarray:
+        basis = self.prepare(model, motion) if cache is None else cache
+        return -self._p(params)[self.parameters[0].name] * basis
+
+    def param_jacobian(self, model, motion: Motion, params: Mapping[str, float] | None = None,
+                       cache: Any = None) -> np.ndarray:
+        basis = self.prepare(model, motion) if cache is None else cache
+        return -basis[:, :, None]
 
 
 class SignalEffect(Component):

@@ -165,12 +165,11 @@ class PassiveElastic(JointEffect):
         thetas = np.linspace(t_lo, t_hi, 13)
         ks = np.geomspace(max(decl["k_lo"].min, 1e-3), min(decl["k_lo"].max, 60.0), 8)
         kh = np.geomspace(max(decl["k_hi"].min, 1e-3), min(decl["k_hi"].max, 60.0), 8)
-        S = np.empty((ks.size, kh.size, thetas.size, q.size))
-        for a, kl in enumerate(ks):
-            for b, kk in enumerate(kh):
-                for t, t0 in enumerate(thetas):
-                    u, w, _, _ = self._terms(model, q, {"theta_0": t0, "k_lo": kl, "k_hi": kk})
-                    S[a, b, t] = u - w
+        # the shapes on the whole grid at once: axes (k_lo, k_hi, theta_0, frame)
+        grid = {"k_lo": ks[:, None, None, None], "k_hi": kh[None, :, None, None],
+                "theta_0": thetas[None, None, :, None]}
+        u, w, _, _ = self._terms(model, q[None, None, None, :], grid)
+        S = u - w
         ss = np.einsum("abtn,abtn->abt", S, S)
         sy = np.einsum("abtn,n->abt", S, y)
         amp = np.clip(sy / np.maximum(ss, 1e-300), 0.0, decl["amplitude"].max)
@@ -185,9 +184,10 @@ class PassiveElastic(JointEffect):
 
 
 def _range(model, coordinate, theta_0):
-    """The normalising range ``(q_lo, q_hi)``: the joint's range of motion, else ``theta_0 -+ 1 rad``."""
+    """The normalising range ``(q_lo, q_hi)``: the joint's range of motion, else ``theta_0 -+ 1 rad``
+    (``theta_0`` may be an array of rest angles)."""
     rng = joint_range(model, coordinate)
-    return rng if rng is not None else (theta_0 - 1.0, theta_0 + 1.0)
+    return rng if rng is not None else (np.asarray(theta_0) - 1.0, np.asarray(theta_0) + 1.0)
 
 
 @register

@@ -22,20 +22,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..components import Component, Parameter
+from ..components import Parameter
 from ..errors import ModelError
-from ._base import add_dynamic_parameters, moving_bodies, torque_regressor
+from ._base import ScaledBasisEffect, add_dynamic_parameters, moving_bodies, torque_regressor
 from .registry import register
 
 
 @register
-class MassScale(Component):
+class MassScale(ScaledBasisEffect):
     """Scale ``1 + delta`` of every segment's mass and inertia (the model not scaled to the subject)."""
 
     family = "scale"
     level = "joint"
     target_kind = "model"
-    linear = True
     inertial = True
     parameters = (
         Parameter("delta", 0.1, -0.6, 1.5, "", "relative change of every segment's mass and inertia "
@@ -66,14 +65,6 @@ class MassScale(Component):
     def prepare(self, model, motion, data=None):
         """``Y pi`` over frames, ``(N, nv)``: the skeleton's inverse dynamics without external loads."""
         return torque_regressor(model, motion, data) @ self._pi(model)
-
-    def generalized_force(self, model, motion, params=None, cache=None):
-        basis = self.prepare(model, motion) if cache is None else cache
-        return -self._p(params)["delta"] * basis
-
-    def param_jacobian(self, model, motion, params=None, cache=None):
-        basis = self.prepare(model, motion) if cache is None else cache
-        return -basis[:, :, None]
 
     def apply_inertia(self, model, pin_model) -> None:
         d = self.values["delta"]
