@@ -362,3 +362,41 @@ def test_cycle_edges():
     edges, period = cycle_edges(t, q, 5)
     assert period == pytest.approx(1.0, abs=0.011) and edges == [200, 400, 600, 800]
     assert cycle_edges(t, np.c_[np.sin(2 * np.pi * 0.37 * t) + np.sin(2 * np.pi * 1.13 * t)], 5) is None
+
+
+# -- muscle level: several effects of the chain at once ----------------------------------------------
+
+def test_joint_chain_of_muscle_level_effects():
+    """Two muscle-level effects in one joint fit: the change of e is that of the whole chain (delay, then
+    activation dynamics) against the model's, not the sum of each alone."""
+    from pinmsk.effects import ActivationDynamics, ElectromechanicalDelay
+    m = model("forearm")
+    trial = make_trial(m, [], duration=3.0, seed=3, measure=("excitations",))
+    c = compare(m, trial)
+    delay, act = ElectromechanicalDelay("muscles", delay=0.05), ActivationDynamics("muscles")
+    jp = JointProblem(c.eq, c.eq_noise.sigma, [delay, act])
+    both = jp.delta(jp.x_start)
+    eq = c.eq
+    u = eq.excitation
+    a = act.transform(eq.motion.t, delay.transform(eq.motion.t, u))
+    expected = eq._muscle_moment(a)[eq.rows] - eq.tau_mus
+    np.testing.assert_allclose(both, expected, rtol=1e-9, atol=1e-9 * np.abs(expected).max())
+    alone = JointProblem(c.eq, c.eq_noise.sigma, [delay]).delta([0.05]) + \
+        JointProblem(c.eq, c.eq_noise.sigma, [act]).delta(act.param_vector())
+    assert np.abs(alone - both).max() > 0.05 * np.abs(both).max()          # they do not add up
+
+
+# slow (9 s): test_joint_chain_of_muscle_level_effects covers the joint chain, test_damping_and_coulomb_...
+# the loop's refit
+@pytest.mark.slow
+def test_delay_refitted_when_activation_dynamics_joins():
+    m = model("forearm")
+    trial = make_trial(m, ["electromechanical_delay:muscles:delay=0.04",
+                           "activation_dynamics:muscles:tau_rise=0.02,tau_fall=0.08"], duration=5.0, seed=3)
+    r = run(m, trial, add=["electromechanical_delay", "activation_dynamics"])
+    assert r.verdict == "at_noise_floor"
+    final = {c.label: c.values for c in r.model.components}
+    assert final["electromechanical_delay:muscles"]["delay"] == pytest.approx(0.04, rel=0.05)
+    assert final["activation_dynamics:muscles"]["tau_rise"] == pytest.approx(0.02, rel=0.1)
+    assert final["activation_dynamics:muscles"]["tau_fall"] == pytest.approx(0.08, rel=0.05)
+    assert r.refits[1]["effects"][0]["params"]["delay"]["before"] > 0.08     # alone it took the lag too
