@@ -413,6 +413,55 @@ def motion_cached(data, model, key, motion: Motion, compute):
     return data.cached(model, key, motion, compute)
 
 
+def parameter_settings(component: Component) -> dict:
+    """How ``component``'s parameters differ from its class's declaration in bounds and ``vary``, as a sidecar
+    entry writes them: ``{"bounds": {name: [lo, hi]}, "fixed": [...], "free": [...]}``, each key only where
+    something differs (:func:`read_parameter_settings` reads them back; values are written apart)."""
+    declared = {p.name: p for p in type(component).parameters}
+    params = component.params
+    out: dict[str, Any] = {
+        "bounds": {n: [p.min, p.max] for n, p in params.items()
+                   if (p.min, p.max) != (declared[n].min, declared[n].max)},
+        "fixed": [n for n, p in params.items() if not p.vary and declared[n].vary],
+        "free": [n for n, p in params.items() if p.vary and not declared[n].vary]}
+    return {k: v for k, v in out.items() if v}
+
+
+def read_parameter_settings(spec: Mapping, names: Iterable[str], *, where: str
+                            ) -> tuple[dict[str, tuple[float, float]], dict[str, bool]]:
+    """``(bounds, vary)`` from a sidecar entry's optional ``bounds = { name = [lo, hi] }``, ``fixed = [...]``
+    (parameters a fit keeps) and ``free = [...]`` (parameters a fit may change) keys, for a component with
+    parameters ``names``; a ModelError names ``where`` and the bad entry (with a "did you mean")."""
+    names = list(names)
+
+    def check(key, k):
+        if k not in names:
+            close = difflib.get_close_matches(str(k), names, n=1)
+            hint = f" (did you mean '{close[0]}'?)" if close else ""
+            raise ModelError(f"{where}: '{key}' names unknown parameter '{k}'{hint}; parameters: {', '.join(names)}")
+
+    bounds = {}
+    table = spec.get("bounds") or {}
+    if not isinstance(table, Mapping):
+        raise ModelError(f"{where}: 'bounds' must be a table {{ name = [lo, hi] }}, got {table!r}")
+    for k, b in table.items():
+        check("bounds", k)
+        try:
+            lo, hi = (float(x) for x in b)
+        except (TypeError, ValueError):
+            raise ModelError(f"{where}: bounds for '{k}' must be [lo, hi], got {b!r}") from None
+        bounds[k] = (lo, hi)
+    vary = {}
+    for key, flag in (("fixed", False), ("free", True)):
+        given = spec.get(key) or ()
+        for k in (given,) if isinstance(given, str) else given:
+            check(key, k)
+            if vary.get(k, flag) != flag:
+                raise ModelError(f"{where}: parameter '{k}' is both fixed and free")
+            vary[k] = flag
+    return bounds, vary
+
+
 def _replace(p: Parameter, **kw) -> Parameter:
     d = dict(p.__dict__)
     d.update(kw)

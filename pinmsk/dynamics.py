@@ -27,7 +27,8 @@ from . import skeleton
 from .components import Motion
 from .effects.sensor import apply_sensors
 from .errors import ResidualWarning, TrialError
-from .kinematics import DEFAULT_CUTOFF, TrialInputs, lowpass_external, prepare, source_coordinates
+from .kinematics import (DEFAULT_CUTOFF, TrialInputs, actuated_forces, lowpass_external, prepare,
+                         require_independent_joints, source_coordinates)
 from .residuals import ResidualReport, floating_base_residuals
 from .signals.sampling import median_step
 from .trial import Trial, moment_channels
@@ -44,15 +45,32 @@ def component_forces(model, motion: Motion, *, data=None) -> dict[str, np.ndarra
 
 
 def inverse_dynamics_array(model, motion: Motion, *, external: Sequence[skeleton.ExternalForce] = (),
-                           components: bool = True, progress=None, data=None) -> np.ndarray:
+                           components: bool = True, progress=None, data=None, actuated: bool = True) -> np.ndarray:
     """Actuator generalized forces ``(N, nv)`` for a Motion (see :func:`inverse_dynamics`);
-    ``data`` as for :func:`component_forces`."""
+    ``data`` as for :func:`component_forces`.  On a model with dependent joints (an exact OpenSim
+    import) they are OpenSim's coordinates' forces at their joints and 0 at the dependent joints
+    (:func:`pinmsk.kinematics.actuated_forces`); ``actuated=False`` gives Pinocchio's ``tau`` of every joint.
+    A contact on a body that ``external`` loads (a measured GRF on a foot that has contact spheres) is
+    refused: the ground would act twice."""
+    if components and external and model.contacts:
+        _ground_acts_once(model, external)
     tau = skeleton.rnea(model, motion.q, motion.v, motion.a, external=external,
                                     progress=progress)
     if components:
         for f in component_forces(model, motion, data=data).values():
             tau -= f
-    return tau
+    return actuated_forces(model, motion, tau) if actuated else tau
+
+
+def _ground_acts_once(model, external) -> None:
+    pm = model.pin
+    loaded = {pm.frames[model.frame_id(e.frame)].parentJoint: e.frame for e in external}
+    both = [f"{c.label} on {loaded[j]}" for c in model.contacts
+            if (j := pm.frames[model.frame_id(c.target)].parentJoint) in loaded]
+    if both:
+        raise TrialError(f"model '{model.name}' has contacts on the bodies the trial's ground reaction forces load "
+                         f"({', '.join(both)}): the ground would act twice; leave the measured GRF out "
+                         "(ground_reaction='ignore', CLI --no-grf) or the contacts (model.without(label))")
 
 
 @dataclass(frozen=True)
@@ -90,7 +108,8 @@ def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, ex
                          notes=inputs.notes + ("external wrenches given by the caller on "
                                                + ", ".join(e.frame for e in ext),))
     motion = inputs.motion
-    tau = inverse_dynamics_array(model, motion, external=ext, components=components, progress=progress)
+    tau = inverse_dynamics_array(model, motion, external=ext, components=components, progress=progress,
+                                 actuated=False)
     residuals = floating_base_residuals(model, motion, tau, ext)
     names, q_out, tau_out = source_coordinates(model, motion, tau)
     chans = {c: q_out[:, i] for i, c in enumerate(names)}
@@ -155,6 +174,7 @@ def simulate(model, *, t, q0, v0, moments=None, method: str = "rk4", rtol: float
     their generalized force at each evaluation.  Returns a Trial with the
     coordinates and ``<coord>_speed`` channels.
     """
+    require_independent_joints(model, "simulate (forward dynamics)")
     t = np.asarray(t, dtype=float)
     tau_fn = _torque_function(model, moments)
     comps = [c for c in model.components if not getattr(c, "inertial", False)]

@@ -21,6 +21,11 @@ returns self; ``result_`` (a :class:`~pinmsk.fitting.Result`: the Trial of coord
 in ``model.coordinate_order`` and the statistics of the weighted marker residuals),
 ``marker_rms_`` (per-marker RMS error over frames, m), ``frame_rms_`` (per-frame RMS
 over markers, m), ``iterations_`` and ``converged_`` (per frame).
+
+A model with dependent joints (an exact OpenSim import, ``pinmsk.kinematics.coordinate_map``)
+is solved in OpenSim's coordinates: the joints follow by the map and the marker Jacobians by
+its chain rule; coupled coordinates take their couplers' values, as OpenSim's IK enforces
+them.  The result's channels are then OpenSim's coordinates (``q_`` stays Pinocchio's).
 """
 from __future__ import annotations
 
@@ -32,6 +37,7 @@ import pinocchio as pin
 
 from .errors import ConvergenceError, ModelError, TrialError
 from .fitting import FitStatistics, Fitter, Result, format_report
+from .kinematics import coordinate_map, trial_coordinates
 from .markers import MarkerSet, load_marker_set
 from .trial import Trial, marker_array, marker_names
 
@@ -140,26 +146,49 @@ class InverseKinematics(Fitter):
         w = np.array([(self.weights or {}).get(m.name, m.weight) for m in used], dtype=float)
         pm, fids = add_marker_frames(model, mset)
         pd = pm.createData()
-        nq = pm.nq
+        # the solved coordinates: the model's joints, or OpenSim's coordinates of a model with dependent
+        # joints (an exact import), whose joints follow by the map (marker Jacobians J_pin dq_pin/dq)
+        cmap = coordinate_map(model)
+        names = model.coordinates if cmap is None else tuple(cmap.osim_coordinates)
+        index = {c: i for i, c in enumerate(names)}
+        nq = len(names)
+
+        def column(c):
+            if cmap is None or c in index:
+                return index[c] if c in index else model.coordinate_index(c)
+            hint = difflib.get_close_matches(str(c), names, n=3)
+            raise ModelError(f"inverse kinematics: model '{model.name}' solves OpenSim's coordinates; '{c}' is not "
+                             f"one{'; did you mean ' + ', '.join(map(repr, hint)) + '?' if hint else ''} "
+                             f"(coordinates: {', '.join(names)})")
+
         # initial pose
-        q = np.zeros(nq)
+        q = np.zeros(nq) if cmap is None else np.array([cmap.welded.get(c, 0.0) for c in names])
         if self.q0 is not None:
             if isinstance(self.q0, dict):
                 for c, v in self.q0.items():
-                    q[model.coordinate_index(c)] = v
+                    q[column(c)] = v
             else:
                 q[:] = np.asarray(self.q0, dtype=float)
+
+        def evaluate(qk, x, Jall):
+            """Marker positions (and Jacobians in the solved coordinates) at qk into x (nm, na), Jall (nm, na, nq)."""
+            qp = qk if cmap is None else cmap.expand(qk[None])[0][0]
+            Jm = None if cmap is None else cmap.jacobian(qk[None])[0]
+            pin.computeJointJacobians(pm, pd, qp)      # also runs forward kinematics
+            pin.updateFramePlacements(pm, pd)
+            for j, fid in enumerate(fids):
+                x[j] = pd.oMf[fid].translation[ax]
+                Jp = pin.getFrameJacobian(pm, pd, fid, pin.LOCAL_WORLD_ALIGNED)[ax]
+                Jall[j] = Jp if Jm is None else Jp @ Jm
+
         # free coordinates: those that move a marker
-        pin.computeJointJacobians(pm, pd, q)
-        pin.updateFramePlacements(pm, pd)
-        moves = np.zeros(nq, dtype=bool)
-        for fid in fids:
-            J = pin.getFrameJacobian(pm, pd, fid, pin.LOCAL_WORLD_ALIGNED)[:3]
-            moves |= np.abs(J[ax]).sum(axis=0) > 0
+        x0, J0 = np.empty((nm, na)), np.empty((nm, na, nq))
+        evaluate(q, x0, J0)
+        moves = np.abs(J0).sum(axis=(0, 1)) > 0
         if self.coordinates is None:
             free = np.flatnonzero(moves)
         else:
-            free = np.array([model.coordinate_index(c) for c in self.coordinates])
+            free = np.array([column(c) for c in self.coordinates])
         if free.size == 0:
             raise ModelError("inverse kinematics: no coordinate moves any measured marker")
         if nm * na < free.size:
@@ -170,14 +199,7 @@ class InverseKinematics(Fitter):
         iters = np.zeros(n, dtype=int)
         conv = np.zeros(n, dtype=bool)
         nf = free.size
-        rot = np.array([model.coordinate_index(c) for c in model.rotational_coordinates], dtype=int)
-        def evaluate(qk, x, Jall):
-            """Marker positions (and Jacobians) at qk into x (nm, na) and Jall (nm, na, nq)."""
-            pin.computeJointJacobians(pm, pd, qk)      # also runs forward kinematics
-            pin.updateFramePlacements(pm, pd)
-            for j, fid in enumerate(fids):
-                x[j] = pd.oMf[fid].translation[ax]
-                Jall[j] = pin.getFrameJacobian(pm, pd, fid, pin.LOCAL_WORLD_ALIGNED)[ax]
+        rot = np.array([index[c] for c in model.rotational_coordinates if c in index], dtype=int)
 
         xk, Jk = np.empty((nm, na)), np.empty((nm, na, nq))
         xn, Jn = np.empty((nm, na)), np.empty((nm, na, nq))
@@ -248,10 +270,18 @@ class InverseKinematics(Fitter):
         self.marker_error_ = err
         self.iterations_ = iters
         self.converged_ = conv
-        self.free_coordinates_ = tuple(model.coordinates[i] for i in free)
+        self.free_coordinates_ = tuple(names[i] for i in free)
         self.axes_ = axes
-        self.q_ = Q
-        chans = {c: Q[:, model.coordinate_index(c)] for c in model.coordinate_order}
+        if cmap is None:
+            self.q_ = Q
+            chans = {c: Q[:, model.coordinate_index(c)] for c in model.coordinate_order}
+        else:
+            # coupled coordinates take their couplers' values (OpenSim's IK enforces them); q_ is Pinocchio's
+            for dep, indep, f, scale in cmap.couplers:
+                x = Q[:, index[indep[0]]] if len(indep) == 1 else Q[:, [index[c] for c in indep]]
+                Q[:, index[dep]] = scale * f.value(x)
+            self.q_ = cmap.expand(Q)[0]
+            chans = {c: Q[:, index[c]] for c in trial_coordinates(model)}
         used_k = np.isfinite(err)                        # (n, nm) markers measured in each frame
         stats = FitStatistics(
             n=int(used_k.sum()) * na, k=n * nf, sse=float(np.sum(np.where(used_k, w * err ** 2, 0.0))),

@@ -29,6 +29,7 @@ metadata and every report.
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable
@@ -46,7 +47,8 @@ from .skeleton import ExternalForce, world_wrench
 from .trial import Trial, parse_ground_reaction
 
 __all__ = ["DEFAULT_CUTOFF", "FILTER_ORDER", "Filtering", "TrialInputs", "motion", "as_motion", "prepare",
-           "cutoff_value", "coordinate_map", "source_coordinates",
+           "cutoff_value", "coordinate_map", "source_coordinates", "trial_coordinates", "actuated_forces",
+           "require_independent_joints", "check_coordinate_columns",
            "is_planar", "has_ground_reaction", "lowpass_external"]
 
 #: Vertical force (N) below which a plate counts as unloaded.
@@ -214,6 +216,7 @@ def motion(model, trial, *, cutoff=DEFAULT_CUTOFF, signals: Iterable[str] | None
     Analyses use :func:`prepare`, which adds the external loads.
     """
     cmap = coordinate_map(model)
+    check_coordinate_columns(model, trial)
     if cmap is None:
         trial.require(model.coordinates)
         q, v, a = trial.kinematics(model.coordinates, cutoff=cutoff_value(cutoff))
@@ -256,6 +259,82 @@ def source_coordinates(model, motion: Motion, tau: np.ndarray) -> tuple[tuple[st
     q = np.column_stack([cols[c] if c in cols else np.full(motion.n_frames, cmap.welded.get(c, cmap.defaults[c]))
                          for c in cmap.osim_coordinates])
     return cmap.osim_coordinates, q, cmap.generalized_forces(cols, tau, couplers=False)
+
+
+def trial_coordinates(model) -> tuple[str, ...]:
+    """The coordinates a trial of ``model`` gives: OpenSim's (not welded) for a model with a coordinate map,
+    else the model's own (:attr:`~pinmsk.Model.coordinate_order`)."""
+    cmap = coordinate_map(model)
+    if cmap is None:
+        return tuple(model.coordinate_order)
+    return tuple(c for c in cmap.osim_coordinates if c not in cmap.welded)
+
+
+def actuated_forces(model, motion: Motion, tau: np.ndarray) -> np.ndarray:
+    """The generalized forces ``(N, nv)`` actuators supply for Pinocchio's ``tau`` (N, nv), in the model's joint
+    columns: ``tau`` itself without a coordinate map; with one (an exact OpenSim import), each OpenSim
+    coordinate's force ``J^T tau`` (:func:`source_coordinates`) at its joint and 0 at the dependent joints,
+    which no actuator drives (their share of the load reaches the coordinates by virtual work).  What muscles
+    and reserves balance (static optimization) is this.  A map whose coordinates drive only dependent joints
+    (Rajagopal's patella angle ``knee_angle_r_beta``) has no column for their force: ModelError naming them."""
+    cmap = coordinate_map(model)
+    if cmap is None:
+        return tau
+    names, _, tau_os = source_coordinates(model, motion, tau)
+    lost = [c for c in names if c not in model.coordinates and c not in cmap.welded]
+    if lost:
+        raise ModelError(f"model '{model.name}': coordinate(s) {', '.join(lost)} drive only dependent joints, so "
+                         "their generalized force has no joint column here; this analysis cannot balance "
+                         "them (inverse_dynamics reports them; or import the model with nonlinear='fit')")
+    out = np.zeros_like(np.asarray(tau, dtype=float))
+    for i, c in enumerate(names):
+        if c in model.coordinates:
+            out[:, model.coordinate_index(c)] = tau_os[:, i]
+    return out
+
+
+def require_independent_joints(model, what: str) -> None:
+    """ModelError if ``model`` has dependent joints (a coordinate map): ``what`` (an analysis that integrates
+    or moves the Pinocchio joints independently) cannot hold them."""
+    cmap = coordinate_map(model)
+    if cmap is None:
+        return
+    deps = list(cmap.dependent)
+    raise ModelError(
+        f"{what} moves the Pinocchio joints of model '{model.name}' independently, but {len(deps)} of them "
+        f"({', '.join(deps[:4])}{' ...' if len(deps) > 4 else ''}) are dependent joints, functions of OpenSim's "
+        "coordinates (an exact import of nonlinear joint axes), which it cannot hold; load the .osim with "
+        "nonlinear='fit' (command line: --nonlinear fit; the fitted joints' errors are in the import report)")
+
+
+def check_coordinate_columns(model, trial) -> None:
+    """TrialError naming each column of a coordinates file (OpenSim's ``Coordinates`` tables: IK output) that
+    is not a coordinate of ``model``, with the closest model coordinates (a coordinate the model lacks is an
+    input that would otherwise be dropped).  Speeds and accelerations of the model's coordinates, and trials
+    a channel map made (which chose their columns), are not checked."""
+    meta = getattr(trial, "meta", {}) or {}
+    if meta.get("name") != "Coordinates" or meta.get("channel_map"):
+        return
+    from .trial import close_matches
+    offered = trial_coordinates(model)
+    full = model.meta.get("coordinate_map")        # an OpenSim import's: welded coordinates are known too
+    have = set(offered) | set(getattr(full, "osim_coordinates", ())) | set(model.coordinates)
+    unknown = []
+    for n in trial.names:
+        base = n.split("/")[-2] if n.startswith("/") and n.count("/") >= 3 else n
+        if base in have or _DERIVATIVE.sub("", base) in have:
+            continue
+        unknown.append((n, close_matches(base, offered)))
+    if unknown:
+        parts = [f"'{n}'" + (f" (did you mean {' or '.join(map(repr, hint))}?)" if hint else "")
+                 for n, hint in unknown]
+        src = meta.get("source", "the trial")
+        raise TrialError(f"{src}: column(s) {', '.join(parts)} of the coordinates file are not coordinates of "
+                         f"model '{model.name}' ({', '.join(offered)}); rename them (--map) or "
+                         "drop them (Trial.drop) if the model does not have them")
+
+
+_DERIVATIVE = re.compile(r"_(?:speed|u|acceleration|accel)$")
 
 
 def first_non_finite(x: np.ndarray) -> tuple[int, int] | None:

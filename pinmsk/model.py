@@ -32,6 +32,7 @@ import numpy as np
 import pinocchio as pin
 
 from . import builtin_models
+from .actuators import from_spec as actuator_from_spec
 from .components import Component, Motion, ParameterKeyError, Parameters
 from .contact.spec import from_spec as contact_from_spec
 from .effects import registry
@@ -39,33 +40,54 @@ from .errors import ModelError
 from . import kinematics
 from .kinematics import DEFAULT_CUTOFF
 from .muscles import NaganoGerritsen, Thelen2003
+from .muscles.models import MUSCLE_MODELS, MUSCLE_PARAMETERS
 from .muscles.muscle_set import MUSCLE_PREFIX, MuscleSet
-from .muscles.paths import MomentArmPath
+from .muscles.paths import MomentArmPath, PolynomialPath
 from .io.toml_files import check_keys, read_toml
 
 #: Every key a model sidecar may hold (``urdf/README.md``), per table; others are errors.
 #: ``[[effects]]`` keys are the effect's own (type, target, params, its options and
-#: parameters) and ``[[contacts]]`` keys the contact's, checked where they are built.
+#: parameters), ``[[actuators]]`` and ``[[contacts]]`` keys the actuator's and the contact's,
+#: checked where they are built.
 SIDECAR_SCHEMA = {
     "model": {"name": "model name (default: the file name)", "urdf": "the skeleton (required)",
               "gravity": "[gx, gy, gz] m/s^2, world frame", "up_axis": "'x' | 'y' | 'z' (display)",
               "description": "one line", "default_paths": "path variant used by default",
-              "coordinate_order": "order of q, v, tau in pinmsk (a permutation of the joints)"},
-    "muscle_model": {"type": "'thelen2003' | 'nagano_gerritsen'",
+              "coordinate_order": "order of q, v, tau in pinmsk (a permutation of the joints)",
+              "osim": "the OpenSim model it was imported from (relative to the sidecar; the viewer draws its "
+                      "geometric muscle paths)",
+              "osim_digest": "blake2b digest of that .osim when the sidecar was written"},
+    "muscle_model": {"type": "'thelen2003' | 'nagano_gerritsen' | (imported models) 'thelen2003_opensim' | "
+                             "'millard2012' | 'degroote2016'",
                      "tendon": "'rigid' | 'compliant' (default for static analyses)",
                      "tendon_model": "the type's own tendon law (thelen2003: 'thelen2003'; "
                                      "nagano_gerritsen: 'winters_quadratic')",
                      "tendon_strain": "tendon strain at F_max (default 0.04)",
-                     "parallel_elastic": "the type's own choice (thelen2003: true; nagano_gerritsen: false)"},
+                     "parallel_elastic": "the type's own choice (thelen2003: true; nagano_gerritsen: false)",
+                     "tau_rise": "activation time constant (s; the type's default)",
+                     "tau_fall": "deactivation time constant (s; the type's default)"},
     "muscles": {"name": "muscle name", "f_max": "N", "l_opt": "m", "l_slack": "m", "pennation": "rad",
                 "volume": "m^3", "fast_fraction": "0..1", "width": "Nagano & Gerritsen only",
-                "paths": "path variants { l0, moment_arms }", "points": "display polyline"},
+                "paths": "path variants { l0, moment_arms } or a fitted polynomial", "points": "display polyline",
+                # the other per-muscle parameters of the muscle models (MUSCLE_PARAMETERS), each for its types
+                **{k: f"{p.unit or '-'}: {p.doc}" for k, p in MUSCLE_PARAMETERS.items()
+                   if k not in ("f_max", "l_opt", "l_slack", "pennation", "volume", "fast_fraction", "width")}},
     "effects": None,
+    "actuators": None,
     "contacts": None,
+    "coordinate_map": "OpenSim's coordinates -> dependent joints (pinmsk.opensim.skeleton.MAP_KEYS)",
 }
-#: Keys of one path variant, ``paths.<variant> = { ... }`` of a muscle.
+#: Keys of one path variant, ``paths.<variant> = { ... }`` of a muscle: moment-arm polynomials per
+#: coordinate (``l0``, ``moment_arms``: MomentArmPath) or one polynomial of the length in the coordinates
+#: the muscle crosses (the rest: PolynomialPath, as ``pinmsk import`` writes an OpenSim model's fit).
 SIDECAR_PATH_KEYS = {"l0": "muscle-tendon length at q = 0 (m)",
-                     "moment_arms": "{ coordinate = [c0, c1, ...] } (m)"}
+                     "moment_arms": "{ coordinate = [c0, c1, ...] } (m)",
+                     "coordinates": "the coordinates of the length polynomial",
+                     "center": "x = (q - center) / scale, per coordinate", "scale": "per coordinate",
+                     "exponents": "[[e per coordinate], ...] one row per term",
+                     "coefficients": "one per term (m)",
+                     "max_length_error": "the fit's largest length error against the geometric path (m)",
+                     "max_moment_arm_error": "the fit's largest moment-arm error (m)"}
 #: The tendon law and parallel element each muscle type implements (``[muscle_model]`` may
 #: state them, but not ask for another).
 _MUSCLE_LAWS = {"thelen2003": ("thelen2003", True), "nagano_gerritsen": ("winters_quadratic", False)}
@@ -364,12 +386,29 @@ class Model:
         return kinematics.motion(self, trial, cutoff=cutoff, signals=signals)
 
     def describe(self) -> str:
-        """A short human-readable summary (used by ``pinmsk info``)."""
-        lines = [f"model {self.name}: {self.nv} dof, {self.n_muscles} muscles, "
+        """A short human-readable summary (used by ``pinmsk info``).  A model with a coordinate map (an
+        OpenSim import's dependent joints) is described by OpenSim's coordinates, the dependent joints
+        listed as such."""
+        cmap = kinematics.coordinate_map(self)
+        if cmap is None:
+            size = f"{self.nv} dof"
+        else:
+            coords = [c for c in cmap.osim_coordinates if c not in cmap.welded]
+            size = (f"{len(coords)} coordinates (OpenSim's; the Pinocchio skeleton has {self.nv} joints, "
+                    f"{len(cmap.dependent)} of them dependent)")
+        lines = [f"model {self.name}: {size}, {self.n_muscles} muscles, "
                  f"mass {self.mass:.3f} kg, gravity {np.round(self.gravity, 3).tolist()} m/s^2"]
         if self.meta.get("description"):
             lines.append(f"  {self.meta['description']}")
-        lines.append("  coordinates: " + ", ".join(self.coordinate_order))
+        if cmap is None:
+            lines.append("  coordinates: " + ", ".join(self.coordinate_order))
+        else:
+            only = [c for c in coords if c not in self._coord_index]
+            lines.append(f"  coordinates ({len(coords)}, what motions give and results report): " + ", ".join(coords))
+            if only:
+                lines.append(f"  coordinates that drive only dependent joints: {', '.join(only)}")
+            lines.append(f"  dependent joints ({len(cmap.dependent)}, functions of the coordinates, exact): " + ", ".join(
+                f"{d.name} = {_function_label(d.function)}({', '.join(d.of)})" for d in cmap.dependent.values()))
         if self.muscles is not None:
             lines.append(f"  muscles ({self.muscles.model_type}, {self.muscles.tendon} tendon): "
                          + ", ".join(self.muscles.names))
@@ -383,6 +422,14 @@ class Model:
     def __reduce__(self):
         # Pinocchio models pickle; rebuild through the constructor.
         return (_rebuild, (self.name, self._pin, self.muscles, self.effects, self.contacts, _thaw(self.meta)))
+
+
+def _function_label(f) -> str:
+    """``SimmSpline``, ``1.147 * SimmSpline`` (a MultiplierFunction), ...: an OpenSim function's kind."""
+    inner = getattr(f, "function", None)
+    if inner is not None and hasattr(f, "scale"):
+        return f"{f.scale:.6g} * {_function_label(inner)}"
+    return type(f).__name__
 
 
 def _rebuild(name, pm, muscles, effects, contacts, meta):
@@ -447,10 +494,16 @@ class Data:
 # -- loading ---------------------------------------------------------------
 
 def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
-               tendon: str | None = None, gravity=None) -> Model:
+               tendon: str | None = None, gravity=None, nonlinear: str | None = None) -> Model:
     """Load a built-in model by name (``finger``, ``forearm``, ``gait2d``, ``human3d``)
     or a user's model from a sidecar ``.toml`` (which names its URDF), a bare ``.urdf`` or an
-    OpenSim ``.osim`` (:func:`pinmsk.opensim.import_osim`; its report is ``meta['import_report']``).
+    OpenSim ``.osim`` (:func:`import_osim`; its report is ``meta['import_report']``).
+
+    An ``.osim`` is imported with ``nonlinear="exact"`` unless ``nonlinear="fit"`` is given (see
+    :func:`pinmsk.opensim.importer.read_import`): joints whose axes are nonlinear functions of a
+    coordinate (a spline knee) get dependent joints filled from OpenSim's coordinates, so trials and
+    results are in OpenSim's coordinates.  The import is cached in this process (:func:`import_osim`):
+    loading the same unchanged file with the same options again returns the same (frozen) Model.
 
     ``moment_arms`` picks a path variant declared in the sidecar (e.g.
     ``"constant"`` or ``"angle"``); ``tendon`` overrides the sidecar's
@@ -465,9 +518,12 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
             raise ModelError(f"{p}: moment_arms and tendon do not apply to an OpenSim model (its muscles "
                              "come from the .osim: their paths are fitted polynomials, their tendons as OpenSim sets them)")
         from .opensim.importer import warn_report
-        model, report = import_osim(p, gravity=gravity)
+        model, report = import_osim(p, gravity=gravity, nonlinear=nonlinear or "exact")
         warn_report(report)
         return model
+    if nonlinear is not None:
+        raise ModelError(f"{p}: nonlinear= applies to an OpenSim .osim model (how its nonlinear joints are "
+                         "imported); this model is already a skeleton")
     if p.suffix.lower() == ".urdf":
         if not p.exists():
             raise ModelError(f"URDF file not found: {p}")
@@ -497,13 +553,27 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
     return _load_sidecar(sidecar, moment_arms=moment_arms, tendon=tendon, gravity=gravity)
 
 
-def import_osim(path, *, locked: str = "joint", nonlinear: str = "fit", gravity=None, hooks=None):
+def import_osim(path, *, locked: str = "joint", nonlinear: str = "exact", gravity=None, hooks=None):
     """``(Model, ImportReport)`` of an OpenSim ``.osim`` (the parts: :func:`pinmsk.opensim.importer.read_import`,
     whose docstring gives the options; ``load_model`` takes the defaults).  ``hooks`` default: the
-    muscle import (:func:`pinmsk.opensim.muscle_import.muscle_hook`); ``()`` imports the skeleton only."""
+    muscle import (:func:`pinmsk.opensim.muscle_import.muscle_hook`) and the contacts
+    (:func:`pinmsk.opensim.contacts.contact_hook`); ``()`` imports the skeleton only.
+
+    Imports are cached in this process, keyed by the file (resolved path, modification time in ns, size
+    and a digest of its content) and the options (``locked``, ``nonlinear``, ``gravity``, the hook objects): importing the same
+    unchanged file with the same options returns the same Model and report (the Model is frozen, so
+    sharing it is safe), without refitting the muscle paths (arm26: 2-4 s).  A changed file is imported
+    again.  :func:`clear_import_cache` empties the cache; ``pinmsk import`` writes a sidecar that loads
+    fast in a new process.
+    """
     from .opensim.importer import read_import
+    from .opensim.contacts import contact_hook
     from .opensim.muscle_import import DEFAULT_HOOKS
-    hooks = DEFAULT_HOOKS if hooks is None else hooks
+    hooks = tuple((*DEFAULT_HOOKS, contact_hook) if hooks is None else hooks)
+    key = _import_key(path, locked, nonlinear, gravity, hooks)
+    if key is not None and key in _IMPORTS:
+        _IMPORTS[key] = _IMPORTS.pop(key)            # most recently used last
+        return _IMPORTS[key]
     from .opensim.report import NOTE, ReportEntry
     imp = read_import(path, locked=locked, nonlinear=nonlinear, hooks=hooks)
     report = imp.report
@@ -513,7 +583,46 @@ def import_osim(path, *, locked: str = "joint", nonlinear: str = "fit", gravity=
             f"replaced by gravity {imp.pin_model.gravity.linear.tolist()} m/s^2 (given to the import)"))])
     model = Model._make(name=imp.name, pin_model=imp.pin_model, muscles=imp.muscles, effects=(), contacts=(),
                         meta={**imp.meta, "import_report": report})
-    return (model.with_effect(*imp.components) if imp.components else model), report
+    out = (model.with_effect(*imp.components) if imp.components else model), report
+    if key is not None:
+        _IMPORTS[key] = out
+        while len(_IMPORTS) > MAX_CACHED_IMPORTS:
+            del _IMPORTS[next(iter(_IMPORTS))]
+    return out
+
+
+#: How many imported models :func:`import_osim` keeps (least recently used dropped first).
+MAX_CACHED_IMPORTS = 16
+_IMPORTS: dict = {}
+
+
+def clear_import_cache(path=None) -> None:
+    """Forget the models :func:`import_osim` cached (the next import reads and fits the file again): all of
+    them, or those of the file at ``path``."""
+    if path is None:
+        _IMPORTS.clear()
+        return
+    p = str(Path(str(path)).resolve())
+    for key in [k for k in _IMPORTS if k[0] == p]:
+        del _IMPORTS[key]
+
+
+def _import_key(path, locked, nonlinear, gravity, hooks):
+    """The cache key of an import, or None (not cached) if the file cannot be stat'ed or an option is not
+    hashable; the import itself then says what is wrong."""
+    import hashlib
+    try:
+        p = Path(str(path)).resolve()
+        st = p.stat()
+        # the content's digest too: a file rewritten within the file system's time resolution (tests, scripts)
+        # with the same size is not taken for the old one (~1 ms for a 1 MB .osim)
+        digest = hashlib.blake2b(p.read_bytes(), digest_size=16).hexdigest()
+        g = None if gravity is None else tuple(float(x) for x in np.asarray(gravity, dtype=float).reshape(-1))
+        key = (str(p), st.st_mtime_ns, st.st_size, digest, locked, nonlinear, g, hooks)
+        hash(key)
+    except (OSError, TypeError, ValueError):
+        return None
+    return key
 
 
 def _warn_default_gravity(where) -> None:
@@ -563,16 +672,29 @@ def _load_sidecar(sidecar: Path, *, moment_arms: str | None, tendon: str | None,
         "description": mspec.get("description", ""), "up_axis": mspec.get("up_axis", "z"),
         "coordinate_order": list(order) if order else None,
     }
+    if mspec.get("osim"):           # where the viewer finds the geometric muscle paths of an imported model
+        meta["source_osim"] = str((sidecar.parent / str(mspec["osim"])).resolve())
+        meta["source_osim_digest"] = mspec.get("osim_digest")
+    if "coordinate_map" in spec:
+        from .opensim.skeleton import CoordinateMap
+        cmap = CoordinateMap.from_spec(spec["coordinate_map"], joints=coords, where=str(sidecar))
+        meta["coordinate_map"] = cmap
+        meta["dependent_coordinates"] = {n: {"joint": d.joint, "axis": d.axis, "of": list(d.of),
+                                             "function": repr(d.function)} for n, d in cmap.dependent.items()}
     muscles = None
     entries = spec.get("muscles", [])
     if entries:
         mm = spec.get("muscle_model", {})
         variant = moment_arms or mspec.get("default_paths", "constant")
         meta["moment_arms"] = variant
-        path = MomentArmPath.from_sidecar(entries, coords, variant)
+        path, errors = _sidecar_path(entries, coords, variant, sidecar)
+        if errors:
+            meta["path_fit_errors"] = errors
         muscles = _build_muscles(entries, mm, path, tendon or mm.get("tendon", "rigid"), sidecar)
     effects = [registry.from_spec(e, where=f"{sidecar} [[effects]] #{i + 1}")
                for i, e in enumerate(spec.get("effects", []))]
+    effects += [actuator_from_spec(a, where=f"{sidecar} [[actuators]] #{i + 1}")
+                for i, a in enumerate(spec.get("actuators", []))]
     contacts = [contact_from_spec(c, where=f"{sidecar} [[contacts]] #{i + 1}")
                 for i, c in enumerate(spec.get("contacts", []))]
     model = Model._make(name=name, pin_model=pm, muscles=muscles, effects=(), contacts=(), meta=meta)
@@ -586,11 +708,12 @@ def _check_sidecar(spec: dict, sidecar: Path) -> None:
             close = difflib.get_close_matches(section, list(SIDECAR_SCHEMA), n=1)
             hint = f" (did you mean '{close[0]}'?)" if close else ""
             raise ModelError(f"{sidecar}: unknown table '{section}'{hint}; a model sidecar has "
-                             "[model], [muscle_model], [[muscles]], [[effects]] and [[contacts]]")
+                             "[model], [muscle_model], [[muscles]], [[effects]], [[actuators]], [[contacts]] and "
+                             "[coordinate_map]")
     for section in ("model", "muscle_model"):
         if section in spec:
             check_keys(spec[section], SIDECAR_SCHEMA[section], where=str(sidecar), section=f"[{section}]")
-    for section in ("muscles", "effects", "contacts"):
+    for section in ("muscles", "effects", "actuators", "contacts"):
         if section in spec and not (isinstance(spec[section], list)
                                     and all(isinstance(e, dict) for e in spec[section])):
             raise ModelError(f"{sidecar}: '{section}' must be an array of tables, [[{section}]]")
@@ -604,12 +727,77 @@ def _check_sidecar(spec: dict, sidecar: Path) -> None:
             check_keys(table, SIDECAR_PATH_KEYS, where=str(sidecar), section=f"{label} paths.{variant}")
 
 
+def _sidecar_path(entries, coords, variant: str, sidecar: Path):
+    """``(path, fit errors)`` of path variant ``variant``: a MomentArmPath (``l0``, ``moment_arms``) or, for the
+    polynomials ``pinmsk import`` writes, a PolynomialPath with ``{muscle: {"length", "moment_arm"}}`` errors."""
+    tables = [e.get("paths", {}).get(variant) for e in entries]
+    poly = [isinstance(t, dict) and "coefficients" in t for t in tables]
+    if not any(poly):
+        return MomentArmPath.from_sidecar(entries, coords, variant, source=sidecar), {}
+    names = [e.get("name") for e in entries]
+    if not all(poly):
+        other = names[poly.index(False)]
+        raise ModelError(f"{sidecar}: path variant {variant!r} is a polynomial for some muscles but not for "
+                         f"'{other}'; give every muscle the same kind of path")
+    terms, errors = [], {}
+    for name, t in zip(names, tables):
+        missing = [k for k in ("coordinates", "exponents", "coefficients") if k not in t]
+        if missing:
+            raise ModelError(f"{sidecar}: [[muscles]] '{name}' paths.{variant} needs {', '.join(missing)}")
+        terms.append({k: t[k] for k in ("coordinates", "center", "scale", "exponents", "coefficients") if k in t})
+        if "max_length_error" in t or "max_moment_arm_error" in t:
+            errors[name] = {"length": t.get("max_length_error"), "moment_arm": t.get("max_moment_arm_error")}
+    try:
+        return PolynomialPath(muscles=names, coordinates=coords, terms=terms), errors
+    except (ModelError, TypeError, ValueError) as exc:
+        raise ModelError(f"{sidecar}: [[muscles]] paths.{variant}: {exc}") from None
+
+
+#: Keys of a [[muscles]] entry that are not parameters of the muscle model.
+_MUSCLE_ENTRY_KEYS = ("name", "paths", "points")
+
+
+def _build_imported_muscles(entries, mm: dict, path, tendon: str, sidecar: Path, kind: str, names):
+    """The MuscleSet of a sidecar whose muscles are an imported OpenSim model's (``pinmsk import``): every
+    per-muscle key is a constructor argument of the muscle model ``kind``, ``tau_rise``/``tau_fall`` its
+    time constants; what the type does not take is refused by name."""
+    for key in ("tendon_model", "parallel_elastic", "tendon_strain"):
+        if key in mm:
+            raise ModelError(f"{sidecar}: [muscle_model] {key} is for the thelen2003 and nagano_gerritsen types; "
+                             f"type '{kind}' has per-muscle curve parameters in [[muscles]]")
+    keys = sorted({k for e in entries for k in e if k not in _MUSCLE_ENTRY_KEYS})
+    kwargs: dict[str, Any] = {k: mm[k] for k in ("tau_rise", "tau_fall") if k in mm}
+    for key in keys:
+        lacking = [e["name"] for e in entries if key not in e]
+        if lacking:
+            raise ModelError(f"{sidecar}: [[muscles]] '{lacking[0]}' has no '{key}', which other muscles give; "
+                             "give it for every muscle or none")
+        try:
+            kwargs[key] = np.array([float(e[key]) for e in entries])
+        except (TypeError, ValueError):
+            bad = next(e for e in entries if not isinstance(e[key], (int, float)))
+            raise ModelError(f"{sidecar}: [[muscles]] '{bad['name']}' {key} = {bad[key]!r} must be a number") from None
+    cls = MUSCLE_MODELS[kind]
+    try:
+        mtu = cls(names=names, **kwargs)
+    except TypeError as exc:
+        raise ModelError(f"{sidecar}: [[muscles]]: muscle type '{kind}' does not take these parameters ({exc})") from None
+    except ModelError as exc:
+        raise ModelError(f"{sidecar}: [[muscles]]: {exc}") from None
+    try:
+        return MuscleSet(names=names, model_type=kind, mtu=mtu, path=path, tendon=tendon)
+    except ModelError as exc:
+        raise ModelError(f"{sidecar}: [[muscles]]: {exc}") from None
+
+
 def _build_muscles(entries, mm: dict, path, tendon: str, sidecar: Path):
     kind = mm.get("type", "thelen2003")
     names = [e.get("name") for e in entries]
     for i, n in enumerate(names):
         if not n:
             raise ModelError(f"{sidecar}: muscle entry {i + 1} has no name")
+    if kind in MUSCLE_MODELS and kind not in _MUSCLE_LAWS:
+        return _build_imported_muscles(entries, mm, path, tendon, sidecar, kind, names)
 
     def col(key, default=None, required=True):
         vals = []
@@ -627,8 +815,22 @@ def _build_muscles(entries, mm: dict, path, tendon: str, sidecar: Path):
                   pennation=col("pennation", 0.0), fast_fraction=col("fast_fraction", 0.5, required=False),
                   volume=col("volume", required=False) if any("volume" in e for e in entries) else None)
     if kind not in _MUSCLE_LAWS:
-        raise ModelError(f"{sidecar}: unknown muscle_model type '{kind}' "
-                         "(known: thelen2003, nagano_gerritsen)")
+        close = difflib.get_close_matches(str(kind), list(MUSCLE_MODELS), n=1)
+        hint = f" (did you mean '{close[0]}'?)" if close else ""
+        raise ModelError(f"{sidecar}: unknown muscle_model type '{kind}'{hint} "
+                         f"(known: {', '.join(MUSCLE_MODELS)})")
+    for key in ("tau_rise", "tau_fall"):
+        if key in mm:
+            common[key] = mm[key]
+    if kind == "thelen2003" and any("v_max" in e for e in entries):
+        common["v_max"] = col("v_max")
+    own = {"name", "paths", "points", "f_max", "l_opt", "l_slack", "pennation", "volume", "fast_fraction",
+           "v_max" if kind == "thelen2003" else "width"}
+    for e in entries:
+        other = sorted(set(e) - own)
+        if other:
+            raise ModelError(f"{sidecar}: [[muscles]] '{e['name']}': {', '.join(other)} is not a parameter of muscle "
+                             f"type '{kind}'")
     law, parallel = _MUSCLE_LAWS[kind]
     if mm.get("tendon_model", law) != law:
         raise ModelError(f"{sidecar}: [muscle_model] tendon_model = {mm['tendon_model']!r}, but type '{kind}' "

@@ -76,7 +76,7 @@ from .io.output_files import atomic_write, output_folder, write_json
 from .io.tables import read_trial, write_trial
 from .io.toml_files import read_toml
 from .io.trc import read_trc
-from .kinematics import DEFAULT_CUTOFF, cutoff_value
+from .kinematics import DEFAULT_CUTOFF, cutoff_value, trial_coordinates
 from .markers import load_marker_set
 from .model import load_model
 from .presentation import plots
@@ -252,7 +252,7 @@ def run_trial(spec: dict, *, model="gait2d", out_dir=None, base_dir=".") -> dict
             if k.startswith("ik_") and isinstance(v, dict):
                 row["ik_rms_mm_max"] = max(v.values())
         norm = bm if bm else 1.0
-        for c in m.coordinate_order:
+        for c in trial_coordinates(m):          # OpenSim's coordinates of a model with dependent joints
             if c.startswith(("hip", "knee", "ankle")):
                 row[f"{c}_peak_abs_nm_per_kg" if bm else f"{c}_peak_abs_nm"] = float(
                     np.max(np.abs(idt[moment_channel(c)])) / norm)
@@ -329,7 +329,7 @@ def _remove_partial_folders(out: Path, names) -> None:
 
 def _figures(model, d: Path, idt: Trial, res: Trial) -> int:
     """Per-trial PNGs (joint moments, torso residuals) via :mod:`pinmsk.presentation.plots`; returns how many."""
-    joints = [moment_channel(c) for c in model.coordinate_order if c.startswith(("hip", "knee", "ankle"))]
+    joints = [moment_channel(c) for c in trial_coordinates(model) if c.startswith(("hip", "knee", "ankle"))]
     n = len(plots.save_channels(idt, joints, d, stem="moments", ylabel="N m"))
     n += len(plots.save_channels(res, list(res.names), d, stem="residuals"))
     return n

@@ -8,6 +8,9 @@ Cases (``CASES``):
   metatarsal and toe of foot2d (centres at the sites) and of gait2d (``center="sole"``), as
   :func:`pinmsk.contact.foot_contacts` builds them, and one sphere from a sidecar
   ``[[contacts]]`` entry (:func:`pinmsk.contact.from_spec`, an explicit ``center = [x, y]``);
+* OpenSim's SmoothSphereHalfSpaceForce and HuntCrossleyForce on gait2d's sole frames, offset
+  spheres against Moco's floor (a half space turned by -90 degrees about z) and against a ramp
+  (:data:`OPENSIM_CONTACTS`);
 * the muscle set (``model.muscles``) of forearm (Thelen 2003) and gait2d (Nagano & Gerritsen).
 
 Each is checked on what applies to it: declarations (family, label, target, parameters with
@@ -30,8 +33,9 @@ import pytest
 
 import pinmsk
 from pinmsk.components import Component, Motion
-from pinmsk.contact import (HuntCrossley, HyperVolumetric, SiteKinematics, Volumetric, foot_contacts,
-                            from_spec, wrench_generalized_force)
+from pinmsk.contact import (CONTACT_TYPES, HalfSpaceContact, HuntCrossley, HuntCrossleyForce, HyperVolumetric,
+                            SiteKinematics, SmoothSphereHalfSpaceForce, Volumetric, foot_contacts, from_spec,
+                            wrench_generalized_force)
 from pinmsk.contact.dual import Dual
 from pinmsk.contact.foot import KINDS, SITES, Foot2dGeometry, foot2d_site_kinematics
 from pinmsk.diagnose.catalog import CatalogContext, catalog
@@ -111,23 +115,54 @@ VERTICAL = {"foot2d": "ankle_y", "gait2d": "torso_y"}
 
 def _contact_motion(model, comp, n=12, seed=1):
     """Frames with the sphere 2-8 mm into the ground, slipping at ~0.1 m/s, and compressed or
-    released at rates that keep the damping factor ``1 + a v_n`` of Eq. 4.4 / 4.8 in [0.7, 2]:
+    released at rates that keep the damping factor ``1 + a v_n`` of Eq. 4.4 / 4.8 in [0.7, 2]
+    (OpenSim's ``1 + 3/2 c v_n`` in [0.02, 2], where the smooth sphere's second switch acts):
     the vertical coordinate and its speed are shifted to give that penetration and rate."""
     rng = np.random.default_rng(seed)
     t = np.arange(n) * 0.01
     q = _uniform_q(model, rng, n, 0.4, 0.6)
     v = rng.normal(0.0, 0.1, (n, model.nv))
     j = model.coordinate_index(VERTICAL[model.name])
+    e = np.zeros(model.nv)
+    e[j] = 1.0
 
     def penetration(q):
         return comp.evaluate(model, Motion(t, q, v, np.zeros_like(q))).penetration
 
-    q[:, j] += penetration(q) - rng.uniform(0.002, 0.008, n)
     eps = 1e-6
+    # the penetration is linear in the vertical coordinate (-1 on level ground, -cos on a ramp)
+    slope = (penetration(q + eps * e) - penetration(q - eps * e)) / (2 * eps)
+    q[:, j] += (rng.uniform(0.002, 0.008, n) - penetration(q)) / slope
     rate = (penetration(q + eps * v) - penetration(q - eps * v)) / (2 * eps)
-    a = comp.values.get("a_s", comp.values.get("a_v", 10.0))
-    v[:, j] += rate - rng.uniform(-0.3, 1.0, n) / max(a, 10.0)
+    if isinstance(comp, HalfSpaceContact):
+        target = (rng.uniform(0.02, 2.0, n) - 1.0) / (1.5 * max(comp.values["dissipation"], 0.1))
+    else:
+        target = rng.uniform(-0.3, 1.0, n) / max(comp.values.get("a_s", comp.values.get("a_v", 10.0)), 10.0)
+    v[:, j] += (target - rate) / slope
     return Motion(t, q, v, np.zeros_like(q))
+
+
+def _floor_normal(orientation_z: float) -> tuple:
+    """The outward normal of an OpenSim ContactHalfSpace on the ground turned by ``orientation_z``
+    about z (``-x`` of its frame): Moco's floor (-pi/2) has +y, up to rounding."""
+    return (-np.cos(orientation_z), -np.sin(orientation_z), 0.0)
+
+
+#: Moco's 2-D walking contact parameters (2D_gait.osim)
+MOCO = dict(stiffness=3067776.0, dissipation=2.0, static_friction=0.8, dynamic_friction=0.8,
+            viscous_friction=0.5, transition_velocity=0.2)
+#: OpenSim's contacts: offset spheres on gait2d's sole frames, on Moco's floor and on a ramp
+RAMP = dict(plane_normal=(-np.sin(0.1), np.cos(0.1), 0.05), plane_point=(0.1, 0.02, -0.03))
+OPENSIM_CONTACTS = {
+    "smooth_sphere_half_space:heel_r": lambda: SmoothSphereHalfSpaceForce(
+        "heel_r", location=(0.03, 0.035, 0.0), plane_normal=_floor_normal(-np.pi / 2), radius=0.035, **MOCO),
+    "smooth_sphere_half_space:toe_r": lambda: SmoothSphereHalfSpaceForce(
+        "toe_r", location=(0.0, 0.015, 0.005), radius=0.015, **{**MOCO, "dissipation": 1.0,
+                                                               "static_friction": 0.9}, **RAMP),
+    "hunt_crossley_force:metatarsal_r": lambda: HuntCrossleyForce(
+        "metatarsal_r", location=(0.01, 0.02, -0.004), radius=0.02, stiffness=1e6, dissipation=1.5,
+        static_friction=0.9, dynamic_friction=0.5, viscous_friction=0.3, transition_velocity=0.2, **RAMP),
+}
 
 
 #: a sidecar [[contacts]] entry: the alias type name, a fixed centre in the site frame, a fixed parameter
@@ -137,7 +172,9 @@ SIDECAR_CONTACT = {"type": "hunt_crossley", "frame": "toe_r", "center": [0.01, 0
 
 def _contact_case(model_name, kind, site):
     model = _model(model_name)
-    if kind == "sidecar":
+    if f"{kind}:{site}" in OPENSIM_CONTACTS:
+        comp = OPENSIM_CONTACTS[f"{kind}:{site}"]()
+    elif kind == "sidecar":
         comp = from_spec(SIDECAR_CONTACT, where="conformance [[contacts]] #1")
     else:
         comp = foot_contacts(model, kind, side=None if model_name == "foot2d" else "r")[SITES.index(site)]
@@ -163,6 +200,7 @@ def _muscle_case(model_name):
 CASES = ([f"effect:{f}" for f in families()]
          + [f"contact:{m}:{k}:{s}" for m in ("foot2d", "gait2d") for k in KINDS for s in SITES]
          + [f"contact:gait2d:sidecar:{SIDECAR_CONTACT['frame']}"]
+         + [f"contact:gait2d:{key}" for key in OPENSIM_CONTACTS]
          + ["muscles:forearm", "muscles:gait2d"])
 
 
@@ -182,7 +220,7 @@ def test_the_suite_covers_every_kind_of_component():
             "segment_mass", "activation_dynamics", "electromechanical_delay",
             "riener_edrich_1999"} <= set(families())
     kinds = {type(_build(c).comp) for c in CASES if c.startswith("contact:")}
-    assert kinds == set(KINDS.values()) == {HuntCrossley, Volumetric, HyperVolumetric}
+    assert kinds == set(CONTACT_TYPES) == set(KINDS.values()) | {SmoothSphereHalfSpaceForce, HuntCrossleyForce}
     assert {_build(c).comp.mtu.__class__.__name__ for c in CASES if c.startswith("muscles:")} == \
         {"Thelen2003", "NaganoGerritsen"}
     # every contact motion loads its sphere (else the contact checks below could not fail)
@@ -201,7 +239,7 @@ def test_declarations(case):
     if comp.kind == "effect":
         assert get(comp.family) is type(comp)
     elif comp.kind == "contact":
-        assert type(comp) in KINDS.values()
+        assert type(comp) in CONTACT_TYPES
     else:
         assert isinstance(comp, MuscleSet) and comp.family == "muscles"
     assert comp.label == (f"{comp.family}:{comp.target}" if comp.target else comp.family)
@@ -286,7 +324,8 @@ def _effect_zero(case):
 
 #: the parameters whose zero switches a sphere off: the stiffness, and for the hyper-volumetric
 #: law also its damping, a_h V v_n (Eq. 4.15), which does not scale with k_h
-CONTACT_OFF = {HuntCrossley: ("k_s",), Volumetric: ("k_v",), HyperVolumetric: ("k_h", "a_h")}
+CONTACT_OFF = {HuntCrossley: ("k_s",), Volumetric: ("k_v",), HyperVolumetric: ("k_h", "a_h"),
+               SmoothSphereHalfSpaceForce: ("stiffness",), HuntCrossleyForce: ("stiffness",)}
 
 
 def _contact_zero(case):
@@ -541,9 +580,16 @@ def test_pickle_roundtrip(case):
     assert host.parameters == case.host.parameters
 
 
+def _contact_options(comp) -> tuple[str, ...]:
+    """The settings of a contact that are not parameters (equality compares them too)."""
+    if isinstance(comp, HalfSpaceContact):
+        return ("location", "plane_normal", "plane_point")
+    return ("center", "ground_speed", "smoothing")
+
+
 def _rebuilt(comp, **options):
     """A fresh sphere with the parameters (values, bounds, vary) and options of ``comp``, some replaced."""
-    kw = dict(ground_speed=comp.ground_speed, smoothing=comp.smoothing, center=comp.center)
+    kw = {o: getattr(comp, o) for o in _contact_options(comp)}
     kw.update(options)
     p = comp.params
     fresh = type(comp)(comp.target, bounds={k: (x.min, x.max) for k, x in p.items()}, **kw, **comp.values)
@@ -553,6 +599,11 @@ def _rebuilt(comp, **options):
 def _variants(comp):
     """``(what, same, others)``: a component built afresh equal to ``comp``, and ones that differ
     from it in something that changes what it computes."""
+    if isinstance(comp, HalfSpaceContact):
+        loc = np.array(comp.location)
+        return _rebuilt(comp), [_rebuilt(comp, location=loc + (0.0, 0.002, 0.0)),
+                                _rebuilt(comp, plane_normal=(0.1, 1.0, 0.0)),
+                                _rebuilt(comp, plane_point=np.array(comp.plane_point) + (0.0, 0.001, 0.0))]
     if comp.kind == "contact":
         centers = [c for c in (None, "sole", (0.0, 0.01)) if c != comp.center]
         return _rebuilt(comp), [_rebuilt(comp, center=c) for c in centers] + [
@@ -606,7 +657,7 @@ def test_with_params_copies(case):
     for a, b in zip(_outputs(case, comp), before):
         np.testing.assert_array_equal(a, b)
     if comp.kind == "contact":                                    # the copy keeps the options
-        options = ("center", "ground_speed", "smoothing")
+        options = _contact_options(comp)
         assert [getattr(other, o) for o in options] == [getattr(comp, o) for o in options]
         for a, b in zip(_outputs(case, other), _outputs(case, _rebuilt(other))):
             np.testing.assert_array_equal(a, b)
@@ -662,7 +713,7 @@ def test_fix_and_free_return_copies(case):
 
 # -- immutability ------------------------------------------------------------------------------
 
-OPTIONS = {"effect": (), "contact": ("center", "ground_speed", "smoothing"),
+OPTIONS = {"effect": (), "contact": ("center", "ground_speed", "smoothing", "location", "plane_normal", "plane_point"),
            "muscle": ("names", "mtu", "path", "tendon", "model_type")}
 
 

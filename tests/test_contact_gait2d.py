@@ -79,3 +79,28 @@ def test_contacts_from_sidecar_spec_stand_like_foot_contacts(gait):
     assert f_spec > 0
     for c, r in zip(cs, ref):
         assert c.values["R"] == pytest.approx(r.values["R"])
+
+
+def test_ground_reaction_trial_of_the_models_contacts(gait):
+    """The model-level GRF of gait2d standing on both feet: per-side channels named as trials name
+    them, summing to body weight, each side's COP between its heel and toe."""
+    from pinmsk.contact import contact_ground_reactions, ground_reaction_trial
+    from pinmsk.errors import ModelError
+    from pinmsk.trial import parse_ground_reaction
+
+    feet = _feet(gait, "hypervolumetric")
+    model = gait.with_effect(*feet["r"], *feet["l"])
+    mg = pin.computeTotalMass(gait.pin) * 9.81
+    y = brentq(lambda y: ground_reaction_trial(model, _pose(gait, y))["r_ground_force_vy"][0] * 2 - mg,
+               STANDING - 0.03, STANDING + 0.001, xtol=1e-12)
+    mo = _pose(gait, y)
+    grf = ground_reaction_trial(model, mo)
+    assert {parse_ground_reaction(n).side for n in grf.names} == {"r", "l"} and len(grf.names) == 18
+    assert grf["r_ground_force_vy"][0] + grf["l_ground_force_vy"][0] == pytest.approx(mg, rel=1e-9)
+    sides = contact_ground_reactions(model, mo)
+    for side in ("r", "l"):
+        heel, toe = (c.evaluate(model, mo).point[0, 0] for c in (feet[side][0], feet[side][2]))
+        assert heel < grf[f"{side}_ground_force_px"][0] < toe
+        assert grf[f"{side}_ground_force_px"][0] == sides[side].cop[0, 0]
+    with pytest.raises(ModelError, match="has no contacts"):
+        ground_reaction_trial(gait, mo)

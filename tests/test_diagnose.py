@@ -69,8 +69,9 @@ FOREARM_MUSCLE = [
 def test_forearm_muscle_level_recovers(family, truth):
     m = model("forearm")
     eff = pinmsk.effects.get(family)("muscles", **truth)
-    # 5 s: the time constants and the delay come back within 4 % (std. errors under 10 %) already
-    trial = make_trial(m, [eff], duration=5.0, rate=100.0, seed=3)
+    # 5 s: the time constants and the delay come back within 4 % (std. errors under 10 %) already, with
+    # the white excitation noise; realistic envelope noise (coloured) is tests/test_diagnose_muscle.py's
+    trial = make_trial(m, [eff], duration=5.0, rate=100.0, seed=3, noise={"emg_lowpass": 0})
     assert "elbow_flexion_moment" not in trial and "BRD_excitation" in trial
     d, after = check_recovery(m, trial, family, "muscles", truth)
     assert d.comparison.mode == "muscle"
@@ -125,8 +126,8 @@ def test_two_hidden_effects_in_two_add_steps(tmp_path):
     assert totals[2] <= 1.5 * final.noise_floor["total"]
     assert [c.label for c in final.model.components] == ["payload:hand", "joint_damping:elbow_flexion"]
     data = json.loads((tmp_path / "d.json").read_text())
-    assert set(data) == {"inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added",
-                         "refit", "pairs", "outside_catalog", "stopping"}
+    assert {"inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added", "noise_model", "refit",
+                "pairs", "outside_catalog", "stopping"} <= set(data)
     assert data["verdict"] == "at_noise_floor"
     assert [(a["effect"], a["target"]) for a in data["added"]] == [("payload", "hand"),
                                                                   ("joint_damping", "elbow_flexion")]
@@ -142,8 +143,11 @@ def test_json_shape_and_summary():
     trial = make_trial(m, ["joint_damping:elbow_flexion:c=0.3"], seed=5)
     r = run(m, trial)
     js = r.to_dict()
-    assert list(js) == ["inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added",
-                        "refit", "pairs", "outside_catalog", "stopping"]
+    assert list(js)[:7] == ["inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added"]
+    assert list(js)[7:] == ["noise_model", "refit", "pairs", "outside_catalog", "stopping"]
+    assert js["noise_model"]["method"] == "propagated noise models"
+    assert set(js["noise_model"]["sources"]) == {"coordinates", "moments"}
+    assert js["noise_model"]["sources"]["moments"]["channels"]["elbow_flexion_moment"]["corner_hz"] is None
     assert set(js["rmse"]) == {"elbow_flexion_moment", "total"} == set(js["noise_floor"])
     for w in js["worst_windows"]:
         assert set(w) == {"channel", "start", "end", "rmse"} and w["end"] > w["start"]
@@ -201,7 +205,11 @@ def test_noise_floor_estimators():
     # and the diagnosis' floor matches the noise actually in the residual
     d = diagnose(m, noisy)
     assert d.noise_floor["total"] == pytest.approx(d.rmse["total"], rel=0.25)
-    assert "third differences" in d.comparison.noise.method
+    assert "noise models fitted to each measured channel" in d.comparison.noise.method
+    models = d.comparison.noise.models
+    assert models["coordinates"].rms()[0] == pytest.approx(np.deg2rad(0.2), rel=0.15)
+    assert models["moments"].rms()[0] == pytest.approx(0.02 * np.max(np.abs(clean["elbow_flexion_moment"])),
+                                                       rel=0.15)
 
 
 # -- synth ---------------------------------------------------------------------------------------

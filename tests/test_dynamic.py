@@ -494,3 +494,21 @@ def test_ift_sharing_is_exact_and_its_derivatives_analytic(arms):
     inner = slice(10, -10)
     np.testing.assert_allclose(dF[inner], num1[inner], rtol=0, atol=1e-5 * np.abs(dF).max())
     np.testing.assert_allclose(ddF[inner], num2[inner], rtol=0, atol=1e-4 * np.abs(ddF).max())
+
+
+def test_forward_simulation_uses_the_models_activation_component(finger):
+    """simulate_ff (the FF design's forward simulation) takes the model's activation time constants: a held
+    excitation step from rest gives a = 1 - exp(-t / tau_rise) with the component's 40 ms, not 11 ms; dynamic
+    optimization refuses a delay by name."""
+    from pinmsk.effects import ActivationDynamics, ElectromechanicalDelay
+
+    slow = finger.with_effect(ActivationDynamics("muscles", tau_rise=0.04, tau_fall=0.1))
+    t = np.linspace(0, 0.1, 201)
+    U = np.ones((t.size, 2))
+    for model, tau in ((finger, 0.011), (slow, 0.04)):
+        sim = simulate_ff(model, t, U, U[1:], [0.0], [0.0], a0=np.zeros(2))
+        np.testing.assert_allclose(sim["a"][:, 0], -np.expm1(-t / tau), atol=1e-6)
+    par = Polynomial(3, duration=0.2)
+    with pytest.raises(ModelError, match="electromechanical_delay:muscles.*honours activation_dynamics"):
+        DynamicOptimization(finger.with_effect(ElectromechanicalDelay("muscles")), parametrization=par,
+                            target=Target("sine", amplitude=0.2, frequency=5.0), tracking_weight=1).fit()

@@ -18,7 +18,7 @@ LAYERS = {
     "signals": 3,
     "io": 4,
     "components": 5, "fitting": 5,
-    "muscles": 6, "effects": 6, "contact": 6, "skeleton": 6,
+    "muscles": 6, "effects": 6, "contact": 6, "skeleton": 6, "actuators": 6,
     "kinematics": 7, "grf": 7, "residuals": 7, "opensim": 7,
     "builtin_models": 8, "model": 8,
     "markers": 9, "ik": 9, "dynamics": 9, "energy": 9, "contact.identify": 9, "contact.synthetic": 9,

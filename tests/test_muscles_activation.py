@@ -118,3 +118,36 @@ def test_integration_bad_input():
         activation_from_excitation(t_bad, np.zeros((11, 2)))
     with pytest.raises(TrialError, match="same N"):
         activation_from_excitation(t, np.zeros((10, 2)))
+
+
+def test_vectorised_recurrence_equals_the_step_by_step_one():
+    """activation_from_excitation solves the held steps by scans (narrow problems) or step by step (wide),
+    with per-muscle time constants: both equal a plain loop of held_step over the frames, also when the
+    branch iteration is cut short and finishes step by step."""
+    import pinmsk.muscles.activation as act
+    from pinmsk.muscles.activation import held_step
+
+    rng = np.random.default_rng(3)
+    t = np.cumsum(rng.uniform(0.005, 0.015, 400))
+    smooth = 0.5 + 0.4 * np.sin(np.outer(t, [1.3, 2.9, 7.0]) + [0.0, 1.0, 2.0])
+    u = np.clip(smooth * (1 + 0.2 * rng.standard_normal(smooth.shape)), 0, 1)
+    tr, tf = np.array([0.01, 0.03, 0.005]), np.array([0.05, 0.2, 0.04])
+
+    def loop(u, tr, tf):
+        a = np.empty(np.broadcast_shapes(u.shape, (1,) + np.shape(tr)))
+        a[0] = u[0]
+        for k in range(1, t.size):
+            a[k] = held_step(a[k - 1], 0.5 * (u[k] + u[k - 1]), t[k] - t[k - 1], tau_rise=tr, tau_fall=tf)
+        return a
+
+    ref = loop(u, tr, tf)
+    np.testing.assert_allclose(activation_from_excitation(t, u, tau_rise=tr, tau_fall=tf), ref, atol=1e-14)
+    wide = np.repeat(u[:, None, :], 120, axis=1)                       # (N, 120, 3): the step-by-step path
+    np.testing.assert_allclose(activation_from_excitation(t, wide, tau_rise=tr, tau_fall=tf),
+                               np.repeat(ref[:, None, :], 120, axis=1), atol=1e-14)
+    um = 0.5 * (u[1:] + u[:-1])
+    t1, t2 = act._rates(tr, tf)
+    h = np.diff(t)[:, None]
+    cut = act._held_steps(u[0], um, np.exp(-(t1 * um + t2) * h), np.broadcast_to(np.exp(-t2 * h), um.shape),
+                          max_rounds=1)
+    np.testing.assert_allclose(cut, ref[1:], atol=1e-14)

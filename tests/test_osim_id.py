@@ -100,7 +100,7 @@ def test_id_of_gait10dof18musc_matches_opensims_reference_with_the_same_filter()
 
 
 def test_the_fitted_knee_is_what_exact_mode_fixes():
-    # the same comparison with the fixed-axis knee (nonlinear="fit", load_model's default) is off by
+    # the same comparison with the fixed-axis knee (nonlinear="fit"; load_model's default is exact) is off by
     # several % of the peak on the knees: what exact mode removes (and a check that the test above can fail)
     d = _gait_dir()
     osim = _opensim()

@@ -10,6 +10,7 @@ and by gait10dof18musc.
 """
 import pickle
 import time
+import warnings
 
 import numpy as np
 import pinocchio as pin
@@ -19,6 +20,7 @@ import pinmsk
 from pinmsk.errors import ModelError, OutputError
 from pinmsk.io.osim import parse_osim, read_osim
 from pinmsk.io.shared_data import shared_data_dir
+from pinmsk.kinematics import coordinate_map
 from pinmsk.opensim import functions as fns
 from pinmsk.model import import_osim
 from pinmsk.opensim.importer import HookResult, write_import
@@ -383,7 +385,9 @@ def types_path(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def leg_skeleton(leg_path):
-    return build_skeleton(read_osim(leg_path))
+    """The leg with its nonlinear knee and patella fitted by fixed axes (``nonlinear="fit"``; the default,
+    exact mode: test_exact_mode_holds_nonlinear_joints_exactly)."""
+    return build_skeleton(read_osim(leg_path), nonlinear="fit")
 
 
 @pytest.fixture(scope="module")
@@ -409,8 +413,9 @@ def _pin_positions(pm, q_row, names):
 
 
 def _q_pin(skel, vals, i=0):
-    pm = skel.pin_model
-    return np.array([vals[pm.names[j]][i] for j in range(1, pm.njoints)])
+    """Pinocchio's q at sample ``i`` of OpenSim coordinate values (the map fills dependent joints)."""
+    one = {c: np.atleast_1d(v)[i:i + 1] for c, v in vals.items()}
+    return skel.coordinate_map.expand(one, couplers=False)[0][0]
 
 
 # ---------------------------------------------------------------------------
@@ -645,7 +650,7 @@ def test_locked_clamped_and_coupled_coordinates(leg_path, leg_skeleton, leg_impo
     assert "lumbar_extension" not in welded.coordinates and welded.nq == model.nq - 1
     assert "welded" in rep2.find('name="lumbar_extension"')[0].became
     torso = _pin_positions(welded.pin, np.zeros(welded.nq), ["torso"])["torso"]
-    vals = {c: [0.0] for c in model.meta["coordinate_order"]}
+    vals = {c: [0.0] for c in leg_skeleton.kinematics.coordinates}
     vals["lumbar_extension"] = [-0.05]
     assert np.allclose(torso, leg_skeleton.kinematics.body_poses(vals)["torso"][0, :3, 3], atol=1e-14)
     assert model.meta["osim_motion_types"]["knee_beta"] == "Coupled"
@@ -674,7 +679,7 @@ def test_report_lists_what_is_not_imported_and_hooks_replace_it(leg_path, leg_im
         entries = [ReportEntry(element=mu.where, became="a test muscle") for mu in doc.muscles]
         return HookResult(entries=tuple(entries), handled=tuple(mu.where for mu in doc.muscles))
 
-    _, rep = import_osim(leg_path, hooks=[muscles_hook])
+    _, rep = import_osim(leg_path, hooks=[muscles_hook], nonlinear="fit")     # with approximated joints
     assert len(rep.not_imported) == 5 and rep.find('name="vas"')[0].became == "a test muscle"
     element, became, approximation, max_error = rep.approximations[0]
     assert max_error > 0 and approximation and isinstance(rep, ImportReport)
@@ -708,7 +713,7 @@ def test_nonlinear_axes_of_a_multi_coordinate_joint_are_frozen_and_measured():
                      + axis("rotation2", "plane", "0 1 0", LIN) + axis("rotation3", "", "1 0 0", ZERO)
                      + axis("translation1", "elev", "1 0 0", spline) + axis("translation2", "", "0 1 0", ZERO)
                      + axis("translation3", "", "0 0 1", ZERO) + "</SpatialTransform>"))
-    skel = build_skeleton(parse_osim(text, source="shoulder.osim"))
+    skel = build_skeleton(parse_osim(text, source="shoulder.osim"), nonlinear="fit")
     (entry,) = [e for e in skel.entries if e.status == "approximated"]
     assert entry.details["sampled"] and "frozen" in entry.approximation and skel.pin_model.nq == 2
     # the frozen translation is the spline at the default elev = 0, so the error is |spline(elev)| <= 0.03 m
@@ -869,15 +874,24 @@ def test_inverse_dynamics_matches_opensim_on_exact_skeletons(tmp_path, leg_path)
 # ---------------------------------------------------------------------------
 
 def test_load_model_and_write_import_round_trip(leg_path, tmp_path):
-    with pytest.warns(UserWarning, match=r"leg\.osim: 2 joint\(s\) approximated .*knee \d.* mm.*1 muscle path\(s\) fitted by polynomials.*"
-                      r"5 element\(s\) not "
-                                         r"imported yet \(CoordinateActuator, HuntCrossleyForce"):
-        model = pinmsk.load_model(leg_path)     # the .osim branch of load_model
+    with pytest.warns(UserWarning, match=r"leg\.osim: 1 muscle path\(s\) fitted by polynomials.*"
+                      r"the import report") as caught:
+        model = pinmsk.load_model(leg_path)     # the .osim branch of load_model: exact knee and patella
+    assert not any("not imported" in str(w.message) for w in caught)      # contacts and actuators are imported
+    # the actuators are components (the default hooks: tests/test_actuators.py)
+    assert [c.label for c in model.components if c.kind == "actuator"] == [
+        "coordinate_actuator:lumbar_reserve", "point_actuator:FX", "torque_actuator:MZ"]
     assert pickle.loads(pickle.dumps(model)).meta["import_report"].approximations
-    assert isinstance(model, pinmsk.Model) and model.name == "leg" and model.nq == 9
+    # 9 OpenSim coordinates; knee_beta drives only dependent joints: 8 of them are joints, + 5 dependent joints
+    assert isinstance(model, pinmsk.Model) and model.name == "leg" and model.nq == 13
+    with pytest.warns(UserWarning, match=r"leg\.osim: 2 joint\(s\) approximated .*knee \d.* mm"):
+        assert pinmsk.load_model(leg_path, nonlinear="fit").nq == 9
     assert np.allclose(model.gravity, [0.0, -9.80665, 0.0])
     assert model.coordinate_order[:3] == ("pelvis_tilt", "pelvis_tx", "pelvis_ty")
-    files = write_import(model, tmp_path / "out")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")            # every component is written: no "not written" warning
+        files = write_import(model, tmp_path / "out")
+    assert "# NOT WRITTEN" not in files["sidecar"].read_text()
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == sorted(p.name for p in files.values())
     back = pinmsk.load_model(files["sidecar"])
     assert back.coordinates == model.coordinates and back.coordinate_order == model.coordinate_order
@@ -885,7 +899,11 @@ def test_load_model_and_write_import_round_trip(leg_path, tmp_path):
     a, b = model.pin, back.pin
     for j in range(a.njoints):
         assert np.allclose(a.inertias[j].matrix(), b.inertias[j].matrix(), atol=1e-12)
+    # the components (tests/test_osim_sidecar.py: their forces and SO) and the frames, the spheres' included
+    assert back.effects == model.effects and back.contacts == model.contacts
+    assert {c.target for c in model.contacts} == {"heel"}
     names = [f.name for f in a.frames if f.type in (pin.FrameType.BODY, pin.FrameType.OP_FRAME)]
+    assert "heel" in names
     rng = np.random.default_rng(5)
     da, db = a.createData(), b.createData()
     for _ in range(20):
@@ -1016,21 +1034,33 @@ def test_shared_models_parse_build_and_report(key):
     model, report, _ = _shared_import(key)
     doc = read_osim(path)
     # the import time (issue 14: <= 5 s for Rajagopal) is measured by benchmarks/bench_osim_import.py, not here
-    assert model.nq == len([c for c in doc.coordinates]) and model.mass == pytest.approx(
-        sum(b.mass for b in doc.bodies), abs=1e-9)
+    cmap = coordinate_map(model)
+    # OpenSim's coordinates, each a joint or (exact mode) mapped to dependent joints
+    assert (model.nq if cmap is None else len(cmap.osim_coordinates)) == len(doc.coordinates)
+    assert model.mass == pytest.approx(sum(b.mass for b in doc.bodies), abs=1e-9)
     assert np.allclose(model.gravity, doc.gravity)
     # each muscle is imported (the default hook: up to 40 muscles) or reported as not imported
     missing = {e.element for e in report.not_imported}
     assert {m.name for m in doc.muscles if m.where not in missing} <= set(model.muscle_names)
     assert (model.n_muscles > 0) == (len(doc.muscles) <= 40)
     approx = [e for e in report.approximations if e.details.get("kind") != "muscle paths"]   # the joints
+    assert not approx                   # the default (nonlinear="exact") holds every joint exactly
     if key in KNEE_FIT:
-        assert {e.element.split('"')[1] for e in approx} >= ({"knee_r", "knee_l"} if "walk" not in key
-                                                            else {"walker_knee_r", "walker_knee_l"})
-        knee = [e for e in approx if "knee_r" in e.element][0]
-        assert knee.max_error == pytest.approx(KNEE_FIT[key], rel=0.02)
+        knees = {d.joint for d in cmap.dependent.values()}
+        assert knees >= ({"knee_r", "knee_l"} if "walk" not in key else {"walker_knee_r", "walker_knee_l"})
     else:
-        assert not approx
+        assert cmap is None
+
+
+@pytest.mark.parametrize("key", sorted(KNEE_FIT))
+def test_shared_models_fitted_knees_report_their_error(key):
+    # nonlinear="fit": the knees become fixed-axis joints, with the measured error in the report
+    skel = build_skeleton(read_osim(_shared(key)), nonlinear="fit")
+    approx = [e for e in skel.entries if e.status == "approximated"]
+    assert {e.element.split('"')[1] for e in approx} >= ({"knee_r", "knee_l"} if "walk" not in key
+                                                        else {"walker_knee_r", "walker_knee_l"})
+    knee = [e for e in approx if "knee_r" in e.element][0]
+    assert knee.max_error == pytest.approx(KNEE_FIT[key], rel=0.02)
 
 
 @needs_opensim
@@ -1038,12 +1068,14 @@ def test_shared_models_parse_build_and_report(key):
                          + [pytest.param("subject_walk_scaled", marks=pytest.mark.slow)])
 def test_shared_models_match_opensim(key):
     path = _shared(key)
-    skel = build_skeleton(read_osim(path))
-    kin, excess, exact, mass = _check_against_opensim(path, skel)
-    assert kin < 1e-9                   # OpenSim's kinematics, reproduced from the XML alone
-    assert exact < 1e-9                 # Pinocchio, where nothing is approximated
-    assert excess < 1e-9                # and elsewhere within the reported bounds
-    assert mass == pytest.approx(sum(i.mass for i in skel.pin_model.inertias), abs=1e-9)
+    for mode in ("exact", "fit") if key in KNEE_FIT else ("exact",):
+        skel = build_skeleton(read_osim(path), nonlinear=mode)
+        kin, excess, exact, mass = _check_against_opensim(path, skel)
+        assert kin < 1e-9                   # OpenSim's kinematics, reproduced from the XML alone
+        assert exact < 1e-9                 # Pinocchio, where nothing is approximated (exact mode: everywhere)
+        assert excess < 1e-9                # and elsewhere within the reported bounds
+        assert (mode == "fit") == bool(skel.bounds)
+        assert mass == pytest.approx(sum(i.mass for i in skel.pin_model.inertias), abs=1e-9)
 
 
 @needs_opensim
@@ -1060,12 +1092,17 @@ def test_exact_mode_inverse_dynamics_matches_opensim(key):
     assert err < (1e-10 if key == "subject01" else 1e-4) * scale
 
 
-def test_cli_info_accepts_an_osim(capsys):
+def test_cli_info_accepts_an_osim(capsys, leg_path):
     from pinmsk.presentation.cli import main
     path = _shared("gait10dof18musc")
     assert main(["info", str(path)]) == 0
     out = capsys.readouterr().out
-    assert "10 dof" in out and "knee_angle_r" in out and "approximated" in out
+    # OpenSim's 10 coordinates, the knee translations listed as the dependent joints they are
+    assert "10 coordinates (OpenSim's; the Pinocchio skeleton has 14 joints, 4 of them dependent)" in out
+    assert "dependent joints (4, " in out and "knee_r_translation1 = SimmSpline(knee_angle_r)" in out
+    assert "approximated" in out
+    assert main(["info", str(leg_path), "--nonlinear", "fit"]) == 0      # the fitted knee: joints only
+    assert "model leg: 9 dof" in capsys.readouterr().out
 
 
 # -- pinmsk import (the CLI) -----------------------------------------------------------------------

@@ -58,3 +58,29 @@ def test_fso_bad_options(forearm, motion):
             FSO(**kw).fit(forearm, motion)
     with pytest.raises(SolverError, match="not run"):
         FSO().report()
+
+
+def test_fso_honours_the_models_activation_dynamics(forearm, motion):
+    """Activation mode with slow activation dynamics (60/200 ms) in the model: the control points' activations
+    stay within what the held excitations reach, differ from FSO without it, and the excitations given
+    back reproduce them; force mode refuses the component by name."""
+    from pinmsk.effects import ActivationDynamics
+    from pinmsk.errors import ModelError
+    from pinmsk.muscles.activation import held_step, reachable_activation
+
+    slow = forearm.with_effect(ActivationDynamics("muscles", tau_rise=0.06, tau_fall=0.2))
+    plain = FSO(mode="activation").fit(forearm, motion)
+    f = FSO(mode="activation", enforce="cost").fit(slow, motion)
+    a, t = f.activations_, f.t_
+    lo, hi = reachable_activation(a[:-1], np.diff(t)[:, None], tau_rise=0.06, tau_fall=0.2)
+    assert np.all(a[1:] >= lo - 1e-8) and np.all(a[1:] <= hi + 1e-8)
+    assert np.max(np.abs(a - FSO(mode="activation", enforce="cost").fit(forearm, motion).activations_)) > 1e-2
+    u = f.excitations_
+    back = [a[0]]
+    for k in range(1, t.size):
+        back.append(held_step(back[-1], u[k], t[k] - t[k - 1], tau_rise=0.06, tau_fall=0.2))
+    np.testing.assert_allclose(np.array(back), a, atol=1e-7)
+    assert "BRD_excitation" in f.result_ and "BRD_excitation" not in plain.result_
+    assert "tau_rise 60 ms" in f.report()
+    with pytest.raises(ModelError, match="force mode.*activation_dynamics:muscles.*mode='activation'"):
+        FSO().fit(slow, motion)

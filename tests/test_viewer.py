@@ -129,9 +129,9 @@ def test_viewer_builds_bodies_muscles_and_ground(own_viewer, forearm):
     for name in forearm.muscle_names:
         segs = viewer.muscle_paths[name]
         assert segs, name
-        for s in segs:
-            for k in range(viewer.levels):
-                assert f"/meshcat/pinmsk/{s}/c{k}" in objects
+        for s in segs:      # muscle red until coloured; the colour levels are made at the first colour
+            assert f"/meshcat/pinmsk/{s}/red" in objects
+            assert f"/meshcat/pinmsk/{s}/c0" not in objects
     assert "/meshcat/pinmsk/ground" in objects
     # y-up model: the scene root turns it upright
     assert viewer.up_axis == "y"
@@ -139,7 +139,12 @@ def test_viewer_builds_bodies_muscles_and_ground(own_viewer, forearm):
     scene = viewer.scene()
     for g in geoms:
         assert "object" in scene[f"/meshcat/pinmsk/model/skeleton/visuals/{g}"]
-    assert "object" in scene[f"/meshcat/pinmsk/{viewer.muscle_paths['BICLH'][0]}/c0"]
+    assert "object" in scene[f"/meshcat/pinmsk/{viewer.muscle_paths['BICLH'][0]}/red"]
+    viewer.display(activation={"BICLH": 0.3})
+    objects = _paths(viewer.commands, "set_object")
+    for name in forearm.muscle_names:
+        for s in viewer.muscle_paths[name]:
+            assert {f"/meshcat/pinmsk/{s}/c{k}" for k in range(viewer.levels)} <= objects
 
 
 def test_ground_is_below_a_fixed_base_model(viewer):
@@ -157,7 +162,7 @@ def test_display_moves_muscles_and_colours_them(viewer, forearm):
     seg = viewer.muscle_paths["BICLH"][0]
     props = [(c.path, c.detail) for c in new if c.kind == "set_property"]
     assert (f"/meshcat/pinmsk/{seg}/c{viewer.levels - 1}", "visible") in props   # top level shown
-    assert (f"/meshcat/pinmsk/{seg}/c0", "visible") in props                     # rest level hidden
+    assert (f"/meshcat/pinmsk/{seg}/red", "visible") in props                    # muscle red (no value) hidden
     assert f"/meshcat/pinmsk/{seg}" in _paths(new, "set_transform")
     # forces are shown relative to f_max
     viewer.display(np.array([1.5]), force={"BICLH": 0.0})

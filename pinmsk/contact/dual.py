@@ -11,7 +11,7 @@ parameters (``Dual.variables``) and reads the residual's Jacobian off ``der``.
 
 Supported: ``+ - * / **``, unary ``-``, comparisons (on the value, returning bools),
 indexing and item assignment, ``sum``/``mean``/``ravel``/``reshape``/``copy``; ufuncs
-``add subtract multiply true_divide negative power sqrt exp log arctan sin cos
+``add subtract multiply true_divide negative power sqrt exp log arctan tanh sin cos
 absolute square maximum minimum matmul`` and the comparisons; functions ``np.where``
 (plain condition), ``np.clip``, ``np.stack``, ``np.concatenate``, ``np.zeros_like``,
 ``np.sum``, ``np.mean``.  Anything else raises ``TypeError`` (numpy's "not supported
@@ -423,6 +423,7 @@ _UFUNCS = {
     np.exp: _unary(np.exp, np.exp),
     np.log: _unary(np.log, _dlog),
     np.arctan: _unary(np.arctan, lambda x: 1.0 / (1.0 + x * x)),
+    np.tanh: _unary(np.tanh, lambda x: 1.0 - np.tanh(x) ** 2),
     np.sin: _unary(np.sin, np.cos),
     np.cos: _unary(np.cos, lambda x: -np.sin(x)),
     np.absolute: _unary(np.absolute, np.sign),

@@ -7,7 +7,10 @@
   ``hypervolumetric``).  Works for any model with those frames: foot2d's
   ``heel, metatarsal, toe`` or gait2d's ``heel_r, metatarsal_r, toe_r`` (``side="r"``).
 * :func:`ground_reaction` -- total ground reaction force, centre of pressure and
-  free moment of a set of contact outputs (one foot).
+  free moment of a set of contact outputs (one foot);
+* :func:`contact_ground_reactions` / :func:`ground_reaction_trial` -- the same for each side of
+  a model's own contacts over a motion (e.g. the four spheres of an imported Moco 2-D model), the
+  latter as trial channels ``r_ground_force_vy`` ...
 
 COP regularisation.  The COP of the model is the normal-force-weighted mean of
 the application points,
@@ -23,6 +26,7 @@ of the frames where the COP means something physically.
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Sequence
@@ -30,6 +34,7 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import ModelError
+from ..trial import Trial
 from .dual import vector
 from .hunt_crossley import HuntCrossley
 from .sphere import ContactForces, SiteKinematics, cross, smooth_positive
@@ -147,6 +152,53 @@ def ground_reaction(outputs: Sequence[ContactForces], *, cop_eps: float = 1.0) -
     cop = (num + cop_eps * ref) / (W + cop_eps)[:, None]
     cop[:, 1] = 0.0
     return GroundReaction(F, cop, F[:, 1] > cop_eps, outputs)
+
+
+_SIDE = re.compile(r"_(r|l)$")
+
+
+def contact_side(model, contact) -> str:
+    """``"r"``, ``"l"`` or ``""``: the side of a contact, from its frame's name (``heel_r``) or, failing
+    that, its body's (``calcn_l``)."""
+    m = _SIDE.search(contact.target)
+    if m is None:
+        pm = model.pin
+        f = pm.frames[model.frame_id(contact.target)]
+        m = _SIDE.search(pm.frames[f.parentFrame].name)
+    return m.group(1) if m else ""
+
+
+def contact_ground_reactions(model, motion, *, data=None, cop_eps: float = 1.0) -> dict[str, GroundReaction]:
+    """``{side: GroundReaction}`` of ``model.contacts`` over ``motion`` (a
+    :class:`~pinmsk.components.Motion`), the contacts grouped by :func:`contact_side` (``""`` for
+    those of no side).  ``data`` (``model.create_data()``) shares the frames' kinematics with other
+    work on the same motion.  The COP lies on ``y = 0`` (see :func:`ground_reaction`)."""
+    if not model.contacts:
+        raise ModelError(f"model '{model.name}' has no contacts (model.contacts is empty)")
+    sides: dict[str, list] = {}
+    for c in model.contacts:
+        out = c.evaluate(model, motion, cache=c.prepare(model, motion, data=data))
+        sides.setdefault(contact_side(model, c), []).append(out)
+    return {side: ground_reaction(outs, cop_eps=cop_eps) for side, outs in sides.items()}
+
+
+def ground_reaction_trial(model, motion, *, data=None, cop_eps: float = 1.0) -> Trial:
+    """The ground reaction of the model's contacts as a :class:`~pinmsk.trial.Trial` named as
+    trials are: per side ``r_ground_force_v[xyz]`` (N), ``r_ground_force_p[xyz]`` (the COP, m) and
+    ``r_ground_torque_[xyz]`` (the free moment about the vertical at the COP, N m), no prefix for
+    contacts of no side (:func:`contact_ground_reactions`)."""
+    channels, units = {}, {}
+    for side, gr in contact_ground_reactions(model, motion, data=data, cop_eps=cop_eps).items():
+        pre = f"{side}_" if side else ""
+        torque = np.zeros_like(gr.force)
+        torque[:, 1] = gr.free_moment
+        for what, arr, unit in (("ground_force_v", gr.force, "N"), ("ground_force_p", gr.cop, "m"),
+                                ("ground_torque_", torque, "N*m")):
+            for k, a in enumerate("xyz"):
+                channels[f"{pre}{what}{a}"], units[f"{pre}{what}{a}"] = np.asarray(arr[:, k], dtype=float), unit
+    return Trial(motion.t, channels, units=units,
+                 meta={"analysis": "contact ground reaction", "model": model.name,
+                       "contacts": ", ".join(c.label for c in model.contacts)})
 
 
 # -- analytic planar kinematics of foot2d ----------------------------------------

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .dual import asarray
+from .dual import asarray, value
 
 
 def regularized_coulomb(slip: np.ndarray, normal: np.ndarray, mu_f, v_s) -> np.ndarray:
@@ -28,3 +28,25 @@ def regularized_coulomb(slip: np.ndarray, normal: np.ndarray, mu_f, v_s) -> np.n
 def friction_coefficient(speed, mu_f, v_s):
     """``mu(v) = mu_f arctan(v / v_s)``, Eq. 4.17 (tends to (pi/2) mu_f for v >> v_s)."""
     return mu_f * np.arctan(np.asarray(speed, dtype=float) / v_s)
+
+
+def hollars_friction(slip, normal, *, static, dynamic, viscous, transition_velocity, slip_smoothing=0.0):
+    """Simbody's friction law (M. Hollars), that of OpenSim's HuntCrossleyForce and
+    SmoothSphereHalfSpaceForce: the force (N, 3) on the body slipping at ``slip`` (N, 3) m/s,
+
+        f = -f_n [min(v/v_t, 1) (u_d + 2 (u_s - u_d) / (1 + (v/v_t)^2)) + u_v v] slip / v,
+
+    ``v = sqrt(|slip|^2 + slip_smoothing)`` (SmoothSphereHalfSpaceForce adds its
+    ``constant_contact_force`` there, in m^2/s^2; HuntCrossleyForce adds nothing), ``v_t`` =
+    ``transition_velocity`` (m/s), ``u_s, u_d`` the static and dynamic coefficients, ``u_v`` the
+    viscous one (s/m).  ``min(v/v_t, 1) / v`` is ``1 / v_t`` below the transition, so the force is
+    smooth through zero slip (Simbody divides by v; the limit is the same); the ``min`` itself is
+    Simbody's, so the law has a kink at ``v = v_t`` (C0 there; the derivative is one-sided).
+    """
+    v2 = slip[:, 0] * slip[:, 0] + slip[:, 1] * slip[:, 1] + slip[:, 2] * slip[:, 2] + slip_smoothing
+    vt = asarray(transition_velocity)
+    below = value(v2) < value(vt) * value(vt)
+    v = np.sqrt(np.where(below, value(vt) * value(vt), v2))   # only the branch v >= v_t divides by v
+    g = np.where(below, 1.0 / vt, 1.0 / v)
+    mu = g * (dynamic + 2.0 * (static - dynamic) / (1.0 + v2 / (vt * vt))) + viscous
+    return -(normal * mu)[:, None] * slip

@@ -1,10 +1,21 @@
-"""Hunt-Crossley point contact (thesis Eq. 4.4)."""
+"""Hunt-Crossley contact: the law (:func:`hunt_crossley_normal`), the thesis's point contact (Eq. 4.4)
+and OpenSim's HuntCrossleyForce between a sphere and a half space."""
 from __future__ import annotations
 
 import numpy as np
 
 from ..components import Parameter
+from .dual import asarray
+from .half_space import HALF_SPACE_PARAMETERS, HalfSpaceContact, hertz_coefficient
 from .sphere import FRICTION_PARAMETERS, OFFSET_PARAMETERS, SphereContact
+
+
+def hunt_crossley_normal(depth, rate, stiffness, exponent, damping):
+    """Hunt & Crossley (1975): ``k x^n (1 + a v)`` for the penetration ``x >= 0`` (m) and its rate
+    ``v`` (m/s, + compressing): thesis Eq. 4.4 (``k_s, n_s, a_s``), and Simbody's Hertz contact
+    (``n = 3/2``, ``k = 4/3 k_e sqrt(R k_e)``, ``a = 3/2 c``) in OpenSim's HuntCrossleyForce and
+    SmoothSphereHalfSpaceForce."""
+    return stiffness * np.power(asarray(depth), exponent) * (1.0 + damping * rate)
 
 
 class HuntCrossley(SphereContact):
@@ -31,6 +42,35 @@ class HuntCrossley(SphereContact):
     ) + FRICTION_PARAMETERS + OFFSET_PARAMETERS
 
     def normal_law(self, delta_s, rate, p):
-        fn = p["k_s"] * np.power(delta_s, p["n_s"]) * (1.0 + p["a_s"] * rate)
+        fn = hunt_crossley_normal(delta_s, rate, p["k_s"], p["n_s"], p["a_s"])
         zbar = p["L0"] - delta_s  # from the site down to the ground
         return fn, np.zeros_like(delta_s), zbar
+
+
+class HuntCrossleyForce(HalfSpaceContact):
+    """OpenSim's ``HuntCrossleyForce`` between a ContactSphere and a ContactHalfSpace, as Simbody's
+    ``HuntCrossleyForce`` computes it (Hunt & Crossley 1975 on Hertz contact; friction of M. Hollars;
+    Sherman, Seth & Delp 2011), for one sphere whose ContactParameters are the half space's too:
+
+        f_n = max(0, 4/3 k sqrt(R k) x^(3/2) (1 + 3/2 c v_n)),   k = E^(2/3) / 2,
+
+    ``x = max(0, delta)`` the indentation, ``v_n`` the compression rate, at the contact point
+    midway through the overlap (geometry: :class:`~pinmsk.contact.half_space.HalfSpaceContact`), and
+    :func:`~pinmsk.contact.friction.hollars_friction` on the unsmoothed slip.  Exactly Simbody's
+    law, so not smooth: the force and its first derivative are continuous at first touch
+    (``x^(3/2)``), the ``max`` leaves a kink where the damping factor turns negative (Simbody returns
+    no force there), and the friction has one at the transition velocity.  For gradient-based
+    optimisation use :class:`~pinmsk.contact.SmoothSphereHalfSpaceForce`.  Unlike thesis Eq. 4.4
+    (:class:`HuntCrossley`, a vertical spring under a site), the law acts between a sphere and a
+    half space of any orientation.  Parameters: OpenSim's ContactParameters (``stiffness``,
+    ``dissipation``, the friction coefficients) and the force's ``transition_velocity``.
+    """
+
+    family = "hunt_crossley_force"
+    parameters = HALF_SPACE_PARAMETERS
+
+    def normal_law(self, depth, rate, p):
+        x = np.maximum(depth, 0.0)
+        f = hunt_crossley_normal(x, rate, hertz_coefficient(p["stiffness"], p["radius"]), 1.5,
+                                 1.5 * asarray(p["dissipation"]))
+        return np.maximum(f, 0.0)

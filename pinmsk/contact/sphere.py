@@ -190,7 +190,86 @@ OFFSET_PARAMETERS = (
 )
 
 
-class SphereContact(Component):
+class FrameContact(Component):
+    """What every contact element shares: a sphere fixed to the body frame ``target``, whose
+    :meth:`evaluate_kinematics` turns the frame's :class:`SiteKinematics` into
+    :class:`ContactForces`; :meth:`prepare` computes those kinematics (with Jacobians) once per
+    motion, and :meth:`generalized_force` is ``J^T`` of the world wrench.  Subclasses define
+    :meth:`evaluate_kinematics` and :meth:`_options` (the settings that are not parameters, which
+    equality compares as it compares the parameters)."""
+
+    kind: ClassVar[str] = "contact"
+    target_kind: ClassVar[str] = "frame"
+
+    def __init__(self, target: str, *, bounds: Mapping[str, tuple[float, float]] | None = None, **values: float):
+        self._start(target, bounds)
+        self._finish(values)
+
+    def _start(self, target, bounds) -> None:
+        """The parameters at their defaults, with per-element ``bounds`` ``{name: (lo, hi)}`` replacing
+        the class's (subclasses check their options between this and :meth:`_finish`)."""
+        if target is None:
+            raise ModelError(f"{self.family}: give the frame the sphere is fixed to, e.g. 'heel_r'")
+        declared = {p.name for p in self.parameters}
+        # check the new bounds before the values, so a value allowed only by them passes
+        self._bounds_override = {}
+        for name, (lo, hi) in (bounds or {}).items():
+            if name not in declared:
+                raise ModelError(f"{self.family}:{target}: bounds for unknown parameter '{name}'; "
+                                 f"it has {sorted(declared)}")
+            if not lo <= hi:
+                raise ModelError(f"{self.family}:{target}: bounds for '{name}' are [{lo}, {hi}]; lower > upper")
+            self._bounds_override[name] = (float(lo), float(hi))
+        Component.__init__(self, target)  # defaults first (class bounds)
+        params = dict(self._params)
+        for name, (lo, hi) in self._bounds_override.items():
+            p = params[name]
+            params[name] = _replace(p, min=lo, max=hi, value=float(np.clip(p.value, lo, hi)))
+        self._params = params
+
+    def _finish(self, values) -> None:
+        """The parameter ``values`` given, checked against the (new) bounds."""
+        if values:
+            self._params = self.with_params(dict(values))._params
+
+    def evaluate_kinematics(self, kin: SiteKinematics, params: Mapping[str, Any] | None = None) -> ContactForces:
+        raise NotImplementedError
+
+    def prepare(self, model, motion: Motion, data=None) -> SiteKinematics:
+        """The site's :class:`SiteKinematics` with Jacobians (cached in ``data``, a
+        :class:`pinmsk.model.Data`, when given)."""
+        return motion_cached(
+            data, model, ("site", model.frame_id(self.target)), motion,
+            lambda pd: site_kinematics(model, self.target, motion.q, motion.v, jacobian=True, pin_data=pd))
+
+    def evaluate(self, model, motion: Motion, params=None, cache: SiteKinematics | None = None) -> ContactForces:
+        """:class:`ContactForces` over the frames of ``motion``."""
+        kin = cache if cache is not None else self.prepare(model, motion)
+        return self.evaluate_kinematics(kin, params)
+
+    def generalized_force(self, model, motion: Motion, params=None, cache=None) -> np.ndarray:
+        """``J^T w`` (N, nv): the world wrench of the contact force at its application point."""
+        kin = cache if cache is not None else self.prepare(model, motion)
+        if kin.jacobian is None:
+            kin = site_kinematics(model, self.target, motion.q, motion.v, jacobian=True)
+        out = self.evaluate_kinematics(kin, params)
+        return wrench_generalized_force(kin, out.force, out.point)
+
+    def check_target(self, model) -> None:
+        model.frame_id(self.target)
+
+    def _options(self) -> tuple:
+        return ()
+
+    # the options change the force as the parameters do, so equal spheres must share them
+    def __eq__(self, other) -> bool:
+        return super().__eq__(other) and self._options() == other._options()
+
+    def __hash__(self) -> int:
+        return hash((super().__hash__(), self._options()))
+
+
+class SphereContact(FrameContact):
     """Base class of the contact elements: a sphere fixed to ``target`` (a frame) against y = 0.
 
     Subclasses implement :meth:`normal_law`, returning ``(f_n, volume,
@@ -213,8 +292,6 @@ class SphereContact(Component):
                       radius / rest length), or a fixed ``(x, y)`` in m.
     """
 
-    kind: ClassVar[str] = "contact"
-    target_kind: ClassVar[str] = "frame"
     #: name of the parameter playing the sphere radius / rest length
     radius_name: ClassVar[str] = "R"
     #: name of the stiffness parameter (for sensitivity studies)
@@ -222,25 +299,7 @@ class SphereContact(Component):
 
     def __init__(self, target: str, *, ground_speed: float = 0.0, smoothing: float = 1e-4,
                  bounds: Mapping[str, tuple[float, float]] | None = None, center=None, **values: float):
-        if target is None:
-            raise ModelError(f"{self.family}: give the frame the sphere is fixed to, e.g. 'heel_r'")
-        values = dict(values)
-        declared = {p.name for p in self.parameters}
-        # check the new bounds before the values, so a value allowed only by them passes
-        self._bounds_override = {}
-        for name, (lo, hi) in (bounds or {}).items():
-            if name not in declared:
-                raise ModelError(f"{self.family}:{target}: bounds for unknown parameter '{name}'; "
-                                 f"it has {sorted(declared)}")
-            if not lo <= hi:
-                raise ModelError(f"{self.family}:{target}: bounds for '{name}' are [{lo}, {hi}]; lower > upper")
-            self._bounds_override[name] = (float(lo), float(hi))
-        super().__init__(target)  # defaults first (class bounds)
-        params = dict(self._params)
-        for name, (lo, hi) in self._bounds_override.items():
-            p = params[name]
-            params[name] = _replace(p, min=lo, max=hi, value=float(np.clip(p.value, lo, hi)))
-        self._params = params
+        self._start(target, bounds)
         if not smoothing > 0:
             raise ModelError(f"{self.label}: smoothing must be > 0 (m), got {smoothing}")
         self.ground_speed = float(ground_speed)
@@ -256,8 +315,7 @@ class SphereContact(Component):
             if not (math.isfinite(cx) and math.isfinite(cy)):
                 raise ModelError(f"{self.label}: center {center!r} is not finite")
             self.center = (cx, cy)
-        if values:
-            self._params = self.with_params(values)._params
+        self._finish(values)
 
     # -- the force law (subclasses) ---------------------------------------
     def normal_law(self, delta_s, rate, p: Mapping[str, Any]):
@@ -297,38 +355,8 @@ class SphereContact(Component):
         force = ff + vector(zero, fn, zero)
         return ContactForces(fn, ff, force, point, delta, vol, slip)
 
-    def prepare(self, model, motion: Motion, data=None) -> SiteKinematics:
-        """The site's :class:`SiteKinematics` with Jacobians (cached in ``data``, a
-        :class:`pinmsk.model.Data`, when given)."""
-        return motion_cached(
-            data, model, ("site", model.frame_id(self.target)), motion,
-            lambda pd: site_kinematics(model, self.target, motion.q, motion.v, jacobian=True, pin_data=pd))
-
-    def evaluate(self, model, motion: Motion, params=None, cache: SiteKinematics | None = None) -> ContactForces:
-        """:class:`ContactForces` over the frames of ``motion``."""
-        kin = cache if cache is not None else self.prepare(model, motion)
-        return self.evaluate_kinematics(kin, params)
-
-    def generalized_force(self, model, motion: Motion, params=None, cache=None) -> np.ndarray:
-        """``J^T w`` (N, nv): the world wrench of the contact force at its application point."""
-        kin = cache if cache is not None else self.prepare(model, motion)
-        if kin.jacobian is None:
-            kin = site_kinematics(model, self.target, motion.q, motion.v, jacobian=True)
-        out = self.evaluate_kinematics(kin, params)
-        return wrench_generalized_force(kin, out.force, out.point)
-
-    def check_target(self, model) -> None:
-        model.frame_id(self.target)
-
     def _options(self) -> tuple:
         return (self.ground_speed, self.smoothing, self.center)
-
-    # the options change the force as the parameters do, so equal spheres must share them
-    def __eq__(self, other) -> bool:
-        return super().__eq__(other) and self._options() == other._options()
-
-    def __hash__(self) -> int:
-        return hash((super().__hash__(), self._options()))
 
 
 def wrench_generalized_force(kin: SiteKinematics, force: np.ndarray, point: np.ndarray) -> np.ndarray:

@@ -39,25 +39,24 @@ Kinematics are low-passed (zero-lag Butterworth, ``cutoff`` Hz, default 6)
 and differentiated by quintic spline; frames within ``1.5 / cutoff`` s of
 either end (filter and spline end effects) are left out of every statistic.
 
-Noise floor (:class:`NoiseFloor`), estimated from the data, per channel::
+Noise floor (:class:`NoiseFloor`), estimated from the data, per channel
+(:mod:`pinmsk.diagnose.noise`)::
 
-    sigma^2 = sigma_white^2 + sigma_kinematic^2
+    sigma^2 = sigma_direct^2 + sigma_kinematic^2
 
-* ``sigma_white``: white measurement noise of the residual (torque sensor,
-  force plates, EMG) from its third differences, which cancel any smooth
-  signal: ``d_k = (e_{k+3} - 3 e_{k+2} + 3 e_{k+1} - e_k) / sqrt(20)`` has the
-  noise's variance for white noise; the RMS of ``d`` after discarding values
-  beyond 5 robust (MAD) standard deviations (steps such as friction
-  reversals) is the estimate.
-* ``sigma_kinematic``: the measured angles' noise seen through filtering,
-  differentiation and inverse dynamics, which is low-pass and invisible to
-  differences.  The angle noise ``sigma_q`` of each coordinate is estimated
-  from third differences as above; three realisations of white noise of that
-  size are pushed through the same low-pass, spline and residual
-  computation, and the RMS change of the residual is the estimate.
-* motion mode: angle noise ``sigma_q`` combined with the spread of the
-  simulated angles when the driving moments get their white noise and the
-  initial states their filtered-kinematics noise (two Monte-Carlo runs).
+Each measured input -- raw coordinates, measured moments, ground reaction
+channels, excitations/EMG -- gets a noise model fitted to its own spectrum
+above the movement's band (white, or low-passed white noise: filtered angles,
+EMG envelopes; :mod:`pinmsk.signals.noise`); seeded realisations of the models
+are pushed through the same path as the measurement (low-pass, spline
+derivatives, inverse dynamics, GRF filter, the model's muscle-level chain and
+muscle moments), and the RMS change of the residual is the floor: angles give
+``sigma_kinematic``, the other channels ``sigma_direct``.  The propagation runs
+through the model compared, so a model with an added effect gets its own
+floor (:meth:`Comparison.with_model` reuses the fitted noise models, not the
+floor).  Motion mode: the angle noise combined with the spread of the
+simulated angles when the driving moments get their white noise and the
+initial states their filtered-kinematics noise (two Monte-Carlo runs).
 """
 from __future__ import annotations
 
@@ -68,24 +67,23 @@ import numpy as np
 
 from ..components import Motion
 from ..dynamics import inverse_dynamics_array, simulate
-from ..effects._base import SignalEffect, is_prismatic, unactuated_coordinates
+from ..effects._base import SignalEffect, unactuated_coordinates
 from ..effects.sensor import apply_sensors, sensors_of
 from ..errors import ModelError, TrialError
 from ..grf import external_forces
-from ..kinematics import DEFAULT_CUTOFF, TrialInputs, prepare
+from ..kinematics import DEFAULT_CUTOFF, TrialInputs, cutoff_value, prepare, require_independent_joints
 from ..signals.filtering import differentiate
-from ..signals.sampling import median_step
 from ..skeleton import ExternalForce
 from ..trial import Trial, close_matches, moment_channel, moment_channels, parse_ground_reaction
 from . import contact as _contact
 from .comparison import Comparison, NoiseFloor, white_noise_sigma
 from .contact import compare_contact
+from .noise import propagated_floor
 
 __all__ = ["DEFAULT_CUTOFF", "MODES", "Comparison", "EquationError", "NoiseFloor", "compare",
            "comparison_plan", "external_forces_from_trial", "white_noise_sigma"]
 
 MODES = ("torque", "motion", "muscle", "contact")
-_N_PROPAGATE = 3
 #: Largest |value| accepted in a measured channel (SI: N m, N, m, or excitation): far above any
 #: human moment or ground force, so a larger finite value is a fill value or a unit error.
 MEASURED_LIMIT = 1e6
@@ -324,42 +322,45 @@ class EquationError:
         return dtau[:, self.rows]
 
     # -- EMG noise through the muscle-level chain ----
-    def emg_noise(self, extra: SignalEffect | None = None) -> np.ndarray:
-        """RMS (C,) of the muscle moments' response to the measured signals' white noise.
+    def set_excitation_noise(self, realisations) -> None:
+        """The excitations' noise realisations (list of (N, m)) :meth:`emg_noise` propagates
+        (set by the noise floor, :mod:`pinmsk.diagnose.noise`); None: no excitation noise."""
+        self._u_noise = None if realisations is None else [np.asarray(x, dtype=float) for x in realisations]
 
-        The excitations' noise level is estimated locally (third differences,
-        0.5-s moving RMS, so signal-dependent EMG noise is followed); three
-        realisations of it are passed through the model's muscle-level chain
-        (plus ``extra``, e.g. a fitted candidate) and the muscle moments.
+    def excitation_response(self, xi: np.ndarray, chain=None, base=None) -> np.ndarray:
+        """Change (n_rows, C) of the muscle moments when the measured signals change by ``xi`` (N, m)."""
+        chain = self.chain if chain is None else chain
+        base = self.activation if base is None else base
+        a = self._apply_chain(chain, self.excitation + xi)
+        return np.einsum("nm,nmc->nc", (a - base) * self.f_active, self.moment_arms)[self.rows]
+
+    def emg_noise(self, extra: SignalEffect | None = None) -> np.ndarray:
+        """RMS (C,) of the muscle moments' response to the measured signals' noise.
+
+        The noise realisations are those of the excitations' own noise model
+        (multiplicative, coloured by the envelope's low-pass; see
+        :mod:`pinmsk.diagnose.noise`), passed through the model's muscle-level
+        chain (plus ``extra``, e.g. a fitted candidate) and the muscle moments.
         """
-        if self.mode != "muscle":
+        if self.mode != "muscle" or not getattr(self, "_u_noise", None):
             return np.zeros(self.columns.size)
-        if not hasattr(self, "_u_noise"):
-            u = self.excitation
-            d = np.diff(u, n=3, axis=0) / np.sqrt(20.0)
-            d = np.vstack([d[:2], d, d[-1:]])
-            dt = median_step(self.motion.t)
-            w = max(int(round(0.5 / dt)), 5)
-            kernel = np.ones(w) / w
-            var = np.column_stack([np.convolve(d[:, j] ** 2, kernel, mode="same") for j in range(u.shape[1])])
-            sig = np.sqrt(var)
-            rng = np.random.default_rng(2024)
-            self._u_noise = [sig * rng.standard_normal(u.shape) for _ in range(_N_PROPAGATE)]
         chain = self.chain if extra is None else sorted(
             [c for c in self.chain if c.label != extra.label] + [extra], key=lambda c: c.order)
         base = self._apply_chain(chain, self.excitation) if extra is not None else self.activation
         acc = np.zeros(self.columns.size)
         for xi in self._u_noise:
-            a = self._apply_chain(chain, self.excitation + xi)
-            dtau = np.einsum("nm,nmc->nc", (a - base) * self.f_active, self.moment_arms)[self.rows]
-            acc += np.mean(dtau ** 2, axis=0)
+            acc += np.mean(self.excitation_response(xi, chain, base) ** 2, axis=0)
         return np.sqrt(acc / len(self._u_noise))
 
-    # -- residual with perturbed kinematics (noise propagation) ----
-    def residual_for(self, motion: Motion) -> np.ndarray:
+    # -- residual with perturbed kinematics or loads (noise propagation) ----
+    def residual_for(self, motion: Motion, *, external=None) -> np.ndarray:
+        """``e`` for another motion (same frames) and, optionally, other external loads."""
         mrows = motion.subset(self.rows)
-        tau_id = inverse_dynamics_array(self.model, mrows, external=self._ext_rows)[:, self.columns]
+        ext = self._ext_rows if external is None else _subset_external(external, self.rows)
+        tau_id = inverse_dynamics_array(self.model, mrows, external=ext)[:, self.columns]
         if self.mode == "muscle":
+            if motion is self.motion:
+                return self.tau_mus - tau_id
             fa, fp = self.model.muscles.force_limits(motion.q, motion.v)
             R = self.model.muscles.moment_arms(motion.q)[:, :, self.columns]
             act = np.einsum("nm,nmc->nc", self.activation * fa + fp, R)[self.rows]
@@ -375,7 +376,7 @@ class EquationError:
 def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = DEFAULT_CUTOFF,
             grf_frames: Mapping[str, str] | None = None, grf=None, external_loads=None,
             grf_cutoff="same", sim_window: float = 0.5, noise_floor: NoiseFloor | None = None,
-            _inputs: TrialInputs | None = None) -> Comparison:
+            _inputs: TrialInputs | None = None, _fits: dict | None = None) -> Comparison:
     """Compare ``model`` with ``trial`` (see the module docstring for the modes and the noise floor).
 
     Kinematics and ground reaction forces (the trial's own, ``grf=`` at its own
@@ -385,6 +386,9 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
     """
     if not isinstance(trial, Trial):
         raise TrialError(f"compare needs a Trial, got {type(trial).__name__}; read one with pinmsk.read_trial")
+    # the candidate effects' generalized forces and the motion-level simulation are in the Pinocchio joints
+    require_independent_joints(model, "the diagnosis")
+    cutoff = cutoff_value(cutoff)              # 0 and None: no filter
     _check_measured(model, trial)
     external_given = grf is not None or external_loads is not None
     plan = comparison_plan(model, trial, mode, has_grf=_has_grf(trial) or external_given)
@@ -421,71 +425,31 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
                        measured_tau=measured_tau, external=external, excitation=excitation)
     options = {"grf_frames": grf_frames, "grf": grf, "external_loads": external_loads, "grf_cutoff": grf_cutoff,
                "sim_window": sim_window}
+    channels = moment_channels(eq_coords)
+    floor = noise_floor if noise_floor is not None and plan.mode != "motion" else propagated_floor(
+        eq, trial, mode=plan.mode, excitation_kind=plan.excitation_kind, cutoff=cutoff, options=options,
+        channels=channels, grf_in_trial=_has_grf(trial) and not external_given, fits=_fits)
+    if noise_floor is not None:
+        options["noise_given"] = True
     states = _states(model, trial, motion, rows, eq_coords, excitation, plan.excitation_kind, external)
     if plan.mode == "motion":
-        meas, mod, floor = _motion_level(model, trial, motion, rows, sim_window, eq, noise_floor, cutoff)
-        channels = tuple(plan.coordinates)
-        eq_floor = _torque_floor(model, trial, motion, eq, cutoff, moment_channels(eq_coords))
-        return Comparison("motion", model, trial, cutoff, t[rows], channels, tuple(plan.coordinates),
+        eq_floor = floor
+        meas, mod, floor = _motion_level(model, trial, motion, rows, sim_window, eq,
+                                         None if noise_floor is None else noise_floor, cutoff)
+        return Comparison("motion", model, trial, cutoff, t[rows], tuple(plan.coordinates), tuple(plan.coordinates),
                           meas, mod, floor, eq, states, options, eq_floor, inputs=inputs, remake=_remake)
-    channels = moment_channels(eq_coords)
-    if plan.mode == "muscle":
-        # the measured side's noise passes through the model's own muscle-level chain: recompute it
-        floor = _muscle_floor(model, trial, motion, eq, cutoff, channels, noise_floor)
-    else:
-        floor = noise_floor if noise_floor is not None else _torque_floor(model, trial, motion, eq, cutoff,
-                                                                         channels)
     return Comparison(plan.mode, model, trial, cutoff, t[rows], channels, eq_coords, eq.actuation.copy(),
                       eq.tau_id.copy(), floor, eq, states, options, inputs=inputs, remake=_remake)
 
 
 def _remake(c: Comparison, model) -> Comparison:
-    """``c`` again for another model: the same frames, noise floor, inputs and options."""
-    return compare(model, c.trial, mode=c.mode, cutoff=c.cutoff, noise_floor=c.noise, _inputs=c.inputs,
-                   **c.options)
-
-
-def _torque_floor(model, trial, motion, eq, cutoff, channels) -> NoiseFloor:
-    white = white_noise_sigma(eq.e)
-    raw_q = np.column_stack([trial[c] for c in model.coordinates])
-    sigma_q = white_noise_sigma(raw_q)
-    prop = np.zeros(len(channels))
-    if np.any(sigma_q > 0):
-        rng = np.random.default_rng(12345)
-        t = motion.t
-        acc = np.zeros(len(channels))
-        for _ in range(_N_PROPAGATE):
-            noise = rng.standard_normal(raw_q.shape) * sigma_q
-            dq, dv, da = differentiate(t, noise, cutoff=cutoff)
-            pert = Motion(t, motion.q + dq, motion.v + dv, motion.a + da, motion.signals)
-            diff = eq.residual_for(pert) - eq.e
-            acc += np.mean(diff ** 2, axis=0)
-        prop = np.sqrt(acc / _N_PROPAGATE)
-    sigma = np.sqrt(white ** 2 + prop ** 2)
-    sigma = np.where(sigma > 0, sigma, np.finfo(float).tiny)
-    how = ("white noise of the residual from its third differences (outliers beyond 5 MAD dropped), "
-           "plus angle noise (third differences of the raw coordinates: "
-           + ", ".join(f"{c} {s * 1000:.3g} mm" if is_prismatic(model, c) else f"{c} {np.rad2deg(s):.3g} deg"
-                       for c, s in zip(model.coordinates, sigma_q))
-           + f") propagated through the {cutoff if cutoff else 'un'}-Hz low-pass, spline derivatives "
-           f"and the residual ({_N_PROPAGATE} Monte-Carlo realisations)")
-    return NoiseFloor(tuple(channels), sigma, white, prop, how)
-
-
-def _muscle_floor(model, trial, motion, eq, cutoff, channels, previous) -> NoiseFloor:
-    """Muscle level: kinematic noise propagated as in torque mode, plus EMG noise through the chain."""
-    if previous is not None:
-        kin = previous.propagated
-        how = previous.method
-    else:
-        tf = _torque_floor(model, trial, motion, eq, cutoff, channels)
-        kin = tf.propagated
-        how = ("excitation/EMG noise (local third-difference RMS of each signal, 0.5-s window) propagated "
-               "through the model's muscle-level chain and muscle moments (3 Monte-Carlo realisations), "
-               "plus " + tf.method.split("plus ", 1)[-1])
-    emg = eq.emg_noise()
-    sigma = np.sqrt(kin ** 2 + emg ** 2)
-    return NoiseFloor(tuple(channels), np.maximum(sigma, np.finfo(float).tiny), emg, kin, how)
+    """``c`` again for another model: the same frames, inputs and options; the noise floor is
+    propagated again through the new model (the trial's noise models are reused), unless it was given."""
+    given = c.noise if c.options.get("noise_given") else None
+    fits = None if given is not None else (c.eq_noise.fits or None)
+    opts = {k: v for k, v in c.options.items() if k != "noise_given"}
+    return compare(model, c.trial, mode=c.mode, cutoff=c.cutoff, noise_floor=given, _inputs=c.inputs,
+                   _fits=fits, **opts)
 
 
 def _states(model, trial, motion, rows, coords, excitation, kind, external) -> dict:

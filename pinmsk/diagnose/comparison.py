@@ -8,7 +8,7 @@ comparisons themselves are :mod:`pinmsk.diagnose.compare` and
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Mapping
 
 import numpy as np
 
@@ -20,18 +20,39 @@ __all__ = ["NoiseFloor", "Comparison", "white_noise_sigma"]
 
 @dataclass(frozen=True)
 class NoiseFloor:
-    """Per-channel noise floor ``sigma`` (same units as the channel) and how it was estimated."""
+    """Per-channel noise floor ``sigma`` (same units as the channel) and how it was estimated.
+
+    ``white`` is the part from the directly measured channels (moments, GRF,
+    EMG), ``propagated`` the part from the angles; ``models`` the noise models
+    used (:class:`pinmsk.signals.noise.NoiseModel` per source group, see
+    :mod:`pinmsk.diagnose.noise`), ``fits`` those fitted to the trial before
+    any correction (reused for another model of the same trial), ``info`` the
+    JSON-ready description (:meth:`to_json`).
+    """
 
     channels: tuple[str, ...]
     sigma: np.ndarray
     white: np.ndarray
     propagated: np.ndarray
     method: str
+    models: Mapping = field(default_factory=dict, repr=False, compare=False)
+    fits: Mapping | None = field(default=None, repr=False, compare=False)
+    info: Mapping | None = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict[str, float]:
         """``{channel: sigma, ..., "total": RMS of the sigmas}``, JSON-ready."""
         out = {c: float(s) for c, s in zip(self.channels, self.sigma)}
         out["total"] = float(np.sqrt(np.mean(self.sigma ** 2)))
+        return out
+
+    def to_json(self) -> dict:
+        """How the floor was made, JSON-ready (the diagnosis JSON's ``noise_model``): ``method`` (text),
+        and for propagated floors ``band_start_hz``, ``realisations``, the ``sources`` with their fitted
+        spectra, the per-channel ``kinematic`` and ``direct`` parts and any ``band_correction``."""
+        out = {"description": self.method}
+        out.update(self.info or {"method": "white noise and propagated angle noise",
+                                 "direct": {c: float(v) for c, v in zip(self.channels, self.white)},
+                                 "kinematic": {c: float(v) for c, v in zip(self.channels, self.propagated)}})
         return out
 
 

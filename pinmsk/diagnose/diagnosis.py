@@ -257,6 +257,7 @@ class Diagnosis:
             "ranking": [s.to_dict() for s in self.ranking],
             "verdict": self.verdict,
             "added": [_added_json(a) for a in added],
+            "noise_model": self.comparison.noise.to_json(),
             "refit": [_json(r) for r in refits],
             "pairs": [_pair_json(p) for p in self.pairs],
             "outside_catalog": _json(self.outside_catalog),

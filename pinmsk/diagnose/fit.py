@@ -25,8 +25,13 @@ within the parameters' bounds:
 Uncertainties: ``cov = s^2 (J^T J)^-1`` with ``J`` the whitened Jacobian at
 the optimum and ``s^2`` the residual variance, inflated by
 ``(1 + rho) / (1 - rho)`` with ``rho`` the residual's lag-1 autocorrelation (an
-AR(1) effective-sample-size correction; the filtered-kinematics part of the
-noise is not white).
+AR(1) effective-sample-size correction, :func:`ar1_inflation`; the
+filtered-kinematics and EMG-envelope parts of the noise are not white).  It
+overstates the correction for band-limited noise, whose autocorrelation falls
+off faster than ``rho^j``, which keeps the reported errors conservative; the
+identifiability checks (:mod:`pinmsk.diagnose.scoring`), which ask whether the
+likelihood is flat, use the integrated autocorrelation instead
+(:func:`inflation`: the Newey-West long-run variance over the variance).
 
 Blocked cross-validation (:meth:`EffectFit.cross_validate`): the frames
 are cut into ``folds`` contiguous blocks; each block is predicted by the fit
@@ -321,8 +326,7 @@ class EffectProblem:
         stderr = {}
         if p:
             s2 = (sse - rest) / max(n - p, 1)
-            rho = _lag1(r)
-            infl = (1 + rho) / (1 - rho)
+            infl = ar1_inflation(r)
             if p == 1 and not self.linear:
                 # curvature of the sum of squares itself (see _fit_scalar): cov = 2 s^2 / SSE''
                 span = (self.hi - self.lo)[0] if np.isfinite(self.hi - self.lo)[0] else max(abs(x[0]), 1.0)
@@ -386,14 +390,52 @@ class EffectProblem:
         return e_cv, ok
 
 
-def _lag1(r: np.ndarray) -> float:
+def long_run_variance(u: np.ndarray) -> tuple[float, int]:
+    """Newey-West (Bartlett kernel) long-run variance of the series ``u`` (demeaned) with the bandwidth of
+    Andrews (1991) for an AR(1) plug-in, ``L = 1.1447 (a n)^(1/3)``, ``a = 4 rho^2 / ((1 - rho)^2 (1 +
+    rho)^2)``: ``(lrv, L)``."""
+    u = np.asarray(u, dtype=float)
+    n = u.size
+    uc = u - np.mean(u) if n else u
+    g0 = float(uc @ uc) / max(n, 1)
+    if n < 3 or g0 <= 0:
+        return g0, 0
+    rho = float(np.clip(np.dot(uc[1:], uc[:-1]) / (n * g0), 0.0, 0.995))
+    a = 4 * rho ** 2 / ((1 - rho) ** 2 * (1 + rho) ** 2)
+    L = int(min(max(np.ceil(1.1447 * (a * n) ** (1 / 3)), 1), n // 4))
+    m = 1 << int(np.ceil(np.log2(2 * n)))
+    f = np.fft.rfft(uc, m)
+    acov = np.fft.irfft(f * np.conj(f), m)[:L + 1] / n
+    w = 1.0 - np.arange(1, L + 1) / (L + 1)
+    return max(acov[0] + 2.0 * float(np.dot(w, acov[1:])), acov[0] / n), L
+
+
+def ar1_inflation(r: np.ndarray) -> float:
+    """``(1 + rho) / (1 - rho)``, ``rho`` the lag-1 autocorrelation of the residual ``r`` (clipped to
+    [0, 0.98]): the AR(1) effective-sample-size factor of the reported standard errors (conservative for
+    band-limited noise, whose autocorrelation falls off faster than ``rho^j``)."""
     r = np.asarray(r, dtype=float)
     if r.ndim == 1:
         r = r[:, None]
-    num = np.sum(r[1:] * r[:-1])
     den = np.sum(r * r)
-    rho = num / den if den > 0 else 0.0
-    return float(np.clip(rho, 0.0, 0.98))
+    rho = float(np.clip(np.sum(r[1:] * r[:-1]) / den if den > 0 else 0.0, 0.0, 0.98))
+    return (1 + rho) / (1 - rho)
+
+
+def inflation(r: np.ndarray) -> float:
+    """Variance inflation of a sum over the autocorrelated residual ``r`` (n,) or (n, C): its long-run
+    variance over its variance (the integrated autocorrelation, Bartlett-weighted; 1 for white noise),
+    the channels weighted by their variances."""
+    r = np.asarray(r, dtype=float)
+    if r.ndim == 1:
+        r = r[:, None]
+    num = den = 0.0
+    for c in r.T:
+        lrv, _ = long_run_variance(c)
+        v = float(np.var(c))
+        num += lrv
+        den += v
+    return float(max(num / den, 1.0)) if den > 0 else 1.0
 
 
 def describe_fit(fit: Result) -> str:
@@ -718,14 +760,14 @@ class JointProblem:
 
     # -- uncertainties and identifiability ----------------------------------------------
     def covariance(self, x, mask=None) -> dict:
-        """Parameter covariance ``s^2 (J^T J)^-1`` (AR(1)-inflated as :class:`EffectFit`), the whitened
+        """Parameter covariance ``s^2 (J^T J)^-1`` (inflated as :class:`EffectFit`'s), the whitened
         Jacobian's rank and condition number (columns scaled to unit norm) and which parameters sit at a
         bound (left out of the inversion: their error is NaN)."""
         mask = np.ones(self.n, dtype=bool) if mask is None else mask
         r = ((self.e + self.delta(x)) / self.sigma)[mask]
         if self.p == 0:
             return {"cov": np.zeros((0, 0)), "rank": 0, "cond": 1.0, "at_bound": np.zeros(0, bool),
-                    "s2": float(np.mean(r ** 2)) if r.size else 1.0, "inflation": 1.0,
+                    "s2": float(np.mean(r ** 2)) if r.size else 1.0, "inflation": 1.0, "integrated_inflation": 1.0,
                     "singular_values": np.zeros(0)}
         J = (self.jacobian(x)[mask] / self.sigma[None, :, None]).reshape(-1, self.p)
         span = self.hi - self.lo
@@ -738,8 +780,7 @@ class JointProblem:
         cond = float(sv[0] / sv[-1]) if sv.size and sv[-1] > 0 else float("inf")
         n_res, p = r.size, self.p
         s2 = float(np.sum(r ** 2)) / max(n_res - p, 1)
-        rho = _lag1(r)
-        infl = (1 + rho) / (1 - rho)
+        infl = ar1_inflation(r)
         cov = np.full((p, p), np.nan)
         inner = ~at_bound & (norms > 0)
         if np.any(inner):
@@ -759,7 +800,7 @@ class JointProblem:
                 sub[:, blind] = np.inf
                 cov[np.ix_(inner, inner)] = sub
         return {"cov": cov, "rank": rank, "cond": cond, "at_bound": at_bound, "s2": s2, "inflation": infl,
-                "singular_values": sv}
+                "integrated_inflation": inflation(r), "singular_values": sv}
 
     def stderr_corr(self, cov) -> tuple[np.ndarray, np.ndarray]:
         d = np.diag(cov)
@@ -778,12 +819,13 @@ class JointProblem:
         return out
 
     def profile_interval(self, x, j: int, se_wald: float, threshold: float, *, max_nfev: int = 10,
-                         evaluations: int = 3) -> tuple[float, float, bool, bool]:
+                         evaluations: int = 3) -> tuple:
         """Profile-likelihood interval of parameter ``j``: where the SSE, re-minimised over all the other
         parameters, has risen by ``threshold`` (``3.84 s^2`` for 95 %).
 
-        Returns ``(low, high, low_closed, high_closed)``: a side that reaches its bound before the SSE
-        rises that far is open (the data do not bound the parameter there).  Each side starts with a step
+        Returns ``(low, high, low_closed, high_closed, rise_low, rise_high)``: a side that reaches its bound
+        before the SSE rises that far is open, and ``rise_*`` is how far the SSE has risen at that bound
+        (NaN for a closed side): near zero, the data do not bound the parameter there at all.  Each side starts with a step
         of the Wald half-width and then takes secant steps on ``sqrt(delta SSE)``, which is linear in the
         step where the SSE is quadratic (``evaluations`` warm-started refits at most, ``max_nfev``
         evaluations each).
@@ -800,11 +842,11 @@ class JointProblem:
         for sign, bound in ((-1.0, lo), (1.0, hi)):
             room = abs(bound - x[j]) if np.isfinite(bound) else np.inf
             if room <= 1e-12 * max(span, 1e-12):
-                out.append((x[j], False))
+                out.append((x[j], False, 0.0))
                 continue
             h = 1.96 * se_wald if np.isfinite(se_wald) and se_wald > 0 else 0.1 * span
             h = min(h, room)
-            xk, opened, tried_room = x.copy(), False, False
+            xk, opened, tried_room, rise = x.copy(), False, False, np.nan
             for _ in range(evaluations):
                 rise, xk = rise_at(x[j] + sign * h, xk)
                 tried_room = h >= room
@@ -820,6 +862,6 @@ class JointProblem:
             if not opened and h >= room and not tried_room:
                 rise, _ = rise_at(x[j] + sign * room, xk)     # the estimate lies beyond the bound: check it
                 opened = rise < threshold
-            out.append((x[j] + sign * min(h, room), not opened))
-        (a, ca), (b, cb) = out
-        return float(a), float(b), bool(ca), bool(cb)
+            out.append((x[j] + sign * min(h, room), not opened, float(rise) if opened else float("nan")))
+        (a, ca, ra), (b, cb, rb) = out
+        return float(a), float(b), bool(ca), bool(cb), ra, rb

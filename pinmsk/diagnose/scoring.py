@@ -42,6 +42,10 @@ __all__ = ["Scorer", "identifiability", "model_with_components", "motion_rmse_af
 
 #: chi-square(1) quantile of the profile-likelihood intervals (95 %)
 PROFILE_LEVEL = 3.841
+#: an interval side that runs into a bound is "flat" -- the data do not bound the parameter -- when the
+#: profile there has risen by less than this share of the 95 % threshold (a quadratic profile: the bound
+#: within one standard error); a larger rise is an imprecise but informative parameter, cut at the bound
+FLAT = 0.25
 #: condition number (unit-norm columns) beyond which parameters are taken as not identifiable together
 COND_MAX = 1e6
 #: candidates whose fitted changes correlate beyond this, and whose held-out errors the test cannot tell
@@ -146,7 +150,9 @@ def identifiability(jp: JointProblem, x: np.ndarray, which: int = -1, *, profile
         flags.append(f"the sensitivity matrix has rank {cov['rank']} < {p_all} parameters")
     elif cov["cond"] > COND_MAX and cov["cond"] > 10 * base_cond:
         flags.append(f"the sensitivity matrix is ill-conditioned (condition number {cov['cond']:.3g})")
-    threshold = PROFILE_LEVEL * cov["s2"] * cov["inflation"]
+    # whether the likelihood is flat: the integrated autocorrelation, not the (conservative) AR(1) factor
+    threshold = PROFILE_LEVEL * cov["s2"] * cov["integrated_inflation"]
+    se_id = se * np.sqrt(cov["integrated_inflation"] / cov["inflation"])      # the errors on that footing
     linear = jp.linear or prob.linear
     for k, name in zip(range(sl.start, sl.stop), names):
         lo_b, hi_b = jp.lo[k], jp.hi[k]
@@ -165,20 +171,27 @@ def identifiability(jp: JointProblem, x: np.ndarray, which: int = -1, *, profile
             intervals[name] = {"low": None, "high": None, "open": ["lower", "upper"]}
             continue
         if linear or not profile:
-            h = np.sqrt(PROFILE_LEVEL) * se[k]
+            h = np.sqrt(PROFILE_LEVEL) * se_id[k]
             a, b = max(x[k] - h, lo_b), min(x[k] + h, hi_b)
             ca, cb = x[k] - h > lo_b, x[k] + h < hi_b
+            # the quadratic profile's rise at a bound inside the Wald interval
+            ra, rb = (threshold * ((x[k] - lo_b) / h) ** 2, threshold * ((hi_b - x[k]) / h) ** 2)
             method = "wald"
         else:
-            a, b, ca, cb = jp.profile_interval(x, k, se[k], threshold)
+            a, b, ca, cb, ra, rb = jp.profile_interval(x, k, se_id[k], threshold)
             method = "profile"
         opened = [side for side, closed in (("lower", ca), ("upper", cb)) if not closed]
         intervals[name] = {"low": float(a), "high": float(b), "open": opened, "method": method}
-        for side in opened:
+        for side, rise in (("lower", ra), ("upper", rb)):
+            if side not in opened:
+                continue
             bound = lo_b if side == "lower" else hi_b
             if name in zero and np.isclose(bound, zero[name]):
                 continue                         # consistent with no effect: the held-out test decides
-            flags.append(f"{name}: the 95 % interval reaches its {side} bound {bound:.4g} (not identifiable)")
+            if rise < FLAT * threshold:
+                flags.append(f"{name}: the profile is flat up to its {side} bound {bound:.4g} (not identifiable)")
+            else:                                # informative, only imprecise: the interval is cut at the bound
+                intervals[name].setdefault("cut", []).append(side)
     corr_out = {}
     for k in range(sl.start, sl.stop):
         for m in range(p_all):

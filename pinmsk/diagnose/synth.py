@@ -26,13 +26,23 @@ and returns the measurements a lab would record, with noise:
   feet, both centres of pressure under the feet, shifted together to carry
   the moment.
 
-Noise (``noise="realistic"``, seeded, white): angles 0.2 deg, translations
+Noise (``noise="realistic"``, seeded): white on angles 0.2 deg, translations
 0.5 mm; moments 2 % of the channel's peak; ground reaction forces 1 % of the
-peak vertical force, centres of pressure 2 mm; excitations EMG-like,
-signal-dependent ``u (1 + 0.05 xi) + 0.005 xi'``, clipped at 0 (a white
-simplification of envelope noise).  ``noise=None`` gives exact data; a dict
-overrides single levels (keys ``angle``, ``translation``, ``moment``, ``grf``,
-``cop``, ``excitation``, ``excitation_floor``).
+peak vertical force, centres of pressure 2 mm.  Excitations are measured as
+EMG envelopes are made: raw EMG at 1 kHz is the excitation times a Gaussian
+carrier band-limited to 20-450 Hz, plus an amplifier floor of
+``excitation_floor`` (0.005) times another; it is rectified and low-passed at
+``emg_lowpass`` Hz (6, zero-lag, order 4: :func:`pinmsk.signals.emg.envelope`)
+over a record 1 s longer at each end, scaled by the carrier's rectified mean
+and sampled at the trial's times.  Its noise is multiplicative and coloured:
+about 8 % of the envelope, flat up to the low-pass and nothing above it (what
+third differences cannot see); ``trial.meta["emg_lowpass"]`` and
+``["emg_rate"]`` record the low-pass and the rate it ran at, as
+:func:`pinmsk.signals.emg.envelopes` does.  ``emg_lowpass=0``
+gives the white model instead, ``u (1 + excitation xi) + excitation_floor xi'``
+with ``excitation`` = 0.05, clipped at 0.  ``noise=None`` gives exact data; a
+dict overrides single levels (keys ``angle``, ``translation``, ``moment``,
+``grf``, ``cop``, ``excitation``, ``excitation_floor``, ``emg_lowpass``).
 
 The CLI's ``pinmsk synth MODEL --effect FAMILY:TARGET:param=value ...`` maps
 onto :func:`make_trial` with effect strings in the same syntax
@@ -58,11 +68,14 @@ from ..skeleton import ExternalForce, external_generalized_force
 from ..trial import Trial, moment_channel, parse_ground_reaction
 from .diagnosis import parse_effect
 
-__all__ = ["make_trial", "NOISE", "effect_from_text", "walking_motion", "write_compact"]
+__all__ = ["make_trial", "NOISE", "WALK", "effect_from_text", "walking_motion", "write_compact"]
 
 #: realistic noise levels (see the module docstring)
 NOISE = {"angle": np.deg2rad(0.2), "translation": 0.0005, "moment": 0.02, "grf": 0.01, "cop": 0.002,
-         "excitation": 0.05, "excitation_floor": 0.005}
+         "excitation": 0.05, "excitation_floor": 0.005, "emg_lowpass": 6.0}
+#: Sampling rate (Hz) of the raw EMG behind synthetic envelopes, and its band (Hz).
+EMG_RATE = 1000.0
+EMG_BAND = (20.0, 450.0)
 
 
 def effect_from_text(text: str) -> Component:
@@ -80,6 +93,27 @@ def _load(model):
     return model
 
 
+def _walk_coordinates(model, tt, period: float, speed: float) -> np.ndarray:
+    """The closed-form gait2d walk of :func:`walking_motion` at times ``tt``."""
+    w = 2 * np.pi / period
+    q = np.zeros((tt.size, model.nv))
+    ix = model.coordinate_index
+    q[:, ix("torso_x")] = speed * tt
+    q[:, ix("torso_y")] = 1.0 + 0.02 * np.cos(2 * w * tt)
+    q[:, ix("torso_angle")] = 0.05 + 0.02 * np.sin(2 * w * tt)
+    for side, ph in (("r", 0.0), ("l", np.pi)):
+        q[:, ix(f"hip_{side}")] = -0.1 + 0.35 * np.sin(w * tt + ph)
+        q[:, ix(f"knee_{side}")] = 0.6 + 0.5 * np.sin(w * tt + ph - 1.2)
+        q[:, ix(f"ankle_{side}")] = 0.05 + 0.2 * np.sin(w * tt + ph + 0.5)
+    return q
+
+
+def _central(f, t, h: float = 1e-5):
+    """``(f(t), f'(t), f''(t))`` of a smooth closed form by central differences (step ``h``)."""
+    q = f(t)
+    return q, (f(t + h) - f(t - h)) / (2 * h), (f(t + h) - 2 * q + f(t - h)) / h ** 2
+
+
 def walking_motion(model, *, n_frames: int = 200, duration: float = 1.0, period: float = 1.0,
                    speed: float = 1.2) -> Motion:
     """A walking-like gait2d motion with exact derivatives (no data, no noise): the SO test and benchmark motion.
@@ -91,44 +125,66 @@ def walking_motion(model, *, n_frames: int = 200, duration: float = 1.0, period:
     differences (step 1e-5 s) of the closed-form coordinates.
     """
     t = np.linspace(0.0, duration, n_frames)
-    h = 1e-5
-    q = _walk_coords(model, t, period=period, speed=speed)
-    v = (_walk_coords(model, t + h, period=period, speed=speed)
-         - _walk_coords(model, t - h, period=period, speed=speed)) / (2 * h)
-    a = (_walk_coords(model, t + h, period=period, speed=speed) - 2 * q
-         + _walk_coords(model, t - h, period=period, speed=speed)) / h ** 2
-    return Motion(t, q, v, a)
+    return Motion(t, *_central(lambda tt: _walk_coordinates(model, tt, period, speed), t))
 
 
-def _walk_coords(model, tt, *, period: float = 1.0, speed: float = 1.2, amplitude: float = 1.0):
-    """The closed-form walking coordinates of :func:`walking_motion` at times ``tt`` ``(N, nv)``."""
-    w = 2 * np.pi / period
-    q = np.zeros((tt.size, model.nv))
-    ix = model.coordinate_index
-    q[:, ix("torso_x")] = speed * tt
-    q[:, ix("torso_y")] = 1.0 + 0.02 * np.cos(2 * w * tt)
-    q[:, ix("torso_angle")] = 0.05 + 0.02 * np.sin(2 * w * tt)
-    for side, ph in (("r", 0.0), ("l", np.pi)):
-        q[:, ix(f"hip_{side}")] = -0.1 + amplitude * 0.35 * np.sin(w * tt + ph)
-        q[:, ix(f"knee_{side}")] = 0.6 + amplitude * 0.5 * np.sin(w * tt + ph - 1.2)
-        q[:, ix(f"ankle_{side}")] = 0.05 + amplitude * 0.2 * np.sin(w * tt + ph + 0.5)
-    return q
+#: The synthetic walk (``make_trial(..., motion="walk")``): stride period (s), speed (m/s), the foot
+#: loads' hand-over (s, double support) and the heel-strike bounce (m, s).
+WALK = {"period": 1.0, "speed": 1.2, "double_support": 0.06, "impact": 0.001, "impact_time": 0.015}
+
+
+def _heel_strikes(side: str, tt) -> np.ndarray:
+    """Time since the last heel strike of ``side`` (right at 0, 1, 2 ... s; left half a period later)."""
+    P = WALK["period"]
+    off = 0.0 if side == "r" else 0.5 * P
+    return np.mod(tt - off, P)
+
+
+def _walk(model, t):
+    """``(q, v, a, share_r)`` of the synthetic walk: :func:`walking_motion`'s coordinates plus a heel-strike
+    bounce of the trunk, ``-A (s / T)^3 exp(3 - s / T) / 27`` for ``s`` seconds after each heel strike (C2,
+    content up to ~1 / (2 pi T) = 10 Hz, above the 6-Hz low-pass: what makes GRF and kinematics need the
+    same filter), and the right foot's share of the load: 1 in right single stance, 0 in left, a quintic
+    smoothstep over the double support after each heel strike (zero load is exactly zero)."""
+    need = ["torso_x", "torso_y", "torso_angle", "hip_r", "knee_r", "ankle_r", "hip_l", "knee_l", "ankle_l"]
+    missing = [c for c in need if c not in model.coordinates]
+    if missing or "heel_r" not in model.frame_names:
+        raise ModelError(f"the synthetic walk needs a planar leg model with {', '.join(need)}; '{model.name}' "
+                         f"lacks {', '.join(missing) or 'heel_r'}")
+    A, T = WALK["impact"], WALK["impact_time"]
+    iy = model.coordinate_index("torso_y")
+
+    def coords(tt):
+        q = _walk_coordinates(model, tt, WALK["period"], WALK["speed"])
+        for side in ("r", "l"):
+            x = _heel_strikes(side, tt) / T
+            q[:, iy] -= A * x ** 3 * np.exp(3.0 - x) / 27.0
+        return q
+
+    q, v, a = _central(coords, t)
+    x = np.clip(_heel_strikes("r", t) / WALK["double_support"], 0, 1)
+    y = np.clip(_heel_strikes("l", t) / WALK["double_support"], 0, 1)
+    rise = x ** 3 * (10 - 15 * x + 6 * x ** 2)                  # right takes the load after its heel strike
+    fall = y ** 3 * (10 - 15 * y + 6 * y ** 2)                  # and gives it up after the left's
+    half = _heel_strikes("r", t) < 0.5 * WALK["period"]
+    share = np.where(half, rise, 1.0 - fall)
+    return q, v, a, share
 
 
 def make_trial(model, effects: Sequence = (), *, duration: float = 10.0, rate: float = 100.0,
                noise="realistic", seed: int = 0, measure: Sequence[str] | None = None,
-               amplitude: float = 1.0, motion: str = "default") -> Trial:
+               amplitude: float = 1.0, motion: str = "auto") -> Trial:
     """A synthetic trial of ``model`` with hidden ``effects`` (Components or effect strings).
 
     ``measure`` picks the recorded channel groups among ``"moments"``,
     ``"excitations"``, ``"grf"`` (default: moments for fixed-base models,
     excitations when a muscle-level effect is hidden, ground reaction forces
     for a floating base).  ``amplitude`` scales the motion (1 = the default
-    range).  ``motion``: ``"default"`` (the multi-sine, or the squat-and-sway
-    of a floating base) or ``"walk"`` (a floating base: :func:`walking_motion`,
-    1 s strides at 1.2 m/s, the phase seeded; both feet carry the load as in
-    the squat).  Returns a :class:`~pinmsk.trial.Trial` whose ``meta`` records
-    the hidden effects and noise levels.
+    range).  ``motion``: ``"auto"`` (the multi-sine, or the squat-and-sway for
+    a floating base) or ``"walk"`` (gait2d: :func:`walking_motion` with
+    heel-strike bounces and the load handed from foot to foot, :data:`WALK`).
+    Returns a :class:`~pinmsk.trial.Trial` whose ``meta`` records the hidden
+    effects and noise levels.
     """
     model = _load(model)
     effs = [effect_from_text(e) if isinstance(e, str) else e for e in effects]
@@ -160,12 +216,13 @@ def make_trial(model, effects: Sequence = (), *, duration: float = 10.0, rate: f
     n = int(round(duration * rate)) + 1
     t = np.arange(n) / rate
     lead = 0.3 if signal else 0.0            # extra time so a delayed signal exists at the end
-    if motion not in ("default", "walk"):
-        raise ModelError(f"motion is 'default' or 'walk', got {motion!r}")
+    if motion not in ("auto", "walk"):
+        raise ModelError(f"motion must be 'auto' or 'walk', got {motion!r}")
+    share = None
     if motion == "walk":
         if not unact:
-            raise ModelError(f"motion='walk' needs a floating-base leg model; '{model.name}' is fixed to the world")
-        q, v, a = _walk(model, t, rng, amplitude)
+            raise ModelError(f"the synthetic walk is for a floating-base leg model; '{model.name}' is fixed")
+        q, v, a, share = _walk(model, t)
     elif unact:
         q, v, a = _squat(model, t, rng, amplitude)
     else:
@@ -178,7 +235,7 @@ def make_trial(model, effects: Sequence = (), *, duration: float = 10.0, rate: f
     if "grf" in measure:
         if not unact:
             raise ModelError(f"model '{model.name}' is fixed to the world: it has no ground reaction forces")
-        chans.update(_grf(truth, motion, unact, t))
+        chans.update(_grf(truth, motion, unact, t, share))
     if "moments" in measure or "excitations" in measure:
         full = Motion(np.arange(q.shape[0]) / rate, q, v, a)
         external = []
@@ -212,7 +269,15 @@ def _levels(noise) -> dict:
         unknown = set(noise) - set(NOISE)
         if unknown:
             raise ModelError(f"unknown noise keys {sorted(unknown)}; known: {sorted(NOISE)}")
-        return {**NOISE, **noise}
+        out = {**NOISE, **noise}
+        if "excitation" in noise and out["emg_lowpass"] > 0:
+            raise ModelError("noise key 'excitation' sets the white excitation model, but emg_lowpass = "
+                             f"{out['emg_lowpass']:g} Hz makes envelope noise (its level follows from the EMG "
+                             "process); pass emg_lowpass=0 with it")
+        if not 0 <= out["emg_lowpass"] < 0.5 * EMG_RATE:
+            raise ModelError(f"noise emg_lowpass must be 0 (white model) or a low-pass in Hz below "
+                             f"{0.5 * EMG_RATE:g}; got {out['emg_lowpass']!r}")
+        return out
     raise ModelError(f"noise must be 'realistic', None or a dict of levels, got {noise!r}")
 
 
@@ -240,18 +305,6 @@ def _multisine(model, t, rng, amplitude):
         dds = (-np.sin(np.outer(t, w) + ph) * w ** 2) @ amp
         k = half / np.max(np.abs(s))
         q[:, i], v[:, i], a[:, i] = mid + k * s, k * ds, k * dds
-    return q, v, a
-
-
-def _walk(model, t, rng, amplitude):
-    """:func:`walking_motion`'s coordinates on ``t`` from a seeded phase (``amplitude`` scales the joint
-    swings), with the same central-difference derivatives."""
-    tt = t + rng.uniform(0.0, 1.0)
-    h = 1e-5
-    q = _walk_coords(model, tt, amplitude=amplitude)
-    v = (_walk_coords(model, tt + h, amplitude=amplitude) - _walk_coords(model, tt - h, amplitude=amplitude)) / (2 * h)
-    a = (_walk_coords(model, tt + h, amplitude=amplitude) - 2 * q
-         + _walk_coords(model, tt - h, amplitude=amplitude)) / h ** 2
     return q, v, a
 
 
@@ -351,16 +404,17 @@ def _excitations(model, motion, tau, signal):
                          f"'{model.name}'; lower the amplitude")
     u = act
     t = motion.t
-    for e in reversed(signal):                                 # undo the chain, last effect first
-        mask = e.muscle_mask(model)
-        if e.family == "activation_dynamics":
-            p = e.values
+    parts = [(e, p) for e in signal for p in e.parts()]
+    for e, p in reversed(parts):                               # undo the chain, last part first
+        mask = p.muscle_mask(model)
+        if p.family == "activation_dynamics":
+            v = p.values
             spline = make_interp_spline(t, u, k=5, axis=0)
             adot = spline.derivative(1)(t)
-            inv = excitation_from_activation(u, adot, tau_rise=p["tau_rise"], tau_fall=p["tau_fall"])
+            inv = excitation_from_activation(u, adot, tau_rise=v["tau_rise"], tau_fall=v["tau_fall"])
             u = np.where(mask[None, :], inv, u)
-        elif e.family == "electromechanical_delay":
-            d = e.values["delay"]
+        elif p.family == "electromechanical_delay":
+            d = p.values["delay"]
             shifted = np.column_stack([np.interp(t + d, t, u[:, j]) for j in range(u.shape[1])])
             u = np.where(mask[None, :], shifted, u)
         else:
@@ -370,8 +424,9 @@ def _excitations(model, motion, tau, signal):
     return u
 
 
-def _grf(truth, motion: Motion, unact, t) -> dict:
-    """Per-foot ground reaction forces making the torso rows of the true inverse dynamics vanish."""
+def _grf(truth, motion: Motion, unact, t, share=None) -> dict:
+    """Per-foot ground reaction forces making the torso rows of the true inverse dynamics vanish
+    (``share``: the right foot's part of the load; default 50 +- 15 %)."""
     import pinocchio as pin
 
     model = truth
@@ -393,7 +448,7 @@ def _grf(truth, motion: Motion, unact, t) -> dict:
             pts[k] = 0.5 * (data.oMf[h].translation + data.oMf[mf].translation)
         mid[sd] = pts
         zside[sd] = pts[:, 2]
-    share = 0.5 + 0.15 * np.sin(2 * np.pi * 0.3 * t)
+    share = 0.5 + 0.15 * np.sin(2 * np.pi * 0.3 * t) if share is None else np.asarray(share, dtype=float)
     ex, ey = np.tile([1.0, 0, 0], (n, 1)), np.tile([0, 1.0, 0], (n, 1))
 
     def gen(sd, unit, dx):
@@ -430,9 +485,33 @@ def _grf(truth, motion: Motion, unact, t) -> dict:
     return out
 
 
+def _envelope_noise(t, u, lv: dict, rng) -> np.ndarray:
+    """Envelopes ``(N, m)`` of simulated raw EMG for excitations ``u`` (N, m) at times ``t`` (see the module notes)."""
+    from scipy.signal import butter, sosfiltfilt
+
+    from ..signals.emg import envelope
+
+    pad = 1.0
+    tf = np.arange(t[0] - pad, t[-1] + pad + 0.5 / EMG_RATE, 1.0 / EMG_RATE)
+    uf = make_interp_spline(t, u, k=3, axis=0)(np.clip(tf, t[0], t[-1]))
+    sos = butter(4, [EMG_BAND[0] / (0.5 * EMG_RATE), EMG_BAND[1] / (0.5 * EMG_RATE)], btype="band", output="sos")
+    carrier = sosfiltfilt(sos, rng.standard_normal((2,) + uf.shape), axis=1)
+    carrier /= np.mean(np.abs(carrier), axis=1, keepdims=True)       # unit rectified mean
+    raw = uf * carrier[0] + lv["excitation_floor"] * carrier[1]
+    env = envelope(raw, rate=EMG_RATE, band=None, cutoff=lv["emg_lowpass"])
+    return np.column_stack([np.interp(t, tf, env[:, j]) for j in range(u.shape[1])])
+
+
 def _add_noise(trial: Trial, model, lv: dict, rng) -> Trial:
     new = {}
+    meta = dict(trial.meta)
     n = trial.n_frames
+    exc = [c for c in trial.names if c.endswith("_excitation")]
+    if exc and lv["emg_lowpass"] > 0:
+        env = _envelope_noise(np.asarray(trial.time), np.column_stack([trial[c] for c in exc]), lv, rng)
+        new.update({c: env[:, j] for j, c in enumerate(exc)})
+        meta["emg_lowpass"] = float(lv["emg_lowpass"])
+        meta["emg_rate"] = EMG_RATE
     peak_fy = max([np.max(np.abs(trial[c])) for c in trial.names if c.endswith("ground_force_vy")] or [0.0])
     for c in trial.names:
         x = np.array(trial[c], dtype=float)
@@ -442,6 +521,8 @@ def _add_noise(trial: Trial, model, lv: dict, rng) -> Trial:
         elif c.endswith("_moment"):
             x = x + rng.standard_normal(n) * lv["moment"] * np.max(np.abs(x))
         elif c.endswith("_excitation"):
+            if c in new:
+                continue
             x = x * (1 + lv["excitation"] * rng.standard_normal(n)) + lv["excitation_floor"] * rng.standard_normal(n)
             x = np.maximum(x, 0.0)
         else:
@@ -451,7 +532,7 @@ def _add_noise(trial: Trial, model, lv: dict, rng) -> Trial:
             elif g is not None and g.quantity == "point" and g.axis != "z":
                 x = x + rng.standard_normal(n) * lv["cop"]
         new[c] = x
-    return Trial(trial.time, new, meta=dict(trial.meta))
+    return Trial(trial.time, {c: new[c] for c in trial.names}, meta=meta)
 
 
 def _is_prismatic(model, coord: str) -> bool:

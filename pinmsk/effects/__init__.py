@@ -19,6 +19,8 @@ sensor_gain                coordinate   none: the recorded ``<coord>_moment`` re
 sensor_offset              coordinate   none: the recorded ``<coord>_moment`` reads ``tau + b`` (measurement)
 activation_dynamics        muscles      excitation -> activation, Eq. A.2 (muscle level)
 electromechanical_delay    muscles      excitation delayed by ``delay`` (muscle level)
+delayed_activation_        muscles      delay, then Eq. A.2: both fitted together (muscle level)
+dynamics
 =========================  ===========  ==================================================
 
 Add your own effect with the :func:`register` decorator.  A coordinate effect
@@ -53,7 +55,7 @@ parameter-independent work, given back as ``cache``); see
 from ..errors import ModelError
 from . import registry as _r
 from ._base import JointEffect, SignalEffect
-from .activation import ActivationDynamics
+from .activation import ActivationDynamics, DelayedActivationDynamics, ExcitationPath, excitation_path
 from .damping import JointDamping
 from .delay import ElectromechanicalDelay
 from .friction import CoulombFriction
@@ -76,7 +78,8 @@ def unregister(family: str) -> None:
 _BUILTIN = frozenset(families())
 
 __all__ = [
-    "ActivationDynamics", "CoulombFriction", "ElectromechanicalDelay",
+    "ActivationDynamics", "CoulombFriction", "DelayedActivationDynamics", "ElectromechanicalDelay",
+    "ExcitationPath", "excitation_path",
     "JointDamping", "JointEffect", "JointSpring", "MassScale", "MeasurementEffect", "PassiveElastic", "Payload",
     "RienerEdrich1999PassiveMoment", "SegmentMass", "SensorGain", "SensorOffset", "SignalEffect", "families",
     "from_spec", "get", "register", "unregister",

@@ -25,8 +25,9 @@ import pinocchio as pin
 from ..components import Component, Motion, motion_cached
 from ..errors import ModelError
 
-__all__ = ["JointEffect", "ScaledBasisEffect", "SignalEffect", "frame_point_kinematics", "torque_regressor",
-           "unactuated_coordinates", "moving_bodies", "hand_like_frames", "joint_range", "bounded_to_range"]
+__all__ = ["JointEffect", "ScaledBasisEffect", "SignalEffect", "signal_parts", "frame_point_kinematics",
+           "torque_regressor", "unactuated_coordinates", "moving_bodies", "hand_like_frames", "joint_range",
+           "bounded_to_range"]
 
 
 class JointEffect(Component):
@@ -131,6 +132,11 @@ class SignalEffect(Component):
         if self.target != "muscles":
             model.muscles.index(self.target)
 
+    def parts(self) -> tuple["SignalEffect", ...]:
+        """The elementary muscle-level effects this one is made of, in chain order (itself by default;
+        a composite such as delay-then-activation-dynamics gives its two)."""
+        return (self,)
+
     def muscle_mask(self, model) -> np.ndarray:
         """Boolean ``(m,)``: the muscles this effect applies to."""
         m = model.n_muscles
@@ -172,6 +178,12 @@ class SignalEffect(Component):
 
 
 # -- model structure helpers ---------------------------------------------------
+
+def signal_parts(model) -> list:
+    """The elementary parts of the model's muscle-level effects, in chain order."""
+    chain = sorted([c for c in model.effects if isinstance(c, SignalEffect)], key=lambda c: c.order)
+    return [p for c in chain for p in c.parts()]
+
 
 def unactuated_coordinates(model) -> tuple[str, ...]:
     """Coordinates no actuator drives: the model's floating base.

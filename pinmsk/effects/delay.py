@@ -26,7 +26,7 @@ import numpy as np
 
 from ..components import Parameter
 from ..signals.sampling import median_step
-from ._base import SignalEffect
+from ._base import SignalEffect, signal_parts
 from .registry import register
 
 
@@ -40,6 +40,13 @@ class ElectromechanicalDelay(SignalEffect):
         Parameter("delay", 0.04, 0.0, 0.25, "s", "delay from EMG/excitation to muscle activation"),
     )
     zero_params = {"delay": 0.0}
+
+    @classmethod
+    def candidates(cls, model, context):
+        """One candidate for all muscles in a muscle-level comparison, unless the model has a delay already."""
+        if context.mode != "muscle" or model.muscles is None:
+            return []
+        return [] if any(isinstance(p, cls) for p in signal_parts(model)) else [cls("muscles")]
 
     def __getstate__(self):
         state = dict(self.__dict__)

@@ -35,7 +35,7 @@ __all__ = [
     "OsimElement", "OsimFunction", "Coordinate", "OffsetFrame", "TransformAxis", "Joint", "Mesh",
     "WrapObject", "Body", "CoordinateCoupler", "Marker", "PathPoint", "PathWrap", "GeometryPath",
     "Muscle", "Actuator", "ContactGeometry", "ContactForce", "OtherElement", "OsimDocument",
-    "read_osim", "parse_osim", "JOINT_TYPES", "FUNCTION_TYPES", "MUSCLE_TYPES", "WRAP_TYPES",
+    "read_osim", "parse_osim", "ForceSetDocument", "read_force_set", "parse_force_set", "JOINT_TYPES", "FUNCTION_TYPES", "MUSCLE_TYPES", "WRAP_TYPES",
 ]
 
 #: Joint types OpenSim defines (the skeleton builder says which it can represent).
@@ -992,3 +992,51 @@ def parse_osim(data: bytes | str, *, source: str = "<string>") -> OsimDocument:
         constraints=tuple(sink.constraints), markers=markers, muscles=tuple(sink.muscles),
         actuators=tuple(sink.actuators), contact_geometry=tuple(contact_geometry),
         contact_forces=tuple(sink.contact_forces), other=tuple(sink.other))
+
+
+# ---------------------------------------------------------------------------
+# a force set file (OpenSim's ``force_set_files``: reserve and residual actuators)
+# ---------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class ForceSetDocument:
+    """An OpenSim ``<ForceSet>`` file (the ``force_set_files`` of OpenSim's tools): its actuators."""
+
+    source: str
+    name: str
+    actuators: tuple[Actuator, ...]
+
+
+def read_force_set(path) -> ForceSetDocument:
+    """Read an OpenSim force set file (``<OpenSimDocument><ForceSet>``, e.g. ``*_Reserve_Actuators.xml``)."""
+    p = Path(path)
+    if not p.is_file():
+        raise ModelError(f"OpenSim force set file not found: {p}")
+    return parse_force_set(p.read_bytes(), source=str(p))
+
+
+def parse_force_set(data: bytes | str, *, source: str = "<string>") -> ForceSetDocument:
+    """Parse a force set file's text; ``source`` names it in messages.  pinmsk reads its actuators
+    (:data:`ACTUATOR_TYPES`); any other force in it is refused by name, never dropped."""
+    if isinstance(data, str):
+        data = data.encode("utf-8")
+    try:
+        root = _parse_xml(data, source)
+    except ModelError as exc:
+        raise ModelError(str(exc).replace("not a valid .osim file", "not a valid force set file")) from None
+    fs = root.child("ForceSet") if root.tag == "OpenSimDocument" else root
+    if fs is None or fs.tag != "ForceSet":
+        inside = ", ".join(f"<{c.tag}>" for c in root.children[:3]) or "nothing"
+        what = (f"<OpenSimDocument> holds {inside}" if root.tag == "OpenSimDocument"
+                else f"the root element is <{root.tag}>")
+        raise ModelError(f"{source}:{root.line}: not an OpenSim force set file: {what}, not a <ForceSet> "
+                         "(of CoordinateActuator, PointActuator and TorqueActuator elements)")
+    version = int(float(root.attrib.get("Version", "0") or 0)) if root.tag == "OpenSimDocument" else 0
+    rd = _Reader(source, version)
+    sink = _Sink()
+    for f in _objects(fs):
+        if f.tag not in ACTUATOR_TYPES:
+            raise rd.error(f, f"pinmsk reads actuators ({', '.join(ACTUATOR_TYPES)}) from a force set file; "
+                              "this element is not one")
+        rd.force(f, f"/forceset/{f.name}", sink)
+    return ForceSetDocument(source=source, name=fs.name, actuators=tuple(sink.actuators))

@@ -8,7 +8,11 @@ Below ``model.py`` (which builds the Model from these parts), above the reader :
 * :mod:`.report` -- :class:`ImportReport`: what became what, and each approximation's error;
 * :mod:`.importer` -- :func:`read_import` (the parts of an imported model) and :func:`write_import`
   (URDF + TOML sidecar); :func:`pinmsk.model.import_osim` and ``load_model("x.osim")`` use them;
-* :mod:`.paths` -- geometric muscle paths and their polynomial surrogates.
+* :mod:`.paths` -- geometric muscle paths and their polynomial surrogates;
+* :mod:`.actuators` -- CoordinateActuator, PointActuator, TorqueActuator as pinmsk ideal actuators
+  (the import hook, and OpenSim force set files such as ``*_Reserve_Actuators.xml``);
+* :mod:`.contacts` -- :func:`contact_hook`: SmoothSphereHalfSpaceForce and HuntCrossleyForce as
+  :mod:`pinmsk.contact` components (Simbody's laws), each sphere a frame on its body.
 
 Reading needs no ``opensim`` package; it is an optional peer for the tests that compare with OpenSim.
 """
@@ -19,7 +23,8 @@ from .._lazy import lazy_attributes
 _EXPORTS = {
     "read_import": "importer", "write_import": "importer", "ImportReport": "report", "ReportEntry": "report",
     "build_skeleton": "skeleton", "OsimKinematics": "skeleton", "CoordinateMap": "skeleton",
-    "from_osim": "functions",
+    "from_osim": "functions", "contact_hook": "contacts", "read_actuators": "actuators",
+    "actuator_hook": "actuators",
 }
 __all__ = sorted(_EXPORTS)
 __getattr__, __dir__ = lazy_attributes(__name__, _EXPORTS, __all__)

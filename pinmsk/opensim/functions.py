@@ -25,6 +25,11 @@ ddf)``); ``x`` is ``(N,)`` for one-argument functions and ``(N, k)`` for a
   :data:`FUNCTIONS` maps them to :class:`SimmSpline` -- a model that says
   NaturalCubicSpline behaves in pinmsk as it behaves in OpenSim.
 
+:func:`to_spec` and :func:`from_spec` write a function as its OpenSim definition (type and
+properties: ``{"type": "SimmSpline", "x": [...], "y": [...]}``, nested for MultiplierFunction), not as
+samples, and read it back: the same class from the same numbers, so the same values bit for bit
+(the sidecar of ``pinmsk import`` stores the coordinate map's functions so).
+
 Other OpenSim functions (GCVSpline, StepFunction, Sine, PiecewiseConstantFunction,
 MultivariatePolynomialFunction, ExpressionBasedFunction) are refused by name
 (:class:`~pinmsk.errors.ModelError` with the element and line).
@@ -36,7 +41,7 @@ import numpy as np
 from ..errors import ModelError
 
 __all__ = ["Function", "Constant", "LinearFunction", "PolynomialFunction", "SimmSpline",
-           "PiecewiseLinearFunction", "MultiplierFunction", "FUNCTIONS", "from_osim"]
+           "PiecewiseLinearFunction", "MultiplierFunction", "FUNCTIONS", "from_osim", "to_spec", "from_spec"]
 
 #: OpenSim's SimmMacros: knot spacings are at least TINY_NUMBER; "equal" means within ROUNDOFF_ERROR.
 TINY_NUMBER = 1e-7
@@ -370,3 +375,60 @@ def from_osim(fn) -> Function:
         return FUNCTIONS[kind](fn.x, fn.y)
     except ValueError as exc:
         raise ModelError(f"{fn.where}: {exc}") from None
+
+
+#: The properties of each function type in :func:`to_spec` / :func:`from_spec` (besides ``type``).
+SPEC_KEYS = {"Constant": ("value",), "LinearFunction": ("coefficients",), "PolynomialFunction": ("coefficients",),
+             "SimmSpline": ("x", "y"), "PiecewiseLinearFunction": ("x", "y"), "MultiplierFunction": ("scale", "function")}
+
+
+def to_spec(f: Function) -> dict:
+    """The OpenSim definition of ``f``: ``{"type": ..., <its properties>}`` (plain lists and floats)."""
+    if isinstance(f, Constant):
+        return {"type": "Constant", "value": f.c}
+    if isinstance(f, MultiplierFunction):
+        return {"type": "MultiplierFunction", "scale": f.scale, "function": to_spec(f.function)}
+    if isinstance(f, (LinearFunction, PolynomialFunction)):
+        return {"type": type(f).__name__, "coefficients": f.coefficients.tolist()}
+    if isinstance(f, (SimmSpline, PiecewiseLinearFunction)):
+        return {"type": type(f).__name__, "x": f.x.tolist(), "y": f.y.tolist()}
+    raise ModelError(f"no OpenSim definition for the function {f!r}")
+
+
+def from_spec(spec, *, where: str) -> Function:
+    """The function :func:`to_spec` wrote (ModelError naming ``where`` and the key for a bad one)."""
+    from ..io.toml_files import check_keys
+
+    if not isinstance(spec, dict) or spec.get("type") not in SPEC_KEYS:
+        kind = spec.get("type") if isinstance(spec, dict) else spec
+        raise ModelError(f"{where}: a function is a table {{ type = ..., ... }} with type one of "
+                         f"{', '.join(SPEC_KEYS)}; got {kind!r}")
+    kind = spec["type"]
+    keys = SPEC_KEYS[kind]
+    check_keys(spec, ("type",) + keys, where=where, section=f"the {kind}")
+    missing = [k for k in keys if k not in spec]
+    if missing:
+        raise ModelError(f"{where}: the {kind} needs {', '.join(missing)}")
+    try:
+        if kind == "Constant":
+            return Constant(_scalar(spec["value"], where, "value"))
+        if kind == "MultiplierFunction":
+            return MultiplierFunction(from_spec(spec["function"], where=f"{where}: function"),
+                                      _scalar(spec["scale"], where, "scale"))
+        if kind in ("LinearFunction", "PolynomialFunction"):
+            return FUNCTIONS[kind](_numbers(spec["coefficients"], where, "coefficients"))
+        return FUNCTIONS[kind](_numbers(spec["x"], where, "x"), _numbers(spec["y"], where, "y"))
+    except ValueError as exc:
+        raise ModelError(f"{where}: {exc}") from None
+
+
+def _scalar(v, where, key) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ModelError(f"{where}: {key} must be a number, got {v!r}")
+    return float(v)
+
+
+def _numbers(v, where, key) -> list:
+    if not isinstance(v, list) or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+        raise ModelError(f"{where}: {key} must be a list of numbers, got {v!r}")
+    return [float(x) for x in v]

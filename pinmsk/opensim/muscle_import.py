@@ -41,14 +41,16 @@ import numpy as np
 from ..errors import ModelError
 from ..io.osim import OsimDocument, _parse_xml
 from ..muscles.muscle_set import MuscleSet
+from .actuators import actuator_hook
 from .muscles import MUSCLE_TYPES, muscle_model_from_osim, properties_from_xml, summarize_notes
-from .importer import HookResult
+from .hooks import HookResult
 from .paths import GeometricPaths, fit_polynomial_paths, path_specs_from_xml
 from .report import APPROXIMATED, NOTE, ReportEntry
 from .skeleton import OsimKinematics, Skeleton
 
 __all__ = ["muscle_hook", "default_muscle_hook", "DEFAULT_HOOKS", "MAX_MUSCLES", "geometric_paths",
-           "MAX_ROTATION_SPAN", "FIT_SAMPLES", "TEST_SAMPLES", "MAX_DEGREE", "TOLERANCE"]
+           "muscle_control_bounds", "osim_geometric_paths", "MAX_ROTATION_SPAN", "FIT_SAMPLES", "TEST_SAMPLES",
+           "MAX_DEGREE", "TOLERANCE"]
 
 #: Training and held-out poses of the polynomial fit (per fit; the fit's cost grows with them).
 FIT_SAMPLES = 250
@@ -97,13 +99,26 @@ def muscle_hook(doc: OsimDocument, skeleton: Skeleton, *, ranges=None, max_muscl
     model_coords = tuple(skeleton.pin_model.names[j] for j in range(1, skeleton.pin_model.njoints))
     crossing = _crossed_coordinates(doc, kin, specs)
     fit_coords = tuple(c for c in kin.coordinates if c not in locked and any(c in cs for cs in crossing.values()))
+    # an exact skeleton's coordinate that drives only dependent joints (Rajagopal's patella angle) and is
+    # coupled to joints (an enforced CoordinateCouplerConstraint) follows its coupler in the paths' placements,
+    # as OpenSim enforces it: the paths are fitted in the independent coordinates, their moment arms include
+    # the coupling (refused below if a path point names the coordinate itself)
+    couplers = {dep: (indep, f, scale) for dep, indep, f, scale in skeleton.coordinate_map.couplers} \
+        if skeleton.coordinate_map is not None else {}
+    by_coupler = [c for c in fit_coords if c not in model_coords and c in couplers
+                  and all(i in model_coords for i in couplers[c][0]) and not any(c in sp.coordinates for sp in specs)]
+    need = {c for c in fit_coords if c not in by_coupler} | {i for c in by_coupler for i in couplers[c][0]}
+    fit_coords = tuple(c for c in kin.coordinates if c in need and c not in locked)
     missing = sorted(c for c in fit_coords if c not in model_coords)
     if missing:
         raise ModelError(f"{doc.source}: the muscle paths depend on coordinate(s) {missing}, which the imported "
-                         "skeleton does not have as joints")
+                         "skeleton does not have as joints (import with nonlinear='fit')")
     lock_cols = [(kin.coordinates.index(c), v) for c, v in locked.items()]
+    coupled_cols = [(kin.coordinates.index(c), [kin.coordinates.index(i) for i in couplers[c][0]], couplers[c][1],
+                     float(couplers[c][2])) for c in by_coupler]
 
-    geometric = GeometricPaths(specs, coordinates=kin.coordinates, placements=_Placements(kin, lock_cols))
+    geometric = GeometricPaths(specs, coordinates=kin.coordinates,
+                               placements=_Placements(kin, lock_cols, coupled_cols))
     given = dict(ranges or {})
     unknown = sorted(set(given) - set(kin.coordinates))
     if unknown:
@@ -115,6 +130,12 @@ def muscle_hook(doc: OsimDocument, skeleton: Skeleton, *, ranges=None, max_muscl
     muscles = MuscleSet(names=names, model_type=imp.model_type, mtu=imp.mtu, path=path, tendon=imp.tendon)
 
     entries = _fit_entries(doc, chosen, fits, ranges)
+    if by_coupler:
+        entries.append(ReportEntry(
+            element=f"{doc.source}: <ConstraintSet>", status=NOTE,
+            became=(f"muscle paths fitted with the coupled coordinate(s) {', '.join(by_coupler)} following their "
+                    "couplers (as OpenSim enforces them; they drive only dependent joints): the moment arms about "
+                    f"{', '.join(sorted({i for c in by_coupler for i in couplers[c][0]}))} include the coupling")))
     coupled = sorted({c["dependent"] for c in skeleton.couplings} & set(fit_coords))
     if coupled:
         # the fit samples a coupled coordinate on its own; OpenSim's moment arm about the independent
@@ -128,7 +149,8 @@ def muscle_hook(doc: OsimDocument, skeleton: Skeleton, *, ranges=None, max_muscl
         element=f"{doc.source}: <ForceSet> {len(chosen)} muscles",
         became=(f"MuscleSet of {len(chosen)} {imp.model_type} muscles ({imp.tendon} tendon)"
                 + ("; curve notes: " + " | ".join(notes) if notes else "; curves exact")),
-        status=NOTE, details={"notes": tuple(notes), "geometric_paths": geometric}))
+        status=NOTE, details={"notes": tuple(notes), "geometric_paths": geometric,
+                              "control_bounds": {m.name: m.control_bounds for m in imp.muscles}}))
     return HookResult(muscles=muscles, entries=tuple(entries), handled=tuple(m.where for m in chosen))
 
 
@@ -141,22 +163,26 @@ def default_muscle_hook(doc: OsimDocument, skeleton: Skeleton):
     return muscle_hook(doc, skeleton, max_muscles=MAX_MUSCLES)
 
 
-#: The hooks :func:`pinmsk.model.import_osim` (and ``load_model``) runs by default: the muscles.
-DEFAULT_HOOKS = (default_muscle_hook,)
+#: The hooks :func:`pinmsk.model.import_osim` (and ``load_model``) runs by default: the muscles and the
+#: actuators (:func:`pinmsk.opensim.actuators.actuator_hook`).
+DEFAULT_HOOKS = (default_muscle_hook, actuator_hook)
 
 
 class _Placements:
-    """Body placements of OpenSim's kinematics, locked coordinates at their defaults (picklable, so the
-    model that keeps the geometric paths in its report pickles)."""
+    """Body placements of OpenSim's kinematics, locked coordinates at their defaults and coupled ones (``coupled``:
+    ``(column, independent columns, function, scale)``) set by their couplers (picklable, so the model that keeps
+    the geometric paths in its report pickles)."""
 
-    def __init__(self, kin: OsimKinematics, lock_cols):
-        self.kin, self.lock_cols = kin, tuple(lock_cols)
+    def __init__(self, kin: OsimKinematics, lock_cols, coupled=()):
+        self.kin, self.lock_cols, self.coupled = kin, tuple(lock_cols), tuple(coupled)
 
     def __call__(self, bodies, q):
-        if self.lock_cols:
+        if self.lock_cols or self.coupled:
             q = np.array(q, dtype=float)
             for j, v in self.lock_cols:
                 q[:, j] = v
+            for j, cols, f, scale in self.coupled:
+                q[:, j] = scale * f.value(q[:, cols[0]] if len(cols) == 1 else q[:, cols])
         poses = self.kin.body_poses(q)
         T = np.stack([poses[b] for b in bodies], axis=1)
         return T[..., :3, :3], T[..., :3, 3]
@@ -169,6 +195,32 @@ def geometric_paths(report) -> GeometricPaths | None:
         if gp is not None:
             return gp
     return None
+
+
+def muscle_control_bounds(report) -> dict | None:
+    """``{muscle: (min_control, max_control)}`` of an import's muscles (OpenSim's excitation bounds, which its
+    static optimization takes as activation bounds), from its report; None if it has none."""
+    for e in getattr(report, "entries", ()):
+        cb = e.details.get("control_bounds")
+        if cb is not None:
+            return dict(cb)
+    return None
+
+
+def osim_geometric_paths(source) -> GeometricPaths | None:
+    """The geometric paths of every ``<GeometryPath>`` of an .osim file (muscles of any type, path
+    actuators, ligaments), placed as :func:`muscle_hook` places them (OpenSim's kinematics of the XML,
+    locked coordinates at their default values); None if the model has no path.  Cheap (no fit): what
+    the viewer draws when an import kept no geometric paths (a skeleton-only import, or more muscles
+    than :data:`MAX_MUSCLES`)."""
+    from ..io.osim import read_osim
+    doc = read_osim(source)
+    specs = path_specs_from_xml(_etree(doc.source))
+    if not specs:
+        return None
+    kin = OsimKinematics(doc)
+    lock_cols = [(kin.coordinates.index(c.name), c.default_value) for c in doc.coordinates if c.locked]
+    return GeometricPaths(specs, coordinates=kin.coordinates, placements=_Placements(kin, lock_cols))
 
 
 def _etree(source) -> ET.Element:

@@ -183,6 +183,11 @@ class MuscleModelImport:
 
 
 # --------------------------------------------------------------------------- properties
+#: OpenSim's ``min_control`` of a muscle that does not set it: Thelen2003Muscle and
+#: Millard2012EquilibriumMuscle set it to their default ``minimum_activation`` (0.01) when constructed,
+#: before the XML is read (``constructProperties``: ``setMinControl(get_minimum_activation())``); other
+#: muscles keep Muscle's 0.
+DEFAULT_MIN_CONTROL = {"Thelen2003Muscle": 0.01, "Millard2012EquilibriumMuscle": 0.01}
 #: The OpenSim muscle types pinmsk maps.
 MUSCLE_TYPES = ("Thelen2003Muscle", "Millard2012EquilibriumMuscle", "DeGrooteFregly2016Muscle")
 
@@ -341,7 +346,7 @@ def muscle_from_osim(element_type: str, properties: Mapping, *, name: str | None
     if not applies:
         note("disabled", "appliesForce", "false: OpenSim applies no force of this muscle")
     bounds = tuple(_number(props[k], k, where) if not _unset(props.get(k)) else d
-                   for k, d in (("min_control", 0.0), ("max_control", 1.0)))
+                   for k, d in (("min_control", DEFAULT_MIN_CONTROL.get(element_type, 0.0)), ("max_control", 1.0)))
     for key, why in _DYNAMICS_ONLY.items():
         if key in own and not _unset(props.get(key)):
             note("ignored", key, f"{props[key]}: {why}")

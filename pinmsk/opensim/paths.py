@@ -54,6 +54,13 @@ the derivative of the length (the arc's change is of second order); it does not
 see the polyline steps of OpenSim's ellipsoid arc, which a difference of the
 total length would.
 
+For drawing, :meth:`GeometricPaths.polylines` gives every path over many
+frames as a polyline in ground (:class:`PathPolylines`): the points OpenSim's
+``getCurrentPath`` returns (active points and each wrap's tangent points, at the
+same locations, tests/test_viewer_paths.py) with points along each wrapped arc
+in between, as long as the path's length (the arc points sit a few microns off
+the surface to make up the chords' shortfall).
+
 Arrays are time-first; units SI (m, rad).
 """
 from __future__ import annotations
@@ -76,7 +83,7 @@ __all__ = [
     "PathPointSpec", "ConditionalPathPointSpec", "MovingPathPointSpec", "WrapSpec", "PathWrapSpec",
     "PathSpec", "path_specs_from_xml", "coordinate_ranges_from_xml", "GeometricPaths",
     "PolynomialFitReport", "fit_polynomial_paths", "sample_poses", "motion_ranges", "body_fixed_xyz",
-    "function_from_xml",
+    "function_from_xml", "PathPolylines", "ARC_POINT",
 ]
 
 GROUND = "ground"
@@ -595,7 +602,7 @@ class _Wrap:
     """Result of wrapping a batch of segments: code (n,), tangent points r1, r2 (n, 3) in the wrap
     object's frame, arc length (n,), and whether the result carries a path over the surface."""
 
-    __slots__ = ("code", "r1", "r2", "arc", "ok")
+    __slots__ = ("code", "r1", "r2", "arc", "ok", "curve")
 
     def __init__(self, n):
         self.code = np.zeros(n, dtype=int)
@@ -603,6 +610,9 @@ class _Wrap:
         self.r2 = np.zeros((n, 3))
         self.arc = np.zeros(n)
         self.ok = np.zeros(n, dtype=bool)
+        # curve(t) -> (points, outward normals) (n, k, 3) of the path over the surface at fractions t (k,)
+        # in (0, 1) of the arc, in the wrap object's frame; built lazily (only drawing asks for it)
+        self.curve = None
 
 
 # --------------------------------------------------------------------------------------------
@@ -716,9 +726,36 @@ def _wrap_cylinder(p1, p2, *, radius, length, axis, sign, single):
     if np.any(live):
         r1, r2, arc = _cylinder_spiral(p1, p2, r1, r2, long_wrap, radius, single, live)
         res.r1, res.r2, res.arc = r1, r2, arc
+        res.curve = lambda t: _spiral_curve(r1, r2, long_wrap, radius, t)
     res.code = code
     res.ok = live
     return res
+
+
+def _spiral(r1, r2, long_wrap, radius):
+    """Axial travel, swept angle and length of the spiral from r1 to r2 over the cylinder (OpenSim's
+    WrapCylinder::_calc_spiral_wrap_point geometry; the long way round where ``long_wrap``)."""
+    axial = r2[..., 2] - r1[..., 2]
+    uu = r1 * np.array([1.0, 1.0, 0.0])
+    vv = r2 * np.array([1.0, 1.0, 0.0])
+    theta = np.arctan2(np.cross(uu, vv)[..., 2], _dot(uu, vv))
+    theta = np.where(long_wrap, 2.0 * math.pi - theta, theta)
+    return axial, theta, np.sqrt((radius * theta) ** 2 + axial ** 2)
+
+
+def _spiral_point(t, axial, theta, r, long_wrap):
+    """The point at fraction t of the spiral that starts at r (t, axial, theta, long_wrap broadcast)."""
+    sense = np.where(long_wrap, -1.0, 1.0)
+    return _rot_z(sense * t * theta, r) + (t * axial)[..., None] * _DN
+
+
+def _spiral_curve(r1, r2, long_wrap, radius, t):
+    """Points (n, k, 3) at fractions t (k,) of the spiral r1 -> r2 and their outward normals."""
+    axial, theta, _ = _spiral(r1, r2, long_wrap, radius)
+    t = np.asarray(t, dtype=float)[None, :]
+    pts = _spiral_point(t, axial[:, None], theta[:, None], np.broadcast_to(r1[:, None, :], (len(r1), t.size, 3)),
+                        long_wrap[:, None])
+    return pts, _unit(pts * np.array([1.0, 1.0, 0.0]))
 
 
 def _cylinder_spiral(p1, p2, r1, r2, long_wrap, radius, single, live):
@@ -727,16 +764,9 @@ def _cylinder_spiral(p1, p2, r1, r2, long_wrap, radius, single, live):
     r1, r2 = r1.copy(), r2.copy()
 
     def spiral(r1, r2, long_wrap):
-        axial = r2[:, 2] - r1[:, 2]
-        uu = r1 * np.array([1.0, 1.0, 0.0])
-        vv = r2 * np.array([1.0, 1.0, 0.0])
-        theta = np.arctan2(np.cross(uu, vv)[:, 2], _dot(uu, vv))
-        theta = np.where(long_wrap, 2.0 * math.pi - theta, theta)
-        return axial, theta, np.sqrt((radius * theta) ** 2 + axial ** 2)
+        return _spiral(r1, r2, long_wrap, radius)
 
-    def point(t, axial, theta, r, long_wrap):
-        sense = np.where(long_wrap, -1.0, 1.0)
-        return _rot_z(sense * t * theta, r) + (t * axial)[:, None] * _DN
+    point = _spiral_point
 
     def adjust(pt, r, w):
         pr, rw = _unit(r - pt), _unit(w - r)
@@ -849,7 +879,18 @@ def _wrap_sphere(p1, p2, *, radius, axis, sign):
     # OpenSim 4.6 takes -(2 pi - angle) for a far-side wrap (a negative arc); the arc is 2 pi - angle
     angle = np.where(far, 2.0 * math.pi - angle, angle)
     res.code, res.ok, res.r1, res.r2, res.arc = code, live, r1, r2, radius * angle
+    res.curve = lambda t: _great_circle(r1, r2, np.where(far, -angle, angle), t)
     return res
+
+
+def _great_circle(r1, r2, turn, t):
+    """Points (n, k, 3) at fractions t (k,) of the arc that turns r1 by ``turn`` (rad, signed: negative
+    the long way round) about r1 x r2 on a sphere centred at the origin, and their outward normals."""
+    axis = _unit(np.cross(r1, r2))
+    phi = turn[:, None] * np.asarray(t, dtype=float)[None, :]
+    pts = (np.cos(phi)[..., None] * r1[:, None, :]
+           + np.sin(phi)[..., None] * np.cross(axis, r1)[:, None, :])
+    return pts, _unit(pts)
 
 
 # --------------------------------------------------------------------------------------------
@@ -1030,9 +1071,9 @@ def _ellipsoid_tangent(p1e, r1, p1, a, vs, vs4):
     return np.where(on_surface[:, None], p1, r1)
 
 
-def _ellipsoid_arc(r1, r2, a, vs, vs4, far, factor):
-    """OpenSim's CalcDistanceOnEllipsoid: the polyline over the surface in the wrap plane (1 mm
-    segments, at most 499) -> (length, second point, second-last point), in scaled units."""
+def _ellipsoid_plane(r1, r2, vs, vs4, far, factor):
+    """The wrap plane's section of CalcDistanceOnEllipsoid -> (chord (m), segments, short, centre a0,
+    in-plane axes ar1 and vsy, signed turn from r1 to r2), in scaled units."""
     n = r1.shape[0]
     chord = _norm(r1 - r2) / factor
     nseg = np.clip((chord / 0.001).astype(int), 1, 499)
@@ -1045,11 +1086,13 @@ def _ellipsoid_arc(r1, r2, a, vs, vs4, far, factor):
     ar1, ar2 = _unit(r1 - a0), _unit(r2 - a0)
     with np.errstate(invalid="ignore"):
         phi0 = np.arccos(_dot(ar1, ar2))
-    dphi = np.where(far, -(2.0 * math.pi - phi0), phi0) / nseg
     vsz = _unit(np.cross(ar1, ar2))
     vsy = np.cross(vsz, ar1)
-    k = np.arange(1, 499)[None, :]                       # interior points 1 .. nseg-1
-    phi = k * dphi[:, None]
+    return chord, nseg, short, a0, ar1, vsy, np.where(far, -(2.0 * math.pi - phi0), phi0)
+
+
+def _ellipsoid_plane_points(a0, ar1, vsy, a, phi):
+    """Where the rays from a0 at angles phi (n, k) in the plane (ar1, vsy) leave the ellipsoid (n, k, 3)."""
     r = np.cos(phi)[..., None] * ar1[:, None, :] + np.sin(phi)[..., None] * vsy[:, None, :]
     f1 = r / a
     f2 = (a0 / a)[:, None, :]
@@ -1058,7 +1101,32 @@ def _ellipsoid_arc(r1, r2, a, vs, vs4, far, factor):
     cc = np.sum(f2 * f2, axis=2) - 1.0
     with np.errstate(invalid="ignore", divide="ignore"):
         mu3 = (-bb + np.sqrt(bb * bb - 4.0 * aa * cc)) / (2.0 * aa)
-    s = a0[:, None, :] + mu3[..., None] * r
+    return a0[:, None, :] + mu3[..., None] * r
+
+
+def _ellipsoid_curve(r1, r2, a, vs, vs4, far, factor, t):
+    """Points (n, k, 3) of OpenSim's polyline over the ellipsoid near fractions t (k,) of its turn -- each
+    t moved to the nearest of the polyline's own vertices, so the points' chords never exceed its
+    length -- and their outward normals (0 at the tangent points), in the wrap frame (m)."""
+    _, nseg, short, a0, ar1, vsy, turn = _ellipsoid_plane(r1, r2, vs, vs4, far, factor)
+    t = np.asarray(t, dtype=float)[None, :]
+    ts = np.round(t * nseg[:, None]) / nseg[:, None]
+    pts = _ellipsoid_plane_points(a0, ar1, vsy, a, ts * turn[:, None])
+    pts = np.where((ts <= 0.0)[..., None], r1[:, None, :], np.where((ts >= 1.0)[..., None], r2[:, None, :], pts))
+    chord = r1[:, None, :] + t[..., None] * (r2 - r1)[:, None, :]      # OpenSim's straight arc below 1 mm
+    pts = np.where(short[:, None, None], chord, pts)
+    ends = (ts <= 0.0) | (ts >= 1.0) | short[:, None]
+    normals = np.where(ends[..., None], 0.0, _unit(pts / (a * a)))
+    return pts / factor, normals
+
+
+def _ellipsoid_arc(r1, r2, a, vs, vs4, far, factor):
+    """OpenSim's CalcDistanceOnEllipsoid: the polyline over the surface in the wrap plane (1 mm
+    segments, at most 499) -> (length, second point, second-last point), in scaled units."""
+    n = r1.shape[0]
+    chord, nseg, short, a0, ar1, vsy, turn = _ellipsoid_plane(r1, r2, vs, vs4, far, factor)
+    k = np.arange(1, 499)[None, :]                       # interior points 1 .. nseg-1
+    s = _ellipsoid_plane_points(a0, ar1, vsy, a, k * (turn / nseg)[:, None])
     interior = k < nseg[:, None]
     s = np.where(interior[..., None], s, r2[:, None, :])
     pts = np.concatenate([r1[:, None, :], s, r2[:, None, :]], axis=1)
@@ -1180,6 +1248,14 @@ def _wrap_ellipsoid(P1, P2, *, dims, axis, sign, method):
     res.r1[idx] = r1 / factor
     res.r2[idx] = r2 / factor
     res.arc[idx] = length / factor
+
+    def curve(t):
+        pts, normals = _ellipsoid_curve(r1, r2, a, vs, vs4, far, factor, t)
+        P, Nrm = np.zeros((n,) + pts.shape[1:]), np.zeros((n,) + pts.shape[1:])
+        P[idx], Nrm[idx] = pts, normals
+        return P, Nrm
+
+    res.curve = curve
     return res
 
 
@@ -1257,6 +1333,11 @@ def _wrap_torus(p1, p2, *, inner, outer, axis, sign, single):
     res.r1 = np.einsum("nji,nj->ni", R, cyl.r1) + c
     res.r2 = np.einsum("nji,nj->ni", R, cyl.r2) + c
     res.arc = np.where(ok, cyl.arc, 0.0)
+    if cyl.curve is not None:
+        def curve(t):
+            pts, normals = cyl.curve(t)
+            return np.einsum("nji,nkj->nki", R, pts) + c[:, None, :], np.einsum("nji,nkj->nki", R, normals)
+        res.curve = curve
     return res
 
 
@@ -1339,10 +1420,12 @@ class _State:
     """A wrapped path over frames: slot order, local positions, arcs, length, and the ground positions
     the length was summed from (OpenSim's per-realization cache of each point's ground location)."""
 
-    __slots__ = ("order", "L", "arc", "length", "G")
+    __slots__ = ("order", "L", "arc", "length", "G", "curve")
 
-    def __init__(self, order, L, arc, length, G):
+    def __init__(self, order, L, arc, length, G, curve=None):
         self.order, self.L, self.arc, self.length, self.G = order, L, arc, length, G
+        # with arc sampling: (points, outward normals) (N, W, k, 3) in ground of each wrap's arc
+        self.curve = curve
 
 
 class _Cache:
@@ -1462,8 +1545,11 @@ class GeometricPaths:
         return R, p
 
     # -- one path over frames ------------------------------------------------------------------
-    def _wrap_path(self, c: _Compiled, q, R, p) -> _State:
+    def _wrap_path(self, c: _Compiled, q, R, p, arc_t=None) -> _State:
+        """The wrapped path over frames; with ``arc_t`` (k,) also the points of each taken arc at
+        those fractions of it (:attr:`_State.curve`)."""
         N, P, W, S = q.shape[0], c.P, c.W, c.S
+        curve = None if arc_t is None else (np.zeros((N, W, len(arc_t), 3)), np.zeros((N, W, len(arc_t), 3)))
         Lp, active = c.point_locals(q)
         L = np.zeros((N, S, 3))
         L[:, :P] = Lp
@@ -1484,7 +1570,8 @@ class GeometricPaths:
                         f = np.flatnonzero(running & (worder[:, i] == w))
                         if f.size == 0:
                             continue
-                        codes, returned = self._apply_wrap(c, w, f, order, cache, L, arc, active, Rw, ow, R, p)
+                        codes, returned = self._apply_wrap(c, w, f, order, cache, L, arc, active, Rw, ow, R, p,
+                                                           arc_t=arc_t, curve=curve)
                         result[f, i] = codes
                         running[f[returned]] = False
                 g = np.flatnonzero(running)
@@ -1501,10 +1588,11 @@ class GeometricPaths:
                 if not np.any(running):
                     break
         length = cache.length(order, arc, c.slot_wrap)
-        return _State(order, L, arc, length, cache.G if cache.stale else cache.X)
+        return _State(order, L, arc, length, cache.G if cache.stale else cache.X, curve)
 
-    def _apply_wrap(self, c, w, f, order, cache, L, arc, active, Rw, ow, R, p):
-        """Wrap object w of path c over frames f (in place on order, cache, L, arc) -> (codes, returned)."""
+    def _apply_wrap(self, c, w, f, order, cache, L, arc, active, Rw, ow, R, p, arc_t=None, curve=None):
+        """Wrap object w of path c over frames f (in place on order, cache, L, arc, and ``curve``, the
+        arcs' points at fractions ``arc_t``, when given) -> (codes, returned)."""
         pw = c.spec.wraps[w]
         P, S = c.P, c.S
         X = cache.X
@@ -1531,6 +1619,8 @@ class GeometricPaths:
         best_r1 = np.zeros((n, 3))
         best_r2 = np.zeros((n, 3))
         best_arc = np.zeros(n)
+        if arc_t is not None:
+            best_pts, best_nrm = np.zeros((n, len(arc_t), 3)), np.zeros((n, len(arc_t), 3))
         mandatory = np.zeros(n, dtype=bool)
         Rwf, owf = Rw[f, w], ow[f, w]
         for j in range(S - 1):
@@ -1561,6 +1651,10 @@ class GeometricPaths:
             t = ci[take]
             best_pos[t], best_change[t] = j, change[take]
             best_r1[t], best_r2[t], best_arc[t] = r1[take], r2[take], res.arc[take]
+            if arc_t is not None and t.size:
+                pts, nrm = res.curve(arc_t)
+                best_pts[t] = np.einsum("nij,nkj->nki", Rc[take], pts[take]) + oc[take][:, None, :]
+                best_nrm[t] = np.einsum("nij,nkj->nki", Rc[take], nrm[take])
             mandatory[ci[mand]] = True
         got = best_pos >= 0
         arc[f[~got], w] = 0.0
@@ -1571,6 +1665,8 @@ class GeometricPaths:
             L[g, s1] = np.einsum("nji,nj->ni", Rb, best_r1[got] - pb)
             L[g, s2] = np.einsum("nji,nj->ni", Rb, best_r2[got] - pb)
             arc[g, w] = best_arc[got]
+            if arc_t is not None:
+                curve[0][g, w], curve[1][g, w] = best_pts[got], best_nrm[got]
             o[got] = _insert_two(o[got], best_pos[got] + 1, s1, s2)
         order[f] = o
         return codes, returned
@@ -1648,6 +1744,69 @@ class GeometricPaths:
         X = _to_ground(R, p, c.slot_body, st.L)
         return [X[n, o[o >= 0]] for n, o in enumerate(st.order)]
 
+    def polylines(self, q, *, arc_points: int = 8, keep_length: bool = True) -> "PathPolylines":
+        """Every path as a polyline in ground over frames ``q`` (N, nq) (or (nq,): N = 1), in one batch.
+
+        The vertices of muscle i at frame n are its active points in order with, where the path wraps,
+        the two tangent points and ``arc_points - 1`` points along the arc between them (the spiral
+        over a cylinder, the great circle over a sphere, OpenSim's polyline over an ellipsoid -- at its
+        own vertices nearest to even fractions of the turn -- and the torus's local cylinder), as
+        OpenSim's ``GeometryPath::getCurrentPath`` and each ``PathWrapPoint``'s wrap path lay them.
+
+        ``keep_length`` (default): the points along each arc are moved out along the surface's normal
+        by the one distance (``lift``, a Newton solve per arc) that makes the arc's chords as long as
+        the arc length the path's length is summed from, so the polyline is as long as the path:
+        its length is :meth:`lengths` of the same paths with ``match_opensim=False`` (to round-off),
+        which is :meth:`lengths` itself for paths with at most one wrap object (several: see the
+        class docstring).  False: the arc points lie on the surface and the chords are shorter.
+        """
+        q, _ = self._q(q)
+        k = int(arc_points)
+        if k < 2:
+            raise PinmskError(f"arc_points must be at least 2 (the arc's segments), got {arc_points!r}")
+        arc_t = np.arange(1, k) / k
+        R, p = self._place(q)
+        N = q.shape[0]
+        rows = np.arange(N)[:, None]
+        parts = []
+        for c in self._paths:
+            st = self._wrap_path(c, q, R, p, arc_t=arc_t if c.W else None)
+            P, W, S = c.P, c.W, c.S
+            X = _to_ground(R, p, c.slot_body, st.L)                            # (N, S, 3) where the path lies
+            lift = np.zeros((N, W))
+            if W:
+                C, Nrm = st.curve
+                taken = np.stack([np.any(st.order == P + 2 * w, axis=1) for w in range(W)], axis=1)
+                if keep_length:
+                    lift = _lift_arcs(X[:, P::2][:, :W], X[:, P + 1::2][:, :W], C, Nrm, st.arc, taken)
+                C = C + lift[..., None, None] * Nrm
+                pos = np.concatenate([X, C.reshape(N, W * (k - 1), 3)], axis=1)
+            else:
+                pos = X
+            # each slot of the order expands to itself and, for a wrap's first tangent point, its arc points
+            table = np.full((S, k), -1)
+            table[:, 0] = np.arange(S)
+            for w in range(W):
+                table[P + 2 * w, 1:] = S + w * (k - 1) + np.arange(k - 1)
+            ids = np.where(st.order[..., None] >= 0, table[np.maximum(st.order, 0)], -1).reshape(N, -1)
+            ids = _compact(ids, ids >= 0)
+            counts = np.sum(ids >= 0, axis=1)
+            ids = ids[:, :max(int(counts.max()), 1)]
+            pts = pos[rows, np.maximum(ids, 0)]
+            last = pts[np.arange(N), counts - 1]
+            pts = np.where((ids >= 0)[..., None], pts, last[:, None, :])
+            sources = np.where(ids >= S, ARC_POINT, ids)
+            parts.append((pts, counts, sources, np.max(lift, axis=1, initial=0.0)))
+        K = max(pt.shape[1] for pt, *_ in parts)
+        points = np.empty((N, len(parts), K, 3))
+        sources = np.full((N, len(parts), K), -1)
+        for i, (pt, cnt, src, _) in enumerate(parts):
+            points[:, i, :pt.shape[1]] = pt
+            points[:, i, pt.shape[1]:] = pt[:, -1:]
+            sources[:, i, :src.shape[1]] = src
+        return PathPolylines(muscles=self.muscles, points=points, counts=np.stack([p[1] for p in parts], axis=1),
+                             sources=sources, lift=np.stack([p[3] for p in parts], axis=1))
+
     def _coordinate_columns(self, coordinates):
         if coordinates is None:
             return list(range(len(self.coordinates)))
@@ -1659,6 +1818,63 @@ class GeometricPaths:
                 raise ModelError(f"no coordinate {name!r} among the paths' coordinates{hint}")
             cols.append(self.coordinates.index(name))
         return cols
+
+
+#: :attr:`PathPolylines.sources` of a point along a wrap's arc (-1: padding)
+ARC_POINT = -2
+
+
+@dataclass(frozen=True, eq=False)
+class PathPolylines:
+    """Muscle paths as polylines in ground over N frames (:meth:`GeometricPaths.polylines`).
+
+    ``points`` (N, m, K, 3): muscle i's vertices at frame n in order, ``counts[n, i]`` of them; the
+    rest repeat the last one (zero-length segments), so every frame has K vertices.  ``sources``
+    (N, m, K): what each vertex is -- ``p`` in 0..P-1 the path's point p (in its spec's order),
+    ``P + 2w`` and ``P + 2w + 1`` the first and second tangent points on its wrap object w,
+    :data:`ARC_POINT` a point along an arc, -1 padding.  ``lift`` (N, m): the largest distance (m)
+    the arc points were moved off their surfaces to keep the polyline's length (0 without wraps).
+    """
+
+    muscles: tuple
+    points: np.ndarray
+    counts: np.ndarray
+    sources: np.ndarray
+    lift: np.ndarray
+
+    def lengths(self) -> np.ndarray:
+        """The polylines' lengths (N, m), summed over their segments."""
+        return np.sum(_norm(np.diff(self.points, axis=2)), axis=2)
+
+    def of(self, muscle: str) -> tuple[np.ndarray, np.ndarray]:
+        """``(points (N, K, 3), counts (N,))`` of one muscle."""
+        if muscle not in self.muscles:
+            close = difflib.get_close_matches(str(muscle), self.muscles, n=1)
+            hint = f"; did you mean {close[0]!r}?" if close else ""
+            raise ModelError(f"no path for muscle {muscle!r}{hint}")
+        i = self.muscles.index(muscle)
+        return self.points[:, i], self.counts[:, i]
+
+
+def _lift_arcs(T1, T2, C, Nrm, arc, taken, iterations: int = 50):
+    """Offsets s (N, W) along the normals Nrm of the arc points C (N, W, k-1, 3) that make the chords
+    T1 -> C + s Nrm -> T2 as long as ``arc`` (N, W), where ``taken``.  The chords' length is convex in
+    s, so Newton's method from s = 0 (chords <= arc) converges from above after its first step."""
+    ends = np.zeros(T1.shape[:2] + (1, 3))
+    s = np.zeros(arc.shape)
+    D = np.diff(np.concatenate([ends, Nrm, ends], axis=2), axis=2)
+    todo = taken.copy()
+    for _ in range(iterations):
+        V = np.concatenate([T1[:, :, None], C + s[..., None, None] * Nrm, T2[:, :, None]], axis=2)
+        d = np.diff(V, axis=2)
+        seg = _norm(d)
+        f = np.sum(seg, axis=2) - arc
+        fp = np.sum(_dot(d, D) / np.where(seg > 0.0, seg, 1.0), axis=2)
+        todo &= (np.abs(f) > 1e-15 * np.maximum(arc, 1.0)) & (fp > 0.0)
+        if not np.any(todo):
+            break
+        s = np.where(todo, s - f / np.where(todo, fp, 1.0), s)
+    return np.where(taken, s, 0.0)
 
 
 # --------------------------------------------------------------------------------------------

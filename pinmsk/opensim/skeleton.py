@@ -27,7 +27,10 @@ a revolute (rotation axes) or prismatic (translation axes) Pinocchio joint about
 that axis, its intercept a fixed offset; constant axes become fixed offsets.  A
 joint built only of such axes is exact.  A joint whose axes are other functions
 of a coordinate (gait10dof18musc's knee translations, Rajagopal's walker knee
-and patella) moves its child along a curve no fixed-axis joint follows; it is
+and patella) moves its child along a curve no fixed-axis joint follows.  By default
+(``nonlinear="exact"``) each such axis becomes a Pinocchio joint of its own, a
+dependent coordinate that :class:`CoordinateMap` fills from OpenSim's coordinates
+(exact).  With ``nonlinear="fit"`` the joint is
 replaced by the fixed-axis revolute (or prismatic) joint that best fits the
 child body's motion over the coordinate's range (least squares over the
 child's attached points), and the report gives the largest error of the
@@ -382,6 +385,19 @@ def _coupler_functions(doc) -> tuple:
                  for con in doc.constraints if con.enforced)
 
 
+#: Keys of a sidecar's ``[coordinate_map]`` table (:meth:`CoordinateMap.to_spec`), of its dependent joints and
+#: of its couplers.
+MAP_KEYS = {"osim_coordinates": "OpenSim's coordinates, in its order",
+            "defaults": "{ coordinate = default value }", "welded": "{ coordinate = value } (locked='weld')",
+            "dependent": "[[coordinate_map.dependent]]: the joints that are functions of coordinates",
+            "couplers": "[[coordinate_map.couplers]]: enforced CoordinateCouplerConstraints"}
+DEPENDENT_KEYS = {"name": "the Pinocchio joint", "joint": "the OpenSim joint", "axis": "its SpatialTransform axis",
+                  "of": "the coordinates it is a function of", "function": "the OpenSim function { type = ... }",
+                  "welded": "{ coordinate = value } of welded arguments"}
+COUPLER_KEYS = {"dependent": "coordinate", "independent": "coordinates", "scale_factor": "number",
+                "function": "the OpenSim function { type = ... }"}
+
+
 class CoordinateMap:
     """OpenSim's coordinates -> the Pinocchio model's ``q`` (with speeds, accelerations, Jacobian).
 
@@ -408,6 +424,103 @@ class CoordinateMap:
     def identity(self) -> bool:
         """True if every Pinocchio joint is an OpenSim coordinate (no dependent coordinates)."""
         return not self.dependent
+
+    # -- serialisation (the sidecar of ``pinmsk import``) ----------------------
+    def to_spec(self) -> dict:
+        """The map as plain data (the ``[coordinate_map]`` table of a sidecar): OpenSim's coordinates, their
+        defaults and welded values, each dependent joint's coordinates and OpenSim function definition
+        (:func:`pinmsk.opensim.functions.to_spec`: the function itself, not samples), and the enforced
+        couplers.  :meth:`from_spec` reads it back; the Pinocchio joints come from the skeleton."""
+        deps = []
+        for d in self.dependent.values():
+            rec = {"name": d.name, "joint": d.joint, "axis": d.axis, "of": list(d.of),
+                   "function": fns.to_spec(d.function)}
+            if d.welded:
+                rec["welded"] = {c: float(v) for c, v in d.welded.items()}
+            deps.append(rec)
+        return {"osim_coordinates": list(self.osim_coordinates),
+                "defaults": {c: float(self.defaults[c]) for c in self.osim_coordinates},
+                "welded": {c: float(v) for c, v in self.welded.items()},
+                "dependent": deps,
+                "couplers": [{"dependent": dep, "independent": list(indep), "scale_factor": float(scale),
+                              "function": fns.to_spec(f)} for dep, indep, f, scale in self.couplers]}
+
+    @classmethod
+    def from_spec(cls, spec, *, joints: Sequence[str], where: str) -> "CoordinateMap":
+        """The map :meth:`to_spec` wrote, on a skeleton with Pinocchio ``joints`` (in order); ModelError naming
+        ``where`` and the key for an unknown key, an unknown coordinate or a joint the map does not explain."""
+        from ..io.toml_files import check_keys
+
+        check_keys(spec, MAP_KEYS, where=where, section="[coordinate_map]")
+        for key in ("osim_coordinates", "defaults"):
+            if key not in spec:
+                raise ModelError(f"{where}: [coordinate_map] needs '{key}'")
+        coords = spec["osim_coordinates"]
+        if not (isinstance(coords, list) and coords and all(isinstance(c, str) for c in coords)):
+            raise ModelError(f"{where}: [coordinate_map] osim_coordinates must be a list of coordinate names")
+        known = set(coords)
+
+        def values(table, what):
+            if not isinstance(table, dict):
+                raise ModelError(f"{where}: [coordinate_map] {what} must be a table {{ coordinate = value }}")
+            for c, v in table.items():
+                if c not in known:
+                    raise ModelError(f"{where}: [coordinate_map] {what} names '{c}', which is not one of "
+                                     "osim_coordinates")
+                if isinstance(v, bool) or not isinstance(v, (int, float)):
+                    raise ModelError(f"{where}: [coordinate_map] {what}.{c} must be a number, got {v!r}")
+            return {c: float(v) for c, v in table.items()}
+
+        defaults = values(spec["defaults"], "defaults")
+        absent = [c for c in coords if c not in defaults]
+        if absent:
+            raise ModelError(f"{where}: [coordinate_map] defaults lacks {', '.join(absent)}")
+        welded = values(spec.get("welded", {}), "welded")
+
+        def names(v, label):
+            if not (isinstance(v, list) and all(isinstance(c, str) and c in known for c in v)):
+                raise ModelError(f"{where}: {label} must list coordinates of osim_coordinates, got {v!r}")
+            return tuple(v)
+
+        dependent = {}
+        for i, rec in enumerate(spec.get("dependent", [])):
+            label = f"[[coordinate_map.dependent]] #{i + 1}"
+            check_keys(rec, DEPENDENT_KEYS, where=where, section=label)
+            missing = [k for k in ("name", "of", "function") if k not in rec]
+            if missing:
+                raise ModelError(f"{where}: {label} needs {', '.join(missing)}")
+            name = str(rec["name"])
+            label = f"[[coordinate_map.dependent]] '{name}'"
+            f = fns.from_spec(rec["function"], where=f"{where}: {label} function")
+            of = names(rec["of"], f"{label} of")
+            if not of or (f.n_args and f.n_args != len(of)):
+                raise ModelError(f"{where}: {label}: its function takes {f.n_args} argument(s) but 'of' names "
+                                 f"{len(of)} coordinate(s)")
+            dependent[name] = DependentCoordinate(
+                name=name, joint=str(rec.get("joint", "")), axis=str(rec.get("axis", "")), of=of, function=f,
+                where=f"{where}: {label}", welded=values(rec.get("welded", {}), f"{label} welded"))
+        couplers = []
+        for i, rec in enumerate(spec.get("couplers", [])):
+            label = f"[[coordinate_map.couplers]] #{i + 1}"
+            check_keys(rec, COUPLER_KEYS, where=where, section=label)
+            missing = [k for k in COUPLER_KEYS if k not in rec]
+            if missing:
+                raise ModelError(f"{where}: {label} needs {', '.join(missing)}")
+            dep = names([rec["dependent"]], f"{label} dependent")[0]
+            couplers.append((dep, names(rec["independent"], f"{label} independent"),
+                             fns.from_spec(rec["function"], where=f"{where}: {label} function"),
+                             float(rec["scale_factor"])))
+        joints = tuple(joints)
+        stray = [j for j in joints if j not in known and j not in dependent]
+        if stray:
+            raise ModelError(f"{where}: the skeleton's joint(s) {', '.join(stray)} are neither OpenSim coordinates "
+                             "(osim_coordinates) nor dependent joints of [coordinate_map]")
+        lost = [d for d in dependent if d not in joints]
+        if lost:
+            raise ModelError(f"{where}: [coordinate_map] dependent joint(s) {', '.join(lost)} are not joints of the "
+                             "skeleton")
+        return cls(osim_coordinates=coords, joints=joints, dependent=dependent, couplers=couplers,
+                   defaults=defaults, welded=welded)
 
     def _osim(self, q, what):
         if q is None:
@@ -564,15 +677,15 @@ class Skeleton:
     options: Mapping = field(default_factory=dict)
 
 
-def build_skeleton(doc: OsimDocument, *, locked: str = "joint", nonlinear: str = "fit", fit_samples: int = 81,
+def build_skeleton(doc: OsimDocument, *, locked: str = "joint", nonlinear: str = "exact", fit_samples: int = 81,
                    check_samples: int = 2001) -> Skeleton:
     """The Pinocchio skeleton of ``doc``, with report entries for each joint and the error bounds.
 
     ``locked``: ``"joint"`` keeps locked coordinates as joints (default), ``"weld"`` fixes them at
-    their default values.  ``nonlinear``: ``"fit"`` (default) replaces a joint whose axes are nonlinear
-    functions of a coordinate by the best-fitting fixed-axis joint (measured, reported); ``"exact"``
-    gives each such axis a Pinocchio joint of its own, a *dependent coordinate* (``dependent``) whose
-    value is the axis function of its coordinate(s): exact when filled by :class:`CoordinateMap`.
+    their default values.  ``nonlinear``: ``"exact"`` (default) gives each axis that is a nonlinear
+    function of a coordinate a Pinocchio joint of its own, a *dependent coordinate* (``dependent``) whose
+    value is the axis function of its coordinate(s): exact when filled by :class:`CoordinateMap`;
+    ``"fit"`` replaces such a joint by the best-fitting fixed-axis joint (measured, reported).
     ``fit_samples`` / ``check_samples``: coordinate samples for fitting an approximated joint and for
     measuring its error.
     """

@@ -33,7 +33,16 @@ from .progress import Progress
 
 def _model(args):
     from ..model import load_model
-    return load_model(args.model, moment_arms=getattr(args, "moment_arms", None))
+    return load_model(args.model, moment_arms=getattr(args, "moment_arms", None),
+                      nonlinear=getattr(args, "nonlinear", None))
+
+
+def _nonlinear_flag(s) -> None:
+    """``--nonlinear`` on a command that takes a MODEL: how an .osim's nonlinear joint axes are imported."""
+    s.add_argument("--nonlinear", choices=["exact", "fit"], default=None,
+                   help="an .osim MODEL's joint axes that are nonlinear functions of a coordinate (a spline "
+                        "knee): 'exact' (default) dependent joints computed from OpenSim's coordinates; 'fit' "
+                        "best-fitting fixed-axis joints (their errors are in the import report)")
 
 
 def _read(path, model=None, args=None, *, coordinates: bool = True):
@@ -143,9 +152,11 @@ def cmd_info(args) -> int:
 
 
 def cmd_import(args) -> int:
-    from ..opensim.importer import read_import, write_import
-    files = write_import(args.model, args.out, name=args.name)
-    print(read_import(args.model).report.format(verbose=args.verbose))
+    from ..model import import_osim
+    from ..opensim.importer import write_import
+    model, report = import_osim(args.model, nonlinear=args.nonlinear or "exact")     # the report is printed
+    files = write_import(model, args.out, name=args.name)
+    print(report.format(verbose=args.verbose))
     for what in ("urdf", "sidecar", "markers", "report"):
         print(f"wrote {files[what]}")
     return 0
@@ -160,7 +171,8 @@ def cmd_id(args) -> int:
     print(res.report())
     out = res.trial
     _write(out, args.output, args.precision)
-    _plot(args, out, list(moment_channels(model.coordinate_order)), "inverse_dynamics", "moment (N m)")
+    _plot(args, out, [n for n in moment_channels(model.coordinate_order) if n in out]    # OpenSim's, with a map
+          or [n for n in out.names if n.endswith("_moment")], "inverse_dynamics", "moment (N m)")
     return 0
 
 
@@ -237,7 +249,8 @@ def _run_solver(args, solver, total: int | None, label: str, title: str) -> int:
 def cmd_so(args) -> int:
     from ..solvers.static import StaticOptimization
     dofs = [d.strip() for d in args.dofs.split(",") if d.strip()] if args.dofs else None
-    so = StaticOptimization(**_so_options(args), minmax=args.minmax, dofs=dofs)
+    so = StaticOptimization(**_so_options(args), minmax=args.minmax, dofs=dofs, actuators=args.actuators,
+                            convention=args.convention)
     return _run_solver(args, so, None, "SO", "static_optimization")
 
 
@@ -340,8 +353,9 @@ def cmd_optimize(args) -> int:
 
 def cmd_view(args) -> int:
     from .viewer import view_cli
-    trial = _read(args.trial, _model(args), args) if args.trial else None
-    view_cli(args.model, trial, args.results, open_browser=args.open,
+    model = _model(args)          # loaded once (an .osim import is not quick)
+    trial = _read(args.trial, model, args) if args.trial else None
+    view_cli(model, trial, args.results, open_browser=args.open,
              block=not args.no_block, timeout=args.timeout)
     return 0
 
@@ -411,6 +425,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("model")
     s.add_argument("--moment-arms", choices=["constant", "angle"], default=None,
                    help="muscle path variant (models that declare several)")
+    _nonlinear_flag(s)
     s.set_defaults(func=cmd_info)
 
     s = sub.add_parser("import", help="an OpenSim .osim model as URDF + TOML sidecar, with the import report",
@@ -422,6 +437,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-o", "--out", required=True, metavar="DIR", help="folder for the files (created)")
     s.add_argument("--name", default=None, help="file stem (default: the .osim's)")
     s.add_argument("--verbose", action="store_true", help="also list what was imported exactly")
+    _nonlinear_flag(s)
     s.set_defaults(func=cmd_import)
 
     s = sub.add_parser("id", help="inverse dynamics of a trial: <coord>_moment channels")
@@ -433,6 +449,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
     _add_read_flags(s)
+    _nonlinear_flag(s)
     s.set_defaults(func=cmd_id)
 
     s = sub.add_parser("muscles", help="muscle analysis of a trial: <muscle>_length, _fiber_length, "
@@ -443,6 +460,7 @@ def build_parser() -> argparse.ArgumentParser:
     _precision_flag(s)
     input_flags(s)
     _add_read_flags(s)
+    _nonlinear_flag(s)
     s.set_defaults(func=cmd_muscles)
 
     s = sub.add_parser("simulate", help="forward dynamics driven by <coord>_moment channels (or none)")
@@ -458,6 +476,7 @@ def build_parser() -> argparse.ArgumentParser:
     _precision_flag(s)
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
     _add_read_flags(s)
+    _nonlinear_flag(s)
     s.set_defaults(func=cmd_simulate)
 
     s = sub.add_parser("demo", help="the diagnosis loop on a shipped forearm trial with a hidden effect")
@@ -482,6 +501,7 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
         s.add_argument("--report", metavar="OUT.html", default=None, help="write a self-contained HTML report")
         _add_read_flags(s)
+        _nonlinear_flag(s)
 
     s = sub.add_parser("so", help="static optimization: muscle forces and activations frame by frame")
     so_flags(s)
@@ -492,6 +512,14 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--dofs", metavar="COORD,COORD", default=None,
                    help="balance only these coordinates (default: every coordinate a muscle spans; the "
                         "others must need no force, or --reserves)")
+    s.add_argument("--actuators", metavar="FILE.xml", default=None,
+                   help="an OpenSim force set file of reserve and residual actuators (CoordinateActuator, "
+                        "PointActuator, TorqueActuator) sharing the moments with the muscles, besides the model's "
+                        "own; each costs |control|^P and gets <name>_control and <name>_force channels")
+    s.add_argument("--convention", choices=["pinmsk", "opensim"], default="pinmsk",
+                   help="muscle model: pinmsk's (passive forces included, default) or OpenSim's "
+                        "StaticOptimization (F = a F_opt without passive force, activations within the muscles' "
+                        "min/max controls), for like-for-like comparisons")
     s.set_defaults(func=cmd_so)
 
     s = sub.add_parser("fso", help="forward static optimization: track a motion forward in time (thesis Sec. 3.4)")
@@ -523,6 +551,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="frames to try frame effects (e.g. a payload) at, besides the defaults")
     s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
     _add_read_flags(s)
+    _nonlinear_flag(s)
     s.set_defaults(func=cmd_diagnose)
 
     s = sub.add_parser("synth", help="write a synthetic trial of a model with hidden effects and noise")
@@ -585,6 +614,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-block", action="store_true", help="return at once instead of serving until Ctrl-C")
     s.add_argument("--timeout", type=float, default=None, help="serve for this many seconds, then stop")
     _add_read_flags(s)
+    _nonlinear_flag(s)
     s.set_defaults(func=cmd_view)
 
     s = sub.add_parser("batch", help="run IK -> ID -> SO -> report over the trials of a config file")

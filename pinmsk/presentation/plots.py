@@ -141,7 +141,12 @@ def _suffix(quantity: str) -> tuple[str, str]:
 def muscles_in(results, quantity: str = "force", muscles=None) -> list[str]:
     """Muscles with a ``<muscle>_<quantity>`` channel in ``results`` (restricted to ``muscles``)."""
     suf, _ = _suffix(quantity)
-    have = [c[: -len(suf)] for c in results.names if c.endswith(suf) and len(c) > len(suf)]
+    # a static optimization's actuators (<name>_force, named in its meta) are not muscles
+    meta = getattr(results, "meta", None) or {}
+    listed = meta.get("actuator_names") or (meta.get("header") or {}).get("actuator_names") or ""
+    actuators = {n.strip() for n in str(listed).split(",") if n.strip()}
+    have = [c[: -len(suf)] for c in results.names if c.endswith(suf) and len(c) > len(suf)
+            and c[: -len(suf)] not in actuators]
     if muscles is None:
         return have
     missing = [m for m in muscles if m not in have]

@@ -14,17 +14,34 @@ Scene (paths under meshcat's ``/meshcat``)::
     pinmsk                              model frame -> z-up world (y-up models stand up)
     pinmsk/ground                       the ground plane
     pinmsk/model/skeleton/visuals/<geometry>   bodies (Pinocchio's MeshcatVisualizer)
+    pinmsk/model/skeleton/visuals/wrap_<name>  wrap objects of an imported OpenSim model
     pinmsk/model/muscles/<muscle>/seg<i>/c<k>  muscle polylines; colour level k of 0..levels-1
+    pinmsk/model/muscles/<muscle>/seg<i>/red   ... in muscle red, shown while no activation is known
     pinmsk/model/contacts/<n>                  contact spheres
     pinmsk/model/residuals/<coord>/c<k>        joint residual markers, colour level k
     pinmsk/ghost/skeleton/visuals/<geometry>   second motion (translucent), optional offset
     pinmsk/grf/<side>/shaft, head              ground reaction force arrows
 
 Colours: activation (or force / f_max, or |residual| / scale) in [0, 1] maps to
-``levels`` discrete colours from blue (0) to red (1).  Each level is its own
+``levels`` discrete colours from blue (0) to red (1); a muscle without one is muscle red.  Each level is its own
 mesh whose visibility is switched, so animated colours also reach a browser
 that connects after the animation was sent (meshcat re-sends the scene to late
 clients with the animation before the objects, which breaks material tracks).
+
+Muscles are polylines drawn as one cylinder per segment (meshcat animates
+transforms and properties, not vertex buffers, so a line strip could not follow
+the motion in an animation or a saved page).  Their vertices come from the
+model's path geometry (:func:`muscle_polylines`): the display points of a
+built-in model or sidecar (fixed in bodies), or, for a model imported from an
+OpenSim ``.osim``, its geometric paths (:meth:`pinmsk.opensim.paths.GeometricPaths.polylines`:
+active points, tangent points and points along the wrapped arcs, OpenSim's
+path algorithm) for all frames of a trial in one batch; for the sidecar ``pinmsk
+import`` wrote, those of the ``.osim`` it names (``[model] osim``; a warning says so
+if that file is gone or changed since).  Muscles whose paths
+are only functions of the coordinates (no display points) are named in a
+warning, not drawn.  An imported model's bodies are capsules between its joints
+(OpenSim's ``.vtp`` meshes are not read) and its wrap objects translucent
+cylinders, spheres and ellipsoids.
 
 Channels used (see DESIGN.md): coordinates by name; ``<muscle>_activation``
 or ``<muscle>_force``; ``<coord>_residual``; ``ground_force_v[xyz]`` and
@@ -42,6 +59,7 @@ import sys
 import time
 import warnings
 from collections import namedtuple
+from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -49,11 +67,11 @@ import pinocchio as pin
 
 from ..errors import ModelError, TrialError
 from ..io.tables import read_trial
-from ..model import load_model
+from ..model import Model, load_model
 from ..trial import Trial, parse_ground_reaction
 from . import viewer_geometry as vg
 
-__all__ = ["Viewer", "ViewerCommand", "view_cli", "default_ground_height"]
+__all__ = ["Viewer", "ViewerCommand", "view_cli", "default_ground_height", "muscle_polylines"]
 
 #: One command sent to the meshcat server: ``kind`` (``set_object``, ``set_transform``,
 #: ``set_property``, ``set_animation``, ``delete``), the node ``path`` and a detail
@@ -68,6 +86,8 @@ GHOST = (0.45, 0.75, 1.0, 0.35)
 GROUND = 0x7f8c99
 CONTACT = 0xe0c020
 GRF = 0x22bb44
+MUSCLE_RED = 0xcc1a1a
+WRAP = (0.35, 0.8, 0.95, 0.35)
 
 
 class Viewer:
@@ -83,6 +103,8 @@ class Viewer:
     levels : number of discrete colours for activations/forces/residuals.
     skeleton_opacity : opacity of the bones (default 0.6 for models with muscles,
         whose display points often lie inside the bones' visuals, else 1).
+    arc_points : segments drawn along each wrapped arc of an imported model's paths.
+    wrap_objects : draw an imported model's wrap objects (tori are not drawn: named in a warning).
     quiet : do not print the URL.
 
     Attributes: ``url``, ``model``, ``visual_model`` (the Pinocchio
@@ -93,7 +115,8 @@ class Viewer:
 
     def __init__(self, model, *, zmq_url: str | None = None, open_browser: bool = False,
                  ground: bool = True, ground_height: float | None = None, levels: int = 8,
-                 skeleton_opacity: float | None = None, quiet: bool = False):
+                 skeleton_opacity: float | None = None, arc_points: int = 8, wrap_objects: bool = True,
+                 quiet: bool = False):
         import meshcat
 
         self.model = model
@@ -109,12 +132,16 @@ class Viewer:
         self._ghost_viz = None
         self._ghost_offset = np.zeros(3)
 
+        self._polylines = muscle_polylines(model, arc_points=arc_points)
         self.visual_model = build_visual_model(model)
         if skeleton_opacity is None:
             # muscle display points lie inside the bones' visuals: let them show through
-            skeleton_opacity = 0.6 if getattr(model, "muscles", None) is not None else 1.0
+            drawn = getattr(model, "muscles", None) is not None or self._polylines is not None
+            skeleton_opacity = 0.6 if drawn else 1.0
         for g in self.visual_model.geometryObjects:
             g.meshColor = np.concatenate([np.asarray(g.meshColor[:3]), [float(skeleton_opacity)]])
+        if wrap_objects and getattr(self._polylines, "paths", None) is not None:
+            add_wrap_objects(self.visual_model, model, self._polylines.paths)
         self.vis = meshcat.Visualizer(zmq_url=zmq_url) if zmq_url else _start_quietly(meshcat)
         self._record(self.vis.window)
         self.url = self.vis.url()
@@ -146,7 +173,7 @@ class Viewer:
         self.viz.loadViewerModel(rootNodeName="skeleton")
 
         self._q0 = neutral_configuration(model.pin)
-        self._muscle_segments = self._build_muscles()
+        self._build_muscles()
         self._contacts = self._build_contacts()
         self._joint_ids = {c: model.pin.getJointId(c) for c in model.coordinates}
 
@@ -179,40 +206,54 @@ class Viewer:
     def _node(self, rel: str):
         return self.vis[f"{self._root}/{rel}"]
 
-    def _build_muscles(self) -> dict[str, list[tuple[str, int, str, int, np.ndarray]]]:
-        """Create the level meshes of every muscle segment; return the segment table."""
+    def _build_muscles(self) -> None:
+        """The segment table of every drawn muscle, with the segments the neutral pose needs."""
+        self._muscle_segments: dict[str, tuple[float, list[str]]] = {}
+        self._coloured: set[str] = set()
+        src = self._polylines
+        if src is None:
+            return
+        for name, radius in zip(src.names, src.radii):
+            self._muscle_segments[name] = (float(radius), [])
+            self._level_state[f"muscle:{name}"] = NO_LEVEL
+        for name, pts in src(self._q0[None]).items():
+            self._ensure_segments(name, pts.shape[1] - 1)
+
+    def _ensure_segments(self, name: str, n: int) -> None:
+        """Create segments of muscle ``name`` up to ``n`` (each with its muscle-red mesh, and its colour
+        levels once the muscle has been coloured)."""
+        _, segs = self._muscle_segments[name]
+        levels = [*range(self.levels), NO_LEVEL] if name in self._coloured else [NO_LEVEL]
+        for i in range(len(segs), n):
+            path = f"model/muscles/{name}/seg{i}"
+            self._level_meshes(name, path, levels)
+            segs.append(path)
+
+    def _ensure_levels(self, name: str) -> None:
+        """The colour-level meshes of muscle ``name`` (made at its first colour: a muscle never coloured
+        has only its muscle-red mesh, one meshcat object per segment instead of ``levels + 1``)."""
+        if name in self._coloured:
+            return
+        self._coloured.add(name)
+        for path in self._muscle_segments[name][1]:
+            self._level_meshes(name, path, range(self.levels))
+
+    def _level_meshes(self, name: str, path: str, levels) -> None:
         import meshcat.geometry as mg
 
-        m = self.model
-        if m.muscles is None or not getattr(m.muscles, "display_points", None):
-            return {}
-        radii = _muscle_radii(m.muscles)
-        segments = {}
-        frames = {f.name for f in m.pin.frames}
-        for i, name in enumerate(m.muscles.names):
-            pts = m.muscles.display_points.get(name) or []
-            resolved = []
-            for p in pts:
-                body, xyz = p[0], np.asarray(p[1:4], dtype=float)
-                if body not in frames:
-                    warnings.warn(f"muscle '{name}': display point on unknown body '{body}'; skipped",
-                                  stacklevel=3)
-                    continue
-                resolved.append((m.pin.getFrameId(body), xyz))
-            if len(resolved) < 2:
-                continue
-            segs = []
-            for s in range(len(resolved) - 1):
-                path = f"model/muscles/{name}/seg{s}"
-                for k in range(self.levels):
-                    mat = mg.MeshLambertMaterial(color=vg.rgb_to_int(self._colors[k]))
-                    self._node(f"{path}/c{k}").set_object(mg.Cylinder(1.0, 1.0), mat)
-                    if k:
-                        self._node(f"{path}/c{k}").set_property("visible", False)
-                segs.append((path, resolved[s][0], resolved[s][1], resolved[s + 1][0], resolved[s + 1][1]))
-            segments[name] = (float(radii[i]), segs)
-            self._level_state[f"muscle:{name}"] = 0
-        return segments
+        shown = self._level_state.get(f"muscle:{name}", NO_LEVEL)
+        for k in levels:
+            color = MUSCLE_RED if k == NO_LEVEL else vg.rgb_to_int(self._colors[k])
+            node = self._node(f"{path}/{_level_node(k)}")
+            node.set_object(mg.Cylinder(1.0, 1.0), mg.MeshLambertMaterial(color=color))
+            if k != shown:
+                node.set_property("visible", False)
+
+    def muscle_polylines(self, q) -> dict[str, np.ndarray]:
+        """``{muscle: (N, K, 3)}``: the vertices of each drawn muscle at configurations ``q`` (N, nq),
+        in the model frame (fewer vertices in a frame repeat its last one)."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        return {} if self._polylines is None else self._polylines(q)
 
     def _build_contacts(self):
         import meshcat.geometry as mg
@@ -298,7 +339,7 @@ class Viewer:
     @property
     def muscle_paths(self) -> dict[str, list[str]]:
         """Scene paths (relative to ``pinmsk/``) of each muscle's segments."""
-        return {n: [s[0] for s in segs] for n, (_, segs) in self._muscle_segments.items()}
+        return {n: list(segs) for n, (_, segs) in self._muscle_segments.items()}
 
     def display(self, q=None, *, activation=None, force=None, residual=None, residual_scale=None,
                 ghost_q=None, ghost_offset=0.0, grf: Mapping | None = None):
@@ -320,13 +361,15 @@ class Viewer:
         data = self.model.pin.createData()
         pin.framesForwardKinematics(self.model.pin, data, q)
         values = self._muscle_values(activation, force)
-        for name, (radius, segs) in self._muscle_segments.items():
-            for path, f0, p0, f1, p1 in segs:
-                a = data.oMf[f0].act(p0)
-                b = data.oMf[f1].act(p1)
-                self._node(path).set_transform(vg.segment_transform(a, b, radius))
+        for name, pts in self.muscle_polylines(q).items():
+            self._ensure_segments(name, pts.shape[1] - 1)
+            radius, segs = self._muscle_segments[name]
+            pos, quat, size = segment_keys(_pad_vertices(pts, len(segs) + 1), radius)
+            for i, path in enumerate(segs):
+                self._node(path).set_transform(_scaled_matrix(pos[0, i], quat[0, i], size[0, i]))
             if values is not None:
-                self._set_level(f"muscle:{name}", [s[0] for s in segs], values.get(name, 0.0))
+                self._ensure_levels(name)
+                self._set_level(f"muscle:{name}", segs, values.get(name, 0.0))
         for k, (label, fid, pos, radius) in enumerate(self._contacts):
             T = np.eye(4)
             T[:3, 3] = data.oMf[fid].act(pos)
@@ -349,14 +392,15 @@ class Viewer:
                 self._set_grf(side, force_xyz, point_xyz, self._grf_scale())
         return self
 
-    def _set_level(self, key: str, paths: Sequence[str], value: float) -> None:
-        level = int(vg.level_of([value], self.levels)[0])
+    def _set_level(self, key: str, paths: Sequence[str], value: float | None) -> None:
+        """Show colour level ``value`` in [0, 1] (None: the muscle red of no value) of nodes ``paths``."""
+        level = NO_LEVEL if value is None else int(vg.level_of([value], self.levels)[0])
         old = self._level_state.get(key, 0)
         if level == old:
             return
         for p in paths:
-            self._node(f"{p}/c{old}").set_property("visible", False)
-            self._node(f"{p}/c{level}").set_property("visible", True)
+            self._node(f"{p}/{_level_node(old)}").set_property("visible", False)
+            self._node(f"{p}/{_level_node(level)}").set_property("visible", True)
         self._level_state[key] = level
 
     def _set_grf(self, side, force_xyz, point_xyz, scale) -> None:
@@ -394,16 +438,23 @@ class Viewer:
         if activation is None and force is None:
             return None
         m = self.model.muscles
-        if m is None:
-            raise ModelError(f"model '{self.model.name}' has no muscles to colour")
+        if m is None and (force is not None or not self._muscle_segments):
+            raise ModelError(f"model '{self.model.name}' has no muscles to colour"
+                             + (" by force (no f_max without its muscle models)" if self._muscle_segments else ""))
         if activation is not None:
             vals = self._per_muscle(activation, "activation")
         else:
             vals = self._per_muscle(force, "force") / np.asarray(m.f_max, dtype=float)
-        return dict(zip(m.names, vals))
+        return dict(zip(self._colour_names, vals))
+
+    @property
+    def _colour_names(self) -> tuple[str, ...]:
+        """The muscles activations name: the model's, or the drawn paths' of a model without muscle models."""
+        m = self.model.muscles
+        return tuple(m.names) if m is not None else tuple(self._muscle_segments)
 
     def _per_muscle(self, x, what) -> np.ndarray:
-        return _per_name(x, self.model.muscles.names, what, "muscles")
+        return _per_name(x, self._colour_names, what, "muscles")
 
     def _per_coordinate(self, x, what) -> np.ndarray:
         return _per_name(x, self.model.coordinates, what, "coordinates")
@@ -460,6 +511,11 @@ class Viewer:
         if grf:
             self._build_grf(list(grf))
 
+        lines = self.muscle_polylines(q)         # every frame's muscle vertices in one batch
+        for name, pts in lines.items():
+            if name in values:
+                self._ensure_levels(name)
+            self._ensure_segments(name, pts.shape[1] - 1)
         anim = Animation(default_framerate=1)  # key times in seconds
         key_t = (t - t[0]) / float(speed)
         data = model.pin.createData()
@@ -479,10 +535,6 @@ class Viewer:
             for name, M, s, mov in zip(gnames, gdata.oMg, scales, moving):
                 if mov:
                     frame[f"{self._root}/model/{name}"].set_transform(scaled(M.homogeneous, s))
-            for mname, (radius, segs) in self._muscle_segments.items():
-                for path, f0, p0, f1, p1 in segs:
-                    T = vg.segment_transform(data.oMf[f0].act(p0), data.oMf[f1].act(p1), radius)
-                    _set_scaled(frame[f"{self._root}/{path}"], T)
             for k, (label, fid, pos, radius) in enumerate(self._contacts):
                 T = np.eye(4)
                 T[:3, 3] = data.oMf[fid].act(pos)
@@ -503,12 +555,19 @@ class Viewer:
                                                   head_length=self._grf_head)
                 _set_scaled(frame[f"{self._root}/grf/{_side_key(side)}/shaft"], shaft)
                 _set_scaled(frame[f"{self._root}/grf/{_side_key(side)}/head"], head)
+        for name, pts in lines.items():
+            radius, segs = self._muscle_segments[name]
+            pos, quat, size = segment_keys(_pad_vertices(pts, len(segs) + 1), radius)
+            for i, path in enumerate(segs):
+                _set_tracks(anim, self.vis, f"{self._root}/{path}", key_t, position=pos[:, i], quaternion=quat[:, i],
+                            scale=size[:, i])
+        self.played_polylines = lines
         # colours: visibility of the level meshes, keyed only where the level changes
         for mname, (radius, segs) in self._muscle_segments.items():
             if mname in values:
                 lv = vg.level_of(values[mname], self.levels)
-                for path, *_ in segs:
-                    self._visibility_tracks(anim, key_t, lv, path)
+                for path in segs:
+                    self._visibility_tracks(anim, key_t, lv, path, hide=(_level_node(NO_LEVEL),))
         if res is not None:
             for j, c in enumerate(model.coordinates):
                 self._visibility_tracks(anim, key_t, res_levels[:, j], f"model/residuals/{c}")
@@ -517,6 +576,9 @@ class Viewer:
                      residual=None if res is None else np.abs(res[0]), residual_scale=scale if res is not None else None,
                      ghost_q=None if gq is None else gq[0], ghost_offset=ghost_offset,
                      grf={side: (F[0], P[0]) for side, (F, P) in grf.items()} or None)
+        for mname, (radius, segs) in self._muscle_segments.items():
+            if mname not in values:
+                self._set_level(f"muscle:{mname}", segs, None)
         self.vis.set_animation(anim, play=play, repetitions=repetitions)
         samples = q[:: max(1, len(q) // 10)]
         if self._ground:
@@ -524,7 +586,8 @@ class Viewer:
         self.frame_camera(samples)
         return anim
 
-    def _visibility_tracks(self, anim, key_t, lv, path) -> None:
+    def _visibility_tracks(self, anim, key_t, lv, path, hide: Sequence[str] = ()) -> None:
+        """Level k of ``path`` visible where ``lv`` is k (keys where it changes); the ``hide`` children hidden."""
         changes = np.flatnonzero(np.diff(lv)) + 1
         idx = np.concatenate([[0], changes, [len(lv) - 1]])
         for k in range(self.levels):
@@ -532,20 +595,23 @@ class Viewer:
             for i in idx:
                 anim.at_frame(self.vis, float(key_t[i]))[node].set_property("visible", "boolean",
                                                                            bool(lv[i] == k))
+        for child in hide:
+            for i in (0, len(lv) - 1):
+                anim.at_frame(self.vis, float(key_t[i]))[f"{self._root}/{path}/{child}"].set_property(
+                    "visible", "boolean", False)
 
     def _muscle_channels(self, sources, t) -> dict[str, np.ndarray]:
         m = self.model.muscles
-        if m is None:
-            return {}
+        f_max = {} if m is None else dict(zip(m.names, np.asarray(m.f_max, dtype=float)))
         out = {}
-        for i, n in enumerate(m.names):
+        for n in self._colour_names:
             act = _channels_on(sources, [f"{n}_activation"], t)
             if act is not None:
                 out[n] = act[:, 0]
                 continue
-            force = _channels_on(sources, [f"{n}_force"], t)
+            force = _channels_on(sources, [f"{n}_force"], t) if n in f_max else None
             if force is not None:
-                out[n] = force[:, 0] / float(np.asarray(m.f_max)[i])
+                out[n] = force[:, 0] / f_max[n]
         return out
 
     # -------------------------------------------------------------- camera
@@ -658,6 +724,14 @@ def _has_display() -> bool:
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
+#: The colour "level" of a muscle without an activation: its ``red`` mesh.
+NO_LEVEL = -1
+
+
+def _level_node(level: int) -> str:
+    return "red" if level == NO_LEVEL else f"c{level}"
+
+
 def _side_key(side) -> str:
     return side if side else "grf"
 
@@ -722,7 +796,15 @@ def _require_finite(x: np.ndarray, labels, what: str) -> np.ndarray:
 
 
 def _coordinates_of(trial, model, what: str) -> np.ndarray:
-    """``(N, nq)`` configuration of ``model`` from a trial's coordinate channels (finite)."""
+    """``(N, nq)`` configuration of ``model`` from a trial's coordinate channels (finite); a model with
+    dependent joints (an exact OpenSim import) takes OpenSim's coordinates, mapped to its joints."""
+    from ..kinematics import coordinate_map, trial_coordinates
+    cmap = coordinate_map(model)
+    if cmap is not None:
+        given = trial_coordinates(model)
+        trial.require(given)
+        trial.check_finite(given, what=f"in the {what} before viewing ({_NO_DRAW})")
+        return cmap.expand({c: np.asarray(trial[c], dtype=float) for c in given})[0]
     names = set(trial.names)
     missing = [c for c in model.coordinates if c not in names]
     if missing:
@@ -768,6 +850,213 @@ def _grf_on(sources, t) -> dict[str, tuple[np.ndarray, np.ndarray]]:
                 arrays.append(_interp_columns(t, np.asarray(s.time, dtype=float), np.stack(cols, axis=1)))
             out[side] = (arrays[0], arrays[1])
     return out
+
+
+def segment_keys(pts: np.ndarray, radius: float):
+    """Placements of the unit cylinders (axis y, spanning y = -0.5 .. 0.5) that draw the segments of
+    polylines ``pts`` (N, K, 3): positions (N, K-1, 3), quaternions (N, K-1, 4) as ``x, y, z, w`` (three.js's
+    order) and scales (N, K-1, 3) (``radius``, length, ``radius``); a zero-length segment is scaled to
+    nothing (not a disc)."""
+    a, b = pts[:, :-1], pts[:, 1:]
+    d = b - a
+    length = np.linalg.norm(d, axis=-1)
+    u = d / np.where(length > 1e-12, length, 1.0)[..., None]
+    # the rotation taking y onto u: about y x u = (u_z, 0, -u_x) by acos(u_y), as a half-angle quaternion
+    w = np.sqrt(np.maximum(0.5 * (1.0 + u[..., 1]), 0.0))
+    flip = w < 1e-6                                   # u = -y: half a turn about x
+    w2 = np.where(flip, 1.0, 2.0 * w)
+    quat = np.stack([np.where(flip, 1.0, u[..., 2] / w2), np.zeros_like(w), np.where(flip, 0.0, -u[..., 0] / w2),
+                     np.where(flip, 0.0, w)], axis=-1)
+    quat /= np.linalg.norm(quat, axis=-1, keepdims=True)
+    zero = length <= 1e-12
+    scale = np.stack([np.where(zero, 1e-9, radius), np.where(zero, 1e-9, length), np.where(zero, 1e-9, radius)],
+                     axis=-1)
+    return 0.5 * (a + b), quat, scale
+
+
+def _scaled_matrix(position, quat, scale) -> np.ndarray:
+    """The 4x4 matrix of a placement with a scale (as three.js composes position, quaternion, scale)."""
+    x, y, z, w = quat
+    R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                  [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                  [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    T = np.eye(4)
+    T[:3, :3] = R * np.asarray(scale)[None, :]
+    T[:3, 3] = position
+    return T
+
+
+def _pad_vertices(pts: np.ndarray, k: int) -> np.ndarray:
+    """``pts`` (N, K, 3) with its last vertex repeated up to k vertices."""
+    if pts.shape[1] >= k:
+        return pts
+    return np.concatenate([pts, np.repeat(pts[:, -1:], k - pts.shape[1], axis=1)], axis=1)
+
+
+def _set_tracks(anim, vis, path: str, times, **tracks) -> None:
+    """Whole animation tracks of node ``path`` at once (``position``/``scale`` (N, 3), ``quaternion``
+    (N, 4)), instead of one key per frame and call."""
+    from meshcat.animation import AnimationTrack
+
+    clip = anim.at_frame(vis, 0.0)[path].get_clip()
+    frames = [float(x) for x in times]
+    for name, values in tracks.items():
+        kind = "quaternion" if name == "quaternion" else "vector3"
+        clip.tracks[name] = AnimationTrack(name, kind, list(frames), np.asarray(values, dtype=float).tolist())
+
+
+class _DisplayPointLines:
+    """Polylines through a model's display points (fixed in bodies: built-in models and sidecars)."""
+
+    paths = None
+
+    def __init__(self, model, names, frames, points, radii):
+        self.model, self.names, self.radii = model, tuple(names), tuple(radii)
+        self._frames = frames              # per muscle: frame ids (P,)
+        self._points = points              # per muscle: (P, 3) in those frames
+        self._ids = sorted({f for fr in frames for f in fr})
+
+    def __call__(self, Q) -> dict[str, np.ndarray]:
+        pm = self.model.pin
+        data = pm.createData()
+        col = {f: k for k, f in enumerate(self._ids)}
+        R = np.empty((len(Q), len(self._ids), 3, 3))
+        p = np.empty((len(Q), len(self._ids), 3))
+        for n, q in enumerate(Q):
+            pin.framesForwardKinematics(pm, data, q)
+            for k, f in enumerate(self._ids):
+                R[n, k], p[n, k] = data.oMf[f].rotation, data.oMf[f].translation
+        out = {}
+        for name, fr, pts in zip(self.names, self._frames, self._points):
+            cols = [col[f] for f in fr]
+            out[name] = np.einsum("npij,pj->npi", R[:, cols], pts) + p[:, cols]
+        return out
+
+
+class _GeometricLines:
+    """Polylines of an imported OpenSim model's geometric paths (:meth:`GeometricPaths.polylines`) at
+    the model's configurations: its joints that are OpenSim coordinates give the paths' coordinates,
+    the others keep their default values."""
+
+    def __init__(self, model, paths, radii, *, arc_points: int):
+        self.model, self.paths, self.names, self.radii = model, paths, tuple(paths.muscles), tuple(radii)
+        self.arc_points = int(arc_points)
+        cmap = model.meta.get("coordinate_map")
+        defaults = dict(getattr(cmap, "defaults", {}) or {})
+        defaults.update(getattr(cmap, "welded", {}) or {})
+        pm = model.pin
+        self._cols = []
+        self._defaults = np.zeros(len(paths.coordinates))
+        for j, c in enumerate(paths.coordinates):
+            if pm.existJointName(c) and pm.joints[pm.getJointId(c)].nq == 1:
+                self._cols.append((j, pm.joints[pm.getJointId(c)].idx_q))
+            self._defaults[j] = float(defaults.get(c, 0.0))
+
+    def __call__(self, Q) -> dict[str, np.ndarray]:
+        qg = np.repeat(self._defaults[None], len(Q), axis=0)
+        for j, iq in self._cols:
+            qg[:, j] = Q[:, iq]
+        pl = self.paths.polylines(qg, arc_points=self.arc_points)
+        k = np.maximum(pl.counts.max(axis=0), 2)
+        return {name: pl.points[:, i, :k[i]] for i, name in enumerate(pl.muscles)}
+
+
+def muscle_polylines(model, *, arc_points: int = 8):
+    """What draws ``model``'s muscles: ``None`` or a callable ``(Q (N, nq)) -> {muscle: (N, K, 3)}`` with
+    ``names`` and ``radii``.  An imported OpenSim model draws its geometric paths (the import's, or
+    read again from its ``.osim`` when the import kept none); other models their display points.
+    Muscles with neither (paths that are only functions of the coordinates) are named in a warning."""
+    muscles = getattr(model, "muscles", None)
+    names = tuple(muscles.names) if muscles is not None else ()
+    radii = dict(zip(names, _muscle_radii(muscles))) if muscles is not None else {}
+    source, said = None, False
+    if model.meta.get("osim") or model.meta.get("source_osim"):
+        from ..opensim.muscle_import import geometric_paths, osim_geometric_paths
+        if model.meta.get("osim"):
+            gp = geometric_paths(model.meta.get("import_report")) or osim_geometric_paths(model.meta["osim"])
+        else:
+            gp, said = _sidecar_osim_paths(model, osim_geometric_paths)
+        if gp is not None:
+            source = _GeometricLines(model, gp, [radii.get(n, 0.006) for n in gp.muscles], arc_points=arc_points)
+    elif muscles is not None and getattr(muscles, "display_points", None):
+        frames = {f.name for f in model.pin.frames}
+        drawn, fids, pts = [], [], []
+        for name in names:
+            resolved = []
+            for p in muscles.display_points.get(name) or []:
+                if p[0] not in frames:
+                    warnings.warn(f"muscle '{name}': display point on unknown body '{p[0]}'; skipped", stacklevel=3)
+                    continue
+                resolved.append((model.pin.getFrameId(p[0]), np.asarray(p[1:4], dtype=float)))
+            if len(resolved) >= 2:
+                drawn.append(name)
+                fids.append([r[0] for r in resolved])
+                pts.append(np.array([r[1] for r in resolved]))
+        if drawn:
+            source = _DisplayPointLines(model, drawn, fids, pts, [radii[n] for n in drawn])
+    missing = [n for n in names if source is None or n not in source.names]
+    if missing and not said:
+        warnings.warn(f"model '{model.name}': {len(missing)} muscle(s) have no path geometry to draw (their paths "
+                      f"are functions of the coordinates only, {type(muscles.path).__name__}; give [[muscles]] "
+                      f"display 'points' to draw them): {', '.join(missing)}", stacklevel=3)
+    return source
+
+
+def _sidecar_osim_paths(model, read_paths):
+    """``(geometric paths or None, warned)`` of the .osim a sidecar written by ``pinmsk import`` names
+    (``[model] osim``, ``meta['source_osim']``): a warning says why none are drawn (the file is gone or
+    unreadable), or that the file changed since the sidecar was written (its digest differs)."""
+    from ..errors import PinmskError
+    from ..opensim.importer import osim_digest
+    src = Path(model.meta["source_osim"])
+    where = f"model '{model.name}' ({model.meta.get('sidecar', 'its sidecar')}, [model] osim)"
+    if not src.is_file():
+        warnings.warn(f"{where}: the OpenSim model it was imported from, {src}, is not found, so no muscle paths "
+                      "are drawn (the sidecar's paths are polynomials of the coordinates); put the .osim there or "
+                      "correct [model] osim", stacklevel=4)
+        return None, True
+    digest = model.meta.get("source_osim_digest")
+    if digest and osim_digest(src) != digest:
+        warnings.warn(f"{where}: {src} changed since the sidecar was written; the muscle paths drawn are the "
+                      "file's as it is now", stacklevel=4)
+    try:
+        return read_paths(src), False
+    except PinmskError as exc:
+        warnings.warn(f"{where}: no muscle paths drawn: {exc}", stacklevel=4)
+        return None, True
+
+
+def add_wrap_objects(geom_model: pin.GeometryModel, model, paths) -> list[str]:
+    """Add the wrap objects the ``paths`` use (cylinders, spheres, ellipsoids) to ``geom_model`` as
+    translucent ``wrap_<name>`` geometries on their bodies' frames; returns the names added.  Tori
+    (no such primitive in meshcat) and wraps on bodies the model lacks are named in a warning."""
+    import coal
+
+    from ..opensim.paths import body_fixed_xyz
+
+    wraps = {}
+    for spec in paths.specs:
+        for pw in spec.wraps:
+            wraps.setdefault(pw.wrap.name, pw.wrap)
+    added, skipped = [], []
+    pm = model.pin
+    for name, w in wraps.items():
+        if not w.active:
+            continue
+        if w.kind == "torus" or not pm.existFrame(w.body):
+            skipped.append(f"{name} ({'a torus' if w.kind == 'torus' else f'on body {w.body!r}, not in the model'})")
+            continue
+        geom = {"cylinder": lambda: coal.Cylinder(w.radius, w.length), "sphere": lambda: coal.Sphere(w.radius),
+                "ellipsoid": lambda: coal.Ellipsoid(*w.dimensions)}[w.kind]()
+        frame = pm.frames[pm.getFrameId(w.body)]
+        placement = frame.placement * pin.SE3(body_fixed_xyz(w.rotation), np.asarray(w.translation))
+        obj = pin.GeometryObject(f"wrap_{name}", frame.parentJoint, placement, geom)
+        obj.meshColor = np.asarray(WRAP, dtype=float)
+        geom_model.addGeometryObject(obj)
+        added.append(name)
+    if skipped:
+        warnings.warn(f"model '{model.name}': wrap object(s) not drawn: {', '.join(skipped)}", stacklevel=3)
+    return added
 
 
 def _muscle_radii(muscles) -> np.ndarray:
@@ -873,6 +1162,7 @@ def view_cli(model_name, trial_path=None, results_path=None, *, open_browser: bo
              block: bool = True, timeout: float | None = None) -> Viewer:
     """``pinmsk view MODEL [TRIAL] [--results RESULTS]``: start the viewer and print its URL.
 
+    ``model_name`` is a name or file for :func:`~pinmsk.model.load_model`, or a Model already loaded;
     ``trial_path`` is a file or a :class:`~pinmsk.trial.Trial` already read.
 
     Loads the model (built-in name or file), shows the neutral pose, or plays
@@ -882,7 +1172,7 @@ def view_cli(model_name, trial_path=None, results_path=None, *, open_browser: bo
     """
     if results_path and trial_path is None:
         raise TrialError("--results needs a TRIAL with the motion to show them on")
-    model = load_model(model_name)
+    model = model_name if isinstance(model_name, Model) else load_model(model_name)
     trial = trial_path if isinstance(trial_path, Trial) else (read_trial(trial_path) if trial_path else None)
     results = read_trial(results_path) if results_path else None
     if trial is not None:

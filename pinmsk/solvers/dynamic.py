@@ -113,6 +113,7 @@ import numpy as np
 import pinocchio as pin
 
 from .. import energy
+from ..effects.activation import ActivationDynamics
 from ..errors import ConvergenceError, ModelError, SolverError, TrialError
 from ..fitting import FitStatistics, Fitter, Result, format_report
 from ..io.tables import read_trial
@@ -266,6 +267,8 @@ class DynamicOptimization(Fitter):
                  free_period: bool = False, period_bounds=(0.5, 2.0), fv_smooth: float = 0.02,
                  precondition: bool | None = None,
                  progress=None, verbose: bool = False):
+        from ..kinematics import require_independent_joints
+        require_independent_joints(model, "dynamic optimization")
         self.model = model
         self.parametrization = parametrization
         self.target = target
@@ -302,10 +305,11 @@ class DynamicOptimization(Fitter):
         model = self.model
         if self.design not in DESIGNS:
             raise ModelError(f"unknown design '{self.design}'; valid: {', '.join(DESIGNS)}")
-        if model.components:
-            raise ModelError(f"model '{model.name}' has components "
-                             f"({', '.join(c.label for c in model.components)}); dynamic "
-                             "optimization does not include effects or contacts yet")
+        other = [c.label for c in model.components if type(c) is not ActivationDynamics]
+        if other:
+            raise ModelError(f"model '{model.name}' has components ({', '.join(other)}); dynamic "
+                             "optimization does not include effects, delays or contacts yet (it honours "
+                             "activation_dynamics: its time constants drive the excitation-activation step)")
         self._mu = BatchMuscles(model)
         self._sk = BatchSkeleton(model)
         nv, m = model.nv, self._mu.m

@@ -33,7 +33,7 @@ from ..errors import ConvergenceError, InfeasibleError, SolverError
 from ..fitting import Fitter, format_report
 from ..kinematics import DEFAULT_CUTOFF
 from . import qp as _qp
-from .mso import TAU_FALL, TAU_RISE, activation_problem, result_of, set_results
+from .mso import activation_problem, model_path, result_of, set_results
 
 #: P = 1: proxsuite's sparse solver reported feasible whole-trial LPs as
 #: infeasible; a proximal term ``LP_REGULARISATION * w a^2`` (activations are
@@ -46,14 +46,17 @@ class ExtendedInverseDynamics(Fitter):
     """EID over a whole trial as one sparse proxsuite QP (see the module notes).
 
     Parameters (keyword-only): ``exponent`` (>= 1), ``weights`` (``S_i``),
-    ``tau_rise``, ``tau_fall``, ``reserves``, ``reserve_weight``, ``tol``,
-    ``dofs``, ``max_iter`` (proxsuite iterations), ``sqp_max_iter``.
+    ``reserves``, ``reserve_weight``, ``tol``, ``dofs``, ``max_iter``
+    (proxsuite iterations), ``sqp_max_iter``.  The activation time constants
+    and any delay are the model's, as in
+    :class:`~pinmsk.solvers.mso.ModifiedStaticOptimization` (``tau_rise`` and
+    ``tau_fall`` are refused by name).
     ``result_`` as :class:`~pinmsk.solvers.mso.ModifiedStaticOptimization`'s;
     its ``objective`` is the time integral of the criterion.
     """
 
-    def __init__(self, *, exponent: float = 2, weights: str = "none", tau_rise: float = TAU_RISE,
-                 tau_fall: float = TAU_FALL, reserves: bool = False, reserve_weight: float = 1000.0,
+    def __init__(self, *, exponent: float = 2, weights: str = "none", tau_rise=None,
+                 tau_fall=None, reserves: bool = False, reserve_weight: float = 1000.0,
                  tol: float = 1e-9, dofs=None, max_iter: int = 10000, sqp_max_iter: int = 50):
         self.exponent = exponent
         self.weights = weights
@@ -69,6 +72,8 @@ class ExtendedInverseDynamics(Fitter):
     def fit(self, model, trial, *, moments=None, cutoff=DEFAULT_CUTOFF, progress=None):
         """Solve the whole trial at once; returns ``self``."""
         t0 = _time.perf_counter()
+        path = model_path(self, model)
+        self.excitation_path_ = path
         P, prob = activation_problem(self, model, trial, moments=moments, cutoff=cutoff)
         N, nd, m = prob.A.shape
         if N < 2:
@@ -92,15 +97,15 @@ class ExtendedInverseDynamics(Fitter):
             Aeq = Aeq + sp.hstack([sp.csc_matrix((N * nd, na)), I, -I], format="csc")
         beq = prob.b.ravel()
         # activation dynamics: lo: a_k - ef a_{k-1} >= 0 ; hi: a_k - er a_{k-1} <= 1 - er
-        ef = np.exp(-dt / self.tau_fall)
-        er = np.exp(-dt / self.tau_rise)
+        ef = np.exp(-dt[:, None] / path.tau_fall[None, :]).ravel()      # (N-1) m, frame-major as cur
+        er = np.exp(-dt[:, None] / path.tau_rise[None, :]).ravel()
         nk = (N - 1) * m
         r_idx = np.arange(nk)
         cur = (np.arange(1, N)[:, None] * m + np.arange(m)[None, :]).ravel()
         prv = cur - m
-        Cd = sp.csc_matrix((np.concatenate([np.ones(nk), -np.repeat(ef, m)]),
+        Cd = sp.csc_matrix((np.concatenate([np.ones(nk), -ef]),
                             (np.concatenate([r_idx, r_idx]), np.concatenate([cur, prv]))), shape=(nk, n))
-        Cu = sp.csc_matrix((np.concatenate([np.ones(nk), -np.repeat(er, m)]),
+        Cu = sp.csc_matrix((np.concatenate([np.ones(nk), -er]),
                             (np.concatenate([r_idx, r_idx]), np.concatenate([cur, prv]))), shape=(nk, n))
         # box rows (the sparse API has no separate box constraints): 0 <= a <= 1 only at
         # frame 0 -- the dynamics rows keep later frames inside [0, 1] -- and the reserves
@@ -110,7 +115,7 @@ class ExtendedInverseDynamics(Fitter):
         ub_res = (np.abs(prob.b) + np.abs(prob.A).sum(axis=2) + 1.0).ravel() if nr else np.zeros(0)
         C = sp.vstack([Cd, Cu, Cb], format="csc")
         l = np.concatenate([np.zeros(nk), np.full(nk, -2.0), np.zeros(box_idx.size)])
-        u = np.concatenate([np.full(nk, 2.0), np.repeat(1.0 - er, m), np.ones(m),
+        u = np.concatenate([np.full(nk, 2.0), 1.0 - er, np.ones(m),
                             np.concatenate([ub_res, ub_res]) if nr else np.zeros(0)])
         wcost = (np.repeat(wt, m) * np.tile(prob.w, N))
         wres = np.repeat(wt, nd)
@@ -217,8 +222,7 @@ class ExtendedInverseDynamics(Fitter):
             f"Extended inverse dynamics (one sparse QP over the trial) of model '{self.model_name_}'", [
                 ("criterion", f"integral sum_i S_i a_i^{float(self.exponent):g} dt, S = {self.weights}; "
                               f"value {self.objective_:.6g}"),
-                ("dynamics", f"Winters-Stark, tau_rise {self.tau_rise * 1e3:g} ms, "
-                             f"tau_fall {self.tau_fall * 1e3:g} ms"),
+                ("dynamics", self.excitation_path_.describe()),
                 ("size", f"{self.n_variables_} variables, {self.n_constraints_[0]} equalities, "
                          f"{self.n_constraints_[1]} inequalities ({prob.n_frames} frames)"),
                 ("solver", f"proxsuite sparse, {self.n_qp_} QP(s), {self.n_iter_} iterations"),

@@ -56,6 +56,16 @@ the forces are held and the moment ``R(q)^T F`` follows the moment arms; in
 activation mode the activations are held and the forces follow the muscles'
 force-length-velocity state.  Every QP goes through proxsuite
 (:class:`pinmsk.solvers.qp.FrameQP`, reused and warm started).
+
+Muscle-level components of the model are honoured in activation mode: with
+activation dynamics (:class:`~pinmsk.effects.ActivationDynamics`, or the
+delay-and-activation component) the activations a control point may choose
+are those the dynamics reach from the previous one with ``0 <= u <= 1`` held
+(:func:`pinmsk.muscles.activation.reachable_activation`, as MSO), and the
+result has ``<muscle>_excitation`` channels (held-step excitations; with an
+electromechanical delay, what a recording shows, ``u(t + delay)``, NaN in the
+last ``delay`` s).  Force mode holds forces, not activations, and refuses a
+model with muscle-level components by name.
 """
 from __future__ import annotations
 
@@ -68,9 +78,12 @@ from scipy.interpolate import CubicHermiteSpline
 
 from ..components import Motion
 from ..dynamics import skeleton_with_inertias
+from ..effects._base import SignalEffect
+from ..effects.activation import excitation_path
 from ..errors import ConvergenceError, InfeasibleError, ModelError, SolverError
 from ..fitting import FitStatistics, Fitter, Result, format_report
-from ..kinematics import DEFAULT_CUTOFF, as_motion, prepare
+from ..kinematics import DEFAULT_CUTOFF, as_motion, prepare, require_independent_joints
+from ..muscles.activation import held_step_excitation, reachable_activation
 from ..skeleton import ExternalForce, external_generalized_force, integrate, world_wrench
 from ..trial import Trial
 from . import qp as _qp
@@ -267,7 +280,14 @@ class ForwardStaticOptimization(Fitter):
         """
         self._check_params()
         t_start = _time.perf_counter()
+        require_independent_joints(model, "forward static optimization (FSO)")
         muscles = check_model(model)
+        signal = [c.label for c in model.effects if isinstance(c, SignalEffect)]
+        if signal and self.mode == "force":
+            raise ModelError(f"FSO in force mode holds muscle forces, not activations, so it cannot honour the "
+                             f"model's {', '.join(signal)}: use mode='activation' or model.without(...) them")
+        path = excitation_path(model) if signal else None
+        self.excitation_path_ = path
         inputs = prepare(model, trial, cutoff=cutoff, grf=grf, external_loads=external_loads, frames=frames,
                          ground_reaction=ground_reaction, grf_cutoff=grf_cutoff)
         self.inputs_ = inputs
@@ -384,6 +404,12 @@ class ForwardStaticOptimization(Fitter):
                 d_now = np.asarray(fp, dtype=float)[0]
             Qcomp = comp_force(ti, q, v)
             lo, hi = np.zeros(m), np.ones(m)
+            if path is not None and kk > 0 and path.declared.any():
+                # activation dynamics: only what the held excitations of the last interval can reach
+                r_lo, r_hi = reachable_activation(X[kk - 1], ti - tc[kk - 1], tau_rise=path.tau_rise,
+                                                  tau_fall=path.tau_fall)
+                lo = np.where(path.declared, np.clip(r_lo, 0.0, 1.0), 0.0)
+                hi = np.where(path.declared, np.clip(r_hi, lo, 1.0), 1.0)
             if not cost_mode:
                 tau_star = pin.rnea(pm, pd, q, v, a_star) - Qcomp
                 A = (R * c_now[:, None]).T / scale[:, None]
@@ -393,7 +419,9 @@ class ForwardStaticOptimization(Fitter):
                     raise InfeasibleError(
                         f"FSO: at t = {ti:.4g} s (control point {kk}) the muscles cannot produce the "
                         f"moments {np.round(tau_star, 4).tolist()} N m needed to track the motion "
-                        f"({sol.status}); pass reserves=True, use enforce='cost', or lower the gains")
+                        f"({sol.status})" + (f" within the activations the model's activation dynamics reach "
+                                            f"({path.describe()})" if path is not None and path.declared.any()
+                                            else "") + "; pass reserves=True, use enforce='cost', or lower the gains")
                 RHO[kk] = sol.rho * scale
             else:
                 M = pin.crba(pm, pd, q)
@@ -469,6 +497,14 @@ class ForwardStaticOptimization(Fitter):
         self.forces_ = F_out
         self.activations_ = X if self.mode == "activation" else F_out / f_max
         self.reserves_ = RHO if self.reserves else None
+        self.excitations_ = None
+        if path is not None:
+            u = X.copy()
+            if n_c > 1:
+                held = held_step_excitation(X[:-1], X[1:], np.diff(tc)[:, None], tau_rise=path.tau_rise,
+                                            tau_fall=path.tau_fall)
+                u[1:] = np.where(path.declared, held, X[1:])     # without dynamics a = u
+            self.excitations_ = path.recorded(tc, u)
         self.tracking_error_ = self.q_ - self.q_desired_
         self.diverged_ = divergence is not None
         self.divergence_ = divergence
@@ -529,6 +565,9 @@ class ForwardStaticOptimization(Fitter):
             ch[f"{n}_force"] = self.forces_[:, i]
         for i, n in enumerate(self.muscles_):
             ch[f"{n}_activation"] = self.activations_[:, i]
+        if getattr(self, "excitations_", None) is not None:
+            for i, n in enumerate(self.muscles_):
+                ch[f"{n}_excitation"] = self.excitations_[:, i]
         if self.reserves_ is not None:
             for j, c in enumerate(self.coordinates_):
                 ch[f"{c}_reserve"] = self.reserves_[:, j]
@@ -560,6 +599,8 @@ class ForwardStaticOptimization(Fitter):
         ]
         if getattr(self, "inputs_", None) is not None:
             rows += list(self.inputs_.describe())
+        if getattr(self, "excitation_path_", None) is not None:
+            rows.append(("dynamics", self.excitation_path_.describe()))
         if self.reserves_ is not None:
             rows.append(("reserves", f"max {np.max(np.abs(self.reserves_)):.4g} N m"))
         if self.diverged_:

@@ -20,6 +20,14 @@ solution otherwise; ``<muscle>_excitation`` channels report it at frame ``k``
 
 Frame 0 is plain SO (``0 <= a <= 1``), unless ``a0`` is given.  Each frame is
 one proxsuite QP (:class:`pinmsk.solvers.qp.FrameQP`, warm started).
+
+The time constants and any electromechanical delay are the model's
+(:func:`pinmsk.effects.activation.excitation_path`): its
+:class:`~pinmsk.effects.ActivationDynamics` (or delay-and-activation
+component) where it has one, else its muscle model's constants.  With a
+delay the reported ``<muscle>_excitation`` is what a recording would show,
+``u(t + delay)``: it leads the activation, and its last ``delay`` seconds are
+NaN (recorded after the trial ends).  The law is :mod:`pinmsk.muscles.activation`.
 """
 from __future__ import annotations
 
@@ -27,89 +35,73 @@ import time as _time
 
 import numpy as np
 
+from ..effects.activation import ExcitationPath, excitation_path
 from ..errors import InfeasibleError, SolverError
 from ..fitting import FitStatistics, Fitter, Result, format_report
 from ..kinematics import DEFAULT_CUTOFF, as_motion
+from ..muscles.activation import TAU_FALL, TAU_RISE, held_step_excitation, reachable_activation
 from ..trial import Trial
 from . import qp as _qp
 from .static import WEIGHTS, build_problem, diagnose_infeasible, infeasible_message
 
-try:  # the foundation's constants (thesis A.2: 11 ms and 68 ms)
-    from ..muscles.activation import TAU_FALL, TAU_RISE
-except ImportError:  # pragma: no cover
-    TAU_RISE, TAU_FALL = 0.011, 0.068
+__all__ = ["ModifiedStaticOptimization", "activation_bounds", "step_excitation", "excitations",
+           "TAU_RISE", "TAU_FALL"]
 
 
-def activation_bounds(a_prev, dt, *, tau_rise: float = TAU_RISE, tau_fall: float = TAU_FALL):
-    """Reachable ``(lo, hi)`` activations after ``dt`` from ``a_prev`` (Winters-Stark, exact).
-
-    ``a_prev`` and ``dt`` broadcast; see the module notes.
-    """
-    if not (tau_rise > 0 and tau_fall > 0):
-        raise SolverError(f"activation time constants must be > 0 (tau_rise={tau_rise}, tau_fall={tau_fall})")
-    a_prev = np.asarray(a_prev, dtype=float)
-    dt = np.asarray(dt, dtype=float)
-    lo = a_prev * np.exp(-dt / tau_fall)
-    hi = 1.0 - (1.0 - a_prev) * np.exp(-dt / tau_rise)
-    return lo, hi
+def activation_bounds(a_prev, dt, *, tau_rise=TAU_RISE, tau_fall=TAU_FALL):
+    """Reachable ``(lo, hi)`` activations after ``dt`` from ``a_prev`` (Winters-Stark, exact):
+    :func:`pinmsk.muscles.activation.reachable_activation`."""
+    return reachable_activation(a_prev, dt, tau_rise=tau_rise, tau_fall=tau_fall)
 
 
-def step_excitation(a_prev, a_next, dt, *, tau_rise: float = TAU_RISE, tau_fall: float = TAU_FALL):
-    """Constant excitation over ``dt`` that takes ``a_prev`` to ``a_next`` (Eq. A.2 solved exactly).
-
-    Falling (``a_next < a_prev``): ``a_next = u + (a_prev - u) e^(-t2 dt)``, closed form.
-    Rising: ``a_next = u + (a_prev - u) e^(-(t1 u + t2) dt)``, increasing in ``u``; bisection.
-    Results are clipped to [0, 1] (values outside come only from round-off at the bounds).
-    """
-    t2 = 1.0 / tau_fall
-    t1 = 1.0 / tau_rise - t2
-    a_prev, a_next, dt = np.broadcast_arrays(np.asarray(a_prev, float), np.asarray(a_next, float),
-                                             np.asarray(dt, float))
-    u = np.empty(a_prev.shape)
-    fall = a_next < a_prev
-    e = np.exp(-t2 * dt)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u_fall = (a_next - a_prev * e) / (1.0 - e)
-    u[fall] = u_fall[fall]
-    rise = ~fall
-    if rise.any():
-        ap, an, h = a_prev[rise], a_next[rise], dt[rise]
-        lo = ap.copy()              # u = a_prev gives no change
-        hi = np.ones_like(ap)
-        for _ in range(60):
-            mid = 0.5 * (lo + hi)
-            val = mid + (ap - mid) * np.exp(-(t1 * mid + t2) * h)
-            big = val > an
-            hi = np.where(big, mid, hi)
-            lo = np.where(big, lo, mid)
-        u[rise] = 0.5 * (lo + hi)
-    return np.clip(u, 0.0, 1.0)
+def step_excitation(a_prev, a_next, dt, *, tau_rise=TAU_RISE, tau_fall=TAU_FALL):
+    """Constant excitation over ``dt`` that takes ``a_prev`` to ``a_next`` (Eq. A.2 solved exactly):
+    :func:`pinmsk.muscles.activation.held_step_excitation`."""
+    return held_step_excitation(a_prev, a_next, dt, tau_rise=tau_rise, tau_fall=tau_fall)
 
 
-def excitations(time, a, *, tau_rise: float = TAU_RISE, tau_fall: float = TAU_FALL):
-    """Step excitations (N, m) for activations (N, m) at ``time``; ``u_0 = a_0``."""
+def excitations(time, a, *, tau_rise=TAU_RISE, tau_fall=TAU_FALL):
+    """Step excitations (N, m) for activations (N, m) at ``time``; ``u_0 = a_0``.
+
+    ``tau_rise``, ``tau_fall``: scalars or (m,) per muscle."""
     a = np.asarray(a, dtype=float)
     u = np.empty_like(a)
     u[0] = np.clip(a[0], 0.0, 1.0)
     if a.shape[0] > 1:
         dt = np.diff(np.asarray(time, dtype=float))[:, None]
-        u[1:] = step_excitation(a[:-1], a[1:], dt, tau_rise=tau_rise, tau_fall=tau_fall)
+        u[1:] = held_step_excitation(a[:-1], a[1:], dt, tau_rise=tau_rise, tau_fall=tau_fall)
     return u
+
+
+def model_path(est, model) -> ExcitationPath:
+    """The model's excitation path for MSO or EID ``est`` (refusing the old time-constant arguments)."""
+    given = [k for k in ("tau_rise", "tau_fall") if getattr(est, k, None) is not None]
+    if given:
+        raise SolverError(
+            f"{type(est).__name__}({', '.join(f'{k}=...' for k in given)}): the activation time constants "
+            "are the model's activation component; add it to the model instead: "
+            "model.with_effect(ActivationDynamics('muscles', tau_rise=..., tau_fall=...))")
+    if model.muscles is None:
+        raise SolverError(f"model '{model.name}' has no muscles; {type(est).__name__} needs a model with muscles")
+    return excitation_path(model)
 
 
 class ModifiedStaticOptimization(Fitter):
     """MSO: activation-mode SO whose activations obey activation dynamics between frames.
 
     Parameters (keyword-only): ``exponent``, ``weights`` (``S_i`` of Eq. 2.14),
-    ``tau_rise``, ``tau_fall`` (s, thesis A.2: 0.011 and 0.068), ``a0``
-    (activations before the first frame, (m,) or scalar; None: frame 0 is
-    free), ``reserves``, ``reserve_weight``, ``tol``, ``dofs`` as
-    :class:`~pinmsk.solvers.static.StaticOptimization`.  ``result_`` as
-    StaticOptimization's, with ``<muscle>_excitation`` channels.
+    ``a0`` (activations before the first frame, (m,) or scalar; None: frame 0
+    is free), ``reserves``, ``reserve_weight``, ``tol``, ``dofs`` as
+    :class:`~pinmsk.solvers.static.StaticOptimization`.  The activation time
+    constants are the model's (see the module notes); ``tau_rise`` and
+    ``tau_fall`` are refused by name (they moved to the model's
+    :class:`~pinmsk.effects.ActivationDynamics`).  ``result_`` as
+    StaticOptimization's, with ``<muscle>_excitation`` channels;
+    ``excitation_path_`` the :class:`~pinmsk.effects.activation.ExcitationPath` used.
     """
 
-    def __init__(self, *, exponent: float = 2, weights: str = "none", tau_rise: float = TAU_RISE,
-                 tau_fall: float = TAU_FALL, a0=None, reserves: bool = False,
+    def __init__(self, *, exponent: float = 2, weights: str = "none", tau_rise=None,
+                 tau_fall=None, a0=None, reserves: bool = False,
                  reserve_weight: float = 1000.0, tol: float = 1e-9, dofs=None):
         self.exponent = exponent
         self.weights = weights
@@ -124,8 +116,11 @@ class ModifiedStaticOptimization(Fitter):
     def fit(self, model, trial, *, moments=None, cutoff=DEFAULT_CUTOFF, progress=None):
         """Solve frame after frame; returns ``self`` (results as StaticOptimization's, plus excitations)."""
         t0 = _time.perf_counter()
+        path = model_path(self, model)
         P, prob = activation_problem(self, model, trial, moments=moments, cutoff=cutoff)
         N, nd, m = prob.A.shape
+        tr, tf = path.tau_rise, path.tau_fall
+        self.excitation_path_ = path
         tol = float(self.tol)
         W = float(self.reserve_weight) if self.reserves else None
         fq = _qp.FrameQP(m=m, nd=nd, weights=prob.w, exponent=P, reserve_weight=W, eps=tol * 1e-4,
@@ -142,7 +137,7 @@ class ModifiedStaticOptimization(Fitter):
                 lo, hi = np.zeros(m), np.ones(m)
             else:
                 dt = dts[k - 1] if k > 0 else (dts[0] if dts.size else 0.01)
-                lo, hi = activation_bounds(prev, dt, tau_rise=self.tau_rise, tau_fall=self.tau_fall)
+                lo, hi = reachable_activation(prev, dt, tau_rise=tr, tau_fall=tf)
                 lo = np.clip(lo, 0.0, 1.0)
                 hi = np.clip(hi, lo, 1.0)
             lo_all[k], hi_all[k] = lo, hi
@@ -154,8 +149,7 @@ class ModifiedStaticOptimization(Fitter):
                 deficit = diagnose_infeasible(prob_k, [k], minmax=False, tol=tol)
                 note = ("In MSO the activation dynamics limit how fast activations change: at this "
                         f"frame a_i must lie in [{', '.join(f'{v:.3g}' for v in lo)}] .. "
-                        f"[{', '.join(f'{v:.3g}' for v in hi)}] (tau_rise {self.tau_rise:g} s, "
-                        f"tau_fall {self.tau_fall:g} s).")
+                        f"[{', '.join(f'{v:.3g}' for v in hi)}] ({path.describe()}).")
                 raise InfeasibleError("MSO: " + infeasible_message(prob, np.array([k]), deficit, note=note))
             x[k] = np.clip(sol.x, lo, hi)      # proxsuite's answer is inside to ~1e-16
             rho[k] = sol.rho
@@ -178,8 +172,7 @@ class ModifiedStaticOptimization(Fitter):
         return format_report(
             f"Modified static optimization (activation dynamics between frames) of model '{self.model_name_}'", [
                 ("criterion", f"sum_i S_i a_i^{float(self.exponent):g} (Eq. 2.14), S = {self.weights}"),
-                ("dynamics", f"Winters-Stark, tau_rise {self.tau_rise * 1e3:g} ms, "
-                             f"tau_fall {self.tau_fall * 1e3:g} ms"),
+                ("dynamics", self.excitation_path_.describe()),
                 ("frames", f"{prob.n_frames}, muscles {len(prob.muscles)}, dofs {', '.join(prob.dofs)}"),
                 ("objective", f"sum over frames {np.sum(self.cost_):.6g}"),
                 ("rate limits", f"active at {at_bound} muscle-frames"),
@@ -222,7 +215,9 @@ def set_results(est, model, prob, a, rho, *, t0: float, analysis: str) -> Trial:
     F = prob.forces(a)
     est.activations_ = a
     est.forces_ = F
-    est.excitations_ = excitations(prob.time, a, tau_rise=est.tau_rise, tau_fall=est.tau_fall)
+    path = est.excitation_path_                  # prob.muscles are the model's, in its order
+    u = excitations(prob.time, a, tau_rise=path.tau_rise, tau_fall=path.tau_fall)
+    est.excitations_ = path.recorded(prob.time, u)
     est.reserves_ = rho * prob.scale if est.reserves else None
     moment = prob.moments(F) + (est.reserves_ if est.reserves else 0.0)
     est.violation_ = np.max(np.abs(moment - prob.tau), axis=1)

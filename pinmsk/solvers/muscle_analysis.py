@@ -41,7 +41,7 @@ def muscle_analysis(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, external_l
     ms = model.muscles
     gp = geometric_paths(model.meta.get("import_report")) if paths == "auto" else None
     if gp is not None and tuple(gp.muscles) == tuple(ms.names):
-        l_mt, arms = _geometric(model, gp, motion.q)
+        l_mt, arms = _geometric(model, gp, motion)
         source = "geometric paths (OpenSim's path algorithm)"
     else:
         l_mt, arms = ms.lengths(motion.q), ms.moment_arms(motion.q)     # (N, m), (N, m, nv)
@@ -69,12 +69,17 @@ def muscle_analysis(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, external_l
     return Trial(motion.t, chans, units=units, meta=meta)
 
 
-def _geometric(model, gp, q):
-    """Exact lengths (N, m) and moment arms (N, m, nv) of an imported model's geometric paths."""
+def _geometric(model, gp, motion):
+    """Exact lengths (N, m) and moment arms (N, m, nv) of an imported model's geometric paths (OpenSim
+    coordinates that drive only dependent joints ride along in the motion's signals)."""
+    q = motion.q
     cols = [c for c in gp.coordinates if c in model.coordinate_order]
     qg = np.zeros((q.shape[0], len(gp.coordinates)))
     for c in cols:
         qg[:, gp.coordinates.index(c)] = q[:, model.coordinate_index(c)]
+    for c in gp.coordinates:
+        if c not in model.coordinate_order and c in motion.signals:
+            qg[:, gp.coordinates.index(c)] = motion.signals[c]
     crossed = sorted({c for t in model.muscles.path.terms for c in t["coordinates"]}
                      if hasattr(model.muscles.path, "terms") else cols, key=gp.coordinates.index)
     lengths, a = gp.lengths_and_moment_arms(qg, coordinates=crossed)

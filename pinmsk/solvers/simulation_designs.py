@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from ..effects.activation import excitation_path
 from ..errors import ModelError
 from ..muscles.tendon import thelen_tendon_force
 from ..muscles.thelen2003 import (GAMMA, K_PE, PASSIVE_STRAIN0, thelen_contraction_rate,
@@ -135,8 +136,10 @@ class BatchMuscles:
         self.h2 = np.asarray(mtu.height, dtype=float) ** 2
         self.v_max = np.asarray(mtu.v_max, dtype=float)
         self.strain0 = float(mtu.tendon_strain0)
-        self.tau_rise = float(mtu.tau_rise)
-        self.tau_fall = float(mtu.tau_fall)
+        # the model's activation component (its muscle model's constants without one), per muscle
+        path = excitation_path(model)
+        self.tau_rise = path.tau_rise
+        self.tau_fall = path.tau_fall
         self.m = ms.n
         self.no_pennation = bool(np.all(self.h2 == 0))
         self._x_min = 1e-6 * self.l_opt

@@ -42,6 +42,18 @@ problem, where a muscle at full force costs at most 1.  With the default
 produce the moment at a marginal cost below 1000 fully-active muscles per
 unit of capacity, i.e. in practice only where they cannot.
 
+Ideal actuators (:mod:`pinmsk.actuators`: the model's, and ``actuators=`` -- an
+OpenSim force set file of reserve and residual actuators) are further variables,
+as in OpenSim's StaticOptimization: a control ``min_control <= u <= max_control``
+whose generalized force is ``u F_opt B(q)``, costing ``|u|^P`` (times the largest
+muscle coefficient); a control that may take both signs is split into two
+non-negative variables, so every solver below is unchanged.  ``convention="opensim"``
+takes OpenSim's muscle model (``F = a F_opt``, no passive force, activations
+within the muscles' controls).  For an exact OpenSim import (dependent joints,
+:func:`pinmsk.kinematics.coordinate_map`) the equations are OpenSim's coordinates'
+(:func:`pinmsk.solvers.moments.balance_space`): moment arms, actuator columns and
+moments all map by ``J^T``.
+
 Fitters follow scikit-learn's habits: the constructor only stores arguments,
 ``fit`` returns ``self``, learned values end in ``_``, :meth:`report` prints
 the objective, iterations, convergence and constraint violation.
@@ -51,17 +63,22 @@ from __future__ import annotations
 import time as _time
 import warnings
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
+from ..actuators import IdealActuator, actuator_columns
 from ..components import Motion
 from ..errors import ConvergenceError, InfeasibleError, ModelError, ResidualWarning, SolverError
 from ..fitting import FitStatistics, Fitter, Result, format_report
 from ..kinematics import DEFAULT_CUTOFF, as_motion, prepare
+from ..opensim.actuators import read_actuators
+from ..opensim.muscle_import import muscle_control_bounds
+from ..opensim.muscles import opensim_static_optimization_capacity
 from ..residuals import floating_base_residuals
 from ..trial import Trial
 from . import qp as _qp
-from .moments import plan_moments, required_moments
+from .moments import balance_space, plan_moments, required_moments, without_actuators
 
 MODES = ("force", "activation")
 WEIGHTS = ("none", "fmax", "pcsa", "volume")
@@ -97,34 +114,48 @@ LP_SKIP = 8
 class SOProblem:
     """The scaled SO problem of a whole motion (see the module notes).
 
-    Forces are ``F = c * x + d``; cost ``sum_i k_i x_i^P`` (physical units) or
-    ``max_i u_i x_i`` (min/max); the solvers see ``w = k / max(k)`` and
-    ``u / max(u)``.  ``A x = b`` are the balanced dofs' equations divided by
-    ``scale`` (N m).
+    The variables ``x`` (N, m + ns) are the muscles' (m) then the actuators' (ns
+    columns: an actuator whose control may take both signs has two, ``u = x+ - x-``,
+    both >= 0, so every solver sees non-negative variables with the cost
+    ``x+^P + x-^P = |u|^P``).  Muscle forces are ``F = c * x + d``; actuator
+    controls ``u = x[:, m:] @ S`` (:meth:`controls`); cost ``sum_i k_i x_i^P``
+    (physical units) or ``max_i u_i x_i`` (min/max); the solvers see
+    ``w = k / max(k)`` and ``u / max(u)``.  ``A x = b`` are the balanced dofs'
+    equations divided by ``scale`` (N m).
     """
 
     time: np.ndarray          # (N,)
     muscles: tuple            # (m,) names
     dofs: tuple               # (nd,) balanced coordinate names
-    dof_index: np.ndarray     # (nd,) columns in q / v
+    dof_index: np.ndarray     # (nd,) columns in the balanced coordinates (q / v without a coordinate map)
     mode: str
-    A: np.ndarray             # (N, nd, m)
+    A: np.ndarray             # (N, nd, m + ns)
     b: np.ndarray             # (N, nd)
-    lo: np.ndarray            # (N, m)
-    hi: np.ndarray            # (N, m)
+    lo: np.ndarray            # (N, m + ns)
+    hi: np.ndarray            # (N, m + ns)
     c: np.ndarray             # (N, m)  N per unit x
     d: np.ndarray             # (N, m)  N
     R: np.ndarray             # (N, m, nd) moment arms of the balanced dofs
     tau: np.ndarray           # (N, nd) moments to balance (N m)
     scale: np.ndarray         # (nd,) N m per scaled unit
-    k: np.ndarray             # (m,) physical cost coefficients of x^P
-    u: np.ndarray             # (m,) physical min/max coefficients
+    k: np.ndarray             # (m + ns,) physical cost coefficients of x^P
+    u: np.ndarray             # (m + ns,) physical min/max coefficients
     f_max: np.ndarray         # (m,)
     exponent: float
+    actuators: tuple = ()                 # (na,) names
+    C: np.ndarray | None = None           # (N, na, nd) generalized force per unit control (N m or N)
+    split: np.ndarray | None = None       # (ns,) the actuator of each actuator variable
+    sign: np.ndarray | None = None        # (ns,) +1 / -1: u = sum sign x
+    optimal_force: np.ndarray | None = None   # (na,)
+    stand_in: np.ndarray | None = None    # (ns,) the finite stand-in hi of an infinite bound (NaN: a real bound)
 
     @property
     def n_frames(self) -> int:
         return self.A.shape[0]
+
+    @property
+    def n_var(self) -> int:
+        return self.A.shape[2]
 
     @property
     def w(self) -> np.ndarray:
@@ -135,10 +166,22 @@ class SOProblem:
         return self.u / np.max(self.u)
 
     def forces(self, x) -> np.ndarray:
-        return self.c * x + self.d
+        """Muscle forces (N, m) of the variables ``x`` (N, m + ns)."""
+        return self.c * x[:, :len(self.muscles)] + self.d
 
     def moments(self, F) -> np.ndarray:
+        """The muscles' moments (N, nd) of muscle forces ``F``."""
         return np.einsum("nm,nmj->nj", F, self.R)
+
+    def controls(self, x) -> np.ndarray:
+        """Actuator controls (N, na) of the variables ``x``."""
+        return _controls(self, x)
+
+    def actuator_moments(self, u) -> np.ndarray:
+        """The actuators' generalized forces (N, nd) of controls ``u`` (zero without actuators)."""
+        if not self.actuators:
+            return np.zeros((np.shape(u)[0], len(self.dofs)))
+        return np.einsum("na,naj->nj", u, self.C)
 
     def cost(self, x, minmax: bool) -> np.ndarray:
         x = np.maximum(x, 0.0)
@@ -179,8 +222,11 @@ def check_model(model):
     return muscles
 
 
-def resolve_dofs(model, R_all: np.ndarray, dofs, *, allow_unspanned: bool = False):
-    """Names and columns of the balanced dofs; default: those spanned by at least one muscle."""
+def resolve_dofs(model, R_all: np.ndarray, dofs, *, allow_unspanned: bool = False, names=None):
+    """Names and columns of the balanced dofs; default: those spanned by at least one muscle (or actuator:
+    ``R_all`` holds their columns too).  ``names``: the coordinates of ``R_all``'s last axis (default the
+    model's)."""
+    coords = tuple(model.coordinates if names is None else names)
     spanned = np.any(np.abs(R_all) > 0, axis=(0, 1))
     if dofs is None:
         idx = np.flatnonzero(spanned)
@@ -190,16 +236,27 @@ def resolve_dofs(model, R_all: np.ndarray, dofs, *, allow_unspanned: bool = Fals
     else:
         if isinstance(dofs, str):
             dofs = [dofs]
-        idx = np.array([model.coordinate_index(d) for d in dofs], dtype=int)
+        idx = np.array([_coordinate_column(model, coords, d) for d in dofs], dtype=int)
         if len(set(idx.tolist())) != idx.size:
             raise ModelError(f"dofs lists a coordinate twice: {list(dofs)}")
-        lonely = [model.coordinates[j] for j in idx if not spanned[j]]
+        lonely = [coords[j] for j in idx if not spanned[j]]
         if lonely and not allow_unspanned:
             raise ModelError(
                 f"no muscle spans {', '.join(lonely)} over this trial, so static optimization "
                 "cannot balance it; leave it out of dofs (the default balances the "
                 "coordinates spanned by muscles) or pass reserves=True")
-    return tuple(model.coordinates[j] for j in idx), idx
+    return tuple(coords[j] for j in idx), idx
+
+
+def _coordinate_column(model, coords, name) -> int:
+    if tuple(coords) == tuple(model.coordinates):
+        return model.coordinate_index(name)
+    if name not in coords:
+        import difflib
+        close = difflib.get_close_matches(str(name), coords, n=3)
+        hint = f"; did you mean {', '.join(map(repr, close))}?" if close else ""
+        raise ModelError(f"no coordinate '{name}' to balance{hint} (coordinates: {', '.join(coords)})")
+    return list(coords).index(name)
 
 
 #: Frames per chunk in which :class:`StaticOptimization` builds and solves a long motion:
@@ -207,10 +264,41 @@ def resolve_dofs(model, R_all: np.ndarray, dofs, *, allow_unspanned: bool = Fals
 #: working set stays in the CPU cache (``StaticOptimization(chunk_size=...)``).
 CHUNK_FRAMES = 20000
 
+#: An actuator without a bound gets a finite stand-in for the solvers (proxsuite needs finite boxes):
+#: this many times the control that alone would give the largest scaled moment of the problem.  A
+#: solution at a stand-in is refused (:class:`~pinmsk.errors.SolverError`), never returned.
+STAND_IN_FACTOR = 1e4
+
+#: Muscle models whose choices OpenSim's static optimization reproduces (``convention=``).
+CONVENTIONS = ("pinmsk", "opensim")
+
 
 def _frame_capacity(R: np.ndarray, c: np.ndarray) -> np.ndarray:
     """(n, nd) moment capacity ``sum_i |R_kij| c_ki`` of each frame and dof."""
     return np.einsum("nmj,nm->nj", np.abs(R), c)
+
+
+def _controls(prob, x) -> np.ndarray:
+    na = len(prob.actuators)
+    if not na:
+        return np.zeros((np.shape(x)[0], 0))
+    S = np.zeros((prob.split.size, na))
+    S[np.arange(prob.split.size), prob.split] = prob.sign
+    return np.asarray(x)[:, len(prob.muscles):] @ S
+
+
+def _split_bounds(lo: np.ndarray, hi: np.ndarray):
+    """The non-negative variables of controls ``lo <= u <= hi``: ``(actuator, sign, lo, hi)`` arrays,
+    ``u = x`` where ``lo >= 0``, ``u = -x`` where ``hi <= 0``, both (``u = x+ - x-``) otherwise."""
+    split, sign, vlo, vhi = [], [], [], []
+    for i, (a, b) in enumerate(zip(lo, hi)):
+        if b > 0.0:
+            split.append(i), sign.append(1.0), vlo.append(max(a, 0.0)), vhi.append(b)
+        if a < 0.0:
+            split.append(i), sign.append(-1.0), vlo.append(max(-b, 0.0)), vhi.append(-a)
+        if a == b == 0.0:
+            split.append(i), sign.append(1.0), vlo.append(0.0), vhi.append(0.0)
+    return (np.array(split, dtype=int), np.array(sign), np.array(vlo, dtype=float), np.array(vhi, dtype=float))
 
 
 class ChunkedSOProblem:
@@ -218,19 +306,28 @@ class ChunkedSOProblem:
 
     It has the whole-motion parts of :class:`SOProblem` (``time``, ``muscles``,
     ``dofs``, ``dof_index``, ``mode``, ``tau``, ``scale``, ``k``, ``u``,
-    ``f_max``, ``exponent``; the scale from every frame, so each chunk is the
+    ``f_max``, ``exponent``, the actuators'; the scale from every frame, so each chunk is the
     same problem as in one piece) and builds the per-frame ones (``A``, ``b``,
-    ``lo``, ``hi``, ``c``, ``d``, ``R``) for frames ``[start, stop)`` on demand
+    ``lo``, ``hi``, ``c``, ``d``, ``R``, ``C``) for frames ``[start, stop)`` on demand
     with :meth:`frames`.  :func:`solve_frames` solves it chunk by chunk.  Reading
     one of the per-frame arrays builds it for the whole motion (cached).
+
+    ``space`` (:class:`~pinmsk.solvers.moments.BalanceSpace`, default the model's coordinates): the
+    coordinates whose equations are balanced.  ``actuators``: ideal actuators
+    (:mod:`pinmsk.actuators`), extra variables with their control bounds and cost ``|u|^P``.
+    ``convention="opensim"``: the muscle model of OpenSim's StaticOptimization (see
+    :class:`StaticOptimization`); ``muscle_bounds``: (lo, hi) arrays (m,) of the muscle variables.
     """
 
-    _PER_FRAME = ("A", "b", "lo", "hi", "c", "d", "R")
+    _PER_FRAME = ("A", "b", "lo", "hi", "c", "d", "R", "C")
 
     def __init__(self, model, motion: Motion, *, mode: str, weights: str, exponent: float, dofs,
-                 moments, reserves: bool, chunk_size: int):
+                 moments, reserves: bool, chunk_size: int, actuators=(), space=None, convention: str = "pinmsk",
+                 muscle_bounds=None, data=None):
         if mode not in MODES:
             raise SolverError(f"mode must be one of {', '.join(MODES)}; got {mode!r}")
+        if convention not in CONVENTIONS:
+            raise SolverError(f"convention must be one of {', '.join(CONVENTIONS)}; got {convention!r}")
         P = _qp.check_exponent(exponent)
         muscles = check_model(model)
         n, m = motion.n_frames, muscles.n
@@ -239,24 +336,58 @@ class ChunkedSOProblem:
         self._muscle_set = muscles
         self._q, self._v = motion.q, motion.v
         self.mode = mode
+        self.convention = convention
+        self._space = space
+        nv = model.nv if space is None else space.n
+        coord_names = model.coordinates if space is None else space.names
         f_max = np.asarray(muscles.f_max, dtype=float)
+        # the actuators: their columns over the whole motion (Pinocchio kinematics once), in the space
+        acts = tuple(actuators)
+        self.actuators = tuple(a.name for a in acts)
+        na = len(acts)
+        if na:
+            C = actuator_columns(model, motion, acts, data=data)
+            self._C_all = C if space is None else space.arms(C)
+            a_lo = np.array([a.min_control for a in acts])
+            a_hi = np.array([a.max_control for a in acts])
+            self.optimal_force = np.array([a.values["optimal_force"] for a in acts])
+        else:
+            self._C_all = np.zeros((n, 0, nv))
+            a_lo = a_hi = self.optimal_force = np.zeros(0)
+        self.split, self.sign, self._v_lo, self._v_hi = _split_bounds(a_lo, a_hi)
+        lo_m, hi_m = (np.zeros(m), np.ones(m)) if muscle_bounds is None else \
+            (np.asarray(muscle_bounds[0], dtype=float), np.asarray(muscle_bounds[1], dtype=float))
+        self._m_lo, self._m_hi = lo_m, hi_m
         # whole-motion statistics a chunk at a time: which coordinates the muscles
         # span (max |R|) and each coordinate's moment capacity (the scale)
-        arm_max = np.zeros((m, model.nv))
-        cap_max = np.zeros(model.nv)
+        arm_max = np.zeros((m, nv))
+        cap_max = np.zeros(nv)
         self._whole = None
         for start, stop in self.chunks(n):
             R, c, d = self._arms_and_forces(slice(start, stop))
-            if R.shape != (stop - start, m, model.nv):
-                raise ModelError(f"moment arms have shape {(n,) + R.shape[1:]}; expected {(n, m, model.nv)}")
+            if R.shape != (stop - start, m, nv):
+                raise ModelError(f"moment arms have shape {(n,) + R.shape[1:]}; expected {(n, m, nv)}")
             np.maximum(arm_max, np.max(np.abs(R), axis=0, initial=0.0), out=arm_max)
-            np.maximum(cap_max, np.max(_frame_capacity(R, c), axis=0, initial=0.0), out=cap_max)
+            np.maximum(cap_max, np.max(_frame_capacity(R, c * np.maximum(np.abs(hi_m), np.abs(lo_m))), axis=0,
+                                       initial=0.0), out=cap_max)
             if stop - start == n:
                 self._whole = (R, c, d)       # one chunk: keep it rather than build it again
-        names, idx = resolve_dofs(model, self._whole[0] if self._whole else arm_max[None], dofs,
-                                  allow_unspanned=reserves)
-        tau = required_moments(model, motion, moments, idx, names)
-        prop = _muscle_property(muscles, weights)
+        act_max = np.max(np.abs(self._C_all), axis=0, initial=0.0) if na else np.zeros((0, nv))
+        spans = np.concatenate([self._whole[0] if self._whole else arm_max[None],
+                                np.broadcast_to(act_max, (1,) + act_max.shape) if self._whole is None
+                                else self._C_all], axis=1)
+        names, idx = resolve_dofs(model, spans, dofs, allow_unspanned=reserves, names=coord_names)
+        if moments is None and space is not None and not space.identity:
+            moments = space.forces(inverse_dynamics_array(without_actuators(model), motion, actuated=False))
+        tau = required_moments(model, motion, moments, idx, names, width=nv)
+        if convention == "opensim":
+            if weights != "none":
+                raise SolverError(f"convention='opensim' costs the activations as OpenSim does (sum a^P, "
+                                  f"a = F / F_max in force mode); weights={weights!r} is not OpenSim's: leave "
+                                  "weights at 'none'")
+            prop = f_max.copy() if mode == "force" else np.ones(m)
+        else:
+            prop = _muscle_property(muscles, weights)
         if np.any(~(prop > 0)):
             i = int(np.flatnonzero(~(prop > 0))[0])
             raise ModelError(f"muscle '{muscles.names[i]}' has {weights} = {prop[i]}; weights need "
@@ -269,23 +400,46 @@ class ChunkedSOProblem:
         self.dof_index = idx
         self.tau = tau
         self.scale = scale
-        self.k = (f_max / prop) ** P if mode == "force" else prop.copy()
-        self.u = f_max / prop if mode == "force" else prop.copy()
+        k_m = (f_max / prop) ** P if mode == "force" else prop.copy()
+        u_m = f_max / prop if mode == "force" else prop.copy()
+        # an actuator's control u costs |u|^P times the largest muscle coefficient: u = 1 costs what the
+        # most expensive fully active muscle costs (OpenSim's sum of |u|^P over all its actuators when
+        # the muscle coefficients are 1: activation mode, or force mode with F_max weights)
+        self.k = np.concatenate([k_m, np.full(self.split.size, np.max(k_m))])
+        self.u = np.concatenate([u_m, np.full(self.split.size, np.max(u_m))])
         self.f_max = f_max
         self.exponent = P
+        # finite stand-ins for infinite control bounds (see STAND_IN_FACTOR)
+        infinite = ~np.isfinite(self._v_hi)
+        self.stand_in = np.full(self.split.size, np.nan)
+        if infinite.any():
+            cols = np.abs(self._C_all[:, self.split, :][:, :, idx]) / scale       # (N, ns, nd)
+            col_max = np.max(cols, axis=(0, 2), initial=0.0)
+            b_max = (float(np.max(np.abs(tau) / scale, initial=0.0))
+                     + float(m) * float(np.max(np.abs(hi_m), initial=1.0)))
+            need = np.where(col_max > 0, (1.0 + b_max) / np.where(col_max > 0, col_max, 1.0), 1.0)
+            self._v_hi = np.where(infinite, STAND_IN_FACTOR * need, self._v_hi)
+            self.stand_in = np.where(infinite, self._v_hi, np.nan)
         self._full = None
 
     def _arms_and_forces(self, rows):
-        """Moment arms (n, m, nv) and ``F = c x + d`` coefficients (n, m) of frames ``rows`` (a slice or indices)."""
+        """Moment arms (n, m, ns) and ``F = c x + d`` coefficients (n, m) of frames ``rows`` (a slice or indices)."""
         muscles, q, v = self._muscle_set, self._q[rows], self._v[rows]
         n = q.shape[0]
         R = np.asarray(muscles.moment_arms(q), dtype=float)
+        if self._space is not None:
+            R = self._space.arms(R, rows)
         if self.mode == "force":
             f_max = np.asarray(muscles.f_max, dtype=float)
             return R, np.broadcast_to(f_max, (n, f_max.size)).copy(), np.zeros((n, f_max.size))
-        fa, fp = muscles.force_limits(q, v)
-        c = np.maximum(np.asarray(fa, dtype=float), 0.0)
-        d = np.asarray(fp, dtype=float)
+        if self.convention == "opensim":
+            c = opensim_static_optimization_capacity(muscles.mtu, muscles.lengths(q), muscles.velocities(q, v))
+            c = np.asarray(c, dtype=float)
+            d = np.zeros_like(c)
+        else:
+            fa, fp = muscles.force_limits(q, v)
+            c = np.maximum(np.asarray(fa, dtype=float), 0.0)
+            d = np.asarray(fp, dtype=float)
         if not (np.all(np.isfinite(c)) and np.all(np.isfinite(d))):
             k0, i0 = np.argwhere(~np.isfinite(c + d))[0]
             k = int(np.arange(self.time.size)[rows][k0])
@@ -296,6 +450,10 @@ class ChunkedSOProblem:
     @property
     def n_frames(self) -> int:
         return self._q.shape[0]
+
+    @property
+    def n_var(self) -> int:
+        return len(self.muscles) + self.split.size
 
     @property
     def is_chunked(self) -> bool:
@@ -321,13 +479,22 @@ class ChunkedSOProblem:
         R = np.ascontiguousarray(R_all[:, :, self.dof_index])
         tau = self.tau[rows]
         A = np.einsum("nmj,nm->njm", R, c)
+        C = np.ascontiguousarray(self._C_all[rows][:, :, self.dof_index])
+        if self.split.size:
+            A_act = np.swapaxes(C[:, self.split, :] * self.sign[None, :, None], 1, 2)
+            A = np.concatenate([A, A_act], axis=2)
         A /= self.scale[None, :, None]
         b = (tau - np.einsum("nmj,nm->nj", R, d)) / self.scale
         n, m = R.shape[0], len(self.muscles)
+        lo = np.concatenate([np.broadcast_to(self._m_lo, (n, m)), np.broadcast_to(self._v_lo, (n, self.split.size))],
+                            axis=1)
+        hi = np.concatenate([np.broadcast_to(self._m_hi, (n, m)), np.broadcast_to(self._v_hi, (n, self.split.size))],
+                            axis=1)
         return SOProblem(time=self.time[rows], muscles=self.muscles, dofs=self.dofs,
-                         dof_index=self.dof_index, mode=self.mode, A=A, b=b,
-                         lo=np.zeros((n, m)), hi=np.ones((n, m)), c=c, d=d, R=R, tau=tau,
-                         scale=self.scale, k=self.k, u=self.u, f_max=self.f_max, exponent=self.exponent)
+                         dof_index=self.dof_index, mode=self.mode, A=A, b=b, lo=lo, hi=hi, c=c, d=d, R=R, tau=tau,
+                         scale=self.scale, k=self.k, u=self.u, f_max=self.f_max, exponent=self.exponent,
+                         actuators=self.actuators, C=C, split=self.split, sign=self.sign,
+                         optimal_force=self.optimal_force, stand_in=self.stand_in)
 
     def __getattr__(self, name):
         if name in ChunkedSOProblem._PER_FRAME:
@@ -339,6 +506,7 @@ class ChunkedSOProblem:
     w = SOProblem.w
     w_minmax = SOProblem.w_minmax
     cost = SOProblem.cost
+    controls = SOProblem.controls
 
     def forces(self, x) -> np.ndarray:
         return np.concatenate([self.frames(s, e).forces(x[s:e]) for s, e in self.chunks()])
@@ -346,22 +514,31 @@ class ChunkedSOProblem:
     def moments(self, F) -> np.ndarray:
         return np.concatenate([self.frames(s, e).moments(F[s:e]) for s, e in self.chunks()])
 
+    def actuator_moments(self, u) -> np.ndarray:
+        if not self.actuators:
+            return np.zeros((np.shape(u)[0], len(self.dofs)))
+        return np.einsum("na,naj->nj", u, self._C_all[:, :, self.dof_index])
+
     def __repr__(self) -> str:
         return (f"ChunkedSOProblem({self.n_frames} frames in chunks of {self.chunk_size}, "
-                f"{len(self.muscles)} muscles, dofs {', '.join(self.dofs)})")
+                f"{len(self.muscles)} muscles, {len(self.actuators)} actuators, dofs {', '.join(self.dofs)})")
 
 
 def build_problem(model, motion: Motion, *, mode: str = "force", weights: str = "none",
                   exponent: float = 2.0, dofs=None, moments=None, reserves: bool = False,
-                  chunk_size: int | None = None):
+                  chunk_size: int | None = None, actuators=(), space=None, convention: str = "pinmsk",
+                  muscle_bounds=None, data=None):
     """The scaled SO problem of ``motion`` (moments by inverse dynamics unless given).
 
     An :class:`SOProblem`; with ``chunk_size`` and a motion of more frames, a
     :class:`ChunkedSOProblem` that builds its per-frame arrays a chunk at a time.
+    ``actuators``, ``space``, ``convention``, ``muscle_bounds``: see :class:`ChunkedSOProblem`.
     """
     prob = ChunkedSOProblem(model, motion, mode=mode, weights=weights, exponent=exponent, dofs=dofs,
                             moments=moments, reserves=reserves,
-                            chunk_size=motion.n_frames if chunk_size is None else chunk_size)
+                            chunk_size=motion.n_frames if chunk_size is None else chunk_size,
+                            actuators=actuators, space=space, convention=convention,
+                            muscle_bounds=muscle_bounds, data=data)
     return prob if prob.is_chunked else prob.frames(0, prob.n_frames)
 
 
@@ -373,7 +550,7 @@ def build_problem(model, motion: Motion, *, mode: str = "force", weights: str = 
 class FramesResult:
     """Scaled solution of all frames with bookkeeping."""
 
-    x: np.ndarray            # (N, m)
+    x: np.ndarray            # (N, m + ns) muscles then actuator variables
     rho: np.ndarray          # (N, nd) scaled reserves
     solved: np.ndarray       # (N,) bool
     path: np.ndarray         # (N,) 0 batched, 1 proxsuite
@@ -381,11 +558,11 @@ class FramesResult:
     qp_solves: int           # proxsuite QPs
     batched_frames: int
     forces: np.ndarray | None = None    # (N, m) N, when solved chunk by chunk
-    moments: np.ndarray | None = None   # (N, nd) N m of the muscles, likewise
+    moments: np.ndarray | None = None   # (N, nd) N m of the muscles and actuators, likewise
 
 
 def _frame_qp(prob: SOProblem, *, exponent, minmax, reserve_weight, tol) -> _qp.FrameQP:
-    m, nd = len(prob.muscles), len(prob.dofs)
+    m, nd = prob.n_var, len(prob.dofs)
     return _qp.FrameQP(m=m, nd=nd, weights=prob.w_minmax if minmax else prob.w, exponent=exponent,
                        minmax=minmax, reserve_weight=reserve_weight, eps=tol * 1e-4,
                        sqp_tol=max(tol * 1e-2, 1e-13))
@@ -407,14 +584,14 @@ def solve_frames(prob: SOProblem, *, minmax: bool = False, reserve_weight: float
         raise SolverError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
     chunked = isinstance(prob, ChunkedSOProblem)
     P = prob.exponent
-    N, nd, m = prob.n_frames, len(prob.dofs), len(prob.muscles)
+    N, nd, m = prob.n_frames, len(prob.dofs), prob.n_var
     spans = prob.chunks() if chunked else [(0, N)]
     sel = np.arange(N) if frames is None else np.asarray(frames, dtype=int)
     x = np.full((N, m), np.nan)
     rho = np.zeros((N, nd))
     solved = np.zeros(N, dtype=bool)
     path = np.full(N, -1, dtype=int)
-    forces = np.full((N, m), np.nan) if chunked else None
+    forces = np.full((N, len(prob.muscles)), np.nan) if chunked else None
     moments = np.zeros((N, nd)) if chunked else None
     iters = 0
     nqp = 0
@@ -530,7 +707,8 @@ def solve_frames(prob: SOProblem, *, minmax: bool = False, reserve_weight: float
         x[start:stop] = np.where(np.isfinite(xs), np.clip(xs, sub.lo, sub.hi), xs)   # proxsuite: inside to ~1e-16
         if chunked:
             forces[start:stop] = sub.forces(x[start:stop])
-            moments[start:stop] = sub.moments(forces[start:stop])
+            moments[start:stop] = (sub.moments(forces[start:stop])
+                                   + sub.actuator_moments(sub.controls(x[start:stop])))
     return FramesResult(x=x, rho=rho, solved=solved, path=path, iterations=iters, qp_solves=nqp,
                         batched_frames=batched, forces=forces, moments=moments)
 
@@ -650,6 +828,34 @@ class StaticOptimization(Fitter):
         Frames built and solved at a time (default :data:`CHUNK_FRAMES`): a
         long motion's per-frame problem arrays are never all in memory.  It
         changes memory and speed only, not the result (so not recorded in the result's meta).
+    actuators : path, sequence of actuators, or None
+        Ideal actuators (:mod:`pinmsk.actuators`: OpenSim's reserve and residual
+        CoordinateActuator, PointActuator, TorqueActuator) sharing the moments
+        with the muscles: the model's own actuator components always, plus an
+        OpenSim force set file (``*_Reserve_Actuators.xml``) or components given
+        here.  Each is a variable ``min_control <= u <= max_control`` with the
+        cost ``|u|^P`` times the largest muscle coefficient (a control of 1
+        costs what the most expensive fully active muscle costs: OpenSim's
+        ``sum |u|^P`` over all actuators when the muscles' coefficients are 1,
+        as in activation mode or with ``convention="opensim"``); its channels
+        are ``<name>_control`` and ``<name>_force``.
+        The coordinates they span count as spanned (the pelvis of a gait model
+        with residual actuators is balanced).  Not the same as ``reserves``
+        (pinmsk's unnamed, heavily penalised actuator per dof).
+    convention : "pinmsk" | "opensim"
+        The muscle model.  ``"pinmsk"`` (default): the physical one above
+        (passive forces included, activations in [0, 1]).  ``"opensim"``:
+        OpenSim's StaticOptimization, for like-for-like comparisons --
+        activation mode as ``use_muscle_physiology`` (``F = a F_opt`` with
+        OpenSim's ``calcInextensibleTendonActiveFiberForce`` at the
+        rigid-tendon fiber length and velocity and *no* passive force,
+        :func:`pinmsk.opensim.muscles.opensim_static_optimization_capacity`),
+        force mode as without it (``F = a F_max``, cost ``sum a^P``); the
+        activations bounded by the muscles' ``min_control``/``max_control``
+        (OpenSim's defaults 0.01..1 for Thelen and Millard muscles; 0..1 for a
+        model not imported from an .osim).  Not the default: OpenSim's SO leaves
+        the passive fiber forces unbalanced and, for Millard 2012 and De Groote
+        2016 muscles, takes a capacity that is not the force along the tendon.
 
     Attributes (after ``fit``)
     --------------------------
@@ -673,7 +879,8 @@ class StaticOptimization(Fitter):
 
     def __init__(self, *, mode: str = "force", exponent: float = 2, weights: str = "none",
                  minmax: bool = False, reserves: bool = False, reserve_weight: float = 1000.0,
-                 tol: float = 1e-9, dofs=None, method: str = "auto", chunk_size: int = CHUNK_FRAMES):
+                 tol: float = 1e-9, dofs=None, method: str = "auto", chunk_size: int = CHUNK_FRAMES,
+                 actuators=None, convention: str = "pinmsk"):
         self.mode = mode
         self.exponent = exponent
         self.weights = weights
@@ -684,6 +891,8 @@ class StaticOptimization(Fitter):
         self.dofs = dofs
         self.method = method
         self.chunk_size = chunk_size
+        self.actuators = actuators
+        self.convention = convention
 
     def _check_params(self):
         if self.mode not in MODES:
@@ -692,6 +901,8 @@ class StaticOptimization(Fitter):
             raise SolverError(f"weights must be one of {', '.join(WEIGHTS)}; got {self.weights!r}")
         if self.method not in METHODS:
             raise SolverError(f"method must be one of {', '.join(METHODS)}; got {self.method!r}")
+        if self.convention not in CONVENTIONS:
+            raise SolverError(f"convention must be one of {', '.join(CONVENTIONS)}; got {self.convention!r}")
         _qp.check_exponent(self.exponent)
         if not (float(self.tol) > 0):
             raise SolverError(f"tol must be > 0; got {self.tol!r}")
@@ -722,11 +933,19 @@ class StaticOptimization(Fitter):
         inputs = prepare(model, trial, cutoff=cutoff, grf=grf, external_loads=external_loads, frames=frames,
                          ground_reaction=ground_reaction, grf_cutoff=grf_cutoff)
         motion = as_motion(model, inputs.motion)
-        plan = plan_moments(model, trial, inputs, moments=moments, dofs=self.dofs, reserves=self.reserves)
+        acts = self._actuators(model)
+        space = balance_space(model, motion)
+        data = model.create_data()
+        arms = space.arms(actuator_columns(model, motion, acts, data=data)) if acts else None
+        plan = plan_moments(model, trial, inputs, moments=moments, dofs=self.dofs, reserves=self.reserves,
+                            space=space, actuator_arms=arms)
         prob = build_problem(model, motion, mode=self.mode, weights=self.weights,
                              exponent=self.exponent, dofs=plan.dofs, moments=plan.tau,
-                             reserves=self.reserves, chunk_size=self.chunk_size)
+                             reserves=self.reserves, chunk_size=self.chunk_size, actuators=acts, space=space,
+                             convention=self.convention, muscle_bounds=self._muscle_bounds(model), data=data)
         t1 = _time.perf_counter()
+        self.actuators_ = acts
+        self._actuator_units = {a.name: a.actuation_unit(model) for a in acts}
         self.inputs_ = inputs
         self.plan_ = plan
         self.residuals_ = (floating_base_residuals(model, motion, plan.tau_full, inputs.external)
@@ -741,12 +960,51 @@ class StaticOptimization(Fitter):
         self.result_ = self._result(prob)
         return self
 
+    def _actuators(self, model) -> tuple:
+        """The model's actuator components and those of ``actuators=`` (a force set file or components)."""
+        own = [c for c in model.components if c.kind == "actuator"]
+        given = self.actuators
+        if given is None:
+            extra = []
+        elif isinstance(given, (str, Path)):
+            extra = list(read_actuators(given, model)[0])
+        else:
+            extra = list(given)
+            for a in extra:
+                if not isinstance(a, IdealActuator):
+                    raise SolverError(f"actuators= takes a force set file or pinmsk.actuators components, not "
+                                      f"{type(a).__name__}")
+                a.check_target(model)
+        names = [a.name for a in own + extra]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            where = " (the model has them already)" if any(n in [a.name for a in own] for n in dup) else ""
+            raise SolverError(f"actuator(s) {dup} appear twice{where}; give each actuator once")
+        return tuple(own + extra)
+
+    def _muscle_bounds(self, model):
+        """The muscles' activation bounds: [0, 1], or with ``convention="opensim"`` their min/max controls."""
+        if self.convention != "opensim":
+            return None
+        cb = muscle_control_bounds(model.meta.get("import_report")) or {}
+        names = model.muscles.names
+        lo = np.array([cb.get(n, (0.0, 1.0))[0] for n in names], dtype=float)
+        hi = np.array([cb.get(n, (0.0, 1.0))[1] for n in names], dtype=float)
+        bad = np.flatnonzero(~(lo <= hi) | (lo < 0))
+        if bad.size:
+            i = int(bad[0])
+            raise ModelError(f"muscle '{names[i]}' has control bounds [{lo[i]:g}, {hi[i]:g}]; static optimization "
+                             "needs 0 <= min_control <= max_control")
+        return lo, hi
+
     def fit_problem(self, prob: SOProblem, progress=None):
         """Solve an already built :class:`SOProblem` (used by benchmarks and FSO)."""
         self._check_params()
         self.plan_ = self.inputs_ = self.residuals_ = None
         t0 = _time.perf_counter()
         self._model_rot = ()
+        self.actuators_ = ()
+        self._actuator_units = {}
         self._solve(prob, progress=progress)
         self.timing_ = {"setup_s": 0.0, "solve_s": _time.perf_counter() - t0,
                         "total_s": _time.perf_counter() - t0}
@@ -774,13 +1032,27 @@ class StaticOptimization(Fitter):
                 "loosen tol, or report the trial and settings")
         self.problem_ = prob
         x = fr.x
+        m = len(prob.muscles)
+        stand_in = getattr(prob, "stand_in", None)
+        if stand_in is not None and np.isfinite(stand_in).any():
+            cols = np.flatnonzero(np.isfinite(stand_in))
+            at = x[:, m + cols] >= 0.999 * stand_in[cols]
+            if at.any():
+                k, j = np.argwhere(at)[0]
+                name = prob.actuators[int(prob.split[cols[j]])]
+                raise SolverError(f"actuator '{name}' (no control bound) reached the solver's stand-in bound "
+                                  f"{stand_in[cols[j]]:.4g} at frame {k} (t = {prob.time[k]:.4g} s): give it "
+                                  "min_control / max_control, or a larger optimal_force")
         F = prob.forces(x) if fr.forces is None else fr.forces
+        u = prob.controls(x)
         reserves = fr.rho * prob.scale
-        moment = prob.moments(F) if fr.moments is None else fr.moments
+        moment = prob.moments(F) + prob.actuator_moments(u) if fr.moments is None else fr.moments
         if W is not None:
             moment = moment + reserves
         self.forces_ = F
-        self.activations_ = x if prob.mode == "activation" else F / prob.f_max
+        self.controls_ = u
+        self.actuator_forces_ = u * (prob.optimal_force if prob.actuators else np.zeros(0))
+        self.activations_ = x[:, :m] if prob.mode == "activation" else F / prob.f_max
         self.reserves_ = reserves if W is not None else None
         self.cost_ = prob.cost(x, bool(self.minmax))
         self.violation_ = np.max(np.abs(moment - prob.tau), axis=1)
@@ -798,14 +1070,17 @@ class StaticOptimization(Fitter):
 
     def _recorded_params(self) -> dict:
         """The parameters written into the result's meta (as strings)."""
-        return {k: str(v) for k, v in self.get_params(deep=False).items() if k not in self._NOT_RECORDED}
+        out = {k: str(v) for k, v in self.get_params(deep=False).items() if k not in self._NOT_RECORDED}
+        if self.actuators is not None and not isinstance(self.actuators, (str, Path)):
+            out["actuators"] = ", ".join(a.label for a in self.actuators) or "none"
+        return out
 
     def _result(self, prob: SOProblem) -> Result:
         """The result: the channels of :meth:`_channels`, the statistics and the report."""
         N, m = self.forces_.shape
         nd = len(prob.dofs)
         stats = FitStatistics(
-            k=N * (m + (nd if self.reserves_ is not None else 0)), converged=True,
+            k=N * (m + len(prob.actuators) + (nd if self.reserves_ is not None else 0)), converged=True,
             message=f"all {N} frames optimal to tol {float(self.tol):g}", iterations=self.n_iter_,
             violation=float(np.max(self.violation_)), objective=float(np.sum(self.cost_)))
         return Result.from_trial(self._channels(prob), stats=stats, report=self._report_text())
@@ -821,6 +1096,10 @@ class StaticOptimization(Fitter):
                 ch[f"{dof}_reserve"] = self.reserves_[:, j]
         plan = getattr(self, "plan_", None)
         units = {f"{n}_force": "N" for n in prob.muscles}
+        for i, name in enumerate(prob.actuators):
+            ch[f"{name}_control"] = self.controls_[:, i]
+            ch[f"{name}_force"] = self.actuator_forces_[:, i]
+            units[f"{name}_force"] = self._actuator_units.get(name, "")
         if self.reserves_ is not None:
             units.update({f"{d}_reserve": "N*m" for d in prob.dofs})
         if plan is not None:
@@ -834,6 +1113,8 @@ class StaticOptimization(Fitter):
         ch["cost"] = self.cost_
         ch["violation"] = self.violation_
         meta = {"analysis": "static_optimization", **self._recorded_params()}
+        if prob.actuators:
+            meta["actuator_names"] = ", ".join(prob.actuators)
         if plan is not None:
             meta.update(self.inputs_.meta())
             meta["balanced_moments"] = plan.source
@@ -848,21 +1129,25 @@ class StaticOptimization(Fitter):
             return f"min/max {what} (Eq. 2.13)"
         p = float(self.exponent)
         ps = f"{p:g}"
+        acts = f" + max(weight) sum_k |u_k|^{ps} (actuator controls)" if getattr(self, "actuators_", ()) else ""
         if self.mode == "force":
             n = {"none": "", "fmax": "/F_max", "pcsa": "/PCSA", "volume": "/V"}[self.weights]
-            return f"sum_i (F_i{n})^{ps} (Eq. 2.11)"
+            if self.convention == "opensim":
+                n = "/F_max"
+            return f"sum_i (F_i{n})^{ps} (Eq. 2.11){acts}"
         s = {"none": "", "fmax": "F_max ", "pcsa": "PCSA ", "volume": "V "}[self.weights]
-        return f"sum_i {s}a_i^{ps} (Eq. 2.14)"
+        return f"sum_i {s}a_i^{ps} (Eq. 2.14){acts}"
 
     def _report_text(self) -> str:
         """Objective, iterations, convergence and constraint violation, in the one report format."""
         prob = self.problem_
         N, m = self.forces_.shape
+        na = len(prob.actuators)
         rows = [
             ("criterion", self.criterion()),
-            ("frames", f"{N} ({prob.time[0]:.4g}-{prob.time[-1]:.4g} s), muscles {m}, "
-                       f"balanced dofs {', '.join(prob.dofs)}"),
-            ("free variables", f"{N * m} ({m} per frame)"),
+            ("frames", f"{N} ({prob.time[0]:.4g}-{prob.time[-1]:.4g} s), muscles {m}"
+                       + (f", actuators {na}" if na else "") + f", balanced dofs {', '.join(prob.dofs)}"),
+            ("free variables", f"{N * (m + na)} ({m + na} per frame)"),
             ("objective", f"sum over frames {np.sum(self.cost_):.6g}, per frame "
                           f"min {np.min(self.cost_):.6g} max {np.max(self.cost_):.6g}"),
             ("solver", f"{self.n_batched_} frames verified in the batched solve, "
@@ -891,6 +1176,18 @@ class StaticOptimization(Fitter):
                     parts.append(f"{d}: {used[:, j].sum()} frames, max {np.max(np.abs(self.reserves_[:, j])):.4g} N m")
             rows.append(("reserves", ("; ".join(parts) if parts else "not used")
                          + (" (N for translational dofs)" if parts else "")))
+        if self.convention == "opensim":
+            rows.append(("muscle model", "OpenSim's StaticOptimization (convention='opensim'): "
+                         + ("F = a F_opt, no passive force" if prob.mode == "activation" else "F = a F_max")
+                         + ", activations within the muscles' min/max controls"))
+        if na:
+            for i, name in enumerate(prob.actuators):
+                u = self.controls_[:, i]
+                k = int(np.argmax(np.abs(u)))
+                unit = self._actuator_units.get(name, "")
+                rows.append(f"  actuator {name:<24} control max |u| {abs(u[k]):9.4g} (t = {prob.time[k]:.4g} s), "
+                            f"force max {abs(self.actuator_forces_[k, i]):9.4g} {unit}, rms "
+                            f"{float(np.sqrt(np.mean(self.actuator_forces_[:, i] ** 2))):.4g} {unit}")
         t = self.timing_
         rows.append(("time", f"{t['total_s'] * 1e3:.1f} ms (setup {t['setup_s'] * 1e3:.1f} ms, "
                              f"solve {t['solve_s'] * 1e3:.1f} ms, {t['solve_s'] / N * 1e6:.1f} us/frame)"))

@@ -1,0 +1,233 @@
+"""The noise floor of a comparison: noise models of the measured channels, propagated through the analysis.
+
+Each measured input gets a :class:`pinmsk.signals.noise.NoiseModel`, fitted to
+the trial's own channel above the movement's band (``band_start = 2 f_99``,
+``f_99`` the frequency below which 99 % of the raw coordinates' power lies):
+
+``coordinates``
+    the raw angles and translations; white, or coloured when the spectrum
+    shows a low-pass (a lab that filtered them);
+``moments``
+    measured ``<coord>_moment`` channels; white only: a single record cannot
+    tell low-passed noise from friction steps, which are signal;
+``ground reaction``
+    force, free-moment and centre-of-pressure channels of the trial; white
+    only, for the same reason (heel strikes, plate on/off);
+``excitation``
+    EMG envelopes / excitations, their own model: multiplicative (the noise
+    scales with the envelope) and coloured by the envelope's low-pass, whose
+    corner is ``trial.meta["emg_lowpass"]`` and design rate
+    ``trial.meta["emg_rate"]`` when known (set by
+    :func:`pinmsk.signals.emg.envelopes`), else fitted.  A low-pass below the
+    second band edge (``sqrt(2) band_start``, 4 Hz for the forearm's trials)
+    cannot be told from the activations' own harmonics and must be given
+    (``trial.with_meta(emg_lowpass=3.0, emg_rate=1000.0)``).
+
+Propagation: ``REALISATIONS`` seeded realisations of each source are added to
+the measured channels and the comparison's residual is recomputed through the
+same path as the measurement -- coordinates through the low-pass, the spline
+derivatives, inverse dynamics (and the muscles' moment arms); GRF through
+:func:`pinmsk.kinematics.prepare` (the same low-pass) and the feet's
+Jacobians; moments directly; excitations through the model's muscle-level
+chain and the muscle moments.  The floor of channel ``c`` is the RMS of the
+change, ``sigma_c^2 = kinematic_c^2 + direct_c^2`` (coordinates vs. the rest).
+Because the propagation runs through the model, the floor is recomputed for
+every model compared (an added payload makes the angle noise count for more;
+an added activation dynamics filters the EMG noise).
+
+A correction keeps the direct sources honest: in each band, the residual's
+power beyond the propagated kinematic noise bounds the direct sources' (an
+EMG envelope's activation harmonics are signal in the input but cancel in the
+residual of a right model).  Where the residual shows less than the direct
+sources predict, by more than twice the band's statistical spread, their
+band powers are scaled down and their models refitted.
+"""
+from __future__ import annotations
+
+from typing import Mapping
+
+import numpy as np
+
+from ..components import Motion
+from ..effects._base import is_prismatic
+from ..kinematics import prepare
+from ..signals.filtering import differentiate
+from ..signals.noise import LOG_VAR, TOP_BAND, band_edges, band_powers, fit_noise, signal_band
+from ..signals.sampling import median_step
+from ..trial import moment_channel, parse_ground_reaction
+from .comparison import NoiseFloor
+
+__all__ = ["REALISATIONS", "fit_sources", "propagated_floor"]
+
+#: Monte-Carlo realisations per source group.
+REALISATIONS = 3
+_SEED = 12345
+
+
+def fit_sources(model, trial, eq, *, mode: str, excitation_kind: str | None, grf_in_trial: bool) -> dict:
+    """``{group: NoiseModel}`` of the trial's measured channels (see the module notes)."""
+    t = np.asarray(trial.time, dtype=float)
+    rate = 1.0 / median_step(t)
+    raw_q = np.column_stack([trial[c] for c in model.coordinates])
+    band_start = float(np.clip(2.0 * signal_band(raw_q, rate), 1.0, TOP_BAND * rate / 4.0))
+    out = {"coordinates": fit_noise(raw_q, rate, band_start, channels=model.coordinates)}
+    if mode in ("torque", "motion"):
+        names = [moment_channel(c) for c in eq.coordinates if moment_channel(c) in trial]
+        if names:
+            out["moments"] = fit_noise(np.column_stack([trial[n] for n in names]), rate, band_start,
+                                       channels=names, coloured=False)
+    if grf_in_trial:
+        names = []
+        for n in trial.names:
+            g = parse_ground_reaction(n)
+            if g is not None and np.all(np.isfinite(trial[n])) and np.ptp(trial[n]) > 0:
+                names.append(n)
+        if names:
+            out["ground reaction"] = fit_noise(np.column_stack([trial[n] for n in names]), rate, band_start,
+                                               channels=names, coloured=False)
+    if mode == "muscle" and excitation_kind is not None:
+        names = [f"{m}_{excitation_kind}" for m in model.muscle_names]
+        corner = trial.meta.get("emg_lowpass")
+        corner = float(corner) if corner and 0 < float(corner) < 0.5 * rate else None
+        made_at = trial.meta.get("emg_rate")
+        made_at = float(made_at) if corner is not None and made_at and float(made_at) > 0 else None
+        out["excitation"] = fit_noise(np.column_stack([trial[n] for n in names]), rate, band_start,
+                                      channels=names, multiplicative=True, corner=corner, design_rate=made_at)
+    return out
+
+
+def _realisations(models, group, n):
+    """Seeded realisations (R, n, k) of one group (its own stream, so groups are independent)."""
+    seed = _SEED + sum(ord(ch) for ch in group)
+    return models[group].sample(np.random.default_rng(seed), n, REALISATIONS)
+
+
+def _kinematic(eq, models, cutoff):
+    t = eq.motion.t
+    xi = _realisations(models, "coordinates", t.size)
+    out = []
+    for r in range(REALISATIONS):
+        dq, dv, da = differentiate(t, xi[r], cutoff=cutoff)
+        m = eq.motion
+        out.append(eq.residual_for(Motion(t, m.q + dq, m.v + dv, m.a + da, m.signals)) - eq.e)
+    return np.array(out)
+
+
+def _direct(eq, models, trial, options, cutoff):
+    """Realisations (R, n, C) of the residual's change by the moment, GRF and excitation noise."""
+    t = eq.motion.t
+    out = np.zeros((REALISATIONS,) + eq.e.shape)
+    if "moments" in models:
+        mm = models["moments"]
+        xi = _realisations(models, "moments", t.size)
+        col = {moment_channel(c): j for j, c in enumerate(eq.coordinates)}
+        for k, name in enumerate(mm.channels):
+            out[:, :, col[name]] += xi[:, eq.rows, k]
+    if "ground reaction" in models:
+        gm = models["ground reaction"]
+        xi = _realisations(models, "ground reaction", t.size)
+        for r in range(REALISATIONS):
+            noisy = trial.with_channels({n: np.asarray(trial[n]) + xi[r, :, k] for k, n in enumerate(gm.channels)})
+            ext = prepare(eq.model, noisy, cutoff=cutoff, frames=options.get("grf_frames"),
+                          grf_cutoff=options.get("grf_cutoff", "same")).external
+            out[r] += eq.residual_for(eq.motion, external=ext) - eq.e
+    if "excitation" in models:
+        xi = _realisations(models, "excitation", t.size)
+        eq.set_excitation_noise(list(xi))
+        for r in range(REALISATIONS):
+            out[r] += eq.excitation_response(xi[r])
+    else:
+        eq.set_excitation_noise(None)
+    return out
+
+
+def _band_correction(eq, rate, edges, kin, direct):
+    """``(J,)`` factors (<= 1) on the direct sources' band powers from the residual's band powers.
+
+    A band is corrected only where the residual's power, allowed two standard
+    deviations of its statistical spread, falls short of the propagated total."""
+    P = band_powers(eq.e, rate, edges).sum(axis=1)
+    K = np.mean([band_powers(x, rate, edges) for x in kin], axis=0).sum(axis=1)
+    D = np.mean([band_powers(x, rate, edges) for x in direct], axis=0).sum(axis=1)
+    n_eff = 2.0 * np.diff(edges) * (eq.rows.size / rate)
+    slack = np.exp(2.0 * np.sqrt(LOG_VAR / n_eff))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where((D > 0) & (P * slack < K + D), (P * slack - K) / D, 1.0)
+    return np.clip(s, 0.01, 1.0)
+
+
+def propagated_floor(eq, trial, *, mode: str, excitation_kind: str | None, cutoff, options: Mapping,
+                     channels, grf_in_trial: bool, fits: dict | None = None) -> NoiseFloor:
+    """The comparison's :class:`~pinmsk.diagnose.comparison.NoiseFloor` (see the module notes).
+
+    ``fits`` reuses the input noise models fitted for another model of the same trial."""
+    model = eq.model
+    fits = fits if fits is not None else fit_sources(model, trial, eq, mode=mode, excitation_kind=excitation_kind,
+                                                     grf_in_trial=grf_in_trial)
+    rate = fits["coordinates"].rate
+    band_start = fits["coordinates"].band_start
+    kin = _kinematic(eq, fits, cutoff)
+    used = dict(fits)
+    direct_groups = [g for g in fits if g != "coordinates"]
+    direct = _direct(eq, fits, trial, options, cutoff)
+    correction = None
+    if direct_groups:
+        edges = band_edges(band_start, rate)
+        s = _band_correction(eq, rate, edges, kin, direct)
+        if np.any(s < 0.999):
+            correction = s
+            for g in direct_groups:
+                old = fits[g]
+                given = old.corner_given
+                used[g] = fit_noise(np.column_stack([trial[n] for n in old.channels]), rate, band_start,
+                                    channels=old.channels, multiplicative=old.kind == "multiplicative",
+                                    corner=float(old.corner[0]) if given else None,
+                                    design_rate=float(old.design_rate[0]) if given else None,
+                                    coloured=g in ("excitation", "coordinates"), band_scale=s[:, None])
+            direct = _direct(eq, used, trial, options, cutoff)
+    kin_rms = np.sqrt(np.mean(kin ** 2, axis=(0, 1)))
+    dir_rms = np.sqrt(np.mean(direct ** 2, axis=(0, 1)))
+    sigma = np.sqrt(kin_rms ** 2 + dir_rms ** 2)
+    sigma = np.where(sigma > 0, sigma, np.finfo(float).tiny)
+    method = _method(model, used, band_start, cutoff, correction)
+    info = {"method": "propagated noise models", "band_start_hz": band_start, "realisations": REALISATIONS,
+            "sources": {g: m.to_dict() for g, m in used.items()},
+            "kinematic": {c: float(v) for c, v in zip(channels, kin_rms)},
+            "direct": {c: float(v) for c, v in zip(channels, dir_rms)}}
+    if correction is not None:
+        edges = band_edges(band_start, rate)
+        info["band_correction"] = [{"band_hz": [float(a), float(b)], "factor": float(f)}
+                                   for a, b, f in zip(edges[:-1], edges[1:], correction)]
+    return NoiseFloor(tuple(channels), sigma, dir_rms, kin_rms, method, models=used, fits=fits, info=info)
+
+
+def _level(model, name, rms):
+    if name in model.coordinates:
+        return f"{name} {rms * 1000:.3g} mm" if is_prismatic(model, name) else f"{name} {np.rad2deg(rms):.3g} deg"
+    return f"{name} {rms:.3g}"
+
+
+def _method(model, models, band_start, cutoff, correction) -> str:
+    parts = []
+    cm = models["coordinates"]
+    parts.append("angle noise (" + cm.describe() + ": " + ", ".join(
+        _level(model, c, s) for c, s in zip(cm.channels, cm.rms())) + f") through the "
+        f"{f'{cutoff:g}-Hz low-pass' if cutoff else 'unfiltered path'}, spline derivatives and inverse dynamics")
+    if "moments" in models:
+        mm = models["moments"]
+        parts.append("moment noise (" + mm.describe() + ": " + ", ".join(
+            f"{c} {s:.3g} N m" for c, s in zip(mm.channels, mm.rms())) + ") directly")
+    if "ground reaction" in models:
+        gm = models["ground reaction"]
+        parts.append(f"ground-reaction noise ({gm.describe()}, {len(gm.channels)} channels) through the same "
+                     "low-pass and the feet")
+    if "excitation" in models:
+        em = models["excitation"]
+        parts.append("EMG/excitation noise (" + em.describe() + ", RMS " + ", ".join(
+            f"{s:.2g}" for s in em.rms()) + ") through the muscle-level chain and the muscle moments")
+    text = (f"noise models fitted to each measured channel above {band_start:.3g} Hz (twice the top of the "
+            "movement's band; robust half-octave band powers, white or Butterworth-coloured spectrum by BIC), "
+            f"propagated by {REALISATIONS} seeded Monte-Carlo realisations: " + "; ".join(parts))
+    if correction is not None:
+        text += (f"; direct noise capped by the residual's band powers (lowest factor {np.min(correction):.2g})")
+    return text

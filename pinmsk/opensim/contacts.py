@@ -1,0 +1,255 @@
+"""The contact import hook of an OpenSim model: :func:`contact_hook`.
+
+Each ``SmoothSphereHalfSpaceForce`` becomes a
+:class:`~pinmsk.contact.SmoothSphereHalfSpaceForce` and each sphere-half-space pair of a
+``HuntCrossleyForce`` a :class:`~pinmsk.contact.HuntCrossleyForce`: Simbody's laws exactly, with
+the force's properties under OpenSim's names (OpenSim's defaults for those the file leaves out).
+
+Geometry.  The ``ContactSphere`` becomes a Pinocchio frame (``OP_FRAME``) on its body, named
+after the sphere (``heel_r``; ``heel_r_sphere`` where a body, joint or marker has that name or a
+second force of the same type uses the sphere), placed where OpenSim places it (the offset frames of its ``socket_frame``, then its
+``location`` and ``orientation``); the component is fixed to that frame with its centre at the
+origin.  The ``ContactHalfSpace`` must be fixed to the ground: its outward normal is ``-x`` of its
+frame and its surface passes through its origin.  The frames are added to the skeleton's
+Pinocchio model (the hook's one side effect; the written URDF holds the skeleton only).
+
+The report gets one entry per component (what became what, the sphere, its body and the half
+space) and names what is not imported: a force on a geometry pinmsk has no law for
+(``ContactMesh``, ``ContactEllipsoid``, ...), a half space on a moving body, a sphere on the
+ground, a HuntCrossleyForce whose sphere and half space have different stiffness (Simbody then
+moves the contact point off the midway plane), an ``ElasticFoundationForce`` (a mesh contact).
+Properties OpenSim does not read (the Moco model's ``derivative_smoothing``, an older name) get a
+note, and are ignored as OpenSim ignores them.
+"""
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pinocchio as pin
+
+from ..contact import HuntCrossleyForce, SmoothSphereHalfSpaceForce
+from ..errors import ModelError
+from ..io.osim import ContactForce, ContactGeometry, OsimDocument
+from .hooks import HookResult
+from .report import EXACT, NOT_IMPORTED, NOTE, ReportEntry
+from .skeleton import Skeleton, _chain, _offset
+
+__all__ = ["contact_hook", "SMOOTH_PROPERTIES", "HUNT_CROSSLEY_PROPERTIES"]
+
+#: The SmoothSphereHalfSpaceForce properties that are the component's parameters (OpenSim's names).
+SMOOTH_PROPERTIES = ("stiffness", "dissipation", "static_friction", "dynamic_friction", "viscous_friction",
+                     "transition_velocity", "constant_contact_force", "hertz_smoothing", "hunt_crossley_smoothing")
+#: A HuntCrossleyForce::ContactParameters' material properties (OpenSim's defaults: 0).
+HUNT_CROSSLEY_PROPERTIES = ("stiffness", "dissipation", "static_friction", "dynamic_friction", "viscous_friction")
+#: Properties that change no force (sockets, display) or are handled apart (appliesForce).
+_NO_FORCE = {"socket_sphere", "socket_half_space", "sphere", "half_space", "force_visualization_radius",
+             "force_visualization_scale_factor", "appliesForce", "isDisabled", "contact_parameters"}
+_LAWS = ("SmoothSphereHalfSpaceForce", "HuntCrossleyForce")
+
+
+def contact_hook(doc: OsimDocument, skeleton: Skeleton) -> HookResult:
+    """``hook(doc, skeleton) -> HookResult``: the model's contact forces as contact components (see
+    the module docstring); adds one frame per imported sphere to ``skeleton.pin_model``."""
+    geometry = {g.name: g for g in doc.contact_geometry}
+    components, entries, handled = [], [], []
+    frames = _Frames(doc, skeleton)
+    for force in doc.contact_forces:
+        handled.append(force.where)
+        if force.type not in _LAWS:
+            entries.append(_not_imported(force, f"{force.type} (a contact between {', '.join(force.geometry)}): "
+                                                "pinmsk has no elastic-foundation (mesh) contact"))
+            continue
+        if force.properties.get("appliesForce") is False or force.properties.get("isDisabled") is True:
+            entries.append(ReportEntry(element=force.where, status=NOTE,
+                                       became="disabled in the .osim (appliesForce false): no force, as in OpenSim"))
+            continue
+        try:
+            made, notes = (_smooth if force.type == "SmoothSphereHalfSpaceForce" else _hunt_crossley)(
+                force, geometry, frames)
+        except _NotImported as why:
+            entries.append(_not_imported(force, str(why)))
+            continue
+        for comp, text in made:
+            components.append(comp)
+            entries.append(ReportEntry(element=force.where, became=text, status=EXACT))
+        for n in notes:             # a note, or (status, text)
+            status, text = n if isinstance(n, tuple) else (NOTE, n)
+            entries.append(ReportEntry(element=force.where, became=text, status=status))
+    for g in doc.contact_geometry:
+        if g.type not in ("ContactSphere", "ContactHalfSpace"):
+            entries.append(ReportEntry(element=g.where, status=NOT_IMPORTED,
+                                       became=f"{g.type}: not imported (pinmsk's contacts are spheres against "
+                                              "half spaces)"))
+    return HookResult(components=tuple(components), entries=tuple(entries), handled=tuple(handled))
+
+
+class _NotImported(Exception):
+    """Why a contact force is not imported (its report entry)."""
+
+
+def _not_imported(force: ContactForce, why: str) -> ReportEntry:
+    return ReportEntry(element=force.where, became=f"not imported: {why}", status=NOT_IMPORTED)
+
+
+def _number(force: ContactForce, props: dict, name: str, default: float, where: str | None = None) -> float:
+    v = props.get(name, default)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+        raise ModelError(f"{where or force.where}: <{name}> must be a finite number, got {v!r}")
+    return float(v)
+
+
+def _unread(force: ContactForce, props: dict, known) -> list[str]:
+    """A note naming the properties OpenSim does not read (it ignores unknown XML elements)."""
+    extra = sorted(k for k in props if k not in known and k not in _NO_FORCE)
+    if not extra:
+        return []
+    text = (f"<{'>, <'.join(extra)}> {'is' if len(extra) == 1 else 'are'} not read by OpenSim's {force.type}: "
+            "ignored, as OpenSim ignores unknown properties")
+    missing = [k for k in known if k not in props]
+    if missing:
+        text += f" (its defaults apply: {', '.join(f'{k} = {_default(force.type, k):g}' for k in missing)})"
+    return [text]
+
+
+def _default(force_type: str, name: str) -> float:
+    cls = SmoothSphereHalfSpaceForce if force_type == "SmoothSphereHalfSpaceForce" else HuntCrossleyForce
+    if force_type == "HuntCrossleyForce" and name in HUNT_CROSSLEY_PROPERTIES:
+        return 0.0                                    # ContactParameters' defaults
+    return next(p.value for p in cls.parameters if p.name == name)
+
+
+def _geometry(force: ContactForce, geometry: dict, name: str) -> ContactGeometry:
+    g = geometry.get(name)
+    if g is None:
+        raise _NotImported(f"its contact geometry '{name}' is not in the ContactGeometrySet")
+    return g
+
+
+def _smooth(force: ContactForce, geometry: dict, frames: "_Frames"):
+    if len(force.geometry) != 2 or not all(force.geometry):
+        raise ModelError(f"{force.where}: names no sphere and half space (<socket_sphere>, <socket_half_space>)")
+    sphere, half = (_geometry(force, geometry, n) for n in force.geometry)
+    for g, want in ((sphere, "ContactSphere"), (half, "ContactHalfSpace")):
+        if g.type != want:
+            raise _NotImported(f"its {'sphere' if want == 'ContactSphere' else 'half space'} '{g.name}' is a "
+                               f"{g.type}, not a {want}")
+    props = force.properties
+    values = {k: _number(force, props, k, _default(force.type, k)) for k in SMOOTH_PROPERTIES}
+    plane = frames.half_space(half)
+    comp, text = frames.component(SmoothSphereHalfSpaceForce, force, sphere, half, plane, values)
+    return [(comp, text)], _unread(force, props, SMOOTH_PROPERTIES)
+
+
+def _hunt_crossley(force: ContactForce, geometry: dict, frames: "_Frames"):
+    material: dict[str, dict] = {}
+    for params in force.properties.get("contact_parameters", ()):
+        values = {k: _number(force, params, k, 0.0, f"{force.where} <ContactParameters>")
+                  for k in HUNT_CROSSLEY_PROPERTIES}
+        for name in str(params.get("geometry", "")).split():
+            if name in material:
+                raise _NotImported(f"geometry '{name}' is listed in two ContactParameters (Simbody makes it two "
+                                   "contact surfaces)")
+            material[name] = values
+    geoms = [_geometry(force, geometry, n) for n in material]
+    spheres = [g for g in geoms if g.type == "ContactSphere"]
+    halves = [g for g in geoms if g.type == "ContactHalfSpace"]
+    others = [g for g in geoms if g not in spheres and g not in halves]
+    if not spheres or not halves:
+        raise _NotImported(f"it has {len(spheres)} sphere(s) and {len(halves)} half space(s); pinmsk's "
+                           "HuntCrossleyForce is a sphere against a half space")
+    for s in spheres:                 # checked before any frame is added
+        for h in halves:
+            ks, kh = material[s.name]["stiffness"], material[h.name]["stiffness"]
+            if ks != kh:
+                raise _NotImported(f"sphere '{s.name}' (stiffness {ks:g}) and half space '{h.name}' ({kh:g}) differ "
+                                   "in stiffness: Simbody then moves the contact point off the midway plane, which "
+                                   "pinmsk's HuntCrossleyForce does not")
+    vt = _number(force, force.properties, "transition_velocity", 0.01)
+    planes = {h.name: frames.half_space(h) for h in halves}
+    made = []
+    for h in halves:
+        for s in spheres:
+            ms, mh = material[s.name], material[h.name]
+            values = {"stiffness": ms["stiffness"], "dissipation": 0.5 * (ms["dissipation"] + mh["dissipation"]),
+                      "transition_velocity": vt}
+            for k in ("static_friction", "dynamic_friction", "viscous_friction"):
+                values[k] = _combined(ms[k], mh[k])
+            made.append(frames.component(HuntCrossleyForce, force, s, h, planes[h.name], values))
+    notes = []
+    meshes = [g for g in others if g.type == "ContactMesh"]
+    if meshes:
+        notes.append(f"{', '.join(repr(g.name) for g in meshes)}: Simbody's HuntCrossleyForce applies forces at "
+                     "point contacts only, so it ignores a ContactMesh's contacts, as pinmsk does")
+    if len(meshes) < len(others):
+        notes.append((NOT_IMPORTED, "not imported: its contacts with "
+                      + ", ".join(f"{g.type} {g.name!r}" for g in others if g not in meshes)
+                      + " (pinmsk's HuntCrossleyForce is a sphere against a half space)"))
+    if len(spheres) > 1:
+        notes.append(f"{len(spheres)} spheres in one force: contacts between them (Simbody's sphere-sphere "
+                     "contacts, only where they overlap) are not modelled; and where one sphere would pull, "
+                     "Simbody skips the pairs after it in its sweep order, while pinmsk gives that sphere no force")
+    if any(material[s.name] != material[h.name] for s in spheres for h in halves):
+        notes.append("sphere and half space have different dissipation or friction: combined as Simbody does "
+                     "(c = (c1 + c2) / 2 at equal stiffness, u = 2 u1 u2 / (u1 + u2))")
+    return made, notes + _unread(force, force.properties, ("transition_velocity",))
+
+
+def _combined(a: float, b: float) -> float:
+    """Simbody's combination of two surfaces' friction coefficients (0 if both are 0)."""
+    return 0.0 if a + b == 0.0 else 2.0 * a * b / (a + b)
+
+
+class _Frames:
+    """The spheres' frames added to the skeleton's Pinocchio model, and the half spaces' planes."""
+
+    def __init__(self, doc: OsimDocument, skeleton: Skeleton):
+        self.doc, self.skeleton, self.pm = doc, skeleton, skeleton.pin_model
+        self.labels: set[str] = set()
+
+    def half_space(self, g: ContactGeometry):
+        body, chain = self.doc.frame_body(g.frame)
+        if body is not self.doc.ground:
+            raise _NotImported(f"its half space '{g.name}' is fixed to body '{body.name}'; pinmsk's half spaces are "
+                               "fixed to the ground")
+        T = _chain(chain) @ _offset(g.location, g.orientation)
+        return tuple(-T[:3, 0]), tuple(T[:3, 3])
+
+    def component(self, cls, force: ContactForce, sphere: ContactGeometry, half: ContactGeometry, plane, values):
+        body, chain = self.doc.frame_body(sphere.frame)
+        if body is self.doc.ground:
+            raise _NotImported(f"its sphere '{sphere.name}' is fixed to the ground; pinmsk's spheres are on bodies")
+        if sphere.radius is None:
+            raise ModelError(f"{sphere.where}: a ContactSphere needs a <radius>")
+        T = _chain(chain) @ _offset(sphere.location, sphere.orientation)
+        name = self._frame(sphere.name, body.name, T, cls.family)
+        normal, point = plane
+        try:
+            comp = cls(name, plane_normal=normal, plane_point=point, radius=sphere.radius, **values)
+        except ModelError as exc:
+            raise ModelError(f"{force.where}: {exc}") from None
+        self.labels.add(comp.label)
+        p = T[:3, 3]
+        text = (f"{comp.label}: sphere '{sphere.name}' (R = {1e3 * sphere.radius:.4g} mm) on body '{body.name}' at "
+                f"({p[0]:.4g}, {p[1]:.4g}, {p[2]:.4g}) m (frame '{name}') against half space '{half.name}' (outward "
+                f"normal ({normal[0]:.3g}, {normal[1]:.3g}, {normal[2]:.3g}) through ({point[0]:.3g}, {point[1]:.3g}, "
+                f"{point[2]:.3g}) m); Simbody's law exactly")
+        return comp, text
+
+    def _frame(self, name: str, body: str, T: np.ndarray, family: str) -> str:
+        """The frame of a sphere (added once; reused by the hook run again on the same skeleton)."""
+        pm = self.pm
+        if not pm.existFrame(body, pin.FrameType.BODY):
+            raise ModelError(f"{self.doc.source}: body '{body}' has no frame in the skeleton")
+        bf = pm.frames[pm.getFrameId(body, pin.FrameType.BODY)]
+        placement = bf.placement * pin.SE3(T)
+        for candidate in itertools.chain((name, f"{name}_sphere"), (f"{name}_sphere_{i}" for i in itertools.count(2))):
+            if f"{family}:{candidate}" not in self.labels:
+                if not pm.existFrame(candidate):
+                    pm.addFrame(pin.Frame(candidate, bf.parentJoint, pm.getFrameId(body, pin.FrameType.BODY),
+                                          placement, pin.FrameType.OP_FRAME))
+                    return candidate
+                f = pm.frames[pm.getFrameId(candidate)]
+                if f.type == pin.FrameType.OP_FRAME and f.parentJoint == bf.parentJoint and \
+                        f.placement.isApprox(placement, 1e-14):
+                    return candidate
