@@ -121,7 +121,8 @@ def rnea(model, q, v, a, *, external: Sequence[ExternalForce] = (),
     for start in range(0, n, PROGRESS_CHUNK):
         for i in range(start, min(start + PROGRESS_CHUNK, n)):
             out[i] = rnea(pm, pd, q[i], v[i], a[i])
-            J[i] = pin.computeJointJacobians(pm, pd, q[i])[:, used]
+            # eigenpy hands a 6 x 1 matrix back as a vector (a one-dof model): keep it 6 x nv
+            J[i] = np.reshape(pin.computeJointJacobians(pm, pd, q[i]), (6, pm.nv))[:, used]
         if progress is not None:
             progress.update(min(PROGRESS_CHUNK, n - start))
     where = {c: k for k, c in enumerate(used)}
