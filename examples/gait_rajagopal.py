@@ -206,8 +206,9 @@ def run(folder: Path, out: Path, *, diagnose: bool = True, plots: bool = True) -
                 "best": None if best is None else best.label,
                 "summary": d.summary_text(),
                 "caveats": [
-                    "The subject (≈ 84 kg by GRF) is heavier than gait2d (65.7 kg): a HAT mass correction is the "
-                    "expected answer; the fitted delta absorbs the whole missing mass (also the legs' and arms').",
+                    "The subject (≈ 84 kg by GRF) is heavier than gait2d (65.7 kg): the model is not scaled to "
+                    "the subject, so the expected answer is the whole-body 'scale' candidate (every segment's "
+                    "mass by one factor), not one segment absorbing the legs' and arms' missing mass.",
                     "The noise floor comes from RRA-smoothed coordinates, so the 'x floor' ratios are "
                     "far larger than they would be on raw IK data; rank the candidates, do not read the ratio.",
                     "Arm swing, lumbar flexion and 3-D pelvis motion are absent from gait2d and also show up "

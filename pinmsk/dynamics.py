@@ -27,6 +27,7 @@ import pinocchio as pin
 
 from . import skeleton
 from .components import Motion
+from .effects.sensor import apply_sensors
 from .errors import ResidualWarning, TrialError
 from .kinematics import (DEFAULT_CUTOFF, TrialInputs, actuated_forces, lowpass_external, prepare,
                          require_independent_joints, source_coordinates)
@@ -241,6 +242,8 @@ def _torque_function(model, moments) -> Callable | None:
         )
     tt = np.asarray(moments.time, dtype=float)
     vals = np.column_stack([moments[cols[i]] for i in present])
+    # a recording through a modelled sensor (gain, offset): the true drive behind the reading
+    vals = apply_sensors(model, [model.coordinates[i] for i in present], vals, inverse=True)
     nv = model.nv
     idx = np.array(present)
 

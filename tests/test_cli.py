@@ -109,7 +109,8 @@ def test_synth_then_diagnose_json(tmp_path, capsys):
     js = tmp_path / "d.json"
     assert main(["diagnose", "forearm", str(src), "--add", "joint_damping", "--json", str(js)]) == 0
     d = json.loads(js.read_text())
-    assert {"inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added", "noise_model"} <= set(d)
+    assert {"inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added", "noise_model", "refit",
+                "pairs", "outside_catalog", "stopping"} <= set(d)
     assert d["inputs"]["lowpass_cutoff_hz"] == 6.0          # what was applied is in the JSON
     assert d["added"][0]["effect"] == "joint_damping"
     assert d["added"][0]["params"]["c"] == pytest.approx(0.3, rel=0.15)

@@ -39,7 +39,7 @@ from pinmsk.contact import (CONTACT_TYPES, HalfSpaceContact, HuntCrossley, HuntC
 from pinmsk.contact.dual import Dual
 from pinmsk.contact.foot import KINDS, SITES, Foot2dGeometry, foot2d_site_kinematics
 from pinmsk.diagnose.catalog import CatalogContext, catalog
-from pinmsk.effects import SignalEffect, families, get
+from pinmsk.effects import MeasurementEffect, SignalEffect, families, get
 from pinmsk.errors import ModelError
 from pinmsk.muscles.muscle_set import MUSCLE_PREFIX, MuscleSet
 from pinmsk.muscles.paths import MomentArmPath
@@ -98,8 +98,10 @@ def _effect_case(family):
         model = _model(name)
         for c in model.components:
             model = model.without(c.label)
-        ctx = CatalogContext("muscle", tuple(model.coordinates), (), ())
-        found = catalog(model, None, families=[family], context=ctx)
+        found = []
+        for mode in ("muscle", "torque"):      # muscle-level effects, then measurement effects of a torque comparison
+            ctx = CatalogContext(mode, tuple(model.coordinates), (), ())
+            found = found or catalog(model, None, families=[family], context=ctx)
         if not found and getattr(cls, "target_kind", "") == "frame":
             found = [cls(model.frame_names[-1])]
         if found:
@@ -291,8 +293,8 @@ def test_generalized_force_shape_and_finite(case):
     # vectorised over frames == frame by frame
     one = np.vstack([comp.generalized_force(model, mo.subset(slice(k, k + 1))) for k in range(5)])
     np.testing.assert_allclose(one, Q[:5], rtol=1e-10, atol=1e-12)
-    if isinstance(comp, SignalEffect):
-        assert np.all(Q == 0.0)          # acts through the muscles only
+    if isinstance(comp, (SignalEffect, MeasurementEffect)):
+        assert np.all(Q == 0.0)          # acts through the muscles, or is the model of a sensor
     else:
         assert np.abs(Q).max() > 0.0     # the motion exercises the component
 
@@ -309,6 +311,12 @@ def _effect_zero(case):
             assert np.abs(comp.transform(mo.t, u) - u).max() > 1e-3      # ... and it does act otherwise
             return
         pytest.skip(f"{comp.family} has no parameter values that switch it off")
+    if isinstance(comp, MeasurementEffect):
+        tau = mo.a[:, 0] * 3.0 + 1.0
+        np.testing.assert_allclose(comp.measure(tau, zero), tau, atol=1e-12)      # a calibrated sensor
+        assert np.abs(comp.measure(tau) - tau).max() > 1e-3                          # ... this one is not
+        np.testing.assert_allclose(comp.unmeasure(comp.measure(tau)), tau, rtol=1e-12, atol=1e-12)
+        return
     if zero is None:
         pytest.skip(f"{comp.family} has no parameter values that switch it off")
     np.testing.assert_allclose(case.force(comp.with_params(zero)), 0.0, atol=1e-12)
@@ -366,6 +374,15 @@ def test_zero_parameters_zero_force(case):
 
 def _effect_param_jacobian(case):
     comp, model, mo = case.comp, case.model, case.motion
+    if isinstance(comp, MeasurementEffect):      # d reading / d theta, of the sensor model
+        tau = mo.a[:, 0] * 3.0 + 1.0
+        J = comp.measure_jacobian(tau)
+        assert J.shape == (mo.n_frames, len(comp.parameters))
+        for k, (name, v) in enumerate(comp.values.items()):
+            h = 1e-6 * max(abs(v), 1.0)
+            fd = (comp.measure(tau, {name: v + h}) - comp.measure(tau, {name: v - h})) / (2 * h)
+            np.testing.assert_allclose(J[:, k], fd, rtol=1e-6, atol=1e-9)
+        return
     if not hasattr(comp, "param_jacobian"):
         pytest.skip(f"{comp.family} has no analytic parameter Jacobian")
     cache = comp.prepare(model, mo)
@@ -544,6 +561,8 @@ def _outputs(case, comp):
     elif isinstance(comp, SignalEffect):
         u = np.column_stack([mo.signals[f"{m}_excitation"] for m in case.model.muscle_names])
         out.append(comp.transform(mo.t, u))
+    elif isinstance(comp, MeasurementEffect):
+        out.append(comp.measure(mo.a[:, 0] * 3.0 + 1.0))
     return out
 
 

@@ -42,7 +42,9 @@ FOREARM_JOINT = [
     ("joint_damping", "elbow_flexion", {"c": 0.3}),
     ("coulomb_friction", "elbow_flexion", {"F_c": 0.5}),
     ("joint_spring", "elbow_flexion", {"k": 2.0, "q0": 1.0}),
-    ("passive_elastic", "elbow_flexion", {"theta_lo": 0.5, "k_lo": 6.0, "theta_hi": 2.1, "k_hi": 6.0}),
+    # from_limits(theta_lo=0.5, k_lo=6, theta_hi=2.1, k_hi=6): rest at 1.3 rad, 20 N m at each end of the range
+    ("passive_elastic", "elbow_flexion", {"amplitude": 2 * float(np.exp(3.0)), "theta_0": 1.3, "k_lo": 6.0,
+                                          "k_hi": 6.0}),
     ("payload", "hand", {"mass": 1.0}),
     ("segment_mass", "forearm_hand", {"delta": 0.2}),
 ]
@@ -124,7 +126,8 @@ def test_two_hidden_effects_in_two_add_steps(tmp_path):
     assert totals[2] <= 1.5 * final.noise_floor["total"]
     assert [c.label for c in final.model.components] == ["payload:hand", "joint_damping:elbow_flexion"]
     data = json.loads((tmp_path / "d.json").read_text())
-    assert {"inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added", "noise_model"} <= set(data)
+    assert {"inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added", "noise_model", "refit",
+                "pairs", "outside_catalog", "stopping"} <= set(data)
     assert data["verdict"] == "at_noise_floor"
     assert [(a["effect"], a["target"]) for a in data["added"]] == [("payload", "hand"),
                                                                   ("joint_damping", "elbow_flexion")]
@@ -141,6 +144,7 @@ def test_json_shape_and_summary():
     r = run(m, trial)
     js = r.to_dict()
     assert list(js)[:7] == ["inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added"]
+    assert list(js)[7:] == ["noise_model", "refit", "pairs", "outside_catalog", "stopping"]
     assert js["noise_model"]["method"] == "propagated noise models"
     assert set(js["noise_model"]["sources"]) == {"coordinates", "moments"}
     assert js["noise_model"]["sources"]["moments"]["channels"]["elbow_flexion_moment"]["corner_hz"] is None
@@ -247,8 +251,8 @@ def test_synth_effect_strings():
     e = synth.effect_from_text("joint_spring:elbow_flexion:k=2,q0=0.5")
     assert e.label == "joint_spring:elbow_flexion" and e.values == {"k": 2.0, "q0": 0.5}
     assert synth.effect_from_text("activation_dynamics").target == "muscles"
-    e = synth.effect_from_text("passive_elastic:elbow_flexion:theta_lo=0.3:k_lo=5")
-    assert e.values["theta_lo"] == 0.3 and e.values["k_lo"] == 5.0
+    e = synth.effect_from_text("passive_elastic:elbow_flexion:theta_0=0.3:k_lo=5")
+    assert e.values["theta_0"] == 0.3 and e.values["k_lo"] == 5.0
     with pytest.raises(pinmsk.ModelError, match="needs a target"):
         synth.effect_from_text("joint_damping")
     with pytest.raises(pinmsk.ModelError, match="NAME=VALUE"):

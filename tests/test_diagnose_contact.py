@@ -63,7 +63,8 @@ def test_bare_foot_misses_a_volumetric_contact(first):
     assert point.rmse_after["ground_force_vy"] > 1.2 * best.rmse_after["ground_force_vy"]
     assert point.fit.bic_change > best.fit.bic_change + 10
     out = first.to_dict()
-    assert {"inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added", "noise_model"} <= set(out)
+    assert {"inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added", "noise_model", "refit",
+                "pairs", "outside_catalog", "stopping"} <= set(out)
     for entry in out["ranking"]:
         assert {"effect", "target", "params", "rmse_after", "explained_fraction", "significant"} <= set(entry)
         assert entry["target"] == "heel,metatarsal,toe"
@@ -125,7 +126,8 @@ def test_cli_diagnose_json(tmp_path, foot, capsys, add):
     text = capsys.readouterr().out
     assert "contact-level comparison" in text
     d = json.loads(out.read_text())
-    assert {"inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added", "noise_model"} <= set(d)
+    assert {"inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added", "noise_model", "refit",
+                "pairs", "outside_catalog", "stopping"} <= set(d)
     assert set(d["rmse"]) == set(CHANNELS) | {"total"}
     # the true model class ranks first before adding (the final ranking is relative to the fitted model),
     # and its stiffnesses and radii are recovered

@@ -48,15 +48,30 @@ def test_joint_effects_closed_forms(forearm):
                                -1.5 * np.tanh(v / 0.01))
     np.testing.assert_allclose(JointSpring("elbow_flexion", k=3.0, q0=0.4).generalized_force(forearm, mo)[:, 0],
                                -3.0 * (q - 0.4))
-    pe = PassiveElastic("elbow_flexion", theta_lo=0.3, k_lo=8.0, theta_hi=2.2, k_hi=12.0)
+    pe = PassiveElastic("elbow_flexion", amplitude=2.0, theta_0=1.4, k_lo=8.0, k_hi=12.0)
+    z = np.exp(8.0 * (1.4 - 0.0)) + np.exp(12.0 * (2.6 - 1.4))          # the branches at the range ends
     np.testing.assert_allclose(pe.generalized_force(forearm, mo)[:, 0],
-                               np.exp(-8.0 * (q - 0.3)) - np.exp(12.0 * (q - 2.2)))
-    # 1 N m at theta_lo from the lower branch; restoring everywhere
-    at = Motion(np.zeros(1), np.array([[0.3]]), np.zeros((1, 1)), np.zeros((1, 1)))
-    lower = PassiveElastic("elbow_flexion", theta_lo=0.3, k_lo=8.0, theta_hi=6.0, k_hi=1.0)
-    assert lower.generalized_force(forearm, at)[0, 0] == pytest.approx(1.0 - np.exp(0.3 - 6.0), abs=1e-12)
+                               2.0 * (np.exp(-8.0 * (q - 1.4)) - np.exp(12.0 * (q - 1.4))) / z, rtol=1e-12)
+    # at the ends of the range (0, 2.6 rad) the moments add up to the amplitude, within the other branch's share
+    ends = Motion(np.zeros(2), np.array([[0.0], [2.6]]), np.zeros((2, 1)), np.zeros((2, 1)))
+    Q = pe.generalized_force(forearm, ends)[:, 0]
+    assert Q[0] > 0 > Q[1] and Q[0] - Q[1] == pytest.approx(2.0, rel=1e-3)
+    # the published form (1 N m at theta_lo from the lower branch, at theta_hi from the upper one) maps exactly
+    pub = PassiveElastic.from_limits("elbow_flexion", forearm, theta_lo=0.3, k_lo=8.0, theta_hi=2.2, k_hi=12.0)
+    np.testing.assert_allclose(pub.generalized_force(forearm, mo)[:, 0],
+                               np.exp(-8.0 * (q - 0.3)) - np.exp(12.0 * (q - 2.2)), rtol=1e-12)
+    assert pub.values["theta_0"] == pytest.approx((8.0 * 0.3 + 12.0 * 2.2) / 20.0)
+    # zero moment at the rest angle, restoring everywhere
+    at = Motion(np.zeros(1), np.array([[1.4]]), np.zeros((1, 1)), np.zeros((1, 1)))
+    assert pe.generalized_force(forearm, at)[0, 0] == 0.0
     dq, _ = pe.state_derivatives(forearm, mo)
     assert np.all(dq[:, 0, 0] < 0)
+    # no member of the family is a constant: the stiffening rates are at least 1/rad, and the diagnosis
+    # bounds the rest angle (and the spring's) to the joint's range
+    assert PassiveElastic.parameters[2].min == PassiveElastic.parameters[3].min == 1.0
+    for eff, name in ((PassiveElastic("elbow_flexion"), "theta_0"), (JointSpring("elbow_flexion"), "q0")):
+        p = eff.for_model(forearm).params[name]
+        assert (p.min, p.max) == (0.0, 2.6)
 
 
 def test_friction_smoothing_is_fixed_and_small():
@@ -216,7 +231,10 @@ def test_catalog_per_model(forearm, gait2d):
     labels = {c.label for c in catalog(forearm, tr)}
     assert labels == {"joint_damping:elbow_flexion", "coulomb_friction:elbow_flexion",
                       "joint_spring:elbow_flexion", "passive_elastic:elbow_flexion", "payload:hand",
-                      "segment_mass:forearm_hand"}
+                      "segment_mass:forearm_hand", "sensor_offset:elbow_flexion", "sensor_gain:elbow_flexion"}
+    # ... each with its rest angle within the joint's range (0-2.6 rad)
+    spring = next(c for c in catalog(forearm, tr) if c.family == "joint_spring")
+    assert (spring.params["q0"].min, spring.params["q0"].max) == (0.0, 2.6)
     # with excitations only: muscle-level comparison, muscle effects join
     ex = pinmsk.Trial(t, {"elbow_flexion": 0.5 + 0 * t,
                           **{f"{m}_excitation": 0.1 + 0 * t for m in forearm.muscle_names}})
@@ -234,6 +252,8 @@ def test_catalog_per_model(forearm, gait2d):
         g.update({f"{s}_ground_force_p{a}": 0 * t for a in "xyz"})
     labels = {c.label for c in catalog(gait2d, pinmsk.Trial(t, g))}
     assert "segment_mass:hat" in labels and not any(x.startswith("joint_damping") for x in labels)
+    # a whole-body mass scale besides the segments; no sensor on the torso rows (no recorded moment)
+    assert "scale" in labels and not any(x.startswith("sensor_") for x in labels)
     assert not any(x.startswith("riener_edrich") for x in labels)      # already in the model
 
 

@@ -7,7 +7,6 @@ without it or without the shared models).
 """
 import math
 import pickle
-import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
@@ -15,6 +14,7 @@ import pytest
 import pinmsk.opensim.functions as osf
 import pinmsk.opensim.paths as op
 from pinmsk.errors import ModelError
+from pinmsk.io.osim import parse_osim, read_osim
 from pinmsk.io.shared_data import shared_data_dir
 from pinmsk.muscles.paths import MomentArmPath, PolynomialPath
 
@@ -187,8 +187,9 @@ _OSIM = """<OpenSimDocument Version="40000"><Model name="t">
 <Ground name="ground"><WrapObjectSet><objects>
   <WrapCylinder name="cyl"><translation>0 0 0</translation><radius>0.02</radius><length>0.1</length>
   <quadrant>-x</quadrant></WrapCylinder></objects></WrapObjectSet></Ground>
-<BodySet><objects><Body name="arm"/></objects></BodySet>
-<JointSet><objects><PinJoint name="j"><coordinates><Coordinate name="theta"><range>-1 2</range></Coordinate>
+<BodySet><objects><Body name="arm"><mass>1</mass></Body></objects></BodySet>
+<JointSet><objects><PinJoint name="j"><socket_parent_frame>/ground</socket_parent_frame>
+<socket_child_frame>/bodyset/arm</socket_child_frame><coordinates><Coordinate name="theta"><range>-1 2</range></Coordinate>
 </coordinates></PinJoint></objects></JointSet>
 <ForceSet><objects><Thelen2003Muscle name="mus"><GeometryPath><PathPointSet><objects>
   <PathPoint name="p1"><socket_parent_frame>/ground</socket_parent_frame><location>0.2 0 0</location></PathPoint>
@@ -203,36 +204,59 @@ _OSIM = """<OpenSimDocument Version="40000"><Model name="t">
 
 
 def test_reader_builds_specs():
-    root = ET.fromstring(_OSIM.format(wrap="cyl"))
-    (spec,) = op.path_specs_from_xml(root)
+    doc = parse_osim(_OSIM.format(wrap="cyl"), source="t.osim")
+    (spec,) = op.path_specs(doc)
     assert spec.muscle == "mus" and spec.bodies == ("ground", "arm") and spec.coordinates == ("theta",)
     moving = spec.points[1]
     assert moving.coordinates == ("theta", None, None) and moving.clamp[0] == (-1.0, 2.0)
     assert moving.locations([np.array([0.0]), None, None]).tolist() == [[-0.21, 0.01, 0.0]]
     (pw,) = spec.wraps
     assert pw.wrap.kind == "cylinder" and pw.wrap.quadrant == "-x" and pw.wrap.wrap_axis_sign == (0, -1)
-    assert op.coordinate_ranges_from_xml(root) == {"theta": (-1.0, 2.0)}
+    assert moving.x(np.array([0.5])).tolist() == osf.SimmSpline([-1, 0, 1, 2], [-0.2, -0.21, -0.2, -0.19])(
+        np.array([0.5])).tolist()
 
 
 def test_reader_names_bad_elements():
-    with pytest.raises(ModelError, match="no wrap object 'cly'.*did you mean 'cyl'"):
-        op.path_specs_from_xml(ET.fromstring(_OSIM.format(wrap="cly")))
+    def specs(text):
+        return op.path_specs(parse_osim(text, source="t.osim"))
+
+    with pytest.raises(ModelError, match=r"t.osim:\d+: <PathWrap name=\"pw\"> of muscle 'mus': no wrap object "
+                                         "'cly'.*did you mean 'cyl'"):
+        specs(_OSIM.format(wrap="cly"))
     bad = _OSIM.format(wrap="cyl").replace("<SimmSpline><x>-1 0 1 2</x><y>-0.2 -0.21 -0.2 -0.19</y></SimmSpline>",
                                            "<StepFunction/>")
-    with pytest.raises(ModelError, match="StepFunction.*not supported"):
-        op.path_specs_from_xml(ET.fromstring(bad))
+    with pytest.raises(ModelError, match=r"t.osim:\d+: <StepFunction.*StepFunction is not supported"):
+        specs(bad)
     bad = _OSIM.format(wrap="cyl").replace('<WrapCylinder name="cyl">', '<WrapCone name="cone">').replace(
         "</WrapCylinder>", "</WrapCone>")
-    with pytest.raises(ModelError, match="unsupported wrap object type 'WrapCone'"):
-        op.path_specs_from_xml(ET.fromstring(bad))
+    with pytest.raises(ModelError, match=r"t.osim:3: <WrapCone name=\"cone\">: unknown wrap object type"):
+        specs(bad)
+    bad = _OSIM.format(wrap="cyl").replace('WrapCylinder', 'WrapCylinderObst')
+    with pytest.raises(ModelError, match=r"t.osim:3: <WrapCylinderObst name=\"cyl\">: unsupported wrap object "
+                                         "type 'WrapCylinderObst'"):
+        specs(bad)
+    bad = _OSIM.format(wrap="cyl").replace("<radius>0.02</radius>", "")
+    with pytest.raises(ModelError, match=r"t.osim:3: <WrapCylinder name=\"cyl\">: has no <radius>"):
+        specs(bad)
+    bad = _OSIM.format(wrap="cyl").replace("<quadrant>-x</quadrant>", "<quadrant>up</quadrant>")
+    with pytest.raises(ModelError, match=r"t.osim:3: <WrapCylinder name=\"cyl\">: .*quadrant 'up'"):
+        specs(bad)
     empty = _OSIM.format(wrap="cyl").split("<PathPointSet>")[0] + "<PathPointSet><objects/></PathPointSet>" \
         "</GeometryPath></Thelen2003Muscle></objects></ForceSet></Model></OpenSimDocument>"
-    with pytest.raises(ModelError, match="Thelen2003Muscle name='mus'.*no path points"):
-        op.path_specs_from_xml(ET.fromstring(empty))
+    with pytest.raises(ModelError, match=r"t.osim:\d+: <Thelen2003Muscle name=\"mus\">: the muscle has no path points"):
+        specs(empty)
+    one = _OSIM.format(wrap="cyl").replace("<PathPoint name=\"p1\">", "<!--").replace("</PathPoint>", "-->")
+    with pytest.raises(ModelError, match=r"t.osim:\d+: <Thelen2003Muscle name=\"mus\">: .*at least 2 points"):
+        specs(one)
+    cond = _OSIM.format(wrap="cyl").replace('<PathPoint name="p1">', '<ConditionalPathPoint name="p1">').replace(
+        "</PathPoint>", "<socket_coordinate>/jointset/j/theta</socket_coordinate><range>1 0</range>"
+                        "</ConditionalPathPoint>")
+    with pytest.raises(ModelError, match=r"t.osim:\d+: <ConditionalPathPoint name=\"p1\">: .*min > max"):
+        specs(cond)
 
 
 def test_evaluator_names_missing_coordinates_and_bad_shapes():
-    (spec,) = op.path_specs_from_xml(ET.fromstring(_OSIM.format(wrap="cyl")))
+    (spec,) = op.path_specs(parse_osim(_OSIM.format(wrap="cyl")))
     with pytest.raises(ModelError, match="coordinate 'theta'.*did you mean 'thetaa'"):
         op.GeometricPaths([spec], coordinates=("thetaa",), placements=placements)
     gp = op.GeometricPaths([spec], coordinates=("theta", "x"), placements=placements)
@@ -328,7 +352,7 @@ def _poses(ref, n, seed=0):
 def _compare(relative, n=30):
     path = _model(relative)
     ref = OsimReference(path)
-    specs = op.path_specs_from_xml(ET.parse(path).getroot())
+    specs = op.path_specs(read_osim(path))
     gp = op.GeometricPaths(specs, coordinates=ref.independent, placements=ref.placements)
     q = _poses(ref, n)
     L, A = gp.lengths_and_moment_arms(q)
@@ -398,7 +422,7 @@ def _synthetic(kind, quadrant, second=None):
         b2.addWrapObject(w2)
         mus.updGeometryPath().addPathWrap(w2)
     m.finalizeConnections()
-    return m, ET.fromstring(m.dump() if hasattr(m, "dump") else _xml_of(m))
+    return m, parse_osim(m.dump() if hasattr(m, "dump") else _xml_of(m))
 
 
 def _xml_of(model):
@@ -414,9 +438,9 @@ def _xml_of(model):
                                                    ("cylinder", "-x", None), ("ellipsoid", "+y", None),
                                                    ("sphere", "all", "cylinder"), ("ellipsoid", "all", "sphere")])
 def test_synthetic_wraps_match_opensim(kind, quadrant, second):
-    model, root = _synthetic(kind, quadrant, second)
+    model, doc = _synthetic(kind, quadrant, second)
     ref = OsimReference(model)
-    gp = op.GeometricPaths(op.path_specs_from_xml(root), coordinates=ref.independent, placements=ref.placements)
+    gp = op.GeometricPaths(op.path_specs(doc), coordinates=ref.independent, placements=ref.placements)
     rng = np.random.default_rng(1)
     q = np.column_stack([rng.uniform(-1.5, 1.5, 60), rng.uniform(-2, 2, 60)])
     L, A = gp.lengths_and_moment_arms(q)
@@ -447,7 +471,7 @@ def _motion(ref, relative):
 def _fit(model, motion, coordinates, n_train):
     path = _model(model)
     ref = OsimReference(path)
-    gp = op.GeometricPaths(op.path_specs_from_xml(ET.parse(path).getroot()), coordinates=ref.independent,
+    gp = op.GeometricPaths(op.path_specs(read_osim(path)), coordinates=ref.independent,
                            placements=ref.placements)
     ranges = op.motion_ranges(_motion(ref, motion), ref.independent, limits=ref.ranges())
     return op.fit_polynomial_paths(gp, ranges=ranges, coordinates=coordinates, n_train=n_train, n_test=200)

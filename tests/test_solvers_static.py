@@ -262,3 +262,14 @@ def test_build_problem_scaling(forearm, motion):
     prob = build_problem(forearm, motion)
     assert np.max(np.sum(np.abs(prob.A), axis=2)) <= 1.0 + 1e-12
     np.testing.assert_allclose(prob.scale[0], np.sum(np.abs(prob.R[0, :, 0]) * forearm.muscles.f_max))
+
+
+def test_so_says_the_models_activation_dynamics_do_not_change_its_frames(forearm, motion):
+    # an effect in the model is used or named, never silently ignored (issue 15): SO's activations are
+    # per frame, so activation dynamics leave them unchanged, and the report says so
+    from pinmsk.effects import ActivationDynamics
+    plain = StaticOptimization().fit(forearm, motion)
+    withad = StaticOptimization().fit(forearm + ActivationDynamics("muscles"), motion)
+    assert np.array_equal(plain.forces_, withad.forces_)
+    assert "activation_dynamics:muscles act between excitation and activation" in withad.report()
+    assert "act between excitation" not in plain.report()

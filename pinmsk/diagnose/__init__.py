@@ -17,17 +17,19 @@ and as the CLI does it: ``dx.run(model, trial, add=["payload:hand"])``, whose re
 :func:`pinmsk.presentation.report.save_diagnosis` writes as JSON, report and figures.  Modules: :mod:`.compare` (residuals, modes,
 noise floor), :mod:`.contact` (the contact mode: a driven foot's GRF, the contact
 models as candidates, BIC), :mod:`.fit` (:class:`EffectFit`, the one way to fit an
-effect, and cross-validation), :mod:`.diagnosis`
-(ranking, verdict, the loop), :mod:`.synth` (hidden-effect trials).
+effect, :class:`~.fit.JointProblem` for several at once, and cross-validation),
+:mod:`.scoring` (joint refits, the held-out test, identifiability, pairs, what an
+unexplained residual follows), :mod:`.diagnosis` (ranking, verdict, the loop),
+:mod:`.synth` (hidden-effect trials).
 """
 from . import synth
 from .compare import DEFAULT_CUTOFF, Comparison, NoiseFloor, compare, external_forces_from_trial
-from .diagnosis import AT_FLOOR, THRESHOLD, Diagnosis, DiagnosisRun, EffectScore, diagnose, parse_effect, run
+from .diagnosis import ALPHA, AT_FLOOR, THRESHOLD, Diagnosis, DiagnosisRun, EffectScore, diagnose, parse_effect, run
 from .fit import EffectFit
 from .synth import make_trial
 
 __all__ = [
-    "AT_FLOOR", "Comparison", "DEFAULT_CUTOFF", "Diagnosis", "DiagnosisRun", "EffectFit", "EffectScore",
+    "ALPHA", "AT_FLOOR", "Comparison", "DEFAULT_CUTOFF", "Diagnosis", "DiagnosisRun", "EffectFit", "EffectScore",
     "NoiseFloor", "THRESHOLD", "compare", "diagnose", "external_forces_from_trial",
     "make_trial", "parse_effect", "run", "synth",
 ]

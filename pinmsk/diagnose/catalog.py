@@ -16,13 +16,19 @@ gets candidates by its ``target_kind``:
 A user family may override its rule with a classmethod ``candidates(model, context)``.
 
 Rules of the built-in families: joint effects (damping, friction, spring,
-passive elastic) on compared, actuated coordinates; ``payload`` on hand-like
-frames (a frame named hand, palm, fingertip, tool, ...) or the frames the user
-names; ``segment_mass`` on every body with mass; ``riener_edrich_1999`` on
+passive elastic) on compared, actuated coordinates; the measurement effects
+``sensor_offset`` (torque and motion level) and ``sensor_gain`` (torque level)
+on the compared, actuated coordinates whose recorded ``<coord>_moment`` the
+comparison uses; ``payload`` on hand-like frames (a frame named hand, palm,
+fingertip, tool, ...) or the frames the user names; ``segment_mass`` on every
+body with mass; ``scale`` (every segment's mass at once: the model not scaled
+to the subject) on models of two bodies or more; ``riener_edrich_1999`` on
 legs with hip, knee and ankle coordinates; ``activation_dynamics`` and
 ``electromechanical_delay`` only when the trial has excitation or EMG
 channels and the model has muscles.  Effects the model already has (same
-label) are left out.
+label) are left out.  Each candidate comes with its model-dependent bounds
+(``for_model``: the rest angles of ``joint_spring`` and ``passive_elastic``
+within the joint's range of motion), so that it stays identifiable.
 """
 from __future__ import annotations
 
@@ -75,7 +81,8 @@ def catalog(model, trial=None, *, frames=None, mode: str = "auto", families=None
                 c.check_target(model)
             except ModelError:
                 continue
-            out.append(c)
+            hook = getattr(c, "for_model", None)
+            out.append(hook(model) if hook is not None else c)
     return out
 
 

@@ -68,6 +68,7 @@ import numpy as np
 from ..components import Motion
 from ..dynamics import inverse_dynamics_array, simulate
 from ..effects._base import SignalEffect, unactuated_coordinates
+from ..effects.sensor import apply_sensors, sensors_of
 from ..errors import ModelError, TrialError
 from ..grf import external_forces
 from ..kinematics import DEFAULT_CUTOFF, TrialInputs, cutoff_value, prepare, require_independent_joints
@@ -259,7 +260,10 @@ class EquationError:
         self._ext_rows = _subset_external(self.external, rows)
         self.data = model.create_data()           # the candidates' kinematics, shared (one thread)
         tau_id = inverse_dynamics_array(model, self.motion_rows, external=self._ext_rows, data=self.data)
-        self.tau_id = tau_id[:, self.columns]
+        # the actuators' generalized forces, and (torque level) what the model's sensors read of them
+        self.tau_act = tau_id[:, self.columns]
+        self.sensors = sensors_of(model) if self.mode == "torque" else []
+        self.tau_id = apply_sensors(model, self.coordinates, self.tau_act) if self.sensors else self.tau_act
         if self.mode == "muscle":
             self.chain = sorted([c for c in model.effects if isinstance(c, SignalEffect)],
                                 key=lambda c: c.order)
@@ -272,6 +276,15 @@ class EquationError:
         else:
             self.actuation = measured_tau[rows][:, self.columns]
         self.e = self.actuation - self.tau_id
+
+    def sensor_input(self, component) -> np.ndarray:
+        """What the measurement effect ``component`` reads on its channel (n_rows,): the actuator's
+        generalized force through the model's sensors that come before it (not itself)."""
+        x = self.tau_act[:, self.coordinates.index(component.target)].copy()
+        for s in self.sensors:
+            if s.target == component.target and s.label != component.label and s.order < component.order:
+                x = s.measure(x)
+        return x
 
     # -- muscle level ----
     def _apply_chain(self, chain, u):
@@ -287,15 +300,23 @@ class EquationError:
         return np.einsum("...nm,nmc->...nc", force, self.moment_arms)
 
     def signal_delta(self, component: SignalEffect, params_batch: Mapping[str, np.ndarray]) -> np.ndarray:
-        """Change of ``e`` (P, n_rows, C) when ``component`` joins the model's muscle-level chain."""
+        """Change of ``e`` (P, n_rows, C) when ``component`` joins the model's muscle-level chain
+        (or replaces the entry of the same label)."""
+        return self.chain_delta([(component, params_batch)])
+
+    def chain_delta(self, changes) -> np.ndarray:
+        """Change of ``e`` (P, n_rows, C) when each ``(component, params_batch)`` of ``changes`` joins the
+        muscle-level chain or replaces its entry of the same label (a joint fit of several)."""
         t = self.motion.t
-        before = [c for c in self.chain if c.order <= component.order]
-        after = [c for c in self.chain if c.order > component.order]
-        u = self._apply_chain(before, self.excitation)
-        a = component.transform_batch(t, u, params_batch, component.muscle_mask(self.model))
-        for c in after:                       # the rest of the chain, all parameter sets in one pass
-            fixed = {k: np.full(a.shape[0], v) for k, v in c.values.items()}
-            a = c.transform_batch(t, a, fixed, c.muscle_mask(self.model))
+        labels = {c.label for c, _ in changes}
+        entries = [(c, None) for c in self.chain if c.label not in labels] + list(changes)
+        entries.sort(key=lambda x: x[0].order)           # stable: the model's own entries first on ties
+        first = next(i for i, (_, b) in enumerate(entries) if b is not None)
+        a = self._apply_chain([c for c, _ in entries[:first]], self.excitation)
+        P = max(np.size(next(iter(b.values()))) if b else 1 for _, b in changes)
+        for c, b in entries[first:]:          # the rest of the chain, all parameter sets in one pass
+            batch = b if b is not None else {k: np.full(P, v) for k, v in c.values.items()}
+            a = c.transform_batch(t, a, batch, c.muscle_mask(self.model))
         dtau = np.einsum("pnm,nmc->pnc", (a - self.activation[None]) * self.f_active[None],
                          self.moment_arms)
         return dtau[:, self.rows]
@@ -323,7 +344,8 @@ class EquationError:
         """
         if self.mode != "muscle" or not getattr(self, "_u_noise", None):
             return np.zeros(self.columns.size)
-        chain = self.chain if extra is None else sorted(self.chain + [extra], key=lambda c: c.order)
+        chain = self.chain if extra is None else sorted(
+            [c for c in self.chain if c.label != extra.label] + [extra], key=lambda c: c.order)
         base = self._apply_chain(chain, self.excitation) if extra is not None else self.activation
         acc = np.zeros(self.columns.size)
         for xi in self._u_noise:
@@ -343,6 +365,8 @@ class EquationError:
             R = self.model.muscles.moment_arms(motion.q)[:, :, self.columns]
             act = np.einsum("nm,nmc->nc", self.activation * fa + fp, R)[self.rows]
             return act - tau_id
+        if self.sensors:
+            tau_id = apply_sensors(self.model, self.coordinates, tau_id)
         return self.actuation - tau_id
 
 

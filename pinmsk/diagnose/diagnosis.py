@@ -4,29 +4,49 @@
 failure (per-channel RMSE against the noise floor, the worst time windows,
 the states the residual follows) and ranks every applicable effect of the
 catalog (:func:`pinmsk.diagnose.catalog`) by how much of the residual it
-explains *out of sample*:
+explains *out of sample* (:mod:`.scoring`):
 
 * each candidate is fitted on all frames (its reported parameters and
   uncertainties) and, for scoring, by blocked cross-validation (``folds``
-  contiguous time blocks, each predicted by the fit on the others, see
-  :mod:`.fit`), so a flexible effect cannot win by fitting noise;
-* ``explained_fraction = 1 - MSE_heldout_after / MSE_before`` (noise-whitened
-  mean squares over channels and frames);
-* ``significant`` when the held-out improvement ``MSE_before - MSE_heldout_after``
-  exceeds ``threshold`` (default 0.1) in units of the noise variance -- the
-  effect explains at least ~30 % of the noise floor's RMS on data it was not
-  fitted to -- and the in-sample BIC falls;
-* ranked by held-out error, best first.
+  contiguous time blocks -- whole cycles when the motion is cyclic -- each
+  predicted by the fit on the others, see :mod:`.fit`), so a flexible effect
+  cannot win by fitting noise;
+* the effects added at earlier steps (``refit=``; :func:`run` passes those it
+  added) are refitted *jointly* with each candidate, warm-started from their
+  values (lmfit's composite model), on all frames and in every fold: a first
+  effect that absorbed part of a correlated second one gives it back, and each
+  entry reports how the earlier parameters move (``refit``), with their
+  correlations from the joint covariance;
+* ``explained_fraction = improvement / MSE_before`` with ``improvement`` the
+  held-out fall of the noise-whitened mean square (per channel and frame)
+  against the earlier effects alone, cross-validated alike;
+* ``significant`` when the held-out test (:func:`~.ranking.held_out_test`,
+  Diebold-Mariano with an autocorrelation-robust variance) exceeds the
+  Bonferroni critical value ``z`` of level ``alpha`` over the candidates, the
+  in-sample BIC of the joint fit falls, the fit converged, and the candidate is
+  *identifiable* (:func:`~.scoring.identifiability`: no parameter at a bound,
+  a full-rank, well-conditioned sensitivity matrix, 95 % profile-likelihood
+  intervals that close inside the bounds).  A non-identifiable candidate is
+  shown, flagged, and never suggested;
+* ranked by held-out improvement, best first (within 0.05 noise variances,
+  fewer parameters first).
 
-Verdict: ``"at_noise_floor"`` when the error is within ``at_floor`` (1.5) times
-the noise floor -- both over all channels (RMS of ``rmse_c / floor_c``) and on
-every single channel -- else ``"missing_effect"``.  When no catalog effect is
-significant the verdict stays ``missing_effect`` (the error *is* above the
-floor) and the summary says the gap lies outside the catalog.
+Stopping rule and verdict.  ``"missing_effect"`` while a candidate (or a pair,
+:meth:`~.scoring.Scorer.pairs`, tried when the best single one leaves a residual
+the noise does not explain) is significant: it is suggested however close to
+the floor the error already is.  Otherwise ``"at_noise_floor"`` when the
+held-out residual is consistent with the noise model
+(:func:`~.scoring.consistent_with_noise`: each channel's and the total
+RMS / floor within ``at_floor`` times the chi-square spread of its effectively
+independent frames; ``at_floor`` allows for the uncertainty of the floor's
+estimate) and every effect in the model is identifiable; else
+``"missing_effect"`` with the residual *outside the catalog*: ``outside_catalog``
+says what it follows (states, time, dominant frequency, phase of the movement;
+:func:`~.scoring.residual_character`).
 
 :func:`run` is the command-line loop: diagnose, then for each ``add`` entry fit
-that effect on all frames, add it to the model (``model.with_effect``) and
-diagnose again.
+that effect jointly with the ones added before (their values move), put them
+all in the model and diagnose again.
 """
 from __future__ import annotations
 
@@ -44,18 +64,25 @@ from ..io.output_files import write_json
 from ..signals.sampling import median_step
 from .catalog import CatalogContext
 from .catalog import catalog as effect_catalog
-from .compare import DEFAULT_CUTOFF, Comparison, compare, simulate_windows
+from .compare import DEFAULT_CUTOFF, Comparison, compare
 from .contact import DELTA_BIC, contact_window, model_with_contacts, rank_contacts, resolve
-from .fit import EffectFit, describe_fit
-from .ranking import EffectScore, finite_or_none, windows_of
+from .fit import EffectFit, JointProblem, describe_fit
+from .ranking import EffectScore, _json, finite_or_none, held_out_test, windows_of
+from .scoring import (ALIAS_CORRELATION, Scorer, consistent_with_noise, critical_z, cycle_edges,
+                      describe_character, model_with_components, residual_character)
 
 __all__ = ["Diagnosis", "DiagnosisRun", "EffectScore", "diagnose", "run", "parse_effect", "describe_fit",
-           "AT_FLOOR", "THRESHOLD"]
+           "AT_FLOOR", "THRESHOLD", "ALPHA"]
 
-#: held-out mean-square improvement (in noise variances) that makes an effect significant
-THRESHOLD = 0.1
-#: error / noise floor at or below which the verdict is at_noise_floor
-AT_FLOOR = 1.5
+#: least held-out improvement (noise variances per channel and frame) a significant effect must make on
+#: top of the test: none -- the test decides, so an effect below the floor is found when it is real
+THRESHOLD = 0.0
+#: family-wise level of the held-out test over the candidates (Bonferroni)
+ALPHA = 0.01
+#: allowance for the noise floor's own estimation error when judging a residual consistent with it
+AT_FLOOR = 1.25
+#: at_noise_floor limit of the contact mode (ratio to the floor; its candidates are scored by BIC)
+CONTACT_AT_FLOOR = 1.5
 _MIN_BLOCK = 20
 
 
@@ -66,11 +93,14 @@ class Diagnosis:
     ``rmse`` and ``noise_floor`` (channel -> value, plus ``total``),
     ``worst_windows``, ``correlations`` (channel -> [(state, r)]),
     ``ranking`` (list of :class:`EffectScore`, best first), ``verdict``,
-    ``best`` (the best significant effect or None).
+    ``best`` (the best significant effect or None), ``pairs`` (pairs fitted
+    jointly), ``refit`` (the earlier effects as refitted here),
+    ``outside_catalog`` (what an unexplained residual follows, or None),
+    ``stopping`` (the test and the noise-consistency check behind the verdict).
     """
 
     def __init__(self, comparison: Comparison, ranking: list, worst_windows: list, correlations: dict,
-                 settings: dict, skipped: list):
+                 settings: dict, skipped: list, *, scorer: Scorer | None = None, pairs=None):
         self.comparison = comparison
         self.model = comparison.model
         self.ranking = ranking
@@ -78,19 +108,64 @@ class Diagnosis:
         self.correlations = correlations
         self.settings = settings
         self.skipped = skipped
+        self.scorer = scorer
+        self.pairs = list(pairs or [])
         self.rmse = comparison.rmse()
         self.noise_floor = comparison.noise.to_dict()
         self.ratio = comparison.ratio()
         self.channel_ratios = {ch: self.rmse[ch] / self.noise_floor[ch] for ch in comparison.channels}
-        worst = max(self.channel_ratios.values())
-        self.verdict = ("at_noise_floor" if max(self.ratio, worst) <= settings["at_floor"]
-                        else "missing_effect")
+        self.outside_catalog = None
+        self.stopping = {}
+        self.refit = scorer.base_moves() if scorer is not None else {}
+        if comparison.mode == "contact":
+            worst = max(self.channel_ratios.values())
+            self.verdict = ("at_noise_floor" if max(self.ratio, worst) <= settings["at_floor"]
+                            else "missing_effect")
+            return
+        held = scorer.base_cv
+        ok, ratio_cv, limit, _ = consistent_with_noise(held, comparison.eq_noise.sigma, settings["at_floor"])
+        unidentified = [c.label for c, info in zip(scorer.refit, scorer.base_ident)
+                        if not info.get("determined", True)]
+        switched_off = [c.label for c, info in zip(scorer.refit, scorer.base_ident)
+                        if info.get("determined", True) and not info.get("identifiable", True)]
+        self.stopping = {
+            "rule": "held-out test (Diebold-Mariano, HAC variance) at family-wise level alpha over the "
+                    "candidates (Bonferroni), in-sample BIC falls, identifiable parameters",
+            "alpha": settings["alpha"], "critical_z": settings["z_critical"],
+            "candidates_tested": len(ranking), "blocks": settings["blocks"],
+            "held_out_ratio": ratio_cv, "consistent_limit": limit, "consistent_with_noise": ok,
+            "noise_floor_method": comparison.noise.method,
+            "not_identifiable_in_model": unidentified, "switched_off_in_model": switched_off,
+        }
+        if self.best is not None or self.best_pair is not None:
+            self.verdict = "missing_effect"
+        elif ok and not unidentified:
+            self.verdict = "at_noise_floor"
+        else:
+            self.verdict = "missing_effect"
+            if not ok:
+                ch = residual_character(comparison, comparison.eq.e if comparison.mode != "motion"
+                                        else comparison.residual)
+                names = comparison.channels if comparison.mode != "motion" else comparison.channels
+                self.outside_catalog = {
+                    "held_out_ratio": ratio_cv, "consistent_limit": limit,
+                    "channels": {n: dict(info, summary=describe_character(info, comparison.coordinates))
+                                 for n, info in ch.items() if n in names},
+                }
 
     @property
     def best(self) -> EffectScore | None:
         for s in self.ranking:
             if s.significant:
                 return s
+        return None
+
+    @property
+    def best_pair(self) -> dict | None:
+        """The best significant pair (better than the best single candidate), or None."""
+        for p in self.pairs:
+            if p["significant"]:
+                return p
         return None
 
     @property
@@ -107,8 +182,9 @@ class Diagnosis:
     def fit(self, effect, target: str | None = None, *, max_nfev: int = 100) -> Result:
         """The fit of an effect (family name, ``family:target`` or a Component) on all frames.
 
-        A name the ranking holds gives that entry's fit; anything else is
-        fitted by :class:`~pinmsk.diagnose.fit.EffectFit`.  Either way the
+        A name the ranking holds gives that entry's fit (with the earlier
+        effects refitted jointly when there are any); anything else is fitted by
+        :class:`~pinmsk.diagnose.fit.EffectFit` (alone).  Either way the
         answer is a :class:`~pinmsk.fitting.Result` (see ``EffectFit``).
         Raises :class:`~pinmsk.errors.ConvergenceError` if the fit does not
         converge within ``max_nfev`` evaluations.
@@ -119,26 +195,59 @@ class Diagnosis:
         plain = isinstance(effect, str) and not parse_effect(effect)[2]
         for s in self.ranking:
             if plain and s.label == comp.label:
-                if not s.converged:
-                    raise ConvergenceError(
-                        f"the fit of {s.label} did not converge ({s.fit.stats.message}); it cannot be added as "
-                        "is. Check that the trial covers the effect or pass fixed parameter values"
-                    )
+                _check_converged(s)
                 return s.fit
         return EffectFit(comp, max_nfev=max_nfev).fit(self.comparison).result_
 
+    def joint_fit(self, effect, target: str | None = None, *, max_nfev: int = 100) -> tuple[list, Result]:
+        """``(components, result)``: ``effect`` fitted jointly with the earlier effects (``refit``).
+
+        ``components`` are the earlier effects with their refitted values and the
+        new effect last, as they go into the model; ``result`` the new effect's
+        fit.  A ranked candidate gives its entry's joint fit.
+        """
+        comp = _resolve(effect, target, self)
+        plain = not (isinstance(effect, str) and parse_effect(effect)[2]) and not isinstance(effect, Component)
+        for s in self.ranking:
+            if plain and s.label == comp.label:
+                _check_converged(s)
+                return list(s.components), s.fit
+        fit = EffectFit(comp, max_nfev=max_nfev).fit(self.comparison)
+        sc = self.scorer
+        if sc is None or not sc.refit:
+            return [fit.effect_], fit.result_
+        jp = JointProblem(self.comparison.eq, sc.sigma, sc.refit + [fit.effect_], problems=sc.problems)
+        x0 = np.concatenate([sc.base_x, fit.theta_])
+        x, conv, msg = jp.solve(x0=x0, max_nfev=max_nfev)
+        if not (conv or jp.linear):
+            raise ConvergenceError(f"the joint fit of {comp.label} with "
+                                   f"{', '.join(c.label for c in sc.refit)} did not converge ({msg})")
+        from .scoring import _joint_result
+        res = _joint_result(jp, x, True, msg, sc.base_sse, self.comparison.eq)
+        return jp.components_at(x, res.info["joint_stderr"]), res
+
     def with_effect(self, effect=None, target: str | None = None):
-        """The model with an effect added, fitted (default: the best significant one)."""
+        """The model with an effect added, fitted jointly with the earlier effects (default: the best
+        significant one)."""
+        if self.comparison.mode == "contact":
+            if effect is None:
+                if self.best is None:
+                    raise ModelError(f"no significant effect to add: the verdict is {self.verdict}; "
+                                     "name one explicitly")
+                return _model_plus(self.model, self.best.fit)
+            return _model_plus(self.model, self.fit(effect, target))
         if effect is None:
             if self.best is None:
                 raise ModelError("no significant effect to add: the verdict is "
                                  f"{self.verdict}; name one explicitly")
-            return _model_plus(self.model, self.best.fit)
-        return _model_plus(self.model, self.fit(effect, target))
+            return model_with_components(self.model, self.best.components)
+        comps, _ = self.joint_fit(effect, target)
+        return model_with_components(self.model, comps)
 
     # -- reporting -----------------------------------------------------------------------
-    def to_dict(self, added: Sequence = ()) -> dict:
-        """The diagnosis as a JSON-ready dict (``added``: the fits added before it, for ``"added"``)."""
+    def to_dict(self, added: Sequence = (), refits: Sequence = ()) -> dict:
+        """The diagnosis as a JSON-ready dict (``added``: the fits added before it, for ``"added"``;
+        ``refits``: what each add step's joint refit changed, for ``"refit"``)."""
         inputs = self.comparison.inputs
         return {
             "inputs": inputs.meta() if inputs is not None else {},
@@ -149,6 +258,10 @@ class Diagnosis:
             "verdict": self.verdict,
             "added": [_added_json(a) for a in added],
             "noise_model": self.comparison.noise.to_json(),
+            "refit": [_json(r) for r in refits],
+            "pairs": [_pair_json(p) for p in self.pairs],
+            "outside_catalog": _json(self.outside_catalog),
+            "stopping": _json(self.stopping),
         }
 
     def summary_text(self, *, header: bool = True) -> str:
@@ -183,6 +296,13 @@ class Diagnosis:
             for ch, cors in self.correlations.items():
                 if cors:
                     lines.append(f"  {ch:<{w}}  " + ", ".join(f"{s} (r = {r:+.2f})" for s, r in cors[:3]))
+        if self.refit and self.refit.get("effects"):
+            lines.append("effects in the model, refitted with every candidate (values from the joint fit "
+                         "without one):")
+            for eff in self.refit["effects"]:
+                lines.append(f"  {eff['label']}: " + ", ".join(
+                    f"{n} = {v['after']:.4g}" + (f" ± {v['stderr']:.2g}" if v["stderr"] is not None else "")
+                    for n, v in eff["params"].items()))
         if self.ranking and c.mode == "contact":
             lines.append(f"ranking (contact models identified by Eq. 4.2, scored by BIC = chi2 + k ln n with the "
                          f"noise floor as sigma; significant when BIC falls by > {self.settings['delta_bic']:g}; "
@@ -198,42 +318,119 @@ class Diagnosis:
                              + f"  significant {sig}{where}" + (f"  [{s.note}]" if s.note else ""))
                 lines.append(f"      {s.describe_params()}")
         elif self.ranking:
-            lines.append(f"ranking ({self.settings['folds']}-fold blocked cross-validation; explained = "
-                         "held-out share of the residual's mean square):")
+            lines.append(f"ranking ({self.settings['blocks']}; explained = held-out share of the residual's "
+                         f"mean square; z = held-out test, significant above {self.settings['z_critical']:.2f} "
+                         f"with identifiable parameters):")
             lw = max(len(s.label) for s in self.ranking)
             for k, s in enumerate(self.ranking, 1):
                 sig = "yes" if s.significant else "no "
+                z = s.test.get("z", float("nan"))
                 lines.append(f"  {k:>2}. {s.label:<{lw}}  explained {100 * s.explained_fraction:6.1f}%  "
-                             f"rmse after {s.rmse_after['total']:.4g}  significant {sig}  {s.describe_params()}"
-                             + (f"  [{s.note}]" if s.note else ""))
+                             f"z {z:7.2f}  rmse after {s.rmse_after['total']:.4g}  significant {sig}  "
+                             f"{s.describe_params()}" + (f"  [{s.note}]" if s.note else ""))
+                if s.refit:
+                    moved = [f"{e['label']}.{n} {v['before']:.4g} -> {v['after']:.4g}"
+                             for e in s.refit["effects"] for n, v in e["params"].items()
+                             if abs(v["change"]) > 1e-12]
+                    if moved:
+                        lines.append("      refitted with it: " + ", ".join(moved))
+                if s.aliases:
+                    lines.append("      explains the same as " + ", ".join(f"{a} (r = {r:+.3f})" for a, r in s.aliases)
+                                 + ": this trial cannot tell them apart")
         else:
             lines.append("ranking: no catalog effect applies to this model and trial")
+        if self.pairs:
+            lines.append("pairs fitted jointly (tested against the best single candidate):")
+            for p in self.pairs[:3]:
+                comps = ", ".join(f"{x.label} ({describe_fit_of(x)})" for x in p["components"])
+                lines.append(f"  {' + '.join(p['effects'])}: held-out gain {p['improvement_over_best']:+.3g}, "
+                             f"z {p['z']:.2f}, significant {'yes' if p['significant'] else 'no'}; {comps}"
+                             + (f"  [{'; '.join(p['flags'])}]" if p["flags"] else ""))
         for label, why in self.skipped:
             lines.append(f"  (skipped {label}: {why})")
+        if self.outside_catalog:
+            lines.append("residual outside the catalog:")
+            for ch, info in self.outside_catalog["channels"].items():
+                lines.append(f"  {ch:<{w}}  {info['summary']}")
         lines.append(self.verdict_line())
         return "\n".join(lines)
 
     def verdict_line(self) -> str:
         ch, worst = max(self.channel_ratios.items(), key=lambda kv: kv[1])
+        where = (f"the error is {self.ratio:.2f}x the noise floor" if len(self.channel_ratios) == 1
+                 else f"the error is {self.ratio:.2f}x the noise floor over all channels, {worst:.2f}x on {ch}")
+        if self.comparison.mode == "contact":
+            if self.verdict == "at_noise_floor":
+                return (f"verdict: at_noise_floor -- the error is {self.ratio:.2f}x the noise floor "
+                        f"(worst channel {worst:.2f}x; <= {self.settings['at_floor']:g}x); nothing to add")
+            if self.best is not None:
+                return (f"verdict: missing_effect -- {where}; best explanation: the {self.best.label} contact "
+                        f"model (BIC {self.best.fit.stats.bic_change:+.4g}, fitted parameters above); add it "
+                        f"with --add {self.best.label}")
+            return (f"verdict: missing_effect -- {where}, but no contact model explains it significantly")
+        st = self.stopping
         if self.verdict == "at_noise_floor":
-            return (f"verdict: at_noise_floor -- the error is {self.ratio:.2f}x the noise floor "
-                    f"(worst channel {worst:.2f}x; <= {self.settings['at_floor']:g}x); nothing to add")
-        where = (f"the error is {self.ratio:.1f}x the noise floor" if len(self.channel_ratios) == 1
-                 else f"the error is {self.ratio:.1f}x the noise floor over all channels, {worst:.1f}x on {ch}")
-        if self.best is not None and self.comparison.mode == "contact":
-            return (f"verdict: missing_effect -- {where}; best explanation: the {self.best.label} contact model "
-                    f"(BIC {self.best.fit.stats.bic_change:+.4g}, fitted parameters above); add it with "
-                    f"--add {self.best.label}")
-        if self.best is not None:
-            return (f"verdict: missing_effect -- {where}; best explanation: {self.best.label} "
-                    f"({self.best.describe_params()}); add it with --add {self.best.label}")
-        return (f"verdict: missing_effect -- {where}, but no catalog effect explains it significantly: "
-                "the gap is outside the catalog (segment lengths, moment arms, sensor offsets, ...) or the "
-                "noise floor is underestimated")
+            return (f"verdict: at_noise_floor -- {where}; the held-out residual is consistent with the noise "
+                    f"model ({st['held_out_ratio']:.2f}x <= {st['consistent_limit']:.2f}x) and no candidate is "
+                    "significant out of sample; nothing to add")
+        best, pair = self.best, self.best_pair
+        if best is not None or pair is not None:
+            parts = []
+            if best is not None:
+                alias = (" -- indistinguishable on this trial from " + ", ".join(a for a, _ in best.aliases)
+                         if best.aliases else "")
+                remedy = ""
+                if hasattr(best.effect, "describe_remedy"):
+                    remedy = f"; {best.effect.describe_remedy(self.model)}"
+                parts.append(f"best explanation: {best.label} ({best.describe_params()}; held-out z "
+                             f"{best.test['z']:.1f}){alias}{remedy}; add it with --add {best.label}")
+            if pair is not None and (best is None or best.label not in pair["effects"]):
+                adds = " ".join(f"--add {e}" for e in pair["effects"])
+                parts.append(f"the pair {' + '.join(pair['effects'])} fitted jointly explains significantly more "
+                             f"than {'any single effect' if best is None else best.label + ' alone'} "
+                             f"(z {pair['z']:.1f}): {adds}")
+            return f"verdict: missing_effect -- {where}; " + "; ".join(parts)
+        if st.get("not_identifiable_in_model") and st.get("consistent_with_noise"):
+            return (f"verdict: missing_effect -- {where}, consistent with the noise, but only through "
+                    f"{', '.join(st['not_identifiable_in_model'])}, whose parameters this trial does not "
+                    "determine (see the flags): the effect that is really missing is another one; remove it")
+        held = st.get("not_identifiable_in_model") or []
+        also = (f"; the model holds {', '.join(held)}, whose parameters this trial does not determine (held at "
+                "their values, see the flags): remove it and diagnose again" if held else "")
+        return (f"verdict: missing_effect -- {where} (held-out {st['held_out_ratio']:.2f}x, more than the noise "
+                f"model allows, {st['consistent_limit']:.2f}x), but no catalog effect explains it out of sample: "
+                "the gap is outside the catalog (see what the residual follows above: segment lengths, moment "
+                "arms, a time-varying disturbance, ...) or the noise floor is underestimated" + also)
 
     def __repr__(self) -> str:
         return (f"<Diagnosis {self.model.name} {self.comparison.mode}: total rmse {self.rmse['total']:.4g}, "
                 f"{self.ratio:.2f}x floor, {self.verdict}>")
+
+
+def describe_fit_of(comp) -> str:
+    """``name = value ± stderr`` of a component's free parameters (its Parameters' stderr)."""
+    return ", ".join(f"{n} = {p.value:.4g}" + (f" ± {p.stderr:.2g}" if p.stderr is not None and np.isfinite(p.stderr)
+                                               else "") for n, p in comp.params.items() if p.vary)
+
+
+def _check_converged(s: EffectScore) -> None:
+    if not s.converged:
+        raise ConvergenceError(
+            f"the fit of {s.label} did not converge ({s.fit.stats.message}); it cannot be added as "
+            "is. Check that the trial covers the effect or pass fixed parameter values"
+        )
+
+
+def _pair_json(p: dict) -> dict:
+    return _json({
+        "effects": list(p["effects"]),
+        "params": {c.label: {n: q.value for n, q in c.params.items()} for c in p["components"]},
+        "stderr": {c.label: {n: q.stderr for n, q in c.params.items()} for c in p["components"]},
+        "refit": {c.label: {n: q.value for n, q in c.params.items()} for c in p["refit"]},
+        "improvement_over_best": p["improvement_over_best"], "z": p["z"],
+        "bic_change_over_best": p["bic_change_over_best"], "rmse_after": p["rmse_after"],
+        "significant": p["significant"], "flags": list(p["flags"]),
+    })
 
 
 def _model_plus(model, fit):
@@ -253,6 +450,11 @@ def _unit(c: Comparison) -> str:
 
 
 def _added_json(a) -> dict:
+    if isinstance(a, Component):          # a component as it is in the final model (after the refits)
+        return {"effect": a.family, "target": a.target,
+                "params": {k: float(p.value) for k, p in a.params.items()},
+                "stderr": {k: finite_or_none(p.stderr if p.stderr is not None else float("nan"))
+                           for k, p in a.params.items() if p.vary}}
     fit = a.fit if isinstance(a, EffectScore) else a
     eff = fit.effect
     return {"effect": eff.family, "target": eff.target,
@@ -306,8 +508,9 @@ def _resolve(effect, target, diag: Diagnosis) -> Component:
             f"({family}:TARGET) or pick one of: {', '.join(applicable) or 'none'}"
         )
     try:
-        comp = cls(target, **values)
+        comp = cls(target)
         comp.check_target(model)
+        comp = _for_model(comp, model).with_params(values) if values else _for_model(comp, model)
     except ModelError as exc:
         targets = _targets(cls, model)
         raise ModelError(f"{exc}. Targets for {family} in model '{model.name}': {targets}") from None
@@ -352,82 +555,71 @@ def _correlations(c: Comparison, k: int = 4) -> dict:
     return out
 
 
-def _score(c: Comparison, est: EffectFit, settings) -> EffectScore:
-    """The ranking entry of a fitted candidate: held-out error by blocked cross-validation."""
-    fit = est.result_
-    conv, msg = fit.stats.converged, fit.stats.message
-    e_cv, cv_ok = est.cross_validate(folds=settings["folds"], guard=settings["guard"])
-    sig = c.eq_noise.sigma
-    mse0 = float(np.mean((c.eq.e / sig) ** 2))
-    mse1 = float(np.mean((e_cv / sig) ** 2))
-    # A muscle-level effect also filters the measured signals' noise; that part of the fall is not
-    # physics.  Count only the fall beyond the change of the noise floor it causes.
-    floor_change = 0.0
-    if est.problem_.signal and c.mode == "muscle":
-        emg_after = c.eq.emg_noise(fit.effect)
-        after2 = c.noise.propagated ** 2 + emg_after ** 2
-        floor_change = float(np.mean((sig ** 2 - after2) / sig ** 2))
-    improvement = mse0 - mse1 - floor_change
-    explained = max(improvement / mse0, -1.0) if mse0 > 0 else 0.0
-    if c.mode == "motion":
-        rmse_after = _motion_rmse_after(c, fit.effect)
-    else:
-        r = np.sqrt(np.mean(e_cv ** 2, axis=0))
-        rmse_after = {ch: float(v) for ch, v in zip(c.channels, r)}
-        rmse_after["total"] = float(np.sqrt(np.mean(r ** 2)))
-    converged = bool(conv)
-    note = "" if converged else f"fit did not converge: {msg}"
-    significant = converged and improvement >= settings["threshold"] and fit.stats.bic_change < 0
-    return EffectScore(fit, rmse_after, explained, improvement, significant, converged, note)
 
 
-def _motion_rmse_after(c: Comparison, effect) -> dict:
-    model = c.model.with_effect(effect)
-    eq = c.eq
-    qs = simulate_windows(model, c.trial, eq.motion, eq.rows, c.options["sim_window"])
-    r = np.sqrt(np.mean((c.measured - qs) ** 2, axis=0))
-    out = {ch: float(v) for ch, v in zip(c.channels, r)}
-    out["total"] = float(np.sqrt(np.mean(r ** 2)))
-    return out
+def _for_model(comp, model):
+    """A candidate with its model-dependent bounds (a rest angle within the joint's range)."""
+    hook = getattr(comp, "for_model", None)
+    return hook(model) if hook is not None else comp
 
 
 def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT_CUTOFF,
              candidates=None, frames: Sequence[str] | None = None, folds: int = 5,
-             threshold: float = THRESHOLD, at_floor: float = AT_FLOOR, window: float = 1.0,
+             threshold: float = THRESHOLD, at_floor: float | None = None, window: float = 1.0,
              grf_frames=None, grf=None, external_loads=None, grf_cutoff="same", sim_window: float = 0.5,
-             comparison: Comparison | None = None,
-             delta_bic: float | None = None, _fits=None) -> Diagnosis:
+             comparison: Comparison | None = None, refit: Sequence = (), alpha: float = ALPHA,
+             pairs: bool = True, delta_bic: float | None = None, _fits=None) -> Diagnosis:
     """Compare ``model`` with ``trial``, locate the failure and rank the missing effects.
 
     ``candidates``: effects to rank (Components, or family names / ``family:target``
     strings); default the whole catalog that applies (:func:`pinmsk.diagnose.catalog`).
-    ``frames`` names frames for frame effects (a payload).  See the module
-    docstring for the scoring and :func:`pinmsk.diagnose.compare.compare` for
-    ``mode``, ``cutoff`` and the noise floor.
+    ``frames`` names frames for frame effects (a payload).  ``refit``: labels of
+    effects in ``model`` to refit jointly with every candidate (the ones added at
+    earlier steps; :func:`run` passes them).  ``alpha``: family-wise level of the
+    held-out test; ``at_floor``: allowance for the noise floor's estimation error
+    when the held-out residual is judged consistent with the noise (default
+    :data:`AT_FLOOR`; contact mode: the ratio at or below which the verdict is
+    at_noise_floor, :data:`CONTACT_AT_FLOOR`); ``threshold``: least held-out
+    improvement in noise variances on top of the test (default 0); ``pairs``:
+    try pairs of candidates when the best single one leaves a residual.  See the
+    module docstring for the scoring and :func:`pinmsk.diagnose.compare.compare`
+    for ``mode``, ``cutoff`` and the noise floor.
 
     In contact mode (:mod:`pinmsk.diagnose.contact`) the candidates are the
     contact models of the foot, scored by BIC with the noise floor as sigma
     (significant below ``-delta_bic``, default
-    :data:`~pinmsk.diagnose.contact.DELTA_BIC`); ``folds`` and ``threshold``
-    do not apply.
+    :data:`~pinmsk.diagnose.contact.DELTA_BIC`); ``folds``, ``threshold``,
+    ``refit`` and ``alpha`` do not apply.
     """
     if folds < 2:
         raise ModelError(f"folds must be >= 2 for cross-validation, got {folds}")
+    if not 0 < alpha < 1:
+        raise ModelError(f"alpha is a significance level in (0, 1), got {alpha}")
     c = comparison if comparison is not None else compare(
         model, trial, mode=mode, cutoff=cutoff, grf_frames=grf_frames, grf=grf, external_loads=external_loads,
         grf_cutoff=grf_cutoff, sim_window=sim_window)
     if c.mode == "contact":
-        return _diagnose_contact(c, candidates, folds, threshold, at_floor, window, cutoff, delta_bic, _fits)
+        return _diagnose_contact(c, candidates, folds, threshold,
+                                 CONTACT_AT_FLOOR if at_floor is None else at_floor, window, cutoff,
+                                 delta_bic, _fits)
     n = c.eq.rows.size
     if n < folds * _MIN_BLOCK:
         raise TrialError(
             f"{n} analysable samples are too few for {folds} cross-validation blocks of at least "
             f"{_MIN_BLOCK}; record a longer trial or pass folds={max(2, n // _MIN_BLOCK)}"
         )
+    refit_comps = _refit_components(c.model, refit)
     dt = median_step(c.eq.motion.t)
     guard = int(np.ceil(1.0 / (cutoff * dt))) if cutoff else 2
-    settings = {"folds": folds, "threshold": threshold, "at_floor": at_floor, "guard": guard,
-                "window": window, "cutoff": cutoff}
+    cyc = cycle_edges(c.time, _main_coordinate(c), folds)
+    if cyc is not None and min(np.diff([0, *cyc[0], n])) < _MIN_BLOCK:
+        cyc = None
+    blocks = (f"{folds}-fold blocked cross-validation over whole cycles (period {cyc[1]:.3g} s)" if cyc
+              else f"{folds}-fold blocked cross-validation")
+    settings = {"folds": folds, "threshold": threshold, "at_floor": AT_FLOOR if at_floor is None else at_floor,
+                "guard": guard, "window": window, "cutoff": cutoff, "alpha": alpha, "blocks": blocks,
+                "block_edges": cyc[0] if cyc else None, "joint_nfev": 50, "cv_nfev": 20, "profile": True,
+                "refit": [x.label for x in refit_comps]}
     ctx = CatalogContext(c.mode, tuple(c.eq.coordinates), unactuated_coordinates(c.model), tuple(frames or ()))
     if candidates is None:
         cands = effect_catalog(model, trial, frames=frames, context=ctx)
@@ -441,19 +633,86 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
             if tgt is None:
                 cands.extend(effect_catalog(model, trial, families=[fam], frames=frames, context=ctx))
             else:
-                comp = registry.get(fam)(tgt, **vals)
+                comp = registry.get(fam)(tgt)
                 comp.check_target(model)
-                cands.append(comp)
+                comp = _for_model(comp, model)
+                cands.append(comp.with_params(vals) if vals else comp)
+    settings["z_critical"] = critical_z(alpha, max(len(cands), 1))
+    scorer = Scorer(c, settings, refit_comps)
     ranking, skipped = [], []
     for comp in cands:
         try:
-            ranking.append(_score(c, EffectFit(comp, strict=False).fit(c), settings))
+            ranking.append(scorer.score(comp))
         except PinmskError as exc:
             skipped.append((comp.label, str(exc)))
     ranking = _order(ranking)
+    _aliases(ranking, c.eq_noise.sigma)
+    found = []
+    if pairs and ranking:
+        best = next((s for s in ranking if s.significant), None)
+        left = best.heldout if best is not None else scorer.base_cv
+        if not consistent_with_noise(left, c.eq_noise.sigma, settings["at_floor"])[0]:
+            found = scorer.pairs(ranking)
     windows = _worst_windows(c, window)
     cors = _correlations(c)
-    return Diagnosis(c, ranking, windows, cors, settings, skipped)
+    return Diagnosis(c, ranking, windows, cors, settings, skipped, scorer=scorer, pairs=found)
+
+
+def _main_coordinate(c) -> np.ndarray:
+    """The coordinate that moves most (rotations before translations, trend removed): the movement's cycle."""
+    q = c.eq.motion_rows.q
+    s = np.linspace(-1.0, 1.0, q.shape[0])[:, None]
+    x = q - q.mean(axis=0)
+    x = x - s * (np.sum(s * x, axis=0) / np.sum(s * s))
+    rot = np.array([not is_prismatic(c.model, n) for n in c.model.coordinates])
+    sd = np.where(rot, x.std(axis=0), 0.0) if rot.any() else x.std(axis=0)
+    return q[:, [int(np.argmax(sd))]]
+
+
+def _refit_components(model, refit) -> list:
+    """The model's effects named in ``refit`` (labels or components), refused by name when absent."""
+    have = {x.label: x for x in model.components}
+    out = []
+    for r in refit or ():
+        label = r.label if isinstance(r, Component) else str(r)
+        if label not in have:
+            raise ModelError(f"refit names '{label}', which model '{model.name}' does not have "
+                             f"(its effects: {', '.join(have) or 'none'})")
+        comp = have[label]
+        if comp.kind == "contact":
+            raise ModelError(f"refit: {label} is a contact model; contact models are not refitted jointly")
+        if label not in [x.label for x in out]:
+            out.append(comp)
+    return out
+
+
+def _aliases(ranking: list, sigma, *, top: int = 3) -> None:
+    """Record, on the leading significant candidates, the others this trial cannot tell them from: their
+    fitted changes correlate (``|r| >= 0.9``) and the held-out test between the two is not significant
+    (``|z| < 2``)."""
+    pool = [s for s in ranking if s.converged and s.fit.info.get("delta") is not None and s.improvement > 0
+            and s.heldout is not None]
+    lead = [s for s in pool if s.significant][:top]
+    if not lead:
+        return
+    vec = {}
+    for s in pool:
+        d = (s.fit.info["delta"] / sigma).ravel()
+        nrm = np.linalg.norm(d)
+        if nrm > 0:
+            vec[s.label] = d / nrm
+    for s in lead:
+        if s.label not in vec:
+            continue
+        for t in pool:
+            if t is s or t.label not in vec:
+                continue
+            r = float(np.dot(vec[s.label], vec[t.label]))
+            if abs(r) < ALIAS_CORRELATION:
+                continue
+            z = held_out_test(t.heldout / sigma, s.heldout / sigma)["z"]
+            if abs(z) < 2.0:
+                s.aliases.append((t.label, r))
 
 
 def _diagnose_contact(c, candidates, folds, threshold, at_floor, window, cutoff, delta_bic, fits) -> Diagnosis:
@@ -471,7 +730,9 @@ def _diagnose_contact(c, candidates, folds, threshold, at_floor, window, cutoff,
 
 def _order(ranking: list, tie: float = 0.05) -> list:
     """Best held-out improvement first; within ``tie`` (noise variances) the fewer parameters first."""
-    out = sorted(ranking, key=lambda s: (not s.converged, -s.improvement))
+    # exact aliases (a gain and a segment mass on one body) tie: the physical effect first
+    out = sorted(ranking, key=lambda s: (not s.converged, -float(f"{s.improvement:.9g}"),
+                                         getattr(s.effect, "level", "") == "sensor"))
     for _ in range(len(out)):
         swapped = False
         for i in range(len(out) - 1):
@@ -486,11 +747,18 @@ def _order(ranking: list, tie: float = 0.05) -> list:
 
 
 class DiagnosisRun:
-    """The loop of :func:`run`: ``steps[0]`` for the model as given, one more per added effect."""
+    """The loop of :func:`run`: ``steps[0]`` for the model as given, one more per added effect.
 
-    def __init__(self, steps: list, added: list):
+    ``added`` holds each added effect's fit as made at its step (jointly with
+    the earlier ones); ``refits`` what each step's joint refit changed (the
+    earlier effects' values before and after, their errors and correlations);
+    the final values of every added effect are those of the final model.
+    """
+
+    def __init__(self, steps: list, added: list, refits: list | None = None):
         self.steps = steps
         self.added = added
+        self.refits = list(refits or [])
 
     @property
     def final(self) -> Diagnosis:
@@ -511,9 +779,34 @@ class DiagnosisRun:
     ratio = property(lambda self: self.final.ratio)
     correlations = property(lambda self: self.final.correlations)
 
+    def final_effects(self) -> list:
+        """The added effects as they are in the final model (after every joint refit), with the errors
+        of the final joint fit."""
+        out = []
+        final = self.final
+        sc = final.scorer
+        errs = {}
+        if sc is not None and sc.refit:
+            for comp, prob, sl in zip(sc.base.components, sc.base.problems, sc.base.slices):
+                errs[comp.label] = dict(zip(prob.names, sc.base_se[sl]))
+        for a in self.added:
+            label = a.effect.label
+            try:
+                comp = final.model.component(label)
+            except ModelError:
+                out.append(a.effect)
+                continue
+            if label in errs:
+                comp = comp.with_params(stderr={k: float(v) for k, v in errs[label].items()})
+            out.append(comp)
+        return out
+
     def to_dict(self) -> dict:
-        """The loop as a JSON-ready dict: the final diagnosis and the effects added."""
-        return self.final.to_dict(self.added)
+        """The loop as a JSON-ready dict: the final diagnosis, the effects added (final values) and what
+        each step's joint refit changed."""
+        if self.final.comparison.mode == "contact":
+            return self.final.to_dict(self.added, self.refits)
+        return self.final.to_dict(self.final_effects(), self.refits)
 
     def summary_text(self) -> str:
         first = self.steps[0]
@@ -524,6 +817,17 @@ class DiagnosisRun:
             prev = self.steps[k - 1]
             out.append("")
             out.append(f"step {k}: added {fit.effect.label} ({describe_fit(fit)})")
+            refit = self.refits[k - 1] if k - 1 < len(self.refits) else None
+            if refit and refit.get("effects"):
+                out.append("  refitted jointly with it:")
+                for e in refit["effects"]:
+                    for n, v in e["params"].items():
+                        se = f" ± {v['stderr']:.2g}" if v["stderr"] is not None else ""
+                        out.append(f"    {e['label']}.{n}: {v['before']:.4g} -> {v['after']:.4g}{se} "
+                                   f"({v['change']:+.3g})")
+                cors = refit.get("correlations") or {}
+                if cors:
+                    out.append("    correlations: " + ", ".join(f"{k2} {r:+.2f}" for k2, r in cors.items()))
             out.append(f"  total rmse {prev.rmse['total']:.4g} -> {step.rmse['total']:.4g} "
                        f"(noise floor {step.noise_floor['total']:.4g}; {prev.ratio:.1f}x -> {step.ratio:.2f}x)")
             out.append(step.summary_text(header=False))
@@ -540,28 +844,71 @@ class DiagnosisRun:
 def run(model, trial, *, add: Sequence = (), first: Diagnosis | None = None, **options) -> DiagnosisRun:
     """Diagnose, then fit and add each ``add`` entry in turn, diagnosing after each.
 
-    ``add`` entries: ``"family"`` (its best-ranked target), ``"family:target"``,
-    ``(family, target)`` tuples or Components.  Writes nothing: the JSON
-    summary, report and figures are :func:`pinmsk.presentation.report.save_diagnosis`.
-    ``options`` go to :func:`diagnose`; ``first`` reuses a diagnosis of this
-    model and trial already made as step 0.
+    Each add is a joint refit: the entry is fitted together with the effects
+    added before it (warm-started from their values), all of them go into the
+    model with their new values, and the next diagnosis refits them again with
+    every candidate.  ``add`` entries: ``"family"`` (its best-ranked target),
+    ``"family:target"``, ``(family, target)`` tuples or Components.  Writes
+    nothing: the JSON summary, report and figures are
+    :func:`pinmsk.presentation.report.save_diagnosis`.  ``options`` go to
+    :func:`diagnose`; ``first`` reuses a diagnosis of this model and trial
+    already made as step 0.
     """
     if isinstance(add, (str, Component)):
         add = [add]
-    d = first if first is not None else diagnose(model, trial, **options)
-    steps, added = [d], []
+    refit = list(options.pop("refit", ()) or ())
+    d = first if first is not None else diagnose(model, trial, refit=refit, **options)
+    if first is not None and d.comparison.mode != "contact":
+        refit = list(d.settings.get("refit", refit))
+    steps, added, refits = [d], [], []
     for entry in add or ():
+        prev = steps[-1]
         if isinstance(entry, tuple):
             fam, tgt = entry[0], (entry[1] if len(entry) > 1 else None)
-            fit = steps[-1].fit(fam, tgt)
         else:
-            fit = steps[-1].fit(entry)
-        new_model = _model_plus(steps[-1].model, fit)
-        comp = steps[-1].comparison.with_model(new_model)
+            fam, tgt = entry, None
+        comp = prev.comparison
         opts = {k: v for k, v in options.items() if k not in ("mode", "cutoff", "grf_frames", "grf", "grf_cutoff",
                                                                     "external_loads", "sim_window")}
         if comp.mode == "contact":
-            opts["_fits"] = getattr(steps[-1], "contact_fits", None)   # the fits depend on the trial only
-        steps.append(diagnose(new_model, trial, comparison=comp, cutoff=steps[-1].settings["cutoff"], **opts))
+            fit = prev.fit(fam, tgt)
+            new_model = _model_plus(prev.model, fit)
+            opts["_fits"] = getattr(prev, "contact_fits", None)   # the fits depend on the trial only
+            refits.append({})
+        else:
+            comps, fit = prev.joint_fit(fam, tgt)
+            new_model = model_with_components(prev.model, comps)
+            refits.append(_step_refit(prev, comps, fit))
+            refit = refit + [comps[-1].label]
+            opts["refit"] = refit
+        steps.append(diagnose(new_model, trial, comparison=comp.with_model(new_model),
+                              cutoff=prev.settings["cutoff"], **opts))
         added.append(fit)
-    return DiagnosisRun(steps, added)
+    return DiagnosisRun(steps, added, refits)
+
+
+def _step_refit(prev: Diagnosis, comps: list, fit: Result) -> dict:
+    """What adding ``comps[-1]`` did to the earlier effects: their values before (in ``prev``'s model) and
+    after the joint refit, standard errors and correlations (from the joint covariance)."""
+    new = comps[-1]
+    out = {"added": new.label, "effects": [], "correlations": {}}
+    names = fit.info.get("joint_names") or []
+    corr = fit.info.get("joint_corr")
+    for comp in comps[:-1]:
+        old = prev.model.component(comp.label)
+        params = {}
+        for n, p in comp.params.items():
+            if not p.vary:
+                continue
+            se = p.stderr if p.stderr is not None and np.isfinite(p.stderr) else None
+            params[n] = {"before": float(old.values[n]), "after": float(p.value),
+                         "change": float(p.value - old.values[n]), "stderr": se}
+        out["effects"].append({"effect": comp.family, "target": comp.target, "label": comp.label,
+                               "params": params})
+    if corr is not None and names:
+        for i in range(len(names)):
+            for j in range(i + 1, len(names)):
+                r = corr[i, j]
+                if np.isfinite(r) and abs(r) >= 0.3:
+                    out["correlations"][f"{names[i]}~{names[j]}"] = float(r)
+    return out

@@ -25,13 +25,27 @@ within the parameters' bounds:
 Uncertainties: ``cov = s^2 (J^T J)^-1`` with ``J`` the whitened Jacobian at
 the optimum and ``s^2`` the residual variance, inflated by
 ``(1 + rho) / (1 - rho)`` with ``rho`` the residual's lag-1 autocorrelation (an
-AR(1) effective-sample-size correction; the filtered-kinematics part of the
-noise is not white).
+AR(1) effective-sample-size correction, :func:`ar1_inflation`; the
+filtered-kinematics and EMG-envelope parts of the noise are not white).  It
+overstates the correction for band-limited noise, whose autocorrelation falls
+off faster than ``rho^j``, which keeps the reported errors conservative; the
+identifiability checks (:mod:`pinmsk.diagnose.scoring`), which ask whether the
+likelihood is flat, use the integrated autocorrelation instead
+(:func:`inflation`: the Newey-West long-run variance over the variance).
 
 Blocked cross-validation (:meth:`EffectFit.cross_validate`): the frames
 are cut into ``folds`` contiguous blocks; each block is predicted by the fit
 on the others, leaving out a guard of ``guard`` frames on either side of the
 held-out block (the low-pass filter correlates neighbouring frames).
+
+Several effects at once (:class:`JointProblem`): the earlier effects of a
+diagnosis loop and a candidate, fitted together -- linear ones exactly, the
+others by trust-region least squares from warm starts -- with the covariance of
+all their parameters (a pseudo-inverse on the identifiable subspace), the rank
+and condition number of the sensitivity matrix, and profile-likelihood
+intervals (:meth:`JointProblem.profile_interval`).  Measurement effects
+(``sensor_gain``, ``sensor_offset``) change the model's reading of their
+channel, ``tau - measure(tau)``, where ``tau`` is what reaches that sensor.
 """
 from __future__ import annotations
 
@@ -47,7 +61,7 @@ from ..fitting import FitStatistics, Fitter, Result, format_report
 from ..stats import weighted_sse
 from ..trial import moment_channel
 
-__all__ = ["EffectFit", "EffectProblem", "describe_fit"]
+__all__ = ["EffectFit", "EffectProblem", "JointProblem", "cv_blocks", "describe_fit"]
 
 
 class EffectProblem:
@@ -64,6 +78,8 @@ class EffectProblem:
         self.component = component
         self.model = eq.model
         self.signal = isinstance(component, SignalEffect)
+        # a measurement effect changes the modelled reading of its channel, not the skeleton
+        self.sensor = getattr(component, "level", None) == "sensor"
         # Fit on the channels the effect can change (a joint effect: its coordinate's); the others
         # only add a constant to the sum of squares.
         affected = getattr(component, "affected_coordinates", None)
@@ -92,7 +108,13 @@ class EffectProblem:
         self.lo = np.array([decl[n].min for n in self.names], dtype=float)
         self.hi = np.array([decl[n].max for n in self.names], dtype=float)
         self.x_default = np.array([decl[n].value for n in self.names], dtype=float)
-        self.cache = None if self.signal else component.prepare(self.model, eq.motion_rows, data=eq.data)
+        self.cache = None if self.signal or self.sensor else component.prepare(self.model, eq.motion_rows,
+                                                                              data=eq.data)
+        if self.sensor:
+            if eq.mode != "torque":
+                raise ModelError(f"{component.label} models the sensor of a recorded {component.channel}; "
+                                 "it applies to torque- and motion-level comparisons only")
+            self.reading = eq.sensor_input(component)
         self._basis = None
         self._memo = None
         self.nfev = 0
@@ -130,6 +152,9 @@ class EffectProblem:
             return self.eq.signal_delta(self.component, batch)[:, :, self.act]
         if self.linear:
             return np.einsum("ncp,Pp->Pnc", self.basis(), X)
+        if self.sensor:      # the model reads measure(tau) instead of tau: e falls by the difference
+            return np.stack([(self.reading - self.component.measure(self.reading, self._params(x)))[:, None]
+                             for x in X])
         cols = self.columns
         out = np.empty((X.shape[0], self.eq.rows.size, cols.size))
         for k, x in enumerate(X):
@@ -140,6 +165,9 @@ class EffectProblem:
     def jacobian(self, x) -> np.ndarray:
         """``d(change of e)/d theta`` at ``x``, ``(n, C, p)``."""
         comp = self.component
+        if self.sensor:
+            idx = [self.all_names.index(n) for n in self.names]
+            return -comp.measure_jacobian(self.reading, self._params(x))[:, None, idx]
         if not self.signal and hasattr(comp, "param_jacobian"):
             J = comp.param_jacobian(self.model, self.eq.motion_rows, self._params(x), self.cache)
             idx = [self.all_names.index(n) for n in self.names]
@@ -167,7 +195,7 @@ class EffectProblem:
     def starts(self, mask) -> list[np.ndarray]:
         out = [np.clip(self.x_default, self.lo, self.hi)]
         comp = self.component
-        if hasattr(comp, "initial_guess") and not self.signal:
+        if hasattr(comp, "initial_guess") and not self.signal and not self.sensor:
             rows_motion = self.eq.motion_rows.subset(np.flatnonzero(mask))
             target = np.full((rows_motion.n_frames, self.model.nv), np.nan)
             target[:, self.columns] = -self.e[mask]
@@ -298,8 +326,7 @@ class EffectProblem:
         stderr = {}
         if p:
             s2 = (sse - rest) / max(n - p, 1)
-            rho = _lag1(r)
-            infl = (1 + rho) / (1 - rho)
+            infl = ar1_inflation(r)
             if p == 1 and not self.linear:
                 # curvature of the sum of squares itself (see _fit_scalar): cov = 2 s^2 / SSE''
                 span = (self.hi - self.lo)[0] if np.isfinite(self.hi - self.lo)[0] else max(abs(x[0]), 1.0)
@@ -363,14 +390,52 @@ class EffectProblem:
         return e_cv, ok
 
 
-def _lag1(r: np.ndarray) -> float:
+def long_run_variance(u: np.ndarray) -> tuple[float, int]:
+    """Newey-West (Bartlett kernel) long-run variance of the series ``u`` (demeaned) with the bandwidth of
+    Andrews (1991) for an AR(1) plug-in, ``L = 1.1447 (a n)^(1/3)``, ``a = 4 rho^2 / ((1 - rho)^2 (1 +
+    rho)^2)``: ``(lrv, L)``."""
+    u = np.asarray(u, dtype=float)
+    n = u.size
+    uc = u - np.mean(u) if n else u
+    g0 = float(uc @ uc) / max(n, 1)
+    if n < 3 or g0 <= 0:
+        return g0, 0
+    rho = float(np.clip(np.dot(uc[1:], uc[:-1]) / (n * g0), 0.0, 0.995))
+    a = 4 * rho ** 2 / ((1 - rho) ** 2 * (1 + rho) ** 2)
+    L = int(min(max(np.ceil(1.1447 * (a * n) ** (1 / 3)), 1), n // 4))
+    m = 1 << int(np.ceil(np.log2(2 * n)))
+    f = np.fft.rfft(uc, m)
+    acov = np.fft.irfft(f * np.conj(f), m)[:L + 1] / n
+    w = 1.0 - np.arange(1, L + 1) / (L + 1)
+    return max(acov[0] + 2.0 * float(np.dot(w, acov[1:])), acov[0] / n), L
+
+
+def ar1_inflation(r: np.ndarray) -> float:
+    """``(1 + rho) / (1 - rho)``, ``rho`` the lag-1 autocorrelation of the residual ``r`` (clipped to
+    [0, 0.98]): the AR(1) effective-sample-size factor of the reported standard errors (conservative for
+    band-limited noise, whose autocorrelation falls off faster than ``rho^j``)."""
     r = np.asarray(r, dtype=float)
     if r.ndim == 1:
         r = r[:, None]
-    num = np.sum(r[1:] * r[:-1])
     den = np.sum(r * r)
-    rho = num / den if den > 0 else 0.0
-    return float(np.clip(rho, 0.0, 0.98))
+    rho = float(np.clip(np.sum(r[1:] * r[:-1]) / den if den > 0 else 0.0, 0.0, 0.98))
+    return (1 + rho) / (1 - rho)
+
+
+def inflation(r: np.ndarray) -> float:
+    """Variance inflation of a sum over the autocorrelated residual ``r`` (n,) or (n, C): its long-run
+    variance over its variance (the integrated autocorrelation, Bartlett-weighted; 1 for white noise),
+    the channels weighted by their variances."""
+    r = np.asarray(r, dtype=float)
+    if r.ndim == 1:
+        r = r[:, None]
+    num = den = 0.0
+    for c in r.T:
+        lrv, _ = long_run_variance(c)
+        v = float(np.var(c))
+        num += lrv
+        den += v
+    return float(max(num / den, 1.0)) if den > 0 else 1.0
 
 
 def describe_fit(fit: Result) -> str:
@@ -457,3 +522,346 @@ class EffectFit(Fitter):
         self._check_fitted()
         p = self.problem_
         return p.cross_validate(folds, guard, x_full=None if p.linear else self.theta_)
+
+
+# -- several effects at once: the joint refit ----------------------------------------------------
+
+def cv_blocks(n: int, folds: int, edges=None) -> list[np.ndarray]:
+    """The held-out blocks of blocked cross-validation: ``folds`` contiguous index arrays over ``n`` rows,
+    cut at ``edges`` (row indices, e.g. cycle boundaries) when given, else of equal length."""
+    if edges is None:
+        return np.array_split(np.arange(n), folds)
+    cuts = [0] + [int(e) for e in edges] + [n]
+    return [np.arange(a, b) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
+
+
+class JointProblem:
+    """Several effects fitted together to one equation error: lmfit's composite model.
+
+    ``components`` are the effects in order; those whose label is a component
+    of the comparison's model already (effects added at earlier steps) change
+    the equation error *relative to their values in the model*, so the joint
+    fit at their current values and the candidate's zero is the model as it
+    is.  The change of ``e`` is the sum over the effects that act through
+    generalized forces plus, for muscle-level effects, the change of the muscle
+    moments when they all join (or replace their entries in) the model's
+    muscle-level chain (:meth:`~pinmsk.diagnose.compare.EquationError.chain_delta`).
+
+    When every effect is linear in its parameters (``d = B theta``) the fit is
+    exact linear least squares (bounded by :func:`scipy.optimize.lsq_linear`
+    when the solution leaves the bounds); otherwise trust-region reflective
+    least squares with the effects' analytic Jacobians (finite differences of
+    the chain for muscle-level effects), warm-started from ``x0`` (the earlier
+    effects' values and the candidate's own fit), so a few iterations suffice.
+    ``problems`` maps labels to :class:`EffectProblem` s already built (their
+    caches are reused).
+    """
+
+    def __init__(self, eq, sigma, components, *, problems: dict | None = None):
+        self.eq = eq
+        self.sigma = np.asarray(sigma, dtype=float)
+        self.components = list(components)
+        labels = [c.label for c in self.components]
+        if len(set(labels)) != len(labels):
+            raise ModelError(f"a joint fit takes each effect once, got {', '.join(labels)}")
+        have = {c.label for c in eq.model.components}
+        self.in_model = [c.label in have for c in self.components]
+        problems = problems or {}
+        self.problems = []
+        for c in self.components:
+            p = problems.get(c.label)
+            self.problems.append(p if p is not None and p.eq is eq else EffectProblem(eq, self.sigma, c))
+        # the channels some effect can change; the others add a constant to the sum of squares
+        sigma_full = self.sigma
+        self.cols = np.unique(np.concatenate([p.act for p in self.problems])) if self.problems else \
+            np.arange(eq.e.shape[1])
+        pos = {int(c): k for k, c in enumerate(self.cols)}
+        self.local = [np.array([pos[int(a)] for a in p.act], dtype=int) for p in self.problems]
+        self.e = eq.e[:, self.cols]
+        self.sigma = sigma_full[self.cols]
+        rest = np.setdiff1d(np.arange(eq.e.shape[1]), self.cols)
+        self.rest_sse = float(np.sum((eq.e[:, rest] / sigma_full[rest]) ** 2))
+        self.n, self.C = self.e.shape
+        self.slices, names, lo, hi, x0 = [], [], [], [], []
+        k = 0
+        for comp, p in zip(self.components, self.problems):
+            vals = comp.values
+            self.slices.append(slice(k, k + len(p.names)))
+            k += len(p.names)
+            names += [f"{comp.label}.{n}" for n in p.names]
+            lo.append(p.lo)
+            hi.append(p.hi)
+            x0.append(np.array([vals[n] for n in p.names], dtype=float))
+        self.names = names
+        self.lo = np.concatenate(lo) if lo else np.zeros(0)
+        self.hi = np.concatenate(hi) if hi else np.zeros(0)
+        self.x_start = np.clip(np.concatenate(x0), self.lo, self.hi) if x0 else np.zeros(0)
+        self.signal_idx = [i for i, p in enumerate(self.problems) if p.signal]
+        self.force_idx = [i for i, p in enumerate(self.problems) if not p.signal]
+        # earlier effects acting through forces: their change relative to the model's values
+        self._base = {}
+        for i in self.force_idx:
+            if self.in_model[i] and self.problems[i].names:
+                self._base[i] = self.problems[i].predict(self.x_start[self.slices[i]][None])[0]
+        self.nfev = 0
+
+    @property
+    def linear(self) -> bool:
+        return not self.signal_idx and all(self.problems[i].linear for i in self.force_idx)
+
+    @property
+    def p(self) -> int:
+        return len(self.names)
+
+    # -- predictions ------------------------------------------------------------------
+    def delta(self, x) -> np.ndarray:
+        """Change of ``e`` (n, C) for the stacked free parameters ``x``."""
+        return self.delta_batch(np.asarray(x, dtype=float)[None])[0]
+
+    def delta_batch(self, X) -> np.ndarray:
+        """Change of ``e`` (P, n, C) for parameter sets ``X`` (P, p)."""
+        X = np.atleast_2d(np.asarray(X, dtype=float))
+        self.nfev += X.shape[0]
+        out = np.zeros((X.shape[0], self.n, self.C))
+        for i in self.force_idx:
+            p = self.problems[i]
+            if not p.names:
+                continue
+            d = p.predict(X[:, self.slices[i]])
+            if i in self._base:
+                d = d - self._base[i][None]
+            out[:, :, self.local[i]] += d
+        if self.signal_idx:
+            changes = []
+            for i in self.signal_idx:
+                p = self.problems[i]
+                batch = {n: np.full(X.shape[0], v) for n, v in p.fixed.items()}
+                batch.update({n: X[:, self.slices[i]][:, j] for j, n in enumerate(p.names)})
+                changes.append((p.component, batch))
+            out += self.eq.chain_delta(changes)[:, :, self.cols]
+        return out
+
+    def jacobian(self, x) -> np.ndarray:
+        """``d delta / d x`` (n, C, p)."""
+        x = np.asarray(x, dtype=float)
+        J = np.zeros((self.n, self.C, self.p))
+        for i in self.force_idx:
+            p = self.problems[i]
+            if p.names:
+                J[:, self.local[i], self.slices[i]] = p.jacobian(x[self.slices[i]])
+        if self.signal_idx:
+            cols = np.concatenate([np.arange(self.p)[self.slices[i]] for i in self.signal_idx])
+            span = np.where(np.isfinite(self.hi - self.lo), self.hi - self.lo, 1.0)[cols]
+            h = 1e-6 * np.maximum(np.abs(x[cols]), 1e-3 * span) + 1e-12
+            step = np.where(x[cols] + h <= self.hi[cols], h, -h)
+            X = np.tile(x, (cols.size + 1, 1))
+            X[1 + np.arange(cols.size), cols] += step
+            # only the chain varies across the stencil: the forces' part cancels in the differences
+            D = self.delta_batch(X)
+            J[:, :, cols] = np.moveaxis((D[1:] - D[0]) / step[:, None, None], 0, -1)
+        return J
+
+    def basis(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(B, c)`` with ``delta = B x + c`` (linear problems): B (n, C, p), c (n, C)."""
+        B = np.zeros((self.n, self.C, self.p))
+        c = np.zeros((self.n, self.C))
+        for i in self.force_idx:
+            p = self.problems[i]
+            if not p.names:
+                continue
+            b = p.basis()
+            B[:, self.local[i], self.slices[i]] = b
+            if i in self._base:
+                c[:, self.local[i]] -= np.einsum("ncp,p->nc", b, self.x_start[self.slices[i]])
+        return B, c
+
+    # -- objective ----------------------------------------------------------------------
+    def residual(self, x, mask=None) -> np.ndarray:
+        r = (self.e + self.delta(x)) / self.sigma
+        return (r if mask is None else r[mask]).ravel()
+
+    def sse(self, x, mask=None) -> float:
+        """Whitened SSE over all channels (the ones no effect changes as a constant; all rows only)."""
+        return float(np.sum(self.residual(x, mask) ** 2)) + (self.rest_sse if mask is None else 0.0)
+
+    def delta_full(self, x) -> np.ndarray:
+        """Change of the whole equation error (n, all channels)."""
+        out = np.zeros_like(self.eq.e)
+        out[:, self.cols] = self.delta(x)
+        return out
+
+    def solve(self, mask=None, x0=None, *, max_nfev: int = 100, fixed: dict | None = None):
+        """Best stacked parameters on the ``mask`` rows from ``x0``: ``(x, converged, message)``.
+
+        ``fixed`` maps indices into ``x`` to values held during the fit (a profile)."""
+        mask = np.ones(self.n, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+        x0 = self.x_start if x0 is None else np.asarray(x0, dtype=float)
+        free = np.ones(self.p, dtype=bool)
+        x0 = x0.copy()
+        for j, v in (fixed or {}).items():
+            free[j] = False
+            x0[j] = v
+        if not np.any(free):
+            return x0, True, "no free parameters"
+        lo, hi = self.lo[free], self.hi[free]
+        sig = self.sigma[None, :, None]
+        if self.linear:
+            B, c = self.basis()
+            Bm = B[mask]
+            rhs = -(self.e[mask] + c[mask] + np.einsum("ncp,p->nc", Bm[:, :, ~free], x0[~free]))
+            A = (Bm[:, :, free] / sig).reshape(-1, int(free.sum()))
+            b = (rhs / self.sigma).ravel()
+            xs, *_ = np.linalg.lstsq(A, b, rcond=None)
+            msg = "linear least squares"
+            ok = True
+            if not (np.all(xs >= lo) and np.all(xs <= hi)):
+                res = lsq_linear(A, b, bounds=(lo, hi))
+                xs, ok, msg = res.x, bool(res.success), f"bounded linear least squares: {res.message}"
+            out = x0.copy()
+            out[free] = xs
+            return out, ok, msg
+        span = hi - lo
+        eps = np.where(np.isfinite(span), 1e-9 * span, 1e-9)
+        start = np.clip(x0[free], lo + eps, hi - eps)
+
+        def full(z):
+            x = x0.copy()
+            x[free] = z
+            return x
+
+        def fun(z):
+            r = self.residual(full(z), mask)
+            if not np.all(np.isfinite(r)):
+                raise ConvergenceError(
+                    f"joint fit of {', '.join(c.label for c in self.components)}: the model gave non-finite "
+                    f"values at {dict(zip(np.array(self.names)[free], np.round(z, 6)))}; tighten the bounds")
+            return r
+
+        def jac(z):
+            J = self.jacobian(full(z))[mask][:, :, free] / sig
+            return J.reshape(-1, int(free.sum()))
+
+        res = least_squares(fun, start, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac",
+                            max_nfev=max_nfev, xtol=1e-8, ftol=1e-9)
+        return full(res.x), bool(res.status > 0), str(res.message)
+
+    def cross_validate(self, blocks, guard: int, x_full, *, max_nfev: int = 20) -> tuple[np.ndarray, bool]:
+        """Held-out equation error (n, all channels): each block changed by the joint fit on the other rows (less a
+        ``guard`` of rows either side), warm-started at ``x_full``."""
+        e_cv = self.eq.e.copy()
+        ok = True
+        for blk in blocks:
+            train = np.ones(self.n, dtype=bool)
+            train[max(blk[0] - guard, 0):min(blk[-1] + guard + 1, self.n)] = False
+            x, conv, _ = self.solve(train, x0=x_full, max_nfev=max_nfev)
+            ok &= conv
+            e_cv[np.ix_(blk, self.cols)] = (self.e + self.delta(x))[blk]
+        return e_cv, ok
+
+    # -- uncertainties and identifiability ----------------------------------------------
+    def covariance(self, x, mask=None) -> dict:
+        """Parameter covariance ``s^2 (J^T J)^-1`` (inflated as :class:`EffectFit`'s), the whitened
+        Jacobian's rank and condition number (columns scaled to unit norm) and which parameters sit at a
+        bound (left out of the inversion: their error is NaN)."""
+        mask = np.ones(self.n, dtype=bool) if mask is None else mask
+        r = ((self.e + self.delta(x)) / self.sigma)[mask]
+        if self.p == 0:
+            return {"cov": np.zeros((0, 0)), "rank": 0, "cond": 1.0, "at_bound": np.zeros(0, bool),
+                    "s2": float(np.mean(r ** 2)) if r.size else 1.0, "inflation": 1.0, "integrated_inflation": 1.0,
+                    "singular_values": np.zeros(0)}
+        J = (self.jacobian(x)[mask] / self.sigma[None, :, None]).reshape(-1, self.p)
+        span = self.hi - self.lo
+        tol = np.where(np.isfinite(span), 1e-8 * span, 1e-9)
+        at_bound = (x <= self.lo + tol) | (x >= self.hi - tol)
+        norms = np.linalg.norm(J, axis=0)
+        Jn = J / np.where(norms > 0, norms, 1.0)
+        sv = np.linalg.svd(Jn, compute_uv=False) if self.p else np.zeros(0)
+        rank = int(np.sum(sv > sv[0] * 1e-10)) if sv.size and sv[0] > 0 else 0
+        cond = float(sv[0] / sv[-1]) if sv.size and sv[-1] > 0 else float("inf")
+        n_res, p = r.size, self.p
+        s2 = float(np.sum(r ** 2)) / max(n_res - p, 1)
+        infl = ar1_inflation(r)
+        cov = np.full((p, p), np.nan)
+        inner = ~at_bound & (norms > 0)
+        if np.any(inner):
+            Ji = J[:, inner] / norms[inner]
+            JtJ = Ji.T @ Ji
+            if not np.all(np.isfinite(JtJ)):
+                cov[np.ix_(inner, inner)] = np.inf
+            else:
+                # pseudo-inverse on the identifiable subspace; a parameter with a share in a null direction
+                # (a combination the data do not see) has no finite error, the others keep theirs
+                w, V = np.linalg.eigh(JtJ)
+                keep = w > max(w.max(), 1e-300) * 1e-12
+                sub = (V[:, keep] / w[keep]) @ V[:, keep].T / np.outer(norms[inner], norms[inner])
+                sub = sub * s2 * infl
+                blind = np.any(np.abs(V[:, ~keep]) > 0.05, axis=1) if np.any(~keep) else np.zeros(sub.shape[0], bool)
+                sub[blind, :] = np.inf
+                sub[:, blind] = np.inf
+                cov[np.ix_(inner, inner)] = sub
+        return {"cov": cov, "rank": rank, "cond": cond, "at_bound": at_bound, "s2": s2, "inflation": infl,
+                "integrated_inflation": inflation(r), "singular_values": sv}
+
+    def stderr_corr(self, cov) -> tuple[np.ndarray, np.ndarray]:
+        d = np.diag(cov)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            se = np.sqrt(np.where(d >= 0, d, np.nan))
+            corr = cov / np.outer(se, se)
+        return se, corr
+
+    def components_at(self, x, stderr=None) -> list:
+        """The components with the stacked values ``x`` (and standard errors)."""
+        out = []
+        for comp, p, sl in zip(self.components, self.problems, self.slices):
+            vals = {n: float(np.clip(v, comp.params[n].min, comp.params[n].max)) for n, v in zip(p.names, x[sl])}
+            se = {} if stderr is None else {n: float(s) for n, s in zip(p.names, stderr[sl])}
+            out.append(comp.with_params(vals, stderr=se) if vals else comp)
+        return out
+
+    def profile_interval(self, x, j: int, se_wald: float, threshold: float, *, max_nfev: int = 10,
+                         evaluations: int = 3) -> tuple:
+        """Profile-likelihood interval of parameter ``j``: where the SSE, re-minimised over all the other
+        parameters, has risen by ``threshold`` (``3.84 s^2`` for 95 %).
+
+        Returns ``(low, high, low_closed, high_closed, rise_low, rise_high)``: a side that reaches its bound
+        before the SSE rises that far is open, and ``rise_*`` is how far the SSE has risen at that bound
+        (NaN for a closed side): near zero, the data do not bound the parameter there at all.  Each side starts with a step
+        of the Wald half-width and then takes secant steps on ``sqrt(delta SSE)``, which is linear in the
+        step where the SSE is quadratic (``evaluations`` warm-started refits at most, ``max_nfev``
+        evaluations each).
+        """
+        s0 = self.sse(x)
+        lo, hi = self.lo[j], self.hi[j]
+        span = hi - lo if np.isfinite(hi - lo) else max(abs(x[j]), 1.0) * 10
+        out = []
+
+        def rise_at(v, start):
+            xk, _, _ = self.solve(None, x0=start, max_nfev=max_nfev, fixed={j: v})
+            return self.sse(xk) - s0, xk
+
+        for sign, bound in ((-1.0, lo), (1.0, hi)):
+            room = abs(bound - x[j]) if np.isfinite(bound) else np.inf
+            if room <= 1e-12 * max(span, 1e-12):
+                out.append((x[j], False, 0.0))
+                continue
+            h = 1.96 * se_wald if np.isfinite(se_wald) and se_wald > 0 else 0.1 * span
+            h = min(h, room)
+            xk, opened, tried_room, rise = x.copy(), False, False, np.nan
+            for _ in range(evaluations):
+                rise, xk = rise_at(x[j] + sign * h, xk)
+                tried_room = h >= room
+                if rise < threshold and tried_room:
+                    opened = True
+                    break
+                est = h * np.sqrt(threshold / rise) if rise > 0 else 2.0 * h
+                h_new = min(est, room)
+                done = abs(h_new - h) <= 0.02 * h
+                h = h_new
+                if done:
+                    break
+            if not opened and h >= room and not tried_room:
+                rise, _ = rise_at(x[j] + sign * room, xk)     # the estimate lies beyond the bound: check it
+                opened = rise < threshold
+            out.append((x[j] + sign * min(h, room), not opened, float(rise) if opened else float("nan")))
+        (a, ca, ra), (b, cb, rb) = out
+        return float(a), float(b), bool(ca), bool(cb), ra, rb

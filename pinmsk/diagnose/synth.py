@@ -14,7 +14,9 @@ and returns the measurements a lab would record, with noise:
   and extensors on top of 5 % co-activation; with hidden
   ``activation_dynamics`` the excitation is the exact inverse (thesis Eq. A.5)
   of those activations; with a hidden ``electromechanical_delay`` the
-  recorded excitation leads the muscle's by ``delay``;
+  recorded excitation leads the muscle's by ``delay``; hidden measurement
+  effects (``sensor_offset``, ``sensor_gain``) turn the true moment into the
+  reading of a biased or mis-scaled sensor (their ``measure``);
 * floating-base models (``gait2d``): a squat-and-sway with the right foot flat
   on the ground at a fixed place (the torso coordinates follow from the
   closure), the left leg slightly out of phase; measured coordinates and
@@ -193,7 +195,8 @@ def make_trial(model, effects: Sequence = (), *, duration: float = 10.0, rate: f
         raise ModelError(f"duration and rate must be positive, got {duration} s at {rate} Hz")
     levels = _levels(noise)
     rng = np.random.default_rng(seed)
-    joint = [e for e in effs if not isinstance(e, SignalEffect)]
+    sensors = [e for e in effs if getattr(e, "level", "joint") == "sensor"]
+    joint = [e for e in effs if not isinstance(e, SignalEffect) and e not in sensors]
     signal = sorted([e for e in effs if isinstance(e, SignalEffect)], key=lambda e: e.order)
     truth = model.with_effect(*joint) if joint else model
     for e in signal:
@@ -208,6 +211,8 @@ def make_trial(model, effects: Sequence = (), *, duration: float = 10.0, rate: f
     if signal and "excitations" not in measure:
         raise ModelError("muscle-level hidden effects only show in excitation channels; "
                          "include 'excitations' in measure")
+    if sensors and "moments" not in measure:
+        raise ModelError(f"hidden {sensors[0].label} describes a recorded moment: include 'moments' in measure")
     n = int(round(duration * rate)) + 1
     t = np.arange(n) / rate
     lead = 0.3 if signal else 0.0            # extra time so a delayed signal exists at the end
@@ -241,6 +246,11 @@ def make_trial(model, effects: Sequence = (), *, duration: float = 10.0, rate: f
             for i, c in enumerate(model.coordinates):
                 if c not in unact:
                     chans[moment_channel(c)] = tau[:n, i].copy()
+            for e in sorted(sensors, key=lambda x: x.order):   # the recording of a biased or mis-scaled sensor
+                e.check_target(model)
+                if e.channel not in chans:
+                    raise ModelError(f"hidden {e.label}: the synthetic trial records no {e.channel}")
+                chans[e.channel] = e.measure(chans[e.channel])
         if "excitations" in measure:
             u = _excitations(model, full, tau, signal)
             for j, m in enumerate(model.muscle_names):

@@ -9,11 +9,14 @@ family                     target       generalized force
 =========================  ===========  ==================================================
 joint_damping              coordinate   ``-c qdot``
 coulomb_friction           coordinate   ``-F_c tanh(qdot / 0.01)``
-joint_spring               coordinate   ``-k (q - q0)``
-passive_elastic            coordinate   ``exp(-k_lo (q - theta_lo)) - exp(k_hi (q - theta_hi))`` N m
+joint_spring               coordinate   ``-k (q - q0)``, ``q0`` within the joint's range
+passive_elastic            coordinate   ``A [exp(-k_lo (q - theta_0)) - exp(k_hi (q - theta_0))]``
 riener_edrich_1999         side r / l   thesis Eq. 5.11 on hip, knee, ankle (x ``scale``)
 payload                    frame        ``-m J_p^T (a_p - g)`` (point mass; inertial)
 segment_mass               body         ``-delta Y_j pi_j`` (mass/inertia scale; inertial)
+scale                      model        ``-delta Y pi`` (every segment; model not scaled to the subject)
+sensor_gain                coordinate   none: the recorded ``<coord>_moment`` reads ``g tau`` (measurement)
+sensor_offset              coordinate   none: the recorded ``<coord>_moment`` reads ``tau + b`` (measurement)
 activation_dynamics        muscles      excitation -> activation, Eq. A.2 (muscle level)
 electromechanical_delay    muscles      excitation delayed by ``delay`` (muscle level)
 delayed_activation_        muscles      delay, then Eq. A.2: both fitted together (muscle level)
@@ -59,7 +62,9 @@ from .friction import CoulombFriction
 from .passive import PassiveElastic, RienerEdrich1999PassiveMoment
 from .payload import Payload
 from .registry import families, from_spec, get, register
+from .scale import MassScale
 from .segment_mass import SegmentMass
+from .sensor import MeasurementEffect, SensorGain, SensorOffset
 from .spring import JointSpring
 
 
@@ -75,7 +80,7 @@ _BUILTIN = frozenset(families())
 __all__ = [
     "ActivationDynamics", "CoulombFriction", "DelayedActivationDynamics", "ElectromechanicalDelay",
     "ExcitationPath", "excitation_path",
-    "JointDamping", "JointEffect", "JointSpring", "PassiveElastic", "Payload",
-    "RienerEdrich1999PassiveMoment", "SegmentMass", "SignalEffect", "families",
+    "JointDamping", "JointEffect", "JointSpring", "MassScale", "MeasurementEffect", "PassiveElastic", "Payload",
+    "RienerEdrich1999PassiveMoment", "SegmentMass", "SensorGain", "SensorOffset", "SignalEffect", "families",
     "from_spec", "get", "register", "unregister",
 ]

@@ -26,8 +26,9 @@ from ..components import Component, Motion, motion_cached
 from ..errors import ModelError
 from ..skeleton import skeleton_constant
 
-__all__ = ["JointEffect", "SignalEffect", "signal_parts", "frame_point_kinematics", "torque_regressor",
-           "unactuated_coordinates", "moving_bodies", "hand_like_frames"]
+__all__ = ["JointEffect", "ScaledBasisEffect", "SignalEffect", "signal_parts", "frame_point_kinematics",
+           "torque_regressor", "unactuated_coordinates", "moving_bodies", "hand_like_frames", "joint_range",
+           "bounded_to_range"]
 
 
 class JointEffect(Component):
@@ -46,6 +47,11 @@ class JointEffect(Component):
     def affected_coordinates(self) -> tuple[str, ...]:
         """The coordinates whose generalized force this effect can change."""
         return (self.target,)
+
+    def for_model(self, model) -> "JointEffect":
+        """This effect with bounds that depend on ``model`` (a rest angle within the joint's range);
+        the diagnosis fits candidates in this form.  Default: unchanged."""
+        return self
 
     def generalized_force(self, model, motion: Motion, params: Mapping[str, float] | None = None,
                           cache: Any = None) -> np.ndarray:
@@ -81,6 +87,24 @@ class JointEffect(Component):
 
     def _dforce_dstate(self, q, v, p):  # pragma: no cover - abstract
         raise NotImplementedError
+
+
+class ScaledBasisEffect(Component):
+    """An effect ``Q = -theta * B(q, v, a)``: its one parameter times a parameter-free basis that
+    :meth:`prepare` computes once per motion (a payload's ``J_p^T (a_p - g)``, a body's ``Y_j pi_j``, the
+    skeleton's ``Y pi``).  Linear, so the diagnosis fits it exactly."""
+
+    linear = True
+
+    def generalized_force(self, model, motion: Motion, params: Mapping[str, float] | None = None,
+                          cache: Any = None) -> np.ndarray:
+        basis = self.prepare(model, motion) if cache is None else cache
+        return -self._p(params)[self.parameters[0].name] * basis
+
+    def param_jacobian(self, model, motion: Motion, params: Mapping[str, float] | None = None,
+                       cache: Any = None) -> np.ndarray:
+        basis = self.prepare(model, motion) if cache is None else cache
+        return -basis[:, :, None]
 
 
 class SignalEffect(Component):
@@ -231,6 +255,34 @@ def hand_like_frames(model) -> list[str]:
         seen.append((f.parentJoint, pos))
         out.append(f.name)
     return out
+
+
+def joint_range(model, coordinate: str) -> tuple[float, float] | None:
+    """The range of motion of ``coordinate`` (the model's position limits), or None without finite limits
+    (a free translation such as ``torso_x``, or limits wider than 20 rad / m: none in practice)."""
+    pm = model.pin
+    i = model.coordinate_index(coordinate)
+    lo, hi = float(pm.lowerPositionLimit[i]), float(pm.upperPositionLimit[i])
+    if not (np.isfinite(lo) and np.isfinite(hi)) or hi - lo > 20 or not lo < hi:
+        return None
+    return lo, hi
+
+
+def bounded_to_range(effect, model, names):
+    """``effect`` with the parameters ``names`` bounded to its target coordinate's range of motion
+    (intersected with their declared bounds; values clipped into it)."""
+    rng = joint_range(model, effect.target)
+    if rng is None:
+        return effect
+    bounds, values = {}, {}
+    for n in names:
+        p = effect.params[n]
+        lo, hi = max(p.min, rng[0]), min(p.max, rng[1])
+        if not lo < hi:
+            continue
+        bounds[n] = (lo, hi)
+        values[n] = float(np.clip(p.value, lo, hi))
+    return effect.with_params(values, bounds=bounds) if bounds else effect
 
 
 # -- batch kinematics (cached in a caller's Data) ---------------------------------

@@ -1,25 +1,46 @@
 """Passive elastic joint moments: a fitted double exponential per joint, and Riener & Edrich (1999).
 
 :class:`PassiveElastic` (``passive_elastic``) -- the Riener & Edrich form
-(thesis Eq. 5.11) for one joint, fitted::
+(thesis Eq. 5.11) for one joint, written as an amplitude times a restoring
+shape about the joint's rest angle ``theta_0``::
 
-    Q = M_ref exp(-k_lo (q - theta_lo)) - M_ref exp(k_hi (q - theta_hi))
+    Q = A [exp(-k_lo (q - theta_0)) - exp(k_hi (q - theta_0))] / Z,
+    Z = exp(k_lo (theta_0 - q_lo)) + exp(k_hi (q_hi - theta_0))
 
-The first term is the moment that resists motion below the lower end of the
-range (it pushes towards +q), the second the one above the upper end.  The
-general double exponential ``k1 exp(-k2 (q - theta1)) - k3 exp(-k4 (theta2 - q))``
-is over-parametrised -- ``k1`` and ``theta1`` (likewise ``k3`` and ``theta2``)
-only enter through ``k1 exp(k2 theta1)`` -- so the amplitudes are fixed at
-``M_ref = 1 N m`` and the identifiable parameters are
+with ``[q_lo, q_hi]`` the joint's range of motion (the model's position
+limits; ``theta_0 -+ 1 rad`` for a joint without them).  The first term is the
+moment that resists motion towards the lower end of the range (it pushes
+towards +q), the second the one towards the upper end.  ``Z`` normalises the
+shape by its two branches' values at the ends of the range, so the moment
+there is at most ``A``, whatever the stiffening rates: the ends' moments add up
+to ``A`` up to the small share of the opposite branch.
 
-* ``theta_lo``, ``theta_hi`` (rad): the angles at which each branch reaches 1 N m;
-* ``k_lo``, ``k_hi`` (1/rad): how fast each branch stiffens (e-folding angle ``1/k``).
+Why this form.  The general double exponential ``k1 exp(-k2 (q - theta1)) -
+k3 exp(-k4 (theta2 - q))`` is over-parametrised -- ``k1`` and ``theta1``
+(likewise ``k3`` and ``theta2``) only enter through ``k1 exp(k2 theta1)`` -- and
+its one-branch limits are degenerate: with ``k4 -> 0`` a branch becomes a
+constant offset, which a sensor bias or a gravity error produces as well, and
+with a large rate at a tiny amplitude it becomes a wall far outside the data
+that a fit on part of the range extrapolates into kilonewton-metres.  Here
+every member of the family is a *restoring* moment (``dQ/dq < 0``) that
+vanishes at the rest angle and stays within ``A`` over the range:
 
-With ``k_lo = k_hi = 0`` both branches are 1 N m and cancel: zero moment.
-Exponents are clipped at 50 to keep far extrapolation finite.  Eq. 5.11's
-constant offsets are left out: a constant moment is indistinguishable from
-an offset in the measured moment or a gravity error.  The fit starts from a
-variable-projection grid over ``(k_lo, k_hi)`` with the two amplitudes solved
+* ``amplitude`` ``A`` (N m, >= 0; 0 = no moment): the scale of the moments at
+  the ends of the range;
+* ``theta_0`` (rad): the rest angle, bounded to the joint's range of motion
+  when the diagnosis builds the candidate (:meth:`PassiveElastic.for_model`);
+* ``k_lo``, ``k_hi`` (1/rad, >= 1): how fast each branch stiffens (e-folding
+  angle ``1/k`` at most 57 deg, the physiological range: Riener & Edrich's
+  exponents are 1.2-11 /rad).  Below 1/rad the shape would be a near-linear
+  spring, which :class:`~pinmsk.effects.spring.JointSpring` describes with two
+  parameters.
+
+No member of the family is a constant offset (that is ``sensor_offset``).
+The published form with ``theta_lo``, ``theta_hi`` (the angles where each branch
+is ``M_ref``) maps onto this one exactly (:meth:`PassiveElastic.from_limits`).
+The exponents are evaluated as ``exp(a - log Z)`` (no overflow within the
+range) and clipped at 50 beyond it.  ``A`` enters linearly, so the fit starts
+from a variable-projection grid over ``(theta_0, k_lo, k_hi)`` with ``A`` solved
 by non-negative least squares (:meth:`PassiveElastic.initial_guess`).
 
 :class:`RienerEdrich1999PassiveMoment` (``riener_edrich_1999``) -- thesis
@@ -43,11 +64,10 @@ knee ~15 deg flexion and ankle ~18 deg plantarflexion, as for a relaxed leg.
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import nnls
 
 from ..components import Parameter
 from ..errors import ModelError
-from ._base import JointEffect
+from ._base import JointEffect, bounded_to_range, joint_range
 from .registry import register
 
 _EXP_CLIP = 50.0
@@ -59,87 +79,115 @@ def _exp(x):
 
 @register
 class PassiveElastic(JointEffect):
-    """Double-exponential passive moment ``M_ref [exp(-k_lo (q - theta_lo)) - exp(k_hi (q - theta_hi))]``."""
+    """Restoring double exponential about the rest angle, normalised at the ends of the joint's range."""
 
     family = "passive_elastic"
-    #: fixed amplitude of each branch (N m): theta_* is where that branch reaches M_ref
-    moment_ref = 1.0
     parameters = (
-        Parameter("theta_lo", 0.0, -2 * np.pi, 2 * np.pi, "rad", "angle where the lower-limit moment is 1 N m"),
-        Parameter("k_lo", 5.0, 0.0, 100.0, "1/rad", "stiffening rate of the lower-limit branch"),
-        Parameter("theta_hi", 2.0, -2 * np.pi, 2 * np.pi, "rad", "angle where the upper-limit moment is 1 N m"),
-        Parameter("k_hi", 5.0, 0.0, 100.0, "1/rad", "stiffening rate of the upper-limit branch"),
+        Parameter("amplitude", 1.0, 0.0, 1.0e3, "N m", "scale of the moments at the ends of the range"),
+        Parameter("theta_0", 0.0, -np.pi, np.pi, "rad", "rest angle (zero moment); bounded to the joint's range"),
+        Parameter("k_lo", 5.0, 1.0, 100.0, "1/rad", "stiffening rate of the lower-limit branch"),
+        Parameter("k_hi", 5.0, 1.0, 100.0, "1/rad", "stiffening rate of the upper-limit branch"),
     )
-    zero_params = {"k_lo": 0.0, "k_hi": 0.0}
+    zero_params = {"amplitude": 0.0}
+    #: parameters bounded to the target coordinate's range of motion (see :meth:`for_model`)
+    range_parameters = ("theta_0",)
 
-    def _branches(self, q, p):
-        lo = self.moment_ref * _exp(-p["k_lo"] * (q - p["theta_lo"]))
-        hi = self.moment_ref * _exp(p["k_hi"] * (q - p["theta_hi"]))
-        return lo, hi
+    @classmethod
+    def from_limits(cls, target, model, *, theta_lo: float, k_lo: float, theta_hi: float, k_hi: float,
+                    moment_ref: float = 1.0) -> "PassiveElastic":
+        """The published parametrisation ``M_ref [exp(-k_lo (q - theta_lo)) - exp(k_hi (q - theta_hi))]``
+        on ``model``'s range of ``target``."""
+        theta_0 = (k_lo * theta_lo + k_hi * theta_hi) / (k_lo + k_hi)
+        lo, hi = _range(model, target, theta_0)
+        log_z = np.logaddexp(k_lo * (theta_0 - lo), k_hi * (hi - theta_0))
+        amp = moment_ref * float(np.exp(-k_lo * (theta_0 - theta_lo) + log_z))
+        return cls(target, amplitude=amp, theta_0=theta_0, k_lo=k_lo, k_hi=k_hi)
 
-    def _force(self, q, v, p):
-        lo, hi = self._branches(q, p)
-        return lo - hi
+    def for_model(self, model) -> "PassiveElastic":
+        """This effect with ``theta_0`` bounded to the target coordinate's range of motion."""
+        return bounded_to_range(self, model, self.range_parameters)
 
-    def _dforce_dparams(self, q, v, p):
-        lo, hi = self._branches(q, p)
-        return np.column_stack([
-            lo * p["k_lo"],                  # d/dtheta_lo
-            -lo * (q - p["theta_lo"]),       # d/dk_lo
-            hi * p["k_hi"],                  # d/dtheta_hi
-            -hi * (q - p["theta_hi"]),       # d/dk_hi
-        ])
+    # -- the law, on the model's range -----------------------------------------------
+    def _terms(self, model, q, p):
+        t0, kl, kh = p["theta_0"], p["k_lo"], p["k_hi"]
+        lo, hi = _range(model, self.target, t0)
+        d = q - t0
+        e_l, e_h = kl * (t0 - lo), kh * (hi - t0)
+        log_z = np.logaddexp(e_l, e_h)
+        u = _exp(-kl * d - log_z)
+        w = _exp(kh * d - log_z)
+        s_l, s_h = np.exp(e_l - log_z), np.exp(e_h - log_z)      # softmax shares, s_l + s_h = 1
+        dz = {"theta_0": s_l * kl - s_h * kh, "k_lo": s_l * (t0 - lo), "k_hi": s_h * (hi - t0)}
+        return u, w, d, dz
 
-    def _dforce_dstate(self, q, v, p):
-        lo, hi = self._branches(q, p)
-        return -p["k_lo"] * lo - p["k_hi"] * hi, np.zeros_like(v)
+    def generalized_force(self, model, motion, params=None, cache=None):
+        i = model.coordinate_index(self.target)
+        p = self._p(params)
+        u, w, _, _ = self._terms(model, motion.q[:, i], p)
+        out = np.zeros((motion.n_frames, model.nv))
+        out[:, i] = p["amplitude"] * (u - w)
+        return out
+
+    def param_jacobian(self, model, motion, params=None, cache=None):
+        i = model.coordinate_index(self.target)
+        p = self._p(params)
+        u, w, d, dz = self._terms(model, motion.q[:, i], p)
+        a = p["amplitude"]
+        out = np.zeros((motion.n_frames, model.nv, 4))
+        out[:, i, 0] = u - w                                                    # d/dA
+        out[:, i, 1] = a * (u * (p["k_lo"] - dz["theta_0"]) + w * (p["k_hi"] + dz["theta_0"]))
+        out[:, i, 2] = a * (-u * d - (u - w) * dz["k_lo"])
+        out[:, i, 3] = a * (-w * d - (u - w) * dz["k_hi"])
+        return out
+
+    def state_derivatives(self, model, motion, params=None, cache=None):
+        i = model.coordinate_index(self.target)
+        p = self._p(params)
+        u, w, _, _ = self._terms(model, motion.q[:, i], p)
+        dq = np.zeros((motion.n_frames, model.nv, model.nv))
+        dq[:, i, i] = -p["amplitude"] * (p["k_lo"] * u + p["k_hi"] * w)
+        return dq, np.zeros_like(dq)
 
     def initial_guess(self, model, motion, target, cache=None) -> list[dict]:
-        """Variable projection: for each ``(k_lo, k_hi)`` on a grid, amplitudes by NNLS; best few."""
+        """Variable projection: on a grid of ``(theta_0, k_lo, k_hi)`` within the bounds, ``A`` by
+        non-negative least squares; the best few."""
         i = model.coordinate_index(self.target)
         y = np.asarray(target)[:, i]
         ok = np.isfinite(y)
         q, y = motion.q[ok, i], y[ok]
         if q.size < 4:
             return []
-        lo_b, hi_b = self.bounds()
-        qc = 0.5 * (q.min() + q.max())
-        ks = np.geomspace(1.0, 60.0, 14)
-        fits = []
-        for kl in np.concatenate([[0.0], ks]):
-            e_lo = _exp(-kl * (q - qc))
-            for kh in np.concatenate([[0.0], ks]):
-                if kl == 0.0 and kh == 0.0:
-                    continue
-                e_hi = _exp(kh * (q - qc))
-                cols = []
-                if kl > 0:
-                    cols.append(e_lo)
-                if kh > 0:
-                    cols.append(-e_hi)
-                A = np.column_stack(cols)
-                scale = np.linalg.norm(A, axis=0)
-                coef, rn = nnls(A / scale, y)
-                coef = coef / scale
-                fits.append((rn, kl, kh, coef))
-        fits.sort(key=lambda f: f[0])
+        decl = self.params
+        t_lo, t_hi = decl["theta_0"].min, decl["theta_0"].max
+        t_lo, t_hi = max(t_lo, q.min() - 0.5), min(t_hi, q.max() + 0.5)
+        if not t_lo < t_hi:
+            t_lo = t_hi = float(np.clip(np.median(q), decl["theta_0"].min, decl["theta_0"].max))
+        thetas = np.linspace(t_lo, t_hi, 13)
+        ks = np.geomspace(max(decl["k_lo"].min, 1e-3), min(decl["k_lo"].max, 60.0), 8)
+        kh = np.geomspace(max(decl["k_hi"].min, 1e-3), min(decl["k_hi"].max, 60.0), 8)
+        # the shapes on the whole grid at once: axes (k_lo, k_hi, theta_0, frame)
+        grid = {"k_lo": ks[:, None, None, None], "k_hi": kh[None, :, None, None],
+                "theta_0": thetas[None, None, :, None]}
+        u, w, _, _ = self._terms(model, q[None, None, None, :], grid)
+        S = u - w
+        ss = np.einsum("abtn,abtn->abt", S, S)
+        sy = np.einsum("abtn,n->abt", S, y)
+        amp = np.clip(sy / np.maximum(ss, 1e-300), 0.0, decl["amplitude"].max)
+        rn = np.sum(y ** 2) - 2 * amp * sy + amp ** 2 * ss
+        order = np.argsort(rn, axis=None)[:3]
         out = []
-        for rn, kl, kh, coef in fits[:3]:
-            j = 0
-            guess = {"k_lo": kl, "k_hi": kh, "theta_lo": float(lo_b[0]), "theta_hi": float(hi_b[2])}
-            if kl > 0:
-                amp = coef[j]; j += 1
-                # M_ref exp(-kl (q - theta)) = amp exp(-kl (q - qc))  =>  theta = qc - ln(amp / M_ref) / kl
-                guess["theta_lo"] = qc - np.log(amp / self.moment_ref) / kl if amp > 0 else float(lo_b[0])
-            else:
-                guess["k_lo"] = 0.0
-            if kh > 0:
-                amp = coef[j]
-                guess["theta_hi"] = qc + np.log(amp / self.moment_ref) / kh if amp > 0 else float(hi_b[2])
-            guess["theta_lo"] = float(np.clip(guess["theta_lo"], lo_b[0], hi_b[0]))
-            guess["theta_hi"] = float(np.clip(guess["theta_hi"], lo_b[2], hi_b[2]))
-            out.append(guess)
+        for flat in order:
+            a, b, t = np.unravel_index(flat, rn.shape)
+            out.append({"amplitude": float(amp[a, b, t]), "theta_0": float(thetas[t]),
+                        "k_lo": float(ks[a]), "k_hi": float(kh[b])})
         return out
+
+
+def _range(model, coordinate, theta_0):
+    """The normalising range ``(q_lo, q_hi)``: the joint's range of motion, else ``theta_0 -+ 1 rad``
+    (``theta_0`` may be an array of rest angles)."""
+    rng = joint_range(model, coordinate)
+    return rng if rng is not None else (np.asarray(theta_0) - 1.0, np.asarray(theta_0) + 1.0)
 
 
 @register

@@ -21,19 +21,18 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from ..components import Component, Parameter
-from ._base import add_dynamic_parameters, frame_point_kinematics
+from ..components import Parameter
+from ._base import ScaledBasisEffect, add_dynamic_parameters, frame_point_kinematics
 from .registry import register
 
 
 @register
-class Payload(Component):
+class Payload(ScaledBasisEffect):
     """Point mass ``m`` at the origin of frame ``target``."""
 
     family = "payload"
     level = "joint"
     target_kind = "frame"
-    linear = True
     inertial = True
     parameters = (
         Parameter("mass", 1.0, 0.0, 200.0, "kg", "mass held at the frame origin"),
@@ -44,14 +43,6 @@ class Payload(Component):
         """``J_p^T (a_p - g)`` over frames, ``(N, nv)``."""
         J, acc = frame_point_kinematics(model, motion, self.target, data)
         return np.einsum("nkv,nk->nv", J, acc - model.gravity[None, :])
-
-    def generalized_force(self, model, motion, params=None, cache=None):
-        basis = self.prepare(model, motion) if cache is None else cache
-        return -self._p(params)["mass"] * basis
-
-    def param_jacobian(self, model, motion, params=None, cache=None):
-        basis = self.prepare(model, motion) if cache is None else cache
-        return -basis[:, :, None]
 
     def apply_inertia(self, model, pin_model) -> None:
         f = model.pin.frames[model.frame_id(self.target)]

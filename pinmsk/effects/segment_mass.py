@@ -20,20 +20,19 @@ with a payload on the same body).
 """
 from __future__ import annotations
 
-from ..components import Component, Parameter
+from ..components import Parameter
 from ..errors import ModelError
-from ._base import add_dynamic_parameters, moving_bodies, torque_regressor
+from ._base import ScaledBasisEffect, add_dynamic_parameters, moving_bodies, torque_regressor
 from .registry import register
 
 
 @register
-class SegmentMass(Component):
+class SegmentMass(ScaledBasisEffect):
     """Scale ``1 + delta`` of the mass and inertia of the body ``target``."""
 
     family = "segment_mass"
     level = "joint"
     target_kind = "body"
-    linear = True
     inertial = True
     parameters = (
         Parameter("delta", 0.1, -0.9, 5.0, "", "relative mass/inertia change (0 = as modelled)"),
@@ -58,14 +57,6 @@ class SegmentMass(Component):
         Y = torque_regressor(model, motion, data)
         pi = model.pin.inertias[j].toDynamicParameters()
         return Y[:, :, 10 * (j - 1):10 * j] @ pi
-
-    def generalized_force(self, model, motion, params=None, cache=None):
-        basis = self.prepare(model, motion) if cache is None else cache
-        return -self._p(params)["delta"] * basis
-
-    def param_jacobian(self, model, motion, params=None, cache=None):
-        basis = self.prepare(model, motion) if cache is None else cache
-        return -basis[:, :, None]
 
     def apply_inertia(self, model, pin_model) -> None:
         j = self._joint(model)

@@ -2,16 +2,21 @@
 
 Physics: the linear approximation of the passive elastic moment about a rest
 angle (an orthosis spring, ligament stiffness near mid-range).  ``k`` in
-N m/rad, ``q0`` in rad.  ``Q`` is linear in ``(k, k q0)``; the diagnosis
-starts its bounded nonlinear fit of ``(k, q0)`` from that linear solution
-(:meth:`JointSpring.initial_guess`), so the fit needs one or two iterations.
+N m/rad, ``q0`` in rad.  The rest angle is where the spring is relaxed, so it
+lies within the joint's range of motion: the diagnosis bounds it there
+(:meth:`JointSpring.for_model`).  Unbounded, a weak spring with its rest angle
+far outside the range (``q0 -> +-2 pi``) is a constant moment plus a small
+slope -- what a sensor offset does -- and its parameters mean nothing.  ``Q``
+is linear in ``(k, k q0)``; the diagnosis starts its bounded nonlinear fit of
+``(k, q0)`` from that linear solution (:meth:`JointSpring.initial_guess`), so
+the fit needs one or two iterations.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from ..components import Parameter
-from ._base import JointEffect
+from ._base import JointEffect, bounded_to_range
 from .registry import register
 
 
@@ -22,9 +27,15 @@ class JointSpring(JointEffect):
     family = "joint_spring"
     parameters = (
         Parameter("k", 1.0, 0.0, 1.0e4, "N m/rad", "stiffness"),
-        Parameter("q0", 0.0, -2 * np.pi, 2 * np.pi, "rad", "rest angle (zero force)"),
+        Parameter("q0", 0.0, -2 * np.pi, 2 * np.pi, "rad", "rest angle (zero force); bounded to the joint's range"),
     )
     zero_params = {"k": 0.0}
+    #: parameters bounded to the target coordinate's range of motion (see :meth:`for_model`)
+    range_parameters = ("q0",)
+
+    def for_model(self, model) -> "JointSpring":
+        """This spring with its rest angle ``q0`` bounded to the target coordinate's range of motion."""
+        return bounded_to_range(self, model, self.range_parameters)
 
     def _force(self, q, v, p):
         return -p["k"] * (q - p["q0"])

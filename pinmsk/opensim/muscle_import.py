@@ -44,7 +44,7 @@ from ..muscles.muscle_set import MuscleSet
 from .actuators import actuator_hook
 from .muscles import MUSCLE_TYPES, muscle_model_from_osim, properties_from_xml, summarize_notes
 from .hooks import HookResult
-from .paths import GeometricPaths, fit_polynomial_paths, path_specs_from_xml
+from .paths import GeometricPaths, fit_polynomial_paths, path_specs
 from .report import APPROXIMATED, NOTE, ReportEntry
 from .skeleton import OsimKinematics, Skeleton
 
@@ -91,7 +91,7 @@ def muscle_hook(doc: OsimDocument, skeleton: Skeleton, *, ranges=None, max_muscl
             raise ModelError(f"{m.where}: the muscle has no path points (<GeometryPath>/<PathPointSet>)")
     imp = muscle_model_from_osim([(m.name, m.type, properties_from_xml(elements[m.name])) for m in chosen],
                                  where=[m.where for m in chosen])
-    specs = {s.muscle: s for s in path_specs_from_xml(root)}
+    specs = {s.muscle: s for s in path_specs(doc)}
     specs = [specs[n] for n in names]
 
     kin = OsimKinematics(doc)
@@ -210,7 +210,7 @@ def osim_geometric_paths(source) -> GeometricPaths | None:
     than :data:`MAX_MUSCLES`)."""
     from ..io.osim import read_osim
     doc = read_osim(source)
-    specs = path_specs_from_xml(_etree(doc.source))
+    specs = path_specs(doc)
     if not specs:
         return None
     kin = OsimKinematics(doc)

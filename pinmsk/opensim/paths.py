@@ -7,9 +7,9 @@ points whose location in their body is a function of a coordinate
 (``WrapCylinder`` ...).  This module describes them with small frozen
 dataclasses (the *specs*: :class:`PathPointSpec`,
 :class:`ConditionalPathPointSpec`, :class:`MovingPathPointSpec`,
-:class:`WrapSpec`, :class:`PathWrapSpec`, :class:`PathSpec`), reads them from
-an .osim XML tree (:func:`path_specs_from_xml`, :func:`coordinate_ranges_from_xml`)
-and evaluates them over many frames at once (:class:`GeometricPaths`), given
+:class:`WrapSpec`, :class:`PathWrapSpec`, :class:`PathSpec`), builds them from
+a read .osim document (:func:`path_specs`, from :func:`pinmsk.io.osim.read_osim`'s
+dataclasses) and evaluates them over many frames at once (:class:`GeometricPaths`), given
 the placements of the bodies in ground.
 
 The evaluation follows OpenSim 4.x (``GeometryPath::computePath``,
@@ -74,16 +74,16 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from ..errors import ModelError, PinmskError
-from .functions import (Constant, LinearFunction, MultiplierFunction, PiecewiseLinearFunction,
-                        PolynomialFunction, SimmSpline)
+from ..io.osim import OsimDocument
+from .functions import Constant, from_osim
 
 _ROUNDOFF = 2e-13     # SIMM's ROUNDOFF_ERROR (the wrap solvers' tolerance)
 
 __all__ = [
     "PathPointSpec", "ConditionalPathPointSpec", "MovingPathPointSpec", "WrapSpec", "PathWrapSpec",
-    "PathSpec", "path_specs_from_xml", "coordinate_ranges_from_xml", "GeometricPaths",
+    "PathSpec", "path_specs", "GeometricPaths",
     "PolynomialFitReport", "fit_polynomial_paths", "sample_poses", "motion_ranges", "body_fixed_xyz",
-    "function_from_xml", "PathPolylines", "ARC_POINT",
+    "PathPolylines", "ARC_POINT",
 ]
 
 GROUND = "ground"
@@ -320,190 +320,100 @@ def body_fixed_xyz(angles) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------------------------
-# reading the specs from an .osim XML tree
+# the specs of a read .osim document
 # --------------------------------------------------------------------------------------------
-def _where(elem) -> str:
-    line = getattr(elem, "sourceline", None)
-    name = elem.get("name")
-    tag = f"<{elem.tag}{f' name={name!r}' if name else ''}>"
-    return f"line {line}: {tag}" if line else tag
+_WRAP_TAGS = {"WrapCylinder": "cylinder", "WrapSphere": "sphere", "WrapEllipsoid": "ellipsoid",
+              "WrapTorus": "torus"}
+#: OpenSim's defaults of the wrap sizes the file may leave out (WrapCylinder's length, WrapTorus's radii).
+_WRAP_DEFAULTS = {"length": 1.0, "inner_radius": 0.01, "outer_radius": 0.05}
 
 
-def _text(elem, tag, default=None):
-    child = elem.find(tag)
-    if child is None or child.text is None or not child.text.strip():
-        return default
-    return child.text.strip()
-
-
-def _floats(elem, tag, n=None, default=None):
-    t = _text(elem, tag)
-    if t is None:
-        if default is None:
-            raise ModelError(f"{_where(elem)}: missing <{tag}>")
-        return default
-    try:
-        vals = tuple(float(v) for v in t.split())
-    except ValueError:
-        raise ModelError(f"{_where(elem)}: <{tag}> must be numbers, got {t!r}") from None
-    if n is not None and len(vals) != n:
-        raise ModelError(f"{_where(elem)}: <{tag}> must have {n} numbers, got {len(vals)}")
-    return vals
-
-
-def _last_name(path: str | None) -> str | None:
+def _leaf(path: str | None) -> str | None:
     """``/bodyset/femur_r`` -> ``femur_r``; ``/jointset/knee_r/knee_angle_r`` -> ``knee_angle_r``."""
-    if path is None:
+    if not path:
         return None
     return path.rstrip("/").split("/")[-1] or None
 
 
-def function_from_xml(elem) -> object:
-    """The :mod:`pinmsk.opensim.functions` function (a vectorised callable) of an OpenSim function
-    element (Constant, LinearFunction, PolynomialFunction, SimmSpline, PiecewiseLinearFunction, or a
-    MultiplierFunction around one)."""
-    kids = list(elem)
-    fn = kids[0] if elem.tag in ("x_location", "y_location", "z_location", "function") and kids else elem
-    tag = fn.tag
-    if tag == "Constant":
-        return Constant(_floats(fn, "value", 1)[0])
-    if tag == "LinearFunction":
-        s, i = _floats(fn, "coefficients", 2)
-        return LinearFunction([s, i])
-    if tag == "PolynomialFunction":
-        return PolynomialFunction(_floats(fn, "coefficients"))
-    if tag == "SimmSpline":
-        return SimmSpline(_floats(fn, "x"), _floats(fn, "y"))
-    if tag == "PiecewiseLinearFunction":
-        return PiecewiseLinearFunction(_floats(fn, "x"), _floats(fn, "y"))
-    if tag == "MultiplierFunction":
-        inner = fn.find("function")
-        if inner is None or len(inner) == 0:
-            raise ModelError(f"{_where(fn)}: a MultiplierFunction needs a <function>")
-        return MultiplierFunction(function_from_xml(inner), _floats(fn, "scale", 1, default=(1.0,))[0])
-    raise ModelError(f"{_where(fn)}: function type {tag!r} is not supported for moving path points "
-                     "(supported: Constant, LinearFunction, PolynomialFunction, SimmSpline, "
-                     "PiecewiseLinearFunction, MultiplierFunction)")
-
-
-def coordinate_ranges_from_xml(root) -> dict[str, tuple[float, float]]:
-    """``{coordinate: (min, max)}`` of every ``<Coordinate>`` of the model."""
+def _wrap_specs(doc: OsimDocument) -> dict[str, WrapSpec]:
+    """``{name: WrapSpec}`` of every wrap object of the document's bodies (a repeated name: the last)."""
     out = {}
-    for c in root.iter("Coordinate"):
-        name = c.get("name")
-        if name:
-            lo, hi = _floats(c, "range", 2, default=(-math.inf, math.inf))
-            out[name] = (lo, hi)
+    for w in doc.wrap_objects:
+        kind = _WRAP_TAGS.get(w.type)
+        if kind is None:
+            raise ModelError(f"{w.where}: unsupported wrap object type {w.type!r} "
+                             f"(supported: {', '.join(_WRAP_TAGS)})")
+        kw = dict(kind=kind, name=w.name, body=_leaf(w.frame), translation=w.translation,
+                  rotation=w.xyz_body_rotation, quadrant=w.quadrant, active=w.active)
+        need = {"cylinder": ("radius", "length"), "sphere": ("radius",), "ellipsoid": ("dimensions",),
+                "torus": ("inner_radius", "outer_radius")}[kind]
+        for attr in need:
+            v = getattr(w, attr)
+            if v is None and attr not in _WRAP_DEFAULTS:
+                raise ModelError(f"{w.where}: has no <{attr}>")
+            kw[attr] = _WRAP_DEFAULTS[attr] if v is None else v
+        try:
+            out[w.name] = WrapSpec(**kw)
+        except ModelError as e:
+            raise ModelError(f"{w.where}: {e}") from None
     return out
 
 
-_WRAP_TAGS = {"WrapCylinder": "cylinder", "WrapSphere": "sphere", "WrapEllipsoid": "ellipsoid",
-              "WrapTorus": "torus"}
-
-
-def _wrap_objects_from_xml(root) -> dict[str, WrapSpec]:
-    out = {}
-    bodies = [e for e in root.iter() if e.tag in ("Body", "Ground") and e.find("WrapObjectSet") is not None]
-    for body in bodies:
-        bname = GROUND if body.tag == "Ground" else body.get("name")
-        for obj in body.find("WrapObjectSet").iter():
-            if obj.tag.startswith("Wrap") and obj.tag not in _WRAP_TAGS and obj.tag != "WrapObjectSet":
-                raise ModelError(f"{_where(obj)}: unsupported wrap object type {obj.tag!r} "
-                                 f"(supported: {', '.join(_WRAP_TAGS)})")
-            if obj.tag not in _WRAP_TAGS:
-                continue
-            kind = _WRAP_TAGS[obj.tag]
-            kw = dict(kind=kind, name=obj.get("name"), body=bname,
-                      translation=_floats(obj, "translation", 3, default=(0.0, 0.0, 0.0)),
-                      rotation=_floats(obj, "xyz_body_rotation", 3, default=(0.0, 0.0, 0.0)),
-                      quadrant=_text(obj, "quadrant", "all"),
-                      active=(_text(obj, "active", "true").lower() != "false"))
-            try:
-                if kind in ("cylinder", "sphere"):
-                    kw["radius"] = _floats(obj, "radius", 1)[0]
-                if kind == "cylinder":
-                    kw["length"] = _floats(obj, "length", 1, default=(1.0,))[0]
-                if kind == "ellipsoid":
-                    kw["dimensions"] = _floats(obj, "dimensions", 3)
-                if kind == "torus":
-                    kw["inner_radius"] = _floats(obj, "inner_radius", 1, default=(0.01,))[0]
-                    kw["outer_radius"] = _floats(obj, "outer_radius", 1, default=(0.05,))[0]
-                out[obj.get("name")] = WrapSpec(**kw)
-            except ModelError as e:
-                raise ModelError(f"{_where(obj)}: {e}") from None
-    return out
-
-
-def _point_from_xml(elem, ranges, function) -> PathPointSpec | MovingPathPointSpec:
-    body = _last_name(_text(elem, "socket_parent_frame")) or _text(elem, "body")
-    if not body:
-        raise ModelError(f"{_where(elem)}: the path point names no parent frame (<socket_parent_frame>)")
-    name = elem.get("name") or ""
-    if elem.tag == "PathPoint":
-        return PathPointSpec(body=body, location=_floats(elem, "location", 3), name=name)
-    if elem.tag == "ConditionalPathPoint":
-        coord = _last_name(_text(elem, "socket_coordinate")) or _text(elem, "coordinate")
-        if not coord:
-            raise ModelError(f"{_where(elem)}: the conditional path point names no coordinate")
-        return ConditionalPathPointSpec(body=body, location=_floats(elem, "location", 3), name=name,
-                                        coordinate=coord, range=_floats(elem, "range", 2))
-    if elem.tag == "MovingPathPoint":
-        fns, coords = [], []
-        for axis in "xyz":
-            loc = elem.find(f"{axis}_location")
-            coord = _last_name(_text(elem, f"socket_{axis}_coordinate")) or _text(elem, f"{axis}_coordinate")
-            if loc is None:
-                fns.append(Constant(0.0))
-                coords.append(None)
-                continue
-            fns.append(function(loc))
-            coords.append(coord)
-        clamp = tuple(ranges.get(c) if c else None for c in coords)
-        return MovingPathPointSpec(body=body, x=fns[0], y=fns[1], z=fns[2], coordinates=tuple(coords),
-                                   clamp=clamp, name=name)
-    raise ModelError(f"{_where(elem)}: unsupported path point type {elem.tag!r} "
+def _point_spec(p, ranges) -> PathPointSpec | MovingPathPointSpec:
+    """The spec of a read path point (:class:`pinmsk.io.osim.PathPoint`); moving points' coordinates
+    clamped to their ``ranges`` as OpenSim clamps them."""
+    body = _leaf(p.frame)
+    # a missing x/y/z_location is a constant 0 (no coordinate); from_osim names a bad function's own line
+    fns = [Constant(0.0) if f is None else from_osim(f) for f in (p.x_location, p.y_location, p.z_location)]
+    try:
+        if p.type == "PathPoint":
+            return PathPointSpec(body=body, location=p.location, name=p.name)
+        if p.type == "ConditionalPathPoint":
+            return ConditionalPathPointSpec(body=body, location=p.location, name=p.name,
+                                            coordinate=p.coordinate, range=p.range)
+        if p.type == "MovingPathPoint":
+            coords = tuple(None if f is None else c for f, c in zip(
+                (p.x_location, p.y_location, p.z_location), (p.x_coordinate, p.y_coordinate, p.z_coordinate)))
+            clamp = tuple(ranges.get(c) if c else None for c in coords)
+            return MovingPathPointSpec(body=body, x=fns[0], y=fns[1], z=fns[2], coordinates=coords,
+                                       clamp=clamp, name=p.name)
+    except ModelError as e:
+        raise ModelError(f"{p.where}: {e}") from None
+    raise ModelError(f"{p.where}: unsupported path point type {p.type!r} "
                      "(supported: PathPoint, ConditionalPathPoint, MovingPathPoint)")
 
 
-def path_specs_from_xml(root, *, function: Callable | None = None) -> tuple[PathSpec, ...]:
-    """The geometry paths of an .osim document (``xml.etree`` root), in document order.
+def path_specs(doc: OsimDocument) -> tuple[PathSpec, ...]:
+    """The geometry paths of a read .osim document (:func:`pinmsk.io.osim.read_osim`), in its order.
 
     Every element with a ``<GeometryPath>`` (muscles, path actuators, ligaments,
-    path springs; in the ForceSet or in the model's ``<components>``) gives one
-    :class:`PathSpec` named after it.
-    ``function`` (optional) turns a ``<x_location>``-like element into a
-    vectorised callable (default: :func:`function_from_xml`).  Raises
-    :class:`ModelError` naming the element (and its line where the parser keeps
-    one) for unknown point, wrap or function types and unknown wrap objects.
+    path springs; in the ForceSet or in a ``<components>``) gives one
+    :class:`PathSpec` named after it; the moving points' functions are
+    :func:`pinmsk.opensim.functions.from_osim`'s.  Raises :class:`ModelError`
+    naming the element's file and line for an unsupported point, wrap or
+    function type, a path without points and a PathWrap naming no wrap object
+    of the model (with the closest names).
     """
-    function = function or function_from_xml
-    ranges = coordinate_ranges_from_xml(root)
-    wraps = _wrap_objects_from_xml(root)
+    ranges = {c.name: (float(c.range[0]), float(c.range[1])) for c in doc.coordinates}
+    wraps = _wrap_specs(doc)
     out = []
-    for force in root.iter():
-        gp = force.find("GeometryPath")
-        if gp is None:
-            continue
-        name = force.get("name")
-        pps = gp.find("PathPointSet")
-        objs = pps.find("objects") if pps is not None else None
-        if objs is None or len(objs) == 0:
-            raise ModelError(f"{_where(force)}: the muscle has no path points (<GeometryPath>/<PathPointSet>)")
-        points = tuple(_point_from_xml(e, ranges, function) for e in objs)
+    for m in doc.muscles:
+        gp = m.path
+        if gp is None or not gp.points:
+            raise ModelError(f"{m.where}: the muscle has no path points (<GeometryPath>/<PathPointSet>)")
+        points = tuple(_point_spec(p, ranges) for p in gp.points)
         pws = []
-        ws = gp.find("PathWrapSet")
-        for pw in (ws.iter("PathWrap") if ws is not None else ()):
-            obj = _text(pw, "wrap_object")
-            if obj not in wraps:
-                close = difflib.get_close_matches(str(obj), list(wraps), n=1)
+        for pw in gp.wraps:
+            if pw.wrap_object not in wraps:
+                close = difflib.get_close_matches(pw.wrap_object, list(wraps), n=1)
                 hint = f"; did you mean {close[0]!r}?" if close else ""
-                raise ModelError(f"{_where(pw)} of muscle {name!r}: no wrap object {obj!r} on any body{hint}")
-            rng = tuple(int(round(v)) for v in _floats(pw, "range", 2, default=(-1, -1)))
-            pws.append(PathWrapSpec(wrap=wraps[obj], range=rng, method=_text(pw, "method", "hybrid")))
+                raise ModelError(f"{pw.where} of muscle {m.name!r}: no wrap object {pw.wrap_object!r} on any "
+                                 f"body{hint}")
+            pws.append(PathWrapSpec(wrap=wraps[pw.wrap_object], range=pw.range, method=pw.method))
         try:
-            out.append(PathSpec(muscle=name, points=points, wraps=tuple(pws)))
+            out.append(PathSpec(muscle=m.name, points=points, wraps=tuple(pws)))
         except ModelError as e:
-            raise ModelError(f"{_where(force)}: {e}") from None
+            raise ModelError(f"{m.where}: {e}") from None
     return tuple(out)
 
 

@@ -539,7 +539,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("model")
     s.add_argument("trial", help="measured trial: coordinates plus <coord>_moment, EMG/excitations or GRF")
     s.add_argument("--add", action="append", metavar="EFFECT[:TARGET]",
-                   help="fit and add this effect, then diagnose again (repeat to iterate)")
+                   help="fit this effect jointly with the ones added before (their values move), add it, then "
+                        "diagnose again (repeat to iterate; the output prints what the refit changed)")
     s.add_argument("--json", metavar="OUT.json", default=None, help="write the summary as JSON")
     s.add_argument("--report", metavar="OUT.html", default=None, help="write a self-contained HTML report")
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")

@@ -500,7 +500,8 @@ def plot_error_steps(run, path=None) -> Figure:
         for ch in chans[:8]:
             ax.plot(x, [s.rmse[ch] / s.noise_floor[ch] for s in steps], marker="o", lw=0.8, label=ch)
     ax.axhline(1.0, color="k", lw=0.8, ls="--", label="noise floor")
-    ax.axhline(steps[-1].settings["at_floor"], color="0.5", lw=0.8, ls=":", label="at_noise_floor limit")
+    limit = (getattr(steps[-1], "stopping", None) or {}).get("consistent_limit", steps[-1].settings["at_floor"])
+    ax.axhline(limit, color="0.5", lw=0.8, ls=":", label="consistent with the noise")
     ax.set_xticks(x)
     ax.set_xticklabels(labels, fontsize=8, rotation=15)
     ax.set_ylabel("rmse / noise floor")

@@ -95,9 +95,13 @@ def render_report(run, *, title: str | None = None) -> str:
     if added:
         parts.append("<h2>Effects added</h2>")
         rows = []
-        for a in added:
+        # their values in the final model: each add refits the earlier effects jointly
+        final = run.final_effects() if hasattr(run, "final_effects") and last.comparison.mode != "contact" else None
+        for a, comp in zip(added, final or [None] * len(added)):
             for k, v in a.params.items():
                 se = a.stderr.get(k)
+                if comp is not None:
+                    v, se = comp.params[k].value, comp.params[k].stderr
                 rows.append([a.effect.label, k, _g(v), _g(se), a.effect.params[k].unit])
         parts.append(_table(["effect", "parameter", "value", "std. error", "unit"], rows, left=2))
 

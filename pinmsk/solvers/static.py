@@ -69,6 +69,7 @@ import numpy as np
 
 from ..actuators import IdealActuator, actuator_columns
 from ..components import Motion
+from ..effects._base import SignalEffect
 from ..errors import ConvergenceError, InfeasibleError, ModelError, ResidualWarning, SolverError
 from ..fitting import FitStatistics, Fitter, Result, format_report
 from ..kinematics import DEFAULT_CUTOFF, as_motion, prepare
@@ -957,6 +958,7 @@ class StaticOptimization(Fitter):
         t2 = _time.perf_counter()
         self.timing_ = {"setup_s": t1 - t0, "solve_s": t2 - t1, "total_s": t2 - t0}
         self.model_name_ = getattr(model, "name", "?")
+        self._signal_effects = tuple(c for c in model.effects if isinstance(c, SignalEffect))
         self.result_ = self._result(prob)
         return self
 
@@ -1161,6 +1163,12 @@ class StaticOptimization(Fitter):
             rows.append(("moments", plan.source))
             rows += list(self.inputs_.describe())
             rows += [("note", n) for n in plan.notes]
+            signal = [c.label for c in self._signal_effects]
+            if signal:
+                # said, not ignored: a frame's activations do not depend on excitation-to-activation dynamics
+                rows.append(("note", f"the model's {', '.join(signal)} act between excitation and activation; "
+                             "static optimization solves each frame's activations, which they do not change "
+                             "(MSO and EID use them to bound and report the excitations)"))
             if plan.unspanned:
                 how = ("left out by request (dofs=)" if plan.by_request else
                        "ideal reserves (no muscle can share them)" if self.reserves else "need no force")
