@@ -1346,7 +1346,9 @@ def _simbody_note(jk: JointKinematics, welded, fit_ranges) -> ReportEntry | None
     free = [c for c in jk.coordinates if c not in welded]
     if jk.joint.type != "CustomJoint" or not free:
         return None
-    k = 41 if len(free) == 1 else 9
+    # a grid of about 2,000 poses whatever the number of coordinates (a 6-coordinate pelvis at 9 per axis
+    # would be half a million, seconds of import for a note)
+    k = 41 if len(free) == 1 else max(3, int(round(2000.0 ** (1.0 / len(free)))))
     grids = np.meshgrid(*[np.linspace(*fit_ranges[c], k) for c in free], indexing="ij")
     n = grids[0].size
     values = {c: np.full(n, welded[c]) for c in jk.coordinates if c in welded}
