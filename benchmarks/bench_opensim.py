@@ -205,6 +205,45 @@ def opensim_so(osim, setup: Path, *, results: Path) -> tuple[float, Path, Path]:
             Path(results) / f"{name}_StaticOptimization_force.sto")
 
 
+def static_optimization_run(osim, model_path, coordinates, out: Path, *, span, actuators=None, loads=None,
+                            physiological: bool = True, cutoff: float = 6.0) -> tuple[float, Path]:
+    """OpenSim's StaticOptimization (an AnalyzeTool built in Python, activation exponent 2, the model's
+    force set plus the ``actuators`` force set file) on ``span`` of ``coordinates`` low-passed at
+    ``cutoff``, results in ``out``; returns (seconds of ``tool.run()``, the activation .sto)."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    model = osim.Model(str(model_path))
+    if actuators is not None:
+        fs = osim.ForceSet(str(actuators))
+        for i in range(fs.getSize()):
+            model.updForceSet().cloneAndAppend(fs.get(i))
+    model.initSystem()
+    tool = osim.AnalyzeTool()
+    tool.setModel(model)
+    tool.setLoadModelAndInput(True)
+    tool.setName("so")
+    tool.setCoordinatesFileName(str(coordinates))
+    tool.setLowpassCutoffFrequency(cutoff)
+    tool.setInitialTime(span[0])
+    tool.setFinalTime(span[1])
+    tool.setResultsDir(str(out))
+    if loads is not None:
+        tool.setExternalLoadsFileName(str(loads))
+    so = osim.StaticOptimization()
+    so.setStartTime(span[0])
+    so.setEndTime(span[1])
+    so.setUseModelForceSet(True)
+    so.setActivationExponent(2.0)
+    so.setUseMusclePhysiology(physiological)
+    model.addAnalysis(so)
+    t0 = time.perf_counter()
+    ok = tool.run()
+    dt = time.perf_counter() - t0
+    if not ok:
+        raise RuntimeError(f"OpenSim's AnalyzeTool (static optimization) failed on {model_path}")
+    return dt, out / "so_StaticOptimization_activation.sto"
+
+
 def gait_so_setup(osim, folder: Path, path: Path, *, t0: float, t1: float) -> Path:
     """Write an AnalyzeTool + StaticOptimization setup for the subject01 walk (absolute paths)."""
     tool = osim.AnalyzeTool()

@@ -13,7 +13,6 @@ imported with exact knees (``nonlinear="exact"``) and its polynomial muscle path
 the shipped reference outputs of an older OpenSim.  Needs ``../shared/data`` and ``opensim``; skips cleanly
 without them.
 """
-import time
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +24,7 @@ from pinmsk.io.shared_data import shared_data_dir
 from pinmsk.io.tables import read_trial
 from pinmsk.model import import_osim
 from pinmsk.solvers import StaticOptimization
+from test_opensim_peer import _harness
 from test_osim_id import _opensim, _opensim_filtered
 
 GAIT = "opensim-models/Gait10dof18musc"
@@ -44,37 +44,12 @@ def _dir(rel, probe):
 
 def opensim_static_optimization(osim, model_path, coordinates, out: Path, *, span, actuators=None, loads=None,
                                 physiological=True, cutoff=6.0):
-    """OpenSim's StaticOptimization (AnalyzeTool, activation exponent 2, the model's force set plus
-    ``actuators``) on ``span`` of ``coordinates`` low-passed at ``cutoff``; returns (activation Trial,
-    seconds of ``tool.run()``)."""
-    out.mkdir(parents=True, exist_ok=True)
-    model = osim.Model(str(model_path))
-    if actuators is not None:
-        fs = osim.ForceSet(str(actuators))
-        for i in range(fs.getSize()):
-            model.updForceSet().cloneAndAppend(fs.get(i))
-    model.initSystem()
-    tool = osim.AnalyzeTool()
-    tool.setModel(model)
-    tool.setLoadModelAndInput(True)
-    tool.setName("so")
-    tool.setCoordinatesFileName(str(coordinates))
-    tool.setLowpassCutoffFrequency(cutoff)
-    tool.setInitialTime(span[0])
-    tool.setFinalTime(span[1])
-    tool.setResultsDir(str(out))
-    if loads is not None:
-        tool.setExternalLoadsFileName(str(loads))
-    so = osim.StaticOptimization()
-    so.setStartTime(span[0])
-    so.setEndTime(span[1])
-    so.setUseModelForceSet(True)
-    so.setActivationExponent(2.0)
-    so.setUseMusclePhysiology(physiological)
-    model.addAnalysis(so)
-    t0 = time.perf_counter()
-    assert tool.run()
-    return read_trial(out / "so_StaticOptimization_activation.sto"), time.perf_counter() - t0
+    """OpenSim's StaticOptimization (the benchmarks' runner, ``bench_opensim.static_optimization_run``) on
+    ``span`` of ``coordinates``; returns (activation Trial, seconds of ``tool.run()``)."""
+    dt, path = _harness().static_optimization_run(osim, model_path, coordinates, out, span=span,
+                                                  actuators=actuators, loads=loads,
+                                                  physiological=physiological, cutoff=cutoff)
+    return read_trial(path), dt
 
 
 def _on_frames(result, ref, names, suffix=""):
