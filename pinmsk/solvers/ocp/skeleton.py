@@ -56,18 +56,17 @@ def _column(x, n: int, what: str):
 
 def _rotation(axis, c, s):
     """Rotation by the angle of cosine ``c``, sine ``s`` about the unit ``axis``: written out for the
-    coordinate axes (as Pinocchio's RX/RY/RZ, no rounding), Rodrigues' formula otherwise."""
-    x, y, z = axis
+    coordinate axes (as Pinocchio's RX/RY/RZ, no rounding), Rodrigues' formula
+    ``c I + s [u]x + (1 - c) u u^T`` otherwise (as matrices: few CasADi operations to build)."""
     if axis == (1.0, 0.0, 0.0):
         return ca.vertcat(ca.horzcat(1, 0, 0), ca.horzcat(0, c, -s), ca.horzcat(0, s, c))
     if axis == (0.0, 1.0, 0.0):
         return ca.vertcat(ca.horzcat(c, 0, s), ca.horzcat(0, 1, 0), ca.horzcat(-s, 0, c))
     if axis == (0.0, 0.0, 1.0):
         return ca.vertcat(ca.horzcat(c, -s, 0), ca.horzcat(s, c, 0), ca.horzcat(0, 0, 1))
-    t = 1 - c
-    return ca.vertcat(ca.horzcat(c + t * x * x, t * x * y - s * z, t * x * z + s * y),
-                      ca.horzcat(t * x * y + s * z, c + t * y * y, t * y * z - s * x),
-                      ca.horzcat(t * x * z - s * y, t * y * z + s * x, c + t * z * z))
+    u = np.array(axis)
+    skew = np.array([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
+    return ca.DM(np.eye(3) - np.outer(u, u)) * c + ca.DM(skew) * s + ca.DM(np.outer(u, u))
 
 
 def _act_inv(R, p, v, w):
@@ -119,6 +118,7 @@ class SymbolicSkeleton:
         self.frames = {f.name: (int(f.parentJoint), np.array(f.placement.rotation), np.array(f.placement.translation))
                        for f in pm.frames}
         self._function = None
+        self._last = None
 
     # -- the recursion ------------------------------------------------------------------------------
     def _joint_placement(self, i, q):
@@ -136,13 +136,18 @@ class SymbolicSkeleton:
         return (ca.DM.zeros(3), u * x) if kind == "R" else (u * x, ca.DM.zeros(3))
 
     def _placements(self, q):
-        """(local liMi, world oMi) of every joint; index 0 is the universe."""
+        """(local liMi, world oMi) of every joint; index 0 is the universe.  The last answer is kept for
+        same ``q`` (the same symbols or numbers), so the frames of one node share one set of expressions."""
+        last = self._last
+        if last is not None and type(last[0]) is type(q) and ca.is_equal(last[0], q, 0):
+            return last[1]
         local, world = [None], [(ca.DM.eye(3), ca.DM.zeros(3))]
         for i in range(1, len(self.parents)):
             R, p = self._joint_placement(i, q)
             Rp, pp = world[self.parents[i]]
             local.append((R, p))
             world.append((ca.mtimes(Rp, R), pp + ca.mtimes(Rp, p)))
+        self._last = (type(q)(q), (local, world))    # a copy: q may be assigned to in place
         return local, world
 
     def _velocities(self, q, v, local):
