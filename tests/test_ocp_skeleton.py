@@ -148,3 +148,24 @@ def test_bad_inputs_are_refused_by_name():
         sk.rnea(z, z, z, fext={12: (np.zeros(3), np.zeros(3))})
     with pytest.raises(ModelError, match=r"fext\[3\] moment must have 3 entries"):
         sk.rnea(z, z, z, fext={3: (np.zeros(3), np.zeros(2))})
+
+
+def test_kept_placements_follow_q():
+    """The placements kept for the last ``q`` are not reused once ``q`` is assigned to in place."""
+    pm = load_model("gait2d").pin
+    sk = SymbolicSkeleton(pm)
+    data = pm.createData()
+    q0 = ca.SX.sym("q", pm.nq)
+    q = ca.SX(q0)
+    first = sk.frame_placement("heel_r", q)[1]
+    q[2] = 0.3                                     # the torso angle fixed in place
+    second = sk.frame_placement("heel_r", q)[1]
+    f = ca.Function("p", [q0], [first, second])
+    x = np.random.default_rng(2).uniform(-1, 1, pm.nq)
+    got1, got2 = (np.asarray(y).ravel() for y in f(x))
+    fid = pm.getFrameId("heel_r")
+    pin.framesForwardKinematics(pm, data, x)
+    np.testing.assert_allclose(got1, data.oMf[fid].translation, rtol=0, atol=TOL)
+    x[2] = 0.3
+    pin.framesForwardKinematics(pm, data, x)
+    np.testing.assert_allclose(got2, data.oMf[fid].translation, rtol=0, atol=TOL)
