@@ -169,3 +169,20 @@ def test_kept_placements_follow_q():
     x[2] = 0.3
     pin.framesForwardKinematics(pm, data, x)
     np.testing.assert_allclose(got2, data.oMf[fid].translation, rtol=0, atol=TOL)
+
+
+def test_every_supported_joint_type():
+    """PZ and PrismaticUnaligned appear in no built-in model: a random branched chain of all eight types,
+    with an operational frame, held to Pinocchio the same way."""
+    pin.seed(3)
+    pm = pin.Model()
+    types_ = [pin.JointModelPX(), pin.JointModelPY(), pin.JointModelPZ(),
+              pin.JointModelPrismaticUnaligned(np.array([0.6, 0.0, 0.8])), pin.JointModelRX(), pin.JointModelRY(),
+              pin.JointModelRZ(), pin.JointModelRevoluteUnaligned(np.array([0.0, -0.8, 0.6]))]
+    parent = 0
+    for k, jm in enumerate(types_):
+        parent = pm.addJoint(parent if k != 5 else 2, jm, pin.SE3.Random(), f"j{k}")
+        pm.appendBodyToJoint(parent, pin.Inertia.Random(), pin.SE3.Identity())
+    pm.addFrame(pin.Frame("site", parent, pin.SE3.Random(), pin.FrameType.OP_FRAME))
+    assert {pm.joints[i].shortname() for i in range(1, pm.njoints)} == {j.shortname() for j in types_}
+    _check_skeleton(pm)
