@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..backend import backend_of
 from ..errors import ModelError
 
 __all__ = ["Parametrization", "Polynomial", "Fourier", "Spline", "make_parametrization"]
@@ -146,10 +147,23 @@ class Fourier(Parametrization):
     def _omega(self):
         return 2.0 * np.pi * np.arange(1, self.n_harmonics + 1) / self.period
 
-    def basis(self, t, deriv: int = 0) -> np.ndarray:
-        """``[1, sin(w_1 t'), cos(w_1 t'), ...]`` differentiated ``deriv`` times, t' = t + shift."""
+    def basis(self, t, deriv: int = 0, *, period=None) -> np.ndarray:
+        """``[1, sin(w_1 t'), cos(w_1 t'), ...]`` differentiated ``deriv`` times, t' = t + shift.
+
+        ``period`` (default: this series' tau) may be a CasADi symbol: the optimal-control
+        engine's free period (Sec. 3.3.6) then gets the exact derivative d B / d tau.
+        """
         t = np.atleast_1d(np.asarray(t, dtype=float)) + self.shift
-        w = self._omega()
+        if period is not None and backend_of(period).symbolic:
+            import casadi as ca
+            k = np.arange(1, self.n_harmonics + 1, dtype=float)
+            ph = ca.DM(np.outer(t, k)) * (2.0 * np.pi / period)
+            cols = [ca.DM.ones(t.size, 1) if deriv == 0 else ca.DM.zeros(t.size, 1)]
+            for j in range(self.n_harmonics):
+                wd = (2.0 * np.pi * k[j] / period) ** deriv
+                cols += [wd * ca.sin(ph[:, j] + deriv * np.pi / 2), wd * ca.cos(ph[:, j] + deriv * np.pi / 2)]
+            return ca.horzcat(*cols)
+        w = self._omega() if period is None else 2.0 * np.pi * np.arange(1, self.n_harmonics + 1) / float(period)
         ph = np.outer(t, w)
         out = np.empty((t.size, self.n_params))
         out[:, 0] = 1.0 if deriv == 0 else 0.0

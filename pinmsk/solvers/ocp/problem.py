@@ -1,0 +1,781 @@
+"""Direct collocation of a musculoskeletal optimal-control problem, solved by IPOPT (thesis Ch. 3, 5).
+
+:class:`Collocation` is the engine: a fitter in scikit-learn's habit (the
+constructor stores, :meth:`Collocation.fit` solves and returns ``self``,
+``result_`` is a :class:`~pinmsk.fitting.Result`).  The problem is
+
+    minimize   sum_k w_k J_k                              (named cost terms, costs.py)
+    subject to x' = f(x, u, s)                            (collocation defects)
+               rnea(q, v, qdd) = R^T F + Q_effects + J^T f_contacts   (implicit skeleton)
+               Hill equilibrium (compliant tendons)       (implicit muscle, De Groote 2016)
+               path and boundary constraints              (constraints.py)
+               bounds from the model's components
+
+with states ``x = [q, v, a (, f_t)]``, point controls ``[qdd (, df_t) ...]`` and
+the control *signal* ``s`` (excitations, muscle forces or torques, by
+formulation; physics.py) either at every collocation point or as a global
+parametrization (controls.py).
+
+Transcription (``scheme``):
+
+- ``"trapezoidal"``: ``x_{k+1} - x_k = h/2 (f_k + f_{k+1})``; the trapezoid rule integrates the costs;
+- ``"hermite-simpson"`` (compressed form): the midpoint state
+  ``x_m = (x_k + x_{k+1})/2 + h/8 (f_k - f_{k+1})``, the defect
+  ``x_{k+1} - x_k = h/6 (f_k + 4 f_m + f_{k+1})``, Simpson's rule for the costs;
+  path constraints and the implicit dynamics hold at nodes and midpoints.
+
+Derivatives: the per-point model is one CasADi ``SX`` function (the same
+component code as the numpy analyses, :mod:`pinmsk.backend`), mapped over the
+points; the NLP is expanded to ``SX`` and IPOPT gets the exact sparse Jacobian
+and Hessian of the Lagrangian by algorithmic differentiation.  No finite
+differences anywhere.
+
+Scaling: every variable group is divided by a nominal size (rad, rad/s, the
+guess's accelerations, ...) and every residual by its own (the guess's joint
+moments for the skeleton, 1 for the normalized muscle rows), so IPOPT sees
+O(1) numbers.
+
+Convergence: IPOPT's return status is reported as it is.  A problem that did
+not reach ``Solve_Succeeded`` (or the acceptable level with its constraints
+met to ``constraint_tol``) has ``converged = False`` and its status names the
+most violated constraint, where and by how much; it is never reported as a
+solution.
+"""
+from __future__ import annotations
+
+import sys
+import time as _time
+
+import numpy as np
+
+from ...errors import ModelError
+from ...fitting import FitStatistics, Fitter, Result, format_report
+from .constraints import Constraint, ExcitationBounds, InitialState, TrackingTolerance
+from .controls import GlobalControls, NodeControls
+from .costs import Cost, TrackCoordinates
+from .physics import PointModel
+
+__all__ = ["Collocation", "SCHEMES"]
+
+SCHEMES = ("trapezoidal", "hermite-simpson")
+_SOLVER_KEYS = {"tol", "max_iter", "constraint_tol", "print_level", "hessian", "linear_solver",
+                "acceptable_tol", "mu_strategy"}
+
+
+class _Blocks:
+    """Rows of the constraint vector with their labels, bounds and physical scale."""
+
+    def __init__(self):
+        self.exprs, self.lo, self.hi, self.meta = [], [], [], []
+
+    def add(self, expr, lo, hi, *, label, rows, where, scale=1.0):
+        """``expr`` (n_rows x n_cols MX, column-major rows), ``rows`` row labels, ``where`` per column."""
+        import casadi as ca
+        expr = ca.MX(expr) if not isinstance(expr, ca.MX) else expr
+        n = expr.numel()
+        lo = np.broadcast_to(np.asarray(lo, dtype=float), expr.shape).ravel(order="F")
+        hi = np.broadcast_to(np.asarray(hi, dtype=float), expr.shape).ravel(order="F")
+        sc = np.broadcast_to(np.asarray(scale, dtype=float).reshape(-1, 1), expr.shape).ravel(order="F")
+        self.exprs.append(ca.vec(expr))
+        self.lo.append(lo)
+        self.hi.append(hi)
+        self.meta.append((label, list(rows), list(where), expr.shape, sc, n))
+
+    def vector(self):
+        import casadi as ca
+        return (ca.vertcat(*self.exprs) if self.exprs else ca.MX.zeros(0),
+                np.concatenate(self.lo) if self.lo else np.zeros(0),
+                np.concatenate(self.hi) if self.hi else np.zeros(0))
+
+    def worst(self, g, lo, hi):
+        """``(violation in physical units, description)`` of the most violated row (scaled measure)."""
+        v = np.maximum(np.maximum(lo - g, g - hi), 0.0)
+        if v.size == 0 or not np.any(v > 0):
+            return 0.0, ""
+        i = int(np.argmax(v))
+        k = 0
+        for label, rows, where, shape, sc, n in self.meta:
+            if i < k + n:
+                j = i - k
+                r, c = j % shape[0], j // shape[0]
+                row = rows[r] if r < len(rows) else str(r)
+                at = where[c] if c < len(where) else ""
+                side = "below its lower bound" if g[i] < lo[i] else "above its upper bound"
+                return float(v[i] * sc[j]), (f"{label}{(' ' + row) if row else ''}{(' ' + at) if at else ''}: "
+                                             f"{side} by {v[i] * sc[j]:.3g}")
+            k += n
+        return float(v[i]), f"row {i}"
+
+    def max_violation(self, g, lo, hi) -> float:
+        v = np.maximum(np.maximum(lo - g, g - hi), 0.0)
+        return float(v.max()) if v.size else 0.0
+
+
+class Collocation(Fitter):
+    """Direct-collocation optimal control of a musculoskeletal model (see the module docstring).
+
+    Arguments (stored; :meth:`fit` solves), the model first, the rest keyword-only:
+
+    - ``cost``: a :class:`~pinmsk.solvers.ocp.costs.Cost` or a weighted sum of them;
+    - ``constraints``: sequence of :mod:`~pinmsk.solvers.ocp.constraints` objects
+      (excitation bounds default to [0, 1]);
+    - ``duration``: seconds, or ``(lower, upper)`` for a free final time;
+    - ``intervals``: collocation intervals; ``scheme``: ``"trapezoidal"`` or ``"hermite-simpson"``;
+    - ``controls``: :class:`NodeControls` (default) or :class:`GlobalControls`;
+    - ``formulation``: ``"ff"`` (excitations), ``"ifm"`` (muscle forces), ``"ift"`` (joint torques);
+    - ``tendon``: ``"rigid"`` or ``"compliant"`` (default: the model's muscle set);
+    - ``guess``: None (automatic: the tracked motion and static optimization) or a Trial /
+      Result whose channels (``<coord>``, ``<coord>_speed``, ``<muscle>_activation``, ...)
+      start the solver (a warm start);
+    - ``n_starts``: automatic guesses to try (the best converged one is the result);
+    - ``solver``: IPOPT settings ``tol`` (1e-8), ``max_iter`` (1000), ``constraint_tol`` (1e-6,
+      scaled), ``print_level``, ``hessian`` (``"exact"`` or ``"limited-memory"``), ...;
+    - ``verbose``: IPOPT's iteration table (default: when stdout is a terminal).
+    """
+
+    def __init__(self, model, *, cost: Cost, constraints=(), duration=1.0, intervals: int = 50,
+                 scheme: str = "hermite-simpson", controls=None, formulation: str = "ff",
+                 tendon: str | None = None, guess=None, n_starts: int = 1, solver: dict | None = None,
+                 verbose: bool | None = None):
+        self.model = model
+        self.cost = cost
+        self.constraints = constraints
+        self.duration = duration
+        self.intervals = intervals
+        self.scheme = scheme
+        self.controls = controls
+        self.formulation = formulation
+        self.tendon = tendon
+        self.guess = guess
+        self.n_starts = n_starts
+        self.solver = solver
+        self.verbose = verbose
+
+    # ------------------------------------------------------------------ problem facts
+    @property
+    def compliant(self) -> bool:
+        return self._pm.compliant
+
+    def forward_coordinate(self) -> str:
+        """The coordinate of progression: ``pelvis_tx`` if present, else the first x translation."""
+        names = self.model.coordinates
+        for c in ("pelvis_tx", "base_x", "root_x"):
+            if c in names:
+                return c
+        for j, jm in enumerate(self.model.pin.joints[1:]):
+            if jm.shortname() == "JointModelPX":
+                return names[self.model.pin.joints[j + 1].idx_v]
+        raise ModelError(f"model '{self.model.name}' has no forward translation; name the coordinate")
+
+    def nominal_times(self) -> np.ndarray:
+        """Collocation times at the nominal duration."""
+        return self._frac * self._T0
+
+    def need(self, what: str, **kw) -> None:
+        """A cost asks the point model for a quantity (``"metabolic"``)."""
+        self._needs[what] = kw
+
+    # ------------------------------------------------------------------ setup
+    def _setup(self):
+        try:
+            import casadi  # noqa: F401
+        except ImportError as exc:   # an optional dependency: say how to get it
+            raise ModelError("the optimal-control engine needs CasADi: pip install casadi") from exc
+        if self.scheme not in SCHEMES:
+            raise ModelError(f"unknown scheme '{self.scheme}'; valid: {', '.join(SCHEMES)}")
+        N = int(self.intervals)
+        if N != self.intervals or N < 2:
+            raise ModelError(f"intervals must be an integer >= 2, got {self.intervals}")
+        self._N = N
+        d = self.duration
+        if np.ndim(d) == 0:
+            if not float(d) > 0:
+                raise ModelError(f"duration must be > 0 s, got {d}")
+            self._T0, self._Tb = float(d), None
+        else:
+            lo, hi = map(float, d)
+            if not 0 < lo < hi:
+                raise ModelError(f"free final time bounds {tuple(d)} must satisfy 0 < lower < upper")
+            self._T0, self._Tb = 0.5 * (lo + hi), (lo, hi)
+        nodes = np.arange(N + 1) / N
+        self._frac = nodes if self.scheme == "trapezoidal" else np.concatenate([nodes, (np.arange(N) + 0.5) / N])
+        self._controls = self.controls if self.controls is not None else NodeControls()
+        if not isinstance(self._controls, (NodeControls, GlobalControls)):
+            raise ModelError(f"controls must be NodeControls() or GlobalControls(...), not {self._controls!r}")
+        if isinstance(self._controls, GlobalControls) and self._Tb is not None:
+            raise ModelError("a global parametrization is defined on a fixed duration: give duration as "
+                             "one number (a Fourier series can have a free period instead)")
+        if not isinstance(self.cost, Cost):
+            raise ModelError(f"cost must be a Cost (e.g. Effort(3) + TrackCoordinates(target)), not {self.cost!r}")
+        self._costs = self.cost.terms()
+        cons = list(self.constraints)
+        for c in cons:
+            if not isinstance(c, Constraint):
+                raise ModelError(f"constraints must be Constraint objects, not {c!r}")
+        self._cons = cons
+        s = dict(self.solver or {})
+        bad = set(s) - _SOLVER_KEYS
+        if bad:
+            raise ModelError(f"unknown solver setting(s) {sorted(bad)}; valid: {sorted(_SOLVER_KEYS)}")
+        self._solver = s
+        self._needs = {}
+        tendon = self.tendon or (self.model.muscles.tendon if self.model.muscles is not None else "rigid")
+        # costs first: they declare what the point model must provide
+        self._pm = PointModel(self.model, tendon=tendon, formulation=self.formulation)
+        for c in self._costs:
+            c.check(self)
+        for c in cons:
+            c.check(self)
+        met = self._needs.get("metabolic")
+        if met is not None:
+            self._pm.metabolic = float(met["smooth"])
+        eb = [c for c in cons if isinstance(c, ExcitationBounds)]
+        if len(eb) > 1:
+            raise ModelError("give at most one ExcitationBounds")
+        self._ebounds = (eb[0].lower, eb[0].upper) if eb else (0.0, 1.0)
+        if np.any(self._pm.delay > 0) and self._Tb is not None:
+            raise ModelError("an electromechanical delay needs a fixed duration (the delayed excitation is "
+                             "an interpolation on a fixed time grid)")
+
+    # ------------------------------------------------------------------ guess
+    def _targets(self):
+        """``{coordinate index: Target}`` of the tracked coordinates (costs and constraints)."""
+        out = {}
+        for c in list(self._costs) + list(self._cons):
+            if isinstance(c, (TrackCoordinates, TrackingTolerance)):
+                out.setdefault(c._j, c.target)
+        return out
+
+    def _auto_guess(self, t, start: int = 0) -> dict:
+        """Point values (each (rows, n_points)) of the automatic guess on times ``t``.
+
+        Coordinates follow the tracked targets (0 elsewhere), activations come from
+        static optimization of the targets' inverse dynamics (start 0) or are constant
+        (later starts), excitations from inverse activation dynamics (Eq. A.5).
+        """
+        model, pm = self.model, self._pm
+        n, nv, m = t.size, model.nv, pm.m
+        q, v, qdd = np.zeros((n, nv)), np.zeros((n, nv)), np.zeros((n, nv))
+        for j, tg in self._targets().items():
+            q[:, j], v[:, j], qdd[:, j] = tg(t), tg(t, 1), tg(t, 2)
+        g = {"q": q.T, "v": v.T, "qdd": qdd.T}
+        if not m:
+            return g
+        a = None
+        if start == 0 and self._targets():
+            a = self._so_activations(t, q, v, qdd)
+        if a is None:
+            a = np.full((n, m), 0.05 + 0.1 * start)
+        return self._muscle_guess(g, t, q, v, a)
+
+    def _muscle_guess(self, g, t, q, v, a):
+        pm, mtu = self._pm, self._pm.ms.mtu
+        order = np.argsort(t)
+        ts = t[order]
+        lo, hi = self._ebounds
+        adot = np.empty_like(a)
+        adot[order] = np.gradient(a[order], ts, axis=0)
+        from ...muscles.activation import excitation_from_activation
+        e = np.clip(excitation_from_activation(a, adot, tau_rise=pm.tau_rise, tau_fall=pm.tau_fall), lo, hi)
+        l_mt = pm.ms.lengths(q)
+        v_mt = pm.ms.velocities(q, v)
+        g.update(a=a.T, e=e.T)
+        if pm.compliant:
+            ft = mtu.equilibrium_tendon_force(a, l_mt)
+            dft = np.empty_like(ft)
+            dft[order] = np.gradient(ft[order], ts, axis=0)
+            g.update(f_t=ft.T, df_t=dft.T)
+            F = mtu.f_max * ft
+        else:
+            F = mtu.rigid_force(a, l_mt, v_mt)
+        g["F"] = np.asarray(F).T
+        if pm.formulation == "ift":
+            R = pm.ms.moment_arms(q)
+            tau = np.einsum("nm,nmj->nj", np.asarray(F), R)
+            g["tau"] = tau[:, pm.driven].T
+        return g
+
+    def _so_activations(self, t, q, v, qdd):
+        """Static-optimization activations (N, m) of the motion (q, v, qdd), or None if SO fails."""
+        from ...components import Motion
+        from ...errors import PinmskError
+        from ..static import StaticOptimization
+        order = np.argsort(t)
+        mo = Motion(t=t[order], q=q[order], v=v[order], a=qdd[order])
+        try:
+            so = StaticOptimization(mode="activation", exponent=2, reserves=True).fit(self.model, mo, cutoff=0)
+        except PinmskError:
+            return None
+        res = so.result_
+        a = np.column_stack([np.asarray(res[f"{n}_activation"]) for n in self.model.muscle_names])
+        out = np.empty_like(a)
+        out[order] = np.clip(a, 0.01, 1.0)
+        return out
+
+    def _guess_from_trial(self, trial, t) -> dict:
+        """Point values from a Trial/Result's channels (a warm start), interpolated to ``t``."""
+        model = self.model
+        tt = np.asarray(trial.time, dtype=float) - float(trial.time[0])
+        T = self._T0
+        span = tt[-1] if tt[-1] > 0 else 1.0
+
+        def ch(name, default):
+            if name in trial.channels:
+                return np.interp(t * span / T, tt, np.asarray(trial[name], dtype=float))
+            return default
+
+        n = t.size
+        q = np.column_stack([ch(c, np.zeros(n)) for c in model.coordinates])
+        v = np.column_stack([ch(f"{c}_speed", np.gradient(q[:, j], t) if n > 1 else np.zeros(n))
+                             for j, c in enumerate(model.coordinates)])
+        qdd = np.column_stack([ch(f"{c}_acceleration", np.zeros(n)) for c in model.coordinates])
+        g = {"q": q.T, "v": v.T, "qdd": qdd.T}
+        if self._pm.m:
+            a = np.column_stack([ch(f"{mu}_activation", np.full(n, 0.05)) for mu in model.muscle_names])
+            g = self._muscle_guess(g, t, q, v, np.clip(a, 0.0, 1.0))
+            e = np.column_stack([ch(f"{mu}_excitation", g["e"][i]) for i, mu in enumerate(model.muscle_names)])
+            g["e"] = e.T
+        return g
+
+    # ------------------------------------------------------------------ NLP
+    def _build(self, guess: dict):
+        import casadi as ca
+        pm, N = self._pm, self._N
+        st, co = pm.layout()
+        nx = sum(len(r) for r in st.values())
+        nu = sum(len(r) for r in co.values())
+        ns = pm.n_signal
+        npt = self._frac.size
+        nv, m = pm.nv, pm.m
+        names = self.model.coordinates
+        muscles = tuple(self.model.muscle_names) if m else ()
+
+        # -- nominal scales (variables and residuals)
+        def nominal(x, floor):
+            return np.maximum(np.max(np.abs(np.atleast_2d(x)), axis=1), floor)
+        sx = np.concatenate([nominal(guess["q"], 0.1), nominal(guess["v"], 1.0)]
+                            + ([np.ones(m)] if m else []) + ([np.ones(m)] if pm.compliant else []))
+        su = [nominal(guess["qdd"], 1.0)]
+        if pm.compliant:
+            su.append(np.maximum(nominal(guess["df_t"], 1.0), 1.0))
+        if m and pm.formulation != "ff":
+            su.append(np.ones(m))
+        if pm.formulation == "ift":
+            su.append(nominal(guess["F"], 1.0))
+        su = np.concatenate(su)
+        if pm.formulation == "ff":
+            ss = np.ones(ns)
+        elif pm.formulation == "ifm":
+            ss = nominal(guess["F"], 1.0)
+        else:
+            ss = nominal(guess["tau"], 0.1)
+        tau_guess = self._guess_torques(guess)
+        weight = 9.81 * pm.mass
+        s_tau = np.maximum(np.max(np.abs(tau_guess), axis=1), max(1e-3 * weight, 1e-2))
+
+        # -- the per-point function (SX)
+        xs, us = ca.SX.sym("x", nx), ca.SX.sym("u", nu)
+        sg, sd, ts = ca.SX.sym("s", ns), ca.SX.sym("sd", ns), ca.SX.sym("t")
+        refs_np = [c.references(self, self._frac * self._T0) for c in self._costs]
+        nref = [0 if r is None else r.shape[0] for r in refs_np]
+        rs = ca.SX.sym("r", sum(nref))
+        pt, res, xdot = pm.evaluate(xs, us, sg, sd, ts)
+        res_rows, res_meta = [], []
+        for label, expr, scale in res:
+            expr = ca.vec(expr)
+            if scale is None:   # joint-moment rows: N m per coordinate
+                sc = s_tau if expr.numel() == nv else np.full(expr.numel(), float(np.max(s_tau)))
+                rows = list(names) if expr.numel() == nv else [names[j] for j in pm.driven]
+            else:
+                sc = np.full(expr.numel(), float(scale))
+                rows = list(muscles) if expr.numel() == m else [str(i) for i in range(expr.numel())]
+            res_rows.append(expr / ca.DM(sc))
+            res_meta.append((label, rows, sc))
+        path_rows, path_meta = [], []
+        for c in self._cons:
+            for label, expr, lo, hi in c.path(pt):
+                path_rows.append(ca.vec(expr))
+                path_meta.append((label, lo, hi))
+        integrands, k = [], 0
+        for c, nr in zip(self._costs, nref):
+            integrands.append(c.integrand(pt, rs[k: k + nr] if nr else None))
+            k += nr
+        report = {"F": pt.get("F", ca.SX.zeros(0)), "contact_forces": pt["contact_forces"],
+                  "metabolic_rate": pt.get("metabolic_rate", ca.SX.zeros(0)),
+                  "e": pt.get("e", ca.SX.zeros(0)) if pm.formulation != "ff" else ca.SX.zeros(0)}
+        rep_keys = list(report)
+        Fpt = ca.Function("point", [xs, us, sg, sd, ts, rs],
+                          [xdot / ca.DM(sx), ca.vertcat(*res_rows) if res_rows else ca.SX.zeros(0),
+                           ca.vertcat(*path_rows) if path_rows else ca.SX.zeros(0),
+                           ca.vertcat(*integrands) if integrands else ca.SX.zeros(0)]
+                          + [ca.vec(report[k_]) for k_ in rep_keys])
+
+        # -- decision variables (scaled)
+        Z = {"X": ca.MX.sym("X", nx, N + 1), "U": ca.MX.sym("U", nu, npt)}
+        X = Z["X"] * ca.repmat(ca.DM(sx), 1, N + 1)
+        U = Z["U"] * ca.repmat(ca.DM(su), 1, npt)
+        ctl = self._controls
+        extra = []
+        if isinstance(ctl, NodeControls):
+            Z["S"] = ca.MX.sym("S", ns, npt)
+            S = Z["S"] * ca.repmat(ca.DM(ss), 1, npt)
+        else:
+            Z["P"] = ca.MX.sym("P", ctl.n_params, ns)
+            P = Z["P"] * ca.repmat(ca.DM(ss).T, ctl.n_params, 1)
+        if self._Tb is not None:
+            Z["T"] = ca.MX.sym("T")
+            T = Z["T"] * self._T0
+        else:
+            T = self._T0
+        if isinstance(ctl, GlobalControls) and ctl.free_period:
+            Z["period"] = ca.MX.sym("period")
+            period = Z["period"] * ctl.parametrization.period
+        tpts = self._frac * T
+        if isinstance(ctl, GlobalControls):
+            B = ctl.basis(self._frac * self._T0, period if ctl.free_period else None)
+            S = ca.mtimes(ca.MX(B) if not isinstance(B, ca.MX) else B, P).T
+        Sd = self._delayed_signal(S, P if isinstance(ctl, GlobalControls) else None,
+                                  period if isinstance(ctl, GlobalControls) and ctl.free_period else None)
+        tmx = ca.MX(ca.DM(tpts).T) if self._Tb is None else (ca.DM(self._frac).T * T)
+        R_all = np.vstack([r for r in refs_np if r is not None]) if any(n_ for n_ in nref) else np.zeros((0, npt))
+        h = T / N
+        iN = slice(0, N + 1)
+        outN = Fpt.map(N + 1)(X, U[:, iN], S[:, iN], Sd[:, iN], tmx[:, iN], R_all[:, :N + 1])
+        XD = outN[0] * ca.repmat(ca.DM(sx), 1, N + 1)
+        if self.scheme == "hermite-simpson":
+            iM = slice(N + 1, 2 * N + 1)
+            Xm = 0.5 * (X[:, :-1] + X[:, 1:]) + h / 8 * (XD[:, :-1] - XD[:, 1:])
+            outM = Fpt.map(N)(Xm, U[:, iM], S[:, iM], Sd[:, iM], tmx[:, iM], R_all[:, N + 1:])
+            XDm = outM[0] * ca.repmat(ca.DM(sx), 1, N)
+            defect = X[:, 1:] - X[:, :-1] - h / 6 * (XD[:, :-1] + 4 * XDm + XD[:, 1:])
+            wq = np.concatenate([np.r_[1.0, np.full(N - 1, 2.0), 1.0] / 6.0, np.full(N, 4.0 / 6.0)])
+            cols = [outN, outM]
+        else:
+            defect = X[:, 1:] - X[:, :-1] - h / 2 * (XD[:, :-1] + XD[:, 1:])
+            wq = np.r_[0.5, np.ones(N - 1), 0.5]
+            cols = [outN]
+        joined = [ca.horzcat(*[c[i] for c in cols]) for i in range(len(outN))]
+        RES, PATH, INT = joined[1], joined[2], joined[3]
+
+        # -- constraints
+        blocks = _Blocks()
+        ptimes = [f"at t = {t_:.4g} s" for t_ in self._frac * self._T0]
+        state_labels = ([f"q {c}" for c in names] + [f"v {c}" for c in names]
+                        + [f"a {n_}" for n_ in muscles] + ([f"f_t {n_}" for n_ in muscles] if pm.compliant else []))
+        blocks.add(defect / ca.repmat(ca.DM(sx), 1, N), 0.0, 0.0, label="collocation defect of", rows=state_labels,
+                   where=[f"in interval {k} ({k * self._T0 / N:.4g} s)" for k in range(N)], scale=sx)
+        r0 = 0
+        for label, rows, sc in res_meta:
+            n_ = len(sc)
+            blocks.add(RES[r0: r0 + n_, :], 0.0, 0.0, label=label, rows=rows, where=ptimes, scale=sc)
+            r0 += n_
+        for i, (label, lo, hi) in enumerate(path_meta):
+            blocks.add(PATH[i, :], lo, hi, label=label, rows=[""], where=ptimes)
+        if isinstance(ctl, GlobalControls) and pm.formulation == "ff":
+            lo, hi = self._ebounds
+            blocks.add(S, lo, hi, label="excitation bound of", rows=list(muscles), where=ptimes)
+        x0, xN = X[:, 0], X[:, N]
+        glob = {"T": T, "x0": x0, "xN": xN, "layout": st, "coordinates": names, "muscles": muscles, "m": m,
+                "mass": pm.mass, "e0": (S[:, 0] if pm.formulation == "ff" else U[co["e"][0]: co["e"][-1] + 1, 0])
+                if m else None}
+        for c in self._cons:
+            for label, expr, lo, hi in c.boundary(glob):
+                blocks.add(expr, lo, hi, label=label, rows=[""], where=[""])
+        g, lbg, ubg = blocks.vector()
+
+        # -- objective
+        values, J = {}, 0
+        for i, c in enumerate(self._costs):
+            integral = h * ca.dot(ca.DM(wq), INT[i, :].T)
+            values[c.name] = c.finish(integral, glob)
+            J = J + c.weight * values[c.name]
+
+        # -- bounds and scaled guess
+        w = ca.vertcat(*[ca.vec(z) for z in Z.values()])
+        lbx, ubx, w0 = self._bounds_and_guess(Z, guess, sx, su, ss, st, co)
+        outputs = {"X": X, "U": U, "S": S, "Sd": Sd, "J": J, "g": g, "T": T,
+                   **{f"cost:{k_}": v_ for k_, v_ in values.items()}}
+        for i, k_ in enumerate(rep_keys):
+            outputs[f"rep:{k_}"] = joined[4 + i]
+        if self.scheme == "hermite-simpson":
+            outputs["Xm"] = Xm
+        if isinstance(ctl, GlobalControls):
+            outputs["P"] = P
+            if ctl.free_period:
+                outputs["period"] = period
+        return dict(w=w, J=J, g=g, lbg=lbg, ubg=ubg, lbx=lbx, ubx=ubx, w0=w0, blocks=blocks,
+                    outputs=outputs, layout=(st, co), n_w=int(w.numel()), Z=Z, scales=(sx, su, ss))
+
+    def _guess_torques(self, guess):
+        """Inverse-dynamics torques (nv, n_points) of the guess's motion (for scaling)."""
+        import pinocchio as pin
+        pmod = self.model.pin
+        data = pmod.createData()
+        q, v, a = guess["q"], guess["v"], guess["qdd"]
+        return np.column_stack([pin.rnea(pmod, data, q[:, k], v[:, k], a[:, k]) for k in range(q.shape[1])])
+
+    def _delayed_signal(self, S, P, period):
+        """The signal through each muscle's electromechanical delay at the points (FF only)."""
+        import casadi as ca
+        pm = self._pm
+        if pm.formulation != "ff" or not np.any(pm.delay > 0):
+            return S
+        t = self._frac * self._T0
+        rows = []
+        for i, d in enumerate(pm.delay):
+            if d <= 0:
+                rows.append(S[i, :])
+                continue
+            td = np.maximum(t - d, 0.0)   # before the start the excitation is held at its initial value
+            if P is not None:
+                Bd = self._controls.basis(td, period)
+                rows.append(ca.mtimes(ca.MX(Bd) if not isinstance(Bd, ca.MX) else Bd, P[:, i]).T)
+            else:
+                order = np.argsort(t)
+                L = np.zeros((t.size, t.size))
+                ts = t[order]
+                for k, tk in enumerate(td):
+                    j = int(np.clip(np.searchsorted(ts, tk) - 1, 0, t.size - 2))
+                    f = (tk - ts[j]) / (ts[j + 1] - ts[j])
+                    L[k, order[j]], L[k, order[j + 1]] = 1.0 - f, f
+                rows.append(ca.mtimes(S[i, :], ca.DM(L).T))
+        return ca.vertcat(*rows)
+
+    def _bounds_and_guess(self, Z, guess, sx, su, ss, st, co):
+        model, pm, N = self.model, self._pm, self._N
+        npt = self._frac.size
+        nv, m = pm.nv, pm.m
+        lo_e, hi_e = self._ebounds
+        pmod = model.pin
+        qlo = np.where(np.isfinite(pmod.lowerPositionLimit) & (np.abs(pmod.lowerPositionLimit) < 1e6),
+                       pmod.lowerPositionLimit, -np.inf)
+        qhi = np.where(np.isfinite(pmod.upperPositionLimit) & (np.abs(pmod.upperPositionLimit) < 1e6),
+                       pmod.upperPositionLimit, np.inf)
+        xlo = [qlo, np.full(nv, -np.inf)]
+        xhi = [qhi, np.full(nv, np.inf)]
+        if m:
+            a_min = 0.01 if pm.compliant else 0.0
+            xlo.append(np.full(m, a_min))
+            xhi.append(np.ones(m))
+            if pm.compliant:
+                flo, fhi = pm.ms.mtu.tendon_force_bounds
+                xlo.append(np.full(m, flo))
+                xhi.append(np.full(m, fhi))
+        xlo, xhi = np.concatenate(xlo), np.concatenate(xhi)
+        ulo, uhi = [np.full(nv, -np.inf)], [np.full(nv, np.inf)]
+        if pm.compliant:
+            ulo.append(np.full(m, -np.inf))
+            uhi.append(np.full(m, np.inf))
+        if m and pm.formulation != "ff":
+            ulo.append(np.full(m, lo_e))
+            uhi.append(np.full(m, hi_e))
+        if pm.formulation == "ift":
+            ulo.append(np.zeros(m))
+            uhi.append(np.full(m, np.inf))
+        ulo, uhi = np.concatenate(ulo), np.concatenate(uhi)
+        nodes = slice(0, N + 1)
+        xg = np.vstack([guess["q"][:, nodes], guess["v"][:, nodes]]
+                       + ([guess["a"][:, nodes]] if m else []) + ([guess["f_t"][:, nodes]] if pm.compliant else []))
+        ug = [guess["qdd"]]
+        if pm.compliant:
+            ug.append(guess["df_t"])
+        if m and pm.formulation != "ff":
+            ug.append(guess["e"])
+        if pm.formulation == "ift":
+            ug.append(guess["F"])
+        ug = np.vstack(ug)
+        sig = {"ff": "e", "ifm": "F", "ift": "tau"}[pm.formulation]
+        parts_lo, parts_hi, parts_w0 = [], [], []
+
+        def put(lo, hi, w0, scale):
+            sc = np.asarray(scale, dtype=float)
+            parts_lo.append((lo / sc).ravel(order="F"))
+            parts_hi.append((hi / sc).ravel(order="F"))
+            parts_w0.append((np.clip(w0, lo, hi) / sc).ravel(order="F"))
+
+        put(np.repeat(xlo[:, None], N + 1, 1), np.repeat(xhi[:, None], N + 1, 1), xg, sx[:, None])
+        put(np.repeat(ulo[:, None], npt, 1), np.repeat(uhi[:, None], npt, 1), ug, su[:, None])
+        ctl = self._controls
+        ns = pm.n_signal
+        if isinstance(ctl, NodeControls):
+            if pm.formulation == "ff":
+                slo, shi = np.full(ns, lo_e), np.full(ns, hi_e)
+            elif pm.formulation == "ifm":
+                slo, shi = np.zeros(ns), np.full(ns, np.inf)
+            else:
+                slo, shi = np.full(ns, -np.inf), np.full(ns, np.inf)
+            put(np.repeat(slo[:, None], npt, 1), np.repeat(shi[:, None], npt, 1), guess[sig], ss[:, None])
+        else:
+            par = ctl.parametrization
+            coef = par.fit(self._frac * self._T0, guess[sig].T)
+            put(np.full(coef.shape, -np.inf), np.full(coef.shape, np.inf), coef, ss[None, :])
+        if "T" in Z:
+            lo, hi = self._Tb
+            put(np.array([lo]), np.array([hi]), np.array([self._T0]), self._T0)
+        if "period" in Z:
+            p0 = ctl.parametrization.period
+            lo, hi = ctl.period_bounds
+            put(np.array([lo * p0]), np.array([hi * p0]), np.array([p0]), p0)
+        return np.concatenate(parts_lo), np.concatenate(parts_hi), np.concatenate(parts_w0)
+
+    # ------------------------------------------------------------------ solve
+    def _ipopt_options(self) -> dict:
+        s = self._solver
+        verbose = self.verbose if self.verbose is not None else sys.stdout.isatty()
+        opts = {"expand": True, "print_time": False,
+                "ipopt.print_level": int(s.get("print_level", 5 if verbose else 0)),
+                "ipopt.sb": "yes", "ipopt.tol": float(s.get("tol", 1e-8)),
+                "ipopt.max_iter": int(s.get("max_iter", 1000)),
+                "ipopt.mu_strategy": s.get("mu_strategy", "adaptive"),
+                "ipopt.linear_solver": s.get("linear_solver", "mumps"),
+                "ipopt.hessian_approximation": s.get("hessian", "exact")}
+        if "acceptable_tol" in s:
+            opts["ipopt.acceptable_tol"] = float(s["acceptable_tol"])
+        return opts
+
+    def fit(self):
+        """Build the NLP, solve it from ``n_starts`` guesses with IPOPT, keep the best converged."""
+        import casadi as ca
+        t_start = _time.perf_counter()
+        self._setup()
+        t = self._frac * self._T0
+        n_starts = int(self.n_starts)
+        if n_starts < 1:
+            raise ModelError(f"n_starts must be >= 1, got {self.n_starts}")
+        guesses = ([self._guess_from_trial(self.guess, t)] if self.guess is not None
+                   else [self._auto_guess(t, k) for k in range(n_starts)])
+        nlp = self._build(guesses[0])
+        solver = ca.nlpsol("ocp", "ipopt", {"x": nlp["w"], "f": nlp["J"], "g": nlp["g"]}, self._ipopt_options())
+        out_fn = ca.Function("outputs", [nlp["w"]], list(nlp["outputs"].values()))
+        records, best = [], None
+        ctol = float(self._solver.get("constraint_tol", 1e-6))
+        for k, gs in enumerate(guesses):
+            w0 = nlp["w0"] if k == 0 else self._build_guess_only(nlp, gs)
+            t0 = _time.perf_counter()
+            sol = solver(x0=w0, lbx=nlp["lbx"], ubx=nlp["ubx"], lbg=nlp["lbg"], ubg=nlp["ubg"])
+            stats = solver.stats()
+            wv = np.asarray(sol["x"]).ravel()
+            gv = np.asarray(sol["g"]).ravel()
+            viol = nlp["blocks"].max_violation(gv, nlp["lbg"], nlp["ubg"])
+            status = str(stats.get("return_status", "unknown"))
+            ok = (status == "Solve_Succeeded" or (status == "Solved_To_Acceptable_Level" and viol <= ctol)) \
+                and np.all(np.isfinite(wv))
+            msg = status
+            if not ok:
+                _, worst = nlp["blocks"].worst(gv, nlp["lbg"], nlp["ubg"])
+                if worst:
+                    msg = f"{status}; largest violation: {worst}"
+            rec = {"start": k, "converged": bool(ok), "status": msg, "objective": float(sol["f"]),
+                   "iterations": int(stats.get("iter_count", -1)), "seconds": _time.perf_counter() - t0,
+                   "violation": viol}
+            records.append(rec)
+            if best is None or (ok and (not best[0]["converged"] or rec["objective"] < best[0]["objective"])):
+                best = (rec, wv)
+        self._nlp = nlp
+        self.result_ = self._result(nlp, out_fn, best, records, _time.perf_counter() - t_start)
+        return self
+
+    def _build_guess_only(self, nlp, guess):
+        """The scaled start vector of another guess on the same NLP (the first guess's scales)."""
+        return self._bounds_and_guess(nlp["Z"], guess, *nlp["scales"], *nlp["layout"])[2]
+
+    # ------------------------------------------------------------------ result
+    def _result(self, nlp, out_fn, best, records, seconds) -> Result:
+        rec, wv = best
+        vals = dict(zip(nlp["outputs"].keys(), [np.asarray(v) for v in out_fn(wv)]))
+        pm, N = self._pm, self._N
+        st, co = nlp["layout"]
+        T = float(np.asarray(vals["T"]).ravel()[0]) if "T" in vals else self._T0
+        X, U, S = vals["X"], vals["U"], vals["S"]
+        Xall = np.hstack([X, vals["Xm"]]) if "Xm" in vals else X
+        order = np.argsort(self._frac, kind="stable")
+        t = (self._frac * T)[order]
+        names, muscles = self.model.coordinates, tuple(self.model.muscle_names) if pm.m else ()
+        ch = {}
+        for j, c in enumerate(names):
+            ch[c] = Xall[st["q"][j], order]
+            ch[f"{c}_speed"] = Xall[st["v"][j], order]
+            ch[f"{c}_acceleration"] = U[co["qdd"][j], order]
+        for j, tg in self._targets().items():
+            ch[f"{names[j]}_desired"] = np.asarray(tg(t), dtype=float)
+        if pm.m:
+            e = S if pm.formulation == "ff" else vals["rep:e"]
+            F = vals["rep:F"]
+            for i, n_ in enumerate(muscles):
+                ch[f"{n_}_excitation"] = e[i, order]
+                ch[f"{n_}_activation"] = Xall[st["a"][i], order]
+                ch[f"{n_}_force"] = F[i, order]
+                if pm.compliant:
+                    ch[f"{n_}_tendon_force"] = Xall[st["f_t"][i], order] * pm.ms.mtu.f_max[i]
+            if vals["rep:metabolic_rate"].size:
+                for i, n_ in enumerate(muscles):
+                    ch[f"{n_}_metabolic_rate"] = vals["rep:metabolic_rate"][i, order]
+        if pm.formulation == "ift":
+            for k, j in enumerate(pm.driven):
+                ch[f"{names[j]}_torque_signal"] = S[k, order]
+        cf = vals["rep:contact_forces"]
+        for i, c in enumerate(pm.contacts):
+            for k, ax in enumerate("xyz"):
+                ch[f"{c.label}_force_{ax}"] = cf[3 * i + k, order]
+        terms = {c.name: float(np.asarray(vals[f"cost:{c.name}"]).ravel()[0]) for c in self._costs}
+        objective = float(np.asarray(vals["J"]).ravel()[0])
+        err = 0.0
+        for j, tg in self._targets().items():
+            err = max(err, float(np.max(np.abs(ch[names[j]] - ch[f"{names[j]}_desired"]))))
+        e_all = S if pm.formulation == "ff" else (vals["rep:e"] if pm.m else np.zeros((0, 1)))
+        lo, hi = self._ebounds
+        bviol = float(max(np.max(np.maximum(lo - e_all, 0), initial=0.0), np.max(np.maximum(e_all - hi, 0), initial=0.0)))
+        ctl = self._controls
+        info = dict(status=rec["status"], terms=terms, objective=objective, seconds=seconds,
+                    iterations=rec["iterations"], nit=rec["iterations"], n_variables=nlp["n_w"],
+                    n_constraints=int(nlp["lbg"].size), scheme=self.scheme, intervals=N,
+                    design=pm.formulation, formulation=pm.formulation, tendon=pm.tendon,
+                    controls=ctl.describe(), duration=T, max_tracking_error=err, max_bound_violation=bviol,
+                    starts=records, coordinates=names, muscles=muscles, x=wv,
+                    violation=rec["violation"])
+        if "P" in vals:
+            info["coeffs"] = vals["P"]
+            par = ctl.parametrization
+            if ctl.free_period:
+                info["period"] = float(np.asarray(vals["period"]).ravel()[0])
+                par = par.with_period(info["period"])
+            info["parametrization"] = par
+        stats = FitStatistics(k=nlp["n_w"], converged=bool(rec["converged"]), message=rec["status"],
+                              iterations=int(rec["iterations"]), violation=float(rec["violation"]),
+                              objective=objective)
+        res = Result(t, ch, stats=stats, info=info, report=self._report_text(stats, info))
+        if not rec["converged"]:
+            print(f"pinmsk: optimal control did not converge: {rec['status']}", file=sys.stderr)
+        return res
+
+    def _report_text(self, stats, info) -> str:
+        flag = "CONVERGED" if stats.converged else "NOT CONVERGED (not a solution)"
+        terms = ", ".join(f"{k} {v:.6g}" for k, v in info["terms"].items())
+        return format_report(
+            f"Optimal control ({info['formulation']} formulation, {info['scheme']}, {info['intervals']} intervals, "
+            f"{info['controls']['kind']} controls) of model '{self.model.name}': {flag}", [
+                ("status", info["status"]),
+                ("objective", f"{stats.objective:.6g} ({terms})"),
+                ("tracking", f"max error {info['max_tracking_error']:.4g} rad"),
+                ("solver", f"IPOPT, {info['iterations']} iterations, {info['n_variables']} variables, "
+                           f"{info['n_constraints']} constraints, exact derivatives (CasADi)"),
+                ("time", f"{info['seconds']:.2f} s (duration {info['duration']:.4g} s)"),
+            ])
+
+    def to_dict(self) -> dict:
+        """The fit as a JSON-ready dict (what ``pinmsk optimize`` writes to ``<out>.json``)."""
+        self._check_fitted()
+        r = self.result_
+        out = {"converged": bool(r.converged), "status": r.status, "objective": float(r.objective),
+               "seconds": float(r.seconds), "iterations": int(r.iterations),
+               "terms": {k: float(v) for k, v in r.terms.items()},
+               "max_bound_violation": float(r.max_bound_violation),
+               "max_tracking_error": float(r.max_tracking_error),
+               "design": r.design, "scheme": r.scheme, "intervals": int(r.intervals),
+               "duration": float(r.duration), "controls": r.controls,
+               "n_variables": int(r.n_variables), "n_constraints": int(r.n_constraints),
+               "starts": r.starts}
+        if "coeffs" in r.info:
+            out["coefficients"] = np.asarray(r.coeffs).tolist()
+            out["parametrization"] = r.parametrization.describe()
+        return out
