@@ -81,6 +81,10 @@ class Cost:
         """This term's value from ``int integrand dt`` (``glob``: horizon quantities T, x0, xN)."""
         return integral / glob["T"]
 
+    def linear_finish(self, glob) -> float | None:
+        """``a`` if :meth:`finish` is ``a * integral`` with a constant ``a`` (a fixed duration), else None."""
+        return 1.0 / glob["T"] if np.ndim(glob["T"]) == 0 and isinstance(glob["T"], (int, float)) else None
+
     def __repr__(self) -> str:
         return f"{self.weight:g} * {type(self).__name__}(name={self.name!r})"
 
@@ -201,6 +205,10 @@ class MetabolicEnergy(Cost):
     def integrand(self, pt, ref=None):
         import casadi as ca
         return ca.sum1(pt["metabolic_rate"])
+
+    def linear_finish(self, glob):
+        a = super().linear_finish(glob)
+        return None if (a is None or self.per == "distance") else a / self.normalizer
 
     def finish(self, integral, glob):
         if self.per == "time":

@@ -63,28 +63,30 @@ _SOLVER_KEYS = {"tol", "max_iter", "constraint_tol", "print_level", "hessian", "
 
 
 class _Blocks:
-    """Rows of the constraint vector with their labels, bounds and physical scale."""
+    """Labels, bounds and physical scales of the NLP's constraint rows, in the order of ``g``.
+
+    A block is ``K`` instances of the same rows (an interval's defects, residuals and path
+    rows, one instance per interval), stored instance after instance.
+    """
 
     def __init__(self):
-        self.exprs, self.lo, self.hi, self.meta = [], [], [], []
+        self.meta, self.lo, self.hi = [], [], []
 
-    def add(self, expr, lo, hi, *, label, rows, where, scale=1.0):
-        """``expr`` (n_rows x n_cols MX, column-major rows), ``rows`` row labels, ``where`` per column."""
-        import casadi as ca
-        expr = ca.MX(expr) if not isinstance(expr, ca.MX) else expr
-        n = expr.numel()
-        lo = np.broadcast_to(np.asarray(lo, dtype=float), expr.shape).ravel(order="F")
-        hi = np.broadcast_to(np.asarray(hi, dtype=float), expr.shape).ravel(order="F")
-        sc = np.broadcast_to(np.asarray(scale, dtype=float).reshape(-1, 1), expr.shape).ravel(order="F")
-        self.exprs.append(ca.vec(expr))
-        self.lo.append(lo)
-        self.hi.append(hi)
-        self.meta.append((label, list(rows), list(where), expr.shape, sc, n))
+    def add(self, rows, where, lo, hi, scale):
+        """Rows labelled ``rows`` (each with its bounds and scale), repeated for each of ``where``."""
+        n, K = len(rows), len(where)
+        self.meta.append((list(rows), list(where), np.asarray(scale, dtype=float)))
+        self.lo.append(np.tile(np.asarray(lo, dtype=float), K))
+        self.hi.append(np.tile(np.asarray(hi, dtype=float), K))
+        assert self.lo[-1].size == n * K
+
+    def add_grid(self, label, rows, where, lo, hi, scale):
+        """One row per signal and point, stored row-fastest (a column-major signal matrix)."""
+        sc = np.broadcast_to(np.asarray(scale, dtype=float), (len(rows),))
+        self.add([f"{label} {r}" for r in rows], where, np.full(len(rows), lo), np.full(len(rows), hi), sc)
 
     def vector(self):
-        import casadi as ca
-        return (ca.vertcat(*self.exprs) if self.exprs else ca.MX.zeros(0),
-                np.concatenate(self.lo) if self.lo else np.zeros(0),
+        return (np.concatenate(self.lo) if self.lo else np.zeros(0),
                 np.concatenate(self.hi) if self.hi else np.zeros(0))
 
     def worst(self, g, lo, hi):
@@ -94,19 +96,19 @@ class _Blocks:
             return 0.0, ""
         i = int(np.argmax(v))
         k = 0
-        for label, rows, where, shape, sc, n in self.meta:
+        for rows, where, sc in self.meta:
+            n = len(rows) * len(where)
             if i < k + n:
                 j = i - k
-                r, c = j % shape[0], j // shape[0]
-                row = rows[r] if r < len(rows) else str(r)
-                at = where[c] if c < len(where) else ""
+                r, c = j % len(rows), j // len(rows)
                 side = "below its lower bound" if g[i] < lo[i] else "above its upper bound"
-                return float(v[i] * sc[j]), (f"{label}{(' ' + row) if row else ''}{(' ' + at) if at else ''}: "
-                                             f"{side} by {v[i] * sc[j]:.3g}")
+                at = f" {where[c]}" if where[c] else ""
+                return float(v[i] * sc[r]), f"{rows[r]}{at}: {side} by {v[i] * sc[r]:.3g}"
             k += n
         return float(v[i]), f"row {i}"
 
-    def max_violation(self, g, lo, hi) -> float:
+    @staticmethod
+    def max_violation(g, lo, hi) -> float:
         v = np.maximum(np.maximum(lo - g, g - hi), 0.0)
         return float(v.max()) if v.size else 0.0
 
@@ -410,101 +412,231 @@ class Collocation(Fitter):
                            ca.vertcat(*integrands) if integrands else ca.SX.zeros(0)]
                           + [ca.vec(report[k_]) for k_ in rep_keys])
 
-        # -- decision variables (scaled)
-        Z = {"X": ca.MX.sym("X", nx, N + 1), "U": ca.MX.sym("U", nu, npt)}
-        X = Z["X"] * ca.repmat(ca.DM(sx), 1, N + 1)
-        U = Z["U"] * ca.repmat(ca.DM(su), 1, npt)
+        R_all = np.vstack([r for r in refs_np if r is not None]) if any(nref) else np.zeros((0, npt))
+
+        # -- decision variables (scaled); their order is the order of w
         ctl = self._controls
-        extra = []
-        if isinstance(ctl, NodeControls):
-            Z["S"] = ca.MX.sym("S", ns, npt)
-            S = Z["S"] * ca.repmat(ca.DM(ss), 1, npt)
-        else:
+        glob_ctl = isinstance(ctl, GlobalControls)
+        has_delay = pm.formulation == "ff" and bool(np.any(pm.delay > 0))
+        ncost = len(self._costs)
+        Z = {"X": ca.MX.sym("X", nx, N + 1), "U": ca.MX.sym("U", nu, npt), "S": ca.MX.sym("S", ns, npt)}
+        if has_delay:
+            Z["Sd"] = ca.MX.sym("Sd", ns, npt)
+        if glob_ctl:
             Z["P"] = ca.MX.sym("P", ctl.n_params, ns)
-            P = Z["P"] * ca.repmat(ca.DM(ss).T, ctl.n_params, 1)
+            if ctl.free_period:
+                Z["period"] = ca.MX.sym("period")
         if self._Tb is not None:
             Z["T"] = ca.MX.sym("T")
-            T = Z["T"] * self._T0
-        else:
-            T = self._T0
-        if isinstance(ctl, GlobalControls) and ctl.free_period:
-            Z["period"] = ca.MX.sym("period")
-            period = Z["period"] * ctl.parametrization.period
-        tpts = self._frac * T
-        if isinstance(ctl, GlobalControls):
-            B = ctl.basis(self._frac * self._T0, period if ctl.free_period else None)
-            S = ca.mtimes(ca.MX(B) if not isinstance(B, ca.MX) else B, P).T
-        Sd = self._delayed_signal(S, P if isinstance(ctl, GlobalControls) else None,
-                                  period if isinstance(ctl, GlobalControls) and ctl.free_period else None)
-        tmx = ca.MX(ca.DM(tpts).T) if self._Tb is None else (ca.DM(self._frac).T * T)
-        R_all = np.vstack([r for r in refs_np if r is not None]) if any(n_ for n_ in nref) else np.zeros((0, npt))
-        h = T / N
-        iN = slice(0, N + 1)
-        outN = Fpt.map(N + 1)(X, U[:, iN], S[:, iN], Sd[:, iN], tmx[:, iN], R_all[:, :N + 1])
-        XD = outN[0] * ca.repmat(ca.DM(sx), 1, N + 1)
-        if self.scheme == "hermite-simpson":
-            iM = slice(N + 1, 2 * N + 1)
-            Xm = 0.5 * (X[:, :-1] + X[:, 1:]) + h / 8 * (XD[:, :-1] - XD[:, 1:])
-            outM = Fpt.map(N)(Xm, U[:, iM], S[:, iM], Sd[:, iM], tmx[:, iM], R_all[:, N + 1:])
-            XDm = outM[0] * ca.repmat(ca.DM(sx), 1, N)
-            defect = X[:, 1:] - X[:, :-1] - h / 6 * (XD[:, :-1] + 4 * XDm + XD[:, 1:])
-            wq = np.concatenate([np.r_[1.0, np.full(N - 1, 2.0), 1.0] / 6.0, np.full(N, 4.0 / 6.0)])
-            cols = [outN, outM]
-        else:
-            defect = X[:, 1:] - X[:, :-1] - h / 2 * (XD[:, :-1] + XD[:, 1:])
-            wq = np.r_[0.5, np.ones(N - 1), 0.5]
-            cols = [outN]
-        joined = [ca.horzcat(*[c[i] for c in cols]) for i in range(len(outN))]
-        RES, PATH, INT = joined[1], joined[2], joined[3]
+        Z["I"] = ca.MX.sym("I", ncost)           # the cost integrals (assembly.py)
+        w = ca.vertcat(*[ca.vec(z) for z in Z.values()])
+        off, k0 = {}, 0
+        for key, z in Z.items():
+            off[key] = k0
+            k0 += int(z.numel())
+        rep = lambda v, n: ca.repmat(ca.DM(v), 1, n)   # noqa: E731
+        X, U, S = Z["X"] * rep(sx, N + 1), Z["U"] * rep(su, npt), Z["S"] * rep(ss, npt)
+        Sd = Z["Sd"] * rep(ss, npt) if has_delay else S
+        T = Z["T"] * self._T0 if "T" in Z else self._T0
+        P = Z["P"] * ca.repmat(ca.DM(ss).T, ctl.n_params, 1) if glob_ctl else None
+        period = Z["period"] * ctl.parametrization.period if "period" in Z else None
 
-        # -- constraints
+        # -- index matrices of the local variables
+        def idx(key, rows, cols):
+            n_r = Z[key].shape[0]
+            return off[key] + np.asarray(cols)[None, :] * n_r + np.asarray(rows)[:, None]
+        hs = self.scheme == "hermite-simpson"
+        kk = np.arange(N)
+        rx, ru, rs_ = np.arange(nx), np.arange(nu), np.arange(ns)
+        parts = [idx("X", rx, kk), idx("X", rx, kk + 1), idx("U", ru, kk), idx("U", ru, kk + 1)]
+        if hs:
+            parts.append(idx("U", ru, N + 1 + kk))
+        sig_key = "S"
+        for key in ((sig_key, "Sd") if has_delay else (sig_key,)):
+            parts += [idx(key, rs_, kk), idx(key, rs_, kk + 1)] + ([idx(key, rs_, N + 1 + kk)] if hs else [])
+        if "T" in Z:
+            parts.append(np.full((1, N), off["T"]))
+        idx_int = np.vstack(parts)
+        nref_ = R_all.shape[0]
+        frac_a = self._frac[:N]
+        if hs:
+            par_int = np.vstack([frac_a[None, :], R_all[:, :N], R_all[:, 1:N + 1], R_all[:, N + 1:]])
+        else:
+            par_int = np.vstack([frac_a[None, :], R_all[:, :N], R_all[:, 1:N + 1]])
+        fin = [idx("X", rx, [N]), idx("U", ru, [N]), idx("S", rs_, [N])] + ([idx("Sd", rs_, [N])] if has_delay else [])
+        if "T" in Z:
+            fin.append(np.full((1, 1), off["T"]))
+        idx_fin = np.vstack(fin)
+        par_fin = np.vstack([np.ones((1, 1)), R_all[:, N:N + 1]])
+
+        # -- the local functions (SX): an interval, and the final node
+        def unpack(z, sizes):
+            out, k = [], 0
+            for n_ in sizes:
+                out.append(z[k: k + n_])
+                k += n_
+            return out
+        zi = ca.SX.sym("z", idx_int.shape[0])
+        pi = ca.SX.sym("p", par_int.shape[0])
+        sizes = [nx, nx, nu, nu] + ([nu] if hs else []) + [ns] * ((3 if hs else 2) * (2 if has_delay else 1)) \
+            + ([1] if "T" in Z else [])
+        zz = unpack(zi, sizes)
+        xa, xb, ua, ub = zz[0] * ca.DM(sx), zz[1] * ca.DM(sx), zz[2] * ca.DM(su), zz[3] * ca.DM(su)
+        j = 4
+        um = None
+        if hs:
+            um = zz[4] * ca.DM(su)
+            j = 5
+        nsig = 3 if hs else 2
+        sig = [zz[j + i] * ca.DM(ss) for i in range(nsig)]
+        j += nsig
+        sdl = [zz[j + i] * ca.DM(ss) for i in range(nsig)] if has_delay else sig
+        j += nsig if has_delay else 0
+        Ti = zz[j] * self._T0 if "T" in Z else self._T0
+        hi = Ti / N
+        ta = pi[0] * Ti
+        pr = unpack(pi[1:], [nref_] * (3 if hs else 2))
+        oa = Fpt(xa, ua, sig[0], sdl[0], ta, pr[0])
+        ob = Fpt(xb, ub, sig[1], sdl[1], ta + hi, pr[1])
+        DX = ca.DM(sx)
+        fa, fb = oa[0] * DX, ob[0] * DX
+        if hs:
+            xm = 0.5 * (xa + xb) + hi / 8 * (fa - fb)
+            om = Fpt(xm, um, sig[2], sdl[2], ta + hi / 2, pr[2])
+            defect = (xb - xa - hi / 6 * (fa + 4 * om[0] * DX + fb)) / DX
+            integral = hi / 6 * (oa[3] + 4 * om[3] + ob[3])
+            rows_int = ca.vertcat(defect, oa[1], oa[2], om[1], om[2])
+            report_int = [xm] + list(oa[4:]) + list(om[4:])
+        else:
+            defect = (xb - xa - hi / 2 * (fa + fb)) / DX
+            integral = hi / 2 * (oa[3] + ob[3])
+            rows_int = ca.vertcat(defect, oa[1], oa[2])
+            report_int = list(oa[4:])
+        G_int = ca.Function("interval", [zi, pi], [rows_int, integral])
+        R_int = ca.Function("interval_report", [zi, pi], report_int)
+        zf = ca.SX.sym("z", idx_fin.shape[0])
+        pf = ca.SX.sym("p", par_fin.shape[0])
+        zz = unpack(zf, [nx, nu, ns] + ([ns] if has_delay else []) + ([1] if "T" in Z else []))
+        Tf = zz[-1] * self._T0 if "T" in Z else self._T0
+        sN = zz[2] * ca.DM(ss)
+        oN = Fpt(zz[0] * DX, zz[1] * ca.DM(su), sN, zz[3] * ca.DM(ss) if has_delay else sN, pf[0] * Tf, pf[1:])
+        G_fin = ca.Function("final_node", [zf, pf], [ca.vertcat(oN[1], oN[2]), ca.SX.zeros(ncost)])
+        R_fin = ca.Function("final_report", [zf, pf], list(oN[4:]))
+
+        # -- the other rows: links of the signal, boundary conditions
         blocks = _Blocks()
-        ptimes = [f"at t = {t_:.4g} s" for t_ in self._frac * self._T0]
+        t_int = [f"in interval {k_} ({k_ * self._T0 / N:.4g}-{(k_ + 1) * self._T0 / N:.4g} s)" for k_ in range(N)]
         state_labels = ([f"q {c}" for c in names] + [f"v {c}" for c in names]
                         + [f"a {n_}" for n_ in muscles] + ([f"f_t {n_}" for n_ in muscles] if pm.compliant else []))
-        blocks.add(defect / ca.repmat(ca.DM(sx), 1, N), 0.0, 0.0, label="collocation defect of", rows=state_labels,
-                   where=[f"in interval {k} ({k * self._T0 / N:.4g} s)" for k in range(N)], scale=sx)
-        r0 = 0
-        for label, rows, sc in res_meta:
-            n_ = len(sc)
-            blocks.add(RES[r0: r0 + n_, :], 0.0, 0.0, label=label, rows=rows, where=ptimes, scale=sc)
-            r0 += n_
-        for i, (label, lo, hi) in enumerate(path_meta):
-            blocks.add(PATH[i, :], lo, hi, label=label, rows=[""], where=ptimes)
-        if isinstance(ctl, GlobalControls) and pm.formulation == "ff":
-            lo, hi = self._ebounds
-            blocks.add(S, lo, hi, label="excitation bound of", rows=list(muscles), where=ptimes)
+        r_labels, r_lo, r_hi, r_sc = [], [], [], []
+
+        def rows_meta(where_tag):
+            for label, rows, sc in res_meta:
+                r_labels.extend(f"{label} {r_} {where_tag}" for r_ in rows)
+                r_lo.extend([0.0] * len(rows))
+                r_hi.extend([0.0] * len(rows))
+                r_sc.extend(sc)
+            for label, lo, hi in path_meta:
+                r_labels.append(f"{label} {where_tag}")
+                r_lo.append(lo)
+                r_hi.append(hi)
+                r_sc.append(1.0)
+        r_labels += [f"collocation defect of {s_}" for s_ in state_labels]
+        r_lo += [0.0] * nx
+        r_hi += [0.0] * nx
+        r_sc += list(sx)
+        rows_meta("at the interval's start")
+        if hs:
+            rows_meta("at the interval's midpoint")
+        blocks.add(r_labels, t_int, r_lo, r_hi, r_sc)
+        r_labels, r_lo, r_hi, r_sc = [], [], [], []
+        rows_meta("")
+        blocks.add(r_labels, [f"at the final node (t = {self._T0:.4g} s)"], r_lo, r_hi, r_sc)
+        blocks.add([f"integral of cost '{c.name}'" for c in self._costs], [""], [0.0] * ncost, [0.0] * ncost,
+                   [1.0] * ncost)
+        ptimes = [f"at t = {t_:.4g} s" for t_ in self._frac * self._T0]
+        sig_rows = list(muscles) if pm.formulation != "ift" else [names[j_] for j_ in pm.driven]
+        other = []
+        if glob_ctl:
+            B = ctl.basis(self._frac * self._T0, period)
+            link = (S - ca.mtimes(ca.MX(B) if not isinstance(B, ca.MX) else B, P).T) / rep(ss, npt)
+            other.append(ca.vec(link))
+            blocks.add_grid("global parametrization of the signal", sig_rows, ptimes, 0.0, 0.0, ss)
+        if has_delay:
+            other.append(ca.vec((Sd - self._delayed_signal(S, P, period)) / rep(ss, npt)))
+            blocks.add_grid("electromechanical delay of the excitation", sig_rows, ptimes, 0.0, 0.0, ss)
         x0, xN = X[:, 0], X[:, N]
         glob = {"T": T, "x0": x0, "xN": xN, "layout": st, "coordinates": names, "muscles": muscles, "m": m,
                 "mass": pm.mass, "e0": (S[:, 0] if pm.formulation == "ff" else U[co["e"][0]: co["e"][-1] + 1, 0])
                 if m else None}
         for c in self._cons:
             for label, expr, lo, hi in c.boundary(glob):
-                blocks.add(expr, lo, hi, label=label, rows=[""], where=[""])
-        g, lbg, ubg = blocks.vector()
+                other.append(ca.vec(expr))
+                blocks.add([label], [""], [lo], [hi], [1.0])
+        other_g = ca.vertcat(*other) if other else ca.MX.zeros(0)
 
-        # -- objective
-        values, J = {}, 0
-        for i, c in enumerate(self._costs):
-            integral = h * ca.dot(ca.DM(wq), INT[i, :].T)
-            values[c.name] = c.finish(integral, glob)
-            J = J + c.weight * values[c.name]
-
-        # -- bounds and scaled guess
-        w = ca.vertcat(*[ca.vec(z) for z in Z.values()])
+        # -- objective: each term's finish of its integral; directly when every finish is linear in it
+        lin = [c.linear_finish(glob) for c in self._costs]
+        direct = all(a_ is not None for a_ in lin)
+        if direct:
+            del Z["I"]
+            w = ca.vertcat(*[ca.vec(z) for z in Z.values()])
+        from .assembly import LocalBlock, assemble
+        lblocks = [LocalBlock("interval", G_int, idx_int, par_int), LocalBlock("final", G_fin, idx_fin, par_fin)]
+        if direct:
+            weights = np.array([c.weight * a_ for c, a_ in zip(self._costs, lin)])
+            g, J, jac_g, hess_lag = assemble(w, lblocks, other_g, int_weights=weights)
+            integ = ca.sum2(G_int.map(N)(ca.reshape(w[idx_int.ravel(order="F").tolist()], idx_int.shape[0], N),
+                                         ca.DM(par_int))[1])
+            values = {c.name: integ[i] * a_ for i, (c, a_) in enumerate(zip(self._costs, lin))}
+        else:
+            values, J = {}, 0
+            I = Z["I"]
+            for i, c in enumerate(self._costs):
+                values[c.name] = c.finish(I[i], glob)
+                J = J + c.weight * values[c.name]
+            g, J, jac_g, hess_lag = assemble(w, lblocks, other_g, n_int_vars=ncost, f_extra=J)
+        blocks.meta, blocks.lo, blocks.hi = (blocks.meta[:2] + blocks.meta[3:], blocks.lo[:2] + blocks.lo[3:],
+                                             blocks.hi[:2] + blocks.hi[3:]) if direct else \
+            (blocks.meta, blocks.lo, blocks.hi)
+        lbg, ubg = blocks.vector()
         lbx, ubx, w0 = self._bounds_and_guess(Z, guess, sx, su, ss, st, co)
-        outputs = {"X": X, "U": U, "S": S, "Sd": Sd, "J": J, "g": g, "T": T,
+        if not direct:
+            w0 = self._with_integrals(w0, G_int, G_fin, idx_int, par_int, idx_fin, par_fin, ncost)
+
+        # -- what the result reports (evaluated once, numerically)
+        Zi = ca.reshape(w[idx_int.ravel(order="F").tolist()], idx_int.shape[0], N)
+        Zf = w[idx_fin.ravel(order="F").tolist()]
+        RI = R_int.map(N)(Zi, ca.DM(par_int))
+        RF = R_fin(Zf, ca.DM(par_fin))
+        RI = RI if isinstance(RI, (list, tuple)) else [RI]
+        RF = RF if isinstance(RF, (list, tuple)) else [RF]
+        n_rep = len(rep_keys)
+        outputs = {"X": X, "U": U, "S": S, "Sd": Sd, "J": J, "T": T,
                    **{f"cost:{k_}": v_ for k_, v_ in values.items()}}
-        for i, k_ in enumerate(rep_keys):
-            outputs[f"rep:{k_}"] = joined[4 + i]
-        if self.scheme == "hermite-simpson":
-            outputs["Xm"] = Xm
-        if isinstance(ctl, GlobalControls):
+        if hs:
+            outputs["Xm"] = RI[0]
+            for i_, k_ in enumerate(rep_keys):
+                outputs[f"rep:{k_}"] = ca.horzcat(RI[1 + i_], RF[i_], RI[1 + n_rep + i_])
+        else:
+            for i_, k_ in enumerate(rep_keys):
+                outputs[f"rep:{k_}"] = ca.horzcat(RI[i_], RF[i_])
+        if glob_ctl:
             outputs["P"] = P
-            if ctl.free_period:
+            if period is not None:
                 outputs["period"] = period
-        return dict(w=w, J=J, g=g, lbg=lbg, ubg=ubg, lbx=lbx, ubx=ubx, w0=w0, blocks=blocks,
-                    outputs=outputs, layout=(st, co), n_w=int(w.numel()), Z=Z, scales=(sx, su, ss))
+        return dict(w=w, J=J, g=g, jac_g=jac_g, hess_lag=hess_lag, lbg=lbg, ubg=ubg, lbx=lbx, ubx=ubx, w0=w0,
+                    blocks=blocks, outputs=outputs, layout=(st, co), n_w=int(w.numel()), Z=Z,
+                    scales=(sx, su, ss), local=(G_int, G_fin, idx_int, par_int, idx_fin, par_fin, ncost))
+
+    def _with_integrals(self, w0, G_int, G_fin, idx_int, par_int, idx_fin, par_fin, ncost):
+        """``w0`` with its integral variables set to the integrals of the guess (feasible rows)."""
+        if not ncost:
+            return w0
+        w0 = np.array(w0, dtype=float)
+        c = np.asarray(G_int.map(idx_int.shape[1])(w0[idx_int], par_int)[1]).sum(axis=1)
+        w0[-ncost:] = c
+        return w0
 
     def _guess_torques(self, guess):
         """Inverse-dynamics torques (nv, n_points) of the guess's motion (for scaling)."""
@@ -585,44 +717,56 @@ class Collocation(Fitter):
             ug.append(guess["F"])
         ug = np.vstack(ug)
         sig = {"ff": "e", "ifm": "F", "ift": "tau"}[pm.formulation]
-        parts_lo, parts_hi, parts_w0 = [], [], []
+        parts = {}
 
-        def put(lo, hi, w0, scale):
+        def put(key, lo, hi, w0, scale):
             sc = np.asarray(scale, dtype=float)
-            parts_lo.append((lo / sc).ravel(order="F"))
-            parts_hi.append((hi / sc).ravel(order="F"))
-            parts_w0.append((np.clip(w0, lo, hi) / sc).ravel(order="F"))
+            parts[key] = ((lo / sc).ravel(order="F"), (hi / sc).ravel(order="F"),
+                          (np.clip(w0, lo, hi) / sc).ravel(order="F"))
 
-        put(np.repeat(xlo[:, None], N + 1, 1), np.repeat(xhi[:, None], N + 1, 1), xg, sx[:, None])
-        put(np.repeat(ulo[:, None], npt, 1), np.repeat(uhi[:, None], npt, 1), ug, su[:, None])
+        put("X", np.repeat(xlo[:, None], N + 1, 1), np.repeat(xhi[:, None], N + 1, 1), xg, sx[:, None])
+        put("U", np.repeat(ulo[:, None], npt, 1), np.repeat(uhi[:, None], npt, 1), ug, su[:, None])
         ctl = self._controls
         ns = pm.n_signal
-        if isinstance(ctl, NodeControls):
-            if pm.formulation == "ff":
-                slo, shi = np.full(ns, lo_e), np.full(ns, hi_e)
-            elif pm.formulation == "ifm":
-                slo, shi = np.zeros(ns), np.full(ns, np.inf)
-            else:
-                slo, shi = np.full(ns, -np.inf), np.full(ns, np.inf)
-            put(np.repeat(slo[:, None], npt, 1), np.repeat(shi[:, None], npt, 1), guess[sig], ss[:, None])
+        if pm.formulation == "ff":
+            slo, shi = np.full(ns, lo_e), np.full(ns, hi_e)
+        elif pm.formulation == "ifm":
+            slo, shi = np.zeros(ns), np.full(ns, np.inf)
         else:
-            par = ctl.parametrization
-            coef = par.fit(self._frac * self._T0, guess[sig].T)
-            put(np.full(coef.shape, -np.inf), np.full(coef.shape, np.inf), coef, ss[None, :])
-        if "T" in Z:
-            lo, hi = self._Tb
-            put(np.array([lo]), np.array([hi]), np.array([self._T0]), self._T0)
+            slo, shi = np.full(ns, -np.inf), np.full(ns, np.inf)
+        put("S", np.repeat(slo[:, None], npt, 1), np.repeat(shi[:, None], npt, 1), guess[sig], ss[:, None])
+        t = self._frac * self._T0
+        coef = None
+        if isinstance(ctl, GlobalControls):
+            coef = ctl.parametrization.fit(t, guess[sig].T)
+            put("P", np.full(coef.shape, -np.inf), np.full(coef.shape, np.inf), coef, ss[None, :])
         if "period" in Z:
             p0 = ctl.parametrization.period
             lo, hi = ctl.period_bounds
-            put(np.array([lo * p0]), np.array([hi * p0]), np.array([p0]), p0)
-        return np.concatenate(parts_lo), np.concatenate(parts_hi), np.concatenate(parts_w0)
+            put("period", np.array([lo * p0]), np.array([hi * p0]), np.array([p0]), p0)
+        if "Sd" in Z:
+            sd0 = np.empty((ns, npt))
+            for i, d in enumerate(pm.delay):
+                td = np.maximum(t - d, 0.0)
+                if coef is not None:
+                    sd0[i] = ctl.basis(td) @ coef[:, i]
+                else:
+                    o = np.argsort(t)
+                    sd0[i] = np.interp(td, t[o], guess[sig][i, o])
+            put("Sd", np.full((ns, npt), -np.inf), np.full((ns, npt), np.inf), sd0, ss[:, None])
+        if "T" in Z:
+            lo, hi = self._Tb
+            put("T", np.array([lo]), np.array([hi]), np.array([self._T0]), self._T0)
+        if "I" in Z:      # the integrals: free; their start is set from the guess (_with_integrals)
+            n_ = int(Z["I"].numel())
+            parts["I"] = (np.full(n_, -np.inf), np.full(n_, np.inf), np.zeros(n_))
+        return tuple(np.concatenate([parts[k][i] for k in Z]) for i in range(3))
 
     # ------------------------------------------------------------------ solve
     def _ipopt_options(self) -> dict:
         s = self._solver
         verbose = self.verbose if self.verbose is not None else sys.stdout.isatty()
-        opts = {"expand": True, "print_time": False,
+        opts = {"expand": False, "print_time": False,
                 "ipopt.print_level": int(s.get("print_level", 5 if verbose else 0)),
                 "ipopt.sb": "yes", "ipopt.tol": float(s.get("tol", 1e-8)),
                 "ipopt.max_iter": int(s.get("max_iter", 1000)),
@@ -645,7 +789,9 @@ class Collocation(Fitter):
         guesses = ([self._guess_from_trial(self.guess, t)] if self.guess is not None
                    else [self._auto_guess(t, k) for k in range(n_starts)])
         nlp = self._build(guesses[0])
-        solver = ca.nlpsol("ocp", "ipopt", {"x": nlp["w"], "f": nlp["J"], "g": nlp["g"]}, self._ipopt_options())
+        opts = self._ipopt_options()
+        opts.update(jac_g=nlp["jac_g"], hess_lag=nlp["hess_lag"])
+        solver = ca.nlpsol("ocp", "ipopt", {"x": nlp["w"], "f": nlp["J"], "g": nlp["g"]}, opts)
         out_fn = ca.Function("outputs", [nlp["w"]], list(nlp["outputs"].values()))
         records, best = [], None
         ctol = float(self._solver.get("constraint_tol", 1e-6))
@@ -726,13 +872,12 @@ class Collocation(Fitter):
         lo, hi = self._ebounds
         bviol = float(max(np.max(np.maximum(lo - e_all, 0), initial=0.0), np.max(np.maximum(e_all - hi, 0), initial=0.0)))
         ctl = self._controls
-        info = dict(status=rec["status"], terms=terms, objective=objective, seconds=seconds,
-                    iterations=rec["iterations"], nit=rec["iterations"], n_variables=nlp["n_w"],
+        info = dict(status=rec["status"], terms=terms, seconds=seconds,
+                    nit=rec["iterations"], n_variables=nlp["n_w"],
                     n_constraints=int(nlp["lbg"].size), scheme=self.scheme, intervals=N,
                     design=pm.formulation, formulation=pm.formulation, tendon=pm.tendon,
-                    controls=ctl.describe(), duration=T, max_tracking_error=err, max_bound_violation=bviol,
-                    starts=records, coordinates=names, muscles=muscles, x=wv,
-                    violation=rec["violation"])
+                    controls=ctl.describe(), horizon=T, max_tracking_error=err, max_bound_violation=bviol,
+                    starts=records, coordinates=names, muscles=muscles, x=wv)
         if "P" in vals:
             info["coeffs"] = vals["P"]
             par = ctl.parametrization
@@ -757,9 +902,9 @@ class Collocation(Fitter):
                 ("status", info["status"]),
                 ("objective", f"{stats.objective:.6g} ({terms})"),
                 ("tracking", f"max error {info['max_tracking_error']:.4g} rad"),
-                ("solver", f"IPOPT, {info['iterations']} iterations, {info['n_variables']} variables, "
+                ("solver", f"IPOPT, {info['nit']} iterations, {info['n_variables']} variables, "
                            f"{info['n_constraints']} constraints, exact derivatives (CasADi)"),
-                ("time", f"{info['seconds']:.2f} s (duration {info['duration']:.4g} s)"),
+                ("time", f"{info['seconds']:.2f} s (horizon {info['horizon']:.4g} s)"),
             ])
 
     def to_dict(self) -> dict:
@@ -772,7 +917,7 @@ class Collocation(Fitter):
                "max_bound_violation": float(r.max_bound_violation),
                "max_tracking_error": float(r.max_tracking_error),
                "design": r.design, "scheme": r.scheme, "intervals": int(r.intervals),
-               "duration": float(r.duration), "controls": r.controls,
+               "duration": float(r.horizon), "controls": r.controls,
                "n_variables": int(r.n_variables), "n_constraints": int(r.n_constraints),
                "starts": r.starts}
         if "coeffs" in r.info:
