@@ -368,12 +368,12 @@ class _MuscleModel:
         l_ce, v_ce, cos = self.fiber_from_tendon(f_t, df_t, l_mt, v_mt)
         return self._fiber_total(a, l_ce, v_ce) * cos - f_t
 
-    def equilibrium_tendon_force(self, a, l_mt, v_mt=None):
+    def equilibrium_tendon_force(self, a, l_mt, v_mt=None, *, tol: float = 1e-10):
         """Normalized tendon force ``f_t`` at the compliant equilibrium (numpy; for initial guesses).
 
         :meth:`equilibrium` divided by ``F_max`` (isometric fiber unless ``v_mt`` is given).
         """
-        return self.equilibrium(l_mt, a, v_mt)["force"] / self.f_max
+        return self.equilibrium(l_mt, a, v_mt, tol=tol)["force"] / self.f_max
 
     def fiber_kinematics_rigid(self, l_mt, v_mt):
         """Fiber length and velocity ``(l_ce, v_ce)`` (m, m/s) for an inextensible tendon.
@@ -1008,7 +1008,7 @@ class Millard2012(_CurveMuscle):
         """Not available: Millard2012 curves are numpy only (use DeGroote2016)."""
         self._numpy_only("tendon_force_bounds")
 
-    def equilibrium_tendon_force(self, a, l_mt, v_mt=None):
+    def equilibrium_tendon_force(self, a, l_mt, v_mt=None, *, tol: float = 1e-10):
         """Not available: Millard2012 curves are numpy only (use DeGroote2016)."""
         self._numpy_only("equilibrium_tendon_force")
 
