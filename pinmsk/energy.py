@@ -16,7 +16,9 @@ per-muscle ``(m,)`` parameters, SI units:
 - ``l_opt`` (m), ``f_max`` (N), ``fast_fraction`` (0..1).
 
 Functions return a dict of the parts (W) so they can be plotted and tested one
-by one; ``"total"`` is ``E'``.
+by one; ``"total"`` is ``E'``.  The signals may be CasADi values (the parameters stay
+numpy): the same code gives the optimal-control engine's cost and its exact
+derivatives (:mod:`pinmsk.backend`; use ``smooth > 0`` there).
 """
 from __future__ import annotations
 

@@ -1,7 +1,8 @@
 """De Groote et al. (2016) muscle curves as OpenSim's DeGrooteFregly2016Muscle defines them.
 
 Pure, elementwise functions over broadcastable arrays (per-muscle settings
-broadcast against time-first ``(N, m)`` inputs), their analytic derivatives,
+broadcast against time-first ``(N, m)`` inputs; the curve arguments may be CasADi
+values, see :mod:`pinmsk.backend`), their analytic derivatives,
 and :class:`DeGrooteFregly2016Muscle`, the OpenSim muscle's properties with
 their OpenSim names, defaults and bounds.  The vectorised muscle-tendon model
 is :class:`pinmsk.muscles.DeGroote2016`.

@@ -10,7 +10,19 @@ Eq. A.10-A.14, no parallel element) share one interface:
 - ``force_limits(l_mt, v_mt) -> (F_active, F_passive)`` (rigid tendon; ``F = a F_active + F_passive``)
 - ``contraction_rate(l_ce, l_mt, a) -> v_ce`` (compliant-tendon ODE, thesis Eq. 3.9)
 - ``inverse(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, ddF_mt=0.0) -> dict`` (thesis Fig. 5.6)
-- ``activation_rate(u, a)``, ``excitation(a, adot)``, ``activation(t, u, a0=None)`` (App. A.2)
+- ``activation_rate(u, a, smooth=0)``, ``excitation(a, adot)``, ``activation(t, u, a0=None)`` (App. A.2)
+
+and the laws of the optimal-control engine, written once for numpy and CasADi
+(:mod:`pinmsk.backend`; no input checks, the checked methods above call the same math):
+
+- ``rigid_force(a, l_mt, v_mt) -> F`` (N), ``fiber_rigid(l_mt, v_mt) -> (l_ce, v_ce, cos_alpha)``;
+- De Groote et al. (2016)'s implicit compliant tendon, state ``f_t = F_T/F_max`` and control
+  ``df_t``: ``fiber_from_tendon(f_t, df_t, l_mt, v_mt) -> (l_ce, v_ce, cos_alpha)``,
+  ``implicit_residual(a, f_t, df_t, l_mt, v_mt)`` (zero at the Hill equilibrium),
+  ``tendon_force_bounds() -> (lo, hi)``, ``equilibrium_tendon_force(a, l_mt, v_mt=None)`` (numpy);
+- ``fiber_forces(a, l_ce, v_ce) -> {"f_isom", "f_v", "f_pe", "f_damping", "f_active", "f_fiber"}``.
+
+Millard2012's quintic Bezier curves are numpy only: it refuses these by name.
 
 :class:`DeGroote2016` and :class:`Millard2012` (OpenSim's DeGrooteFregly2016Muscle
 and Millard2012EquilibriumMuscle curves, with fiber damping) share the
@@ -278,10 +290,14 @@ class _MuscleModel:
         ``v_ce = v_mt cos(alpha)``; needs ``x > 0`` (checked by the numpy wrappers).
         """
         xp = backend_of(l_mt, v_mt)
-        x = xp.asarray(l_mt) - self.l_slack
+        return self._fiber_from_along(xp, xp.asarray(l_mt) - self.l_slack, xp.asarray(v_mt))
+
+    def _fiber_from_along(self, xp, x, x_rate):
+        """``(l_ce, v_ce, cos_alpha)`` from the fiber's projection ``x`` on the line of action and
+        its rate: ``l_ce = sqrt(x^2 + h^2)``, ``v_ce = x x'/l_ce = x' cos(alpha)`` (constant thickness)."""
         l_ce = xp.sqrt(x * x + self.height * self.height)
         cos = x / l_ce
-        return l_ce, xp.asarray(v_mt) * cos, cos
+        return l_ce, x_rate * cos, cos
 
     def _rigid(self, l_mt, v_mt):
         """``(l_ce, v_ce, cos_alpha)`` with an inextensible tendon (checked: the fiber must fit)."""
@@ -352,11 +368,9 @@ class _MuscleModel:
         xp = backend_of(f_t, df_t, l_mt, v_mt)
         strain = self._tendon_strain(xp.asarray(f_t))
         stiffness = self._tendon_curve(strain)[1]
-        x = xp.asarray(l_mt) - self.l_slack * (1.0 + strain)
-        l_ce = xp.sqrt(x * x + self.height * self.height)
-        cos = x / l_ce
         v_t = self.l_slack * xp.asarray(df_t) / stiffness
-        return l_ce, (xp.asarray(v_mt) - v_t) * cos, cos
+        return self._fiber_from_along(xp, xp.asarray(l_mt) - self.l_slack * (1.0 + strain),
+                                      xp.asarray(v_mt) - v_t)
 
     def implicit_residual(self, a, f_t, df_t, l_mt, v_mt):
         """Hill equilibrium residual ``(a f_L f_V + f_PE + f_D) cos(alpha) - f_t`` (dimensionless).

@@ -1,7 +1,8 @@
 """Nagano & Gerritsen contractile element with the Winters tendon (thesis App. A.4-A.5).
 
 Pure, elementwise functions; :class:`pinmsk.muscles.NaganoGerritsen` binds the
-per-muscle parameters.  The model has no parallel elastic element (thesis
+per-muscle parameters.  :func:`ng_force_length`, :func:`ng_activation_hat` and
+:func:`ng_fiber_force` also take CasADi values (:mod:`pinmsk.backend`).  The model has no parallel elastic element (thesis
 Sec. 5.1: passive joint moments take its place).  Conventions:
 
 - lengths normalized by ``l_opt``; velocity normalized by ``l_opt`` too

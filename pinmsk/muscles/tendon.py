@@ -2,7 +2,8 @@
 
 Forces are normalized to the muscle's maximum isometric force ``F_max``;
 strain is engineering strain ``(l_t - l_slack) / l_slack``.  All functions are
-elementwise over broadcastable arrays.
+elementwise over broadcastable arrays; the curves and their inverses (not the second
+derivatives) also take CasADi values (:mod:`pinmsk.backend`).
 
 A slack tendon carries no compression: both curves are zero for strain <= 0.
 The thesis writes Eq. A.6 without that lower bound (read literally the

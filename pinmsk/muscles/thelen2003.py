@@ -2,7 +2,9 @@
 
 Thesis App. A.3 (Eq. A.6-A.9).  Pure, elementwise functions over broadcastable
 arrays; the :class:`pinmsk.muscles.Thelen2003` object binds per-muscle
-parameters to them.  Conventions:
+parameters to them.  The curves (force-length, passive, force-velocity without
+``smooth``, :func:`thelen_fiber_force`) also take CasADi values (:mod:`pinmsk.backend`),
+so the optimal-control engine differentiates this same code.  Conventions:
 
 - lengths normalized by ``l_opt`` (``l_norm = l_ce / l_opt``);
 - fiber velocity normalized by ``v_max`` (``v_norm = v_ce / v_max``,
