@@ -386,6 +386,15 @@ class Component(metaclass=_Frozen):
         """Generalized force ``(N, nv)`` this component applies to the model."""
         raise NotImplementedError
 
+    def generalized_force_at(self, model, q, v):
+        """The generalized force ``(nv,)`` this component applies at ONE state ``(q, v)``, on any
+        backend (:mod:`pinmsk.backend`): numpy 1-D ``q, v`` give a numpy ``(nv,)``; CasADi
+        ``(nv, 1)`` ``SX``/``MX`` give a CasADi ``(nv, 1)`` expression (what the optimal-control
+        engine differentiates).  The same force law as :meth:`generalized_force`, at the
+        component's current parameter values.  Components without a closed form in ``(q, v)``
+        refuse by name (ModelError)."""
+        raise ModelError(f"component {self.label} has no closed form the optimal-control engine can use")
+
     def _p(self, params: Mapping[str, float] | None) -> dict[str, float]:
         out = self.values
         if params:
@@ -402,6 +411,27 @@ class Component(metaclass=_Frozen):
 
     def __hash__(self) -> int:
         return hash((type(self).__name__, self.target, tuple(self.values.items())))
+
+
+def state_vector(nv: int, entries: Mapping[int, Any], like=None):
+    """A generalized-force vector of ``nv`` zeros with ``entries`` ``{index: value}`` set, on the
+    backend of ``like`` and the values: numpy ``(nv,)``, or CasADi ``(nv, 1)`` when any is a CasADi
+    value (what :meth:`Component.generalized_force_at` returns)."""
+    from .backend import backend_of
+
+    xp = backend_of(like, *entries.values())
+    if not xp.symbolic:
+        out = np.zeros(nv)
+        for i, f in entries.items():
+            out[i] = f
+        return out
+    import casadi as ca
+
+    cls = ca.MX if any(isinstance(x, ca.MX) for x in (like, *entries.values())) else ca.SX
+    out = cls.zeros(nv, 1)
+    for i, f in entries.items():
+        out[i] = f
+    return out
 
 
 def motion_cached(data, model, key, motion: Motion, compute):

@@ -29,6 +29,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from ..backend import backend_of
 from ..components import Parameter
 from ..errors import ModelError
 from .dual import asarray, vector
@@ -55,8 +56,9 @@ def hertz_coefficient(stiffness, radius):
     for a sphere of radius R on a half space of the same plane-strain modulus E, as Simbody writes
     it (``HuntCrossleyForce``: ``k = E1^(2/3) E2^(2/3) / (E1^(2/3) + E2^(2/3))``; equal materials
     give ``E^(2/3) / 2``, the ``k`` of ``SmoothSphereHalfSpaceForce``)."""
-    k = 0.5 * np.power(asarray(stiffness), 2.0 / 3.0)
-    return (4.0 / 3.0) * k * np.sqrt(asarray(radius) * k)
+    xp = backend_of(stiffness, radius)
+    k = 0.5 * xp.power(asarray(stiffness), 2.0 / 3.0)
+    return (4.0 / 3.0) * k * xp.sqrt(asarray(radius) * k)
 
 
 def _vec3(x, what: str, owner: str) -> tuple[float, float, float]:
