@@ -129,7 +129,7 @@ class HalfSpaceContact(FrameContact):
         R = asarray(p["radius"])
         n = np.asarray(self.plane_normal)
         centre, vcentre = kin.point(np.asarray(self.location))
-        depth = R - _dot(centre - np.asarray(self.plane_point), n)
+        depth = R - _dot(centre - np.asarray(self.plane_point)[None, :], n)    # a row: CasADi's (1, 3) too
         arm = R - 0.5 * depth                                     # from the centre to the contact point
         r = vector(-arm * n[0], -arm * n[1], -arm * n[2])
         point = centre + r
