@@ -13,7 +13,11 @@ damping returns ``-c * v``).  The equation of motion reads
     M(q) a + h(q, v) = tau_actuators + sum_k Q_k(q, v, a, t) + J^T f_ext,
 
 so inverse dynamics of a model with components subtracts their sum.  The same
-object serves forward simulation, inverse dynamics, the QPs and the diagnosis.
+object serves forward simulation, inverse dynamics, the QPs and the diagnosis;
+``component.generalized_force_at(model, q, v) -> (nv,)`` evaluates the same law
+at one state on numpy or CasADi (:mod:`pinmsk.backend`), for the
+optimal-control engine (components without a closed form in ``(q, v)`` refuse
+by name).
 Parameter-independent work (Jacobians, regressors) goes into
 ``prepare(model, motion, data=None)`` and is passed back as ``cache`` so fitting a
 parameter does not repeat it; ``data`` is a workspace the caller owns

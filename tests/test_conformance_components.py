@@ -13,6 +13,9 @@ from pinmsk.muscles.paths import PolynomialPath, path_variants
 
 ca = pytest.importorskip("casadi")
 
+# a numpy ufunc called on a CasADi value (instead of the pinmsk.backend namespace) fails the test
+pytestmark = pytest.mark.filterwarnings("error::FutureWarning:casadi")
+
 RTOL = 1e-12
 H = 1e-6
 

@@ -10,7 +10,10 @@ Everything here is vectorised over frames: a :class:`SiteKinematics` holds the
 site's world position, orientation, velocity and angular velocity for N frames
 (computed once per motion by :meth:`SphereContact.prepare` through Pinocchio),
 and the force laws are plain numpy on ``(N,)`` arrays, so one evaluation of 3
-spheres over 1,000 frames costs tens of microseconds.
+spheres over 1,000 frames costs tens of microseconds.  The laws go through
+:mod:`pinmsk.backend` (and run on :class:`~pinmsk.contact.dual.Dual` numbers), so
+:meth:`FrameContact.wrench_at` evaluates the same code at one state of the site
+on CasADi values: one frame, scalars ``(1, 1)`` and vectors rows ``(1, 3)``.
 
 Smoothness.  The penetration ``delta = R - h`` (``h`` the centre's height) is
 replaced by the smooth positive part
