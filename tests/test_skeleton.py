@@ -158,7 +158,8 @@ def _branched_model(extra_root=None):
         trunk = add(trunk, jm, name)
     a, b = trunk, trunk
     for k, jm in enumerate([pin.JointModelRevoluteUnaligned(np.array([0.3, -0.5, 0.8]) / np.sqrt(0.98)),
-                            pin.JointModelPrismaticUnaligned(np.array([-0.2, 0.9, 0.1]) / np.sqrt(0.86)), pin.JointModelRX()]):
+                            pin.JointModelPrismaticUnaligned(np.array([-0.2, 0.9, 0.1]) / np.sqrt(0.86)),
+                            pin.JointModelRX()]):
         a = add(a, jm, f"a{k}")
     for k, jm in enumerate([pin.JointModelRY(), pin.JointModelPX(), pin.JointModelRZ()]):
         b = add(b, jm, f"b{k}")
