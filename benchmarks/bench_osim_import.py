@@ -10,7 +10,8 @@ limited to 1):
 * **ID on the imported model vs a bare Pinocchio RNEA loop**: ``pinmsk.skeleton.rnea`` over the
   151 frames of ``IK/subject01_walk_IK.mot`` on the imported subject01 (exact knee, the
   configuration that matches OpenSim) against a plain Python loop of ``pinocchio.rnea`` on the
-  same Pinocchio model and the same (q, v, a) (target >= 0.8x the loop's throughput).
+  same Pinocchio model and the same (q, v, a) (target >= 0.8x the loop's throughput); also with the
+  trial's GRF as external loads (their ``J^T W`` batched over frames: still one Pinocchio call a frame).
 * **ID compute vs OpenSim's InverseDynamicsTool** on the same model, motion and
   ``subject01_walk_grf.xml``: pinmsk's compute = coordinates -> dependent joints, 6 Hz filter and
   spline derivatives, external loads, RNEA, moments mapped back (``inverse_dynamics_result``
@@ -42,7 +43,7 @@ from pinmsk.dynamics import inverse_dynamics_result  # noqa: E402
 from pinmsk.io.external_loads import read_external_loads  # noqa: E402
 from pinmsk.io.shared_data import shared_data_dir  # noqa: E402
 from pinmsk.io.tables import read_trial  # noqa: E402
-from pinmsk.kinematics import motion  # noqa: E402
+from pinmsk.kinematics import motion, prepare  # noqa: E402
 from pinmsk.model import clear_import_cache, import_osim  # noqa: E402
 from pinmsk.skeleton import rnea  # noqa: E402
 
@@ -94,6 +95,8 @@ def main(argv=None) -> int:
     t_bare = _best(bare, args.repeat)
     t_rnea = _best(lambda: rnea(model, mo.q, mo.v, mo.a, data=pd), args.repeat)
     assert np.allclose(rnea(model, mo.q, mo.v, mo.a, data=pd), bare(), atol=1e-9)
+    ext = prepare(model, ik, cutoff=6.0, grf=grf, grf_cutoff=0, external_loads=loads).external
+    t_loaded = _best(lambda: rnea(model, mo.q, mo.v, mo.a, external=ext, data=pd), args.repeat)
     t_id = _best(lambda: inverse_dynamics_result(model, ik, cutoff=6.0, grf=grf, grf_cutoff=0,
                                                  external_loads=loads), args.repeat)
 
@@ -104,6 +107,8 @@ def main(argv=None) -> int:
     print(f"RNEA, bare pinocchio loop:                    {1e3 * t_bare:.2f} ms")
     print(f"RNEA, pinmsk.skeleton.rnea (imported model):  {1e3 * t_rnea:.2f} ms  -> "
           f"{t_bare / t_rnea:.2f}x the loop's throughput (target >= 0.8x)")
+    print(f"RNEA + the GRF loads (J^T W), pinmsk:         {1e3 * t_loaded:.2f} ms  -> "
+          f"{t_bare / t_loaded:.2f}x the bare loop's throughput")
     print(f"ID compute, pinmsk (map, filter, loads, RNEA): {1e3 * t_id:.2f} ms")
     osim, why = harness.import_opensim()
     if osim is None:

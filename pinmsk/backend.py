@@ -40,7 +40,7 @@ NUMPY = types.SimpleNamespace(
     name="numpy", symbolic=False,
     asarray=_np_asarray, exp=np.exp, expm1=np.expm1, log=np.log, log1p=np.log1p, sqrt=np.sqrt,
     tanh=np.tanh, sin=np.sin, cos=np.cos, tan=np.tan, arcsin=np.arcsin, arccos=np.arccos,
-    arctan=np.arctan, arctan2=np.arctan2, sinh=np.sinh, cosh=np.cosh, abs=np.abs, sign=np.sign,
+    arctan=np.arctan, arctan2=np.arctan2, arcsinh=np.arcsinh, sinh=np.sinh, cosh=np.cosh, abs=np.abs, sign=np.sign,
     maximum=np.maximum, minimum=np.minimum, clip=np.clip, where=np.where, square=np.square,
     power=np.power, erf=None,
 )
@@ -72,7 +72,7 @@ def casadi_backend():
             asarray=lambda x: x if isinstance(x, (ca.SX, ca.MX, ca.DM)) else _np_asarray(x),
             exp=ca.exp, expm1=_expm1, log=ca.log, log1p=_log1p, sqrt=ca.sqrt, tanh=ca.tanh,
             sin=ca.sin, cos=ca.cos, tan=ca.tan, arcsin=ca.asin, arccos=ca.acos, arctan=ca.atan,
-            arctan2=ca.atan2, sinh=ca.sinh, cosh=ca.cosh, abs=ca.fabs, sign=ca.sign,
+            arctan2=ca.atan2, arcsinh=ca.asinh, sinh=ca.sinh, cosh=ca.cosh, abs=ca.fabs, sign=ca.sign,
             maximum=ca.fmax, minimum=ca.fmin, clip=_clip, where=_where, square=lambda x: x * x,
             power=lambda x, p: x ** p, erf=ca.erf,
         )

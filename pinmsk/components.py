@@ -13,7 +13,11 @@ damping returns ``-c * v``).  The equation of motion reads
     M(q) a + h(q, v) = tau_actuators + sum_k Q_k(q, v, a, t) + J^T f_ext,
 
 so inverse dynamics of a model with components subtracts their sum.  The same
-object serves forward simulation, inverse dynamics, the QPs and the diagnosis.
+object serves forward simulation, inverse dynamics, the QPs and the diagnosis;
+``component.generalized_force_at(model, q, v) -> (nv,)`` evaluates the same law
+at one state on numpy or CasADi (:mod:`pinmsk.backend`), for the
+optimal-control engine (components without a closed form in ``(q, v)`` refuse
+by name).
 Parameter-independent work (Jacobians, regressors) goes into
 ``prepare(model, motion, data=None)`` and is passed back as ``cache`` so fitting a
 parameter does not repeat it; ``data`` is a workspace the caller owns
@@ -386,6 +390,15 @@ class Component(metaclass=_Frozen):
         """Generalized force ``(N, nv)`` this component applies to the model."""
         raise NotImplementedError
 
+    def generalized_force_at(self, model, q, v):
+        """The generalized force ``(nv,)`` this component applies at ONE state ``(q, v)``, on any
+        backend (:mod:`pinmsk.backend`): numpy 1-D ``q, v`` give a numpy ``(nv,)``; CasADi
+        ``(nv, 1)`` ``SX``/``MX`` give a CasADi ``(nv, 1)`` expression (what the optimal-control
+        engine differentiates).  The same force law as :meth:`generalized_force`, at the
+        component's current parameter values.  Components without a closed form in ``(q, v)``
+        refuse by name (ModelError)."""
+        raise ModelError(f"component {self.label} has no closed form the optimal-control engine can use")
+
     def _p(self, params: Mapping[str, float] | None) -> dict[str, float]:
         out = self.values
         if params:
@@ -402,6 +415,27 @@ class Component(metaclass=_Frozen):
 
     def __hash__(self) -> int:
         return hash((type(self).__name__, self.target, tuple(self.values.items())))
+
+
+def state_vector(nv: int, entries: Mapping[int, Any], like=None):
+    """A generalized-force vector of ``nv`` zeros with ``entries`` ``{index: value}`` set, on the
+    backend of ``like`` and the values: numpy ``(nv,)``, or CasADi ``(nv, 1)`` when any is a CasADi
+    value (what :meth:`Component.generalized_force_at` returns)."""
+    from .backend import backend_of
+
+    xp = backend_of(like, *entries.values())
+    if not xp.symbolic:
+        out = np.zeros(nv)
+        for i, f in entries.items():
+            out[i] = f
+        return out
+    import casadi as ca
+
+    cls = ca.MX if any(isinstance(x, ca.MX) for x in (like, *entries.values())) else ca.SX
+    out = cls.zeros(nv, 1)
+    for i, f in entries.items():
+        out[i] = f
+    return out
 
 
 def motion_cached(data, model, key, motion: Motion, compute):

@@ -16,12 +16,15 @@ per-muscle ``(m,)`` parameters, SI units:
 - ``l_opt`` (m), ``f_max`` (N), ``fast_fraction`` (0..1).
 
 Functions return a dict of the parts (W) so they can be plotted and tested one
-by one; ``"total"`` is ``E'``.
+by one; ``"total"`` is ``E'``.  The signals may be CasADi values (the parameters stay
+numpy): the same code gives the optimal-control engine's cost and its exact
+derivatives (:mod:`pinmsk.backend`; use ``smooth > 0`` there).
 """
 from __future__ import annotations
 
 import numpy as np
 
+from .backend import backend_of
 from .errors import ModelError
 
 __all__ = ["RHO_MUSCLE", "SIGMA_MUSCLE", "muscle_mass", "stimulation_time",
@@ -51,33 +54,37 @@ SMOOTH_WIDTH = 0.01     # default width of the C1 switches used inside optimizat
 
 def smooth_step(x, w):
     """Logistic step ``1 / (1 + exp(-x / w))`` (the Heaviside ``x > 0`` when ``w = 0``)."""
-    x = np.asarray(x, dtype=float)
+    xp = backend_of(x)
+    x = xp.asarray(x)
     if w <= 0:
-        return (x > 0).astype(float)
-    return 0.5 * (1.0 + np.tanh(0.5 * x / w))
+        return xp.where(x > 0, 1.0, 0.0) if xp.symbolic else (x > 0).astype(float)
+    return 0.5 * (1.0 + xp.tanh(0.5 * x / w))
 
 
 def _corner(x, w):
     """One-sided C1 ``max(x, 0)``: 0 for x <= 0, ``x^2/(2w)`` on [0, w], ``x - w/2`` above."""
-    xc = np.clip(x, 0.0, w)
-    return xc * xc / (2.0 * w) + np.maximum(x - w, 0.0)
+    xp = backend_of(x)
+    xc = xp.clip(x, 0.0, w)
+    return xc * xc / (2.0 * w) + xp.maximum(x - w, 0.0)
 
 
 def smooth_relu(x, w):
     """C1 ``max(x, 0)``: exact for ``|x| >= w/2``, ``(x + w/2)^2 / (2w)`` between (error
     <= w/8 at 0); ``np.maximum(x, 0)`` when ``w = 0``."""
-    x = np.asarray(x, dtype=float)
+    xp = backend_of(x)
+    x = xp.asarray(x)
     if w <= 0:
-        return np.maximum(x, 0.0)
+        return xp.maximum(x, 0.0)
     return _corner(x + 0.5 * w, w)
 
 
 def smooth_clip(x, lo, hi, w):
     """C1 ``clip(x, lo, hi)``: exact inside [lo, hi]; outside, a quadratic corner of width
     ``w`` levels off at ``lo - w/2`` and ``hi + w/2`` (``np.clip`` when ``w = 0``)."""
-    x = np.asarray(x, dtype=float)
+    xp = backend_of(x)
+    x = xp.asarray(x)
     if w <= 0:
-        return np.clip(x, lo, hi)
+        return xp.clip(x, lo, hi)
     return x + _corner(lo - x, w) - _corner(x - hi, w)
 
 
@@ -85,19 +92,23 @@ def smooth_power(b, p, w):
     """C1 ``max(b, 0)^p`` for 0 < p < 1: exact for ``b >= w``; below, the quadratic
     ``w^p ((2 - p) b/w + (p - 1) (b/w)^2)`` that matches value and slope at ``w`` and is 0
     at 0 (negative for b < 0; callers floor the total).  ``w = 0``: exact."""
-    b = np.asarray(b, dtype=float)
+    xp = backend_of(b)
+    b = xp.asarray(b)
     if w <= 0:
-        return np.maximum(b, 0.0) ** p
+        return xp.maximum(b, 0.0) ** p
     r = b / w
     low = w ** p * ((2.0 - p) * r + (p - 1.0) * r * r)
-    return np.where(b >= w, np.maximum(b, w) ** p, low)
+    return xp.where(b >= w, xp.maximum(b, w) ** p, low)
 
 
 def _blend(cond_arg, when_true, when_false, w):
     """``where(cond_arg > 0, when_true, when_false)``, a logistic blend when ``w > 0``."""
+    xp = backend_of(cond_arg, when_true, when_false)
     if w <= 0:
-        return np.where(np.asarray(cond_arg) > 0, when_true, when_false)
+        return xp.where(xp.asarray(cond_arg) > 0, when_true, when_false)
     s = smooth_step(cond_arg, w)
+    if xp.symbolic:     # the saturation guard below is a numpy round-off matter
+        return s * when_true + (1.0 - s) * when_false
     with np.errstate(invalid="ignore"):   # a saturated step must not turn inf * 0 into nan
         mixed = s * when_true + (1.0 - s) * when_false
     return np.where(s == 1.0, when_true, np.where(s == 0.0, when_false, mixed))
@@ -141,29 +152,30 @@ def bhargava2004(*, u, a, l_ce, v_ce, f_ce, f_isom, l_opt, f_max, fast_fraction,
     ``stimulation_time(..., smooth=w)``); ``w = 0`` is the exact model.
     """
     w = float(smooth)
-    u = np.asarray(u, dtype=float)
+    xp = backend_of(u, a, l_ce, v_ce, f_ce, f_isom, t_stim)
+    u = xp.asarray(u)
     m = muscle_mass(l_opt, f_max)
     ff = np.asarray(fast_fraction, dtype=float)
     fs = 1.0 - ff
-    u_fast = 1.0 - np.cos(0.5 * np.pi * u)
-    u_slow = np.sin(0.5 * np.pi * u)
-    phi = 0.06 + np.exp(-np.asarray(t_stim, dtype=float) * u / tau_phi)
+    u_fast = 1.0 - xp.cos(0.5 * np.pi * u)
+    u_slow = xp.sin(0.5 * np.pi * u)
+    phi = 0.06 + xp.exp(-xp.asarray(t_stim) * u / tau_phi)
     act = phi * m * (ff * 133.0 * u_fast + fs * 40.0 * u_slow)
-    ln = np.asarray(l_ce, dtype=float) / np.asarray(l_opt, dtype=float)
+    ln = xp.asarray(l_ce) / np.asarray(l_opt, dtype=float)
     if w <= 0:
-        psi = np.where(ln <= 0.5, 0.5 * ln, np.where(ln <= 1.0, ln,
-                                                       np.where(ln <= 1.5, -2.0 * ln + 3.0, 0.0)))
+        psi = xp.where(ln <= 0.5, 0.5 * ln, xp.where(ln <= 1.0, ln,
+                                                       xp.where(ln <= 1.5, -2.0 * ln + 3.0, 0.0)))
     else:   # the same pieces, switched on one after the other by logistic steps
         p0, p1, p2 = 0.5 * ln, ln, -2.0 * ln + 3.0
         psi = (p0 + smooth_step(ln - 0.5, w) * (p1 - p0) + smooth_step(ln - 1.0, w) * (p2 - p1)
                + smooth_step(ln - 1.5, w) * (0.0 - p2))
     maint = psi * m * (ff * 111.0 * u_fast + fs * 74.0 * u_slow)
-    v = np.asarray(v_ce, dtype=float)
-    f_ce = np.asarray(f_ce, dtype=float)
-    f_iso = np.asarray(a, dtype=float) * np.asarray(f_isom, dtype=float) * np.asarray(f_max, dtype=float)
+    v = xp.asarray(v_ce)
+    f_ce = xp.asarray(f_ce)
+    f_iso = xp.asarray(a) * xp.asarray(f_isom) * np.asarray(f_max, dtype=float)
     alpha = _blend(v / np.asarray(l_opt, dtype=float), 0.157 * f_ce, 0.16 * f_iso + 0.18 * f_ce, w)
     short = -alpha * v
-    basal = 0.0225 * m * np.ones_like(short)
+    basal = 0.0225 * m * (0.0 * short + 1.0) if xp.symbolic else 0.0225 * m * np.ones_like(short)
     work = -f_ce * v
     heat = act + maint + short + basal
     return {"activation": act, "maintenance": maint, "shortening": short, "basal": basal,
@@ -198,14 +210,15 @@ def umberger2003(*, u, a, l_ce, v_ce, f_ce, f_isom, l_opt, f_max, fast_fraction,
     the exact model.
     """
     w = float(smooth)
-    u = np.asarray(u, dtype=float)
-    a = np.asarray(a, dtype=float)
+    xp = backend_of(u, a, l_ce, v_ce, f_ce, f_isom)
+    u = xp.asarray(u)
+    a = xp.asarray(a)
     m = muscle_mass(l_opt, f_max)
     ff = np.asarray(fast_fraction, dtype=float)
     fs = 1.0 - ff
     if w <= 0:
-        beta = np.where(u > a, u, 0.5 * (u + a))
-        beta = np.maximum(beta, 0.0)
+        beta = xp.where(u > a, u, 0.5 * (u + a))
+        beta = xp.maximum(beta, 0.0)
     else:   # u if u > a else (u + a)/2  ==  (u + a)/2 + max(u - a, 0)/2
         beta = 0.5 * (u + a) + 0.5 * smooth_relu(u - a, w)
     h_am = 128.0 * ff + 25.0
@@ -213,9 +226,9 @@ def umberger2003(*, u, a, l_ce, v_ce, f_ce, f_isom, l_opt, f_max, fast_fraction,
     a_ft = 153.0 / v_max_fast
     a_l = 4.0 * a_st
     l_opt = np.asarray(l_opt, dtype=float)
-    vt = np.asarray(v_ce, dtype=float) / l_opt
-    dl = np.asarray(l_ce, dtype=float) / l_opt - 1.0          # > 0: long fiber
-    fl = np.asarray(f_isom, dtype=float)
+    vt = xp.asarray(v_ce) / l_opt
+    dl = xp.asarray(l_ce) / l_opt - 1.0          # > 0: long fiber
+    fl = xp.asarray(f_isom)
     am_scale = _blend(dl, 0.4 + 0.6 * fl, 1.0, w)
     sl_scale = _blend(dl, fl, 1.0, w)
     maint = h_am * smooth_power(beta, 0.6, w) * xi * am_scale
@@ -226,8 +239,8 @@ def umberger2003(*, u, a, l_ce, v_ce, f_ce, f_isom, l_opt, f_max, fast_fraction,
     sl = _blend(vt, lengthen, shorten, w) * sl_scale
     h = 1.0 + smooth_relu(maint + sl - 1.0, 100.0 * w)         # floored at 1 W/kg (thesis)
     heat = m * h
-    f_ce = np.asarray(f_ce, dtype=float)
-    work = -f_ce * np.asarray(v_ce, dtype=float)
+    f_ce = xp.asarray(f_ce)
+    work = -f_ce * xp.asarray(v_ce)
     return {"activation_maintenance": m * maint, "shortening_lengthening": m * sl,
             "specific_heat": h, "heat": heat, "work": work, "total": heat + work}
 

@@ -6,9 +6,11 @@ per call (or the one passed in), so the Python layer adds little to a bare
 ``pin.rnea`` loop (see ``benchmarks/``).
 
 External forces cross the API as world-frame wrenches applied at a point on a
-body (:class:`ExternalForce`) and are converted here to Pinocchio's joint-local
-``fext``: the world wrench at the world origin is ``(f, p x f + tau)``, which
-``oMi.actInv`` expresses in the joint frame.
+body (:class:`ExternalForce`): the world wrench at the world origin is
+``(f, p x f + tau)``, and its generalized force ``J^T W`` is subtracted from a
+bare RNEA (computed over all frames at once along the loaded body's supporting
+joints, :func:`_loads_generalized_force`; the same numbers as Pinocchio's
+joint-local ``fext``, ``oMi.actInv(W)``).
 """
 from __future__ import annotations
 
@@ -143,12 +145,26 @@ def rnea(model, q, v, a, *, external: Sequence[ExternalForce] = (),
     joints = [skeleton_constant(pm, "frame_joint:" + e.frame, lambda m, f=e.frame: _frame_joint(m, f))
               for e in external]
     wrenches = [world_wrench(e, n) for e in external]
+    loaded = tuple(sorted(set(joints)))
+    W = {j: sum(w for jj, w in zip(joints, wrenches) if jj == j) for j in loaded}
+    Wall = np.stack([W[j] for j in loaded])
+    tree = skeleton_constant(pm, f"support_tree:{loaded}", lambda m: _support_tree(m, loaded))
+    if tree is not None:
+        # tau = rnea(q, v, a) - sum_j J_j(q)^T W_j (rnea is linear in the loads), the loads' part carried
+        # down their support tree in numpy over a chunk of frames at once: ONE Pinocchio call a frame
+        # (the bare RNEA loop), no per-frame Jacobian, Force or pose
+        for start in range(0, n, PROGRESS_CHUNK):
+            stop = min(start + PROGRESS_CHUNK, n)
+            for i in range(start, stop):
+                out[i] = rnea(pm, pd, q[i], v[i], a[i])
+            out[start:stop] -= _loads_generalized_force(tree, q[start:stop], pm.nv, Wall[:, start:stop])
+            if progress is not None:
+                progress.update(stop - start)
+        return out
     # tau = rnea(q, v, a) - sum_j J_j(q)^T W_j, with W_j the world wrench about the origin and J_j the
     # joint's Jacobian in the world frame (WORLD: the motion subspaces of its supporting joints, at the
     # origin, as computeJointJacobians leaves them in data.J): two Pinocchio calls a frame, the products
-    # batched over frames, instead of a Force built, moved and summed per load and frame
-    loaded = sorted(set(joints))
-    W = {j: sum(w for jj, w in zip(joints, wrenches) if jj == j) for j in loaded}
+    # batched over frames, for the joint types :func:`_support_tree` does not carry loads across
     cols = {j: skeleton_constant(pm, f"support_columns:{j}", lambda m, j=j: _support_columns(m, j)) for j in loaded}
     # the whole data.J copied per frame (one contiguous copy, cheaper than a fancy-indexed column pick),
     # a chunk of frames at a time so long trials keep a bounded workspace
@@ -167,6 +183,125 @@ def rnea(model, q, v, a, *, external: Sequence[ExternalForce] = (),
         if progress is not None:
             progress.update(m)
     return out
+
+
+#: Pinocchio joints :func:`_support_tree` carries loads across: one dof about (revolute) or along (prismatic) a
+#: constant axis of the joint frame, ``q`` the angle or the displacement.
+_AXES = {"JointModelRX": (True, (1.0, 0.0, 0.0)), "JointModelRY": (True, (0.0, 1.0, 0.0)),
+         "JointModelRZ": (True, (0.0, 0.0, 1.0)), "JointModelPX": (False, (1.0, 0.0, 0.0)),
+         "JointModelPY": (False, (0.0, 1.0, 0.0)), "JointModelPZ": (False, (0.0, 0.0, 1.0)),
+         "JointModelRevoluteUnaligned": (True, None), "JointModelPrismaticUnaligned": (False, None)}
+
+
+@dataclass(frozen=True)
+class _ChainJoint:
+    """One joint of the loaded joints' support tree, as carrying the loads' wrenches to it needs.  A
+    wrench is a column ``x = [f; m]`` (force, moment about the frame's origin) in the joint's placement
+    frame; ``S`` is the joint's motion subspace, so ``S . x`` is the joint's generalized force (the
+    axial moment of a revolute joint, which its rotation leaves as it is; the axial force of a
+    prismatic one).  ``G`` carries the parent's ``x`` through the parent's own motion and this joint's
+    placement, in blocks of six rows: parent revolute ``x = G0 xp + sin q G1 xp + (1 - cos q) G2 xp``
+    (Rodrigues' rotation by ``-q``), parent prismatic ``x = G0 xp + q G1 xp`` (the moment about the
+    moved origin), the world parent ``x = G0 W``.  ``pick`` selects this joint's loads among its
+    parent's (None: all of them)."""
+
+    parent: int
+    parent_revolute: bool
+    parent_iq: int
+    joint: int
+    iv: int
+    S: np.ndarray
+    G: np.ndarray
+    pick: tuple[int, ...] | None
+
+
+def _placement_rows(M: pin.SE3) -> np.ndarray:
+    """The 6 x 6 ``X`` with ``X x`` the wrench column ``x`` (about the parent's origin, in its axes)
+    about the placement's origin in its axes: ``[Rp^T f; Rp^T (m - p x f)]``."""
+    R, p = np.array(M.rotation), np.array(M.translation)
+    P = np.array([[0.0, -p[2], p[1]], [p[2], 0.0, -p[0]], [-p[1], p[0], 0.0]])
+    X = np.zeros((6, 6))
+    X[:3, :3] = X[3:, 3:] = R.T
+    X[3:, :3] = -R.T @ P
+    return X
+
+
+def _support_tree(pm: pin.Model, loaded: tuple[int, ...]) -> tuple[_ChainJoint, ...] | None:
+    """The joints supporting the ``loaded`` joints, parents first, or None when one is a joint
+    :data:`_AXES` lacks (the caller then takes Pinocchio's Jacobians)."""
+    members = sorted({s for j in loaded for s in pm.supports[j][1:]})
+    kinds = {}
+    for s in members:
+        jm = pm.joints[s]
+        kind = _AXES.get(jm.shortname())
+        if kind is None or jm.nq != 1 or jm.nv != 1:
+            return None
+        a = np.array(jm.extract().axis if kind[1] is None else kind[1], dtype=float)
+        if abs(a @ a - 1.0) > 1e-12:        # Pinocchio takes the axis as given: Rodrigues needs it unit
+            return None
+        kinds[s] = (kind[0], a, jm.idx_q, jm.idx_v)
+    loads = {s: tuple(i for i, j in enumerate(loaded) if s in pm.supports[j]) for s in members}
+    loads[0] = tuple(range(len(loaded)))
+    out = []
+    for s in members:
+        parent = pm.parents[s]
+        X = _placement_rows(pm.jointPlacements[s])
+        revolute, a, iq, iv = kinds[parent] if parent else (False, None, 0, 0)
+        if parent == 0:
+            G = X
+        else:
+            K = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+            B = np.zeros((6, 6))
+            if revolute:                    # R(-q) on both halves: cos x - sin K x + (1 - cos)(a.x) a
+                B[:3, :3] = B[3:, 3:] = -K
+                A = np.zeros((6, 6))
+                A[:3, :3] = A[3:, 3:] = np.outer(a, a) - np.eye(3)
+                G = np.vstack([X, X @ B, X @ A])
+            else:                           # m - q a x f
+                B[3:, :3] = -K
+                G = np.vstack([X, X @ B])
+        own = kinds[s]
+        S = np.concatenate([np.zeros(3), own[1]] if own[0] else [own[1], np.zeros(3)])
+        pick = None if loads[s] == loads[parent] else tuple(loads[parent].index(i) for i in loads[s])
+        for x in (S, G):
+            x.flags.writeable = False
+        out.append(_ChainJoint(parent, revolute, iq, s, own[3], S, G, pick))
+    return tuple(out)
+
+
+def _loads_generalized_force(tree: tuple[_ChainJoint, ...], q: np.ndarray, nv: int,
+                             W: np.ndarray) -> np.ndarray:
+    """``sum_j J_j(q)^T W_j`` over frames, ``(N, nv)``, for world wrenches ``W`` ``(L, N, 6)`` about the
+    origin on the loaded joints of :func:`_support_tree` ``tree``.  The wrenches are carried down the
+    tree from the world, expressed in each joint's frame in turn (``oMs^-1 W``), and each joint's
+    column is its motion subspace times the wrenches it carries, ``S^T oMs^-1 W``: the world Jacobian's
+    column times ``W``, a (18, 6) x (6, L N) product a joint instead of a Pinocchio call a frame."""
+    n = q.shape[0]
+    out = np.zeros((nv, n))
+    x = {0: np.ascontiguousarray(W.transpose(2, 0, 1))}     # (6, L, N): wrench rows first
+    trig: dict[int, tuple] = {}
+    for c in tree:
+        xp = x[c.parent]
+        if c.pick is not None:
+            xp = xp[:, c.pick, :]
+        L = xp.shape[1]
+        g = (c.G @ xp.reshape(6, L * n)).reshape(-1, L, n)
+        if c.parent == 0:
+            xc = g
+        elif c.parent_revolute:
+            if c.parent not in trig:
+                qs = q[:, c.parent_iq]
+                trig[c.parent] = (np.sin(qs), 1.0 - np.cos(qs))
+            sn, cs1 = trig[c.parent]
+            xc = g[:6]
+            xc += sn * g[6:12]
+            xc += cs1 * g[12:]
+        else:
+            xc = g[:6]
+            xc += q[:, c.parent_iq] * g[6:]
+        x[c.joint] = xc
+        out[c.iv] = (c.S @ xc.reshape(6, L * n)).reshape(L, n).sum(axis=0)
+    return out.T
 
 
 def _support_columns(pm: pin.Model, j: int) -> np.ndarray:

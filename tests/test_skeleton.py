@@ -138,3 +138,57 @@ def test_shape_errors_are_clear():
     with pytest.raises(ModelError, match="no frame or body 'hnad'.*'hand'"):
         skeleton.rnea(model, np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)),
                                   external=[skeleton.ExternalForce("hnad", [[0, 1, 0]], [[0, 0, 0]])])
+
+
+def _branched_model(extra_root=None):
+    """Two branches off a common trunk, every joint type the batched load path poses itself (and, with
+    ``extra_root``, a joint it does not), random placements and inertias."""
+    rng = np.random.default_rng(3)
+    pm = pin.Model()
+
+    def add(parent, jm, name):
+        M = pin.SE3(pin.exp3(rng.uniform(-1, 1, 3)), rng.uniform(-0.3, 0.3, 3))
+        j = pm.addJoint(parent, jm, M, name)
+        pm.appendBodyToJoint(j, pin.Inertia.Random(), pin.SE3.Identity())
+        return j
+
+    trunk = 0 if extra_root is None else add(0, extra_root, "extra")
+    for jm, name in [(pin.JointModelPX(), "px"), (pin.JointModelPY(), "py"), (pin.JointModelPZ(), "pz"),
+                     (pin.JointModelRZ(), "rz"), (pin.JointModelRX(), "rx"), (pin.JointModelRY(), "ry")]:
+        trunk = add(trunk, jm, name)
+    a, b = trunk, trunk
+    for k, jm in enumerate([pin.JointModelRevoluteUnaligned(np.array([0.3, -0.5, 0.8]) / np.sqrt(0.98)),
+                            pin.JointModelPrismaticUnaligned(np.array([-0.2, 0.9, 0.1]) / np.sqrt(0.86)),
+                            pin.JointModelRX()]):
+        a = add(a, jm, f"a{k}")
+    for k, jm in enumerate([pin.JointModelRY(), pin.JointModelPX(), pin.JointModelRZ()]):
+        b = add(b, jm, f"b{k}")
+    return pm
+
+
+@pytest.mark.parametrize("extra_root", [None, pin.JointModelSpherical()], ids=["batched", "jacobians"])
+def test_external_loads_match_pinocchios_local_fext(extra_root):
+    """World wrenches on a branched skeleton (loads on both leaves, on the trunk, two on one body) give
+    Pinocchio's own rnea with each wrench moved into its joint's frame (oMi.actInv), frame by frame."""
+    pm = _branched_model(extra_root)
+    rng = np.random.default_rng(4)
+    n = 7
+    q = np.stack([pin.randomConfiguration(pm, -np.ones(pm.nq), np.ones(pm.nq)) for _ in range(n)])
+    v, a = rng.uniform(-2, 2, (n, pm.nv)), rng.uniform(-5, 5, (n, pm.nv))
+    loads = [skeleton.ExternalForce(body, rng.normal(0, 300, (n, 3)), rng.normal(0, 0.5, (n, 3)),
+                                    rng.normal(0, 20, (n, 3))) for body in ("a2", "b2", "b2", "rx")]
+    got = skeleton.rnea(pm, q, v, a, external=loads)
+    loaded = tuple(sorted({pm.getJointId(e.frame) for e in loads}))
+    assert (skeleton._support_tree(pm, loaded) is None) == (extra_root is not None)   # the path under test
+    pd = pm.createData()
+    for i in range(n):
+        pin.forwardKinematics(pm, pd, q[i])
+        fext = pin.StdVec_Force()
+        for _ in range(pm.njoints):
+            fext.append(pin.Force.Zero())
+        for e in loads:
+            j = pm.getJointId(e.frame)
+            W = skeleton.world_wrench(e, n)[i]
+            fext[j] = fext[j] + pd.oMi[j].actInv(pin.Force(W[:3], W[3:]))
+        want = pin.rnea(pm, pd, q[i], v[i], a[i], fext)
+        assert np.abs(got[i] - want).max() < 1e-9 * max(1.0, np.abs(want).max())

@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..backend import is_symbolic
+
 
 class Dual:
     """Value ``val`` (shape ``S``) and derivative ``der`` (``S + (P,)``) w.r.t. ``P`` seed variables."""
@@ -192,8 +194,9 @@ def value(x):
 
 
 def asarray(x):
-    """``x`` as a float array, or ``x`` itself if it is a :class:`Dual` (the laws' ``np.asarray``)."""
-    return x if isinstance(x, Dual) else np.asarray(x, dtype=float)
+    """``x`` as a float array, or ``x`` itself if it is a :class:`Dual` or a CasADi value (the laws'
+    ``np.asarray``)."""
+    return x if isinstance(x, Dual) or is_symbolic(x) else np.asarray(x, dtype=float)
 
 
 def _col(a):
@@ -215,10 +218,15 @@ def vector(*components):
     """The components (each (...,) plain or Dual) stacked along a new last axis: ``(..., k)``.
 
     What the contact code uses to build 3-vectors: a plain ``np.empty`` fill for arrays
-    (``np.stack`` costs ~5x more on small arrays), a Dual when any component is one.
+    (``np.stack`` costs ~5x more on small arrays), a Dual when any component is one, a CasADi
+    row ``(1, k)`` (one frame) when any is a CasADi value.
     """
     if any(isinstance(c, Dual) for c in components):
         return stack(components, axis=-1)
+    if any(is_symbolic(c) for c in components):
+        # one frame under CasADi: scalars (1, 1) -> a row (1, k), as the (N, k) arrays with N = 1
+        import casadi as ca
+        return ca.horzcat(*(c if is_symbolic(c) else float(np.asarray(c).reshape(())) for c in components))
     shape = max((np.shape(c) for c in components), key=len)
     out = np.empty(shape + (len(components),))
     for j, c in enumerate(components):

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..backend import backend_of, is_symbolic
 from .dual import asarray, value
 
 
@@ -15,14 +16,26 @@ def regularized_coulomb(slip: np.ndarray, normal: np.ndarray, mu_f, v_s) -> np.n
     ``arctan(s / v_s) / s`` (an even, smooth function of s, equal to 1 / v_s at 0)
     so the force is smooth through zero slip.
     """
-    s2 = np.einsum("ni,ni->n", slip, slip)
-    s = np.sqrt(s2)
+    xp = backend_of(slip, normal, mu_f, v_s)
+    if xp.symbolic:                 # one frame under CasADi: slip a row (1, 3)
+        s2 = slip[:, 0] * slip[:, 0] + slip[:, 1] * slip[:, 1] + slip[:, 2] * slip[:, 2]
+    else:
+        s2 = np.einsum("ni,ni->n", slip, slip)
+    s = xp.sqrt(s2)
     v_s = asarray(v_s)
-    tiny = s < 1e-9 * np.maximum(v_s, 1e-300)
-    s_safe = np.where(tiny, 1.0, s)
+    tiny = s < 1e-9 * xp.maximum(v_s, 1e-300)
+    s_safe = xp.where(tiny, 1.0, s)
     # near zero slip the series 1/v_s (1 - s^2 / (3 v_s^2)) in s^2 (sqrt has no derivative at 0)
-    g = np.where(tiny, 1.0 / v_s * (1.0 - s2 / (3.0 * v_s * v_s)), np.arctan(s_safe / v_s) / s_safe)
-    return -(mu_f * normal * g)[:, None] * slip
+    g = xp.where(tiny, 1.0 / v_s * (1.0 - s2 / (3.0 * v_s * v_s)), xp.arctan(s_safe / v_s) / s_safe)
+    return -scale_rows(mu_f * normal * g, slip)
+
+
+def scale_rows(s, vec):
+    """``s[:, None] * vec``: each frame's vector ``vec`` (N, 3) times its scalar ``s`` (N,); under
+    CasADi (one frame: ``s`` (1, 1), ``vec`` (1, 3)) the plain product."""
+    if is_symbolic(s) or is_symbolic(vec):
+        return s * vec
+    return s[:, None] * vec
 
 
 def friction_coefficient(speed, mu_f, v_s):
@@ -45,8 +58,9 @@ def hollars_friction(slip, normal, *, static, dynamic, viscous, transition_veloc
     """
     v2 = slip[:, 0] * slip[:, 0] + slip[:, 1] * slip[:, 1] + slip[:, 2] * slip[:, 2] + slip_smoothing
     vt = asarray(transition_velocity)
+    xp = backend_of(v2, vt, normal)
     below = value(v2) < value(vt) * value(vt)
-    v = np.sqrt(np.where(below, value(vt) * value(vt), v2))   # only the branch v >= v_t divides by v
-    g = np.where(below, 1.0 / vt, 1.0 / v)
+    v = xp.sqrt(xp.where(below, value(vt) * value(vt), v2))   # only the branch v >= v_t divides by v
+    g = xp.where(below, 1.0 / vt, 1.0 / v)
     mu = g * (dynamic + 2.0 * (static - dynamic) / (1.0 + v2 / (vt * vt))) + viscous
-    return -(normal * mu)[:, None] * slip
+    return -scale_rows(normal * mu, slip)

@@ -29,6 +29,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from ..backend import backend_of
 from ..components import Parameter
 from ..errors import ModelError
 from .dual import asarray, vector
@@ -55,8 +56,9 @@ def hertz_coefficient(stiffness, radius):
     for a sphere of radius R on a half space of the same plane-strain modulus E, as Simbody writes
     it (``HuntCrossleyForce``: ``k = E1^(2/3) E2^(2/3) / (E1^(2/3) + E2^(2/3))``; equal materials
     give ``E^(2/3) / 2``, the ``k`` of ``SmoothSphereHalfSpaceForce``)."""
-    k = 0.5 * np.power(asarray(stiffness), 2.0 / 3.0)
-    return (4.0 / 3.0) * k * np.sqrt(asarray(radius) * k)
+    xp = backend_of(stiffness, radius)
+    k = 0.5 * xp.power(asarray(stiffness), 2.0 / 3.0)
+    return (4.0 / 3.0) * k * xp.sqrt(asarray(radius) * k)
 
 
 def _vec3(x, what: str, owner: str) -> tuple[float, float, float]:
@@ -127,7 +129,7 @@ class HalfSpaceContact(FrameContact):
         R = asarray(p["radius"])
         n = np.asarray(self.plane_normal)
         centre, vcentre = kin.point(np.asarray(self.location))
-        depth = R - _dot(centre - np.asarray(self.plane_point), n)
+        depth = R - _dot(centre - np.asarray(self.plane_point)[None, :], n)    # a row: CasADi's (1, 3) too
         arm = R - 0.5 * depth                                     # from the centre to the contact point
         r = vector(-arm * n[0], -arm * n[1], -arm * n[2])
         point = centre + r

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..backend import backend_of
 from ..components import Parameter
 from .dual import asarray
 from .half_space import HALF_SPACE_PARAMETERS, HalfSpaceContact, hertz_coefficient
@@ -15,7 +16,7 @@ def hunt_crossley_normal(depth, rate, stiffness, exponent, damping):
     ``v`` (m/s, + compressing): thesis Eq. 4.4 (``k_s, n_s, a_s``), and Simbody's Hertz contact
     (``n = 3/2``, ``k = 4/3 k_e sqrt(R k_e)``, ``a = 3/2 c``) in OpenSim's HuntCrossleyForce and
     SmoothSphereHalfSpaceForce."""
-    return stiffness * np.power(asarray(depth), exponent) * (1.0 + damping * rate)
+    return stiffness * backend_of(depth, exponent).power(asarray(depth), exponent) * (1.0 + damping * rate)
 
 
 class HuntCrossley(SphereContact):
@@ -44,7 +45,7 @@ class HuntCrossley(SphereContact):
     def normal_law(self, delta_s, rate, p):
         fn = hunt_crossley_normal(delta_s, rate, p["k_s"], p["n_s"], p["a_s"])
         zbar = p["L0"] - delta_s  # from the site down to the ground
-        return fn, np.zeros_like(delta_s), zbar
+        return fn, (0.0 * delta_s if backend_of(delta_s).symbolic else np.zeros_like(delta_s)), zbar
 
 
 class HuntCrossleyForce(HalfSpaceContact):
@@ -70,7 +71,8 @@ class HuntCrossleyForce(HalfSpaceContact):
     parameters = HALF_SPACE_PARAMETERS
 
     def normal_law(self, depth, rate, p):
-        x = np.maximum(depth, 0.0)
+        xp = backend_of(depth, rate)
+        x = xp.maximum(depth, 0.0)
         f = hunt_crossley_normal(x, rate, hertz_coefficient(p["stiffness"], p["radius"]), 1.5,
                                  1.5 * asarray(p["dissipation"]))
-        return np.maximum(f, 0.0)
+        return xp.maximum(f, 0.0)

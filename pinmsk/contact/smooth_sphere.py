@@ -1,8 +1,7 @@
 """OpenSim's SmoothSphereHalfSpaceForce: a smooth Hunt-Crossley sphere against a half space."""
 from __future__ import annotations
 
-import numpy as np
-
+from ..backend import backend_of
 from ..components import Parameter
 from .dual import asarray, value
 from .half_space import HALF_SPACE_PARAMETERS, HalfSpaceContact, hertz_coefficient
@@ -11,7 +10,7 @@ from .hunt_crossley import hunt_crossley_normal
 
 def smooth_step(x):
     """``(1 + tanh(x)) / 2``: Serrancoli et al.'s smooth switch from 0 to 1 around ``x = 0``."""
-    return 0.5 + 0.5 * np.tanh(x)
+    return 0.5 + 0.5 * backend_of(x).tanh(x)
 
 
 class SmoothSphereHalfSpaceForce(HalfSpaceContact):
@@ -50,10 +49,11 @@ class SmoothSphereHalfSpaceForce(HalfSpaceContact):
         cf = p["constant_contact_force"]
         c = asarray(p["dissipation"])
         fh_scale = hertz_coefficient(p["stiffness"], p["radius"]) * smooth_step(p["hertz_smoothing"] * depth)
-        f = hunt_crossley_normal(np.sqrt(depth * depth + cf), rate, fh_scale, 1.5, 1.5 * c)
+        xp = backend_of(depth, rate, c)
+        f = hunt_crossley_normal(xp.sqrt(depth * depth + cf), rate, fh_scale, 1.5, 1.5 * c)
         damped = value(c) > 0.0
-        c_safe = np.where(damped, c, 1.0)
-        switch = np.where(damped, smooth_step(p["hunt_crossley_smoothing"] * (rate + 2.0 / (3.0 * c_safe))), 1.0)
+        c_safe = xp.where(damped, c, 1.0)
+        switch = xp.where(damped, smooth_step(p["hunt_crossley_smoothing"] * (rate + 2.0 / (3.0 * c_safe))), 1.0)
         return f * switch
 
     def slip_smoothing(self, p):

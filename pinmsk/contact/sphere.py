@@ -10,7 +10,10 @@ Everything here is vectorised over frames: a :class:`SiteKinematics` holds the
 site's world position, orientation, velocity and angular velocity for N frames
 (computed once per motion by :meth:`SphereContact.prepare` through Pinocchio),
 and the force laws are plain numpy on ``(N,)`` arrays, so one evaluation of 3
-spheres over 1,000 frames costs tens of microseconds.
+spheres over 1,000 frames costs tens of microseconds.  The laws go through
+:mod:`pinmsk.backend` (and run on :class:`~pinmsk.contact.dual.Dual` numbers), so
+:meth:`FrameContact.wrench_at` evaluates the same code at one state of the site
+on CasADi values: one frame, scalars ``(1, 1)`` and vectors rows ``(1, 3)``.
 
 Smoothness.  The penetration ``delta = R - h`` (``h`` the centre's height) is
 replaced by the smooth positive part
@@ -32,6 +35,7 @@ from typing import Any, ClassVar, Mapping
 import numpy as np
 import pinocchio as pin
 
+from ..backend import backend_of, is_symbolic
 from ..components import Component, Motion, Parameter, _replace, motion_cached
 from ..errors import ModelError
 from .dual import asarray, vector
@@ -45,6 +49,10 @@ UP = np.array([0.0, 1.0, 0.0])
 def cross(a, b):
     """Row-wise cross product of (N, 3) arrays or :class:`~pinmsk.contact.dual.Dual` s
     (np.cross costs ~10x more on small arrays)."""
+    if is_symbolic(a) or is_symbolic(b):       # CasADi rows (1, 3): one frame
+        a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
+        b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
+        return vector(a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0)
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
     b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
     return vector(a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0)
@@ -53,7 +61,7 @@ def cross(a, b):
 def smooth_positive(x, eps: float):
     """``(x + sqrt(x^2 + eps^2)) / 2``: a C-infinity positive part (-> max(x, 0) as eps -> 0)."""
     x = asarray(x)
-    return 0.5 * (x + np.sqrt(x * x + eps * eps))
+    return 0.5 * (x + backend_of(x).sqrt(x * x + eps * eps))
 
 
 #: force scale (N) below which :func:`no_adhesion` blends the normal force smoothly into zero
@@ -69,8 +77,9 @@ def no_adhesion(f, eps: float = ADHESION_EPS):
     CSU data before this: up to -280 N at lift-off, which a fit could use as a free force).
     """
     f = asarray(f)
-    x = np.clip(f, 0.0, eps)
-    return np.where(f >= eps, f, x * x * (2.0 / eps - x / (eps * eps)))
+    xp = backend_of(f)
+    x = xp.clip(f, 0.0, eps)
+    return xp.where(f >= eps, f, x * x * (2.0 / eps - x / (eps * eps)))
 
 
 def cap_volume(depth, radius):
@@ -79,7 +88,7 @@ def cap_volume(depth, radius):
     ``V = pi d^2 (3R - d) / 3`` for ``0 <= d <= 2R`` (``d`` is clipped to that range).
     """
     radius = asarray(radius)
-    d = np.clip(asarray(depth), 0.0, 2.0 * radius)
+    d = backend_of(depth, radius).clip(asarray(depth), 0.0, 2.0 * radius)
     return math.pi * d * d * (3.0 * radius - d) / 3.0
 
 
@@ -90,7 +99,7 @@ def cap_centroid_depth(depth, radius):
     starts at the lowest point of the sphere) and to 0 at d = 2R.
     """
     radius = asarray(radius)
-    d = np.clip(asarray(depth), 0.0, 2.0 * radius)
+    d = backend_of(depth, radius).clip(asarray(depth), 0.0, 2.0 * radius)
     return 3.0 * (2.0 * radius - d) ** 2 / (4.0 * (3.0 * radius - d))
 
 
@@ -119,6 +128,9 @@ class SiteKinematics:
     def point(self, offset_local: np.ndarray):
         """World position and velocity of the body point at ``offset_local`` (3,) or (N, 3)."""
         off = asarray(offset_local)
+        if is_symbolic(self.rotation):           # one frame under CasADi: rotation (3, 3), rows (1, 3)
+            r = (self.rotation @ (off.T if is_symbolic(off) and off.shape == (1, 3) else off)).T
+            return self.position + r, self.velocity + cross(self.omega, r)
         r = np.einsum("nij,j->ni" if off.ndim == 1 else "nij,nj->ni", self.rotation, off)
         return self.position + r, self.velocity + cross(self.omega, r)
 
@@ -254,6 +266,42 @@ class FrameContact(Component):
             kin = site_kinematics(model, self.target, motion.q, motion.v, jacobian=True)
         out = self.evaluate_kinematics(kin, params)
         return wrench_generalized_force(kin, out.force, out.point)
+
+    def wrench_at(self, p, R, v, w, params: Mapping[str, Any] | None = None):
+        """``(force, moment)`` in the world at ONE state of the site frame, numpy or CasADi.
+
+        ``p`` (3,) world position of the site frame's origin, ``R`` (3, 3) its rotation (site to
+        world), ``v`` (3,) the linear velocity of its origin and ``w`` (3,) its angular velocity,
+        all world-aligned (Pinocchio's LOCAL_WORLD_ALIGNED frame velocity).  Returns the force the
+        ground applies to the body and its moment about the site origin, ``(point - p) x force``,
+        so that the generalized force is ``J_lin^T force + J_ang^T moment`` with the site's
+        LOCAL_WORLD_ALIGNED Jacobian, as :meth:`generalized_force` computes it.  The same
+        :meth:`evaluate_kinematics` (one frame): numpy inputs give numpy (3,) arrays equal to the
+        batched values; any CasADi input gives CasADi (3, 1) columns (``params`` numbers).
+        """
+        if backend_of(p, R, v, w).symbolic:
+            import casadi as ca
+
+            sym = ca.MX if any(isinstance(x, ca.MX) for x in (p, R, v, w)) else ca.SX
+
+            def row(x):
+                return ca.reshape(sym(x) if not is_symbolic(x) else x, 1, 3)
+
+            R = sym(np.asarray(R, dtype=float)) if not is_symbolic(R) else R
+            kin = SiteKinematics(row(p), R, row(v), row(w))
+            out = self.evaluate_kinematics(kin, params)
+            moment = cross(out.point - kin.position, out.force)
+            return out.force.T, moment.T
+        kin = SiteKinematics(*(np.asarray(x, dtype=float)[None] for x in (p, R, v, w)))
+        out = self.evaluate_kinematics(kin, params)
+        moment = cross(out.point - kin.position, out.force)
+        return out.force[0], moment[0]
+
+    def generalized_force_at(self, model, q, v):
+        """Refused by name: a contact needs its site's kinematics, which the optimal-control engine
+        computes (the skeleton is Pinocchio's); it evaluates :meth:`wrench_at` on them."""
+        raise ModelError(f"component {self.label} has no closed form the optimal-control engine can use in "
+                         "(q, v) alone; evaluate wrench_at(p, R, v, w) on its site's kinematics")
 
     def check_target(self, model) -> None:
         model.frame_id(self.target)

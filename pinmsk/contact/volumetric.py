@@ -1,8 +1,7 @@
 """Volumetric sphere contact: linear (Eq. 4.5-4.8) and hyper-volumetric (Eq. 4.9-4.15)."""
 from __future__ import annotations
 
-import numpy as np
-
+from ..backend import backend_of
 from ..components import Parameter
 from .sphere import FRICTION_PARAMETERS, OFFSET_PARAMETERS, SphereContact, cap_centroid_depth, cap_volume
 
@@ -55,6 +54,7 @@ class HyperVolumetric(SphereContact):
     def normal_law(self, delta_s, rate, p):
         R = p["R"]
         V = cap_volume(delta_s, R)
-        Vp = np.maximum(V, 1e-300)
-        fn = p["k_h"] * np.exp(p["H"] * np.log(Vp)) + p["a_h"] * V * rate
+        xp = backend_of(V, rate, p["H"])
+        Vp = xp.maximum(V, 1e-300)
+        fn = p["k_h"] * xp.exp(p["H"] * xp.log(Vp)) + p["a_h"] * V * rate
         return fn, V, cap_centroid_depth(delta_s, R)

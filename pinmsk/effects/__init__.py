@@ -25,9 +25,14 @@ dynamics
 
 Add your own effect with the :func:`register` decorator.  A coordinate effect
 only needs its force; the diagnosis then fits it (by linear least squares
-when ``linear = True``), ranks it and adds it like the built-in ones::
+when ``linear = True``), ranks it and adds it like the built-in ones.  Write
+the force against :func:`pinmsk.backend.backend_of` (``xp.abs``, ``xp.tanh``,
+... instead of ``np.abs``): the same ``_force`` then serves the batched numpy
+analyses and, through ``generalized_force_at(model, q, v)`` at one state, the
+optimal-control engine's CasADi expressions and exact derivatives::
 
     >>> import numpy as np
+    >>> from pinmsk.backend import backend_of
     >>> from pinmsk.components import Parameter
     >>> from pinmsk.effects import JointEffect, register
     >>> @register
@@ -38,7 +43,7 @@ when ``linear = True``), ranks it and adds it like the built-in ones::
     ...     parameters = (Parameter("c_d", 0.01, 0.0, 10.0, "N m s^2/rad^2", "drag coefficient"),)
     ...     zero_params = {"c_d": 0.0}
     ...     def _force(self, q, v, p):
-    ...         return -p["c_d"] * np.abs(v) * v
+    ...         return -p["c_d"] * backend_of(v).abs(v) * v
     ...     def _dforce_dparams(self, q, v, p):
     ...         return (-np.abs(v) * v)[:, None]
     ...     def _dforce_dstate(self, q, v, p):
@@ -48,7 +53,9 @@ when ``linear = True``), ranks it and adds it like the built-in ones::
 
 Subclass :class:`pinmsk.components.Component` directly for any other
 target (implement ``generalized_force(model, motion, params=None, cache=None)
--> (N, nv)``, and optionally ``prepare(model, motion, data=None)`` for the
+-> (N, nv)``, ``generalized_force_at(model, q, v) -> (nv,)`` at one state if it
+has a closed form in ``(q, v)`` (without it the optimal-control engine refuses
+the component by name), and optionally ``prepare(model, motion, data=None)`` for the
 parameter-independent work, given back as ``cache``); see
 :mod:`pinmsk.diagnose.catalog` for how candidates are chosen.
 """

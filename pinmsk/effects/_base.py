@@ -22,7 +22,7 @@ from typing import Any, Mapping
 import numpy as np
 import pinocchio as pin
 
-from ..components import Component, Motion, motion_cached
+from ..components import Component, Motion, motion_cached, state_vector
 from ..errors import ModelError
 from ..skeleton import skeleton_constant
 
@@ -59,6 +59,18 @@ class JointEffect(Component):
         out = np.zeros((motion.n_frames, model.nv))
         out[:, i] = self._force(motion.q[:, i], motion.v[:, i], self._p(params))
         return out
+
+    def generalized_force_at(self, model, q, v):
+        """``Q (nv,)`` at one state, numpy or CasADi (:meth:`Component.generalized_force_at`):
+        :meth:`_force_at` on the target coordinate, zero elsewhere."""
+        i = model.coordinate_index(self.target)
+        return state_vector(model.nv, {i: self._force_at(model, q[i], v[i], self.values)}, like=q)
+
+    def _force_at(self, model, q, v, p):
+        """The force law on one coordinate's ``q, v`` (numpy or CasADi): :meth:`_force`, which
+        subclasses write against :func:`pinmsk.backend.backend_of` (model-dependent laws override
+        this instead)."""
+        return self._force(q, v, p)
 
     def param_jacobian(self, model, motion: Motion, params: Mapping[str, float] | None = None,
                        cache: Any = None) -> np.ndarray:
@@ -106,6 +118,14 @@ class ScaledBasisEffect(Component):
         basis = self.prepare(model, motion) if cache is None else cache
         return -basis[:, :, None]
 
+    def generalized_force_at(self, model, q, v):
+        """Refused by name: the basis needs the accelerations (a payload's ``a_p``, a body's ``Y_j``),
+        so this is no closed form in ``(q, v)``; an inertial effect enters the optimal-control
+        problem through the skeleton instead (:meth:`apply_inertia` on a copy of the Pinocchio model)."""
+        how = ("; fold it into the skeleton's inertia (apply_inertia) instead" if self.inertial else "")
+        raise ModelError(f"component {self.label} has no closed form the optimal-control engine can use: its "
+                         f"generalized force depends on the accelerations{how}")
+
 
 class SignalEffect(Component):
     """A muscle-level effect: a transform of the excitation signals ``u (N, m) -> (N, m)``.
@@ -150,6 +170,10 @@ class SignalEffect(Component):
     def generalized_force(self, model, motion: Motion, params: Mapping[str, float] | None = None,
                           cache: Any = None) -> np.ndarray:
         return np.zeros((motion.n_frames, model.nv))
+
+    def generalized_force_at(self, model, q, v):
+        """Zero ``(nv,)`` (numpy or CasADi, as ``q``): a muscle-level effect acts through the muscles."""
+        return state_vector(model.nv, {}, like=q)
 
     def transform(self, t: np.ndarray, u: np.ndarray, params: Mapping[str, float] | None = None,
                   mask: np.ndarray | None = None) -> np.ndarray:

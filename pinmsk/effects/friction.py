@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..backend import backend_of
 from ..components import Parameter
 from ._base import JointEffect
 from .registry import register
@@ -32,7 +33,7 @@ class CoulombFriction(JointEffect):
     zero_params = {"F_c": 0.0}
 
     def _force(self, q, v, p):
-        return -p["F_c"] * np.tanh(v / self.velocity_scale)
+        return -p["F_c"] * backend_of(v).tanh(v / self.velocity_scale)
 
     def _dforce_dparams(self, q, v, p):
         return (-np.tanh(v / self.velocity_scale))[:, None]

@@ -65,7 +65,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..components import Parameter
+from ..backend import backend_of
+from ..components import Parameter, state_vector
 from ..errors import ModelError
 from ._base import JointEffect, bounded_to_range, joint_range
 from .registry import register
@@ -74,7 +75,8 @@ _EXP_CLIP = 50.0
 
 
 def _exp(x):
-    return np.exp(np.minimum(x, _EXP_CLIP))
+    xp = backend_of(x)
+    return xp.exp(xp.minimum(x, _EXP_CLIP))
 
 
 @register
@@ -127,6 +129,10 @@ class PassiveElastic(JointEffect):
         out = np.zeros((motion.n_frames, model.nv))
         out[:, i] = p["amplitude"] * (u - w)
         return out
+
+    def _force_at(self, model, q, v, p):
+        u, w, _, _ = self._terms(model, q, p)
+        return p["amplitude"] * (u - w)
 
     def param_jacobian(self, model, motion, params=None, cache=None):
         i = model.coordinate_index(self.target)
@@ -228,13 +234,14 @@ class RienerEdrich1999PassiveMoment(JointEffect):
     @staticmethod
     def moments_deg(phi_h, phi_k, phi_a):
         """``(T^H, T^K, T^A)`` of Eq. 5.11 in N m for angles in degrees (thesis conventions)."""
-        th = (np.exp(1.4655 - 0.0034 * phi_k + 0.0750 * phi_h)
-              - np.exp(1.3403 - 0.0226 * phi_k - 0.0305 * phi_h) + 8.072)
-        tk = (np.exp(1.800 - 0.0460 * phi_a - 0.0352 * phi_k - 0.0217 * phi_h)
-              - np.exp(-3.971 - 0.0004 * phi_a + 0.0495 * phi_k + 0.0128 * phi_h)
-              - 4.820 + np.exp(2.220 - 0.150 * phi_k))
-        ta = (np.exp(2.1016 - 0.0843 * phi_a - 0.0176 * phi_k)
-              - np.exp(-7.9763 + 0.1949 * phi_a + 0.0008 * phi_k) - 1.792)
+        exp = backend_of(phi_h, phi_k, phi_a).exp
+        th = (exp(1.4655 - 0.0034 * phi_k + 0.0750 * phi_h)
+              - exp(1.3403 - 0.0226 * phi_k - 0.0305 * phi_h) + 8.072)
+        tk = (exp(1.800 - 0.0460 * phi_a - 0.0352 * phi_k - 0.0217 * phi_h)
+              - exp(-3.971 - 0.0004 * phi_a + 0.0495 * phi_k + 0.0128 * phi_h)
+              - 4.820 + exp(2.220 - 0.150 * phi_k))
+        ta = (exp(2.1016 - 0.0843 * phi_a - 0.0176 * phi_k)
+              - exp(-7.9763 + 0.1949 * phi_a + 0.0008 * phi_k) - 1.792)
         return th, tk, ta
 
     def _unit(self, q_hip, q_knee, q_ankle):
@@ -250,6 +257,12 @@ class RienerEdrich1999PassiveMoment(JointEffect):
         for i, m in zip(idx, self._unit(qh, qk, qa)):
             out[:, i] = s * m
         return out
+
+    def generalized_force_at(self, model, q, v):
+        """Eq. 5.11 at one state (numpy or CasADi), the same :meth:`moments_deg` as the batched form."""
+        idx = [model.coordinate_index(c) for c in self.coordinates()]
+        s = self.values["scale"]
+        return state_vector(model.nv, {i: s * m for i, m in zip(idx, self._unit(*(q[i] for i in idx)))}, like=q)
 
     def param_jacobian(self, model, motion, params=None, cache=None):
         return self.generalized_force(model, motion, {"scale": 1.0})[:, :, None]

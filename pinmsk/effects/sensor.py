@@ -36,7 +36,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..components import Component, Motion, Parameter
+from ..components import Component, Motion, Parameter, state_vector
 from ..trial import moment_channel
 from .registry import register
 
@@ -75,6 +75,10 @@ class MeasurementEffect(Component):
     def generalized_force(self, model, motion: Motion, params: Mapping[str, float] | None = None,
                           cache: Any = None) -> np.ndarray:
         return np.zeros((motion.n_frames, model.nv))
+
+    def generalized_force_at(self, model, q, v):
+        """Zero ``(nv,)`` (numpy or CasADi, as ``q``): a measurement effect is no force on the skeleton."""
+        return state_vector(model.nv, {}, like=q)
 
     def state_derivatives(self, model, motion: Motion, params=None, cache=None):
         """Zero: no force, so no dependence on the state."""

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..backend import backend_of
 from ..errors import TrialError
 from ._common import as_array, check_finite
 
@@ -63,19 +64,29 @@ def he_activation_rate(u, a, *, tau_rise: float = 0.015, tau_fall: float = 0.050
     return (u - a) * (t1 * u + t2)
 
 
-def activation_rate(u, a, *, tau_rise: float = TAU_RISE, tau_fall: float = TAU_FALL):
-    """Winters & Stark activation rate, thesis Eq. A.2-A.4.
+def activation_rate(u, a, *, tau_rise: float = TAU_RISE, tau_fall: float = TAU_FALL,
+                    smooth: float = 0.0):
+    """Winters & Stark activation rate, thesis Eq. A.2-A.4 (numpy or CasADi inputs).
 
     ``adot = (u - a)(t1 u + t2)`` when ``u >= a`` (activation) and
     ``(u - a) t2`` when ``u < a`` (deactivation), with ``t2 = 1/tau_fall`` and
     ``t1 = 1/tau_rise - t2``.  For ``u >= 0`` the factor ``t1 u + t2`` is
     positive, so ``u >= a`` if and only if ``adot >= 0`` (the thesis' remark),
     which is what makes :func:`excitation_from_activation` an exact inverse.
+
+    ``smooth = w > 0`` replaces the rise/fall switch ``u >= a`` by
+    ``(1 + tanh((u - a)/w))/2``, as De Groote et al. (2016, Eq. 1-2) do, so that the
+    rate is smooth for a gradient-based optimizer; ``w = 0`` (default) is Eq. A.2 as is.
+    The rate itself is continuous either way (the switched term vanishes at ``u = a``);
+    the blend removes the jump of its slope there.
     """
     t1, t2 = _rates(tau_rise, tau_fall)
-    u = np.asarray(u, dtype=float)
-    a = np.asarray(a, dtype=float)
+    xp = backend_of(u, a)
+    u = xp.asarray(u)
+    a = xp.asarray(a)
     d = u - a
+    if smooth:
+        return d * (t2 + t1 * u * (0.5 + 0.5 * xp.tanh(d / smooth)))
     # deactivation uses t2 only: the rise term t1*u is switched off when u < a.
     return d * (t2 + t1 * u * (d >= 0))
 

@@ -1,7 +1,8 @@
 """De Groote et al. (2016) muscle curves as OpenSim's DeGrooteFregly2016Muscle defines them.
 
 Pure, elementwise functions over broadcastable arrays (per-muscle settings
-broadcast against time-first ``(N, m)`` inputs), their analytic derivatives,
+broadcast against time-first ``(N, m)`` inputs; the curve arguments may be CasADi
+values, see :mod:`pinmsk.backend`), their analytic derivatives,
 and :class:`DeGrooteFregly2016Muscle`, the OpenSim muscle's properties with
 their OpenSim names, defaults and bounds.  The vectorised muscle-tendon model
 is :class:`pinmsk.muscles.DeGroote2016`.
@@ -38,6 +39,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ..backend import backend_of
+
 from ._common import OpenSimMuscleProperties
 
 __all__ = [
@@ -70,7 +73,7 @@ MAX_NORM_FIBER_LENGTH = 1.8
 
 # --------------------------------------------------------------------------- fiber curves
 def _width_x(l_norm, width_scale):
-    return (np.asarray(l_norm, dtype=float) - 1.0) / width_scale + 1.0
+    return (backend_of(l_norm).asarray(l_norm) - 1.0) / width_scale + 1.0
 
 
 def degroote_active_force_length(l_norm, *, width_scale=1.0):
@@ -79,23 +82,25 @@ def degroote_active_force_length(l_norm, *, width_scale=1.0):
     ``width_scale`` (>= 1, OpenSim's ``active_force_width_scale``) stretches the
     curve about its peak at ``l_norm = 1``.
     """
+    xp = backend_of(l_norm)
     x = _width_x(l_norm, width_scale)
-    out = np.zeros(np.shape(x))
+    out = 0.0 * x if xp.symbolic else np.zeros(np.shape(x))
     for b1, b2, b3, b4 in ACTIVE_B:
         s = b3 + b4 * x
         d = x - b2
-        out = out + b1 * np.exp(-0.5 * d * d / (s * s))
+        out = out + b1 * xp.exp(-0.5 * d * d / (s * s))
     return out
 
 
 def degroote_active_force_length_derivative(l_norm, *, width_scale=1.0):
     """``d f_L / d l_norm``: ``sum b1 e(x) (b2 - x)(b3 + b2 b4)/(b3 + b4 x)^3`` over ``width_scale``."""
+    xp = backend_of(l_norm)
     x = _width_x(l_norm, width_scale)
-    out = np.zeros(np.shape(x))
+    out = 0.0 * x if xp.symbolic else np.zeros(np.shape(x))
     for b1, b2, b3, b4 in ACTIVE_B:
         s = b3 + b4 * x
         d = x - b2
-        out = out + b1 * np.exp(-0.5 * d * d / (s * s)) * (-d) * (b3 + b2 * b4) / (s * s * s)
+        out = out + b1 * xp.exp(-0.5 * d * d / (s * s)) * (-d) * (b3 + b2 * b4) / (s * s * s)
     return out / np.asarray(width_scale, dtype=float)
 
 
@@ -110,20 +115,23 @@ def degroote_passive_force_length(l_norm, *, strain=0.6):
 
     ``strain`` is OpenSim's ``passive_fiber_strain_at_one_norm_force``.
     """
+    xp = backend_of(l_norm)
     offset, denom = _passive_offset(strain)
-    return (np.exp(K_PE * (np.asarray(l_norm, dtype=float) - 1.0) / strain) - offset) / denom
+    return (xp.exp(K_PE * (xp.asarray(l_norm) - 1.0) / strain) - offset) / denom
 
 
 def degroote_passive_force_length_derivative(l_norm, *, strain=0.6):
     """``d f_PE / d l_norm = k_PE exp(k_PE (l - 1)/e0) / (e0 (exp(k_PE) - o))``."""
+    xp = backend_of(l_norm)
     _, denom = _passive_offset(strain)
-    e = np.exp(K_PE * (np.asarray(l_norm, dtype=float) - 1.0) / strain)
+    e = xp.exp(K_PE * (xp.asarray(l_norm) - 1.0) / strain)
     return K_PE * e / (np.asarray(strain, dtype=float) * denom)
 
 
 def degroote_force_velocity(v_norm):
     """Force-velocity multiplier ``d1 asinh(d2 v + d3) + d4``: 0 at ``v = -1``, 1 at 0, ~1.794 at +1."""
-    return FV_D1 * np.arcsinh(FV_D2 * np.asarray(v_norm, dtype=float) + FV_D3) + FV_D4
+    xp = backend_of(v_norm)
+    return FV_D1 * xp.arcsinh(FV_D2 * xp.asarray(v_norm) + FV_D3) + FV_D4
 
 
 def degroote_force_velocity_derivative(v_norm):
@@ -148,21 +156,24 @@ def degroote_tendon_force(l_norm, *, strain=0.049):
 
     0 at ``l_T = 1``, 1 at ``1 + strain``; negative (to -0.2) below slack length, as in OpenSim.
     """
+    xp = backend_of(l_norm)
     k = degroote_tendon_stiffness_parameter(strain)
-    return TENDON_C1 * np.exp(k * (np.asarray(l_norm, dtype=float) - TENDON_C2)) - TENDON_C3
+    return TENDON_C1 * xp.exp(k * (xp.asarray(l_norm) - TENDON_C2)) - TENDON_C3
 
 
 def degroote_tendon_force_derivative(l_norm, *, strain=0.049):
     """``d f_T / d l_T = c1 k_T exp(k_T (l_T - c2))``."""
+    xp = backend_of(l_norm)
     k = degroote_tendon_stiffness_parameter(strain)
-    return TENDON_C1 * k * np.exp(k * (np.asarray(l_norm, dtype=float) - TENDON_C2))
+    return TENDON_C1 * k * xp.exp(k * (xp.asarray(l_norm) - TENDON_C2))
 
 
 def degroote_tendon_length(force, *, strain=0.049):
     """Normalised tendon length from normalised tendon force (the exact inverse; needs force > -0.2)."""
+    xp = backend_of(force)
     k = degroote_tendon_stiffness_parameter(strain)
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.log((np.asarray(force, dtype=float) + TENDON_C3) / TENDON_C1) / k + TENDON_C2
+        return xp.log((xp.asarray(force) + TENDON_C3) / TENDON_C1) / k + TENDON_C2
 
 
 # --------------------------------------------------------------------------- OpenSim properties

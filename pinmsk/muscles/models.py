@@ -10,7 +10,19 @@ Eq. A.10-A.14, no parallel element) share one interface:
 - ``force_limits(l_mt, v_mt) -> (F_active, F_passive)`` (rigid tendon; ``F = a F_active + F_passive``)
 - ``contraction_rate(l_ce, l_mt, a) -> v_ce`` (compliant-tendon ODE, thesis Eq. 3.9)
 - ``inverse(F_mt, dF_mt, l_mt, dl_mt, ddl_mt, ddF_mt=0.0) -> dict`` (thesis Fig. 5.6)
-- ``activation_rate(u, a)``, ``excitation(a, adot)``, ``activation(t, u, a0=None)`` (App. A.2)
+- ``activation_rate(u, a, smooth=0)``, ``excitation(a, adot)``, ``activation(t, u, a0=None)`` (App. A.2)
+
+and the laws of the optimal-control engine, written once for numpy and CasADi
+(:mod:`pinmsk.backend`; no input checks, the checked methods above call the same math):
+
+- ``rigid_force(a, l_mt, v_mt) -> F`` (N), ``fiber_rigid(l_mt, v_mt) -> (l_ce, v_ce, cos_alpha)``;
+- De Groote et al. (2016)'s implicit compliant tendon, state ``f_t = F_T/F_max`` and control
+  ``df_t``: ``fiber_from_tendon(f_t, df_t, l_mt, v_mt) -> (l_ce, v_ce, cos_alpha)``,
+  ``implicit_residual(a, f_t, df_t, l_mt, v_mt)`` (zero at the Hill equilibrium),
+  ``tendon_force_bounds() -> (lo, hi)``, ``equilibrium_tendon_force(a, l_mt, v_mt=None)`` (numpy);
+- ``fiber_forces(a, l_ce, v_ce) -> {"f_isom", "f_v", "f_pe", "f_damping", "f_active", "f_fiber"}``.
+
+Millard2012's quintic Bezier curves are numpy only: it refuses these by name.
 
 :class:`DeGroote2016` and :class:`Millard2012` (OpenSim's DeGrooteFregly2016Muscle
 and Millard2012EquilibriumMuscle curves, with fiber damping) share the
@@ -29,6 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..backend import backend_of
 from ..errors import ModelError, TrialError
 from . import millard2012 as _millard
 from ._common import check_finite, locate, muscle_parameter, n_muscles, where_first
@@ -43,9 +56,9 @@ from .inverse import inverse_nagano_gerritsen, inverse_thelen2003
 from .nagano_gerritsen import ng_contraction_rate, ng_equilibrium, ng_fiber_force, ng_force_length
 from .pennation import check_along_positive, pennation_height
 from .tendon import (TENDON_STRAIN0, thelen_tendon_force, thelen_tendon_stiffness, thelen_tendon_strain,
-                     winters_tendon_force)
-from .thelen2003 import (GAMMA, K_PE, PASSIVE_STRAIN0, thelen_contraction_rate, thelen_equilibrium,
-                         thelen_fiber_force, thelen_force_velocity)
+                     winters_tendon_force, winters_tendon_stiffness, winters_tendon_strain)
+from .thelen2003 import (GAMMA, K_PE, PASSIVE_STRAIN0, _speed_scale, thelen_contraction_rate,
+                         thelen_equilibrium, thelen_fiber_force, thelen_force_velocity)
 
 __all__ = ["MUSCLE_MODELS", "MUSCLE_PARAMETERS", "DeGroote2016", "Millard2012", "MuscleParameter",
            "NaganoGerritsen", "Thelen2003", "Thelen2003OpenSim"]
@@ -251,9 +264,14 @@ class _MuscleModel:
         return a
 
     # -- activation dynamics (thesis App. A.2) -----------------------------------
-    def activation_rate(self, u, a):
-        """Winters & Stark activation rate (thesis Eq. A.2) with this model's time constants."""
-        return activation_rate(u, a, tau_rise=self.tau_rise, tau_fall=self.tau_fall)
+    def activation_rate(self, u, a, *, smooth: float = 0.0):
+        """Winters & Stark activation rate (thesis Eq. A.2) with this model's time constants.
+
+        Any backend (numpy or CasADi); ``smooth > 0`` blends the rise/fall switch with a
+        tanh of that width (De Groote et al. 2016, Eq. 1-2), see
+        :func:`pinmsk.muscles.activation.activation_rate`.
+        """
+        return activation_rate(u, a, tau_rise=self.tau_rise, tau_fall=self.tau_fall, smooth=smooth)
 
     def excitation(self, a, adot):
         """Excitation from activation and its rate, inverse activation dynamics (Eq. A.5)."""
@@ -265,14 +283,111 @@ class _MuscleModel:
         return activation_from_excitation(t, u, a0, tau_rise=self.tau_rise, tau_fall=self.tau_fall)
 
     # -- kinematics ------------------------------------------------------------
-    def _rigid(self, l_mt, v_mt):
-        """``(l_ce, v_ce, cos_alpha)`` with an inextensible tendon."""
-        l_mt = np.asarray(l_mt, dtype=float)
-        x = l_mt - self.l_slack
-        check_along_positive(x, l_mt, self.names, what=f"{type(self).__name__} rigid tendon")
-        l_ce = np.sqrt(x * x + self.height * self.height)
+    def fiber_rigid(self, l_mt, v_mt):
+        """``(l_ce, v_ce, cos_alpha)`` with an inextensible tendon; any backend, no input checks.
+
+        ``x = l_mt - l_slack``, ``l_ce = sqrt(x^2 + h^2)`` (constant-thickness pennation),
+        ``v_ce = v_mt cos(alpha)``; needs ``x > 0`` (checked by the numpy wrappers).
+        """
+        xp = backend_of(l_mt, v_mt)
+        return self._fiber_from_along(xp, xp.asarray(l_mt) - self.l_slack, xp.asarray(v_mt))
+
+    def _fiber_from_along(self, xp, x, x_rate):
+        """``(l_ce, v_ce, cos_alpha)`` from the fiber's projection ``x`` on the line of action and
+        its rate: ``l_ce = sqrt(x^2 + h^2)``, ``v_ce = x x'/l_ce = x' cos(alpha)`` (constant thickness)."""
+        l_ce = xp.sqrt(x * x + self.height * self.height)
         cos = x / l_ce
-        return l_ce, np.asarray(v_mt, dtype=float) * cos, cos
+        return l_ce, x_rate * cos, cos
+
+    def _rigid(self, l_mt, v_mt):
+        """``(l_ce, v_ce, cos_alpha)`` with an inextensible tendon (checked: the fiber must fit)."""
+        l_mt = np.asarray(l_mt, dtype=float)
+        check_along_positive(l_mt - self.l_slack, l_mt, self.names,
+                             what=f"{type(self).__name__} rigid tendon")
+        return self.fiber_rigid(l_mt, v_mt)
+
+    def _rigid_force(self, a, l_mt, v_mt):
+        """:meth:`rigid_force` with the fiber-fits check of the numpy path."""
+        l_mt = np.asarray(l_mt, dtype=float)
+        check_along_positive(l_mt - self.l_slack, l_mt, self.names,
+                             what=f"{type(self).__name__} rigid tendon")
+        return self.rigid_force(a, l_mt, v_mt)
+
+    def rigid_force(self, a, l_mt, v_mt):
+        """Muscle-tendon force (N) with a rigid tendon at activation ``a``; any backend, no checks."""
+        raise NotImplementedError
+
+    # -- compliant tendon, implicit form (De Groote et al. 2016) ------------------
+    #: ``(lo, hi)`` of the normalized tendon force state ``f_t`` (see :meth:`tendon_force_bounds`)
+    _TENDON_FORCE_BOUNDS = (0.0, 5.0)
+
+    def _tendon_curve(self, strain):
+        """``(f_T, df_T/dstrain)`` at the tendon strain (any backend)."""
+        raise NotImplementedError
+
+    def _tendon_strain(self, force):
+        """Tendon strain at a normalized tendon force (the inverse of :meth:`_tendon_curve`)."""
+        raise NotImplementedError
+
+    def _fiber_parts(self, a, l_ce, v_ce):
+        """``(f_L, f_V, f_PE, f_D)``: normalized force-length, force-velocity (at activation ``a``),
+        passive and damping forces of the fiber (any backend)."""
+        raise NotImplementedError
+
+    def _fiber_total(self, a, l_ce, v_ce):
+        """Normalized fiber force ``a f_L f_V + f_PE + f_D`` (any backend)."""
+        fl, fv, fpe, fd = self._fiber_parts(a, l_ce, v_ce)
+        return a * fl * fv + fpe + fd
+
+    def fiber_forces(self, a, l_ce, v_ce):
+        """The fiber's forces as the metabolic models need them; any backend, no checks.
+
+        Returns ``{"f_isom", "f_v", "f_pe", "f_damping", "f_active", "f_fiber"}``: the normalized
+        active force-length factor ``f_L``, force-velocity factor ``f_V`` (at activation ``a``),
+        passive and damping forces, then the active (contractile) fiber force
+        ``F_max a f_L f_V`` and the total fiber force (N).
+        """
+        fl, fv, fpe, fd = self._fiber_parts(a, l_ce, v_ce)
+        act = a * fl * fv
+        return {"f_isom": fl, "f_v": fv, "f_pe": fpe, "f_damping": fd,
+                "f_active": self.f_max * act, "f_fiber": self.f_max * (act + fpe + fd)}
+
+    def tendon_force_bounds(self):
+        """``(lo, hi)``: bounds of the normalized tendon force state ``f_t`` (``F_T / F_max``)."""
+        return self._TENDON_FORCE_BOUNDS
+
+    def fiber_from_tendon(self, f_t, df_t, l_mt, v_mt):
+        """``(l_ce, v_ce, cos_alpha)`` from the normalized tendon force ``f_t`` and its rate ``df_t`` (1/s).
+
+        De Groote et al. (2016)'s implicit compliant tendon: the tendon length from the
+        inverse tendon curve, ``l_t = l_slack (1 + strain(f_t))``; the fiber from the
+        constant-thickness pennation geometry, ``x = l_mt - l_t``, ``l_ce = sqrt(x^2 + h^2)``;
+        its velocity from d/dt of the same geometry, ``v_ce = (v_mt - v_t) cos(alpha)`` with the
+        tendon velocity ``v_t = l_slack df_t / (df_T/dstrain)``.  Any backend, no checks.
+        """
+        xp = backend_of(f_t, df_t, l_mt, v_mt)
+        strain = self._tendon_strain(xp.asarray(f_t))
+        stiffness = self._tendon_curve(strain)[1]
+        v_t = self.l_slack * xp.asarray(df_t) / stiffness
+        return self._fiber_from_along(xp, xp.asarray(l_mt) - self.l_slack * (1.0 + strain),
+                                      xp.asarray(v_mt) - v_t)
+
+    def implicit_residual(self, a, f_t, df_t, l_mt, v_mt):
+        """Hill equilibrium residual ``(a f_L f_V + f_PE + f_D) cos(alpha) - f_t`` (dimensionless).
+
+        The fiber state from :meth:`fiber_from_tendon`; zero when the fiber and the tendon
+        carry the same force (De Groote et al. 2016's implicit contraction dynamics, with
+        ``f_t`` a state and ``df_t`` a control).  Any backend, no checks.
+        """
+        l_ce, v_ce, cos = self.fiber_from_tendon(f_t, df_t, l_mt, v_mt)
+        return self._fiber_total(a, l_ce, v_ce) * cos - f_t
+
+    def equilibrium_tendon_force(self, a, l_mt, v_mt=None, *, tol: float = 1e-10):
+        """Normalized tendon force ``f_t`` at the compliant equilibrium (numpy; for initial guesses).
+
+        :meth:`equilibrium` divided by ``F_max`` (isometric fiber unless ``v_mt`` is given).
+        """
+        return self.equilibrium(l_mt, a, v_mt, tol=tol)["force"] / self.f_max
 
     def fiber_kinematics_rigid(self, l_mt, v_mt):
         """Fiber length and velocity ``(l_ce, v_ce)`` (m, m/s) for an inextensible tendon.
@@ -341,12 +456,30 @@ class Thelen2003(_MuscleModel):
                     tendon_strain0=self.tendon_strain0, tau_rise=self.tau_rise,
                     tau_fall=self.tau_fall)
 
-    def _rigid_force(self, a, l_mt, v_mt):
-        l_ce, v_ce, cos = self._rigid(l_mt, v_mt)
+    def rigid_force(self, a, l_mt, v_mt):
+        """Muscle-tendon force (N), rigid tendon (Eq. A.7-A.9); any backend, no input checks."""
+        l_ce, v_ce, cos = self.fiber_rigid(l_mt, v_mt)
+        xp = backend_of(l_ce, a)
         d = l_ce / self.l_opt - 1.0
-        f = thelen_fiber_force(v_ce, a, np.exp(d * d * (-1.0 / GAMMA)), v_max=self.v_max)
-        f += np.expm1((K_PE / PASSIVE_STRAIN0) * np.maximum(d, 0.0)) / np.expm1(K_PE)
+        f = thelen_fiber_force(v_ce, a, xp.exp(d * d * (-1.0 / GAMMA)), v_max=self.v_max)
+        f = f + xp.expm1((K_PE / PASSIVE_STRAIN0) * xp.maximum(d, 0.0)) / np.expm1(K_PE)
         return self.f_max * f * cos
+
+    def _tendon_curve(self, strain):
+        return (thelen_tendon_force(strain, strain0=self.tendon_strain0),
+                thelen_tendon_stiffness(strain, strain0=self.tendon_strain0))
+
+    def _tendon_strain(self, force):
+        return thelen_tendon_strain(force, strain0=self.tendon_strain0)
+
+    def _fiber_parts(self, a, l_ce, v_ce):
+        xp = backend_of(a, l_ce, v_ce)
+        d = l_ce / self.l_opt - 1.0
+        fl = xp.exp(d * d * (-1.0 / GAMMA))
+        # Eq. A.9: activation scales the maximum shortening velocity (as thelen_fiber_force)
+        fv = thelen_force_velocity(v_ce / (_speed_scale(a) * self.v_max))
+        fpe = xp.expm1((K_PE / PASSIVE_STRAIN0) * xp.maximum(d, 0.0)) / np.expm1(K_PE)
+        return fl, fv, fpe, 0.0 * fl
 
     def force_limits(self, l_mt, v_mt):
         """Rigid-tendon force capacity ``(F_active, F_passive)`` (N), each shaped like ``l_mt``.
@@ -449,10 +582,33 @@ class NaganoGerritsen(_MuscleModel):
                     tendon_strain0=self.tendon_strain0, tau_rise=self.tau_rise,
                     tau_fall=self.tau_fall)
 
-    def _rigid_force(self, a, l_mt, v_mt):
-        l_ce, v_ce, cos = self._rigid(l_mt, v_mt)
+    #: the Winters tendon's stiffness vanishes at zero force (its inverse has an infinite slope
+    #: there), so the implicit tendon-force state is kept just above it
+    _TENDON_FORCE_BOUNDS = (1e-3, 5.0)
+
+    def rigid_force(self, a, l_mt, v_mt):
+        """Muscle-tendon force (N), rigid tendon (Eq. A.12-A.13); any backend, no input checks."""
+        l_ce, v_ce, cos = self.fiber_rigid(l_mt, v_mt)
         fi = ng_force_length(l_ce / self.l_opt, self.width)
         return self.f_max * ng_fiber_force(v_ce / self.l_opt, a, fi) * cos
+
+    def _tendon_curve(self, strain):
+        return (winters_tendon_force(strain, strain0=self.tendon_strain0),
+                winters_tendon_stiffness(strain, strain0=self.tendon_strain0))
+
+    def _tendon_strain(self, force):
+        return winters_tendon_strain(force, strain0=self.tendon_strain0)
+
+    def _fiber_total(self, a, l_ce, v_ce):
+        return ng_fiber_force(v_ce / self.l_opt, a, ng_force_length(l_ce / self.l_opt, self.width))
+
+    def _fiber_parts(self, a, l_ce, v_ce):
+        # Eq. A.12 is not separable: f_V is the CE force over a f_isom (1 where f_isom = 0)
+        xp = backend_of(a, l_ce, v_ce)
+        fi = ng_force_length(l_ce / self.l_opt, self.width)
+        f = ng_fiber_force(v_ce / self.l_opt, a, fi)
+        fv = xp.where(fi * a > 0, f / xp.maximum(fi * a, 1e-300), 1.0)
+        return fi, fv, 0.0 * fi, 0.0 * fi
 
     def force_limits(self, l_mt, v_mt):
         """Rigid-tendon force capacity ``(F_active, F_passive)`` (N).
@@ -556,15 +712,21 @@ class _CurveMuscle(_MuscleModel):
         return self._velocity_curve(v_norm)
 
     # -- forces ------------------------------------------------------------------
-    def _rigid_force(self, a, l_mt, v_mt):
-        l_ce, v_ce, cos = self._rigid(l_mt, v_mt)
+    def rigid_force(self, a, l_mt, v_mt):
+        """Muscle-tendon force (N), rigid tendon, as OpenSim; any backend, no input checks."""
+        l_ce, v_ce, cos = self.fiber_rigid(l_mt, v_mt)
         v = v_ce / self.v_max
         fl, _, fpe, _ = self._length_curves(l_ce / self.l_opt)
         fv = self._active_velocity_factor(a, v)
         f, off = self._rigid_fiber(l_ce, v, a * fl * fv + fpe + self.damping * v)
         if off is not None:
-            f = np.where(off, 0.0, f)
+            f = backend_of(f, off).where(off, 0.0, f)
         return self.f_max * f * cos
+
+    def _fiber_parts(self, a, l_ce, v_ce):
+        v = v_ce / self.v_max
+        fl, _, fpe, _ = self._length_curves(l_ce / self.l_opt)
+        return fl, self._active_velocity_factor(a, v), fpe, self.damping * v
 
     def force_limits(self, l_mt, v_mt):
         """Rigid-tendon force capacity ``(F_active, F_passive)`` (N), each shaped like ``l_mt``.
@@ -699,12 +861,13 @@ class DeGroote2016(_CurveMuscle):
         return degroote_force_velocity(v_norm)
 
     def _tendon_curve(self, strain):
-        l_t = 1.0 + np.asarray(strain, dtype=float)
+        l_t = 1.0 + backend_of(strain).asarray(strain)
         return (degroote_tendon_force(l_t, strain=self.tendon_strain),
                 degroote_tendon_force_derivative(l_t, strain=self.tendon_strain))
 
     def _tendon_strain(self, force):
-        return degroote_tendon_length(np.maximum(force, 0.0), strain=self.tendon_strain) - 1.0
+        xp = backend_of(force)
+        return degroote_tendon_length(xp.maximum(force, 0.0), strain=self.tendon_strain) - 1.0
 
 
 #: Millard 2012 curve parameters: ``(parameter, default)``; ``None`` = OpenSim's fitted default
@@ -834,6 +997,41 @@ class Millard2012(_CurveMuscle):
     def _tendon_strain(self, force):
         return self._tfl.inverse(force) - 1.0
 
+    def _numpy_only(self, what):
+        raise ModelError(f"Millard2012 has no {what} for the optimal-control engine: its curves are "
+                         "quintic Bezier splines evaluated in numpy only; use DeGroote2016 muscles "
+                         "(closed-form curves, OpenSim's DeGrooteFregly2016Muscle)")
+
+    def rigid_force(self, a, l_mt, v_mt):
+        """Not available: Millard2012 curves are numpy only (use DeGroote2016); :meth:`force` works."""
+        self._numpy_only("rigid_force")
+
+    def fiber_from_tendon(self, f_t, df_t, l_mt, v_mt):
+        """Not available: Millard2012 curves are numpy only (use DeGroote2016)."""
+        self._numpy_only("fiber_from_tendon")
+
+    def implicit_residual(self, a, f_t, df_t, l_mt, v_mt):
+        """Not available: Millard2012 curves are numpy only (use DeGroote2016)."""
+        self._numpy_only("implicit_residual")
+
+    def fiber_forces(self, a, l_ce, v_ce):
+        """Not available: Millard2012 curves are numpy only (use DeGroote2016)."""
+        self._numpy_only("fiber_forces")
+
+    def tendon_force_bounds(self):
+        """Not available: Millard2012 curves are numpy only (use DeGroote2016)."""
+        self._numpy_only("tendon_force_bounds")
+
+    def equilibrium_tendon_force(self, a, l_mt, v_mt=None, *, tol: float = 1e-10):
+        """Not available: Millard2012 curves are numpy only (use DeGroote2016)."""
+        self._numpy_only("equilibrium_tendon_force")
+
+    def _rigid_force(self, a, l_mt, v_mt):
+        # the numpy path of force(): the generic CurveMuscle math on numpy arrays
+        l_mt = np.asarray(l_mt, dtype=float)
+        check_along_positive(l_mt - self.l_slack, l_mt, self.names, what="Millard2012 rigid tendon")
+        return _CurveMuscle.rigid_force(self, a, l_mt, v_mt)
+
     def _rigid_fiber(self, l_ce, v_norm, f_total):
         # OpenSim: a fiber at its length floor that shortens (or below it) is clamped and carries no
         # force; with a rigid tendon the damping force saturates so the fiber never pushes.
@@ -905,21 +1103,24 @@ class Thelen2003OpenSim(_CurveMuscle):
                 **{k: getattr(self, k) for k, _, _ in _THELEN_CURVES}}
 
     def _length_curves(self, l_norm):
-        d = np.asarray(l_norm, dtype=float) - 1.0
-        fl = np.exp(-(d * d) / self.active_shape)
+        xp = backend_of(l_norm)
+        d = xp.asarray(l_norm) - 1.0
+        fl = xp.exp(-(d * d) / self.active_shape)
         rate = self.passive_shape / self.passive_strain
-        e = np.exp(rate * np.maximum(d, 0.0))
+        e = xp.exp(rate * xp.maximum(d, 0.0))
         taut = d > 0.0
-        return (fl, (-2.0 / self.active_shape) * d * fl, np.where(taut, (e - 1.0) * self._pe_scale, 0.0),
-                np.where(taut, rate * e * self._pe_scale, 0.0))
+        return (fl, (-2.0 / self.active_shape) * d * fl, xp.where(taut, (e - 1.0) * self._pe_scale, 0.0),
+                xp.where(taut, rate * e * self._pe_scale, 0.0))
 
     def _velocity_curve(self, v_norm):
-        return np.maximum(thelen_force_velocity(v_norm, a_f=self.fv_shape, f_hat=self.eccentric_force,
+        xp = backend_of(v_norm)
+        return xp.maximum(thelen_force_velocity(v_norm, a_f=self.fv_shape, f_hat=self.eccentric_force,
                                                 extrapolation=self.fv_extrapolation), 0.0)
 
     def _active_velocity_factor(self, a, v_norm):
-        scale = 0.25 + 0.75 * np.asarray(a, dtype=float)       # activation scales the speed (Eq. A.9)
-        return self._velocity_curve(np.asarray(v_norm, dtype=float) / scale)
+        xp = backend_of(a, v_norm)
+        scale = 0.25 + 0.75 * xp.asarray(a)       # activation scales the speed (Eq. A.9)
+        return self._velocity_curve(xp.asarray(v_norm) / scale)
 
     def _tendon_curve(self, strain):
         return (thelen_tendon_force(strain, strain0=self.tendon_strain, exact_toe=True),

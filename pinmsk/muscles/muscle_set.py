@@ -208,6 +208,22 @@ class MuscleSet(Component):
     def moment_arms(self, q) -> np.ndarray:
         return self.path.moment_arms(q)
 
+    def lengths_at(self, q):
+        """The path's lengths at one pose, numpy (nv,) -> (m,) or CasADi (nv, 1) -> (m, 1)
+        (``path.lengths_at``; paths without a closed form refuse by name)."""
+        return self._path_at("lengths_at")(q)
+
+    def moment_arms_at(self, q):
+        """The path's moment arms ``r = -dl/dq`` at one pose, (m, nv), numpy or CasADi (``path.moment_arms_at``)."""
+        return self._path_at("moment_arms_at")(q)
+
+    def _path_at(self, name):
+        fn = getattr(self.path, name, None)
+        if fn is None:
+            raise ModelError(f"muscle paths {type(self.path).__name__} have no closed form the optimal-control "
+                             "engine can use; fit a PolynomialPath to them (pinmsk.opensim.paths.fit_polynomial_paths)")
+        return fn
+
     # -- forces -------------------------------------------------------------
     def force_limits(self, q, v) -> tuple[np.ndarray, np.ndarray]:
         """Rigid-tendon force capacity ``(F_active, F_passive)``, each (N, m).

@@ -1,7 +1,8 @@
 """Nagano & Gerritsen contractile element with the Winters tendon (thesis App. A.4-A.5).
 
 Pure, elementwise functions; :class:`pinmsk.muscles.NaganoGerritsen` binds the
-per-muscle parameters.  The model has no parallel elastic element (thesis
+per-muscle parameters.  :func:`ng_force_length`, :func:`ng_activation_hat` and
+:func:`ng_fiber_force` also take CasADi values (:mod:`pinmsk.backend`).  The model has no parallel elastic element (thesis
 Sec. 5.1: passive joint moments take its place).  Conventions:
 
 - lengths normalized by ``l_opt``; velocity normalized by ``l_opt`` too
@@ -26,6 +27,8 @@ from typing import Sequence
 
 import numpy as np
 
+from ..backend import backend_of
+
 from ._common import check_active
 from ._solve import compliant_equilibrium
 from .pennation import check_along_positive, pennation_height
@@ -47,7 +50,8 @@ A_HAT_KNEE = 0.3    # a_hat = min(1, a / 0.3)
 
 def ng_activation_hat(a):
     """``a_hat = min(1, 10 a / 3)``: the activation scaling of the shortening velocity (Eq. A.12)."""
-    return np.minimum(1.0, np.asarray(a, dtype=float) / A_HAT_KNEE)
+    xp = backend_of(a)
+    return xp.minimum(1.0, xp.asarray(a) / A_HAT_KNEE)
 
 
 def ng_force_length(l_norm, width):
@@ -56,8 +60,9 @@ def ng_force_length(l_norm, width):
     Equals ``1 - (l - 1)^2 / width^2``: 1 at ``l_opt``, 0 at ``l_opt (1 +- width)``,
     clipped at 0 beyond.
     """
-    d = (np.asarray(l_norm, dtype=float) - 1.0) / width
-    return np.maximum(1.0 - d * d, 0.0)
+    xp = backend_of(l_norm)
+    d = (xp.asarray(l_norm) - 1.0) / width
+    return xp.maximum(1.0 - d * d, 0.0)
 
 
 def ng_force_length_derivative(l_norm, width):
@@ -77,16 +82,19 @@ def ng_fiber_force(v_norm, a, f_isom, *, a_rel=A_REL, b_rel=B_REL, f_hat=F_HAT,
     ``a q`` with the concentric hyperbola ``q = (f_isom B + A w)/(B - w)``,
     ``w = v_norm / a_hat``, or the eccentric ``q = f_isom [1 + (f_hat - 1) v/(a_hat K + v)]``.
     """
-    v = np.asarray(v_norm, dtype=float)
-    a = np.asarray(a, dtype=float)
+    xp = backend_of(v_norm, a, f_isom)
+    v = xp.asarray(v_norm)
+    a = xp.asarray(a)
     ah = ng_activation_hat(a)
-    vc = np.minimum(v, 0.0)
-    ve = np.maximum(v, 0.0)
+    vc = xp.minimum(v, 0.0)
+    ve = xp.maximum(v, 0.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         w = vc / ah
         q_con = (f_isom * b_rel + a_rel * w) / (b_rel - w)
         q_ecc = f_isom * (1.0 + (f_hat - 1.0) * ve / (ah * _k(f_isom, b_rel, f_hat, a_rel, gamma) + ve))
-    f = a * np.where(v <= 0.0, q_con, q_ecc)
+    f = a * xp.where(v <= 0.0, q_con, q_ecc)
+    if xp.symbolic:     # a symbolic activation must be kept > 0 by its bounds (a = 0 is a 0/0 here)
+        return f
     # a = 0 makes a_hat = 0 and q a 0/0 (w = v / 0); the force there is its limit a -> 0+, zero
     return np.where(a == 0.0, 0.0, f) if np.any(a == 0.0) else f
 

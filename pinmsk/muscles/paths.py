@@ -16,6 +16,16 @@ moment_arms = { <coordinate> = [c0, c1, ...] } }`` (see ``urdf/README.md``).
 
 Arrays are time-first: ``q`` is ``(N, nv)`` or one frame ``(nv,)``; results
 are ``(N, m)`` / ``(N, m, nv)``, or ``(m,)`` / ``(m, nv)`` for one frame.
+
+One pose on any backend (:mod:`pinmsk.backend`): ``lengths_at(q) -> (m,)`` and
+``moment_arms_at(q) -> (m, nv)`` take a numpy ``(nv,)`` (then they are
+``lengths`` / ``moment_arms`` of that frame, the same numbers) or a CasADi
+``(nv, 1)`` ``SX``/``MX`` (then CasADi ``(m, 1)`` and ``(m, nv)`` expressions of
+the same polynomials, for the optimal-control engine's exact derivatives).
+Sign convention, both path classes: the moment arm is ``r = -dl/dq``, *not*
+``dl/dq``, so a muscle force ``F >= 0`` (pulling, shortening) gives the
+generalized force ``tau = r^T F`` (``tau_j = sum_i r_ij F_i``: the power
+``F (-dl/dt) = F r v``), and ``dl/dt = -r v``.
 Polynomials are evaluated by Horner's rule over all frames, muscles and
 coordinates at once (the only Python loop is over the polynomial degree).
 """
@@ -27,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pinmsk.backend import is_symbolic
 from pinmsk.errors import ModelError, PinmskError
 
 __all__ = ["MomentArmPath", "PolynomialPath", "DisplayPoints", "display_points_from_sidecar", "path_variants"]
@@ -46,6 +57,34 @@ def _horner(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:
         out *= x[:, None, :]
         out += coeffs[None, :, :, k]
     return out
+
+
+def _horner_at(coeffs: np.ndarray, X):
+    """sum_k coeffs[i, j, k] X[i, j]**k for one pose, X a CasADi (m, nv) -> (m, nv) (the Horner
+    recursion of :func:`_horner`, elementwise)."""
+    import casadi as ca
+
+    out = ca.DM(coeffs[:, :, -1]) + 0.0 * X
+    for k in range(coeffs.shape[2] - 2, -1, -1):
+        out = out * X + ca.DM(coeffs[:, :, k])
+    return out
+
+
+def _symbolic_pose(q, nv: int):
+    """A CasADi pose as a column (nv, 1) (accepts (nv, 1) or (1, nv))."""
+    import casadi as ca
+
+    if q.numel() != nv or min(q.shape) != 1:
+        raise PinmskError(f"q must have shape ({nv}, 1) for one pose, got {q.shape}")
+    return ca.reshape(q, nv, 1)
+
+
+def _numeric_pose(q, nv: int, coordinates) -> np.ndarray:
+    q = np.asarray(q, dtype=float)
+    if q.shape != (nv,):
+        raise PinmskError(f"q must have shape ({nv},) for one pose over coordinates ({', '.join(coordinates)}), "
+                          f"got {q.shape}")
+    return q
 
 
 def _rebuild(cls, muscles, coordinates, l0, coeffs):  # pickle support
@@ -276,6 +315,25 @@ class MomentArmPath:
             c = c[:, :, 1:] * np.arange(1, K) if K > 1 else np.zeros(c.shape[:2] + (1,))
         out = _horner(c, q)
         return out[0] if single else out
+
+    def lengths_at(self, q):
+        """l(q) at one pose, any backend: numpy (nv,) -> (m,) (= :meth:`lengths`), CasADi (nv, 1) -> (m, 1)."""
+        if not is_symbolic(q):
+            return self.lengths(_numeric_pose(q, self.nv, self._coordinates))
+        import casadi as ca
+
+        X = ca.repmat(_symbolic_pose(q, self.nv).T, self.n_muscles, 1)
+        return ca.DM(self._l0) - ca.sum2(_horner_at(self._int_coeffs, X))
+
+    def moment_arms_at(self, q):
+        """r = -dl/dq at one pose, any backend: numpy (nv,) -> (m, nv) (= :meth:`moment_arms`), CasADi
+        (nv, 1) -> (m, nv)."""
+        if not is_symbolic(q):
+            return self.moment_arms(_numeric_pose(q, self.nv, self._coordinates))
+        import casadi as ca
+
+        X = ca.repmat(_symbolic_pose(q, self.nv).T, self.n_muscles, 1)
+        return _horner_at(self._coeffs, X)
 
     def velocities(self, q, v) -> np.ndarray:
         """Lengthening velocities dl/dt = -sum_j r_j v_j: (N, m), or (m,)."""
@@ -543,6 +601,58 @@ class PolynomialPath:
         gx = np.stack(g, axis=2) / self._scale ** (o - 1)
         out = -self._scatter(gx)
         return out[0] if single else out
+
+    def lengths_at(self, q):
+        """l(q) at one pose, any backend: numpy (nv,) -> (m,) (= :meth:`lengths`), CasADi (nv, 1) -> (m, 1)."""
+        if not is_symbolic(q):
+            return self.lengths(_numeric_pose(q, self.nv, self._coordinates))
+        return self._symbolic_at(q)[0]
+
+    def moment_arms_at(self, q):
+        """r = -dl/dq at one pose, any backend: numpy (nv,) -> (m, nv) (= :meth:`moment_arms`), CasADi
+        (nv, 1) -> (m, nv)."""
+        if not is_symbolic(q):
+            return self.moment_arms(_numeric_pose(q, self.nv, self._coordinates))
+        return self._symbolic_at(q)[1]
+
+    def _symbolic_at(self, q):
+        """``(l (m, 1), r (m, nv))`` as CasADi expressions: the polynomials of :meth:`lengths` and
+        their exact gradient as in :meth:`moment_arms` (``dl/dx_v = sum_t c_t e_tv x_v^(e_tv - 1)
+        prod_{u != v} x_u^e_tu``, divided by ``scale_v``), muscle by muscle, term by term."""
+        import casadi as ca
+
+        qc = _symbolic_pose(q, self.nv)
+        sym = ca.MX if isinstance(qc, ca.MX) else ca.SX
+        m = self.n_muscles
+        ends = list(self._starts[1:]) + [self._coef.size]
+        lengths, arms = [], sym.zeros(m, self.nv)
+        for i in range(m):
+            cols = [int(j) for j in self._cidx[i] if j >= 0]
+            xs = [(qc[j] - self._center[i, v]) / self._scale[i, v] for v, j in enumerate(cols)]
+
+            def pw(v, e):
+                return 1.0 if e == 0 else xs[v] ** int(e)
+
+            length, grad = 0.0, [0.0] * len(cols)
+            for t in range(int(self._starts[i]), int(ends[i])):
+                e, c = self._exps[t], float(self._coef[t])
+                factors = [pw(v, e[v]) for v in range(len(cols))]
+                prod = c
+                for f in factors:
+                    prod = prod * f
+                length = length + prod
+                for v in range(len(cols)):
+                    if e[v] == 0:
+                        continue
+                    g = c * float(e[v]) * pw(v, e[v] - 1)
+                    for u, f in enumerate(factors):
+                        if u != v:
+                            g = g * f
+                    grad[v] = grad[v] + g
+            lengths.append(length)
+            for v, j in enumerate(cols):
+                arms[i, j] = arms[i, j] - grad[v] / self._scale[i, v]
+        return ca.vertcat(*[sym(x) if not is_symbolic(x) else x for x in lengths]), arms
 
     def velocities(self, q, v) -> np.ndarray:
         """Lengthening velocities dl/dt = -sum_j r_j v_j: (N, m), or (m,)."""

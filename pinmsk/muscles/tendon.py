@@ -2,7 +2,8 @@
 
 Forces are normalized to the muscle's maximum isometric force ``F_max``;
 strain is engineering strain ``(l_t - l_slack) / l_slack``.  All functions are
-elementwise over broadcastable arrays.
+elementwise over broadcastable arrays; the curves and their inverses (not the second
+derivatives) also take CasADi values (:mod:`pinmsk.backend`).
 
 A slack tendon carries no compression: both curves are zero for strain <= 0.
 The thesis writes Eq. A.6 without that lower bound (read literally the
@@ -24,6 +25,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
+from ..backend import backend_of
 
 __all__ = ["TENDON_STRAIN0",
            "thelen_tendon_force", "thelen_tendon_stiffness", "thelen_tendon_stiffness_derivative",
@@ -61,20 +64,22 @@ def thelen_tendon_force(strain, *, strain0=TENDON_STRAIN0, exact_toe: bool = Fal
     with ``k_lin = 1.712/strain0``; zero for eps <= 0 (slack).
     """
     eps_toe, k_lin, scale, rate = _thelen_constants(strain0, exact_toe)
-    eps = np.asarray(strain, dtype=float)
+    xp = backend_of(strain)
+    eps = xp.asarray(strain)
     # clipping to [0, eps_toe] evaluates both pieces branch-free: the toe term
     # saturates at f_toe and the linear term is zero below the toe.
-    toe = scale * np.expm1(rate * np.clip(eps, 0.0, eps_toe))
-    return toe + k_lin * np.maximum(eps - eps_toe, 0.0)
+    toe = scale * xp.expm1(rate * xp.clip(eps, 0.0, eps_toe))
+    return toe + k_lin * xp.maximum(eps - eps_toe, 0.0)
 
 
 def thelen_tendon_stiffness(strain, *, strain0=TENDON_STRAIN0, exact_toe: bool = False):
     """d(normalized tendon force)/d(strain) of Eq. A.6 (right derivative at 0 and at the toe)."""
     eps_toe, k_lin, scale, rate = _thelen_constants(strain0, exact_toe)
-    eps = np.asarray(strain, dtype=float)
-    in_toe = (eps >= 0.0) & (eps <= eps_toe)
-    toe = rate * scale * np.exp(rate * np.clip(eps, 0.0, eps_toe))
-    return np.where(in_toe, toe, np.where(eps > eps_toe, k_lin, 0.0))
+    xp = backend_of(strain)
+    eps = xp.asarray(strain)
+    toe = rate * scale * xp.exp(rate * xp.clip(eps, 0.0, eps_toe))
+    # (eps >= 0) & (eps <= eps_toe) -> toe; above the toe k_lin; slack 0 (nested: CasADi has no &)
+    return xp.where(eps > eps_toe, k_lin, xp.where(eps >= 0.0, toe, 0.0))
 
 
 def thelen_tendon_stiffness_derivative(strain, *, strain0: float = TENDON_STRAIN0):
@@ -88,9 +93,10 @@ def thelen_tendon_stiffness_derivative(strain, *, strain0: float = TENDON_STRAIN
 def thelen_tendon_strain(force, *, strain0=TENDON_STRAIN0, exact_toe: bool = False):
     """Inverse of Eq. A.6: tendon strain from normalized tendon force (0 for force <= 0)."""
     eps_toe, k_lin, scale, rate = _thelen_constants(strain0, exact_toe)
-    f = np.asarray(force, dtype=float)
-    toe = np.log1p(np.clip(f, 0.0, F_TOE) / scale) / rate
-    return toe + np.maximum(f - F_TOE, 0.0) / k_lin
+    xp = backend_of(force)
+    f = xp.asarray(force)
+    toe = xp.log1p(xp.clip(f, 0.0, F_TOE) / scale) / rate
+    return toe + xp.maximum(f - F_TOE, 0.0) / k_lin
 
 
 def winters_tendon_force(strain, *, strain0: float = TENDON_STRAIN0):
@@ -99,13 +105,15 @@ def winters_tendon_force(strain, *, strain0: float = TENDON_STRAIN0):
     With ``k_t = F_max/(strain0 l_slack)^2``, ``F = k_t (l_t - l_slack)^2`` is
     ``F_max (eps/strain0)^2``: the tendon carries F_max at ``strain0`` (4 %).
     """
-    e = np.maximum(np.asarray(strain, dtype=float), 0.0) / strain0
+    xp = backend_of(strain)
+    e = xp.maximum(xp.asarray(strain), 0.0) / strain0
     return e * e
 
 
 def winters_tendon_stiffness(strain, *, strain0: float = TENDON_STRAIN0):
     """d(normalized force)/d(strain) of Eq. A.10: ``2 eps / strain0^2`` (0 when slack)."""
-    return 2.0 * np.maximum(np.asarray(strain, dtype=float), 0.0) / (strain0 * strain0)
+    xp = backend_of(strain)
+    return 2.0 * xp.maximum(xp.asarray(strain), 0.0) / (strain0 * strain0)
 
 
 def winters_tendon_stiffness_derivative(strain, *, strain0: float = TENDON_STRAIN0):
@@ -116,4 +124,5 @@ def winters_tendon_stiffness_derivative(strain, *, strain0: float = TENDON_STRAI
 
 def winters_tendon_strain(force, *, strain0: float = TENDON_STRAIN0):
     """Inverse of Eq. A.10: strain ``strain0 sqrt(f)`` (0 for force <= 0)."""
-    return strain0 * np.sqrt(np.maximum(np.asarray(force, dtype=float), 0.0))
+    xp = backend_of(force)
+    return strain0 * xp.sqrt(xp.maximum(xp.asarray(force), 0.0))

@@ -2,7 +2,9 @@
 
 Thesis App. A.3 (Eq. A.6-A.9).  Pure, elementwise functions over broadcastable
 arrays; the :class:`pinmsk.muscles.Thelen2003` object binds per-muscle
-parameters to them.  Conventions:
+parameters to them.  The curves (force-length, passive, force-velocity without
+``smooth``, :func:`thelen_fiber_force`) also take CasADi values (:mod:`pinmsk.backend`),
+so the optimal-control engine differentiates this same code.  Conventions:
 
 - lengths normalized by ``l_opt`` (``l_norm = l_ce / l_opt``);
 - fiber velocity normalized by ``v_max`` (``v_norm = v_ce / v_max``,
@@ -32,6 +34,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ..backend import backend_of
 from ..errors import ConvergenceError
 from ._common import check_active, locate, where_first
 from ._solve import compliant_equilibrium, safeguarded_newton
@@ -79,8 +82,9 @@ def thelen_passive_force_length(l_norm, *, k_pe: float = K_PE, strain0: float = 
     Zero below optimal length: the parallel element is slack there (the
     printed formula would give a small negative force; OpenSim clips too).
     """
-    d = np.maximum(np.asarray(l_norm, dtype=float) - 1.0, 0.0)
-    return np.expm1((k_pe / strain0) * d) / math.expm1(k_pe)
+    xp = backend_of(l_norm)
+    d = xp.maximum(xp.asarray(l_norm) - 1.0, 0.0)
+    return xp.expm1((k_pe / strain0) * d) / math.expm1(k_pe)
 
 
 def thelen_passive_force_length_derivative(l_norm, *, k_pe: float = K_PE,
@@ -93,8 +97,9 @@ def thelen_passive_force_length_derivative(l_norm, *, k_pe: float = K_PE,
 
 def thelen_active_force_length(l_norm, *, gamma: float = GAMMA):
     """Thelen 2003 active force-length ``f_isom = exp(-(l - 1)^2 / gamma)``, thesis Eq. A.8."""
-    d = np.asarray(l_norm, dtype=float) - 1.0
-    return np.exp(-(d * d) / gamma)
+    xp = backend_of(l_norm)
+    d = xp.asarray(l_norm) - 1.0
+    return xp.exp(-(d * d) / gamma)
 
 
 def thelen_active_force_length_derivative(l_norm, *, gamma: float = GAMMA):
@@ -157,15 +162,16 @@ def thelen_force_velocity(v_norm, *, smooth: float = 0.0, a_f=A_F, f_hat=F_HAT,
     else:
         a_f, f_hat = np.asarray(a_f, dtype=float), np.asarray(f_hat, dtype=float)
         c, _, w_thr, k_con, k_ecc = _fv_constants(a_f, f_hat, np.asarray(extrapolation, dtype=float))
-    w = np.asarray(v_norm, dtype=float)
-    w1 = np.clip(w, -1.0, 0.0)
-    w2 = np.clip(w, 0.0, w_thr)
+    xp = backend_of(v_norm)
+    w = xp.asarray(v_norm)
+    w1 = xp.clip(w, -1.0, 0.0)
+    w2 = xp.clip(w, 0.0, w_thr)
     # Branch-free: each clipped piece is zero (or 1) outside its interval, so
     # the four pieces add up without np.where chains.
     return ((1.0 + w1) / (1.0 - w1 / a_f)
             + (c * (f_hat - 1.0)) * w2 / (1.0 + c * w2)
-            + k_con * np.minimum(w + 1.0, 0.0)
-            + k_ecc * np.maximum(w - w_thr, 0.0))
+            + k_con * xp.minimum(w + 1.0, 0.0)
+            + k_ecc * xp.maximum(w - w_thr, 0.0))
 
 
 def thelen_force_velocity_derivative(v_norm, *, smooth: float = 0.0):
@@ -195,7 +201,7 @@ def thelen_force_velocity_inverse(f_v):
 
 
 def _speed_scale(a):
-    return 0.25 + 0.75 * np.asarray(a, dtype=float)
+    return 0.25 + 0.75 * backend_of(a).asarray(a)
 
 
 def thelen_fiber_velocity(f_ce, a, f_isom, *, v_max=1.0):
@@ -219,8 +225,9 @@ def thelen_fiber_force(v_ce, a, f_isom, *, v_max=1.0):
 
     ``f = a f_isom f_V(v / ((0.25 + 0.75 a) v_max))``.
     """
-    a = np.asarray(a, dtype=float)
-    w = np.asarray(v_ce, dtype=float) / (_speed_scale(a) * v_max)
+    xp = backend_of(v_ce, a, f_isom)
+    a = xp.asarray(a)
+    w = xp.asarray(v_ce) / (_speed_scale(a) * v_max)
     return a * f_isom * thelen_force_velocity(w)
 
 

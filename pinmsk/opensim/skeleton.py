@@ -453,15 +453,17 @@ def _slope(f: fns.Function, arg: np.ndarray) -> np.ndarray:
     hit = _SLOPES.get(id(f))
     if hit is not None and hit[0] is f and hit[1].shape == arg.shape and np.array_equal(hit[1], arg):
         return hit[2]
-    d = f.derivative(arg, 1, 0)
-    _remember_slope(f, arg, d)
-    return d
+    return _remember_slope(f, arg, f.derivative(arg, 1, 0))
 
 
-def _remember_slope(f: fns.Function, arg: np.ndarray, d: np.ndarray) -> None:
+def _remember_slope(f: fns.Function, arg: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Keep ``d = f'(arg)`` for :func:`_slope`; returns it read-only (every later hit shares it)."""
+    d = d.view()
+    d.flags.writeable = False
     if len(_SLOPES) >= 256 and id(f) not in _SLOPES:
         _SLOPES.pop(next(iter(_SLOPES)))
     _SLOPES[id(f)] = (f, arg.copy(), d)
+    return d
 
 
 class CoordinateMap:
@@ -605,8 +607,7 @@ class CoordinateMap:
         arg = Q[:, cols[0]] if k == 1 else Q[:, cols]
         if k == 1 and A is not None:       # value, slope and curvature from one evaluation
             val, d, dd = f.evaluate(arg)
-            _remember_slope(f, arg, d)
-            d1 = [d]
+            d1 = [_remember_slope(f, arg, d)]
         else:
             val = f.value(arg) if value else None
             d1 = [_slope(f, arg) if k == 1 else f.derivative(arg, 1, i) for i in range(k)]
