@@ -82,7 +82,7 @@ from .model import load_model
 from .presentation import plots
 from .presentation.plots import contact_fit_figures
 from .presentation.progress import Progress
-from .solvers.dynamic import build_from_task, load_task
+from .solvers.ocp.tasks import build_from_task, load_task
 from .solvers.static import StaticOptimization
 from .trial import Trial, moment_channel
 
@@ -479,15 +479,23 @@ def contact_fit_task(model, trial, *, json_path=None, plot_dir=None, **options) 
 
 
 def optimize_task(task_path, out_path=None, progress=None, *, precision: int | None = None) -> Result:
-    """Run the task file ``task_path``; write the result trial to ``out_path`` (.sto/.csv/.mot,
-    ``precision`` significant digits, default that of :func:`pinmsk.io.write_trial`)
-    and the JSON summary (:meth:`DynamicOptimization.to_dict`) next to it (``<out>.json``).
-    Returns the fit's :class:`~pinmsk.fitting.Result` (check ``converged``)."""
+    """Run the task file ``task_path`` on the optimal-control engine (:mod:`pinmsk.solvers.ocp`);
+    write the result trial to ``out_path`` (.sto/.csv/.mot, ``precision`` significant digits,
+    default that of :func:`pinmsk.io.write_trial`) and the JSON summary
+    (:meth:`~pinmsk.solvers.ocp.problem.Collocation.to_dict`) next to it (``<out>.json``).
+
+    A problem IPOPT did not solve raises :class:`~pinmsk.errors.ConvergenceError` naming its
+    status and the most violated constraint; nothing is written then (it is not a solution).
+    """
+    from .errors import ConvergenceError
     spec = load_task(task_path)
     prob = build_from_task(spec, base_dir=Path(task_path).parent, progress=progress)
     res = prob.fit().result_
+    if not res.converged:
+        raise ConvergenceError(f"{task_path}: the optimizer did not converge ({res.status}); "
+                               "no result written (it is not a solution)")
     if out_path is not None:
         out = Path(out_path)
-        write_trial(res, out, precision=precision)
         write_json(out.with_suffix(out.suffix + ".json"), prob.to_dict())
+        write_trial(res, out, precision=precision)
     return res

@@ -85,9 +85,49 @@ def run_pinmsk(*args: str) -> str:
     return out.getvalue()
 
 
+# -- casadi and opensim in separate processes ------------------------------------------------
+# The pip wheels of opensim (4.6, which bundles Moco) and casadi both ship a libcasadi.so.3.7, with
+# different ABIs: whichever a process loads first, the other fails to import.  The suite therefore
+# runs as two xdist groups ("opensim" and "casadi", `--dist loadgroup` in pyproject.toml), one per
+# worker: modules that run OpenSim go to the first, modules that use the optimal-control engine to
+# the second, the rest are shared out between them.  In a single process (-n 0) the second library
+# to be asked for skips with this reason.
+CASADI_OPENSIM = ("casadi and opensim cannot be loaded in one process (both bundle libcasadi.so.3.7 "
+                  "with different ABIs); run the suite with its default -n 2 --dist loadgroup")
+_OPENSIM_MARKS = ("import_opensim(", "bench_opensim", "import opensim")
+_CASADI_MARKS = ("casadi", "solvers.ocp", "optimize_task", "require_casadi")
+
+
+def _module_group(path: Path, k: int) -> str:
+    text = path.read_text(errors="replace") if path.suffix == ".py" else ""
+    if any(m in text for m in _OPENSIM_MARKS) and path.name != "conftest.py":
+        return "opensim"
+    if any(m in text for m in _CASADI_MARKS):
+        return "casadi"
+    return ("opensim", "casadi")[k % 2]
+
+
+def pytest_collection_modifyitems(config, items):
+    groups: dict = {}
+    for item in items:
+        g = groups.get(item.path)
+        if g is None:
+            g = groups[item.path] = _module_group(Path(item.path), len(groups))
+        item.add_marker(pytest.mark.xdist_group(g))
+
+
+def require_casadi():
+    """The casadi module, or a skip naming why (not installed, or opensim already in this process)."""
+    if "opensim" in sys.modules and "casadi" not in sys.modules:
+        pytest.skip(CASADI_OPENSIM)
+    return pytest.importorskip("casadi")
+
+
 def import_opensim():
     """``(opensim, "")`` with its logger off (no ``opensim.log`` in the working directory), or
-    ``(None, why)`` when the optional peer is not installed."""
+    ``(None, why)`` when the optional peer is not installed (or casadi is loaded in this process)."""
+    if "casadi" in sys.modules and "opensim" not in sys.modules:
+        return None, CASADI_OPENSIM
     try:
         import opensim
     except ImportError as exc:  # pragma: no cover - depends on the environment

@@ -11,7 +11,9 @@ from pinmsk.errors import ModelError
 from pinmsk.model import load_model
 from pinmsk.muscles.paths import PolynomialPath, path_variants
 
-ca = pytest.importorskip("casadi")
+from conftest import require_casadi  # noqa: E402
+
+ca = require_casadi()
 
 # a numpy ufunc called on a CasADi value (instead of the pinmsk.backend namespace) fails the test
 pytestmark = pytest.mark.filterwarnings("error::FutureWarning:casadi")

@@ -11,14 +11,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-try:
-    import casadi as ca
-except ModuleNotFoundError:
-    pytest.skip("casadi is not installed (optional: pip install casadi)", allow_module_level=True)
-except ImportError as exc:
-    # OpenSim's Moco bundles its own libcasadi: the pip wheel cannot load in a process that loaded
-    # opensim first (nor opensim after casadi); run this file in its own process then
-    pytest.skip(f"casadi cannot load beside opensim in this process: {exc}", allow_module_level=True)
+from conftest import require_casadi  # noqa: E402
+
+ca = require_casadi()
 
 from pinmsk import energy  # noqa: E402
 from pinmsk.errors import ModelError  # noqa: E402

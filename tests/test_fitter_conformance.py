@@ -55,15 +55,15 @@ def _fso():
     return ForwardStaticOptimization, dict(control_points=41, omega=10.0, gains=None), _elbow(41)
 
 
-def _dynamic():
-    from pinmsk.solvers.dynamic import DynamicOptimization, Target
-    from pinmsk.solvers.parametrization import Polynomial
-    T = 0.25
-    t = np.linspace(0.0, T, 51)
-    target = Target("samples", time=t, values=0.2 * np.sin(np.pi * t / T) ** 2)
-    return DynamicOptimization, dict(model=pinmsk.load_model("finger"), parametrization=Polynomial(1, duration=T),
-                                     target=target, design="ift", step=T / 50, tracking_weight=1.0,
-                                     excitation_bounds=(0.0, 1.0), n_starts=1, maxiter=30), ()
+def _collocation():
+    from conftest import require_casadi
+    require_casadi()
+    from pinmsk.solvers.ocp import Collocation, Effort, InitialState, Target, TrackCoordinates
+    target = Target("sine", amplitude=0.2, frequency=4.0)
+    return Collocation, dict(model=pinmsk.load_model("finger"),
+                             cost=0.1 * Effort(2, normalize=False) + 0.9 * TrackCoordinates(target),
+                             constraints=[InitialState(q={"mcp_flexion": 0.0}, v={"mcp_flexion": float(target(0.0, 1))})],
+                             duration=0.25, intervals=10, solver={"max_iter": 100}), ()
 
 
 def _contact():
@@ -101,7 +101,7 @@ def _effect():
 
 
 CASES = {"StaticOptimization": _so, "ModifiedStaticOptimization": _mso, "ExtendedInverseDynamics": _eid,
-         "ForwardStaticOptimization": _fso, "DynamicOptimization": _dynamic, "ContactFit": _contact,
+         "ForwardStaticOptimization": _fso, "Collocation": _collocation, "ContactFit": _contact,
          "InverseKinematics": _ik, "EffectFit": _effect}
 
 

@@ -14,7 +14,9 @@ import pytest
 from pinmsk import load_model
 from pinmsk.errors import ModelError
 
-ca = pytest.importorskip("casadi")
+from conftest import require_casadi  # noqa: E402
+
+ca = require_casadi()
 
 from pinmsk.solvers.ocp.skeleton import RneaCallback, SymbolicSkeleton  # noqa: E402  (needs casadi)
 

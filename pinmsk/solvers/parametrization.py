@@ -67,6 +67,12 @@ class Parametrization:
     def describe(self) -> dict:
         return {"kind": self.kind, "n_params": self.n_params}
 
+    def __eq__(self, other) -> bool:
+        return type(self) is type(other) and self.describe() == other.describe()
+
+    def __hash__(self) -> int:
+        return hash((type(self).__name__, tuple(sorted(self.describe().items()))))
+
 
 class Polynomial(Parametrization):
     """Polynomial of order ``order`` on ``[t0, t0 + duration]`` (thesis Eq. 3.2), Chebyshev basis."""

@@ -17,14 +17,15 @@
 
 CasADi is needed only when a problem is solved (``pip install casadi``).
 """
-from .constraints import (AverageSpeed, Constraint, CoordinateBounds, ExcitationBounds, InitialState, Periodic,
+from .constraints import (AverageSpeed, Constraint, CoordinateBounds, ExcitationBounds, FinalState, InitialState,
+                          Periodic,
                           Symmetric, TrackingTolerance)
 from .controls import GlobalControls, NodeControls
-from .costs import Cost, CostSum, Effort, MetabolicEnergy, Smoothness, TrackCoordinates, TrackSignals
+from .costs import Cost, CostSum, Effort, FinalTime, MetabolicEnergy, Smoothness, TrackCoordinates, TrackSignals
 from .problem import SCHEMES, Collocation
 from .target import Target
 
 __all__ = ["Collocation", "SCHEMES", "Target", "NodeControls", "GlobalControls",
-           "Cost", "CostSum", "Effort", "MetabolicEnergy", "TrackCoordinates", "TrackSignals", "Smoothness",
-           "Constraint", "TrackingTolerance", "ExcitationBounds", "CoordinateBounds", "InitialState", "Periodic",
+           "Cost", "CostSum", "Effort", "MetabolicEnergy", "TrackCoordinates", "TrackSignals", "Smoothness", "FinalTime",
+           "Constraint", "TrackingTolerance", "ExcitationBounds", "CoordinateBounds", "InitialState", "FinalState", "Periodic",
            "Symmetric", "AverageSpeed"]

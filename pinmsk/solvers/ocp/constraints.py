@@ -13,6 +13,7 @@ duration, and the state layout).
   hyper-extension bound of Eq. 5.10);
 - :class:`InitialState` -- the start of the motion fixed (the thesis's forward
   simulations start from the target's state at rest activation ``a(0) = u(0)``);
+- :class:`FinalState` -- coordinates and speeds fixed at the end;
 - :class:`Periodic` -- ``x(T) = x(0)`` for the chosen states (Eq. 5.9);
 - :class:`Symmetric` -- ``x(T) = mirror(x(0))``: left and right swapped, the
   forward translation advanced (a half gait cycle, Eq. 5.8);
@@ -23,12 +24,13 @@ from __future__ import annotations
 import numpy as np
 
 from ...errors import ModelError
+from ._values import ValueEq
 
-__all__ = ["Constraint", "TrackingTolerance", "ExcitationBounds", "CoordinateBounds", "InitialState",
+__all__ = ["Constraint", "TrackingTolerance", "ExcitationBounds", "CoordinateBounds", "InitialState", "FinalState",
            "Periodic", "Symmetric", "AverageSpeed"]
 
 
-class Constraint:
+class Constraint(ValueEq):
     """Base class: ``path(pt)`` and ``boundary(glob)`` return lists of ``(label, expr, lo, hi)``."""
 
     def check(self, problem) -> None:
@@ -117,6 +119,19 @@ class InitialState(Constraint):
             for i, n in enumerate(glob["muscles"]):
                 rows.append((f"initial activation of {n} = excitation", glob["x0"][lay["a"][i]] - glob["e0"][i],
                              0.0, 0.0))
+        return rows
+
+
+class FinalState(InitialState):
+    """The final coordinates ``q`` and speeds ``v`` fixed (dicts by coordinate, or arrays)."""
+
+    def __init__(self, *, q=None, v=None):
+        super().__init__(q=q, v=v, activation="free")
+
+    def boundary(self, glob) -> list:
+        names, lay = glob["coordinates"], glob["layout"]
+        rows = [(f"final {names[j]}", glob["xN"][lay["q"][j]], x, x) for j, x in self._q.items()]
+        rows += [(f"final {names[j]} speed", glob["xN"][lay["v"][j]], x, x) for j, x in self._v.items()]
         return rows
 
 

@@ -15,12 +15,13 @@ from __future__ import annotations
 import numpy as np
 
 from ...errors import ModelError
+from ._values import ValueEq
 from ..parametrization import Fourier, Parametrization
 
 __all__ = ["NodeControls", "GlobalControls"]
 
 
-class NodeControls:
+class NodeControls(ValueEq):
     """The signal's values at the collocation points are the decision variables."""
 
     kind = "nodes"
@@ -32,7 +33,7 @@ class NodeControls:
         return "NodeControls()"
 
 
-class GlobalControls:
+class GlobalControls(ValueEq):
     """``s(t) = B(t) P`` with ``parametrization`` (one coefficient column per signal).
 
     ``free_period`` (Fourier only): the period is a decision variable within

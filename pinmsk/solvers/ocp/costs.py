@@ -22,6 +22,7 @@ Terms (thesis equation in brackets):
 - :class:`TrackCoordinates` -- ``1/(T max q_d^2) int (q - q_d)^2 dt`` (the ``J_2`` of Eq. 3.3);
 - :class:`TrackSignals` -- any per-point quantity (EMG envelopes against activations, ground
   reaction forces) against sampled references, mean squared error over scales;
+- :class:`FinalTime` -- the duration itself (s), with a free final time (Moco's final-time goal);
 - :class:`Smoothness` -- the mean square of the implicit controls (accelerations, tendon-force
   rates) or of the excitations' rate, which regularizes the collocation solution.
 """
@@ -30,12 +31,13 @@ from __future__ import annotations
 import numpy as np
 
 from ...errors import ModelError
+from ._values import ValueEq
 
 __all__ = ["Cost", "CostSum", "Effort", "MetabolicEnergy", "TrackCoordinates", "TrackSignals",
-           "Smoothness"]
+           "Smoothness", "FinalTime"]
 
 
-class Cost:
+class Cost(ValueEq):
     """A named cost term ``weight * value``; subclasses give ``integrand(pt)`` and may override ``finish``."""
 
     name = "cost"
@@ -83,7 +85,7 @@ class Cost:
 
     def linear_finish(self, glob) -> float | None:
         """``a`` if :meth:`finish` is ``a * integral`` with a constant ``a`` (a fixed duration), else None."""
-        return 1.0 / glob["T"] if np.ndim(glob["T"]) == 0 and isinstance(glob["T"], (int, float)) else None
+        return 1.0 / glob["T"] if isinstance(glob["T"], (int, float)) else None
 
     def __repr__(self) -> str:
         return f"{self.weight:g} * {type(self).__name__}(name={self.name!r})"
@@ -105,6 +107,9 @@ class CostSum(Cost):
 
     def terms(self) -> list[Cost]:
         return list(self._terms)
+
+    def _public(self) -> dict:
+        return {"terms": self._terms}
 
     def __mul__(self, w: float) -> "CostSum":
         return CostSum([t * w for t in self._terms])
@@ -295,3 +300,18 @@ class Smoothness(Cost):
     def integrand(self, pt, ref=None):
         import casadi as ca
         return ca.sumsqr(pt[self.of] / self.scale) / pt[self.of].numel()
+
+
+class FinalTime(Cost):
+    """The duration ``T`` (s) as a cost (with a free final time; Moco's ``MocoFinalTimeGoal``)."""
+
+    name = "final_time"
+
+    def integrand(self, pt, ref=None):
+        return 0.0 * pt["t"]
+
+    def finish(self, integral, glob):
+        return glob["T"]
+
+    def linear_finish(self, glob):
+        return None

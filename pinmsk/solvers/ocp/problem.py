@@ -322,7 +322,7 @@ class Collocation(Fitter):
         span = tt[-1] if tt[-1] > 0 else 1.0
 
         def ch(name, default):
-            if name in trial.channels:
+            if name in trial.names:
                 return np.interp(t * span / T, tt, np.asarray(trial[name], dtype=float))
             return default
 
@@ -690,7 +690,7 @@ class Collocation(Fitter):
             xlo.append(np.full(m, a_min))
             xhi.append(np.ones(m))
             if pm.compliant:
-                flo, fhi = pm.ms.mtu.tendon_force_bounds
+                flo, fhi = pm.ms.mtu.tendon_force_bounds()
                 xlo.append(np.full(m, flo))
                 xhi.append(np.full(m, fhi))
         xlo, xhi = np.concatenate(xlo), np.concatenate(xhi)

@@ -9,11 +9,12 @@ import numpy as np
 
 from ...backend import backend_of
 from ...errors import ModelError
+from ._values import ValueEq
 
 __all__ = ["Target"]
 
 
-class Target:
+class Target(ValueEq):
     """A desired motion ``q_d(t)`` with analytic time derivatives.
 
     ``kind="sine"``: ``offset + amplitude sin(2 pi frequency t + phase)`` (thesis Eq. 3.1);
