@@ -46,7 +46,8 @@ class LocalBlock:
 
 
 def assemble(w, blocks, other_g, *, n_int_vars: int = 0, int_weights=None, f_extra=0):
-    """The NLP's ``g``, ``f`` and custom ``jac_g``, ``hess_lag`` Functions (CasADi ``nlpsol`` options).
+    """The NLP's ``g``, ``f`` and custom ``jac_g``, ``hess_lag`` (and ``grad_f`` with direct integrals, else
+    None) Functions (CasADi ``nlpsol`` options).
 
     ``w`` (MX symbol, n_w): the decision vector; ``blocks``: :class:`LocalBlock` s;
     ``other_g`` (MX of ``w``): the remaining rows.  The integrals enter the objective
@@ -60,6 +61,7 @@ def assemble(w, blocks, other_g, *, n_int_vars: int = 0, int_weights=None, f_ext
     lam_f = ca.MX.sym("lam_f")
     direct = n_int_vars == 0
     g_parts, jac_trip, jac_vals, hess_trip, hess_vals = [], [], [], [], []
+    grad_trip, grad_vals = [], []
     row0 = 0
     n_rows_local = sum(b.n_rows * b.K for b in blocks)
     i_row0 = n_rows_local                       # first integral row
@@ -82,13 +84,20 @@ def assemble(w, blocks, other_g, *, n_int_vars: int = 0, int_weights=None, f_ext
         Jc = ca.jacobian(c, z)
         # the integral rows are I - sum c: their multipliers weigh -c
         H = ca.triu(ca.hessian(ca.dot(lr, r) - ca.dot(lc, c), z)[0])
-        Fj = ca.Function(f"{b.name}_jacobian", [z, p], [r, c, _nonzeros(Jr), _nonzeros(Jc)])
+        # values, Jacobian, gradient and Hessian are separate mapped functions, so that evaluating
+        # g or f never computes derivatives
+        Fj = ca.Function(f"{b.name}_jacobian", [z, p], [_nonzeros(Jr), _nonzeros(Jc)])
         Fh = ca.Function(f"{b.name}_hessian", [z, p, lr, lc], [_nonzeros(H)])
         Zk = ca.reshape(w[b.idx.ravel(order="F").tolist()], b.idx.shape[0], b.K)
         Pk = ca.DM(b.params)
         Lr = ca.reshape(lam_g[row0: row0 + b.n_rows * b.K], b.n_rows, b.K)
-        Rk, Ck, JRk, JCk = Fj.map(b.K)(Zk, Pk)
+        Rk, Ck = b.fn.map(b.K)(Zk, Pk)
+        JRk, JCk = Fj.map(b.K)(Zk, Pk)
         HKk = Fh.map(b.K)(Zk, Pk, Lr, ca.repmat(mu, 1, b.K))
+        if direct and int_weights is not None and len(int_weights):
+            Fg = ca.Function(f"{b.name}_gradient", [z, p], [ca.gradient(ca.dot(ca.DM(np.asarray(int_weights, float)), c), z)])
+            grad_trip.append(b.idx.ravel(order="F"))
+            grad_vals.append(ca.vec(Fg.map(b.K)(Zk, Pk)))
         g_parts.append(ca.vec(Rk))
         integ_sum = integ_sum + ca.sum2(Ck)
         # Jacobian triplets: local rows are distinct NLP rows; integral rows sum over instances
@@ -140,9 +149,16 @@ def assemble(w, blocks, other_g, *, n_int_vars: int = 0, int_weights=None, f_ext
     H = _scatter(n_w, n_w, hess_trip, hess_vals)
     p = ca.MX.sym("p", 0)
     jac_g = ca.Function("nlp_jac_g", [w, p], [g, J], ["x", "p"], ["g", "jac_g_x"])
+    grad_f = None
+    if grad_trip:           # direct integrals: the gradient is the local gradients summed
+        Gf = _scatter(n_w, 1, [(np.concatenate(grad_trip), np.zeros(sum(t.size for t in grad_trip), dtype=np.int64))],
+                      [ca.vertcat(*grad_vals)])
+        if not (isinstance(f_extra, (int, float)) and f_extra == 0):
+            Gf = Gf + ca.gradient(f_extra, w)
+        grad_f = ca.Function("nlp_grad_f", [w, p], [f, ca.densify(Gf)], ["x", "p"], ["f", "grad_f_x"])
     hess_lag = ca.Function("nlp_hess_l", [w, p, lam_f, lam_g], [H], ["x", "p", "lam_f", "lam_g"],
                            ["triu_hess_gamma_x_x"])
-    return g, f, jac_g, hess_lag
+    return g, f, jac_g, hess_lag, grad_f
 
 
 def _nonzeros(M):

@@ -585,7 +585,7 @@ class Collocation(Fitter):
         lblocks = [LocalBlock("interval", G_int, idx_int, par_int), LocalBlock("final", G_fin, idx_fin, par_fin)]
         if direct:
             weights = np.array([c.weight * a_ for c, a_ in zip(self._costs, lin)])
-            g, J, jac_g, hess_lag = assemble(w, lblocks, other_g, int_weights=weights)
+            g, J, jac_g, hess_lag, grad_f = assemble(w, lblocks, other_g, int_weights=weights)
             integ = ca.sum2(G_int.map(N)(ca.reshape(w[idx_int.ravel(order="F").tolist()], idx_int.shape[0], N),
                                          ca.DM(par_int))[1])
             values = {c.name: integ[i] * a_ for i, (c, a_) in enumerate(zip(self._costs, lin))}
@@ -595,7 +595,7 @@ class Collocation(Fitter):
             for i, c in enumerate(self._costs):
                 values[c.name] = c.finish(I[i], glob)
                 J = J + c.weight * values[c.name]
-            g, J, jac_g, hess_lag = assemble(w, lblocks, other_g, n_int_vars=ncost, f_extra=J)
+            g, J, jac_g, hess_lag, grad_f = assemble(w, lblocks, other_g, n_int_vars=ncost, f_extra=J)
         blocks.meta, blocks.lo, blocks.hi = (blocks.meta[:2] + blocks.meta[3:], blocks.lo[:2] + blocks.lo[3:],
                                              blocks.hi[:2] + blocks.hi[3:]) if direct else \
             (blocks.meta, blocks.lo, blocks.hi)
@@ -625,7 +625,7 @@ class Collocation(Fitter):
             outputs["P"] = P
             if period is not None:
                 outputs["period"] = period
-        return dict(w=w, J=J, g=g, jac_g=jac_g, hess_lag=hess_lag, lbg=lbg, ubg=ubg, lbx=lbx, ubx=ubx, w0=w0,
+        return dict(w=w, J=J, g=g, jac_g=jac_g, hess_lag=hess_lag, grad_f=grad_f, lbg=lbg, ubg=ubg, lbx=lbx, ubx=ubx, w0=w0,
                     blocks=blocks, outputs=outputs, layout=(st, co), n_w=int(w.numel()), Z=Z,
                     scales=(sx, su, ss), local=(G_int, G_fin, idx_int, par_int, idx_fin, par_fin, ncost))
 
@@ -791,6 +791,8 @@ class Collocation(Fitter):
         nlp = self._build(guesses[0])
         opts = self._ipopt_options()
         opts.update(jac_g=nlp["jac_g"], hess_lag=nlp["hess_lag"])
+        if nlp["grad_f"] is not None:
+            opts["grad_f"] = nlp["grad_f"]
         solver = ca.nlpsol("ocp", "ipopt", {"x": nlp["w"], "f": nlp["J"], "g": nlp["g"]}, opts)
         out_fn = ca.Function("outputs", [nlp["w"]], list(nlp["outputs"].values()))
         records, best = [], None
