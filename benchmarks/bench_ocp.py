@@ -108,7 +108,7 @@ def plain_forearm_j4(model):
     ``xdot = [v, (R(q)^T F(a, q, v) - g(q)) / M, adot(u, a)]`` with ``g(q) = c1 cos q + c2 sin q``
     (``M``, ``c1``, ``c2`` read from Pinocchio); compressed Hermite-Simpson defects; Simpson's
     rule for ``J4 = 1/(T sum V) int sum V_i a_i^3 dt``; ``|q - q_d| <= 0.1`` and ``0 <= u <= 1``
-    at nodes and midpoints; ``q(0) = 0.3``, ``v(0) = 0``.
+    at nodes and midpoints; ``q(0) = 0.3``, ``v(0) = 0``, ``a(0) = u(0)``.
     """
     import pinocchio as pin
     from pinmsk.effects.activation import excitation_path
@@ -159,9 +159,10 @@ def plain_forearm_j4(model):
     Ln, Lm = ca.mtimes(Sv, X[2:, :] ** 3), ca.mtimes(Sv, Xm[2:, :] ** 3)
     J = ca.sum2(h / 6 * (Ln[:, :-1] + 4 * Lm + Ln[:, 1:])) / T
     qd, qdm = np.asarray(tg(tn), dtype=float), np.asarray(tg(tm), dtype=float)
-    g = [ca.vec(defects), X[0, :].T - qd, Xm[0, :].T - qdm, ca.vec(Un), ca.vec(Um)]
-    lbg = [0.0] * ((2 + m) * N) + [-TOL] * (2 * N + 1) + [0.0] * (m * (2 * N + 1))
-    ubg = [0.0] * ((2 + m) * N) + [TOL] * (2 * N + 1) + [1.0] * (m * (2 * N + 1))
+    # a(0) = u(0): activation starts at rest (InitialState's default, as the old engine's simulation)
+    g = [ca.vec(defects), X[2:, 0] - Un[:, 0], X[0, :].T - qd, Xm[0, :].T - qdm, ca.vec(Un), ca.vec(Um)]
+    lbg = [0.0] * ((2 + m) * N + m) + [-TOL] * (2 * N + 1) + [0.0] * (m * (2 * N + 1))
+    ubg = [0.0] * ((2 + m) * N + m) + [TOL] * (2 * N + 1) + [1.0] * (m * (2 * N + 1))
     wv = ca.vertcat(ca.vec(X), ca.vec(P))
     nx = (2 + m) * (N + 1)
     lbx, ubx = np.full(wv.numel(), -np.inf), np.full(wv.numel(), np.inf)
