@@ -12,7 +12,7 @@ sys.path.insert(0, str(EXAMPLES))
 @pytest.mark.slow
 def test_finger_tapping_quick(tmp_path):
     import finger_tapping
-    finger_tapping.main(["--out", str(tmp_path), "--quick", "--jobs", "2"])
+    finger_tapping.main(["--out", str(tmp_path), "--quick"])
     data = json.loads((tmp_path / "finger_tapping.json").read_text())
     for key in ("frequencies", "J", "J1", "J2", "max_frequency", "seconds"):
         assert key in data
@@ -26,7 +26,7 @@ def test_finger_tapping_quick(tmp_path):
 @pytest.mark.slow
 def test_forearm_quick(tmp_path):
     import forearm_dynamic_optimization as fa
-    fa.main(["--out", str(tmp_path), "--quick", "--jobs", "2"])
+    fa.main(["--out", str(tmp_path), "--quick"])
     data = json.loads((tmp_path / "forearm_do.json").read_text())
     r = data["J4"]["fourier"]
     assert r["converged"]
