@@ -54,18 +54,6 @@ def solve(model, f, *, intervals=50, n_starts=1):
     return res, time.perf_counter() - t0
 
 
-class warm_start:
-    """A result as a Collocation ``guess``.  Workaround: the engine's ``_guess_from_trial`` reads
-    ``trial.channels``, which neither Trial nor Result has (their channel names are ``names``);
-    pass the result itself once that is fixed."""
-
-    def __init__(self, res):
-        self.time, self.channels, self._res = res.time, tuple(res.names), res
-
-    def __getitem__(self, name):
-        return self._res[name]
-
-
 def signals(res):
     """``(time, q, q_desired, u, a, F)`` of an engine result: (N,) and (N, n_muscles) arrays."""
     c = res.coordinates[0]

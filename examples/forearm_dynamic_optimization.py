@@ -40,7 +40,7 @@ from pinmsk.solvers import ocp
 from pinmsk.solvers.ocp import Target
 from pinmsk.solvers.parametrization import Fourier, Polynomial, Spline
 
-from finger_tapping import signals, warm_start
+from finger_tapping import signals
 
 PERIOD = 1.9
 TOL = 0.1
@@ -72,7 +72,7 @@ def solve(model, objective, kind, *, intervals=50, guess=None, formulation="ff",
         model, cost=OBJECTIVES[objective](),
         constraints=[ocp.TrackingTolerance(tg, TOL), ocp.InitialState(q={c: float(tg(0.0))}, v={c: 0.0})],
         duration=PERIOD, intervals=intervals, scheme="hermite-simpson", controls=ocp.GlobalControls(par),
-        formulation=formulation, tendon=tendon, guess=None if guess is None else warm_start(guess),
+        formulation=formulation, tendon=tendon, guess=guess,
         solver={"max_iter": max_iter})
     t0 = time.perf_counter()
     res = fit.fit().result_

@@ -118,11 +118,11 @@ RUN_ELSEWHERE = {
 #: script: (the slow test that runs it, the default test covering the same code, measured time)
 SLOW = {
     "finger_tapping.py": ("tests/test_dynamic_examples.py::test_finger_tapping_quick",
-                          "tests/test_dynamic.py::test_finger_tapping_ifm_converges_and_ift_bounds_are_flagged",
-                          "137 s in --quick mode"),
+                          "tests/test_ocp.py::test_finger_tapping_optima_are_the_replaced_engines_or_lower",
+                          "6 s in --quick mode"),
     "forearm_dynamic_optimization.py": ("tests/test_dynamic_examples.py::test_forearm_quick",
-                                        "tests/test_dynamic.py::test_inverse_designs_converge_on_forearm_tracking",
-                                        "30 s in --quick mode"),
+                                        "tests/test_ocp.py::test_forearm_effort_optima_match_the_replaced_engine",
+                                        "7 s in --quick mode"),
 }
 
 
