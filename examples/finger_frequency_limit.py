@@ -73,25 +73,32 @@ def _compliant_ready(model):
     return model
 
 
-def solve(model, f, *, tendon="rigid", max_iter=MAX_ITER):
-    """The thesis's finger-tapping problem at ``f`` Hz; returns (Result, seconds)."""
-    return _solve(model, f, tendon=tendon, n_starts=1, max_iter=max_iter)
+def solve(model, f, *, tendon="rigid", periodic=False, max_iter=MAX_ITER):
+    """The finger-tapping problem at ``f`` Hz; returns (Result, seconds).
 
-
-def _solve(model, f, *, tendon, n_starts, max_iter):
+    ``periodic=False``: the thesis's problem - one period from the target's initial state
+    (angle, speed; the activations start free), excitations 6th-order polynomials.
+    ``periodic=True``: a steady tapping cycle - angle, speed, activations (and tendon forces) at ``T``
+    equal those at 0 (ocp.Periodic), no initial state imposed, excitations free at the nodes (ocp.NodeControls:
+    the polynomial with periodicity does not converge on the engine, see the module notes).
+    """
     T = 1.0 / f
     tg = ocp.Target("sine", amplitude=AMPLITUDE, frequency=f)
     if tendon == "compliant":
         _compliant_ready(model)
+    if periodic:
+        constraints = [ocp.ExcitationBounds(0, 1), ocp.Periodic()]
+        controls = ocp.NodeControls()
+    else:
+        constraints = [ocp.InitialState(q={"mcp_flexion": float(tg(0.0, 0))}, v={"mcp_flexion": float(tg(0.0, 1))}),
+                       ocp.ExcitationBounds(0, 1)]
+        controls = ocp.GlobalControls(Polynomial(6, duration=T))
     t0 = time.perf_counter()
     fit = ocp.Collocation(
         model, cost=MU * ocp.Effort(2, normalize=False) + (1.0 - MU) * ocp.TrackCoordinates(tg),
-        constraints=[ocp.InitialState(q={"mcp_flexion": float(tg(0.0, 0))},
-                                      v={"mcp_flexion": float(tg(0.0, 1))}),
-                     ocp.ExcitationBounds(0, 1)],
-        duration=T, intervals=INTERVALS, scheme="hermite-simpson",
-        controls=ocp.GlobalControls(Polynomial(6, duration=T)), formulation="ff", tendon=tendon,
-        n_starts=n_starts, solver={"max_iter": max_iter, "print_level": 0}, verbose=False).fit()
+        constraints=constraints, duration=T, intervals=INTERVALS, scheme="hermite-simpson",
+        controls=controls, formulation="ff", tendon=tendon, n_starts=1,
+        solver={"max_iter": max_iter, "print_level": 0}, verbose=False).fit()
     return fit.result_, time.perf_counter() - t0
 
 
@@ -100,7 +107,7 @@ def _row(res, sec):
             "converged": bool(res.converged), "status": str(res.status), "seconds": float(sec)}
 
 
-def max_frequency(model, *, tendon="rigid", scan=SCAN, bisections=3):
+def max_frequency(model, *, tendon="rigid", periodic=False, scan=SCAN, bisections=3):
     """Scan upward until J2 > J2_LIMIT, bisect, interpolate; returns (f_max or None, {f: row}).
 
     Only converged solves bracket the limit: an unconverged frequency is recorded (``converged``
@@ -113,7 +120,7 @@ def max_frequency(model, *, tendon="rigid", scan=SCAN, bisections=3):
     def j2(f):
         f = round(float(f), 3)
         if f not in solved:
-            solved[f] = _row(*solve(model, f, tendon=tendon))
+            solved[f] = _row(*solve(model, f, tendon=tendon, periodic=periodic))
         r = solved[f]
         return r["J2"] if r["converged"] else None
 
@@ -185,31 +192,32 @@ def variants(model, quick=False):
 # ---------------------------------------------------------------------------- figure
 
 
-def figure(base, sweep, path):
+def figure(studies, path):
+    """One row per study (thesis single period; steady cycle), one panel per factor."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    factors = list(sweep)
-    fig, axes = plt.subplots(1, len(factors), figsize=(3.0 * len(factors) + 1, 3.8), sharey=True,
-                             squeeze=False)
-    for ax, name in zip(axes[0], factors):
-        entries = sorted(sweep[name] + [{"label": "x1" if name != "tendon" else "rigid", "scale": 1.0,
-                                         "max_frequency": base}],
-                         key=lambda e: (e["label"] != "rigid", e["scale"]))
-        labels = [e["label"] for e in entries]
-        values = [e["max_frequency"] if e["max_frequency"] is not None else np.nan for e in entries]
-        colors = ["C0" if lab in ("x1", "rigid") else "C1" for lab in labels]
-        ax.bar(labels, values, color=colors)
-        for i, v in enumerate(values):
-            ax.text(i, (v if np.isfinite(v) else 0) * 1.02, "beyond scan" if not np.isfinite(v) else f"{v:.1f}",
-                    ha="center", va="bottom", fontsize=8)
-        ax.axhline(THESIS_MAX, color="k", ls="--", lw=0.8)
-        ax.axhspan(min(LITERATURE), max(LITERATURE), color="gray", alpha=0.3, lw=0)
-        ax.set_title(name, fontsize=9)
-        ax.grid(alpha=0.3, axis="y")
-    axes[0, 0].set_ylabel("max tapping frequency (Hz), J2 = 0.25")
-    fig.suptitle("finger_literature: one factor at a time (dashed: thesis ~6 Hz; band: literature "
-                 "6.46-6.92 Hz)", fontsize=9)
+    factors = list(next(iter(studies.values()))["sweep"])
+    fig, axes = plt.subplots(len(studies), len(factors), figsize=(2.7 * len(factors) + 1, 3.3 * len(studies)),
+                             sharey="row", squeeze=False)
+    for row, (title, st) in zip(axes, studies.items()):
+        for ax, name in zip(row, factors):
+            ref = {"label": "rigid" if name == "tendon" else "x1", "scale": 1.0, "max_frequency": st["max_frequency"]}
+            entries = sorted(st["sweep"][name] + [ref], key=lambda e: (e["label"] != "rigid", e["scale"]))
+            labels = [e["label"] for e in entries]
+            values = [np.nan if e["max_frequency"] is None else e["max_frequency"] for e in entries]
+            ax.bar(labels, np.nan_to_num(values), color=["C0" if e is ref else "C1" for e in entries])
+            for k, v in enumerate(values):
+                ax.text(k, 0 if not np.isfinite(v) else v, "n/a" if not np.isfinite(v) else f"{v:.1f}",
+                        ha="center", va="bottom", fontsize=7)
+            ax.axhline(THESIS_MAX, color="k", ls="--", lw=0.8)
+            ax.axhspan(min(LITERATURE), max(LITERATURE), color="gray", alpha=0.3, lw=0)
+            ax.set_title(f"{name}", fontsize=8)
+            ax.tick_params(labelsize=7)
+            ax.grid(alpha=0.3, axis="y")
+        row[0].set_ylabel(f"{title}\nmax frequency (Hz)", fontsize=8)
+    fig.suptitle("finger_literature: max tapping frequency (J2 = 0.25), one factor at a time; dashed: thesis "
+                 "~6 Hz, band: measured 6.46-6.92 Hz", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -218,11 +226,11 @@ def figure(base, sweep, path):
 # ---------------------------------------------------------------------------- mechanism at the limit
 
 
-def mechanism(model, f, *, tendon="rigid"):
+def mechanism(model, f, *, tendon="rigid", periodic=False):
     """What the muscles do at ``f`` Hz: peak activation, peak force / F_max and the peak
     muscle-tendon shortening speed (|r qdot|, the fibre speed along the tendon with a rigid tendon)
     as a fraction of v_max cos(pennation)."""
-    res, sec = solve(model, f, tendon=tendon)
+    res, sec = solve(model, f, tendon=tendon, periodic=periodic)
     ms = model.muscles
     qd = np.asarray(res["mcp_flexion_speed"], dtype=float)
     r = ms.moment_arms(np.zeros((1, model.nv)))[0, :, 0]       # (N, muscles, nv) -> constant arms at q = 0
@@ -238,6 +246,34 @@ def mechanism(model, f, *, tendon="rigid"):
     return out
 
 
+def study(model, *, periodic, scan, bisections, quick):
+    """The literature finger's limit and the one-factor sweep around it, for one problem form."""
+    base, base_solved = max_frequency(model, periodic=periodic, scan=scan, bisections=bisections)
+    kind = "steady cycle" if periodic else "single period (thesis)"
+    print(f"{kind}: finger_literature max frequency {base} Hz")
+    sweep = {}
+    for name, cases in variants(model, quick=quick).items():
+        sweep[name] = []
+        for label, scale, m, tendon in cases:
+            fmax, solved = max_frequency(m, tendon=tendon, periodic=periodic, scan=scan, bisections=bisections)
+            sweep[name].append({"label": label, "scale": scale, "tendon": tendon, "max_frequency": fmax,
+                                "solved": {str(k): v for k, v in sorted(solved.items())}})
+            print(f"  {name:27s} {label:10s} max frequency {fmax} Hz")
+    effect = {}
+    for name, cases in sweep.items():
+        values = [v for v in [base] + [e["max_frequency"] for e in cases] if v is not None]
+        effect[name] = max(values) - min(values)
+    unconverged = sorted(f"{name} {e['label']} {f} Hz" for name, cases in sweep.items() for e in cases
+                         for f, row in e["solved"].items() if not row["converged"])
+    unconverged += [f"base {f} Hz" for f, row in base_solved.items() if not row["converged"]]
+    return {"max_frequency": base, "solved": {str(k): v for k, v in sorted(base_solved.items())},
+            "sweep": sweep, "range_of_max_frequency_by_factor_Hz": effect,
+            "factor_moving_the_limit_most": max(effect, key=lambda k: effect[k]) if effect else None,
+            "unconverged_solves_left_out": unconverged,
+            "at_6Hz": _row(*solve(model, THESIS_MAX, periodic=periodic)),
+            "mechanism_at_max_frequency": mechanism(model, base, periodic=periodic) if base else None}
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="out/finger_frequency_limit")
@@ -249,43 +285,28 @@ def main(argv=None):
     model = pinmsk.load_model("finger_literature")
     scan = QUICK_SCAN if args.quick else SCAN
     bis = 0 if args.quick else 3
-    base, base_solved = max_frequency(model, scan=scan, bisections=bis)
-    print(f"finger_literature: max frequency {base} Hz (thesis ~{THESIS_MAX} Hz; literature {LITERATURE} Hz)")
-    sweep = {}
-    for name, cases in variants(model, quick=args.quick).items():
-        sweep[name] = []
-        for label, scale, m, tendon in cases:
-            fmax, solved = max_frequency(m, tendon=tendon, scan=scan, bisections=bis)
-            sweep[name].append({"label": label, "scale": scale, "tendon": tendon, "max_frequency": fmax,
-                                "solved": {str(k): v for k, v in sorted(solved.items())}})
-            print(f"  {name:27s} {label:10s} max frequency {fmax} Hz")
-    effect = {}
-    for name, cases in sweep.items():
-        values = [base] + [e["max_frequency"] for e in cases]
-        values = [v for v in values if v is not None]
-        effect[name] = max(values) - min(values)
-    unconverged = sorted(f"{name} {e['label']} {f} Hz" for name, cases in sweep.items() for e in cases
-                         for f, row in e["solved"].items() if not row["converged"])
-    unconverged += [f"base {f} Hz" for f, row in base_solved.items() if not row["converged"]]
-    at_6 = _row(*solve(model, THESIS_MAX))
-    mech = mechanism(model, base) if base else None
-    figure(base, sweep, out / "finger_frequency_limit.png")
+    studies = {"single period (thesis)": study(model, periodic=False, scan=scan, bisections=bis, quick=args.quick)}
+    if not args.quick:
+        studies["steady cycle"] = study(model, periodic=True, scan=scan, bisections=bis, quick=False)
+    figure(studies, out / "finger_frequency_limit.png")
+    thesis = studies["single period (thesis)"]
     summary = {
         "model": "finger_literature",
-        "problem": {"target": f"{AMPLITUDE} sin(2 pi f t)", "cost": "0.1 J1 + 0.9 J2", "controls": "Polynomial(6)",
-                    "scheme": "hermite-simpson", "intervals_per_period": INTERVALS,
+        "problem": {"target": f"{AMPLITUDE} sin(2 pi f t)", "cost": "0.1 J1 + 0.9 J2", "scheme": "hermite-simpson",
+                    "intervals_per_period": INTERVALS,
+                    "single period (thesis)": "Polynomial(6) excitations, initial angle and speed from the target",
+                    "steady cycle": "node excitations, periodic angle, speed, activations (and tendon forces)",
                     "criterion": f"optimal J2 = {J2_LIMIT}, linear interpolation after scan + bisection"},
-        "max_frequency": base, "solved": {str(k): v for k, v in sorted(base_solved.items())},
-        "at_6Hz": at_6, "mechanism_at_max_frequency": mech,
-        "sweep": sweep, "range_of_max_frequency_by_factor_Hz": effect,
-        "unconverged_solves_left_out": unconverged,
-        "factor_moving_the_limit_most": max(effect, key=lambda k: effect[k]) if effect else None,
+        "max_frequency": thesis["max_frequency"], "solved": thesis["solved"], "at_6Hz": thesis["at_6Hz"],
+        "studies": studies,
         "thesis_max_frequency": THESIS_MAX, "literature_max_frequency": LITERATURE,
         "quick": bool(args.quick), "seconds_total": time.perf_counter() - t_all,
     }
     (out / "finger_frequency_limit.json").write_text(json.dumps(summary, indent=2, default=float))
-    print(f"factor moving the limit most: {summary['factor_moving_the_limit_most']} "
-          f"(range {effect}); {summary['seconds_total']:.1f} s")
+    for title, st in studies.items():
+        print(f"{title}: limit {st['max_frequency']} Hz; factor moving it most: {st['factor_moving_the_limit_most']} "
+              f"{ {k: round(v, 2) for k, v in st['range_of_max_frequency_by_factor_Hz'].items()} }")
+    print(f"{summary['seconds_total']:.1f} s")
     return summary
 
 

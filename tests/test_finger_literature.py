@@ -100,4 +100,4 @@ def test_finger_frequency_limit_quick(tmp_path):
     assert 16.0 < data["max_frequency"] < 32.0           # between the scan's last tracked and first lost
     assert data["solved"]["16.0"]["J2"] < ffl.J2_LIMIT < data["solved"]["32.0"]["J2"]
     assert data["at_6Hz"]["converged"] and data["at_6Hz"]["J2"] < 1e-3
-    assert data["sweep"]["v_max"][0]["label"] == "x0.5"
+    assert data["studies"]["single period (thesis)"]["sweep"]["v_max"][0]["label"] == "x0.5"
