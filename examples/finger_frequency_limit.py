@@ -19,6 +19,15 @@ De Groote 2016 implicit form), segment inertia (mass and inertia of the finger, 
 the gravity moment scales with them), and, as a check of the mechanism, F_max of both muscles
 (x0.5, x1, x2).
 
+Both studies are run: the thesis's problem (one period from the target's initial angle and speed,
+activations free at t = 0) and a steady tapping cycle (angle, speed, activations periodic,
+excitations at the nodes: Polynomial(6) with ocp.Periodic stops at Maximum_Iterations_Exceeded /
+Infeasible_Problem_Detected on the engine).  Measured (full run, ~170 s on the loaded machine):
+single period 30.2 Hz, set by strength / inertia (inertia x0.5, x2: 42.9, 20.9 Hz; F_max the
+mirror image; activation and v_max move it < 1 Hz; compliant tendon 39.6 Hz); steady cycle
+10.9 Hz, set by activation dynamics (x0.5, x2: 16.3, 7.2 Hz) and the fibre's force-velocity
+damping (v_max x0.5, x2: 8.4, 13.8 Hz; compliant tendon 19.5 Hz; inertia and F_max < 0.4 Hz).
+
 Run:  python examples/finger_frequency_limit.py --out out/finger_limit   [--quick]
 Writes finger_frequency_limit.json (every solved frequency, J, J1, J2, convergence, seconds, the
 limits) and finger_frequency_limit.png (the sweep figure).  Never imports opensim (casadi and

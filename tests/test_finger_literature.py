@@ -87,6 +87,23 @@ def test_tracking_cost_rises_with_frequency_across_the_limit(model):
     assert ext.max() > 0.9                                   # the weak extensor is near full activation
 
 
+def test_steady_cycle_is_limited_by_activation_dynamics(model):
+    """A periodic tapping cycle at 8 Hz: tracked with the model's time constants (J2 ~ 0.06),
+    lost with both doubled (J2 > 0.25; the steady-cycle limit falls from 10.9 to 7.2 Hz)."""
+    pytest.importorskip("casadi")
+    sys.path.insert(0, str(EXAMPLES))
+    import finger_frequency_limit as ffl
+    mtu = model.muscles.mtu
+    slow = ffl.with_mtu(model, tau_rise=2 * mtu.tau_rise, tau_fall=2 * mtu.tau_fall)
+    assert (slow.muscles.mtu.tau_rise, slow.muscles.mtu.tau_fall) == (0.022, 0.136)
+    base, _ = ffl.solve(model, 8.0, periodic=True)
+    lost, _ = ffl.solve(slow, 8.0, periodic=True)
+    assert base.converged and lost.converged
+    assert base.terms["tracking"] < 0.1 < ffl.J2_LIMIT < lost.terms["tracking"]
+    q = np.asarray(base["mcp_flexion"], dtype=float)
+    assert q[-1] == pytest.approx(q[0], abs=1e-6)          # the cycle closes
+
+
 @pytest.mark.slow
 def test_finger_frequency_limit_quick(tmp_path):
     """The example end to end (--quick: coarse scan, no bisection; ~8 s).  The default test
