@@ -41,12 +41,11 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pinocchio as pin
 
 import pinmsk
-from pinmsk.model import Model
 from pinmsk.muscles.muscle_set import MuscleSet
 from pinmsk.solvers import ocp
+from pinmsk.solvers.ocp.tasks import scale_masses   # masses and inertias x factor, COMs kept
 from pinmsk.solvers.parametrization import Polynomial
 
 J2_LIMIT = 0.25          # examples/finger_tapping.py's criterion
@@ -168,17 +167,6 @@ def with_mtu(model, **changes):
     return model.with_muscles(new)
 
 
-def scale_inertia(model, factor):
-    """``model`` with every body's mass and rotational inertia times ``factor`` (COMs kept): the
-    inertia about the MCP scales by ``factor``, and so does the gravity moment."""
-    pm = pin.Model(model.pin)
-    for j in range(1, pm.njoints):
-        inertia = pm.inertias[j]
-        pm.inertias[j] = pin.Inertia(inertia.mass * factor, inertia.lever, inertia.inertia * factor)
-    return Model(name=model.name, pin_model=pm, muscles=model.muscles, effects=model.effects,
-                 contacts=model.contacts, meta=model.meta)
-
-
 def variants(model, quick=False):
     """{factor: [(label, scale, model, tendon)]}, one factor varied at a time around ``model``."""
     mtu = model.muscles.mtu
@@ -188,7 +176,7 @@ def variants(model, quick=False):
             for s in (0.5, 2.0)],
         "v_max": [(f"x{s:g}", s, with_mtu(model, v_max=np.asarray(mtu.v_max) * s), "rigid") for s in (0.5, 2.0)],
         "tendon": [("compliant", 1.0, model, "compliant")],
-        "segment inertia": [(f"x{s:g}", s, scale_inertia(model, s), "rigid") for s in (0.5, 2.0)],
+        "segment inertia": [(f"x{s:g}", s, scale_masses(model, s), "rigid") for s in (0.5, 2.0)],
         # not asked for by the issue, but the check of the mechanism found at the limit (the weak
         # extensor's moment against the inertial moment I (2 pi f)^2 A): F_max of both muscles
         "F_max": [(f"x{s:g}", s, with_mtu(model, f_max=np.asarray(mtu.f_max) * s), "rigid") for s in (0.5, 2.0)],
