@@ -63,6 +63,11 @@ def builtin_dir() -> Path:
     maps the repository's ``urdf/`` onto it); from a source checkout or an
     editable install it is ``<repo>/urdf``.
     """
+    # The checkout this module was imported from comes first: an editable install of another
+    # checkout (a git worktree run with PYTHONPATH) maps ``pinmsk._urdf`` onto *that* checkout's urdf/.
+    source = Path(__file__).resolve().parents[1] / "urdf"
+    if source.is_dir() and any(source.glob("*.toml")):
+        return source
     try:
         resource = importlib.resources.files("pinmsk._urdf")
     except ModuleNotFoundError:
@@ -71,9 +76,6 @@ def builtin_dir() -> Path:
         path = Path(str(resource))
         if path.is_dir() and any(path.glob("*.toml")):
             return path
-    source = Path(__file__).resolve().parents[1] / "urdf"
-    if source.is_dir() and any(source.glob("*.toml")):
-        return source
     raise ModelError(
         "cannot find pinmsk's built-in models: neither the package 'pinmsk._urdf' nor "
         f"{source} holds any *.toml sidecar; reinstall pinmsk (pip install .) or run from a source checkout"

@@ -40,7 +40,7 @@ PIN_ORDER = ["torso_x", "torso_y", "torso_angle", "hip_l", "knee_l", "ankle_l", 
              "hip_r", "knee_r", "ankle_r", "mtp_r"]  # URDF parser: depth-first, siblings by joint name
 #: what each built-in model is (a new built-in model must be added here, or its test fails)
 EXPECTED = {  # name: (nq = nv, muscles, URDF shipped in urdf/)
-    "finger": (1, 2, True), "foot2d": (4, 0, True), "forearm": (1, 7, True), "gait2d": (11, 16, True),
+    "finger": (1, 2, True), "finger_literature": (1, 2, True), "foot2d": (4, 0, True), "forearm": (1, 7, True), "gait2d": (11, 16, True),
     "human3d": (36, 0, False),
 }
 
