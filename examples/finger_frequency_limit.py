@@ -63,24 +63,6 @@ QUICK_SCAN = [8.0, 16.0, 32.0, 64.0]
 MAX_ITER = 300
 
 
-class _Bounds(tuple):
-    """``(lo, hi)`` that also answers when called.  Workaround: the engine reads
-    ``mtu.tendon_force_bounds`` as an attribute (pinmsk/solvers/ocp/problem.py), the muscle models
-    define it as a method; this object works with both, so it stays correct after the fix."""
-
-    def __call__(self):
-        return tuple(self)
-
-
-def _compliant_ready(model):
-    """``model`` whose muscle model's tendon-force bounds the engine can read either way."""
-    mtu = model.muscles.mtu
-    if callable(getattr(type(mtu), "tendon_force_bounds", None)) and not isinstance(
-            mtu.__dict__.get("tendon_force_bounds"), _Bounds):
-        object.__setattr__(mtu, "tendon_force_bounds", _Bounds(mtu.tendon_force_bounds()))
-    return model
-
-
 def solve(model, f, *, tendon="rigid", periodic=False, max_iter=MAX_ITER):
     """The finger-tapping problem at ``f`` Hz; returns (Result, seconds).
 
@@ -93,7 +75,7 @@ def solve(model, f, *, tendon="rigid", periodic=False, max_iter=MAX_ITER):
     T = 1.0 / f
     tg = ocp.Target("sine", amplitude=AMPLITUDE, frequency=f)
     if tendon == "compliant":
-        _compliant_ready(model)
+        model
     if periodic:
         constraints = [ocp.ExcitationBounds(0, 1), ocp.Periodic()]
         controls = ocp.NodeControls()

@@ -789,6 +789,8 @@ class Collocation(Fitter):
         guesses = ([self._guess_from_trial(self.guess, t)] if self.guess is not None
                    else [self._auto_guess(t, k) for k in range(n_starts)])
         nlp = self._build(guesses[0])
+        from .threads import single_threaded
+        single_threaded()
         opts = self._ipopt_options()
         opts.update(jac_g=nlp["jac_g"], hess_lag=nlp["hess_lag"])
         if nlp["grad_f"] is not None:
