@@ -30,7 +30,7 @@ from .constraints import AverageSpeed, Bounds, CoordinateBounds, Periodic, Symme
 from .costs import Effort, MetabolicEnergy, TrackSignals
 from .problem import Collocation
 
-__all__ = ["gait_model", "standing_height", "standing_guess", "predictive_gait", "tracking_gait",
+__all__ = ["GaitCollocation", "build_gait_task", "gait_model", "standing_height", "standing_guess", "predictive_gait", "tracking_gait",
            "full_stride", "GAIT2D_PAIRS"]
 
 #: right -> left coordinate pairs of gait2d
@@ -122,6 +122,36 @@ def _solver(solver):
     return s
 
 
+class GaitCollocation(Collocation):
+    """A gait :class:`Collocation` whose ``result_`` is the full stride (:func:`full_stride`).
+
+    ``half_cycle_`` is the solved half cycle (``mirror=False``: the tracked span itself,
+    kept as it is); ``summary_`` holds speed, stride length, cost of transport, body weight;
+    :meth:`to_dict` adds them to the engine's JSON summary.
+    """
+
+    def __init__(self, model, *, mirror: bool = True, **kw):
+        super().__init__(model, **kw)
+        self.mirror = mirror
+
+    def fit(self):
+        super().fit()
+        half = self.result_
+        self.half_cycle_ = half
+        stride, summ = full_stride(half, model=self.model, mirror=self.mirror)
+        from ...fitting import Result
+        self.result_ = Result(stride.time, {n: stride[n] for n in stride.names}, stats=half.stats,
+                              info=dict(half.info, horizon=float(stride.time[-1]), **summ), report=half.report_text
+                              if hasattr(half, "report_text") else None)
+        self.summary_ = summ
+        return self
+
+    def to_dict(self) -> dict:
+        out = super().to_dict()
+        out.update({k: (None if v is None else float(v)) for k, v in self.summary_.items()})
+        return out
+
+
 def predictive_gait(model=None, *, speed: float | None = 1.3, duration=0.55, intervals: int = 15,
                     scheme: str = "trapezoidal", effort_weight: float = 0.1, knee_min: float = 0.0,
                     guess="standing", seed: int = 0, tendon: str | None = None, solver=None,
@@ -139,7 +169,7 @@ def predictive_gait(model=None, *, speed: float | None = 1.3, duration=0.55, int
             raise ModelError(f"guess must be 'standing', 'quasi-random' or a Trial, not {guess!r}")
         guess = standing_guess(model, v0, T0, seed=seed if guess == "quasi-random" else None)
     cost = MetabolicEnergy(per="distance", coordinate=FORWARD) + effort_weight * Effort(2)
-    return Collocation(model, cost=cost, constraints=half_cycle_constraints(model, speed=speed, knee_min=knee_min),
+    return GaitCollocation(model, cost=cost, constraints=half_cycle_constraints(model, speed=speed, knee_min=knee_min),
                        duration=duration, intervals=intervals, scheme=scheme, guess=guess, tendon=tendon,
                        solver=_solver(solver), verbose=verbose)
 
@@ -191,7 +221,11 @@ def tracking_gait(model=None, kinematics: Trial | None = None, grf: Trial | None
         for side in ("r", "l"):
             for k, ax in ((0, "vx"), (1, "vy")):
                 idx.append((side, k))
-                refs.append(np.asarray(grf[f"{side}_ground_force_{ax}"], dtype=float))
+                # trial names (r_ground_force_vx) or the OpenSim/Moco file's (ground_force_r_vx)
+                name = f"{side}_ground_force_{ax}"
+                if name not in grf.names and f"ground_force_{side}_{ax}" in grf.names:
+                    name = f"ground_force_{side}_{ax}"
+                refs.append(np.asarray(grf[name], dtype=float))
         terms.append(_TrackGRF(rows, idx, gt, np.column_stack(refs), scale=bw, weight=grf_weight))
     terms.append(effort_weight * Effort(2))
     cost = terms[0]
@@ -206,8 +240,8 @@ def tracking_gait(model=None, kinematics: Trial | None = None, grf: Trial | None
     cons = [CoordinateBounds("knee_r", -0.2, 2.5), CoordinateBounds("knee_l", -0.2, 2.5), b]
     sel = (tt >= -1e-9) & (tt <= T + 1e-9)
     guess = Trial(tt[sel], {c: vals[sel, j] for j, c in enumerate(coords)})
-    return Collocation(model, cost=cost, constraints=cons, duration=T, intervals=intervals, scheme=scheme,
-                       guess=guess, solver=_solver(solver), verbose=verbose)
+    return GaitCollocation(model, mirror=False, cost=cost, constraints=cons, duration=T, intervals=intervals,
+                           scheme=scheme, guess=guess, solver=_solver(solver), verbose=verbose)
 
 
 class _TrackGRF(TrackSignals):
@@ -253,7 +287,7 @@ def ground_reaction_channels(result, model) -> dict:
     return out
 
 
-def full_stride(fit, model=None):
+def full_stride(fit, model=None, *, mirror: bool = True):
     """``(stride, summary)``: the half cycle and its left/right mirror, one full stride.
 
     ``fit``: a solved :class:`Collocation` (or a Result with ``model``).  The second half is the
@@ -265,7 +299,7 @@ def full_stride(fit, model=None):
     ``duration`` (s, the stride).
     """
     if model is None:
-        model, res = fit.model, fit.result_
+        model, res = fit.model, getattr(fit, "half_cycle_", fit.result_)
     else:
         res = fit
     t = np.asarray(res.time, dtype=float)
@@ -273,6 +307,12 @@ def full_stride(fit, model=None):
     ch = {n: np.asarray(res[n], dtype=float) for n in res.names if np.ndim(res[n]) == 1 and len(res[n]) == t.size}
     ch.update(ground_reaction_channels(res, model))
     d = float(ch[FORWARD][-1] - ch[FORWARD][0])
+    mass = float(sum(I.mass for I in model.pin.inertias))
+    rates = [n for n in ch if n.endswith("_metabolic_rate")]
+    cot = float(np.trapezoid(sum(ch[n] for n in rates), t) / (mass * d)) if rates and d > 0 else None
+    if not mirror:
+        return Trial(t - t[0], ch), {"speed": d / T, "stride_length": None, "cost_of_transport": cot,
+                                     "body_weight": mass * G, "duration": T}
     second = {}
     for n, x in ch.items():
         src = _mirror_name(n)
@@ -281,12 +321,56 @@ def full_stride(fit, model=None):
     time = np.concatenate([t, t[1:] + T])
     stride = Trial(time - time[0], {n: np.concatenate([x, second[n][1:]]) for n, x in ch.items()},
                    meta={"source": "pinmsk predictive gait (half cycle mirrored)"})
-    mass = float(sum(I.mass for I in model.pin.inertias))
-    rates = [n for n in ch if n.endswith("_metabolic_rate")]
-    cot = None
-    if rates and d > 0:
-        E = np.trapezoid(sum(ch[n] for n in rates), t)
-        cot = float(E / (mass * d))
     summary = {"speed": d / T, "stride_length": 2 * d, "cost_of_transport": cot, "body_weight": mass * G,
                "duration": 2 * T}
     return stride, summary
+
+
+def build_gait_task(spec: dict, *, base_dir=None, verbose=None) -> GaitCollocation:
+    """The gait problem of a task file's ``[gait]`` table (``pinmsk optimize``; see tasks.TASK_SCHEMA)."""
+    from pathlib import Path
+    from ...io.tables import read_trial
+    ga, ms, so = dict(spec["gait"]), spec.get("model", {}), dict(spec.get("solver", {}))
+    bad = set(spec) - {"gait", "model", "solver"}
+    if bad:
+        raise ModelError(f"task: section(s) {sorted(bad)} do not apply to a [gait] task; use [gait] keys")
+    kind = ga.pop("kind", "predictive")
+    model = gait_model(ms.get("name", "gait2d"), contact_smoothing=float(ga.pop("contact_smoothing", 2e-3)))
+    solver = {"max_iter": int(so.get("maxiter", 3000)), "tol": float(so.get("tol", 1e-4)),
+              "constraint_tol": float(so.get("constraint_tol", 1e-4))}
+    common = dict(intervals=int(so.get("intervals", 15 if kind == "predictive" else 20)),
+                  scheme=so.get("scheme", "trapezoidal"), solver=solver, verbose=verbose)
+    if kind == "predictive":
+        sp = ga.pop("speed", 1.3)
+        ok = {"duration", "effort_weight", "guess", "seed", "knee_min"}
+        extra = set(ga) - ok
+        if extra:
+            raise ModelError(f"task: [gait] key(s) {sorted(extra)} do not apply to kind 'predictive'")
+        return predictive_gait(model, speed=None if sp == "free" else float(sp), tendon=ms.get("tendon"),
+                               **{k: ga[k] for k in ga}, **common)
+    if kind == "tracking":
+        from ...pipeline import opensim_to_gait2d
+        def path(k):
+            if k not in ga:
+                raise ModelError(f"task: [gait] kind 'tracking' needs {k} = \"<file>\"")
+            f = Path(ga.pop(k))
+            if f.is_absolute():
+                return f
+            here = Path(base_dir) / f if base_dir is not None else f
+            if here.exists():
+                return here
+            from ...io.shared_data import shared_data_dir   # a path inside the shared data folder
+            root = shared_data_dir()
+            if root is not None and (root / f).exists():
+                return root / f
+            raise ModelError(f"task: [gait] {k} file '{f}' not found (relative to the task file or "
+                             "the shared data folder, $PINMSK_SHARED_DATA)")
+        # lenient: Moco's example3DWalking files miscount nColumns in their headers (the reader
+        # says so on stderr); the columns themselves are read by their labels
+        kin = opensim_to_gait2d(read_trial(path("coordinates"), strict=False), model)
+        grf = read_trial(path("grf"), strict=False) if "grf" in ga else None
+        extra = set(ga) - {"start", "duration", "effort_weight", "grf_weight"}
+        if extra:
+            raise ModelError(f"task: [gait] key(s) {sorted(extra)} do not apply to kind 'tracking'")
+        return tracking_gait(model, kin, grf, **{k: ga[k] for k in ga}, **common)
+    raise ModelError(f"task: [gait] kind must be 'predictive' or 'tracking', not {kind!r}")
