@@ -349,7 +349,12 @@ def build_gait_task(spec: dict, *, base_dir=None, verbose=None) -> GaitCollocati
         return predictive_gait(model, speed=None if sp == "free" else float(sp), tendon=ms.get("tendon"),
                                **{k: ga[k] for k in ga}, **common)
     if kind == "tracking":
-        from ...pipeline import opensim_to_gait2d
+        # pinmsk.pipeline.opensim_to_gait2d's column map (the pipeline imports the task files,
+        # so it cannot be imported here): the lab pipeline's mapping of OpenSim coordinates
+        from ...io.channel_map import apply_channel_map, opensim_gait2d_map
+
+        def opensim_to_gait2d(coords, model):
+            return apply_channel_map(coords, opensim_gait2d_map(knee_sign="auto"), model=model)
         def path(k):
             if k not in ga:
                 raise ModelError(f"task: [gait] kind 'tracking' needs {k} = \"<file>\"")
