@@ -17,7 +17,7 @@
 
 CasADi is needed only when a problem is solved (``pip install casadi``).
 """
-from .constraints import (AverageSpeed, Constraint, CoordinateBounds, ExcitationBounds, FinalState, InitialState,
+from .constraints import (AverageSpeed, Bounds, Constraint, CoordinateBounds, ExcitationBounds, FinalState, InitialState,
                           Periodic,
                           Symmetric, TrackingTolerance)
 from .controls import GlobalControls, NodeControls
@@ -28,4 +28,4 @@ from .target import Target
 __all__ = ["Collocation", "SCHEMES", "Target", "NodeControls", "GlobalControls",
            "Cost", "CostSum", "Effort", "MetabolicEnergy", "TrackCoordinates", "TrackSignals", "Smoothness", "FinalTime",
            "Constraint", "TrackingTolerance", "ExcitationBounds", "CoordinateBounds", "InitialState", "FinalState", "Periodic",
-           "Symmetric", "AverageSpeed"]
+           "Symmetric", "AverageSpeed", "Bounds"]

@@ -17,7 +17,11 @@ duration, and the state layout).
 - :class:`Periodic` -- ``x(T) = x(0)`` for the chosen states (Eq. 5.9);
 - :class:`Symmetric` -- ``x(T) = mirror(x(0))``: left and right swapped, the
   forward translation advanced (a half gait cycle, Eq. 5.8);
-- :class:`AverageSpeed` -- ``(q_c(T) - q_c(0)) / T = speed``.
+- :class:`AverageSpeed` -- ``(q_c(T) - q_c(0)) / T = speed``;
+- :class:`Bounds` -- box bounds on the decision variables themselves (coordinates, speeds,
+  accelerations at every node), as Moco's ``setStateInfo`` / PredSim's bounds: they keep
+  IPOPT's steps inside the physiological range, and a finite speed or acceleration bound
+  also sets that variable's scale (half its range), as Moco scales by the bounds.
 """
 from __future__ import annotations
 
@@ -27,7 +31,7 @@ from ...errors import ModelError
 from ._values import ValueEq
 
 __all__ = ["Constraint", "TrackingTolerance", "ExcitationBounds", "CoordinateBounds", "InitialState", "FinalState",
-           "Periodic", "Symmetric", "AverageSpeed"]
+           "Periodic", "Symmetric", "AverageSpeed", "Bounds"]
 
 
 class Constraint(ValueEq):
@@ -232,3 +236,49 @@ class AverageSpeed(Constraint):
         lay = glob["layout"]
         d = glob["xN"][lay["q"][self._j]] - glob["x0"][lay["q"][self._j]]
         return [(f"average speed along {self._name} (m/s)", d / glob["T"], self.speed, self.speed)]
+
+
+class Bounds(Constraint):
+    """Box bounds ``{coordinate: (lower, upper)}`` on the coordinates ``q`` (rad or m), speeds ``v``
+    and accelerations ``qdd`` at every collocation point (bounds on the variables, not path rows).
+
+    ``q`` bounds narrow the model's joint limits (never widen them); a finite ``v`` or ``qdd``
+    bound also sets the variable's scale to half its range (Moco's scaling by the bounds).
+    ``default_v`` / ``default_qdd``: ``(lower, upper)`` for every coordinate not named;
+    ``df_t``: ``(lower, upper)`` of the normalized tendon-force rates (1/s) of compliant tendons
+    (De Groote et al. 2016 bound them; also their scale).
+    """
+
+    def __init__(self, *, q=None, v=None, qdd=None, default_v=None, default_qdd=None, df_t=None):
+        self.q, self.v, self.qdd = dict(q or {}), dict(v or {}), dict(qdd or {})
+        self.df_t = None if df_t is None else tuple(map(float, df_t))
+        if self.df_t is not None and not self.df_t[0] < self.df_t[1]:
+            raise ModelError(f"Bounds df_t: lower {self.df_t[0]} must be below upper {self.df_t[1]}")
+        self.default_v = None if default_v is None else tuple(map(float, default_v))
+        self.default_qdd = None if default_qdd is None else tuple(map(float, default_qdd))
+        for what, d in (("q", self.q), ("v", self.v), ("qdd", self.qdd)):
+            for c, b in d.items():
+                lo, hi = map(float, b)
+                if not lo < hi:
+                    raise ModelError(f"Bounds {what} of {c}: lower {lo} must be below upper {hi}")
+        for what, b in (("default_v", self.default_v), ("default_qdd", self.default_qdd)):
+            if b is not None and not b[0] < b[1]:
+                raise ModelError(f"Bounds {what}: lower {b[0]} must be below upper {b[1]}")
+
+    def check(self, problem) -> None:
+        for d in (self.q, self.v, self.qdd):
+            for c in d:
+                problem.model.coordinate_index(c)
+
+    def arrays(self, model, what: str):
+        """``(lower, upper)`` arrays (nv,) of ``what`` (``"q"``, ``"v"``, ``"qdd"``), +-inf where unbounded."""
+        nv = model.nv
+        d = {"q": self.q, "v": self.v, "qdd": self.qdd}[what]
+        dflt = {"q": None, "v": self.default_v, "qdd": self.default_qdd}[what]
+        lo, hi = np.full(nv, -np.inf), np.full(nv, np.inf)
+        if dflt is not None:
+            lo[:], hi[:] = dflt
+        for c, (a, b) in d.items():
+            j = model.coordinate_index(c)
+            lo[j], hi[j] = float(a), float(b)
+        return lo, hi

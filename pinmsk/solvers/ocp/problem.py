@@ -50,7 +50,7 @@ import numpy as np
 
 from ...errors import ModelError
 from ...fitting import FitStatistics, Fitter, Result, format_report
-from .constraints import Constraint, ExcitationBounds, InitialState, TrackingTolerance
+from .constraints import Bounds, Constraint, ExcitationBounds, InitialState, TrackingTolerance
 from .controls import GlobalControls, NodeControls
 from .costs import Cost, TrackCoordinates
 from .physics import PointModel
@@ -231,6 +231,23 @@ class Collocation(Fitter):
         met = self._needs.get("metabolic")
         if met is not None:
             self._pm.metabolic = float(met["smooth"])
+        vb = [c for c in cons if isinstance(c, Bounds)]
+        self._vbounds = {}
+        for what in ("q", "v", "qdd"):
+            lo, hi = np.full(self.model.nv, -np.inf), np.full(self.model.nv, np.inf)
+            for c in vb:                   # several Bounds intersect
+                a, b = c.arrays(self.model, what)
+                lo, hi = np.maximum(lo, a), np.minimum(hi, b)
+            bad = np.flatnonzero(~(lo < hi))
+            if bad.size:
+                raise ModelError(f"Bounds on {what} of {self.model.coordinates[bad[0]]} are empty "
+                                 f"({lo[bad[0]]:g} to {hi[bad[0]]:g})")
+            self._vbounds[what] = (lo, hi)
+        lo, hi = -np.inf, np.inf
+        for c in vb:
+            if c.df_t is not None:
+                lo, hi = max(lo, c.df_t[0]), min(hi, c.df_t[1])
+        self._vbounds["df_t"] = (lo, hi)
         eb = [c for c in cons if isinstance(c, ExcitationBounds)]
         if len(eb) > 1:
             raise ModelError("give at most one ExcitationBounds")
@@ -355,11 +372,16 @@ class Collocation(Fitter):
         # -- nominal scales (variables and residuals)
         def nominal(x, floor):
             return np.maximum(np.max(np.abs(np.atleast_2d(x)), axis=1), floor)
-        sx = np.concatenate([nominal(guess["q"], 0.1), nominal(guess["v"], 1.0)]
+        def by_bounds(sc, what):   # a finite bound's half range is the variable's scale (Moco)
+            lo, hi = self._vbounds[what]
+            half = 0.5 * (hi - lo)
+            return np.where(np.isfinite(half), np.maximum(sc, half), sc)
+        sx = np.concatenate([nominal(guess["q"], 0.1), by_bounds(nominal(guess["v"], 1.0), "v")]
                             + ([np.ones(m)] if m else []) + ([np.ones(m)] if pm.compliant else []))
-        su = [nominal(guess["qdd"], 1.0)]
+        su = [by_bounds(nominal(guess["qdd"], 1.0), "qdd")]
         if pm.compliant:
-            su.append(np.maximum(nominal(guess["df_t"], 1.0), 1.0))
+            lo, hi = self._vbounds["df_t"]
+            su.append(np.maximum(nominal(guess["df_t"], 1.0), 0.5 * (hi - lo) if np.isfinite(hi - lo) else 1.0))
         if m and pm.formulation != "ff":
             su.append(np.ones(m))
         if pm.formulation == "ift":
@@ -373,7 +395,10 @@ class Collocation(Fitter):
             ss = nominal(guess["tau"], 0.1)
         tau_guess = self._guess_torques(guess)
         weight = 9.81 * pm.mass
-        s_tau = np.maximum(np.max(np.abs(tau_guess), axis=1), max(1e-3 * weight, 1e-2))
+        # the guess's inverse dynamics do not see contact forces, which are of the body weight's
+        # size (a standing guess's horizontal rows are 0): with contacts the floor is 5 % of it
+        floor = 0.05 * weight if pm.contacts else max(1e-3 * weight, 1e-2)
+        s_tau = np.maximum(np.max(np.abs(tau_guess), axis=1), floor)
 
         # -- the per-point function (SX)
         xs, us = ca.SX.sym("x", nx), ca.SX.sym("u", nu)
@@ -683,8 +708,9 @@ class Collocation(Fitter):
                        pmod.lowerPositionLimit, -np.inf)
         qhi = np.where(np.isfinite(pmod.upperPositionLimit) & (np.abs(pmod.upperPositionLimit) < 1e6),
                        pmod.upperPositionLimit, np.inf)
-        xlo = [qlo, np.full(nv, -np.inf)]
-        xhi = [qhi, np.full(nv, np.inf)]
+        qlo, qhi = np.maximum(qlo, self._vbounds["q"][0]), np.minimum(qhi, self._vbounds["q"][1])
+        xlo = [qlo, self._vbounds["v"][0]]
+        xhi = [qhi, self._vbounds["v"][1]]
         if m:
             a_min = 0.01 if pm.compliant else 0.0
             xlo.append(np.full(m, a_min))
@@ -694,10 +720,10 @@ class Collocation(Fitter):
                 xlo.append(np.full(m, flo))
                 xhi.append(np.full(m, fhi))
         xlo, xhi = np.concatenate(xlo), np.concatenate(xhi)
-        ulo, uhi = [np.full(nv, -np.inf)], [np.full(nv, np.inf)]
+        ulo, uhi = [self._vbounds["qdd"][0]], [self._vbounds["qdd"][1]]
         if pm.compliant:
-            ulo.append(np.full(m, -np.inf))
-            uhi.append(np.full(m, np.inf))
+            ulo.append(np.full(m, self._vbounds["df_t"][0]))
+            uhi.append(np.full(m, self._vbounds["df_t"][1]))
         if m and pm.formulation != "ff":
             ulo.append(np.full(m, lo_e))
             uhi.append(np.full(m, hi_e))

@@ -60,6 +60,15 @@ TASK_SCHEMA = {
                     "bound_points": "accepted; the bounds hold at every collocation point",
                     "tracking_points": "accepted; the tolerance holds at every collocation point",
                     "initial_state": "'target' (default: the motion's start, a(0) = u(0)) | 'free'"},
+    "gait": {"kind": "'predictive' | 'tracking' (a gait2d half cycle or a measured walk, thesis Ch. 5; "
+                     "replaces [motion])",
+             "speed": "m/s (predictive; 'free' for a free speed)", "duration": "s (half cycle, or the tracked span)",
+             "effort_weight": "weight of the mean squared activation", "guess": "'standing' | 'quasi-random'",
+             "seed": "quasi-random guess seed", "knee_min": "rad, knee hyper-extension bound (Eq. 5.10)",
+             "contact_smoothing": "m, width of the smoothed penetration",
+             "coordinates": "tracking: OpenSim coordinates file (.sto/.mot), mapped onto gait2d",
+             "grf": "tracking: ground reaction force file (.mot)", "start": "tracking: first time (s)",
+             "grf_weight": "tracking: weight of the GRF term"},
     "solver": {"intervals": "collocation intervals (default duration / step, or 50)",
                "scheme": "'hermite-simpson' (default) | 'trapezoidal'",
                "step": "interval length (s) when intervals is not given",
@@ -95,7 +104,7 @@ def load_task(task_path) -> dict:
     if "model" not in spec or "name" not in spec.get("model", {}):
         raise ModelError(f"{p}: missing model: add a [model] table with name = \"finger\" (a "
                          "built-in name) or the path of a model sidecar .toml")
-    if "motion" not in spec:
+    if "motion" not in spec and "gait" not in spec:
         raise ModelError(f"{p}: missing [motion] table (the motion to track)")
     for k, v in spec.items():
         if not isinstance(v, dict):
@@ -144,6 +153,9 @@ def _controls(spec, duration):
 
 def build_from_task(spec: dict, *, base_dir=None, progress=None, verbose=None) -> Collocation:
     """A :class:`~pinmsk.solvers.ocp.problem.Collocation` from a validated task dict."""
+    if "gait" in spec:
+        from .gait import build_gait_task
+        return build_gait_task(spec, base_dir=base_dir, verbose=verbose)
     ms = spec["model"]
     name = ms["name"]
     if base_dir is not None and str(name).endswith((".toml", ".urdf", ".osim")) and not Path(name).is_absolute():

@@ -1,0 +1,381 @@
+"""Predictive and tracking 2-D gait on ``gait2d`` (thesis Ch. 5), built on the collocation engine.
+
+::
+
+    from pinmsk.solvers.ocp import gait
+    fit = gait.predictive_gait(speed=1.3).fit()          # a Collocation (problem, costs, constraints)
+    stride, summary = gait.full_stride(fit)             # one stride, GRF channels r_ground_force_vy ...
+
+The half gait cycle (thesis Sec. 5.2, as Moco's ``example2DWalking``):
+
+- model: ``gait2d`` with its 16 muscles, Riener & Edrich passive moments (Eq. 5.11) and three
+  hyper-volumetric contact spheres per foot (Table 4.4, :func:`~pinmsk.contact.foot.foot_contacts`),
+  their penetration smoothed over ``contact_smoothing`` (m) so the force has usable gradients;
+- constraints: the end state is the start state mirrored left/right (Eq. 5.8), the unpaired
+  coordinates and the forward speed periodic (Eq. 5.9), no knee hyper-extension (Eq. 5.10),
+  a prescribed average speed (or free), and box bounds on every coordinate, speed, acceleration
+  and tendon-force rate (what Moco and PredSim bound; they also set the variables' scales);
+- cost: metabolic energy per distance and body mass (Umberger 2003, Eq. 5.6) plus a small
+  effort term (mean squared activation);
+- guess: standing (feet on the ground, pelvis moving forward at the target speed, low
+  activations) or quasi-random (PredSim's habit: the same plus random joint-angle waves).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ...errors import ModelError
+from ...trial import Trial
+from .constraints import AverageSpeed, Bounds, CoordinateBounds, Periodic, Symmetric
+from .costs import Effort, MetabolicEnergy, TrackSignals
+from .problem import Collocation
+
+__all__ = ["GaitCollocation", "build_gait_task", "gait_model", "standing_height", "standing_guess", "predictive_gait", "tracking_gait",
+           "full_stride", "GAIT2D_PAIRS"]
+
+#: right -> left coordinate pairs of gait2d
+GAIT2D_PAIRS = {f"{j}_r": f"{j}_l" for j in ("hip", "knee", "ankle", "mtp")}
+FORWARD, HEIGHT, TRUNK = "torso_x", "torso_y", "torso_angle"
+G = 9.81
+
+
+def gait_model(model="gait2d", *, contact: str = "hypervolumetric", contact_smoothing: float = 2e-3):
+    """``gait2d`` (or ``model``) with three contact spheres per foot (heel, metatarsal, toe).
+
+    ``contact_smoothing``: the width (m) of the smooth positive part of the penetration; the
+    thesis's 0.1 mm makes the contact force's derivative a step IPOPT cannot cross (the
+    smoothed SmoothSphereHalfSpaceForce of Moco spreads it over about 3 mm).
+    """
+    from ...contact.foot import foot_contacts
+    from ...model import load_model
+    base = load_model(model) if isinstance(model, str) else model
+    if tuple(base.contacts):
+        return base
+    out = base
+    for side in ("r", "l"):
+        for c in foot_contacts(base, contact, side=side, smoothing=contact_smoothing):
+            out = out + c
+    return out
+
+
+def standing_height(model) -> float:
+    """Pelvis height (m) at which the lowest foot site of the zero posture touches the ground."""
+    import pinocchio as pin
+    pm = model.pin
+    d = pm.createData()
+    pin.framesForwardKinematics(pm, d, np.zeros(pm.nq))
+    ys = [d.oMf[model.frame_id(f"{s}_{side}")].translation[1]
+          for s in ("heel", "metatarsal", "toe") for side in "rl"]
+    return -float(min(ys))
+
+
+def standing_guess(model, speed: float, duration: float, *, n: int = 21, sink: float = 0.005,
+                   seed: int | None = None, amplitude: float = 0.2) -> Trial:
+    """A generic guess: standing, the pelvis moving forward at ``speed``, ``sink`` (m) into the ground.
+
+    ``seed``: quasi-random joint-angle waves (amplitude rad, one random phase per joint,
+    one period over the half cycle) and random activations in 0.05-0.2 on top (PredSim).
+    """
+    t = np.linspace(0.0, duration, n)
+    h0 = standing_height(model)
+    ch = {FORWARD: speed * t, HEIGHT: np.full(n, h0 - sink), f"{FORWARD}_speed": np.full(n, speed)}
+    if seed is not None:
+        rng = np.random.default_rng(seed)
+        w = 2 * np.pi / duration
+        for c in model.coordinates:
+            if c in (FORWARD, HEIGHT, TRUNK):
+                continue
+            ph = rng.uniform(0, 2 * np.pi)
+            lo, hi = model.pin.lowerPositionLimit[model.coordinate_index(c)], \
+                model.pin.upperPositionLimit[model.coordinate_index(c)]
+            ch[c] = np.clip(amplitude * np.sin(w * t + ph), lo, hi)
+            ch[f"{c}_speed"] = amplitude * w * np.cos(w * t + ph)
+        for mu in model.muscle_names:
+            ch[f"{mu}_activation"] = np.full(n, rng.uniform(0.05, 0.2))
+    return Trial(t, ch)
+
+
+def gait_bounds(model, *, speed_max: float = 3.0) -> Bounds:
+    """Box bounds of a walking half cycle (Moco's example2DWalking / PredSim ranges)."""
+    h0 = standing_height(model)
+    return Bounds(q={HEIGHT: (h0 - 0.25, h0 + 0.1), TRUNK: (-0.6, 0.6)},
+                  v={FORWARD: (0.0, speed_max), HEIGHT: (-1.5, 1.5), TRUNK: (-3.0, 3.0)}, default_v=(-15.0, 15.0),
+                  qdd={FORWARD: (-30.0, 30.0), HEIGHT: (-30.0, 30.0), TRUNK: (-100.0, 100.0)},
+                  default_qdd=(-500.0, 500.0), df_t=(-20.0, 20.0))
+
+
+def half_cycle_constraints(model, *, speed: float | None, knee_min: float = 0.0) -> list:
+    """Eq. 5.8 (symmetry), Eq. 5.9 (periodicity of the rest, the forward speed included),
+    Eq. 5.10 (no knee hyper-extension), the average speed, and the box bounds."""
+    others = [c for c in model.coordinates if c != FORWARD]
+    cons = [Symmetric(GAIT2D_PAIRS, exclude=(FORWARD,)), Periodic(("v",), exclude=others),
+            CoordinateBounds("knee_r", knee_min, 2.5), CoordinateBounds("knee_l", knee_min, 2.5),
+            gait_bounds(model)]
+    if speed is not None:
+        cons.append(AverageSpeed(float(speed), coordinate=FORWARD))
+    return cons
+
+
+def _solver(solver):
+    s = {"max_iter": 3000, "tol": 1e-4, "constraint_tol": 1e-4}   # Moco's example2DWalking tolerances
+    s.update(solver or {})
+    return s
+
+
+class GaitCollocation(Collocation):
+    """A gait :class:`Collocation` whose ``result_`` is the full stride (:func:`full_stride`).
+
+    ``half_cycle_`` is the solved half cycle (``mirror=False``: the tracked span itself,
+    kept as it is); ``summary_`` holds speed, stride length, cost of transport, body weight;
+    :meth:`to_dict` adds them to the engine's JSON summary.
+    """
+
+    def __init__(self, model, *, mirror: bool = True, **kw):
+        super().__init__(model, **kw)
+        self.mirror = mirror
+
+    def fit(self):
+        super().fit()
+        half = self.result_
+        self.half_cycle_ = half
+        stride, summ = full_stride(half, model=self.model, mirror=self.mirror)
+        from ...fitting import Result
+        self.result_ = Result(stride.time, {n: stride[n] for n in stride.names}, stats=half.stats,
+                              info=dict(half.info, horizon=float(stride.time[-1]), **summ), report=half.report_text
+                              if hasattr(half, "report_text") else None)
+        self.summary_ = summ
+        return self
+
+    def to_dict(self) -> dict:
+        out = super().to_dict()
+        out.update({k: (None if v is None else float(v)) for k, v in self.summary_.items()})
+        return out
+
+
+def predictive_gait(model=None, *, speed: float | None = 1.3, duration=0.55, intervals: int = 15,
+                    scheme: str = "trapezoidal", effort_weight: float = 0.1, knee_min: float = 0.0,
+                    guess="standing", seed: int = 0, tendon: str | None = None, solver=None,
+                    verbose=None) -> Collocation:
+    """The predictive half gait cycle (thesis Sec. 5.2): a :class:`Collocation`, not yet solved.
+
+    ``speed`` m/s (None: free); ``duration`` s or ``(lower, upper)`` (free); ``guess``:
+    ``"standing"``, ``"quasi-random"`` (with ``seed``) or a Trial / Result (a warm start).
+    """
+    model = gait_model() if model is None else gait_model(model)
+    v0 = 1.3 if speed is None else float(speed)
+    T0 = float(np.mean(duration)) if np.ndim(duration) else float(duration)
+    if isinstance(guess, str):
+        if guess not in ("standing", "quasi-random"):
+            raise ModelError(f"guess must be 'standing', 'quasi-random' or a Trial, not {guess!r}")
+        guess = standing_guess(model, v0, T0, seed=seed if guess == "quasi-random" else None)
+    cost = MetabolicEnergy(per="distance", coordinate=FORWARD) + effort_weight * Effort(2)
+    return GaitCollocation(model, cost=cost, constraints=half_cycle_constraints(model, speed=speed, knee_min=knee_min),
+                       duration=duration, intervals=intervals, scheme=scheme, guess=guess, tendon=tendon,
+                       solver=_solver(solver), verbose=verbose)
+
+
+# -- tracking -------------------------------------------------------------------------------------
+
+def contact_rows(model) -> dict:
+    """``{side: [rows of the point quantity "contact_forces"]}``: (x, y) rows of each side's spheres."""
+    out = {"r": [], "l": []}
+    for i, c in enumerate(model.contacts):
+        side = c.target.rsplit("_", 1)[-1]
+        if side in out:
+            out[side].append(3 * i)
+    return out
+
+
+def tracking_gait(model=None, kinematics: Trial | None = None, grf: Trial | None = None, *,
+                  start: float | None = None, duration: float | None = None, intervals: int = 20,
+                  scheme: str = "trapezoidal", tracking_weight: float = 1.0, grf_weight: float = 0.1,
+                  effort_weight: float = 0.01, solver=None, verbose=None) -> Collocation:
+    """Tracking of measured gait2d coordinates (``kinematics``: channels named as the model's
+    coordinates, e.g. from :func:`pinmsk.pipeline.opensim_to_gait2d`) and ground reaction forces
+    (``grf``: ``r_ground_force_vx``, ``..._vy``, ``l_...``, N) over ``[start, start + duration]``.
+
+    Costs: coordinates (squared error over (0.1 rad)^2 or (0.05 m)^2, Moco's
+    MocoStateTrackingGoal habit), GRF x/y per side over body weight (sum of each side's
+    spheres), mean squared activation; bounds as the predictive problem, no symmetry.
+    """
+    from .costs import Cost
+    model = gait_model() if model is None else gait_model(model)
+    if kinematics is None:
+        raise ModelError("tracking_gait needs the measured kinematics (a Trial of gait2d coordinates)")
+    t = np.asarray(kinematics.time, dtype=float)
+    t0 = float(t[0]) if start is None else float(start)
+    T = float(t[-1] - t0) if duration is None else float(duration)
+    mass = float(sum(I.mass for I in model.pin.inertias))
+    bw = mass * G
+    tt = t - t0
+    terms: list[Cost] = []
+    coords = [c for c in model.coordinates if c in kinematics.names]
+    q_idx = [model.coordinate_index(c) for c in coords]
+    scale = [0.05 if c in (FORWARD, HEIGHT) else 0.1 for c in coords]
+    vals = np.column_stack([np.asarray(kinematics[c], dtype=float) for c in coords])
+    terms.append(TrackSignals("q", q_idx, tt, vals, scale=scale, weight=tracking_weight, name="track_coordinates"))
+    if grf is not None:
+        gt = np.asarray(grf.time, dtype=float) - t0
+        rows = contact_rows(model)
+        idx, refs = [], []
+        for side in ("r", "l"):
+            for k, ax in ((0, "vx"), (1, "vy")):
+                idx.append((side, k))
+                # trial names (r_ground_force_vx) or the OpenSim/Moco file's (ground_force_r_vx)
+                name = f"{side}_ground_force_{ax}"
+                if name not in grf.names and f"ground_force_{side}_{ax}" in grf.names:
+                    name = f"ground_force_{side}_{ax}"
+                refs.append(np.asarray(grf[name], dtype=float))
+        terms.append(_TrackGRF(rows, idx, gt, np.column_stack(refs), scale=bw, weight=grf_weight))
+    terms.append(effort_weight * Effort(2))
+    cost = terms[0]
+    for c in terms[1:]:
+        cost = cost + c
+    q0 = {c: np.interp(0.0, tt, vals[:, j]) for j, c in enumerate(coords)}
+    h = standing_height(model)
+    b = gait_bounds(model)
+    b.q[HEIGHT] = (min(h - 0.25, q0.get(HEIGHT, h) - 0.1), max(h + 0.1, q0.get(HEIGHT, h) + 0.1))
+    b.q[FORWARD] = (float(vals[:, coords.index(FORWARD)].min()) - 0.5, float(vals[:, coords.index(FORWARD)].max()) + 0.5) \
+        if FORWARD in coords else (-50.0, 50.0)
+    cons = [CoordinateBounds("knee_r", -0.2, 2.5), CoordinateBounds("knee_l", -0.2, 2.5), b]
+    sel = (tt >= -1e-9) & (tt <= T + 1e-9)
+    guess = Trial(tt[sel], {c: vals[sel, j] for j, c in enumerate(coords)})
+    return GaitCollocation(model, mirror=False, cost=cost, constraints=cons, duration=T, intervals=intervals,
+                           scheme=scheme, guess=guess, solver=_solver(solver), verbose=verbose)
+
+
+class _TrackGRF(TrackSignals):
+    """Each side's ground reaction force (x, y), the sum of its spheres' forces, against measured
+    GRF, mean squared error over body weight."""
+
+    def __init__(self, rows, idx, time, values, *, scale, weight=1.0, name="track_grf"):
+        self.rows, self.pairs = {k: list(v) for k, v in rows.items()}, list(idx)
+        super().__init__("contact_forces", list(range(len(idx))), time, values, scale=scale,
+                         weight=weight, name=name)
+
+    def integrand(self, pt, ref=None):
+        import casadi as ca
+        f = pt["contact_forces"]
+        x = ca.vertcat(*[sum(f[r + k] for r in self.rows[side]) / self.scale[j]
+                         for j, (side, k) in enumerate(self.pairs)])
+        return ca.sumsqr(x - ref) / len(self.pairs)
+
+
+# -- one stride -----------------------------------------------------------------------------------
+
+def _mirror_name(name: str) -> str:
+    for a, b in (("_r", "_l"), ("_l", "_r")):
+        if name.endswith(a):
+            return name[: -len(a)] + b
+        if f"{a}_" in name:
+            return name.replace(f"{a}_", f"{b}_", 1)
+        if name.startswith(f"{a[1]}_"):
+            return f"{b[1]}_" + name[2:]
+    return name
+
+
+def ground_reaction_channels(result, model) -> dict:
+    """``{r_ground_force_vx, _vy, _vz, l_...}`` (N) per side: the sum of its spheres' forces."""
+    out = {}
+    for side in ("r", "l"):
+        for ax in "xyz":
+            s = 0.0
+            for c in model.contacts:
+                if c.target.endswith(f"_{side}"):
+                    s = s + np.asarray(result[f"{c.label}_force_{ax}"], dtype=float)
+            out[f"{side}_ground_force_v{ax}"] = np.asarray(s, dtype=float) * np.ones(len(result.time))
+    return out
+
+
+def full_stride(fit, model=None, *, mirror: bool = True):
+    """``(stride, summary)``: the half cycle and its left/right mirror, one full stride.
+
+    ``fit``: a solved :class:`Collocation` (or a Result with ``model``).  The second half is the
+    first with every ``_r``/``_l`` channel swapped and the forward translation advanced by the
+    half cycle's distance.  ``stride`` is a Trial with the coordinate channels (rad, m), speeds,
+    excitations, activations, forces and ``r_ground_force_vx`` ... (N); ``summary`` holds
+    ``speed`` (m/s), ``stride_length`` (m), ``cost_of_transport`` (J/kg/m; metabolic energy per
+    distance and body mass, None without metabolic rates), ``body_weight`` (N) and
+    ``duration`` (s, the stride).
+    """
+    if model is None:
+        model, res = fit.model, getattr(fit, "half_cycle_", fit.result_)
+    else:
+        res = fit
+    t = np.asarray(res.time, dtype=float)
+    T = float(t[-1] - t[0])
+    ch = {n: np.asarray(res[n], dtype=float) for n in res.names if np.ndim(res[n]) == 1 and len(res[n]) == t.size}
+    ch.update(ground_reaction_channels(res, model))
+    d = float(ch[FORWARD][-1] - ch[FORWARD][0])
+    mass = float(sum(I.mass for I in model.pin.inertias))
+    rates = [n for n in ch if n.endswith("_metabolic_rate")]
+    cot = float(np.trapezoid(sum(ch[n] for n in rates), t) / (mass * d)) if rates and d > 0 else None
+    if not mirror:
+        return Trial(t - t[0], ch), {"speed": d / T, "stride_length": None, "cost_of_transport": cot,
+                                     "body_weight": mass * G, "duration": T}
+    second = {}
+    for n, x in ch.items():
+        src = _mirror_name(n)
+        y = ch.get(src, x)
+        second[n] = y + d if n == FORWARD else y
+    time = np.concatenate([t, t[1:] + T])
+    stride = Trial(time - time[0], {n: np.concatenate([x, second[n][1:]]) for n, x in ch.items()},
+                   meta={"source": "pinmsk predictive gait (half cycle mirrored)"})
+    summary = {"speed": d / T, "stride_length": 2 * d, "cost_of_transport": cot, "body_weight": mass * G,
+               "duration": 2 * T}
+    return stride, summary
+
+
+def build_gait_task(spec: dict, *, base_dir=None, verbose=None) -> GaitCollocation:
+    """The gait problem of a task file's ``[gait]`` table (``pinmsk optimize``; see tasks.TASK_SCHEMA)."""
+    from pathlib import Path
+    from ...io.tables import read_trial
+    ga, ms, so = dict(spec["gait"]), spec.get("model", {}), dict(spec.get("solver", {}))
+    bad = set(spec) - {"gait", "model", "solver"}
+    if bad:
+        raise ModelError(f"task: section(s) {sorted(bad)} do not apply to a [gait] task; use [gait] keys")
+    kind = ga.pop("kind", "predictive")
+    model = gait_model(ms.get("name", "gait2d"), contact_smoothing=float(ga.pop("contact_smoothing", 2e-3)))
+    solver = {"max_iter": int(so.get("maxiter", 3000)), "tol": float(so.get("tol", 1e-4)),
+              "constraint_tol": float(so.get("constraint_tol", 1e-4))}
+    common = dict(intervals=int(so.get("intervals", 15 if kind == "predictive" else 20)),
+                  scheme=so.get("scheme", "trapezoidal"), solver=solver, verbose=verbose)
+    if kind == "predictive":
+        sp = ga.pop("speed", 1.3)
+        ok = {"duration", "effort_weight", "guess", "seed", "knee_min"}
+        extra = set(ga) - ok
+        if extra:
+            raise ModelError(f"task: [gait] key(s) {sorted(extra)} do not apply to kind 'predictive'")
+        return predictive_gait(model, speed=None if sp == "free" else float(sp), tendon=ms.get("tendon"),
+                               **{k: ga[k] for k in ga}, **common)
+    if kind == "tracking":
+        # pinmsk.pipeline.opensim_to_gait2d's column map (the pipeline imports the task files,
+        # so it cannot be imported here): the lab pipeline's mapping of OpenSim coordinates
+        from ...io.channel_map import apply_channel_map, opensim_gait2d_map
+
+        def opensim_to_gait2d(coords, model):
+            return apply_channel_map(coords, opensim_gait2d_map(knee_sign="auto"), model=model)
+        def path(k):
+            if k not in ga:
+                raise ModelError(f"task: [gait] kind 'tracking' needs {k} = \"<file>\"")
+            f = Path(ga.pop(k))
+            if f.is_absolute():
+                return f
+            here = Path(base_dir) / f if base_dir is not None else f
+            if here.exists():
+                return here
+            from ...io.shared_data import shared_data_dir   # a path inside the shared data folder
+            root = shared_data_dir()
+            if root is not None and (root / f).exists():
+                return root / f
+            raise ModelError(f"task: [gait] {k} file '{f}' not found (relative to the task file or "
+                             "the shared data folder, $PINMSK_SHARED_DATA)")
+        # lenient: Moco's example3DWalking files miscount nColumns in their headers (the reader
+        # says so on stderr); the columns themselves are read by their labels
+        kin = opensim_to_gait2d(read_trial(path("coordinates"), strict=False), model)
+        grf = read_trial(path("grf"), strict=False) if "grf" in ga else None
+        extra = set(ga) - {"start", "duration", "effort_weight", "grf_weight"}
+        if extra:
+            raise ModelError(f"task: [gait] key(s) {sorted(extra)} do not apply to kind 'tracking'")
+        return tracking_gait(model, kin, grf, **{k: ga[k] for k in ga}, **common)
+    raise ModelError(f"task: [gait] kind must be 'predictive' or 'tracking', not {kind!r}")

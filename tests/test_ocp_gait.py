@@ -1,0 +1,112 @@
+"""Gait on the optimal-control engine (pinmsk.solvers.ocp.gait, thesis Ch. 5): one stride from a half
+cycle, variable bounds, the gait task files."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from conftest import REPO, require_casadi
+
+ca = require_casadi()
+
+import pinmsk  # noqa: E402
+from pinmsk.errors import ModelError  # noqa: E402
+from pinmsk.fitting import FitStatistics, Result  # noqa: E402
+from pinmsk.solvers import ocp  # noqa: E402
+from pinmsk.solvers.ocp import gait  # noqa: E402
+
+
+def _half_cycle(model, T=0.5, n=11, d=0.65):
+    """A synthetic half cycle (Result) with every channel kind full_stride reads."""
+    t = np.linspace(0.0, T, n)
+    rng = np.random.default_rng(3)
+    ch = {"torso_x": d * t / T, "torso_y": 0.9 + 0.01 * np.sin(2 * np.pi * t / T)}
+    for c in model.coordinates[2:]:
+        ch[c] = rng.normal(size=n)
+    for m in model.muscle_names:
+        ch[f"{m}_activation"] = rng.uniform(0.01, 1, n)
+        ch[f"{m}_metabolic_rate"] = np.full(n, 10.0)
+    for c in model.contacts:
+        for ax in "xyz":
+            ch[f"{c.label}_force_{ax}"] = rng.uniform(0, 100, n) if ax != "z" else np.zeros(n)
+    return Result(t, ch, stats=FitStatistics(k=1, converged=True, message="", iterations=0, violation=0.0,
+                                             objective=0.0))
+
+
+def test_full_stride_mirrors_the_half_cycle_and_sums_each_sides_spheres():
+    """The second half is the first with right and left swapped and the pelvis advanced by the half
+    cycle's distance; each side's GRF is the sum of its three spheres; speed, stride length, cost of
+    transport (16 muscles x 10 W over 0.5 s, per kg and m) and body weight from their definitions."""
+    model = gait.gait_model()
+    half = _half_cycle(model)
+    stride, s = gait.full_stride(half, model=model)
+    n = half.time.size
+    assert stride.time.size == 2 * n - 1 and stride.time[-1] == pytest.approx(1.0)
+    # the seam (index n - 1) is the half cycle's end, which symmetry makes its start mirrored
+    np.testing.assert_array_equal(stride["hip_r"][n:], half["hip_l"][1:])
+    np.testing.assert_array_equal(stride["knee_l"][n:], half["knee_r"][1:])
+    np.testing.assert_array_equal(stride["soleus_r_activation"][n:], half["soleus_l_activation"][1:])
+    np.testing.assert_allclose(stride["torso_x"][n:], half["torso_x"][1:] + 0.65)
+    np.testing.assert_array_equal(stride["torso_y"][n:], half["torso_y"][1:])
+    fy_r = sum(half[f"{c.label}_force_y"] for c in model.contacts if c.target.endswith("_r"))
+    np.testing.assert_allclose(stride["r_ground_force_vy"][:n], fy_r)
+    np.testing.assert_allclose(stride["l_ground_force_vy"][n:], fy_r[1:])
+    mass = sum(I.mass for I in model.pin.inertias)
+    assert s["speed"] == pytest.approx(1.3) and s["stride_length"] == pytest.approx(1.3)
+    assert s["body_weight"] == pytest.approx(9.81 * mass)
+    assert s["cost_of_transport"] == pytest.approx(16 * 10.0 * 0.5 / (mass * 0.65))
+    # mirroring twice is the identity (a round trip)
+    again, _ = gait.full_stride(Result(stride.time[n - 1:] - stride.time[n - 1],
+                                       {k: stride[k][n - 1:] for k in half.names},
+                                       stats=half.stats), model=model)
+    np.testing.assert_allclose(again["hip_r"][n:], half["hip_r"][1:])
+    np.testing.assert_allclose(again["torso_x"][n:], half["torso_x"][1:] + 2 * 0.65)
+
+
+def test_bounds_hold_on_the_variables_and_bind_when_active():
+    """A forearm reach in 1 s: its unbounded peak speed exceeds 2 rad/s; bounded to 2 rad/s the speed
+    stays within it at every node, touches it, and the effort rises."""
+    model = pinmsk.load_model("forearm", moment_arms="angle")
+    cons = [ocp.InitialState(q={"elbow_flexion": 0.3}, v={"elbow_flexion": 0.0}),
+            ocp.FinalState(q={"elbow_flexion": 1.5}, v={"elbow_flexion": 0.0})]
+
+    def solve(extra):
+        return ocp.Collocation(model, cost=ocp.Effort(2), constraints=cons + extra, duration=0.8, intervals=15,
+                               scheme="trapezoidal", verbose=False).fit().result_
+    free = solve([])
+    assert free.converged and free["elbow_flexion_speed"].max() > 2.1
+    r = solve([ocp.Bounds(v={"elbow_flexion": (-2.0, 2.0)})])
+    assert r.converged, r.status
+    assert r["elbow_flexion_speed"].max() <= 2.0 + 1e-9
+    assert r["elbow_flexion_speed"].max() > 2.0 - 1e-4
+    assert r.objective > free.objective
+
+
+def test_bounds_refuse_empty_ranges_by_name():
+    with pytest.raises(ModelError, match="Bounds v of knee_r"):
+        ocp.Bounds(v={"knee_r": (1.0, -1.0)})
+    model = pinmsk.load_model("forearm", moment_arms="angle")
+    fit = ocp.Collocation(model, cost=ocp.Effort(2), constraints=[ocp.Bounds(q={"elbow_flexion": (0.1, 0.2)}),
+                                                                  ocp.Bounds(q={"elbow_flexion": (0.3, 0.4)})],
+                          duration=1.0, intervals=5, verbose=False)
+    with pytest.raises(ModelError, match="Bounds on q of elbow_flexion are empty"):
+        fit.fit()
+
+
+def test_gait_task_files_build_the_half_cycle_problem():
+    """data/tasks/gait2d_predictive.toml: the half-cycle constraints (symmetry, periodic forward speed,
+    knee bounds, box bounds, 1.3 m/s), metabolic cost per distance plus effort; an unknown [gait] key
+    is refused by name."""
+    from pinmsk.solvers.ocp.tasks import build_from_task, load_task
+    spec = load_task(REPO / "data/tasks/gait2d_predictive.toml")
+    fit = build_from_task(spec, base_dir=REPO / "data/tasks")
+    assert isinstance(fit, gait.GaitCollocation)
+    kinds = [type(c).__name__ for c in fit.constraints]
+    assert kinds.count("CoordinateBounds") == 2 and "Symmetric" in kinds and "Periodic" in kinds
+    sp = [c for c in fit.constraints if isinstance(c, ocp.AverageSpeed)]
+    assert len(sp) == 1 and sp[0].speed == 1.3
+    assert [t.name for t in fit.cost.terms()] == ["metabolic", "effort"]
+    assert len(fit.model.contacts) == 6 and fit.intervals == 15
+    spec["gait"]["spead"] = 1.2
+    with pytest.raises(ModelError, match="spead"):
+        build_from_task(spec)
