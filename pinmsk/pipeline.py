@@ -494,8 +494,13 @@ def optimize_task(task_path, out_path=None, progress=None, *, precision: int | N
     if not res.converged:
         raise ConvergenceError(f"{task_path}: the optimizer did not converge ({res.status}); "
                                "no result written (it is not a solution)")
+    summary = prob.to_dict()
+    if "gait" in spec:      # a gait task writes one full stride and its gait numbers
+        from .solvers.ocp.gait import stride_result
+        res, gait_numbers = stride_result(prob, mirror=spec["gait"].get("kind", "predictive") == "predictive")
+        summary.update(gait_numbers)
     if out_path is not None:
         out = Path(out_path)
-        write_json(out.with_suffix(out.suffix + ".json"), prob.to_dict())
+        write_json(out.with_suffix(out.suffix + ".json"), summary)
         write_trial(res, out, precision=precision)
     return res

@@ -94,8 +94,9 @@ def run_pinmsk(*args: str) -> str:
 # to be asked for skips with this reason.
 CASADI_OPENSIM = ("casadi and opensim cannot be loaded in one process (both bundle libcasadi.so.3.7 "
                   "with different ABIs); run the suite with its default -n 2 --dist loadgroup")
-_OPENSIM_MARKS = ("import_opensim(", "bench_opensim", "import opensim")
-_CASADI_MARKS = ("casadi", "solvers.ocp", "optimize_task", "require_casadi")
+_OPENSIM_MARKS = ("import_opensim(", "require_opensim(", "bench_opensim", "import opensim")
+_CASADI_MARKS = ("casadi", "solvers.ocp", "import ocp", "optimize_task", "require_casadi", "data/tasks",
+                 "finger_tapping", "forearm_dynamic_optimization", "finger_frequency_limit", "bench_ocp")
 
 
 def _module_group(path: Path, k: int) -> str:
@@ -107,13 +108,24 @@ def _module_group(path: Path, k: int) -> str:
     return ("opensim", "casadi")[k % 2]
 
 
-def pytest_collection_modifyitems(config, items):
-    groups: dict = {}
-    for item in items:
-        g = groups.get(item.path)
-        if g is None:
-            g = groups[item.path] = _module_group(Path(item.path), len(groups))
-        item.add_marker(pytest.mark.xdist_group(g))
+_GROUPS: dict = {}
+
+
+def pytest_itemcollected(item):
+    # marked as each item is collected, so that xdist's own collection hook (which turns the mark
+    # into the "@group" node-id suffix its loadgroup scheduler reads) finds it
+    g = _GROUPS.get(item.path)
+    if g is None:
+        g = _GROUPS[item.path] = _module_group(Path(item.path), len(_GROUPS))
+    item.add_marker(pytest.mark.xdist_group(g))
+
+
+def require_opensim():
+    """The opensim module (logger off), or a skip naming why (not installed, or casadi in this process)."""
+    osim, why = import_opensim()
+    if osim is None:
+        pytest.skip(why)
+    return osim
 
 
 def require_casadi():

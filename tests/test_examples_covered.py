@@ -123,6 +123,9 @@ SLOW = {
     "forearm_dynamic_optimization.py": ("tests/test_dynamic_examples.py::test_forearm_quick",
                                         "tests/test_ocp.py::test_forearm_effort_optima_match_the_replaced_engine",
                                         "7 s in --quick mode"),
+    "finger_frequency_limit.py": ("tests/test_finger_literature.py::test_finger_frequency_limit_quick",
+                                  "tests/test_finger_literature.py::test_tracking_cost_rises_with_frequency_across_the_limit",
+                                  "4-6 s in --quick mode"),
 }
 
 

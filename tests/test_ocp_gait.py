@@ -100,7 +100,7 @@ def test_gait_task_files_build_the_half_cycle_problem():
     from pinmsk.solvers.ocp.tasks import build_from_task, load_task
     spec = load_task(REPO / "data/tasks/gait2d_predictive.toml")
     fit = build_from_task(spec, base_dir=REPO / "data/tasks")
-    assert isinstance(fit, gait.GaitCollocation)
+    assert isinstance(fit, ocp.Collocation)
     kinds = [type(c).__name__ for c in fit.constraints]
     assert kinds.count("CoordinateBounds") == 2 and "Symmetric" in kinds and "Periodic" in kinds
     sp = [c for c in fit.constraints if isinstance(c, ocp.AverageSpeed)]

@@ -16,6 +16,8 @@ without them.
 import numpy as np
 import pytest
 
+from conftest import require_opensim
+
 from pinmsk import errors as pinmsk_errors
 from pinmsk.dynamics import inverse_dynamics_result
 from pinmsk.io.shared_data import shared_data_dir
@@ -43,7 +45,7 @@ def _exact(d):
 
 
 def _opensim():
-    osim = pytest.importorskip("opensim")
+    osim = require_opensim()
     osim.Logger.setLevelString("Off")
     try:
         osim.Logger.removeFileSink()

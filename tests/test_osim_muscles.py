@@ -8,6 +8,8 @@ import warnings
 import numpy as np
 import pytest
 
+from conftest import require_opensim
+
 from pinmsk.presentation.cli import main
 from test_osim_paths import OsimReference, _model, _motion
 
@@ -31,7 +33,7 @@ def _imported(relative):
 
 def _reference(relative, every):
     """OpenSim's model and every ``every``-th pose of the model's IK motion."""
-    osim = pytest.importorskip("opensim")
+    osim = require_opensim()
     osim.Logger.setLevelString("Off")
     osim.Logger.removeFileSink()
     ref = OsimReference(_model(relative))
@@ -120,7 +122,7 @@ def test_gait10dof18musc_muscles_match_opensim_over_every_ik_frame():
 
 
 def test_max_isometric_force_round_trip_and_report():
-    osim = pytest.importorskip("opensim")
+    osim = require_opensim()
     osim.Logger.setLevelString("Off")
     for relative in (ARM26, GAIT):
         model, report, _ = _imported(relative)

@@ -11,6 +11,8 @@ import pickle
 import numpy as np
 import pytest
 
+from conftest import require_opensim
+
 import pinmsk.opensim.functions as osf
 import pinmsk.opensim.paths as op
 from pinmsk.errors import ModelError
@@ -279,7 +281,7 @@ class OsimReference:
     """Body placements, path lengths and moment arms from the opensim package."""
 
     def __init__(self, path_or_model):
-        osim = self.osim = pytest.importorskip("opensim")
+        osim = self.osim = require_opensim()
         # logger off before loading: OpenSim opens its opensim.log lazily, in the working directory of
         # the moment -- the model's folder while it reads the model (the shared data must stay clean)
         osim.Logger.setLevelString("Off")
@@ -381,7 +383,7 @@ def test_rajagopal_matches_opensim():
 
 
 def _synthetic(kind, quadrant, second=None):
-    osim = pytest.importorskip("opensim")
+    osim = require_opensim()
     m = osim.Model()
     b1 = osim.Body("b1", 1.0, osim.Vec3(0), osim.Inertia(0.1, 0.1, 0.1))
     b2 = osim.Body("b2", 1.0, osim.Vec3(0), osim.Inertia(0.1, 0.1, 0.1))

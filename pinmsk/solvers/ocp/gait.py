@@ -30,7 +30,7 @@ from .constraints import AverageSpeed, Bounds, CoordinateBounds, Periodic, Symme
 from .costs import Effort, MetabolicEnergy, TrackSignals
 from .problem import Collocation
 
-__all__ = ["GaitCollocation", "build_gait_task", "gait_model", "standing_height", "standing_guess", "predictive_gait", "tracking_gait",
+__all__ = ["stride_result", "build_gait_task", "gait_model", "standing_height", "standing_guess", "predictive_gait", "tracking_gait",
            "full_stride", "GAIT2D_PAIRS"]
 
 #: right -> left coordinate pairs of gait2d
@@ -122,34 +122,17 @@ def _solver(solver):
     return s
 
 
-class GaitCollocation(Collocation):
-    """A gait :class:`Collocation` whose ``result_`` is the full stride (:func:`full_stride`).
-
-    ``half_cycle_`` is the solved half cycle (``mirror=False``: the tracked span itself,
-    kept as it is); ``summary_`` holds speed, stride length, cost of transport, body weight;
-    :meth:`to_dict` adds them to the engine's JSON summary.
-    """
-
-    def __init__(self, model, *, mirror: bool = True, **kw):
-        super().__init__(model, **kw)
-        self.mirror = mirror
-
-    def fit(self):
-        super().fit()
-        half = self.result_
-        self.half_cycle_ = half
-        stride, summ = full_stride(half, model=self.model, mirror=self.mirror)
-        from ...fitting import Result
-        self.result_ = Result(stride.time, {n: stride[n] for n in stride.names}, stats=half.stats,
-                              info=dict(half.info, horizon=float(stride.time[-1]), **summ), report=half.report_text
-                              if hasattr(half, "report_text") else None)
-        self.summary_ = summ
-        return self
-
-    def to_dict(self) -> dict:
-        out = super().to_dict()
-        out.update({k: (None if v is None else float(v)) for k, v in self.summary_.items()})
-        return out
+def stride_result(fit, *, mirror: bool = True):
+    """``(Result, summary)``: a solved gait :class:`Collocation`'s result as one full stride
+    (:func:`full_stride`: the half cycle mirrored, ``mirror=False`` keeps a tracked span as it is)
+    with the fit's statistics, and the summary numbers (speed, stride length, cost of transport,
+    body weight) that ``pinmsk optimize`` adds to ``OUT.sto.json``."""
+    from ...fitting import Result
+    half = fit.result_
+    stride, summ = full_stride(half, model=fit.model, mirror=mirror)
+    res = Result(stride.time, {n: stride[n] for n in stride.names}, stats=half.stats,
+                 info=dict(half.info, horizon=float(stride.time[-1]), **summ))
+    return res, {k: (None if v is None else float(v)) for k, v in summ.items()}
 
 
 def predictive_gait(model=None, *, speed: float | None = 1.3, duration=0.55, intervals: int = 15,
@@ -169,7 +152,7 @@ def predictive_gait(model=None, *, speed: float | None = 1.3, duration=0.55, int
             raise ModelError(f"guess must be 'standing', 'quasi-random' or a Trial, not {guess!r}")
         guess = standing_guess(model, v0, T0, seed=seed if guess == "quasi-random" else None)
     cost = MetabolicEnergy(per="distance", coordinate=FORWARD) + effort_weight * Effort(2)
-    return GaitCollocation(model, cost=cost, constraints=half_cycle_constraints(model, speed=speed, knee_min=knee_min),
+    return Collocation(model, cost=cost, constraints=half_cycle_constraints(model, speed=speed, knee_min=knee_min),
                        duration=duration, intervals=intervals, scheme=scheme, guess=guess, tendon=tendon,
                        solver=_solver(solver), verbose=verbose)
 
@@ -240,7 +223,7 @@ def tracking_gait(model=None, kinematics: Trial | None = None, grf: Trial | None
     cons = [CoordinateBounds("knee_r", -0.2, 2.5), CoordinateBounds("knee_l", -0.2, 2.5), b]
     sel = (tt >= -1e-9) & (tt <= T + 1e-9)
     guess = Trial(tt[sel], {c: vals[sel, j] for j, c in enumerate(coords)})
-    return GaitCollocation(model, mirror=False, cost=cost, constraints=cons, duration=T, intervals=intervals,
+    return Collocation(model, cost=cost, constraints=cons, duration=T, intervals=intervals,
                            scheme=scheme, guess=guess, solver=_solver(solver), verbose=verbose)
 
 
@@ -326,7 +309,7 @@ def full_stride(fit, model=None, *, mirror: bool = True):
     return stride, summary
 
 
-def build_gait_task(spec: dict, *, base_dir=None, verbose=None) -> GaitCollocation:
+def build_gait_task(spec: dict, *, base_dir=None, verbose=None) -> Collocation:
     """The gait problem of a task file's ``[gait]`` table (``pinmsk optimize``; see tasks.TASK_SCHEMA)."""
     from pathlib import Path
     from ...io.tables import read_trial
