@@ -60,7 +60,7 @@ from .errors import TrialError
 from .io.shared_data import shared_data_dir
 from .trial import Trial
 
-__all__ = ["GaitCycle", "GaitValidation", "validate_gait", "gait_cycle", "winter_cycle",
+__all__ = ["GaitCycle", "GaitValidation", "validate_gait", "gait_cycle", "read_stride", "winter_cycle",
            "measured_walk_cycle", "double_hump", "heel_strikes", "curve_rms", "curve_correlation",
            "read_table_a1", "scale_to_model", "PUBLISHED", "EMG_GROUPS", "JOINTS", "G"]
 
@@ -89,7 +89,8 @@ EMG_GROUPS = {
     "glutei": ("gluteus_maximus", "gluteus_medius"),
 }
 
-#: Published values of healthy adult walking at a natural speed: (low, high) and the source.
+#: Published values of healthy adult walking at a natural speed: (low, high) and the source.  The
+#: numbers are those commonly quoted from these sources; they were not re-read in the originals here.
 PUBLISHED = {
     "cadence_steps_per_min": {
         "range": (94.0, 116.6), "mean": 105.3,
@@ -454,6 +455,45 @@ def _band(value, ref) -> dict:
             "source": ref["source"]}
 
 
+def _finite(x):
+    """``x`` with every non-finite float replaced by None and numpy scalars made plain (strict JSON)."""
+    if isinstance(x, dict):
+        return {k: _finite(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_finite(v) for v in x]
+    if isinstance(x, (float, np.floating)):
+        return float(x) if np.isfinite(x) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
+    return x
+
+
+#: keys of the ``OUT.sto.json`` beside a ``pinmsk optimize`` stride that the validation reads
+SIDECAR_KEYS = ("speed", "stride_length", "cost_of_transport", "body_weight")
+
+
+def read_stride(path) -> Trial:
+    """A stride written by ``pinmsk optimize`` (``OUT.sto``), with ``OUT.sto.json``'s speed, stride
+    length, cost of transport and body weight (when present) in its meta."""
+    from .io.tables import read_trial
+
+    path = Path(path)
+    tr = read_trial(path)
+    side = path.with_name(path.name + ".json")
+    if not side.exists():
+        return tr
+    try:
+        info = json.loads(side.read_text())
+    except json.JSONDecodeError as exc:
+        raise TrialError(f"{side}: line {exc.lineno}, column {exc.colno}: not JSON ({exc.msg})") from None
+    if not isinstance(info, dict):
+        raise TrialError(f"{side}: expected a JSON object, got {type(info).__name__}")
+    extra = {k: info[k] for k in SIDECAR_KEYS if info.get(k) is not None}
+    return tr.with_meta(**extra, sidecar=str(side))
+
+
 @dataclass
 class GaitValidation:
     """The numbers (``numbers``, JSON-ready) and the cycles compared (``simulation``, ``references``)."""
@@ -462,7 +502,8 @@ class GaitValidation:
     references: dict
 
     def to_json(self, path=None) -> str:
-        text = json.dumps(self.numbers, indent=2, default=float)
+        """The numbers as JSON (NaN -> null), also written to ``path`` (atomically) if given."""
+        text = json.dumps(_finite(self.numbers), indent=2, allow_nan=False)
         if path is not None:
             from .io.output_files import atomic_write
             atomic_write(path, lambda fh: fh.write(text), parents=True)
@@ -480,9 +521,12 @@ def validate_gait(result: Trial, *, winter: GaitCycle | None | bool = True,
                   label: str = "simulation") -> GaitValidation:
     """Validate one simulated full stride on gait2d (see the module docstring for every definition).
 
-    ``winter`` / ``measured``: True = read from the shared data (skipped, with a note, when absent),
-    a :class:`GaitCycle` to use instead, or False/None to leave that reference out.
+    ``result``: a Result or Trial, a path of a ``pinmsk optimize`` stride (:func:`read_stride`), or a
+    :class:`GaitCycle`.  ``winter`` / ``measured``: True = read from the shared data (skipped, with a
+    note, when absent), a :class:`GaitCycle` to use instead, or False/None to leave that reference out.
     """
+    if isinstance(result, (str, Path)):
+        result = read_stride(result)
     sim = result if isinstance(result, GaitCycle) else gait_cycle(result, label=label,
                                                                    body_weight=body_weight, speed=speed)
     refs = {}

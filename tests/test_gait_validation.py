@@ -185,3 +185,28 @@ def test_winter_reference_against_the_measured_walk(walk):
     r = gv.compare_angles(w, walk)
     assert r["knee_r"]["correlation"] > 0.9 and r["knee_r"]["rms_deg"] < 12.0
     assert w.cadence == pytest.approx(121.7, abs=0.5)       # frames 28-97 at ~70 Hz
+
+
+def test_read_stride_takes_the_sidecar_and_validate_gait_reads_a_path(tmp_path):
+    from pinmsk.io.tables import write_trial
+    tr = _synthetic_stride(T=1.14, speed=1.25)
+    path = tmp_path / "OUT.sto"
+    write_trial(tr, path)
+    (tmp_path / "OUT.sto.json").write_text(json.dumps({"converged": True, "speed": 1.2, "cost_of_transport": 3.4,
+                                                       "body_weight": 650.0, "stride_length": None}))
+    v = gv.validate_gait(path, winter=False, measured=False)
+    assert v.numbers["speed_m_per_s"] == pytest.approx(1.2)          # the sidecar's, not torso_x's 1.25
+    assert v.numbers["body_weight_n"] == pytest.approx(650.0)
+    assert v.numbers["spatiotemporal"]["cost_of_transport_j_per_kg_m"]["value"] == pytest.approx(3.4)
+    assert v.numbers["stride_time_s"] == pytest.approx(1.14, rel=1e-6)
+    text = v.to_json(tmp_path / "v.json")
+    assert "NaN" not in text and json.loads((tmp_path / "v.json").read_text())["label"] == "simulation"
+
+
+def test_read_stride_names_a_broken_sidecar(tmp_path):
+    from pinmsk.io.tables import write_trial
+    path = tmp_path / "OUT.sto"
+    write_trial(_synthetic_stride(), path)
+    (tmp_path / "OUT.sto.json").write_text('{"speed": 1.2,\n "x": }')
+    with pytest.raises(TrialError, match=r"OUT\.sto\.json: line 2, column \d+: not JSON"):
+        gv.read_stride(path)
