@@ -24,8 +24,9 @@ as shipped with Moco; read there, formulated again here):
   lumbar actuator control), the example's coordinate bounds; MocoTrack's default solver settings.
 * *predictive* -- ``MocoStudy``: the same symmetry, ``MocoAverageSpeedGoal`` 1.2 m/s, ``MocoControlGoal``
   weight 10, exponent 3, divided by displacement; final time in [0.4, 0.6] s; CasADi solver, 50 mesh
-  intervals, IPOPT tolerances 1e-4, 1000 iterations max; guess = the tracking solution when this run
-  produced one (as the example does), else Moco's default guess (recorded in the output).
+  intervals, IPOPT tolerances 1e-4, 1000 iterations max; guess = ``--predictive-guess``, else the
+  tracking solution when this run produced one (as the example does), else Moco's default guess
+  (recorded in the output).
 
 Everything OpenSim reads or writes lives in a copy of the model folder under ``--out`` (default: a
 fresh temporary directory); the shared data are only read.  OpenSim's Logger is off; IPOPT's
@@ -239,7 +240,8 @@ def _run_child(problem: str, workdir: Path, timeout: float, guess: Path | None) 
 
 
 def reference_rms_deg(solution: Path, reference: Path) -> dict:
-    """RMS (deg) of the solution's joint angles against the reference, on the solution's times."""
+    """RMS (deg) of the half-cycle solution's angles against the reference half cycle, both over their
+    own duration (0-100 %; the prediction's duration is free, the tracking's equals the reference's)."""
     import warnings
 
     import numpy as np
@@ -255,9 +257,9 @@ def reference_rms_deg(solution: Path, reference: Path) -> dict:
         r = next((n for n in ref.names if n.endswith(f"/{a}/value") or n == a), None)
         if s is None or r is None:
             continue
-        t = sol.time
-        keep = (t >= ref.time[0]) & (t <= ref.time[-1])
-        d = np.asarray(sol[s])[keep] - np.interp(t[keep], ref.time, np.asarray(ref[r]))
+        ps = (sol.time - sol.time[0]) / (sol.time[-1] - sol.time[0])
+        pr = (ref.time - ref.time[0]) / (ref.time[-1] - ref.time[0])
+        d = np.asarray(sol[s]) - np.interp(ps, pr, np.asarray(ref[r]))
         out[a] = float(np.degrees(np.sqrt(np.mean(d ** 2))))
     return out
 
@@ -284,6 +286,8 @@ def main(argv=None) -> int:
                     help="comma-separated subset of tracking,predictive")
     ap.add_argument("--timeout-tracking", type=float, default=900.0, help="s (default 900)")
     ap.add_argument("--timeout-predictive", type=float, default=600.0, help="s (default 600)")
+    ap.add_argument("--predictive-guess", type=Path, default=None,
+                    help="guess .sto of the prediction (default: this run's tracking solution, else Moco's)")
     ap.add_argument("--out", type=Path, default=None, help="output folder (default: a new temporary one)")
     ap.add_argument("--data", type=Path, default=None, help="shared data folder (default ../shared/data)")
     ap.add_argument("--_worker", choices=PROBLEMS, help=argparse.SUPPRESS)
@@ -314,13 +318,15 @@ def main(argv=None) -> int:
         shutil.copy2(src / f, out / f)
     timeouts = {"tracking": a.timeout_tracking, "predictive": a.timeout_predictive}
     results = {}
-    guess = None
+    guess = a.predictive_guess.resolve() if a.predictive_guess else None
+    if guess is not None and not guess.exists():
+        ap.error(f"--predictive-guess: {guess} does not exist")
     for p in problems:
         print(f"Moco {p}: running (timeout {timeouts[p]:.0f} s) in {out} ...", flush=True)
         r = _run_child(p, out, timeouts[p], guess if p == "predictive" else None)
         if r.get("solution"):
             r["reference_rms_deg"] = reference_rms_deg(Path(r["solution"]), out / "referenceCoordinates.sto")
-            if p == "tracking":
+            if p == "tracking" and a.predictive_guess is None:
                 guess = Path(r["solution"])
         results[p] = {"moco": r}
         print(f"  status {r['status']}, success {r['success']}, objective {_fmt(r.get('objective'))}, "
