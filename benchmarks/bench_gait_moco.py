@@ -38,6 +38,9 @@ solution ``.sto`` files (``createPeriodicTrajectory``) and the full-stride GRF
 (``createExternalLoadsTableForGait``), and the RMS (deg) of the solution's joint angles against
 ``referenceCoordinates.sto`` (the tracked data; for the prediction, how far it walks from it).
 A child killed by the timeout is reported as ``"not converged within X s"`` (no solution).
+Each Moco stride is also mapped onto gait2d (:func:`moco_stride_on_gait2d`) and validated with
+:func:`pinmsk.gait_validation.validate_gait` (joint angles against Winter and the measured walk,
+the GRF double hump, activations against EMG): ``<problem>_validation.json`` / ``.html``.
 
 Measured here (2 shared cores, pip opensim 4.6): the issue reports tracking 387 s, and a
 prediction that had not converged after 58 min; this script's own runs are in the PR report.
@@ -264,6 +267,68 @@ def reference_rms_deg(solution: Path, reference: Path) -> dict:
     return out
 
 
+#: 2D_gait.osim muscle -> the gait2d muscle group it stands for (for the activation-EMG comparison)
+MOCO_MUSCLES = {"glut_max": "glutei", "iliopsoas": "iliopsoas", "hamstrings": "hamstrings",
+                "rect_fem": "rectus_femoris", "vasti": "vasti", "gastroc": "gastrocnemius", "soleus": "soleus",
+                "tib_ant": "tibialis_anterior"}
+
+
+def moco_stride_on_gait2d(full: Path, grf: Path):
+    """Moco's full-stride solution as a gait2d stride Trial: coordinates by
+    :func:`pinmsk.pipeline.opensim_to_gait2d` (Gait10dof18musc hip centre, knee + = extension in the
+    OpenSim model), GRF ``r_ground_force_v{x,y}``, activations renamed to gait2d's groups."""
+    import warnings
+
+    import numpy as np
+
+    import pinmsk
+    from pinmsk.io.channel_map import GAIT10DOF_HIP_OFFSET
+    from pinmsk.pipeline import opensim_to_gait2d
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sol = pinmsk.read_trial(full, strict=False)
+        g = pinmsk.read_trial(grf, strict=False)
+    model = pinmsk.load_model("gait2d")
+    values = [n for n in sol.names if n.startswith("/jointset/") and n.endswith("/value")]
+    kin = opensim_to_gait2d(sol.select(values), model, hip_offset=GAIT10DOF_HIP_OFFSET, knee_sign=-1)
+    ch = {c: np.asarray(kin[c]) for c in kin.names}
+    for s in "rl":
+        for a in "xy":
+            ch[f"{s}_ground_force_v{a}"] = np.interp(sol.time, g.time, np.asarray(g[f"ground_force_{s}_v{a}"]))
+        for m, group in MOCO_MUSCLES.items():
+            n = next((c for c in sol.names if c.endswith(f"/{m}_{s}/activation")), None)   # with or without /forceset
+            if n is not None:
+                ch[f"{group}_{s}_activation"] = np.asarray(sol[n])
+    return pinmsk.Trial(sol.time, ch, meta={"source": str(full)})
+
+
+def validate_moco(problem: str, r: dict, out: Path) -> dict | None:
+    """Moco's stride against Winter, the measured walk and published values (pinmsk.gait_validation):
+    the summary numbers, with the full JSON and an HTML report written under ``out``."""
+    from pinmsk.gait_validation import validate_gait
+    if not r.get("full_stride"):
+        return None
+    v = validate_gait(moco_stride_on_gait2d(Path(r["full_stride"]), Path(r["grf_full_stride"])),
+                      label=f"Moco {problem}")
+    v.to_json(out / f"{problem}_validation.json")
+    try:
+        v.write_report(out / f"{problem}_validation.html", figures_dir=out / f"{problem}_figures")
+    except ImportError:                      # matplotlib absent: the numbers are still written
+        pass
+    n = v.numbers
+    summary = {"joint_rms_deg": {ref: {j: round(x["rms_deg"], 2) for j, x in d.items() if j.endswith("_r")}
+                                 for ref, d in n["joint_angles"].items()},
+               "joint_correlation": {ref: {j: round(x["correlation"], 3) for j, x in d.items() if j.endswith("_r")}
+                                     for ref, d in n["joint_angles"].items()},
+               "grf_double_hump_r": n["grf"].get("simulation", {}).get("r"),
+               "grf_rms_bw_pct": n["grf"].get("rms_bw_pct"),
+               "emg_correlation_r": {m: x.get("correlation_r") for m, x in n.get("emg", {}).items()},
+               "cadence_steps_per_min": n["spatiotemporal"]["cadence_steps_per_min"]["value"],
+               "stride_length_m": n["spatiotemporal"]["stride_length_m"]["value"],
+               "speed_m_per_s": n["speed_m_per_s"]}
+    return summary
+
+
 def run_pinmsk(problem: str) -> dict | None:
     """The pinmsk side of ``problem`` ("tracking" or "predictive") on Moco's own model.
 
@@ -328,6 +393,7 @@ def main(argv=None) -> int:
             r["reference_rms_deg"] = reference_rms_deg(Path(r["solution"]), out / "referenceCoordinates.sto")
             if p == "tracking" and a.predictive_guess is None:
                 guess = Path(r["solution"])
+            r["validation"] = validate_moco(p, r, out)
         results[p] = {"moco": r}
         print(f"  status {r['status']}, success {r['success']}, objective {_fmt(r.get('objective'))}, "
               f"iterations {_fmt(r.get('iterations'))}, wall {r['wall_seconds']:.1f} s", flush=True)
