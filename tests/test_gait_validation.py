@@ -210,3 +210,35 @@ def test_read_stride_names_a_broken_sidecar(tmp_path):
     (tmp_path / "OUT.sto.json").write_text('{"speed": 1.2,\n "x": }')
     with pytest.raises(TrialError, match=r"OUT\.sto\.json: line 2, column \d+: not JSON"):
         gv.read_stride(path)
+
+
+# -- benchmarks/bench_gait_moco.py: the parent side (never imports opensim) -------------------------
+
+def _bench():
+    import importlib.util
+    from pathlib import Path
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_gait_moco.py"
+    spec = importlib.util.spec_from_file_location("bench_gait_moco", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_bench_gait_moco_symmetry_names_and_arguments(capsys):
+    b = _bench()
+    assert b._swap_side("/jointset/hip_r/hip_flexion_r/value") == "/jointset/hip_l/hip_flexion_l/value"
+    assert b._swap_side("/forceset/rect_fem_l/activation") == "/forceset/rect_fem_r/activation"
+    with pytest.raises(SystemExit):
+        b.main(["--problems", "tracking,walking"])
+    assert "unknown ['walking']" in capsys.readouterr().err
+    assert b.run_pinmsk("tracking") is None
+    assert "pinmsk side (tracking): not yet" in capsys.readouterr().out
+
+
+def test_bench_gait_moco_reference_against_itself_is_zero(shared_data):
+    ref = shared_data / "opensim-models" / "Moco2DWalking" / "referenceCoordinates.sto"
+    if not ref.exists():
+        pytest.skip("Moco2DWalking is absent from the shared data")
+    rms = _bench().reference_rms_deg(ref, ref)
+    assert set(rms) == set(_bench().ANGLES)
+    assert max(rms.values()) < 1e-9
