@@ -242,3 +242,13 @@ def test_bench_gait_moco_reference_against_itself_is_zero(shared_data):
     rms = _bench().reference_rms_deg(ref, ref)
     assert set(rms) == set(_bench().ANGLES)
     assert max(rms.values()) < 1e-9
+
+
+def test_bench_gait_moco_reads_the_last_ipopt_iterate_of_a_killed_run(tmp_path):
+    log = tmp_path / "predictive.log"
+    log.write_text("iter    objective    inf_pr   inf_du lg(mu)\n   0  3.89e-01 4.40e+00 2.62e-02   0.0\n"
+                   "  25r  1.75e-01 4.18e-01 8.45e-02  -8.2\nNumber of nonzeros 12\n")
+    assert _bench()._last_iterate(log) == {"iterations": 25, "objective": 0.175, "inf_pr": 0.418, "inf_du": 0.0845,
+                                           "note": "last IPOPT iterate at the timeout"}
+    log.write_text("no iterations\n")
+    assert _bench()._last_iterate(log) == {}
