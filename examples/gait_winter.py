@@ -28,43 +28,13 @@ import numpy as np
 
 import pinmsk
 from pinmsk.ik import InverseKinematics
+from pinmsk.gait_validation import read_table_a1, scale_to_model
 from pinmsk.markers import load_marker_set
 
 from _common import data_file_main
 
-NAMES = ("RIB_CAGE", "RIGHT_HIP", "RIGHT_KNEE", "RIGHT_FIBULA", "RIGHT_ANKLE", "RIGHT_HEEL", "RIGHT_MT5",
-         "RIGHT_TOE")
 SWING = (69, 95)       # 0-based: right toe-off (frame 70, 1-based) .. the frame before heel contact (~97)
 CUTOFFS = (3.0, 4.0, 6.0, 8.0, 10.0, 15.0, None)
-
-
-def read_table_a1(path: Path) -> pinmsk.Trial:
-    """Table A.1 as a marker Trial (m); the 3-decimal time column is rebuilt from its end time."""
-    d = np.loadtxt(path, skiprows=2)
-    if d.shape[1] != 2 + 2 * len(NAMES):
-        raise pinmsk.TrialError(f"{path}: expected {2 + 2 * len(NAMES)} columns, got {d.shape[1]}")
-    n = d.shape[0]
-    t = np.arange(n) * (d[-1, 1] - d[0, 1]) / (n - 1)
-    ch = {}
-    for j, m in enumerate(NAMES):
-        ch[f"{m}_x"] = d[:, 2 + 2 * j] / 100.0
-        ch[f"{m}_y"] = d[:, 3 + 2 * j] / 100.0
-    return pinmsk.Trial(t, ch, meta={"source": str(path), "markers": NAMES, "units": "cm"})
-
-
-def scale_to_model(mk: pinmsk.Trial, mset) -> tuple[pinmsk.Trial, float]:
-    def dist(a, b):
-        return np.hypot(mk[f"{a}_x"] - mk[f"{b}_x"], mk[f"{a}_y"] - mk[f"{b}_y"])
-
-    measured = np.median(dist("RIGHT_HIP", "RIGHT_KNEE") + dist("RIGHT_KNEE", "RIGHT_ANKLE"))
-    p = {m.name: np.asarray(m.position) for m in mset.markers}
-    # hip and knee markers on the thigh, ankle marker on the shank (0.41552 m below the knee centre)
-    model = np.linalg.norm(p["RIGHT_HIP"] - p["RIGHT_KNEE"]) + np.linalg.norm(
-        p["RIGHT_ANKLE"] - (p["RIGHT_KNEE"] - np.array([0.0, -0.41552, 0.0])))
-    s = float(model / measured)
-    d = mk.to_dict()
-    d.pop("time")
-    return pinmsk.Trial(mk.time, {k: s * v for k, v in d.items()}, meta={**dict(mk.meta), "scale": s}), s
 
 
 def run(path: Path, out: Path, *, plots: bool = True) -> dict:
