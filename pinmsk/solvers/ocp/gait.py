@@ -39,23 +39,86 @@ FORWARD, HEIGHT, TRUNK = "torso_x", "torso_y", "torso_angle"
 G = 9.81
 
 
-def gait_model(model="gait2d", *, contact: str = "hypervolumetric", contact_smoothing: float = 2e-3):
+def gait_model(model="gait2d", *, contact: str = "hypervolumetric", contact_smoothing: float = 2e-3,
+               muscle_model: str | None = None, tendon: str | None = None, friction_velocity: float | None = None,
+               mtp_stiffness: float | None = None, mtp_damping: float = 0.0, contact_values=None):
     """``gait2d`` (or ``model``) with three contact spheres per foot (heel, metatarsal, toe).
 
     ``contact_smoothing``: the width (m) of the smooth positive part of the penetration; the
     thesis's 0.1 mm makes the contact force's derivative a step IPOPT cannot cross (the
     smoothed SmoothSphereHalfSpaceForce of Moco spreads it over about 3 mm).
+    ``friction_velocity``: the transition velocity ``v_s`` (m/s) of every site's regularized
+    Coulomb friction (None: the thesis's 5-50 mm/s, Table 4.4); ``contact_values``: per-site
+    parameter overrides (:func:`~pinmsk.contact.foot.foot_contacts`).
+
+    ``muscle_model``: None keeps the model's muscles; ``"degroote2016"`` rebuilds the same
+    muscles (f_max, l_opt, l_slack, pennation, activation time constants, volumes, fast
+    fractions, paths) as :class:`~pinmsk.muscles.models.DeGroote2016` units, as Moco and
+    PredSim do for gradient-based optimal control: their curves are smooth everywhere,
+    whereas gait2d's Nagano-Gerritsen force-velocity relation has a slope jump at v = 0 and
+    the Winters tendon a zero stiffness at zero force (thesis App. A.4-A.5).
+    ``tendon``: ``"rigid"`` / ``"compliant"`` sets the muscle set's tendon (None: keep).
     """
     from ...contact.foot import foot_contacts
+    from ...contact.smooth_sphere import SmoothSphereHalfSpaceForce
     from ...model import load_model
     base = load_model(model) if isinstance(model, str) else model
+    base = _convert_muscles(base, muscle_model, tendon)
+    if mtp_stiffness is not None and "mtp_r" in base.coordinates:
+        from ...effects.damping import JointDamping
+        from ...effects.spring import JointSpring
+        for side in ("r", "l"):
+            base = base.with_effect(JointSpring(f"mtp_{side}", k=float(mtp_stiffness), q0=0.0))
+            if mtp_damping:
+                base = base.with_effect(JointDamping(f"mtp_{side}", c=float(mtp_damping)))
     if tuple(base.contacts):
         return base
     out = base
+    vals = {k: dict(v) for k, v in (contact_values or {}).items()}
+    if friction_velocity is not None:
+        for site in ("heel", "metatarsal", "toe"):
+            vals.setdefault(site, {})["v_s"] = float(friction_velocity)
+    if contact == "smooth_sphere":
+        for side in ("r", "l"):
+            for site, R in SMOOTH_SPHERE_RADII.items():
+                p = dict(MOCO_SMOOTH_SPHERE, radius=R)
+                if friction_velocity is not None:
+                    p["transition_velocity"] = float(friction_velocity)
+                p.update(vals.get(site, {}))
+                out = out + SmoothSphereHalfSpaceForce(f"{site}_{side}", location=(0.0, p["radius"], 0.0), **p)
+        return out
     for side in ("r", "l"):
-        for c in foot_contacts(base, contact, side=side, smoothing=contact_smoothing):
+        for c in foot_contacts(base, contact, side=side, smoothing=contact_smoothing, values=vals):
             out = out + c
     return out
+
+
+#: Moco's 2D walking model's SmoothSphereHalfSpaceForce values (2D_gait.osim: contactHeel_r ...)
+MOCO_SMOOTH_SPHERE = dict(stiffness=3067776.0, dissipation=2.0, static_friction=0.8, dynamic_friction=0.8,
+                          viscous_friction=0.5, transition_velocity=0.2)
+#: sphere radii (m) at gait2d's sole sites: Moco's heel (0.035) and front (0.015) spheres,
+#: a metatarsal one between them
+SMOOTH_SPHERE_RADII = {"heel": 0.035, "metatarsal": 0.025, "toe": 0.015}
+
+
+def _convert_muscles(model, muscle_model, tendon):
+    """``model`` with its muscles as ``muscle_model`` units and/or another tendon (see gait_model)."""
+    ms = model.muscles
+    if ms is None or (muscle_model is None and tendon is None):
+        return model
+    from ...muscles.muscle_set import MuscleSet
+    tendon = ms.tendon if tendon is None else tendon
+    mtu = ms.mtu
+    if muscle_model is not None and muscle_model != ms.model_type:
+        if muscle_model != "degroote2016":
+            raise ModelError(f"gait_model: muscle_model must be None or 'degroote2016', not {muscle_model!r}")
+        from ...muscles.models import DeGroote2016
+        mtu = DeGroote2016(f_max=ms.f_max, l_opt=ms.l_opt, l_slack=ms.l_slack, pennation=ms.pennation,
+                           names=ms.names, fast_fraction=ms.fast_fraction, volume=ms.volume,
+                           tau_rise=float(mtu.tau_rise), tau_fall=float(mtu.tau_fall))
+    new = MuscleSet(names=ms.names, model_type=mtu.model_type, mtu=mtu, path=ms.path, tendon=tendon,
+                    display_points=dict(ms.display_points))
+    return model.with_muscles(new)
 
 
 def standing_height(model) -> float:
@@ -140,9 +203,10 @@ class GaitCollocation(Collocation):
         self.half_cycle_ = half
         stride, summ = full_stride(half, model=self.model, mirror=self.mirror)
         from ...fitting import Result
-        self.result_ = Result(stride.time, {n: stride[n] for n in stride.names}, stats=half.stats,
-                              info=dict(half.info, horizon=float(stride.time[-1]), **summ), report=half.report_text
-                              if hasattr(half, "report_text") else None)
+        # "duration" stays in summary_ only: it would hide the Result's own attribute
+        info = dict(half.info, horizon=float(stride.time[-1]), **{k: v for k, v in summ.items() if k != "duration"})
+        self.result_ = Result(stride.time, {n: stride[n] for n in stride.names}, stats=half.stats, info=info,
+                              report=half.report_text if hasattr(half, "report_text") else None)
         self.summary_ = summ
         return self
 
@@ -154,20 +218,26 @@ class GaitCollocation(Collocation):
 
 def predictive_gait(model=None, *, speed: float | None = 1.3, duration=0.55, intervals: int = 15,
                     scheme: str = "trapezoidal", effort_weight: float = 0.1, knee_min: float = 0.0,
-                    guess="standing", seed: int = 0, tendon: str | None = None, solver=None,
+                    guess="standing", seed: int = 0, tendon: str | None = None,
+                    muscle_model: str | None = None, contact: str = "hypervolumetric",
+                    contact_smoothing: float = 2e-3,
+                    friction_velocity: float | None = None, mtp_stiffness: float | None = None,
+                    mtp_damping: float = 0.0, sink: float = 0.005, solver=None,
                     verbose=None) -> Collocation:
     """The predictive half gait cycle (thesis Sec. 5.2): a :class:`Collocation`, not yet solved.
 
     ``speed`` m/s (None: free); ``duration`` s or ``(lower, upper)`` (free); ``guess``:
     ``"standing"``, ``"quasi-random"`` (with ``seed``) or a Trial / Result (a warm start).
     """
-    model = gait_model() if model is None else gait_model(model)
+    model = gait_model("gait2d" if model is None else model, muscle_model=muscle_model, tendon=tendon,
+                       contact=contact, contact_smoothing=contact_smoothing,
+                       friction_velocity=friction_velocity, mtp_stiffness=mtp_stiffness, mtp_damping=mtp_damping)
     v0 = 1.3 if speed is None else float(speed)
     T0 = float(np.mean(duration)) if np.ndim(duration) else float(duration)
     if isinstance(guess, str):
         if guess not in ("standing", "quasi-random"):
             raise ModelError(f"guess must be 'standing', 'quasi-random' or a Trial, not {guess!r}")
-        guess = standing_guess(model, v0, T0, seed=seed if guess == "quasi-random" else None)
+        guess = standing_guess(model, v0, T0, sink=sink, seed=seed if guess == "quasi-random" else None)
     cost = MetabolicEnergy(per="distance", coordinate=FORWARD) + effort_weight * Effort(2)
     return GaitCollocation(model, cost=cost, constraints=half_cycle_constraints(model, speed=speed, knee_min=knee_min),
                        duration=duration, intervals=intervals, scheme=scheme, guess=guess, tendon=tendon,
