@@ -180,7 +180,16 @@ def half_cycle_constraints(model, *, speed: float | None, knee_min: float = 0.0)
 
 
 def _solver(solver):
-    s = {"max_iter": 3000, "tol": 1e-4, "constraint_tol": 1e-4}   # Moco's example2DWalking tolerances
+    """Moco's example2DWalking tolerances (1e-4) and its default quasi-Newton Hessian
+    (MocoCasADiSolver's ``optim_hessian_approximation = "limited-memory"``).
+
+    With the exact Hessian no gait2d half cycle converged: the Lagrangian's curvature from the
+    contact and muscle terms is strongly indefinite away from a gait, IPOPT's inertia
+    correction climbs to 1e7-1e10, the steps shrink to ~1e-3 and the dual infeasibility grows
+    to 1e9-1e14 (whatever the muscles, contacts, guess or mu strategy).  The limited-memory
+    BFGS approximation is positive definite by construction and converges in a few hundred
+    iterations (see :func:`predictive_gait`)."""
+    s = {"max_iter": 3000, "tol": 1e-4, "constraint_tol": 1e-4, "hessian": "limited-memory"}
     s.update(solver or {})
     return s
 
@@ -218,8 +227,8 @@ class GaitCollocation(Collocation):
 
 def predictive_gait(model=None, *, speed: float | None = 1.3, duration=0.55, intervals: int = 15,
                     scheme: str = "trapezoidal", effort_weight: float = 0.1, knee_min: float = 0.0,
-                    guess="standing", seed: int = 0, tendon: str | None = None,
-                    muscle_model: str | None = None, contact: str = "hypervolumetric",
+                    guess="standing", seed: int = 0, tendon: str | None = "rigid",
+                    muscle_model: str | None = "degroote2016", contact: str = "hypervolumetric",
                     contact_smoothing: float = 2e-3,
                     friction_velocity: float | None = None, mtp_stiffness: float | None = None,
                     mtp_damping: float = 0.0, sink: float = 0.005, solver=None,
@@ -228,6 +237,15 @@ def predictive_gait(model=None, *, speed: float | None = 1.3, duration=0.55, int
 
     ``speed`` m/s (None: free); ``duration`` s or ``(lower, upper)`` (free); ``guess``:
     ``"standing"``, ``"quasi-random"`` (with ``seed``) or a Trial / Result (a warm start).
+
+    Defaults that make the problem converge (measured on 2 loaded cores, 15 trapezoidal
+    intervals, standing guess): gait2d's 16 muscles as De Groote 2016 units with a rigid tendon
+    (``muscle_model="degroote2016", tendon="rigid"``, the same f_max, l_opt, l_slack, pennation;
+    as Moco and PredSim use) and IPOPT with a limited-memory Hessian (:func:`_solver`):
+    Optimal Solution Found in ~370 iterations, ~18 s.  With the model's own Nagano-Gerritsen
+    muscles (``muscle_model=None``) and the compliant Winters tendon it does not converge; the
+    rigid-tendon NG variant and the compliant De Groote variant converge slowly, if at all
+    (over 1000 iterations).  The other model options are :func:`gait_model`'s.
     """
     model = gait_model("gait2d" if model is None else model, muscle_model=muscle_model, tendon=tendon,
                        contact=contact, contact_smoothing=contact_smoothing,
@@ -259,7 +277,9 @@ def contact_rows(model) -> dict:
 def tracking_gait(model=None, kinematics: Trial | None = None, grf: Trial | None = None, *,
                   start: float | None = None, duration: float | None = None, intervals: int = 20,
                   scheme: str = "trapezoidal", tracking_weight: float = 1.0, grf_weight: float = 0.1,
-                  effort_weight: float = 0.01, solver=None, verbose=None) -> Collocation:
+                  effort_weight: float = 0.01, muscle_model: str | None = "degroote2016",
+                  tendon: str | None = "rigid", floor_sink: float | None = 0.005, solver=None,
+                  verbose=None) -> Collocation:
     """Tracking of measured gait2d coordinates (``kinematics``: channels named as the model's
     coordinates, e.g. from :func:`pinmsk.pipeline.opensim_to_gait2d`) and ground reaction forces
     (``grf``: ``r_ground_force_vx``, ``..._vy``, ``l_...``, N) over ``[start, start + duration]``.
@@ -267,9 +287,12 @@ def tracking_gait(model=None, kinematics: Trial | None = None, grf: Trial | None
     Costs: coordinates (squared error over (0.1 rad)^2 or (0.05 m)^2, Moco's
     MocoStateTrackingGoal habit), GRF x/y per side over body weight (sum of each side's
     spheres), mean squared activation; bounds as the predictive problem, no symmetry.
+    ``muscle_model``, ``tendon`` and the solver defaults as :func:`predictive_gait` (why: there).
+    ``floor_sink``: the measured pelvis height is shifted so that the lowest sole site sits this
+    deep (m) in the ground (median over the frames); None tracks it as measured.
     """
     from .costs import Cost
-    model = gait_model() if model is None else gait_model(model)
+    model = gait_model("gait2d" if model is None else model, muscle_model=muscle_model, tendon=tendon)
     if kinematics is None:
         raise ModelError("tracking_gait needs the measured kinematics (a Trial of gait2d coordinates)")
     t = np.asarray(kinematics.time, dtype=float)
@@ -301,6 +324,15 @@ def tracking_gait(model=None, kinematics: Trial | None = None, grf: Trial | None
     cost = terms[0]
     for c in terms[1:]:
         cost = cost + c
+    if HEIGHT in coords and floor_sink is not None:
+        # the lab floor and the model's: the mapped pelvis height of a measured walk need not put
+        # gait2d's soles on the ground (the Moco walk's float 14-40 mm above it, no support at
+        # all); lower it so that the lowest sole site sits floor_sink (m) deep, the median over frames
+        j = coords.index(HEIGHT)
+        lows = _lowest_site(model, coords, vals)
+        vals = vals.copy()
+        vals[:, j] -= float(np.median(lows)) + float(floor_sink)
+        terms[0] = TrackSignals("q", q_idx, tt, vals, scale=scale, weight=tracking_weight, name="track_coordinates")
     q0 = {c: np.interp(0.0, tt, vals[:, j]) for j, c in enumerate(coords)}
     h = standing_height(model)
     b = gait_bounds(model)
@@ -312,6 +344,22 @@ def tracking_gait(model=None, kinematics: Trial | None = None, grf: Trial | None
     guess = Trial(tt[sel], {c: vals[sel, j] for j, c in enumerate(coords)})
     return GaitCollocation(model, mirror=False, cost=cost, constraints=cons, duration=T, intervals=intervals,
                            scheme=scheme, guess=guess, solver=_solver(solver), verbose=verbose)
+
+
+def _lowest_site(model, coords, vals) -> np.ndarray:
+    """Per frame, the height (m) of the lowest sole site (heel, metatarsal, toe of both feet)."""
+    import pinocchio as pin
+    pm = model.pin
+    d = pm.createData()
+    ids = [model.frame_id(f"{s}_{side}") for s in ("heel", "metatarsal", "toe") for side in "rl"]
+    cols = [model.coordinate_index(c) for c in coords]
+    out = np.empty(vals.shape[0])
+    for k in range(vals.shape[0]):
+        q = np.zeros(pm.nq)
+        q[cols] = vals[k]
+        pin.framesForwardKinematics(pm, d, q)
+        out[k] = min(d.oMf[i].translation[1] for i in ids)
+    return out
 
 
 class _TrackGRF(TrackSignals):
@@ -405,9 +453,13 @@ def build_gait_task(spec: dict, *, base_dir=None, verbose=None) -> GaitCollocati
     if bad:
         raise ModelError(f"task: section(s) {sorted(bad)} do not apply to a [gait] task; use [gait] keys")
     kind = ga.pop("kind", "predictive")
-    model = gait_model(ms.get("name", "gait2d"), contact_smoothing=float(ga.pop("contact_smoothing", 2e-3)))
+    mm = ga.pop("muscle_model", "degroote2016")
+    model = gait_model(ms.get("name", "gait2d"), contact_smoothing=float(ga.pop("contact_smoothing", 2e-3)),
+                       muscle_model=None if mm == "model" else mm,
+                       tendon=ms.get("tendon", None if mm == "model" else "rigid"))
     solver = {"max_iter": int(so.get("maxiter", 3000)), "tol": float(so.get("tol", 1e-4)),
-              "constraint_tol": float(so.get("constraint_tol", 1e-4))}
+              "constraint_tol": float(so.get("constraint_tol", 1e-4)),
+              "hessian": so.get("hessian", "limited-memory")}
     common = dict(intervals=int(so.get("intervals", 15 if kind == "predictive" else 20)),
                   scheme=so.get("scheme", "trapezoidal"), solver=solver, verbose=verbose)
     if kind == "predictive":
@@ -416,7 +468,7 @@ def build_gait_task(spec: dict, *, base_dir=None, verbose=None) -> GaitCollocati
         extra = set(ga) - ok
         if extra:
             raise ModelError(f"task: [gait] key(s) {sorted(extra)} do not apply to kind 'predictive'")
-        return predictive_gait(model, speed=None if sp == "free" else float(sp), tendon=ms.get("tendon"),
+        return predictive_gait(model, speed=None if sp == "free" else float(sp), tendon=None, muscle_model=None,
                                **{k: ga[k] for k in ga}, **common)
     if kind == "tracking":
         # pinmsk.pipeline.opensim_to_gait2d's column map (the pipeline imports the task files,
@@ -447,5 +499,5 @@ def build_gait_task(spec: dict, *, base_dir=None, verbose=None) -> GaitCollocati
         extra = set(ga) - {"start", "duration", "effort_weight", "grf_weight"}
         if extra:
             raise ModelError(f"task: [gait] key(s) {sorted(extra)} do not apply to kind 'tracking'")
-        return tracking_gait(model, kin, grf, **{k: ga[k] for k in ga}, **common)
+        return tracking_gait(model, kin, grf, muscle_model=None, tendon=None, **{k: ga[k] for k in ga}, **common)
     raise ModelError(f"task: [gait] kind must be 'predictive' or 'tracking', not {kind!r}")
