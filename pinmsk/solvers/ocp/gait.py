@@ -11,6 +11,9 @@ The half gait cycle (thesis Sec. 5.2, as Moco's ``example2DWalking``):
 - model: ``gait2d`` with its 16 muscles, Riener & Edrich passive moments (Eq. 5.11) and three
   hyper-volumetric contact spheres per foot (Table 4.4, :func:`~pinmsk.contact.foot.foot_contacts`),
   their penetration smoothed over ``contact_smoothing`` (m) so the force has usable gradients;
+  by default its muscles become De Groote 2016 units with a rigid tendon (same parameters) and
+  IPOPT uses a limited-memory Hessian, the two changes that make the solve converge (Moco's and
+  PredSim's choices; measurements in :func:`predictive_gait` and :func:`_solver`);
 - constraints: the end state is the start state mirrored left/right (Eq. 5.8), the unpaired
   coordinates and the forward speed periodic (Eq. 5.9), no knee hyper-extension (Eq. 5.10),
   a prescribed average speed (or free), and box bounds on every coordinate, speed, acceleration
