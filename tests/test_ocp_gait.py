@@ -110,3 +110,31 @@ def test_gait_task_files_build_the_half_cycle_problem():
     spec["gait"]["spead"] = 1.2
     with pytest.raises(ModelError, match="spead"):
         build_from_task(spec)
+
+
+@pytest.mark.slow
+def test_predictive_half_cycle_converges_from_standing():
+    """Slow (6 s alone, 26 s on the loaded 2 cores; test_gait_task_files_build_the_half_cycle_problem
+    builds the same problem in the default suite).
+    The default predictive half cycle (task file gait2d_predictive.toml: 15 trapezoidal intervals,
+    0.55 s, 1.3 m/s, standing guess; De Groote 2016 rigid-tendon muscles, limited-memory Hessian)
+    reaches IPOPT's Optimal Solution Found within 1000 iterations (369 measured), with the prescribed
+    speed, the stride length it implies (2 x 0.55 s x 1.3 m/s) and a finite, positive cost of transport
+    equal to the metabolic term of the objective (J/kg/m)."""
+    from pinmsk.solvers.ocp.tasks import build_from_task, load_task
+    spec = load_task(REPO / "data/tasks/gait2d_predictive.toml")
+    spec["solver"]["maxiter"] = 1000
+    fit = build_from_task(spec, base_dir=REPO / "data/tasks").fit()
+    r, numbers = gait.stride_result(fit)
+    d = {**fit.to_dict(), **numbers}
+    assert d["converged"] and d["status"] == "Solve_Succeeded", d["status"]
+    assert d["iterations"] < 1000
+    assert d["speed"] == pytest.approx(1.3, abs=1e-6)
+    assert d["stride_length"] == pytest.approx(2 * 0.55 * 1.3, abs=1e-6)
+    assert d["cost_of_transport"] == pytest.approx(d["terms"]["metabolic"], rel=1e-6)
+    assert 0.5 < d["cost_of_transport"] < 20.0
+    # the knee hyper-extension bound (Eq. 5.10) holds and the feet carry the body: the mean vertical
+    # GRF over the stride is the body weight (periodic vertical motion)
+    assert r["knee_r"].min() >= -1e-6
+    fy = r["r_ground_force_vy"] + r["l_ground_force_vy"]
+    assert np.trapezoid(fy, r.time) / r.time[-1] == pytest.approx(d["body_weight"], rel=0.05)

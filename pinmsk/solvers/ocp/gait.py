@@ -11,6 +11,9 @@ The half gait cycle (thesis Sec. 5.2, as Moco's ``example2DWalking``):
 - model: ``gait2d`` with its 16 muscles, Riener & Edrich passive moments (Eq. 5.11) and three
   hyper-volumetric contact spheres per foot (Table 4.4, :func:`~pinmsk.contact.foot.foot_contacts`),
   their penetration smoothed over ``contact_smoothing`` (m) so the force has usable gradients;
+  by default its muscles become De Groote 2016 units with a rigid tendon (same parameters) and
+  IPOPT uses a limited-memory Hessian, the two changes that make the solve converge (Moco's and
+  PredSim's choices; measurements in :func:`predictive_gait` and :func:`_solver`);
 - constraints: the end state is the start state mirrored left/right (Eq. 5.8), the unpaired
   coordinates and the forward speed periodic (Eq. 5.9), no knee hyper-extension (Eq. 5.10),
   a prescribed average speed (or free), and box bounds on every coordinate, speed, acceleration
@@ -39,23 +42,86 @@ FORWARD, HEIGHT, TRUNK = "torso_x", "torso_y", "torso_angle"
 G = 9.81
 
 
-def gait_model(model="gait2d", *, contact: str = "hypervolumetric", contact_smoothing: float = 2e-3):
+def gait_model(model="gait2d", *, contact: str = "hypervolumetric", contact_smoothing: float = 2e-3,
+               muscle_model: str | None = None, tendon: str | None = None, friction_velocity: float | None = None,
+               mtp_stiffness: float | None = None, mtp_damping: float = 0.0, contact_values=None):
     """``gait2d`` (or ``model``) with three contact spheres per foot (heel, metatarsal, toe).
 
     ``contact_smoothing``: the width (m) of the smooth positive part of the penetration; the
     thesis's 0.1 mm makes the contact force's derivative a step IPOPT cannot cross (the
     smoothed SmoothSphereHalfSpaceForce of Moco spreads it over about 3 mm).
+    ``friction_velocity``: the transition velocity ``v_s`` (m/s) of every site's regularized
+    Coulomb friction (None: the thesis's 5-50 mm/s, Table 4.4); ``contact_values``: per-site
+    parameter overrides (:func:`~pinmsk.contact.foot.foot_contacts`).
+
+    ``muscle_model``: None keeps the model's muscles; ``"degroote2016"`` rebuilds the same
+    muscles (f_max, l_opt, l_slack, pennation, activation time constants, volumes, fast
+    fractions, paths) as :class:`~pinmsk.muscles.models.DeGroote2016` units, as Moco and
+    PredSim do for gradient-based optimal control: their curves are smooth everywhere,
+    whereas gait2d's Nagano-Gerritsen force-velocity relation has a slope jump at v = 0 and
+    the Winters tendon a zero stiffness at zero force (thesis App. A.4-A.5).
+    ``tendon``: ``"rigid"`` / ``"compliant"`` sets the muscle set's tendon (None: keep).
     """
     from ...contact.foot import foot_contacts
+    from ...contact.smooth_sphere import SmoothSphereHalfSpaceForce
     from ...model import load_model
     base = load_model(model) if isinstance(model, str) else model
+    base = _convert_muscles(base, muscle_model, tendon)
+    if mtp_stiffness is not None and "mtp_r" in base.coordinates:
+        from ...effects.damping import JointDamping
+        from ...effects.spring import JointSpring
+        for side in ("r", "l"):
+            base = base.with_effect(JointSpring(f"mtp_{side}", k=float(mtp_stiffness), q0=0.0))
+            if mtp_damping:
+                base = base.with_effect(JointDamping(f"mtp_{side}", c=float(mtp_damping)))
     if tuple(base.contacts):
         return base
     out = base
+    vals = {k: dict(v) for k, v in (contact_values or {}).items()}
+    if friction_velocity is not None:
+        for site in ("heel", "metatarsal", "toe"):
+            vals.setdefault(site, {})["v_s"] = float(friction_velocity)
+    if contact == "smooth_sphere":
+        for side in ("r", "l"):
+            for site, R in SMOOTH_SPHERE_RADII.items():
+                p = dict(MOCO_SMOOTH_SPHERE, radius=R)
+                if friction_velocity is not None:
+                    p["transition_velocity"] = float(friction_velocity)
+                p.update(vals.get(site, {}))
+                out = out + SmoothSphereHalfSpaceForce(f"{site}_{side}", location=(0.0, p["radius"], 0.0), **p)
+        return out
     for side in ("r", "l"):
-        for c in foot_contacts(base, contact, side=side, smoothing=contact_smoothing):
+        for c in foot_contacts(base, contact, side=side, smoothing=contact_smoothing, values=vals):
             out = out + c
     return out
+
+
+#: Moco's 2D walking model's SmoothSphereHalfSpaceForce values (2D_gait.osim: contactHeel_r ...)
+MOCO_SMOOTH_SPHERE = dict(stiffness=3067776.0, dissipation=2.0, static_friction=0.8, dynamic_friction=0.8,
+                          viscous_friction=0.5, transition_velocity=0.2)
+#: sphere radii (m) at gait2d's sole sites: Moco's heel (0.035) and front (0.015) spheres,
+#: a metatarsal one between them
+SMOOTH_SPHERE_RADII = {"heel": 0.035, "metatarsal": 0.025, "toe": 0.015}
+
+
+def _convert_muscles(model, muscle_model, tendon):
+    """``model`` with its muscles as ``muscle_model`` units and/or another tendon (see gait_model)."""
+    ms = model.muscles
+    if ms is None or (muscle_model is None and tendon is None):
+        return model
+    from ...muscles.muscle_set import MuscleSet
+    tendon = ms.tendon if tendon is None else tendon
+    mtu = ms.mtu
+    if muscle_model is not None and muscle_model != ms.model_type:
+        if muscle_model != "degroote2016":
+            raise ModelError(f"gait_model: muscle_model must be None or 'degroote2016', not {muscle_model!r}")
+        from ...muscles.models import DeGroote2016
+        mtu = DeGroote2016(f_max=ms.f_max, l_opt=ms.l_opt, l_slack=ms.l_slack, pennation=ms.pennation,
+                           names=ms.names, fast_fraction=ms.fast_fraction, volume=ms.volume,
+                           tau_rise=float(mtu.tau_rise), tau_fall=float(mtu.tau_fall))
+    new = MuscleSet(names=ms.names, model_type=mtu.model_type, mtu=mtu, path=ms.path, tendon=tendon,
+                    display_points=dict(ms.display_points))
+    return model.with_muscles(new)
 
 
 def standing_height(model) -> float:
@@ -117,7 +183,16 @@ def half_cycle_constraints(model, *, speed: float | None, knee_min: float = 0.0)
 
 
 def _solver(solver):
-    s = {"max_iter": 3000, "tol": 1e-4, "constraint_tol": 1e-4}   # Moco's example2DWalking tolerances
+    """Moco's example2DWalking tolerances (1e-4) and its default quasi-Newton Hessian
+    (MocoCasADiSolver's ``optim_hessian_approximation = "limited-memory"``).
+
+    With the exact Hessian no gait2d half cycle converged: the Lagrangian's curvature from the
+    contact and muscle terms is strongly indefinite away from a gait, IPOPT's inertia
+    correction climbs to 1e7-1e10, the steps shrink to ~1e-3 and the dual infeasibility grows
+    to 1e9-1e14 (whatever the muscles, contacts, guess or mu strategy).  The limited-memory
+    BFGS approximation is positive definite by construction and converges in a few hundred
+    iterations (see :func:`predictive_gait`)."""
+    s = {"max_iter": 3000, "tol": 1e-4, "constraint_tol": 1e-4, "hessian": "limited-memory"}
     s.update(solver or {})
     return s
 
@@ -131,26 +206,43 @@ def stride_result(fit, *, mirror: bool = True):
     half = fit.result_
     stride, summ = full_stride(half, model=fit.model, mirror=mirror)
     res = Result(stride.time, {n: stride[n] for n in stride.names}, stats=half.stats,
-                 info=dict(half.info, horizon=float(stride.time[-1]), **summ))
+                 info=dict(half.info, horizon=float(stride.time[-1]),
+                           # "duration" would hide the Result's own attribute
+                           **{k: v for k, v in summ.items() if k != "duration"}))
     return res, {k: (None if v is None else float(v)) for k, v in summ.items()}
 
 
 def predictive_gait(model=None, *, speed: float | None = 1.3, duration=0.55, intervals: int = 15,
                     scheme: str = "trapezoidal", effort_weight: float = 0.1, knee_min: float = 0.0,
-                    guess="standing", seed: int = 0, tendon: str | None = None, solver=None,
+                    guess="standing", seed: int = 0, tendon: str | None = "rigid",
+                    muscle_model: str | None = "degroote2016", contact: str = "hypervolumetric",
+                    contact_smoothing: float = 2e-3,
+                    friction_velocity: float | None = None, mtp_stiffness: float | None = None,
+                    mtp_damping: float = 0.0, sink: float = 0.005, solver=None,
                     verbose=None) -> Collocation:
     """The predictive half gait cycle (thesis Sec. 5.2): a :class:`Collocation`, not yet solved.
 
     ``speed`` m/s (None: free); ``duration`` s or ``(lower, upper)`` (free); ``guess``:
     ``"standing"``, ``"quasi-random"`` (with ``seed``) or a Trial / Result (a warm start).
+
+    Defaults that make the problem converge (measured on 2 loaded cores, 15 trapezoidal
+    intervals, standing guess): gait2d's 16 muscles as De Groote 2016 units with a rigid tendon
+    (``muscle_model="degroote2016", tendon="rigid"``, the same f_max, l_opt, l_slack, pennation;
+    as Moco and PredSim use) and IPOPT with a limited-memory Hessian (:func:`_solver`):
+    Optimal Solution Found in ~370 iterations, ~18 s.  With the model's own Nagano-Gerritsen
+    muscles (``muscle_model=None``) and the compliant Winters tendon it does not converge; the
+    rigid-tendon NG variant and the compliant De Groote variant converge slowly, if at all
+    (over 1000 iterations).  The other model options are :func:`gait_model`'s.
     """
-    model = gait_model() if model is None else gait_model(model)
+    model = gait_model("gait2d" if model is None else model, muscle_model=muscle_model, tendon=tendon,
+                       contact=contact, contact_smoothing=contact_smoothing,
+                       friction_velocity=friction_velocity, mtp_stiffness=mtp_stiffness, mtp_damping=mtp_damping)
     v0 = 1.3 if speed is None else float(speed)
     T0 = float(np.mean(duration)) if np.ndim(duration) else float(duration)
     if isinstance(guess, str):
         if guess not in ("standing", "quasi-random"):
             raise ModelError(f"guess must be 'standing', 'quasi-random' or a Trial, not {guess!r}")
-        guess = standing_guess(model, v0, T0, seed=seed if guess == "quasi-random" else None)
+        guess = standing_guess(model, v0, T0, sink=sink, seed=seed if guess == "quasi-random" else None)
     cost = MetabolicEnergy(per="distance", coordinate=FORWARD) + effort_weight * Effort(2)
     return Collocation(model, cost=cost, constraints=half_cycle_constraints(model, speed=speed, knee_min=knee_min),
                        duration=duration, intervals=intervals, scheme=scheme, guess=guess, tendon=tendon,
@@ -172,7 +264,9 @@ def contact_rows(model) -> dict:
 def tracking_gait(model=None, kinematics: Trial | None = None, grf: Trial | None = None, *,
                   start: float | None = None, duration: float | None = None, intervals: int = 20,
                   scheme: str = "trapezoidal", tracking_weight: float = 1.0, grf_weight: float = 0.1,
-                  effort_weight: float = 0.01, solver=None, verbose=None) -> Collocation:
+                  effort_weight: float = 0.01, muscle_model: str | None = "degroote2016",
+                  tendon: str | None = "rigid", floor_sink: float | None = 0.005, solver=None,
+                  verbose=None) -> Collocation:
     """Tracking of measured gait2d coordinates (``kinematics``: channels named as the model's
     coordinates, e.g. from :func:`pinmsk.pipeline.opensim_to_gait2d`) and ground reaction forces
     (``grf``: ``r_ground_force_vx``, ``..._vy``, ``l_...``, N) over ``[start, start + duration]``.
@@ -180,9 +274,12 @@ def tracking_gait(model=None, kinematics: Trial | None = None, grf: Trial | None
     Costs: coordinates (squared error over (0.1 rad)^2 or (0.05 m)^2, Moco's
     MocoStateTrackingGoal habit), GRF x/y per side over body weight (sum of each side's
     spheres), mean squared activation; bounds as the predictive problem, no symmetry.
+    ``muscle_model``, ``tendon`` and the solver defaults as :func:`predictive_gait` (why: there).
+    ``floor_sink``: the measured pelvis height is shifted so that the lowest sole site sits this
+    deep (m) in the ground (median over the frames); None tracks it as measured.
     """
     from .costs import Cost
-    model = gait_model() if model is None else gait_model(model)
+    model = gait_model("gait2d" if model is None else model, muscle_model=muscle_model, tendon=tendon)
     if kinematics is None:
         raise ModelError("tracking_gait needs the measured kinematics (a Trial of gait2d coordinates)")
     t = np.asarray(kinematics.time, dtype=float)
@@ -214,6 +311,15 @@ def tracking_gait(model=None, kinematics: Trial | None = None, grf: Trial | None
     cost = terms[0]
     for c in terms[1:]:
         cost = cost + c
+    if HEIGHT in coords and floor_sink is not None:
+        # the lab floor and the model's: the mapped pelvis height of a measured walk need not put
+        # gait2d's soles on the ground (the Moco walk's float 14-40 mm above it, no support at
+        # all); lower it so that the lowest sole site sits floor_sink (m) deep, the median over frames
+        j = coords.index(HEIGHT)
+        lows = _lowest_site(model, coords, vals)
+        vals = vals.copy()
+        vals[:, j] -= float(np.median(lows)) + float(floor_sink)
+        terms[0] = TrackSignals("q", q_idx, tt, vals, scale=scale, weight=tracking_weight, name="track_coordinates")
     q0 = {c: np.interp(0.0, tt, vals[:, j]) for j, c in enumerate(coords)}
     h = standing_height(model)
     b = gait_bounds(model)
@@ -225,6 +331,22 @@ def tracking_gait(model=None, kinematics: Trial | None = None, grf: Trial | None
     guess = Trial(tt[sel], {c: vals[sel, j] for j, c in enumerate(coords)})
     return Collocation(model, cost=cost, constraints=cons, duration=T, intervals=intervals,
                            scheme=scheme, guess=guess, solver=_solver(solver), verbose=verbose)
+
+
+def _lowest_site(model, coords, vals) -> np.ndarray:
+    """Per frame, the height (m) of the lowest sole site (heel, metatarsal, toe of both feet)."""
+    import pinocchio as pin
+    pm = model.pin
+    d = pm.createData()
+    ids = [model.frame_id(f"{s}_{side}") for s in ("heel", "metatarsal", "toe") for side in "rl"]
+    cols = [model.coordinate_index(c) for c in coords]
+    out = np.empty(vals.shape[0])
+    for k in range(vals.shape[0]):
+        q = np.zeros(pm.nq)
+        q[cols] = vals[k]
+        pin.framesForwardKinematics(pm, d, q)
+        out[k] = min(d.oMf[i].translation[1] for i in ids)
+    return out
 
 
 class _TrackGRF(TrackSignals):
@@ -318,9 +440,13 @@ def build_gait_task(spec: dict, *, base_dir=None, verbose=None) -> Collocation:
     if bad:
         raise ModelError(f"task: section(s) {sorted(bad)} do not apply to a [gait] task; use [gait] keys")
     kind = ga.pop("kind", "predictive")
-    model = gait_model(ms.get("name", "gait2d"), contact_smoothing=float(ga.pop("contact_smoothing", 2e-3)))
+    mm = ga.pop("muscle_model", "degroote2016")
+    model = gait_model(ms.get("name", "gait2d"), contact_smoothing=float(ga.pop("contact_smoothing", 2e-3)),
+                       muscle_model=None if mm == "model" else mm,
+                       tendon=ms.get("tendon", None if mm == "model" else "rigid"))
     solver = {"max_iter": int(so.get("maxiter", 3000)), "tol": float(so.get("tol", 1e-4)),
-              "constraint_tol": float(so.get("constraint_tol", 1e-4))}
+              "constraint_tol": float(so.get("constraint_tol", 1e-4)),
+              "hessian": so.get("hessian", "limited-memory")}
     common = dict(intervals=int(so.get("intervals", 15 if kind == "predictive" else 20)),
                   scheme=so.get("scheme", "trapezoidal"), solver=solver, verbose=verbose)
     if kind == "predictive":
@@ -329,7 +455,7 @@ def build_gait_task(spec: dict, *, base_dir=None, verbose=None) -> Collocation:
         extra = set(ga) - ok
         if extra:
             raise ModelError(f"task: [gait] key(s) {sorted(extra)} do not apply to kind 'predictive'")
-        return predictive_gait(model, speed=None if sp == "free" else float(sp), tendon=ms.get("tendon"),
+        return predictive_gait(model, speed=None if sp == "free" else float(sp), tendon=None, muscle_model=None,
                                **{k: ga[k] for k in ga}, **common)
     if kind == "tracking":
         # pinmsk.pipeline.opensim_to_gait2d's column map (the pipeline imports the task files,
@@ -360,5 +486,5 @@ def build_gait_task(spec: dict, *, base_dir=None, verbose=None) -> Collocation:
         extra = set(ga) - {"start", "duration", "effort_weight", "grf_weight"}
         if extra:
             raise ModelError(f"task: [gait] key(s) {sorted(extra)} do not apply to kind 'tracking'")
-        return tracking_gait(model, kin, grf, **{k: ga[k] for k in ga}, **common)
+        return tracking_gait(model, kin, grf, muscle_model=None, tendon=None, **{k: ga[k] for k in ga}, **common)
     raise ModelError(f"task: [gait] kind must be 'predictive' or 'tracking', not {kind!r}")

@@ -59,7 +59,8 @@ __all__ = ["Collocation", "SCHEMES"]
 
 SCHEMES = ("trapezoidal", "hermite-simpson")
 _SOLVER_KEYS = {"tol", "max_iter", "constraint_tol", "print_level", "hessian", "linear_solver",
-                "acceptable_tol", "mu_strategy"}
+                "acceptable_tol", "mu_strategy", "nlp_scaling_method", "bound_push", "acceptable_iter",
+                "acceptable_constr_viol_tol"}
 
 
 class _Blocks:
@@ -799,8 +800,13 @@ class Collocation(Fitter):
                 "ipopt.mu_strategy": s.get("mu_strategy", "adaptive"),
                 "ipopt.linear_solver": s.get("linear_solver", "mumps"),
                 "ipopt.hessian_approximation": s.get("hessian", "exact")}
-        if "acceptable_tol" in s:
-            opts["ipopt.acceptable_tol"] = float(s["acceptable_tol"])
+        for k in ("acceptable_tol", "bound_push", "acceptable_constr_viol_tol"):
+            if k in s:
+                opts[f"ipopt.{k}"] = float(s[k])
+        if "acceptable_iter" in s:
+            opts["ipopt.acceptable_iter"] = int(s["acceptable_iter"])
+        if "nlp_scaling_method" in s:
+            opts["ipopt.nlp_scaling_method"] = str(s["nlp_scaling_method"])
         return opts
 
     def fit(self):

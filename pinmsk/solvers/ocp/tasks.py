@@ -66,6 +66,8 @@ TASK_SCHEMA = {
              "effort_weight": "weight of the mean squared activation", "guess": "'standing' | 'quasi-random'",
              "seed": "quasi-random guess seed", "knee_min": "rad, knee hyper-extension bound (Eq. 5.10)",
              "contact_smoothing": "m, width of the smoothed penetration",
+             "muscle_model": "'degroote2016' (default: the model's muscles as De Groote 2016 units, which "
+                             "converge) | 'model' (the model's own muscle law)",
              "coordinates": "tracking: OpenSim coordinates file (.sto/.mot), mapped onto gait2d",
              "grf": "tracking: ground reaction force file (.mot)", "start": "tracking: first time (s)",
              "grf_weight": "tracking: weight of the GRF term"},
