@@ -94,8 +94,8 @@ def run_pinmsk(*args: str) -> str:
 # to be asked for skips with this reason.
 CASADI_OPENSIM = ("casadi and opensim cannot be loaded in one process (both bundle libcasadi.so.3.7 "
                   "with different ABIs); run the suite with its default -n 2 --dist loadgroup")
-_OPENSIM_MARKS = ("import_opensim(", "require_opensim(", "bench_opensim", "import opensim")
-_CASADI_MARKS = ("casadi", "solvers.ocp", "import ocp", "optimize_task", "require_casadi", "data/tasks",
+_OPENSIM_MARKS = ("import_opensim(", "require_opensim(", "LazyOpenSim", "opensim_module", "bench_opensim", "import opensim")
+_CASADI_MARKS = ("casadi", "LazyCasadi", "solvers.ocp", "import ocp", "optimize_task", "require_casadi", "data/tasks",
                  "finger_tapping", "forearm_dynamic_optimization", "finger_frequency_limit", "bench_ocp")
 
 
@@ -120,12 +120,38 @@ def pytest_itemcollected(item):
     item.add_marker(pytest.mark.xdist_group(g))
 
 
+class LazyOpenSim:
+    """``opensim`` for a test module, imported at first use inside a test (see :class:`LazyCasadi`)."""
+
+    def __getattr__(self, name):
+        if name.startswith("__"):
+            raise AttributeError(name)
+        return getattr(require_opensim(), name)
+
+
+@pytest.fixture
+def opensim_module():
+    """The opensim module, or a skip naming why."""
+    return require_opensim()
+
+
 def require_opensim():
     """The opensim module (logger off), or a skip naming why (not installed, or casadi in this process)."""
     osim, why = import_opensim()
     if osim is None:
         pytest.skip(why)
     return osim
+
+
+class LazyCasadi:
+    """``casadi`` for a test module, imported at first use inside a test, never at collection:
+    both workers collect every module, and a module-level import would load casadi in the OpenSim
+    worker too (then opensim cannot load there)."""
+
+    def __getattr__(self, name):
+        if name.startswith("__"):      # pytest's collector inspects module attributes
+            raise AttributeError(name)
+        return getattr(require_casadi(), name)
 
 
 def require_casadi():

@@ -11,9 +11,9 @@ from pinmsk.errors import ModelError
 from pinmsk.model import load_model
 from pinmsk.muscles.paths import PolynomialPath, path_variants
 
-from conftest import require_casadi  # noqa: E402
+from conftest import LazyCasadi  # noqa: E402
 
-ca = require_casadi()
+ca = LazyCasadi()   # imported inside the tests (tests/conftest.py)
 
 # a numpy ufunc called on a CasADi value (instead of the pinmsk.backend namespace) fails the test
 pytestmark = pytest.mark.filterwarnings("error::FutureWarning:casadi")

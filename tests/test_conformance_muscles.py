@@ -11,9 +11,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from conftest import require_casadi  # noqa: E402
+from conftest import LazyCasadi  # noqa: E402
 
-ca = require_casadi()
+ca = LazyCasadi()   # imported inside the tests (tests/conftest.py)
 
 from pinmsk import energy  # noqa: E402
 from pinmsk.errors import ModelError  # noqa: E402

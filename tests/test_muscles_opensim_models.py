@@ -29,10 +29,10 @@ from pinmsk.opensim.muscles import (muscle_from_osim, muscle_model_from_osim,
                                     opensim_static_optimization_capacity, properties_from_xml,
                                     summarize_notes)
 
-from conftest import import_opensim
+from conftest import LazyOpenSim
 
-osim, _WHY = import_opensim()
-needs_opensim = pytest.mark.skipif(osim is None, reason=_WHY or "opensim importable")
+osim = LazyOpenSim()   # imported inside the tests, never at collection (tests/conftest.py)
+needs_opensim = pytest.mark.usefixtures("opensim_module")
 
 
 def fd(f, x, h=1e-6):

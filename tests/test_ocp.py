@@ -9,9 +9,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from conftest import REPO, require_casadi
+from conftest import REPO, LazyCasadi
 
-ca = require_casadi()
+ca = LazyCasadi()   # imported inside the tests (tests/conftest.py)
 
 import pinmsk  # noqa: E402
 from pinmsk.errors import ConvergenceError, ModelError  # noqa: E402

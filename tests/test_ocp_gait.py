@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from conftest import REPO, require_casadi
+from conftest import REPO, LazyCasadi
 
-ca = require_casadi()
+ca = LazyCasadi()   # imported inside the tests (tests/conftest.py)
 
 import pinmsk  # noqa: E402
 from pinmsk.errors import ModelError  # noqa: E402

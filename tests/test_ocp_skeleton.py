@@ -14,11 +14,20 @@ import pytest
 from pinmsk import load_model
 from pinmsk.errors import ModelError
 
-from conftest import require_casadi  # noqa: E402
+from conftest import LazyCasadi  # noqa: E402
 
-ca = require_casadi()
+ca = LazyCasadi()   # imported inside the tests (tests/conftest.py)
 
-from pinmsk.solvers.ocp.skeleton import RneaCallback, SymbolicSkeleton  # noqa: E402  (needs casadi)
+
+
+def SymbolicSkeleton(*args, **kw):   # pinmsk.solvers.ocp.skeleton imports casadi: not at collection
+    from pinmsk.solvers.ocp.skeleton import SymbolicSkeleton as cls
+    return cls(*args, **kw)
+
+
+def RneaCallback(*args, **kw):
+    from pinmsk.solvers.ocp.skeleton import RneaCallback as cls
+    return cls(*args, **kw)
 
 BUILTIN = ["finger", "forearm", "gait2d", "foot2d", "human3d"]
 N = 20

@@ -14,11 +14,11 @@ import pinmsk
 from pinmsk import skeleton
 from pinmsk.io.shared_data import shared_data_dir
 
-from conftest import REPO, import_opensim
+from conftest import REPO, LazyOpenSim
 
-osim, _WHY = import_opensim()
+osim = LazyOpenSim()   # imported inside the tests, never at collection (tests/conftest.py)
 
-needs_opensim = pytest.mark.skipif(osim is None, reason=_WHY or "opensim importable")
+needs_opensim = pytest.mark.usefixtures("opensim_module")
 
 
 def _harness():

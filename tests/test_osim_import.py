@@ -27,19 +27,11 @@ from pinmsk.opensim.importer import HookResult, write_import
 from pinmsk.opensim.report import ImportReport, ReportEntry
 from pinmsk.opensim.skeleton import build_skeleton
 
-try:
-    import opensim as osim
-except ImportError:  # pragma: no cover - depends on the environment
-    osim = None
-else:
-    # no opensim.log: OpenSim opens its file sink in the current folder, which is the model's while it loads
-    osim.Logger.setLevelString("Off")
-    try:
-        osim.Logger.removeFileSink()
-    except Exception:  # pragma: no cover - older opensim
-        pass
+from conftest import LazyOpenSim  # noqa: E402
 
-needs_opensim = pytest.mark.skipif(osim is None, reason="opensim is not importable (`pip install opensim`)")
+# imported inside the tests, never at collection (tests/conftest.py: casadi and opensim in one process)
+osim = LazyOpenSim()
+needs_opensim = pytest.mark.usefixtures("opensim_module")
 
 
 # ---------------------------------------------------------------------------
