@@ -20,8 +20,10 @@ The half gait cycle (thesis Sec. 5.2, as Moco's ``example2DWalking``):
   and tendon-force rate (what Moco and PredSim bound; they also set the variables' scales);
 - cost: metabolic energy per distance and body mass (Umberger 2003, Eq. 5.6) plus a small
   effort term (mean squared activation);
-- guess: standing (feet on the ground, pelvis moving forward at the target speed, low
-  activations) or quasi-random (PredSim's habit: the same plus random joint-angle waves).
+- guess: walking-like (one sinusoid per joint and stride from the speed and duration only,
+  :func:`walking_guess`; the default), standing (feet on the ground, pelvis moving forward at
+  the target speed, low activations) or quasi-random (PredSim's habit: the same plus random
+  joint-angle waves); solved coarse-to-fine (15 then 25 intervals, :class:`CoarseToFine`).
 """
 from __future__ import annotations
 
@@ -30,10 +32,10 @@ import numpy as np
 from ...errors import ModelError
 from ...trial import Trial
 from .constraints import AverageSpeed, Bounds, CoordinateBounds, Periodic, Symmetric
-from .costs import Effort, MetabolicEnergy, TrackSignals
+from .costs import Effort, MetabolicEnergy, Smoothness, TrackSignals
 from .problem import Collocation
 
-__all__ = ["stride_result", "build_gait_task", "gait_model", "standing_height", "standing_guess", "predictive_gait", "tracking_gait",
+__all__ = ["CoarseToFine", "walking_guess", "stride_result", "build_gait_task", "gait_model", "standing_height", "standing_guess", "predictive_gait", "tracking_gait",
            "full_stride", "GAIT2D_PAIRS"]
 
 #: right -> left coordinate pairs of gait2d
@@ -161,22 +163,70 @@ def standing_guess(model, speed: float, duration: float, *, n: int = 21, sink: f
     return Trial(t, ch)
 
 
-def gait_bounds(model, *, speed_max: float = 3.0) -> Bounds:
-    """Box bounds of a walking half cycle (Moco's example2DWalking / PredSim ranges)."""
+def walking_guess(model, speed: float, duration: float, *, n: int = 21, sink: float = 0.005,
+                  activation: float = 0.1) -> Trial:
+    """A generic walking-like guess built from the speed and the half-cycle duration only.
+
+    Not a tracking solution: every joint is one sinusoid per stride (phase ``p = t / (2 T)``,
+    right heel strike at ``p = 0``), the left side the right shifted by half a stride:
+    hip ``-A cos(2 pi p)`` with ``A = d / (2 L)`` the angle a step of length ``d = speed T``
+    spans on a leg of length ``L`` (hip to ground when standing), knee ``0.5 (1 - cos(2 pi (p -
+    0.72)))`` (straight in mid-stance, 1 rad in mid-swing), ankle ``0.1 cos(2 pi (p - 0.6))``;
+    the pelvis moves forward at ``speed`` and at each node its height puts the lowest foot site
+    ``sink`` (m) into the ground; activations ``activation``.
+    """
+    import pinocchio as pin
+    t = np.linspace(0.0, duration, n)
+    w = np.pi / duration                            # one stride = 2 half cycles
     h0 = standing_height(model)
-    return Bounds(q={HEIGHT: (h0 - 0.25, h0 + 0.1), TRUNK: (-0.6, 0.6)},
+    A = float(np.clip(speed * duration / (2 * h0), 0.05, 0.6))
+    waves = {"hip": lambda p: -A * np.cos(2 * np.pi * p),
+             "knee": lambda p: 0.5 * (1 - np.cos(2 * np.pi * (p - 0.72))),
+             "ankle": lambda p: 0.1 * np.cos(2 * np.pi * (p - 0.6))}
+    ch = {FORWARD: speed * t, f"{FORWARD}_speed": np.full(n, speed)}
+    ph = {"r": t * w / (2 * np.pi), "l": t * w / (2 * np.pi) + 0.5}
+    for j, f in waves.items():
+        for side, p in ph.items():
+            c = f"{j}_{side}"
+            if c in model.coordinates:
+                ch[c] = f(p)
+                ch[f"{c}_speed"] = np.gradient(ch[c], t)
+    # the pelvis height: the lowest sole site of each node's posture on the ground
+    pm = model.pin
+    d = pm.createData()
+    sites = [model.frame_id(f"{s}_{side}") for s in ("heel", "metatarsal", "toe") for side in "rl"]
+    y = np.empty(n)
+    for k in range(n):
+        q = np.zeros(pm.nq)
+        for c in model.coordinates:
+            if c in ch and c not in (FORWARD,):
+                q[model.coordinate_index(c)] = ch[c][k]
+        pin.framesForwardKinematics(pm, d, q)
+        y[k] = -min(d.oMf[i].translation[1] for i in sites) - sink
+    ch[HEIGHT] = y
+    ch[f"{HEIGHT}_speed"] = np.gradient(y, t)
+    for mu in model.muscle_names:
+        ch[f"{mu}_activation"] = np.full(n, float(activation))
+    return Trial(t, ch)
+
+
+def gait_bounds(model, *, speed_max: float = 3.0, trunk=(-0.6, 0.6)) -> Bounds:
+    """Box bounds of a walking half cycle (Moco's example2DWalking / PredSim ranges);
+    ``trunk``: the range (rad) of the trunk's angle to the vertical (positive: leaning forward)."""
+    h0 = standing_height(model)
+    return Bounds(q={HEIGHT: (h0 - 0.25, h0 + 0.1), TRUNK: tuple(float(x) for x in trunk)},
                   v={FORWARD: (0.0, speed_max), HEIGHT: (-1.5, 1.5), TRUNK: (-3.0, 3.0)}, default_v=(-15.0, 15.0),
                   qdd={FORWARD: (-30.0, 30.0), HEIGHT: (-30.0, 30.0), TRUNK: (-100.0, 100.0)},
                   default_qdd=(-500.0, 500.0), df_t=(-20.0, 20.0))
 
 
-def half_cycle_constraints(model, *, speed: float | None, knee_min: float = 0.0) -> list:
+def half_cycle_constraints(model, *, speed: float | None, knee_min: float = 0.0, trunk=(-0.6, 0.6)) -> list:
     """Eq. 5.8 (symmetry), Eq. 5.9 (periodicity of the rest, the forward speed included),
     Eq. 5.10 (no knee hyper-extension), the average speed, and the box bounds."""
     others = [c for c in model.coordinates if c != FORWARD]
     cons = [Symmetric(GAIT2D_PAIRS, exclude=(FORWARD,)), Periodic(("v",), exclude=others),
             CoordinateBounds("knee_r", knee_min, 2.5), CoordinateBounds("knee_l", knee_min, 2.5),
-            gait_bounds(model)]
+            gait_bounds(model, trunk=trunk)]
     if speed is not None:
         cons.append(AverageSpeed(float(speed), coordinate=FORWARD))
     return cons
@@ -212,9 +262,11 @@ def stride_result(fit, *, mirror: bool = True):
     return res, {k: (None if v is None else float(v)) for k, v in summ.items()}
 
 
-def predictive_gait(model=None, *, speed: float | None = 1.3, duration=0.55, intervals: int = 15,
-                    scheme: str = "trapezoidal", effort_weight: float = 0.1, knee_min: float = 0.0,
-                    guess="standing", seed: int = 0, tendon: str | None = "rigid",
+def predictive_gait(model=None, *, speed: float | None = 1.3, duration=0.55, intervals: int = 25,
+                    coarse_intervals: int | None = 15,
+                    scheme: str = "trapezoidal", effort_weight: float = 0.1,
+                    smoothness_weight: float = 0.0, knee_min: float = 0.0, trunk=(-0.15, 0.15),
+                    guess="walking", seed: int = 0, tendon: str | None = "rigid",
                     muscle_model: str | None = "degroote2016", contact: str = "hypervolumetric",
                     contact_smoothing: float = 2e-3,
                     friction_velocity: float | None = None, mtp_stiffness: float | None = None,
@@ -223,16 +275,37 @@ def predictive_gait(model=None, *, speed: float | None = 1.3, duration=0.55, int
     """The predictive half gait cycle (thesis Sec. 5.2): a :class:`Collocation`, not yet solved.
 
     ``speed`` m/s (None: free); ``duration`` s or ``(lower, upper)`` (free); ``guess``:
-    ``"standing"``, ``"quasi-random"`` (with ``seed``) or a Trial / Result (a warm start).
+    ``"walking"`` (:func:`walking_guess`), ``"standing"``, ``"quasi-random"`` (with ``seed``) or a
+    Trial / Result (a warm start); ``trunk``: the trunk angle's range (rad, positive forward);
+    ``coarse_intervals``: solve first on that many intervals and start the ``intervals`` problem
+    from its solution (coarse-to-fine, :class:`CoarseToFine`; None: one solve);
+    ``smoothness_weight``: weight of a mean squared acceleration term (``Smoothness("qdd",
+    scale=10)``, 0 = none).
 
-    Defaults that make the problem converge (measured on 2 loaded cores, 15 trapezoidal
-    intervals, standing guess): gait2d's 16 muscles as De Groote 2016 units with a rigid tendon
-    (``muscle_model="degroote2016", tendon="rigid"``, the same f_max, l_opt, l_slack, pennation;
-    as Moco and PredSim use) and IPOPT with a limited-memory Hessian (:func:`_solver`):
-    Optimal Solution Found in ~370 iterations, ~18 s.  With the model's own Nagano-Gerritsen
-    muscles (``muscle_model=None``) and the compliant Winters tendon it does not converge; the
-    rigid-tendon NG variant and the compliant De Groote variant converge slowly, if at all
-    (over 1000 iterations).  The other model options are :func:`gait_model`'s.
+    Why the defaults (measured on 2 loaded cores with :func:`pinmsk.gait_validation.validate_gait`,
+    RMS / correlation of the right joint angles against Winter's Table A.1; seconds vary 1.5-2x
+    with the machine's load):
+
+    - gait2d's 16 muscles as De Groote 2016 units with a rigid tendon and IPOPT with a
+      limited-memory Hessian (:func:`_solver`): the only combination that converges (with the
+      model's Nagano-Gerritsen muscles or the compliant tendon it does not, or over 1000 it);
+    - ``trunk=(-0.15, 0.15)`` (+-9 deg): with the former +-0.6 rad every solution leaned the trunk
+      forward ~30 deg, which hides in the hip angle (trunk to thigh): hip RMS 30 deg whatever the
+      guess; walking trunks lean 0-10 deg (PredSim and Moco's example2DWalking bound the pelvis
+      tilt as tightly);
+    - ``guess="walking"``: from standing (15 intervals) the optimum is a shuffling gait,
+      CoT 6.9 J/kg/m, hip / knee / ankle 30 / 20 / 13 deg (corr 0.27 / 0.58 / -0.2); with the
+      bounded trunk from standing CoT 2.8, 13 / 26 / 9 deg, knee corr 0.05; from the walking
+      guess CoT 2.08, 15 / 19 / 13 deg (corr 0.67 / 0.51 / -0.34), GRF RMS 39 % BW vs the
+      measured walk (2853 it, 80-130 s);
+    - ``coarse_intervals=15, intervals=25``: the 25-interval refinement of that solution has
+      CoT 2.24, hip / knee / ankle 12.7 / 18.4 / 11.6 deg (corr 0.78 / 0.60 / -0.09), 7.2 / 20.9
+      deg (corr 0.91 / 0.77) against the measured walk, GRF RMS 30 % BW, peaks 139 / 174 % BW
+      (4503 it in all, 137-250 s).  30 intervals from the same coarse solution fell into another
+      optimum (CoT 4.5, hip corr -0.13);
+    - not defaults: a free duration in [0.45, 0.65] s ran to the 0.45 s bound (CoT 6.1, a worse
+      optimum); a smoothness weight 1e-3 did not converge in 3000 it; a loose coarse stage
+      (tol 1e-2) saves nothing (the refinement then needs ~2000 it).
     """
     model = gait_model("gait2d" if model is None else model, muscle_model=muscle_model, tendon=tendon,
                        contact=contact, contact_smoothing=contact_smoothing,
@@ -240,13 +313,50 @@ def predictive_gait(model=None, *, speed: float | None = 1.3, duration=0.55, int
     v0 = 1.3 if speed is None else float(speed)
     T0 = float(np.mean(duration)) if np.ndim(duration) else float(duration)
     if isinstance(guess, str):
-        if guess not in ("standing", "quasi-random"):
-            raise ModelError(f"guess must be 'standing', 'quasi-random' or a Trial, not {guess!r}")
-        guess = standing_guess(model, v0, T0, sink=sink, seed=seed if guess == "quasi-random" else None)
+        if guess not in ("standing", "quasi-random", "walking"):
+            raise ModelError(f"guess must be 'walking', 'standing', 'quasi-random' or a Trial, not {guess!r}")
+        guess = walking_guess(model, v0, T0, sink=sink) if guess == "walking" else standing_guess(model, v0, T0, sink=sink, seed=seed if guess == "quasi-random" else None)
     cost = MetabolicEnergy(per="distance", coordinate=FORWARD) + effort_weight * Effort(2)
-    return Collocation(model, cost=cost, constraints=half_cycle_constraints(model, speed=speed, knee_min=knee_min),
-                       duration=duration, intervals=intervals, scheme=scheme, guess=guess, tendon=tendon,
-                       solver=_solver(solver), verbose=verbose)
+    if smoothness_weight:
+        cost = cost + smoothness_weight * Smoothness("qdd", scale=10.0)
+    kw = dict(model=model, cost=cost, constraints=half_cycle_constraints(model, speed=speed, knee_min=knee_min,
+                                                                          trunk=trunk),
+              duration=duration, scheme=scheme, tendon=tendon, solver=_solver(solver), verbose=verbose)
+    if coarse_intervals is None or int(coarse_intervals) == int(intervals):
+        return Collocation(intervals=intervals, guess=guess, **kw)
+    coarse = Collocation(intervals=int(coarse_intervals), guess=guess, **kw)
+    return CoarseToFine(intervals=intervals, coarse=coarse, **kw)
+
+
+class CoarseToFine(Collocation):
+    """A :class:`Collocation` solved from the solution of a ``coarse`` one (fewer intervals).
+
+    ``fit()`` solves ``coarse`` from its guess, interpolates its solution (states, controls,
+    activations, excitations) onto this problem's points as the guess, and solves; the result's
+    ``iterations`` and ``seconds`` are those of both solves (``info["stages"]`` each one's).
+    A coarse grid finds the gait's pattern cheaply; the finer one sharpens the contacts.
+    """
+
+    def __init__(self, model, *, coarse: Collocation, **kw):
+        super().__init__(model, **kw)
+        self.coarse = coarse
+
+    def fit(self):
+        import dataclasses
+        from ...fitting import Result
+        c = self.coarse.fit().result_
+        self.guess = c
+        super().fit()
+        r = self.result_
+        stages = [{"intervals": int(self.coarse.intervals), "iterations": int(c.iterations),
+                   "seconds": float(c.seconds), "status": c.status},
+                  {"intervals": int(self.intervals), "iterations": int(r.iterations),
+                   "seconds": float(r.seconds), "status": r.status}]
+        it = sum(s["iterations"] for s in stages)
+        sec = sum(s["seconds"] for s in stages)
+        self.result_ = Result(r.time, {n: r[n] for n in r.names}, stats=dataclasses.replace(r.stats, iterations=it),
+                              info=dict(r.info, seconds=sec, nit=it, stages=stages))
+        return self
 
 
 # -- tracking -------------------------------------------------------------------------------------
@@ -447,7 +557,7 @@ def build_gait_task(spec: dict, *, base_dir=None, verbose=None) -> Collocation:
     solver = {"max_iter": int(so.get("maxiter", 3000)), "tol": float(so.get("tol", 1e-4)),
               "constraint_tol": float(so.get("constraint_tol", 1e-4)),
               "hessian": so.get("hessian", "limited-memory")}
-    common = dict(intervals=int(so.get("intervals", 15 if kind == "predictive" else 20)),
+    common = dict(intervals=int(so.get("intervals", 25 if kind == "predictive" else 20)),
                   scheme=so.get("scheme", "trapezoidal"), solver=solver, verbose=verbose)
     if kind == "predictive":
         sp = ga.pop("speed", 1.3)
