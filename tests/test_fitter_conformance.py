@@ -66,6 +66,18 @@ def _collocation():
                              duration=0.25, intervals=10, solver={"max_iter": 100}), ()
 
 
+def _coarse_to_fine():
+    from conftest import require_casadi
+    require_casadi()
+    from pinmsk.solvers.ocp import Effort, InitialState, Target, TrackCoordinates
+    from pinmsk.solvers.ocp.gait import CoarseToFine
+    target = Target("sine", amplitude=0.2, frequency=4.0)
+    return CoarseToFine, dict(model=pinmsk.load_model("finger"), coarse_intervals=5, intervals=10,
+                              cost=0.1 * Effort(2, normalize=False) + 0.9 * TrackCoordinates(target),
+                              constraints=[InitialState(q={"mcp_flexion": 0.0}, v={"mcp_flexion": float(target(0.0, 1))})],
+                              duration=0.25, solver={"max_iter": 100}), ()
+
+
 def _contact():
     from pinmsk.contact import ContactFit, synthetic_foot_trial
     trial = synthetic_foot_trial(contact="point", noise=0.0, seed=1, ground_speed=0.0)
@@ -101,7 +113,7 @@ def _effect():
 
 
 CASES = {"StaticOptimization": _so, "ModifiedStaticOptimization": _mso, "ExtendedInverseDynamics": _eid,
-         "ForwardStaticOptimization": _fso, "Collocation": _collocation, "ContactFit": _contact,
+         "ForwardStaticOptimization": _fso, "Collocation": _collocation, "CoarseToFine": _coarse_to_fine, "ContactFit": _contact,
          "InverseKinematics": _ik, "EffectFit": _effect}
 
 
@@ -268,6 +280,14 @@ def _classes_with_fit():
                 out.setdefault(current, (path.relative_to(PACKAGE.parent), False))
             elif line and not line[0].isspace() and not line.startswith(("#", ")", '"')):
                 current = None
+    # a subclass of a Fitter found here is a Fitter too (e.g. CoarseToFine(Collocation))
+    for path in PACKAGE.rglob("*.py"):
+        for line in path.read_text().splitlines():
+            m = CLASS.match(line)
+            if m and m.group(1) in out and not out[m.group(1)][1]:
+                bases = [b.strip() for b in (m.group(2) or "").strip("()").split(",")]
+                if any(out.get(b, (None, False))[1] for b in bases):
+                    out[m.group(1)] = (out[m.group(1)][0], True)
     return out
 
 

@@ -107,8 +107,8 @@ def test_gait_task_files_build_the_half_cycle_problem():
     assert len(sp) == 1 and sp[0].speed == 1.3
     assert [t.name for t in fit.cost.terms()] == ["metabolic", "effort"]
     # coarse-to-fine (15 then 25 intervals) from the walking guess, the trunk within +-0.15 rad
-    assert isinstance(fit, gait.CoarseToFine) and fit.intervals == 25 and fit.coarse.intervals == 15
-    assert len(fit.model.contacts) == 6 and isinstance(fit.coarse.guess, pinmsk.trial.Trial)
+    assert isinstance(fit, gait.CoarseToFine) and fit.intervals == 25 and fit.coarse_intervals == 15
+    assert len(fit.model.contacts) == 6 and isinstance(fit.guess, pinmsk.trial.Trial)
     b = [c for c in fit.constraints if isinstance(c, ocp.Bounds)][0]
     assert b.q["torso_angle"] == (-0.15, 0.15)
     spec["gait"]["spead"] = 1.2

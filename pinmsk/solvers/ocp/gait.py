@@ -324,31 +324,43 @@ def predictive_gait(model=None, *, speed: float | None = 1.3, duration=0.55, int
               duration=duration, scheme=scheme, tendon=tendon, solver=_solver(solver), verbose=verbose)
     if coarse_intervals is None or int(coarse_intervals) == int(intervals):
         return Collocation(intervals=intervals, guess=guess, **kw)
-    coarse = Collocation(intervals=int(coarse_intervals), guess=guess, **kw)
-    return CoarseToFine(intervals=intervals, coarse=coarse, **kw)
+    return CoarseToFine(intervals=intervals, coarse_intervals=int(coarse_intervals), guess=guess, **kw)
 
 
 class CoarseToFine(Collocation):
-    """A :class:`Collocation` solved from the solution of a ``coarse`` one (fewer intervals).
+    """A :class:`Collocation` solved first on ``coarse_intervals`` intervals, whose solution (states,
+    controls, activations, excitations) interpolated onto this problem's points is the guess.
 
-    ``fit()`` solves ``coarse`` from its guess, interpolates its solution (states, controls,
-    activations, excitations) onto this problem's points as the guess, and solves; the result's
-    ``iterations`` and ``seconds`` are those of both solves (``info["stages"]`` each one's).
+    The coarse problem is this one with fewer intervals (same cost, constraints, guess, solver); the
+    result's ``iterations`` and ``seconds`` are those of both solves (``info["stages"]`` each one's).
     A coarse grid finds the gait's pattern cheaply; the finer one sharpens the contacts.
     """
 
-    def __init__(self, model, *, coarse: Collocation, **kw):
-        super().__init__(model, **kw)
-        self.coarse = coarse
+    def __init__(self, model, *, coarse_intervals: int, cost, constraints=(), duration=1.0, intervals: int = 50,
+                 scheme: str = "hermite-simpson", controls=None, formulation: str = "ff",
+                 tendon: str | None = None, guess=None, n_starts: int = 1, solver: dict | None = None,
+                 verbose: bool | None = None):
+        super().__init__(model, cost=cost, constraints=constraints, duration=duration, intervals=intervals,
+                         scheme=scheme, controls=controls, formulation=formulation, tendon=tendon, guess=guess,
+                         n_starts=n_starts, solver=solver, verbose=verbose)
+        self.coarse_intervals = coarse_intervals
 
     def fit(self):
         import dataclasses
         from ...fitting import Result
-        c = self.coarse.fit().result_
-        self.guess = c
-        super().fit()
+        params = self.get_params(deep=False)
+        params.pop("coarse_intervals")
+        params["intervals"] = int(self.coarse_intervals)
+        coarse = Collocation(**params)
+        c = coarse.fit().result_
+        self.coarse_ = coarse
+        self._warm = c          # the coarse solution is this fit's guess (the guess argument is untouched)
+        try:
+            super().fit()
+        finally:
+            del self._warm
         r = self.result_
-        stages = [{"intervals": int(self.coarse.intervals), "iterations": int(c.iterations),
+        stages = [{"intervals": int(self.coarse_intervals), "iterations": int(c.iterations),
                    "seconds": float(c.seconds), "status": c.status},
                   {"intervals": int(self.intervals), "iterations": int(r.iterations),
                    "seconds": float(r.seconds), "status": r.status}]
@@ -561,7 +573,8 @@ def build_gait_task(spec: dict, *, base_dir=None, verbose=None) -> Collocation:
                   scheme=so.get("scheme", "trapezoidal"), solver=solver, verbose=verbose)
     if kind == "predictive":
         sp = ga.pop("speed", 1.3)
-        ok = {"duration", "effort_weight", "guess", "seed", "knee_min"}
+        ok = {"duration", "effort_weight", "guess", "seed", "knee_min", "trunk", "coarse_intervals",
+              "smoothness_weight"}
         extra = set(ga) - ok
         if extra:
             raise ModelError(f"task: [gait] key(s) {sorted(extra)} do not apply to kind 'predictive'")

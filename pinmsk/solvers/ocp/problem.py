@@ -818,7 +818,8 @@ class Collocation(Fitter):
         n_starts = int(self.n_starts)
         if n_starts < 1:
             raise ModelError(f"n_starts must be >= 1, got {self.n_starts}")
-        guesses = ([self._guess_from_trial(self.guess, t)] if self.guess is not None
+        start = self.__dict__.get("_warm", self.guess)     # a subclass's warm start, else the argument
+        guesses = ([self._guess_from_trial(start, t)] if start is not None
                    else [self._auto_guess(t, k) for k in range(n_starts)])
         nlp = self._build(guesses[0])
         from .threads import single_threaded

@@ -63,7 +63,11 @@ TASK_SCHEMA = {
     "gait": {"kind": "'predictive' | 'tracking' (a gait2d half cycle or a measured walk, thesis Ch. 5; "
                      "replaces [motion])",
              "speed": "m/s (predictive; 'free' for a free speed)", "duration": "s (half cycle, or the tracked span)",
-             "effort_weight": "weight of the mean squared activation", "guess": "'standing' | 'quasi-random'",
+             "effort_weight": "weight of the mean squared activation",
+             "guess": "'walking' (default: a walking-like guess from the speed alone) | 'standing' | 'quasi-random'",
+             "trunk": "rad, bound on the trunk angle (default 0.15)",
+             "coarse_intervals": "predictive: intervals of the coarse first solve (0: none)",
+             "smoothness_weight": "predictive: weight of the mean squared accelerations",
              "seed": "quasi-random guess seed", "knee_min": "rad, knee hyper-extension bound (Eq. 5.10)",
              "contact_smoothing": "m, width of the smoothed penetration",
              "muscle_model": "'degroote2016' (default: the model's muscles as De Groote 2016 units, which "
