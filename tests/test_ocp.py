@@ -358,3 +358,23 @@ def test_metabolic_rate_is_the_umberger_model():
     Et = E.sum(axis=1)          # nodes and midpoints alternate on the result's grid: Simpson's rule
     T = float(r.time[-1])
     assert r.objective == pytest.approx(float(np.sum(Et[:-1:2] + 4 * Et[1::2] + Et[2::2])) / 6 * (T / 10) / T, rel=1e-9)
+
+
+def test_coordinate_actuators_are_controls_that_enter_the_dynamics():
+    """A reserve actuator on the elbow (CoordinateActuator, 10 N m, controls in [-1, 1]) makes the
+    too-weak problem of test_infeasible_problem_names_the_violated_constraint feasible: at every point
+    ``rnea = R^T F + 10 u`` (numpy's own code), and the controls stay in their bounds."""
+    from pinmsk.actuators import CoordinateActuator
+    model = pinmsk.load_model("forearm", moment_arms="angle") + CoordinateActuator(
+        "elbow_reserve", "elbow_flexion", optimal_force=10.0, min_control=-1.0, max_control=1.0)
+    r = _forearm(ocp.Effort(2) + 10.0 * ocp.ActuatorEffort(), model=model, controls=ocp.NodeControls(),
+                 constraints=[ocp.ExcitationBounds(0.0, 0.01)], intervals=10).fit().result_
+    assert r.converged, r.status
+    u = np.asarray(r["elbow_reserve_control"])
+    assert np.all(np.abs(u) <= 1.0 + 1e-9) and np.max(np.abs(u)) > 0.05
+    q, v, a = (np.asarray(r[c])[:, None] for c in ("elbow_flexion", "elbow_flexion_speed", "elbow_flexion_acceleration"))
+    F = np.column_stack([r[f"{n}_force"] for n in model.muscle_names])
+    tau = np.array([pin.rnea(model.pin, model.pin.createData(), q[k], v[k], a[k]) for k in range(q.shape[0])])
+    assert np.max(np.abs(tau[:, 0] - model.muscles.joint_moments(q, F)[:, 0] - 10.0 * u)) < 1e-6
+    with pytest.raises(ModelError, match="has no actuators"):
+        _forearm(ocp.ActuatorEffort(), intervals=5).fit()

@@ -22,6 +22,8 @@ Terms (thesis equation in brackets):
 - :class:`TrackCoordinates` -- ``1/(T max q_d^2) int (q - q_d)^2 dt`` (the ``J_2`` of Eq. 3.3);
 - :class:`TrackSignals` -- any per-point quantity (EMG envelopes against activations, ground
   reaction forces) against sampled references, mean squared error over scales;
+- :class:`ActuatorEffort` -- the mean square of the model's actuator controls (reserves, residuals;
+  the actuators' part of Moco's control effort);
 - :class:`FinalTime` -- the duration itself (s), with a free final time (Moco's final-time goal);
 - :class:`Smoothness` -- the mean square of the implicit controls (accelerations, tendon-force
   rates) or of the excitations' rate, which regularizes the collocation solution.
@@ -33,7 +35,7 @@ import numpy as np
 from ...errors import ModelError
 from ._values import ValueEq
 
-__all__ = ["Cost", "CostSum", "Effort", "MetabolicEnergy", "TrackCoordinates", "TrackSignals",
+__all__ = ["Cost", "CostSum", "Effort", "ActuatorEffort", "MetabolicEnergy", "TrackCoordinates", "TrackSignals",
            "Smoothness", "FinalTime"]
 
 
@@ -167,6 +169,21 @@ class Effort(Cost):
         # bounds, but the Hermite-Simpson midpoint activation is an interpolant, not a variable
         xs = ca.fmax(x, 0.0) if self.exponent != int(self.exponent) else x
         return ca.dot(ca.DM(self._S), xs ** self.exponent)
+
+
+class ActuatorEffort(Cost):
+    """``1/T int mean_k u_k^2 dt`` over the model's CoordinateActuators' controls (reserves and
+    residuals: a large weight keeps them for what the muscles cannot do)."""
+
+    name = "actuator_effort"
+
+    def check(self, problem) -> None:
+        if not problem._pm.actuators:
+            raise ModelError(f"cost '{self.name}': model '{problem.model.name}' has no actuators")
+
+    def integrand(self, pt, ref=None):
+        import casadi as ca
+        return ca.sumsqr(pt["act"]) / pt["act"].numel()
 
 
 class MetabolicEnergy(Cost):

@@ -79,14 +79,22 @@ class PointModel:
                                      "optimal-control engine can use")
         else:
             self.delay = np.zeros(0)
-        self.effects, self.contacts, self.unsupported = [], [], []
+        from ...actuators import CoordinateActuator, IdealActuator
+        self.effects, self.contacts, self.actuators = [], [], []
         for c in model.components:
             if isinstance(c, SignalEffect):
                 continue               # read through excitation_path above
             if c in tuple(model.contacts):
                 self.contacts.append(c)
+            elif isinstance(c, CoordinateActuator):
+                self.actuators.append(c)   # one control each, in [min_control, max_control]
+            elif isinstance(c, IdealActuator):
+                raise ModelError(f"{c.label}: the optimal-control engine drives CoordinateActuators; a "
+                                 f"{type(c).__name__}'s direction depends on the pose and is not supported yet "
+                                 "(remove it: model.without(label))")
             elif c is not self.ms:
                 self.effects.append(c)
+        self._act_cols = [model.coordinate_index(a.target) for a in self.actuators]
         if formulation == "ift":
             if driven is None:
                 R = np.abs(self.ms.moment_arms(np.zeros((1, self.nv)))[0])
@@ -124,6 +132,9 @@ class PointModel:
         if self.formulation == "ift":
             co["F"] = list(range(k, k + m))       # and so are the muscle forces
             k += m
+        if self.actuators:
+            co["act"] = list(range(k, k + len(self.actuators)))   # the actuators' controls
+            k += len(self.actuators)
         return st, co
 
     # -- one point -------------------------------------------------------------------
@@ -190,6 +201,11 @@ class PointModel:
                 pt["metabolic_rate"] = self._metabolic(e_act, a, l_ce, v_ce)
         for c in self.effects:
             tau = tau + ca.vec(c.generalized_force_at(self.model, q, v))
+        if self.actuators:
+            u_act = rows(u, co["act"])
+            for k_, (a_, j) in enumerate(zip(self.actuators, self._act_cols)):
+                tau[j] = tau[j] + a_.values["optimal_force"] * u_act[k_]
+            pt["act"] = u_act
         grf = []
         for c in self.contacts:
             Rw, p = self.sk.frame_placement(c.target, q)

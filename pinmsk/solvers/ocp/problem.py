@@ -387,6 +387,8 @@ class Collocation(Fitter):
             su.append(np.ones(m))
         if pm.formulation == "ift":
             su.append(nominal(guess["F"], 1.0))
+        if pm.actuators:
+            su.append(np.ones(len(pm.actuators)))
         su = np.concatenate(su)
         if pm.formulation == "ff":
             ss = np.ones(ns)
@@ -731,6 +733,9 @@ class Collocation(Fitter):
         if pm.formulation == "ift":
             ulo.append(np.zeros(m))
             uhi.append(np.full(m, np.inf))
+        if pm.actuators:
+            ulo.append(np.array([a.min_control for a in pm.actuators]))
+            uhi.append(np.array([a.max_control for a in pm.actuators]))
         ulo, uhi = np.concatenate(ulo), np.concatenate(uhi)
         nodes = slice(0, N + 1)
         xg = np.vstack([guess["q"][:, nodes], guess["v"][:, nodes]]
@@ -742,6 +747,8 @@ class Collocation(Fitter):
             ug.append(guess["e"])
         if pm.formulation == "ift":
             ug.append(guess["F"])
+        if pm.actuators:
+            ug.append(guess.get("act", np.zeros((len(pm.actuators), npt))))
         ug = np.vstack(ug)
         sig = {"ff": "e", "ifm": "F", "ift": "tau"}[pm.formulation]
         parts = {}
@@ -896,6 +903,8 @@ class Collocation(Fitter):
         if pm.formulation == "ift":
             for k, j in enumerate(pm.driven):
                 ch[f"{names[j]}_torque_signal"] = S[k, order]
+        for k, a_ in enumerate(pm.actuators):
+            ch[f"{a_.name}_control"] = U[co["act"][k], order]
         cf = vals["rep:contact_forces"]
         for i, c in enumerate(pm.contacts):
             for k, ax in enumerate("xyz"):
