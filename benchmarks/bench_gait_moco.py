@@ -350,15 +350,66 @@ def validate_moco(problem: str, r: dict, out: Path) -> dict | None:
     return summary
 
 
-def run_pinmsk(problem: str) -> dict | None:
-    """The pinmsk side of ``problem`` ("tracking" or "predictive") on Moco's own model.
+def run_pinmsk(problem: str, data_dir: Path | None = None) -> dict | None:
+    """The pinmsk side of ``problem`` on Moco's own model, in a child process (this one may have
+    imported opensim, and casadi cannot load beside it).
 
-    Hook for the lead: import 2D_gait.osim (``pinmsk.opensim``), solve the same problem with
-    ``pinmsk.solvers.ocp`` (CasADi; this process has never imported opensim), and return a dict with
-    the same keys as the Moco side (status, success, objective, iterations, wall_seconds, solution).
+    ``"tracking"``: 2D_gait.osim imported by pinmsk (De Groote muscles with fitted paths, the four
+    SmoothSphereHalfSpaceForce contacts, the lumbar CoordinateActuator), a half cycle of Moco's
+    reference length tracking ``referenceCoordinates.sto`` (10 x the mean squared error scaled by
+    each coordinate's range) plus muscle and actuator effort, left/right symmetry; 25 trapezoidal
+    intervals, IPOPT with the limited-memory Hessian.  Not Moco's exact objective: Moco's also
+    tracks the contact forces (``referenceGRF.sto``) and weights its terms differently, so the
+    objectives are not comparable, the solutions and times are.  ``"predictive"``: not yet (None).
     """
-    print(f"pinmsk side ({problem}): not yet")
-    return None
+    if problem != "tracking":
+        print(f"pinmsk side ({problem}): not yet")
+        return None
+    import subprocess
+    root = Path(__file__).resolve().parents[1]
+    model_dir = (data_dir or root.parent / "shared" / "data") / "opensim-models" / "Moco2DWalking"
+    code = _PINMSK_TRACKING.replace("MODEL_DIR", str(model_dir))
+    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(root))
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=1200)
+    wall = time.perf_counter() - t0
+    line = [x for x in proc.stdout.splitlines() if x.startswith("{")]
+    if proc.returncode or not line:
+        print(f"pinmsk side (tracking) failed: {proc.stderr.strip().splitlines()[-1:]}")
+        return None
+    out = json.loads(line[-1])
+    out["wall_seconds"] = wall
+    out["reference_rms_deg"] = out.pop("joint_rms_deg")    # the key the Moco side's table reads
+    return out
+
+
+_PINMSK_TRACKING = r"""
+import json, time, numpy as np, warnings
+warnings.simplefilter("ignore")
+import pinmsk
+from pinmsk.solvers import ocp
+t0 = time.perf_counter()
+m = pinmsk.load_model("MODEL_DIR/2D_gait.osim")
+ref = pinmsk.read_trial("MODEL_DIR/referenceCoordinates.sto", strict=False)
+cols = {p.split("/")[-2]: np.asarray(ref[p]) for p in ref.names if p.endswith("/value")}
+t = np.asarray(ref.time) - ref.time[0]
+T = float(t[-1])
+idx = [m.coordinate_index(c) for c in cols]
+vals = np.column_stack([cols[c] for c in cols])
+track = ocp.TrackSignals("q", idx, t, vals, scale=np.maximum(np.ptp(vals, axis=0), 0.05), name="state_tracking")
+pairs = {"hip_flexion_r": "hip_flexion_l", "knee_angle_r": "knee_angle_l", "ankle_angle_r": "ankle_angle_l"}
+fit = ocp.Collocation(m, cost=10.0 * track + ocp.Effort(2) + ocp.ActuatorEffort(),
+                      constraints=[ocp.Symmetric(pairs, exclude=("pelvis_tx",))], duration=T, intervals=25,
+                      scheme="trapezoidal", guess=pinmsk.Trial(t, cols),
+                      solver={"hessian": "limited-memory", "max_iter": 3000, "tol": 1e-4, "constraint_tol": 1e-4},
+                      verbose=False)
+r = fit.fit().result_
+rms = {c: float(np.degrees(np.sqrt(np.mean((np.interp(r.time, t, cols[c]) - r[c]) ** 2))))
+       for c in cols if c not in ("pelvis_tx", "pelvis_ty")}
+print(json.dumps({"status": r.status, "success": bool(r.converged), "objective": float(r.objective),
+                  "terms": r.terms, "iterations": int(r.nit), "solve_seconds": float(r.seconds),
+                  "seconds": time.perf_counter() - t0, "joint_rms_deg": rms}))
+"""
 
 
 def _fmt(x, spec=".4g"):
@@ -420,7 +471,7 @@ def main(argv=None) -> int:
               f"iterations {_fmt(r.get('iterations'))}, wall {r['wall_seconds']:.1f} s", flush=True)
     if not a.moco_only:
         for p in problems:
-            results[p]["pinmsk"] = run_pinmsk(p)
+            results[p]["pinmsk"] = run_pinmsk(p, a.data)
             m, q = results[p]["moco"], results[p]["pinmsk"]
             if q and m.get("wall_seconds") and q.get("wall_seconds"):
                 results[p]["ratio_moco_over_pinmsk"] = m["wall_seconds"] / q["wall_seconds"]
