@@ -50,7 +50,7 @@ import numpy as np
 
 from ...errors import ModelError
 from ...fitting import FitStatistics, Fitter, Result, format_report
-from .constraints import Bounds, Constraint, ExcitationBounds, InitialState, TrackingTolerance
+from .constraints import Bounds, Constraint, ExcitationBounds, TrackingTolerance
 from .controls import GlobalControls, NodeControls
 from .costs import Cost, TrackCoordinates
 from .physics import PointModel
@@ -704,7 +704,7 @@ class Collocation(Fitter):
     def _bounds_and_guess(self, Z, guess, sx, su, ss, st, co):
         model, pm, N = self.model, self._pm, self._N
         npt = self._frac.size
-        nv, m = pm.nv, pm.m
+        m = pm.m
         lo_e, hi_e = self._ebounds
         pmod = model.pin
         qlo = np.where(np.isfinite(pmod.lowerPositionLimit) & (np.abs(pmod.lowerPositionLimit) < 1e6),
