@@ -231,8 +231,8 @@ def test_bench_gait_moco_symmetry_names_and_arguments(capsys):
     with pytest.raises(SystemExit):
         b.main(["--problems", "tracking,walking"])
     assert "unknown ['walking']" in capsys.readouterr().err
-    assert b.run_pinmsk("tracking") is None
-    assert "pinmsk side (tracking): not yet" in capsys.readouterr().out
+    assert b.run_pinmsk("predictive") is None       # the pinmsk side of the prediction: not yet
+    assert "pinmsk side (predictive): not yet" in capsys.readouterr().out
 
 
 def test_bench_gait_moco_reference_against_itself_is_zero(shared_data):
