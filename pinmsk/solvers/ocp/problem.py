@@ -63,6 +63,15 @@ _SOLVER_KEYS = {"tol", "max_iter", "constraint_tol", "print_level", "hessian", "
                 "acceptable_constr_viol_tol"}
 
 
+def _time_derivative(t, y):
+    """``dy/dt`` (N, k) at the collocation points ``t``, which are not in time order (nodes, then
+    Hermite-Simpson midpoints): finite differences in time order, put back in the points' order."""
+    order = np.argsort(t)
+    out = np.empty_like(np.asarray(y, dtype=float))
+    out[order] = np.gradient(np.asarray(y, dtype=float)[order], t[order], axis=0) if t.size > 1 else 0.0
+    return out
+
+
 class _Blocks:
     """Labels, bounds and physical scales of the NLP's constraint rows, in the order of ``g``.
 
@@ -290,11 +299,8 @@ class Collocation(Fitter):
 
     def _muscle_guess(self, g, t, q, v, a):
         pm, mtu = self._pm, self._pm.ms.mtu
-        order = np.argsort(t)
-        ts = t[order]
         lo, hi = self._ebounds
-        adot = np.empty_like(a)
-        adot[order] = np.gradient(a[order], ts, axis=0)
+        adot = _time_derivative(t, a)
         from ...muscles.activation import excitation_from_activation
         e = np.clip(excitation_from_activation(a, adot, tau_rise=pm.tau_rise, tau_fall=pm.tau_fall), lo, hi)
         l_mt = pm.ms.lengths(q)
@@ -302,8 +308,7 @@ class Collocation(Fitter):
         g.update(a=a.T, e=e.T)
         if pm.compliant:
             ft = mtu.equilibrium_tendon_force(a, l_mt)
-            dft = np.empty_like(ft)
-            dft[order] = np.gradient(ft[order], ts, axis=0)
+            dft = _time_derivative(t, ft)
             g.update(f_t=ft.T, df_t=dft.T)
             F = mtu.f_max * ft
         else:
@@ -346,8 +351,8 @@ class Collocation(Fitter):
 
         n = t.size
         q = np.column_stack([ch(c, np.zeros(n)) for c in model.coordinates])
-        v = np.column_stack([ch(f"{c}_speed", np.gradient(q[:, j], t) if n > 1 else np.zeros(n))
-                             for j, c in enumerate(model.coordinates)])
+        dq = _time_derivative(t, q)
+        v = np.column_stack([ch(f"{c}_speed", dq[:, j]) for j, c in enumerate(model.coordinates)])
         qdd = np.column_stack([ch(f"{c}_acceleration", np.zeros(n)) for c in model.coordinates])
         g = {"q": q.T, "v": v.T, "qdd": qdd.T}
         if self._pm.m:
@@ -668,11 +673,8 @@ class Collocation(Fitter):
 
     def _guess_torques(self, guess):
         """Inverse-dynamics torques (nv, n_points) of the guess's motion (for scaling)."""
-        import pinocchio as pin
-        pmod = self.model.pin
-        data = pmod.createData()
-        q, v, a = guess["q"], guess["v"], guess["qdd"]
-        return np.column_stack([pin.rnea(pmod, data, q[:, k], v[:, k], a[:, k]) for k in range(q.shape[1])])
+        from ...skeleton import rnea
+        return rnea(self.model, guess["q"].T, guess["v"].T, guess["qdd"].T).T
 
     def _delayed_signal(self, S, P, period):
         """The signal through each muscle's electromechanical delay at the points (FF only)."""
