@@ -289,6 +289,8 @@ def test_unconverged_task_writes_nothing_and_exits_2(tmp_path):
     (dict(duration=-1.0), "duration must be > 0"), (dict(duration=(2.0, 1.0)), "free final time bounds"),
     (dict(solver={"tolerance": 1}), "unknown solver setting"), (dict(formulation="x"), "unknown formulation"),
     (dict(n_starts=0), "n_starts must be"), (dict(cost="effort"), "cost must be a Cost"),
+    (dict(n_starts=2, guess=pinmsk.Trial(np.linspace(0, 1, 5), {"mcp_flexion": np.zeros(5)})), "with a guess given"),
+    (dict(cost=ocp.TrackSignals("emg", [0], [0.0, 1.0], [[0.0], [1.0]])), "unknown quantity 'emg'"),
 ])
 def test_bad_problem_arguments_are_named(kw, match):
     args = dict(cost=ocp.Effort(2), duration=1.0, intervals=5)

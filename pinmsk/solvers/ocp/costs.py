@@ -284,6 +284,13 @@ class TrackSignals(Cost):
         self.values = np.asarray(values, dtype=float).reshape(self.time.size, len(self.index))
         self.scale = np.broadcast_to(np.asarray(scale, dtype=float), (len(self.index),)).copy()
 
+    QUANTITIES = ("q", "v", "qdd", "a", "e", "F", "contact_forces", "act")
+
+    def check(self, problem) -> None:
+        if self.quantity not in self.QUANTITIES:
+            raise ModelError(f"cost '{self.name}': unknown quantity '{self.quantity}'; valid: "
+                             f"{', '.join(self.QUANTITIES)}")
+
     def references(self, problem, times) -> np.ndarray:
         t = np.asarray(times, dtype=float)
         if t.min() < self.time[0] - 1e-9 or t.max() > self.time[-1] + 1e-9:

@@ -827,6 +827,9 @@ class Collocation(Fitter):
         n_starts = int(self.n_starts)
         if n_starts < 1:
             raise ModelError(f"n_starts must be >= 1, got {self.n_starts}")
+        if n_starts > 1 and self.guess is not None:
+            raise ModelError(f"n_starts={n_starts} counts automatic guesses; with a guess given, one start "
+                             "is solved: pass n_starts=1 (or no guess)")
         start = self.__dict__.get("_warm", self.guess)     # a subclass's warm start, else the argument
         guesses = ([self._guess_from_trial(start, t)] if start is not None
                    else [self._auto_guess(t, k) for k in range(n_starts)])
