@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ..builtin_models import builtin_names
-from ..errors import PinmskError, RepairWarning
+from ..errors import MissingDependencyError, ModelError, PinmskError, RepairWarning
 from ..io.channel_map import read_mapped
 from ..io.output_files import check_output_file, output_folder, output_transaction
 from ..io.tables import write_trial
@@ -331,13 +331,36 @@ _OPTIMIZE_EPILOG = (
     "  free_period = true frees the Fourier period.\n"
     "Every key of every section: pinmsk.solvers.ocp.tasks.TASK_SCHEMA (unknown keys are errors).\n"
     "A problem that does not converge exits with status 2 and writes nothing.\n"
+    "A [gait] task with --report OUT.html also writes the gait validation report of the solved stride.\n"
     "Examples: data/tasks/*.toml")
+
+
+def _check_gait_report(args) -> None:
+    """``--report``: refused by name, before the solve, for a task without ``[gait]`` or without matplotlib."""
+    from ..solvers.ocp.tasks import load_task
+    if "gait" not in load_task(args.task):
+        raise ModelError(f"--report: {args.task} has no [gait] table; the HTML report validates a gait "
+                         "(use --plot DIR for the figures of other tasks)")
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        raise MissingDependencyError("--report needs matplotlib for its figures (pip install matplotlib); "
+                                     "nothing solved or written") from None
 
 
 def cmd_optimize(args) -> int:
     from ..pipeline import optimize_task
+    if args.report:
+        _check_gait_report(args)
     res = optimize_task(args.task, args.output, precision=args.precision)
     print(res.report())
+    if args.report:
+        # the stride just solved (the Result written to OUT.sto: its info carries the JSON's speed,
+        # cost of transport and body weight) against Winter's Table A.1, the measured walk and the
+        # published bands (gait_validation.validate_gait; references absent from the data are noted)
+        from ..gait_validation import validate_gait
+        validate_gait(res, label=Path(args.task).stem).write_report(args.report, title=f"pinmsk optimize {args.task}")
+        print(f"wrote {args.report}")
     _plot(args, res, [n for n in res.names if n.endswith(("_excitation", "_activation"))],
           "optimize_controls", "excitation / activation")
     _plot(args, res, [n for n in res.names if n.endswith("_desired")]
@@ -600,6 +623,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-o", "--output", default=None, help="result trial (.sto/.csv), plus OUT.json")
     _precision_flag(s)
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
+    s.add_argument("--report", metavar="OUT.html", default=None,
+                   help="[gait] tasks: write the validation report (joint angles vs Winter and the measured "
+                        "walk, GRF double hump, activations vs EMG, published bands; needs matplotlib)")
     s.set_defaults(func=cmd_optimize)
 
     s = sub.add_parser("view", help="meshcat viewer: the model, optionally playing a trial with results")
