@@ -126,6 +126,9 @@ SLOW = {
     "finger_frequency_limit.py": ("tests/test_finger_literature.py::test_finger_frequency_limit_quick",
                                   "tests/test_finger_literature.py::test_tracking_cost_rises_with_frequency_across_the_limit",
                                   "4-6 s in --quick mode"),
+    "gait_foot_mass.py": ("tests/test_gait_foot_mass.py::test_foot_mass_67_percent_lowers_the_objective",
+                          "tests/test_gait_foot_mass.py::test_foot_mass_example_code_on_a_tiny_problem",
+                          "two predictive gaits, 3-5 min each"),
 }
 
 
