@@ -175,3 +175,30 @@ def test_predictive_gait_converges_from_the_walking_guess_and_validates():
         w = v["winter"]
         assert w["hip_r"]["rms_deg"] < 15 and w["hip_r"]["correlation"] > 0.7
         assert w["knee_r"]["rms_deg"] < 20 and w["ankle_r"]["rms_deg"] < 13
+
+
+def test_tracking_gait_tracks_grf_in_newtons_or_in_body_weights():
+    """tracking_gait's GRF reference: as measured (N, Moco's habit) by default; with subject_weight
+    (N, or "grf": the mean total vertical force over the tracked span) scaled by the model's weight
+    over the subject's, so that the model tracks the same multiples of its own weight."""
+    model = gait.gait_model("gait2d", muscle_model="degroote2016", tendon="rigid")
+    bw = sum(I.mass for I in model.pin.inertias) * 9.81
+    t = np.linspace(0.0, 1.0, 101)
+    kin = pinmsk.Trial(t, {"torso_x": 1.2 * t, "hip_r": 0.3 * np.sin(6 * t), "hip_l": -0.3 * np.sin(6 * t)})
+    fy = {"r": 800.0 + 200.0 * np.sin(2 * np.pi * t), "l": 100.0 - 200.0 * np.sin(2 * np.pi * t)}   # sum 900 N
+    grf = pinmsk.Trial(t, {"r_ground_force_vx": np.full(t.size, 30.0), "r_ground_force_vy": fy["r"],
+                           "l_ground_force_vx": np.zeros(t.size), "l_ground_force_vy": fy["l"]})
+
+    def ref(**kw):
+        fit = gait.tracking_gait(model, kin, grf, start=0.0, duration=1.0, muscle_model=None, tendon=None, **kw)
+        term = next(c for c in fit.cost.terms() if c.name == "track_grf")
+        return term.values                      # columns r_vx, r_vy, l_vx, l_vy (N)
+
+    np.testing.assert_allclose(ref()[:, 1], fy["r"], rtol=1e-12)
+    np.testing.assert_allclose(ref(subject_weight=900.0)[:, 1], fy["r"] * bw / 900.0, rtol=1e-12)
+    np.testing.assert_allclose(ref(subject_weight="grf"), ref(subject_weight=900.0), rtol=1e-12)
+    np.testing.assert_allclose(ref(subject_weight="grf")[:, 0], 30.0 * bw / 900.0, rtol=1e-12)
+    with pytest.raises(ModelError, match="subject_weight"):
+        ref(subject_weight=-1.0)
+    with pytest.raises(ModelError, match="subject_weight"):
+        ref(subject_weight="kg")
