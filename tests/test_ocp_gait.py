@@ -202,3 +202,25 @@ def test_tracking_gait_tracks_grf_in_newtons_or_in_body_weights():
         ref(subject_weight=-1.0)
     with pytest.raises(ModelError, match="subject_weight"):
         ref(subject_weight="kg")
+
+
+def test_gait_task_guess_file_is_the_strides_first_half_cycle(tmp_path):
+    """[gait] guess = "<stride file>" (a pinmsk optimize output): the guess is its first half cycle, in
+    the file's own time from 0; foot_mass and coarse_intervals = 0 (one solve) are task keys; a
+    missing guess file is named."""
+    from pinmsk.solvers.ocp.tasks import build_from_task, load_task
+    t = np.linspace(0.0, 1.1, 23)
+    pinmsk.write_trial(pinmsk.Trial(t + 2.0, {"torso_x": 1.3 * t, "hip_r": np.sin(t)}), tmp_path / "walk.sto")
+    spec = load_task(REPO / "data/tasks/gait2d_predictive.toml")
+    spec["gait"].update(speed="free", guess="walk.sto", coarse_intervals=0, foot_mass=0.67)
+    fit = build_from_task(spec, base_dir=tmp_path)
+    assert type(fit) is ocp.Collocation                      # coarse_intervals = 0: one solve
+    g = fit.guess
+    np.testing.assert_allclose(g.time, t[:12], atol=1e-12)   # 0 .. 0.55 s of the 1.1 s stride
+    np.testing.assert_allclose(g["hip_r"], np.sin(t[:12]), atol=1e-12)
+    assert not [c for c in fit.constraints if isinstance(c, ocp.AverageSpeed)]
+    assert fit.model.pin.inertias[fit.model.pin.frames[fit.model.frame_id("foot_r")].parentJoint].mass \
+        == pytest.approx(0.67 * 1.2)
+    spec["gait"]["guess"] = "nowhere.sto"
+    with pytest.raises(ModelError, match="guess file 'nowhere.sto' not found"):
+        build_from_task(spec, base_dir=tmp_path)

@@ -326,7 +326,7 @@ def predictive_gait(model=None, *, speed: float | None = 1.3, duration=0.55, int
     kw = dict(model=model, cost=cost, constraints=half_cycle_constraints(model, speed=speed, knee_min=knee_min,
                                                                           trunk=trunk),
               duration=duration, scheme=scheme, tendon=tendon, solver=_solver(solver), verbose=verbose)
-    if coarse_intervals is None or int(coarse_intervals) == int(intervals):
+    if not coarse_intervals or int(coarse_intervals) == int(intervals):      # None / 0: one solve
         return Collocation(intervals=intervals, guess=guess, **kw)
     return CoarseToFine(intervals=intervals, coarse_intervals=int(coarse_intervals), guess=guess, **kw)
 
@@ -587,6 +587,22 @@ def build_gait_task(spec: dict, *, base_dir=None, verbose=None) -> Collocation:
     if bad:
         raise ModelError(f"task: section(s) {sorted(bad)} do not apply to a [gait] task; use [gait] keys")
     kind = ga.pop("kind", "predictive")
+
+    def path(k):
+        if k not in ga:
+            raise ModelError(f"task: [gait] kind '{kind}' needs {k} = \"<file>\"")
+        f = Path(ga.pop(k))
+        if f.is_absolute():
+            return f
+        for here in ([Path(base_dir) / f] if base_dir is not None else []) + [f]:
+            if here.exists():
+                return here
+        from ...io.shared_data import shared_data_dir   # a path inside the shared data folder
+        root = shared_data_dir()
+        if root is not None and (root / f).exists():
+            return root / f
+        raise ModelError(f"task: [gait] {k} file '{f}' not found (relative to the task file, the "
+                         "working directory or the shared data folder, $PINMSK_SHARED_DATA)")
     mm = ga.pop("muscle_model", "degroote2016")
     model = gait_model(ms.get("name", "gait2d"), contact_smoothing=float(ga.pop("contact_smoothing", 2e-3)),
                        muscle_model=None if mm == "model" else mm,
@@ -599,10 +615,16 @@ def build_gait_task(spec: dict, *, base_dir=None, verbose=None) -> Collocation:
     if kind == "predictive":
         sp = ga.pop("speed", 1.3)
         ok = {"duration", "effort_weight", "guess", "seed", "knee_min", "trunk", "coarse_intervals",
-              "smoothness_weight"}
+              "smoothness_weight", "foot_mass"}
         extra = set(ga) - ok
         if extra:
             raise ModelError(f"task: [gait] key(s) {sorted(extra)} do not apply to kind 'predictive'")
+        if ga.get("guess", "walking") not in ("walking", "standing", "quasi-random"):
+            # a stride file of pinmsk optimize (Moco's setGuessFile habit): its first half cycle
+            stride = read_trial(path("guess"), strict=False)
+            tt = np.asarray(stride.time, dtype=float)
+            first = tt <= tt[0] + 0.5 * (tt[-1] - tt[0]) + 1e-9
+            ga["guess"] = Trial(tt[first] - tt[0], {n: np.asarray(stride[n], dtype=float)[first] for n in stride.names})
         return predictive_gait(model, speed=None if sp == "free" else float(sp), tendon=None, muscle_model=None,
                                **{k: ga[k] for k in ga}, **common)
     if kind == "tracking":
@@ -612,21 +634,6 @@ def build_gait_task(spec: dict, *, base_dir=None, verbose=None) -> Collocation:
 
         def opensim_to_gait2d(coords, model):
             return apply_channel_map(coords, opensim_gait2d_map(knee_sign="auto"), model=model)
-        def path(k):
-            if k not in ga:
-                raise ModelError(f"task: [gait] kind 'tracking' needs {k} = \"<file>\"")
-            f = Path(ga.pop(k))
-            if f.is_absolute():
-                return f
-            here = Path(base_dir) / f if base_dir is not None else f
-            if here.exists():
-                return here
-            from ...io.shared_data import shared_data_dir   # a path inside the shared data folder
-            root = shared_data_dir()
-            if root is not None and (root / f).exists():
-                return root / f
-            raise ModelError(f"task: [gait] {k} file '{f}' not found (relative to the task file or "
-                             "the shared data folder, $PINMSK_SHARED_DATA)")
         # lenient: Moco's example3DWalking files miscount nColumns in their headers (the reader
         # says so on stderr); the columns themselves are read by their labels
         kin = opensim_to_gait2d(read_trial(path("coordinates"), strict=False), model)

@@ -64,7 +64,9 @@ TASK_SCHEMA = {
                      "replaces [motion])",
              "speed": "m/s (predictive; 'free' for a free speed)", "duration": "s (half cycle, or the tracked span)",
              "effort_weight": "weight of the mean squared activation",
-             "guess": "'walking' (default: a walking-like guess from the speed alone) | 'standing' | 'quasi-random'",
+             "guess": "'walking' (default: a walking-like guess from the speed alone) | 'standing' | 'quasi-random' | "
+                      "a stride file of pinmsk optimize (its first half cycle; relative to the task file)",
+             "foot_mass": "predictive: both feet's mass and inertia scaled by this (thesis Sec. 5.3: 0.67)",
              "trunk": "rad, bound on the trunk angle (default 0.15)",
              "coarse_intervals": "predictive: intervals of the coarse first solve (0: none)",
              "smoothness_weight": "predictive: weight of the mean squared accelerations",
