@@ -231,6 +231,10 @@ _AXES = {"JointModelRX": (True, (1.0, 0.0, 0.0)), "JointModelRY": (True, (0.0, 1
          "JointModelRevoluteUnaligned": (True, None), "JointModelPrismaticUnaligned": (False, None)}
 
 
+#: The unit axes along x, y, z and their index.
+_AXIS_INDEX = {(1.0, 0.0, 0.0): 0, (0.0, 1.0, 0.0): 1, (0.0, 0.0, 1.0): 2}
+
+
 @dataclass(frozen=True)
 class _ChainJoint:
     """One joint of the loaded joints' support tree, as carrying the loads' wrenches to it needs.  A
@@ -248,6 +252,7 @@ class _ChainJoint:
     parent_revolute: bool
     parent_axis: np.ndarray | None      # None: the world parent
     parent_iq: int
+    parent_k: int                       # the parent's axis is e_k (-1: another axis, or the world)
     joint: int
     iv: int
     X: np.ndarray | None
@@ -299,12 +304,9 @@ def _support_tree(pm: pin.Model, loaded: tuple[int, ...]) -> tuple[_ChainJoint, 
         hit = np.flatnonzero(S == 1.0)
         S_row = int(hit[0]) if hit.size == 1 and np.count_nonzero(S) == 1 else -1
         pick = None if loads[s] == loads[parent] else tuple(loads[parent].index(i) for i in loads[s])
-        out.append(_ChainJoint(parent, revolute, a, iq, s, own[3], X, S, S_row, pick))
+        k = -1 if a is None else _AXIS_INDEX.get(tuple(a.tolist()), -1)
+        out.append(_ChainJoint(parent, revolute, a, iq, k, s, own[3], X, S, S_row, pick))
     return tuple(out)
-
-
-#: The unit axes along x, y, z and their index.
-_AXIS_INDEX = {(1.0, 0.0, 0.0): 0, (0.0, 1.0, 0.0): 1, (0.0, 0.0, 1.0): 2}
 
 
 def _axis_cross(a: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -340,20 +342,21 @@ def _loads_generalized_force(tree: tuple[_ChainJoint, ...], q: np.ndarray, nv: i
             # R(-q) x = cos q x - sin q (a x x) + (1 - cos q)(a . x) a on both halves
             if c.parent not in trig:
                 qs = q[:, c.parent_iq]
-                trig[c.parent] = (np.cos(qs), np.sin(qs), 1.0 - np.cos(qs))
+                cq = np.cos(qs)
+                trig[c.parent] = (cq, np.sin(qs), 1.0 - cq)
             cs, sn, cs1 = trig[c.parent]
             a = c.parent_axis
-            k = _AXIS_INDEX.get(tuple(a))
-            if k is not None:           # about e_k: a plane rotation of the other two rows of each half
+            k = c.parent_k
+            if k >= 0:                  # about e_k: a plane rotation of the other two rows of both halves
                 i, j = (k + 1) % 3, (k + 2) % 3
                 y = xp.copy()
-                for h in (0, 3):
-                    ui, uj = xp[h + i], xp[h + j]
-                    y[h + i] = cs * ui + sn * uj
-                    y[h + j] = cs * uj - sn * ui
+                h, yh = xp.reshape(2, 3, *xp.shape[1:]), y.reshape(2, 3, *xp.shape[1:])
+                ui, uj = h[:, i], h[:, j]
+                yh[:, i] = cs * ui + sn * uj
+                yh[:, j] = cs * uj - sn * ui
             else:
                 y = np.empty_like(xp)
-            for h in (slice(0, 3), slice(3, 6)) if k is None else ():
+            for h in (slice(0, 3), slice(3, 6)) if k < 0 else ():
                 u = xp[h]
                 r = cs * u
                 r -= sn * _axis_cross(a, u)
