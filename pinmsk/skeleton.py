@@ -143,7 +143,7 @@ def _pool(model) -> pin.ModelPool | None:
 def _rnea_frames(pm: pin.Model, pd: pin.Data, pool, q, v, a, out) -> None:
     """``out[i] = rnea(q[i], v[i], a[i])`` for the rows of (N, n) C-ordered arrays: through ``pool`` (their
     transposes are the column-major (n, N) blocks Pinocchio's batch call takes, no copy) or frame by frame."""
-    if pool is not None:
+    if pool is not None and q.shape[0]:
         pin.rneaInParallel(1, pool, q.T, v.T, a.T, out.T)
         return
     rnea = pin.rnea
