@@ -225,7 +225,9 @@ def _plate_loads(model, grf: Trial, motion: Motion, *, cutoff, external_loads, f
         if cutoff is None:
             # unfiltered, the interpolation reads only the GRF frames bracketing the motion's times: the
             # wrenches are made at those alone (a GRF file is sampled 5-10x faster than the kinematics)
-            rows = np.union1d(j, j + 1)
+            used = np.zeros(tg.size, dtype=bool)
+            used[j] = used[j + 1] = True
+            rows = np.flatnonzero(used)
     wrenches = [_grf.plate_wrench(grf, p, min_force=wrench_min, planar=planar, rows=rows) for p in plist]
     n_w = grf.n_frames if rows is None else rows.size
     W = np.concatenate([np.hstack([F, M]) for F, M in wrenches], axis=1) if wrenches else np.zeros((n_w, 0))

@@ -107,10 +107,13 @@ def world_wrench(ext: ExternalForce, n: int) -> np.ndarray:
             f"external force on '{ext.frame}' has {f.shape[0]} frames and its point {p.shape[0]}; "
             f"the motion has {n}"
         )
-    m = cross3(p, f)
-    if ext.torque is not None:
-        tq = _frames(ext.torque, 3, f"external torque on '{ext.frame}'")
-        m = m + tq
+    tq = None if ext.torque is None else _frames(ext.torque, 3, f"external torque on '{ext.frame}'")
+    if tq is not None and tq.shape == f.shape and not p.any():
+        m = tq          # wrenches about the origin already (prepare's GRF): 0 x f + tau is tau
+    else:
+        m = cross3(p, f)
+        if tq is not None:
+            m = m + tq
     return np.hstack([f, m])
 
 
