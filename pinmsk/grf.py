@@ -294,12 +294,13 @@ def plates(model, trial: Trial, *, external_loads=None, frames: Mapping | None =
 
 
 def plate_wrench(trial: Trial, plate: Plate, *, min_force: float = 20.0, planar: bool = False,
-                 cop: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                 cop: np.ndarray | None = None, rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """World wrench of one plate about the world origin: force ``(N, 3)`` and moment ``(N, 3)``.
 
     ``M = p x F + T`` with ``p`` the COP and ``T`` the free moment.  Samples with
     vertical force below ``min_force`` N are zero (an unloaded plate's COP means
     nothing).  ``planar`` (models in the x-y plane) keeps F_x, F_y and M_z.
+    ``rows`` (sorted frame indices) converts only those frames (``cop`` then has one row each).
     This is the one conversion of plate data to loads on the model.
     """
     ch = plate.columns
@@ -314,8 +315,11 @@ def plate_wrench(trial: Trial, plate: Plate, *, min_force: float = 20.0, planar:
     kinds = ("force", "torque") if cop is not None else ("force", "point", "torque")
     keys = [(k, a) for k in kinds for a in "xyz"]
     have = [i for i, key in enumerate(keys) if key in ch]
-    X = np.zeros((trial.n_frames, len(keys)))
-    X[:, have] = trial.get([ch[keys[i]] for i in have])
+    block = trial.get([ch[keys[i]] for i in have])
+    if rows is not None:
+        block = block[rows]
+    X = np.zeros((block.shape[0], len(keys)))
+    X[:, have] = block
     F = X[:, 0:3]
     P = np.asarray(cop, dtype=float) if cop is not None else X[:, 3:6]
     T = X[:, -3:]
@@ -323,6 +327,7 @@ def plate_wrench(trial: Trial, plate: Plate, *, min_force: float = 20.0, planar:
     bad = on & ~(np.isfinite(F).all(axis=1) & np.isfinite(T).all(axis=1))
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
+        k = k if rows is None else int(rows[k])
         raise TrialError(f"ground reaction {plate.name} is not finite at frame {k} (t = {trial.time[k]:.6g} s)")
     F = np.where(on[:, None], F, 0.0)
     P = np.where(on[:, None] & np.isfinite(P), P, 0.0)

@@ -184,6 +184,28 @@ def lowpass_external(external, *, rate: float, cutoff) -> tuple[ExternalForce, .
     return tuple(out)
 
 
+def _bracket(t: np.ndarray, tg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For ``np.interp(t, tg, .)``: each ``t``'s piece ``j`` (``tg[j] <= t < tg[j + 1]``, clipped to the
+    pieces) and ``t`` clamped to ``tg``'s span (np.interp holds the end values outside it)."""
+    j = np.clip(np.searchsorted(tg, t, side="right") - 1, 0, tg.size - 2)
+    return j, np.clip(t, tg[0], tg[-1])
+
+
+def _interp_rows(t: np.ndarray, tg: np.ndarray, j: np.ndarray, y0: np.ndarray, y1: np.ndarray) -> np.ndarray:
+    """``np.interp`` of every column at once from the bracketing rows ``y0 = y[j]``, ``y1 = y[j + 1]``
+    (:func:`_bracket`), with its formula ``slope (t - tg[j]) + y[j]`` and its end values (the same numbers
+    for finite ``y``)."""
+    x0, x1 = tg[j], tg[j + 1]
+    out = ((y1 - y0) / (x1 - x0)[:, None]) * (t - x0)[:, None] + y0
+    at_end = t >= tg[-1]
+    if at_end.any():
+        out[at_end] = y1[at_end]
+    at_start = t <= tg[0]
+    if at_start.any():
+        out[at_start] = y0[at_start]
+    return out
+
+
 def _plate_loads(model, grf: Trial, motion: Motion, *, cutoff, external_loads, frames, planar,
                  q_on_grf_time, same_time: bool):
     _grf.check_vertical_force(grf, min_force=MIN_FORCE)
@@ -192,17 +214,31 @@ def _plate_loads(model, grf: Trial, motion: Motion, *, cutoff, external_loads, f
     # an OpenSim ExternalLoads file says which columns load which body, and OpenSim applies them at every
     # frame (its GRF files carry a processed COP); only plates found by pinmsk drop their unloaded frames
     wrench_min = -np.inf if external_loads is not None else MIN_FORCE
-    wrenches = [_grf.plate_wrench(grf, p, min_force=wrench_min, planar=planar) for p in plist]
-    W = np.concatenate([np.hstack([F, M]) for F, M in wrenches], axis=1) if wrenches else np.zeros((grf.n_frames, 0))
-    if cutoff is not None:
-        W = lowpass_wrenches(W, rate=measured_rate(grf), cutoff=cutoff)
+    rows = None
     if not same_time:
         tg = np.asarray(grf.time, dtype=float)
         t = motion.t
         if t[0] < tg[0] - 1e-9 or t[-1] > tg[-1] + 1e-9:
             raise TrialError(f"the GRF covers {tg[0]:.4g}-{tg[-1]:.4g} s but the kinematics "
                              f"{t[0]:.4g}-{t[-1]:.4g} s; cut the trial to the GRF's time span")
-        W = np.column_stack([np.interp(t, tg, W[:, j]) for j in range(W.shape[1])]) if W.size else np.zeros((t.size, 0))
+        j, tc = _bracket(t, tg)
+        if cutoff is None:
+            # unfiltered, the interpolation reads only the GRF frames bracketing the motion's times: the
+            # wrenches are made at those alone (a GRF file is sampled 5-10x faster than the kinematics)
+            used = np.zeros(tg.size, dtype=bool)
+            used[j] = used[j + 1] = True
+            rows = np.flatnonzero(used)
+    wrenches = [_grf.plate_wrench(grf, p, min_force=wrench_min, planar=planar, rows=rows) for p in plist]
+    n_w = grf.n_frames if rows is None else rows.size
+    W = np.concatenate([np.hstack([F, M]) for F, M in wrenches], axis=1) if wrenches else np.zeros((n_w, 0))
+    if cutoff is not None:
+        W = lowpass_wrenches(W, rate=measured_rate(grf), cutoff=cutoff)
+    if not same_time:
+        if not W.size:
+            W = np.zeros((t.size, 0))
+        else:
+            k = j if rows is None else np.searchsorted(rows, j)     # j + 1 is the next row of ``rows``
+            W = _interp_rows(tc, tg, j, W[k], W[k + 1])
     ext = []
     for i, p in enumerate(plist):
         F = np.ascontiguousarray(W[:, 6 * i: 6 * i + 3])

@@ -15,6 +15,7 @@ joint-local ``fext``, ``oMi.actInv(W)``).
 from __future__ import annotations
 
 import difflib
+import threading
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -106,15 +107,51 @@ def world_wrench(ext: ExternalForce, n: int) -> np.ndarray:
             f"external force on '{ext.frame}' has {f.shape[0]} frames and its point {p.shape[0]}; "
             f"the motion has {n}"
         )
-    m = cross3(p, f)
-    if ext.torque is not None:
-        tq = _frames(ext.torque, 3, f"external torque on '{ext.frame}'")
-        m = m + tq
+    tq = None if ext.torque is None else _frames(ext.torque, 3, f"external torque on '{ext.frame}'")
+    if tq is not None and tq.shape == f.shape and not p.any():
+        m = tq          # wrenches about the origin already (prepare's GRF): 0 x f + tau is tau
+    else:
+        m = cross3(p, f)
+        if tq is not None:
+            m = m + tq
     return np.hstack([f, m])
 
 
 #: Frames between two ``progress.update`` calls of the long loops here.
 PROGRESS_CHUNK = 4096
+
+
+_POOLS = threading.local()
+
+
+def _pool(model) -> pin.ModelPool | None:
+    """A one-thread :class:`pinocchio.ModelPool` of a pinmsk model's skeleton, for ``pin.rneaInParallel``
+    (one C++ loop over a chunk of frames instead of one Python call a frame: the same RNEA, the same
+    numbers), kept per thread (its Data is a workspace) and per skeleton object (checked by identity;
+    at most 8 kept).  None for a bare ``pin.Model``: that one is mutable, and a pool holds a copy."""
+    if not hasattr(model, "pin"):
+        return None
+    pm = model.pin
+    pools = getattr(_POOLS, "pools", None)
+    if pools is None:
+        pools = _POOLS.pools = {}
+    hit = pools.get(id(pm))
+    if hit is None or hit[0] is not pm:
+        if len(pools) >= 8:
+            pools.pop(next(iter(pools)))
+        hit = pools[id(pm)] = (pm, pin.ModelPool(pm, 1))
+    return hit[1]
+
+
+def _rnea_frames(pm: pin.Model, pd: pin.Data, pool, q, v, a, out) -> None:
+    """``out[i] = rnea(q[i], v[i], a[i])`` for the rows of (N, n) C-ordered arrays: through ``pool`` (their
+    transposes are the column-major (n, N) blocks Pinocchio's batch call takes, no copy) or frame by frame."""
+    if pool is not None and q.shape[0]:
+        pin.rneaInParallel(1, pool, q.T, v.T, a.T, out.T)
+        return
+    rnea = pin.rnea
+    for i in range(q.shape[0]):
+        out[i] = rnea(pm, pd, q[i], v[i], a[i])
 
 
 def rnea(model, q, v, a, *, external: Sequence[ExternalForce] = (),
@@ -124,6 +161,8 @@ def rnea(model, q, v, a, *, external: Sequence[ExternalForce] = (),
     Returns ``(N, nv)``.  ``external`` lists world-frame wrenches at points.
     ``progress``: an object with ``update(n)``, called every
     :data:`PROGRESS_CHUNK` frames (e.g. :class:`pinmsk.presentation.progress.Progress`).
+    On a pinmsk model the frames go through Pinocchio's batch ``rneaInParallel`` on one thread
+    (:func:`_pool`; ``data`` is then not used); on a bare ``pin.Model``, one ``pin.rnea`` call a frame.
     """
     pm = _pin(model)
     q = _frames(q, pm.nq, "q")
@@ -132,15 +171,17 @@ def rnea(model, q, v, a, *, external: Sequence[ExternalForce] = (),
     n = q.shape[0]
     if v.shape[0] != n or a.shape[0] != n:
         raise ModelError(f"q, v, a have {n}, {v.shape[0]}, {a.shape[0]} frames; they must match")
-    pd = data if data is not None else pm.createData()
     out = np.empty((n, pm.nv))
+    pool = _pool(model)
+    # a Data costs milliseconds on a large skeleton: made only where a per-frame call needs one
+    pd = data if data is not None or pool is not None else pm.createData()
     rnea = pin.rnea
     if not external:
         for start in range(0, n, PROGRESS_CHUNK):
-            for i in range(start, min(start + PROGRESS_CHUNK, n)):
-                out[i] = rnea(pm, pd, q[i], v[i], a[i])
+            stop = min(start + PROGRESS_CHUNK, n)
+            _rnea_frames(pm, pd, pool, q[start:stop], v[start:stop], a[start:stop], out[start:stop])
             if progress is not None:
-                progress.update(min(PROGRESS_CHUNK, n - start))
+                progress.update(stop - start)
         return out
     joints = [skeleton_constant(pm, "frame_joint:" + e.frame, lambda m, f=e.frame: _frame_joint(m, f))
               for e in external]
@@ -155,8 +196,7 @@ def rnea(model, q, v, a, *, external: Sequence[ExternalForce] = (),
         # (the bare RNEA loop), no per-frame Jacobian, Force or pose
         for start in range(0, n, PROGRESS_CHUNK):
             stop = min(start + PROGRESS_CHUNK, n)
-            for i in range(start, stop):
-                out[i] = rnea(pm, pd, q[i], v[i], a[i])
+            _rnea_frames(pm, pd, pool, q[start:stop], v[start:stop], a[start:stop], out[start:stop])
             out[start:stop] -= _loads_generalized_force(tree, q[start:stop], pm.nv, Wall[:, start:stop])
             if progress is not None:
                 progress.update(stop - start)
@@ -165,6 +205,7 @@ def rnea(model, q, v, a, *, external: Sequence[ExternalForce] = (),
     # joint's Jacobian in the world frame (WORLD: the motion subspaces of its supporting joints, at the
     # origin, as computeJointJacobians leaves them in data.J): two Pinocchio calls a frame, the products
     # batched over frames, for the joint types :func:`_support_tree` does not carry loads across
+    pd = pm.createData() if pd is None else pd
     cols = {j: skeleton_constant(pm, f"support_columns:{j}", lambda m, j=j: _support_columns(m, j)) for j in loaded}
     # the whole data.J copied per frame (one contiguous copy, cheaper than a fancy-indexed column pick),
     # a chunk of frames at a time so long trials keep a bounded workspace
@@ -193,25 +234,33 @@ _AXES = {"JointModelRX": (True, (1.0, 0.0, 0.0)), "JointModelRY": (True, (0.0, 1
          "JointModelRevoluteUnaligned": (True, None), "JointModelPrismaticUnaligned": (False, None)}
 
 
+#: The unit axes along x, y, z and their index.
+_AXIS_INDEX = {(1.0, 0.0, 0.0): 0, (0.0, 1.0, 0.0): 1, (0.0, 0.0, 1.0): 2}
+
+
 @dataclass(frozen=True)
 class _ChainJoint:
     """One joint of the loaded joints' support tree, as carrying the loads' wrenches to it needs.  A
     wrench is a column ``x = [f; m]`` (force, moment about the frame's origin) in the joint's placement
     frame; ``S`` is the joint's motion subspace, so ``S . x`` is the joint's generalized force (the
     axial moment of a revolute joint, which its rotation leaves as it is; the axial force of a
-    prismatic one).  ``G`` carries the parent's ``x`` through the parent's own motion and this joint's
-    placement, in blocks of six rows: parent revolute ``x = G0 xp + sin q G1 xp + (1 - cos q) G2 xp``
-    (Rodrigues' rotation by ``-q``), parent prismatic ``x = G0 xp + q G1 xp`` (the moment about the
-    moved origin), the world parent ``x = G0 W``.  ``pick`` selects this joint's loads among its
-    parent's (None: all of them)."""
+    prismatic one): row ``S_row`` of ``x`` for an axis along x, y or z.  The parent's ``x`` is carried
+    through the parent's own motion (``parent_axis``, ``parent_iq`` the column of its angle or displacement; revolute:
+    Rodrigues' rotation by ``-q`` of both halves, prismatic: the moment about the moved origin
+    ``m - q a x f``) and then this joint's placement ``X`` (None: the identity, which a chain of an
+    OpenSim CustomJoint's axes mostly has).  ``pick`` selects this joint's loads among its parent's
+    (None: all of them)."""
 
     parent: int
     parent_revolute: bool
+    parent_axis: np.ndarray | None      # None: the world parent
     parent_iq: int
+    parent_k: int                       # the parent's axis is e_k (-1: another axis, or the world)
     joint: int
     iv: int
+    X: np.ndarray | None
     S: np.ndarray
-    G: np.ndarray
+    S_row: int                          # -1: not along a frame axis (use S)
     pick: tuple[int, ...] | None
 
 
@@ -239,6 +288,7 @@ def _support_tree(pm: pin.Model, loaded: tuple[int, ...]) -> tuple[_ChainJoint, 
         a = np.array(jm.extract().axis if kind[1] is None else kind[1], dtype=float)
         if abs(a @ a - 1.0) > 1e-12:        # Pinocchio takes the axis as given: Rodrigues needs it unit
             return None
+        a.flags.writeable = False
         kinds[s] = (kind[0], a, jm.idx_q, jm.idx_v)
     loads = {s: tuple(i for i, j in enumerate(loaded) if s in pm.supports[j]) for s in members}
     loads[0] = tuple(range(len(loaded)))
@@ -246,27 +296,31 @@ def _support_tree(pm: pin.Model, loaded: tuple[int, ...]) -> tuple[_ChainJoint, 
     for s in members:
         parent = pm.parents[s]
         X = _placement_rows(pm.jointPlacements[s])
-        revolute, a, iq, iv = kinds[parent] if parent else (False, None, 0, 0)
-        if parent == 0:
-            G = X
+        if np.array_equal(X, np.eye(6)):
+            X = None
         else:
-            K = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
-            B = np.zeros((6, 6))
-            if revolute:                    # R(-q) on both halves: cos x - sin K x + (1 - cos)(a.x) a
-                B[:3, :3] = B[3:, 3:] = -K
-                A = np.zeros((6, 6))
-                A[:3, :3] = A[3:, 3:] = np.outer(a, a) - np.eye(3)
-                G = np.vstack([X, X @ B, X @ A])
-            else:                           # m - q a x f
-                B[3:, :3] = -K
-                G = np.vstack([X, X @ B])
+            X.flags.writeable = False
+        revolute, a, iq, _ = kinds[parent] if parent else (False, None, 0, 0)
         own = kinds[s]
         S = np.concatenate([np.zeros(3), own[1]] if own[0] else [own[1], np.zeros(3)])
+        S.flags.writeable = False
+        hit = np.flatnonzero(S == 1.0)
+        S_row = int(hit[0]) if hit.size == 1 and np.count_nonzero(S) == 1 else -1
         pick = None if loads[s] == loads[parent] else tuple(loads[parent].index(i) for i in loads[s])
-        for x in (S, G):
-            x.flags.writeable = False
-        out.append(_ChainJoint(parent, revolute, iq, s, own[3], S, G, pick))
+        k = -1 if a is None else _AXIS_INDEX.get(tuple(a.tolist()), -1)
+        out.append(_ChainJoint(parent, revolute, a, iq, k, s, own[3], X, S, S_row, pick))
     return tuple(out)
+
+
+def _axis_cross(a: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``a x x`` for a constant axis ``a`` (3,) and rows ``x`` (3, ...), skipping the axis' zero entries."""
+    out = np.zeros_like(x)
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):      # (a x x)_i = a_j x_k - a_k x_j
+        if a[j]:
+            out[i] += a[j] * x[k]
+        if a[k]:
+            out[i] -= a[k] * x[j]
+    return out
 
 
 def _loads_generalized_force(tree: tuple[_ChainJoint, ...], q: np.ndarray, nv: int,
@@ -275,32 +329,57 @@ def _loads_generalized_force(tree: tuple[_ChainJoint, ...], q: np.ndarray, nv: i
     origin on the loaded joints of :func:`_support_tree` ``tree``.  The wrenches are carried down the
     tree from the world, expressed in each joint's frame in turn (``oMs^-1 W``), and each joint's
     column is its motion subspace times the wrenches it carries, ``S^T oMs^-1 W``: the world Jacobian's
-    column times ``W``, a (18, 6) x (6, L N) product a joint instead of a Pinocchio call a frame."""
+    column times ``W``, a few (6, L N) array operations a joint instead of a Pinocchio call a frame."""
     n = q.shape[0]
-    out = np.zeros((nv, n))
+    out = np.empty((nv, n)) if nv else np.zeros((0, n))
+    out[:] = 0.0
     x = {0: np.ascontiguousarray(W.transpose(2, 0, 1))}     # (6, L, N): wrench rows first
     trig: dict[int, tuple] = {}
     for c in tree:
         xp = x[c.parent]
         if c.pick is not None:
             xp = xp[:, c.pick, :]
-        L = xp.shape[1]
-        g = (c.G @ xp.reshape(6, L * n)).reshape(-1, L, n)
-        if c.parent == 0:
-            xc = g
+        if c.parent_axis is None:
+            y = xp
         elif c.parent_revolute:
+            # R(-q) x = cos q x - sin q (a x x) + (1 - cos q)(a . x) a on both halves
             if c.parent not in trig:
                 qs = q[:, c.parent_iq]
-                trig[c.parent] = (np.sin(qs), 1.0 - np.cos(qs))
-            sn, cs1 = trig[c.parent]
-            xc = g[:6]
-            xc += sn * g[6:12]
-            xc += cs1 * g[12:]
+                cq = np.cos(qs)
+                trig[c.parent] = (cq, np.sin(qs), 1.0 - cq)
+            cs, sn, cs1 = trig[c.parent]
+            a = c.parent_axis
+            k = c.parent_k
+            if k >= 0:                  # about e_k: a plane rotation of the other two rows of both halves
+                i, j = (k + 1) % 3, (k + 2) % 3
+                y = xp.copy()
+                h, yh = xp.reshape(2, 3, *xp.shape[1:]), y.reshape(2, 3, *xp.shape[1:])
+                ui, uj = h[:, i], h[:, j]
+                yh[:, i] = cs * ui + sn * uj
+                yh[:, j] = cs * uj - sn * ui
+            else:
+                y = np.empty_like(xp)
+            for h in (slice(0, 3), slice(3, 6)) if k < 0 else ():
+                u = xp[h]
+                r = cs * u
+                r -= sn * _axis_cross(a, u)
+                ax = sum(a[i] * u[i] for i in range(3) if a[i])
+                r += (cs1 * ax) * a[:, None, None]
+                y[h] = r
         else:
-            xc = g[:6]
-            xc += q[:, c.parent_iq] * g[6:]
+            y = xp.copy()               # m - q a x f, about the origin moved along the axis
+            y[3:] -= q[:, c.parent_iq] * _axis_cross(c.parent_axis, xp[:3])
+        if c.X is None:
+            xc = y
+        else:
+            L = y.shape[1]
+            xc = (c.X @ y.reshape(6, L * n)).reshape(6, L, n)
         x[c.joint] = xc
-        out[c.iv] = (c.S @ xc.reshape(6, L * n)).reshape(L, n).sum(axis=0)
+        if c.S_row >= 0:
+            out[c.iv] = xc[c.S_row, 0] if xc.shape[1] == 1 else xc[c.S_row].sum(axis=0)
+        else:
+            L = xc.shape[1]
+            out[c.iv] = (c.S @ xc.reshape(6, L * n)).reshape(L, n).sum(axis=0)
     return out.T
 
 

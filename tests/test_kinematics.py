@@ -297,3 +297,30 @@ def test_so_checks_the_unspanned_coordinates_of_given_moments_too(gait2d):
         StaticOptimization().fit(gait2d, tr, moments=idt)
     so = StaticOptimization(reserves=True).fit(gait2d, tr, moments=idt)
     np.testing.assert_allclose(so.result_["torso_y_reserve"], idt["torso_y_moment"])
+
+
+def test_unfiltered_grf_at_its_own_rate_is_np_interp_of_the_full_wrenches(gait2d):
+    """Unfiltered (grf_cutoff=0), a faster GRF's wrenches are made only at the frames bracketing the motion's
+    times: the same numbers as every frame's wrench linearly interpolated (np.interp), COP moving (the moment
+    p x F is not linear in the samples); a non-finite sample is named by its frame in the GRF file."""
+    from pinmsk import grf as _grf
+    from pinmsk.kinematics import MIN_FORCE
+
+    fast = bouncing(gait2d, rate=1000.0)
+    ch = {n: np.asarray(fast[n]).copy() for n in fast.names if "ground" in n}
+    t_g = np.asarray(fast.time)
+    ch["r_ground_force_px"] = ch["r_ground_force_px"] + 0.05 * np.sin(2 * np.pi * 3.0 * t_g)
+    ch["l_ground_force_vx"] = 40.0 * np.cos(2 * np.pi * 2.0 * t_g)
+    grf = Trial(t_g, ch)
+    t = np.arange(0.0, 2.9, 0.01) + 0.0004              # between the GRF's samples, and on one
+    t[100] = t_g[1000]
+    kin = Trial(t, {c: np.interp(t, t_g, fast[c]) for c in gait2d.coordinates})
+    got = prepare(gait2d, kin, grf=grf, grf_cutoff=0)
+    for plate, e in zip(_grf.plates(gait2d, grf), got.external):
+        F, M = _grf.plate_wrench(grf, plate, min_force=MIN_FORCE, planar=True)
+        want = np.column_stack([np.interp(t, t_g, x) for x in np.hstack([F, M]).T])
+        np.testing.assert_allclose(np.hstack([e.force, e.torque]), want, rtol=0, atol=1e-9)
+    used = int(np.searchsorted(t_g, t[5]))              # a frame the interpolation reads
+    bad = dict(ch, r_ground_force_vz=np.where(np.arange(t_g.size) == used, np.nan, ch["r_ground_force_vz"]))
+    with pytest.raises(TrialError, match=f"not finite at frame {used} "):
+        prepare(gait2d, kin, grf=Trial(t_g, bad), grf_cutoff=0)

@@ -49,6 +49,25 @@ def test_batch_matches_per_frame_and_mass_matrix(name):
     assert np.allclose(M, np.transpose(M, (0, 2, 1)))
 
 
+def test_batched_rnea_is_the_per_frame_loop_in_chunks(monkeypatch):
+    """A pinmsk model's frames go through Pinocchio's batch rneaInParallel (one thread), chunk by chunk:
+    the per-frame pin.rnea numbers exactly, with and without loads, progress told every chunk; no frames,
+    no output rows."""
+    model = pinmsk.load_model("gait2d")
+    q, v, a = _random_state(model, 11, seed=5)
+    pm, pd = model.pin, model.pin.createData()
+    want = np.stack([pin.rnea(pm, pd, q[i], v[i], a[i]) for i in range(11)])
+    monkeypatch.setattr(skeleton, "PROGRESS_CHUNK", 4)
+    seen = []
+    progress = type("P", (), {"update": lambda self, k: seen.append(k)})()
+    assert np.array_equal(skeleton.rnea(model, q, v, a, progress=progress), want)
+    assert seen == [4, 4, 3]
+    ext = [skeleton.ExternalForce("foot_r", np.tile([10.0, 500.0, 0.0], (11, 1)), np.zeros((11, 3)))]
+    loaded = skeleton.rnea(model, q, v, a, external=ext)
+    assert np.allclose(loaded, skeleton.rnea(pm, q, v, a, external=ext), atol=1e-9)   # bare model: the loop
+    assert skeleton.rnea(model, q[:0], v[:0], a[:0]).shape == (0, model.nv)
+
+
 def test_forearm_gravity_moment_at_90_degrees_matches_hand_calculation():
     model = pinmsk.load_model("forearm")
     g = skeleton.gravity_torque(model, np.array([[np.pi / 2]]))[0, 0]

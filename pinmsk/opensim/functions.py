@@ -237,6 +237,18 @@ class _Knotted(Function):
             todo = below | above
         return k
 
+    def _inner_only(self, x):
+        """``x`` as a 1-D float array when every sample is strictly inside the knots (beyond the roundoff
+        band of the ends, none NaN: the usual case, where the region masks below change nothing), else None."""
+        a = np.asarray(x, dtype=float)
+        if a.ndim != 1 or a.size == 0:
+            return None
+        lo, hi = a.min(), a.max()       # NaN propagates: the comparisons fail, the general path runs
+        if lo >= self.x[0] and hi <= self.x[-1] and lo - self.x[0] > ROUNDOFF_ERROR \
+                and self.x[-1] - hi > ROUNDOFF_ERROR:
+            return a
+        return None
+
     def _regions(self, x):
         a = np.asarray(x, dtype=float)
         scalar = a.ndim == 0
@@ -253,6 +265,11 @@ class _Knotted(Function):
         return v[0] if scalar else v
 
     def value(self, x):
+        ai = self._inner_only(x)
+        if ai is not None:
+            k = self._interval(ai)
+            t = ai - self.x[k]
+            return self.y[k] + t * (self.b[k] + t * (self.c[k] + t * self.d[k]))
         a, scalar, lo, hi, at0, at1, inner = self._regions(x)
         out = np.empty(a.shape)
         out[lo] = self.y[0] + (a[lo] - self.x[0]) * self.b[0]
@@ -268,6 +285,13 @@ class _Knotted(Function):
 
     def derivative(self, x, order=1, component=0):
         self._check_order(order)
+        ai = self._inner_only(x)
+        if ai is not None:
+            k = self._interval(ai)
+            t = ai - self.x[k]
+            if order == 1:
+                return self.b[k] + t * (2.0 * self.c[k] + 3.0 * t * self.d[k])
+            return 2.0 * self.c[k] + 6.0 * t * self.d[k]
         a, scalar, lo, hi, at0, at1, inner = self._regions(x)
         out = np.empty(a.shape)
         if order == 1:
@@ -289,6 +313,13 @@ class _Knotted(Function):
 
     def evaluate(self, x):
         # value() and both derivative()s from one region split and one bisection (the same numbers)
+        ai = self._inner_only(x)
+        if ai is not None:
+            k = self._interval(ai)
+            t = ai - self.x[k]
+            b, c, d = self.b[k], self.c[k], self.d[k]
+            return (self.y[k] + t * (b + t * (c + t * d)), b + t * (2.0 * c + 3.0 * t * d),
+                    2.0 * c + 6.0 * t * d)
         a, scalar, lo, hi, at0, at1, inner = self._regions(x)
         f, d1, d2 = np.empty(a.shape), np.empty(a.shape), np.empty(a.shape)
         f[lo] = self.y[0] + (a[lo] - self.x[0]) * self.b[0]

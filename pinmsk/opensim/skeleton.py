@@ -692,16 +692,14 @@ class CoordinateMap:
         vp = None if V is None else np.empty((n, nq))
         ap = None if A is None else np.empty((n, nq))
         prows = []
+        same_j, same_i = [], []         # the joints that are OpenSim coordinates: copied in one gather
         for j, name in enumerate(self.joints):
             d = self.dependent.get(name)
             if d is None:
                 i = self._col[name]
-                qp[:, j] = Q[:, i]
+                same_j.append(j)
+                same_i.append(i)
                 prows.append(rows[i])
-                if vp is not None:
-                    vp[:, j] = V[:, i]
-                if ap is not None:
-                    ap[:, j] = A[:, i]
                 continue
             val, row, vel, acc = self._chain(d.function, [self._col[c] for c in d.of], Q, V, A, rows)
             qp[:, j] = val
@@ -710,6 +708,9 @@ class CoordinateMap:
                 vp[:, j] = vel
             if ap is not None:
                 ap[:, j] = acc
+        for out, src in ((qp, Q), (vp, V), (ap, A)):
+            if out is not None:
+                out[:, same_j] = src[:, same_i]
         return qp, vp, ap, prows
 
 

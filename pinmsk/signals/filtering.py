@@ -208,7 +208,8 @@ def differentiate(time, x, *, cutoff: float | None = None, order: int = 4):
         x = lowpass(x, rate=rate, cutoff=cutoff, order=order)
     from scipy.interpolate import make_interp_spline
 
-    spline = make_interp_spline(t, x, k=5, axis=0)
+    # t and x were checked finite above: scipy's second check of its system is skipped (the same solve)
+    spline = make_interp_spline(t, x, k=5, axis=0, check_finite=False)
     d1, d2 = _derivative_splines(spline)
     return x, d1(t), d2(t)
 
