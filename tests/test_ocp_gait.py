@@ -111,6 +111,17 @@ def test_gait_task_files_build_the_half_cycle_problem():
     assert len(fit.model.contacts) == 6 and isinstance(fit.guess, pinmsk.trial.Trial)
     b = [c for c in fit.constraints if isinstance(c, ocp.Bounds)][0]
     assert b.q["torso_angle"] == (-0.15, 0.15)
+    # the toe springs (20 N m/rad, 0.5 N m s/rad) in the fine stage only; the rest of the model the same
+    from pinmsk.effects.damping import JointDamping
+    from pinmsk.effects.spring import JointSpring
+    toes = {(type(e).__name__, e.target): dict(e.values) for e in fit.model.effects
+            if isinstance(e, (JointSpring, JointDamping))}
+    assert toes == {("JointSpring", "mtp_r"): {"k": 20.0, "q0": 0.0}, ("JointSpring", "mtp_l"): {"k": 20.0, "q0": 0.0},
+                    ("JointDamping", "mtp_r"): {"c": 0.5}, ("JointDamping", "mtp_l"): {"c": 0.5}}
+    assert len(fit.coarse_model.effects) == len(fit.model.effects) - 4
+    assert fit.coarse_model.contacts == fit.model.contacts
+    spec["gait"]["mtp_stiffness"] = "none"
+    assert build_from_task(spec, base_dir=REPO / "data/tasks").coarse_model is None
     spec["gait"]["spead"] = 1.2
     with pytest.raises(ModelError, match="spead"):
         build_from_task(spec)

@@ -10,7 +10,9 @@ The half gait cycle (thesis Sec. 5.2, as Moco's ``example2DWalking``):
 
 - model: ``gait2d`` with its 16 muscles, Riener & Edrich passive moments (Eq. 5.11) and three
   hyper-volumetric contact spheres per foot (Table 4.4, :func:`~pinmsk.contact.foot.foot_contacts`),
-  their penetration smoothed over ``contact_smoothing`` (m) so the force has usable gradients;
+  their penetration smoothed over ``contact_smoothing`` (m) so the force has usable gradients,
+  and a passive spring and damper at each toe joint (:func:`with_toe_joints`, in the predictive
+  problem);
   by default its muscles become De Groote 2016 units with a rigid tendon (same parameters) and
   IPOPT uses a limited-memory Hessian, the two changes that make the solve converge (Moco's and
   PredSim's choices; measurements in :func:`predictive_gait` and :func:`_solver`);
@@ -35,7 +37,7 @@ from .constraints import AverageSpeed, Bounds, CoordinateBounds, Periodic, Symme
 from .costs import Effort, MetabolicEnergy, Smoothness, TrackSignals
 from .problem import Collocation
 
-__all__ = ["CoarseToFine", "walking_guess", "stride_result", "build_gait_task", "gait_model", "standing_height", "standing_guess", "predictive_gait", "tracking_gait",
+__all__ = ["CoarseToFine", "with_toe_joints", "walking_guess", "stride_result", "build_gait_task", "gait_model", "standing_height", "standing_guess", "predictive_gait", "tracking_gait",
            "full_stride", "GAIT2D_PAIRS"]
 
 #: right -> left coordinate pairs of gait2d
@@ -69,13 +71,7 @@ def gait_model(model="gait2d", *, contact: str = "hypervolumetric", contact_smoo
     from ...model import load_model
     base = load_model(model) if isinstance(model, str) else model
     base = _convert_muscles(base, muscle_model, tendon)
-    if mtp_stiffness is not None and "mtp_r" in base.coordinates:
-        from ...effects.damping import JointDamping
-        from ...effects.spring import JointSpring
-        for side in ("r", "l"):
-            base = base.with_effect(JointSpring(f"mtp_{side}", k=float(mtp_stiffness), q0=0.0))
-            if mtp_damping:
-                base = base.with_effect(JointDamping(f"mtp_{side}", c=float(mtp_damping)))
+    base = with_toe_joints(base, mtp_stiffness, mtp_damping)
     if tuple(base.contacts):
         return base
     out = base
@@ -96,6 +92,25 @@ def gait_model(model="gait2d", *, contact: str = "hypervolumetric", contact_smoo
         for c in foot_contacts(base, contact, side=side, smoothing=contact_smoothing, values=vals):
             out = out + c
     return out
+
+
+def with_toe_joints(model, stiffness: float | None, damping: float = 0.0):
+    """``model`` with a passive spring (``stiffness`` N m/rad about 0) and damper (``damping`` N m s/rad)
+    at both toe joints (``mtp_r``, ``mtp_l``; :class:`~pinmsk.effects.spring.JointSpring`,
+    :class:`~pinmsk.effects.damping.JointDamping`); None / a model without toes: unchanged.
+
+    gait2d's toes carry no muscle and no passive moment of their own (Riener & Edrich's Eq. 5.11
+    covers hip, knee and ankle): without one they rest on their joint limits in swing and the
+    forefoot cannot push off through them (measured in :func:`predictive_gait`)."""
+    if stiffness is None or "mtp_r" not in model.coordinates:
+        return model
+    from ...effects.damping import JointDamping
+    from ...effects.spring import JointSpring
+    for side in ("r", "l"):
+        model = model.with_effect(JointSpring(f"mtp_{side}", k=float(stiffness), q0=0.0))
+        if damping:
+            model = model.with_effect(JointDamping(f"mtp_{side}", c=float(damping)))
+    return model
 
 
 #: Moco's 2D walking model's SmoothSphereHalfSpaceForce values (2D_gait.osim: contactHeel_r ...)
@@ -269,8 +284,8 @@ def predictive_gait(model=None, *, speed: float | None = 1.3, duration=0.55, int
                     guess="walking", seed: int = 0, tendon: str | None = "rigid",
                     muscle_model: str | None = "degroote2016", contact: str = "hypervolumetric",
                     contact_smoothing: float = 2e-3,
-                    friction_velocity: float | None = None, mtp_stiffness: float | None = None,
-                    mtp_damping: float = 0.0, sink: float = 0.005, foot_mass: float = 1.0, solver=None,
+                    friction_velocity: float | None = None, mtp_stiffness: float | None = 20.0,
+                    mtp_damping: float = 0.5, sink: float = 0.005, foot_mass: float = 1.0, solver=None,
                     verbose=None) -> Collocation:
     """The predictive half gait cycle (thesis Sec. 5.2): a :class:`Collocation`, not yet solved.
 
@@ -281,7 +296,9 @@ def predictive_gait(model=None, *, speed: float | None = 1.3, duration=0.55, int
     from its solution (coarse-to-fine, :class:`CoarseToFine`; None: one solve);
     ``smoothness_weight``: weight of a mean squared acceleration term (``Smoothness("qdd",
     scale=10)``, 0 = none); ``foot_mass``: both feet's (``foot_r``, ``foot_l``) mass and inertia
-    scaled by it (:meth:`~pinmsk.model.Model.with_segment_mass`; thesis Sec. 5.3 reruns at 0.67).
+    scaled by it (:meth:`~pinmsk.model.Model.with_segment_mass`; thesis Sec. 5.3 reruns at 0.67);
+    ``mtp_stiffness`` (N m/rad), ``mtp_damping`` (N m s/rad): the toe joints' passive spring and
+    damper (:func:`with_toe_joints`; None: none), left out of the coarse stage.
 
     Why the defaults (measured on 2 loaded cores with :func:`pinmsk.gait_validation.validate_gait`,
     RMS / correlation of the right joint angles against Winter's Table A.1; seconds vary 1.5-2x
@@ -304,16 +321,27 @@ def predictive_gait(model=None, *, speed: float | None = 1.3, duration=0.55, int
       deg (corr 0.91 / 0.77) against the measured walk, GRF RMS 30 % BW, peaks 139 / 174 % BW
       (4503 it in all, 137-250 s).  30 intervals from the same coarse solution fell into another
       optimum (CoT 4.5, hip corr -0.13);
-    - not defaults: a free duration in [0.45, 0.65] s ran to the 0.45 s bound (CoT 6.1, a worse
+    - ``mtp_stiffness=20, mtp_damping=0.5`` (:func:`with_toe_joints`), the coarse stage without
+      them: gait2d's toes have no passive moment, and in every solution above they hung on their
+      -1 rad limit in swing; with the toe springs in the 25-interval stage (from the same 15-interval
+      solution) the objective falls from 2.25 to 1.99 (CoT 1.98) and the knee comes right: 7.2 deg
+      RMS against Winter (corr 0.98; it was 18.4, 0.60), swing flexion 51 deg (37 before; Winter
+      64-69), hip 13.0 (0.78), ankle 11.9 (-0.03), EMG correlation 0.37 on average (0.18), second
+      GRF peak 195 % BW (174), 5203 it in all, 152 s.  With the springs in the coarse stage too the
+      15-interval solve ran (CoT 5.4, stance 29 %); 50 N m/rad, 1 N m s/rad stopped at 3000 it;
+    - not defaults: 50 intervals from the 25-interval solution: CoT 2.87 with the same knee and GRF
+      (the grid does not cause them); effort ``a^3`` with weight 1 ran (CoT 5.2); a free speed from
+      the walking guess ran at 2.0 m/s (CoT 2.81), from the 1.3 m/s optimum it walks at 1.41 m/s
+      (CoT 2.31, 1078 it); a free duration in [0.45, 0.65] s ran to the 0.45 s bound (CoT 6.1, a worse
       optimum); a smoothness weight 1e-3 did not converge in 3000 it; a loose coarse stage
       (tol 1e-2) saves nothing (the refinement then needs ~2000 it).
     """
-    model = gait_model("gait2d" if model is None else model, muscle_model=muscle_model, tendon=tendon,
-                       contact=contact, contact_smoothing=contact_smoothing,
-                       friction_velocity=friction_velocity, mtp_stiffness=mtp_stiffness, mtp_damping=mtp_damping)
+    bare = gait_model("gait2d" if model is None else model, muscle_model=muscle_model, tendon=tendon,
+                      contact=contact, contact_smoothing=contact_smoothing, friction_velocity=friction_velocity)
     if foot_mass != 1.0:
         for side in ("r", "l"):
-            model = model.with_segment_mass(f"foot_{side}", foot_mass)
+            bare = bare.with_segment_mass(f"foot_{side}", foot_mass)
+    model = with_toe_joints(bare, mtp_stiffness, mtp_damping)
     v0 = 1.3 if speed is None else float(speed)
     T0 = float(np.mean(duration)) if np.ndim(duration) else float(duration)
     if isinstance(guess, str):
@@ -328,33 +356,41 @@ def predictive_gait(model=None, *, speed: float | None = 1.3, duration=0.55, int
               duration=duration, scheme=scheme, tendon=tendon, solver=_solver(solver), verbose=verbose)
     if not coarse_intervals or int(coarse_intervals) == int(intervals):      # None / 0: one solve
         return Collocation(intervals=intervals, guess=guess, **kw)
-    return CoarseToFine(intervals=intervals, coarse_intervals=int(coarse_intervals), guess=guess, **kw)
+    # the coarse stage without the toe springs: with them it ran (CoT 5.4) from the walking guess
+    return CoarseToFine(intervals=intervals, coarse_intervals=int(coarse_intervals), guess=guess,
+                        coarse_model=bare if bare is not model else None, **kw)
 
 
 class CoarseToFine(Collocation):
     """A :class:`Collocation` solved first on ``coarse_intervals`` intervals, whose solution (states,
     controls, activations, excitations) interpolated onto this problem's points is the guess.
 
-    The coarse problem is this one with fewer intervals (same cost, constraints, guess, solver); the
-    result's ``iterations`` and ``seconds`` are those of both solves (``info["stages"]`` each one's).
-    A coarse grid finds the gait's pattern cheaply; the finer one sharpens the contacts.
+    The coarse problem is this one with fewer intervals (same cost, constraints, guess, solver) and,
+    if ``coarse_model`` is given, on that model (a continuation: an easier model first, e.g. without
+    the toe springs); the result's ``iterations`` and ``seconds`` are those of both solves
+    (``info["stages"]`` each one's).  A coarse grid finds the gait's pattern cheaply; the finer one
+    sharpens the contacts.
     """
 
     def __init__(self, model, *, coarse_intervals: int, cost, constraints=(), duration=1.0, intervals: int = 50,
                  scheme: str = "hermite-simpson", controls=None, formulation: str = "ff",
                  tendon: str | None = None, guess=None, n_starts: int = 1, solver: dict | None = None,
-                 verbose: bool | None = None):
+                 verbose: bool | None = None, coarse_model=None):
         super().__init__(model, cost=cost, constraints=constraints, duration=duration, intervals=intervals,
                          scheme=scheme, controls=controls, formulation=formulation, tendon=tendon, guess=guess,
                          n_starts=n_starts, solver=solver, verbose=verbose)
         self.coarse_intervals = coarse_intervals
+        self.coarse_model = coarse_model
 
     def fit(self):
         import dataclasses
         from ...fitting import Result
         params = self.get_params(deep=False)
         params.pop("coarse_intervals")
+        coarse_model = params.pop("coarse_model")
         params["intervals"] = int(self.coarse_intervals)
+        if coarse_model is not None:
+            params["model"] = coarse_model
         coarse = Collocation(**params)
         c = coarse.fit().result_
         self.coarse_ = coarse
@@ -615,10 +651,12 @@ def build_gait_task(spec: dict, *, base_dir=None, verbose=None) -> Collocation:
     if kind == "predictive":
         sp = ga.pop("speed", 1.3)
         ok = {"duration", "effort_weight", "guess", "seed", "knee_min", "trunk", "coarse_intervals",
-              "smoothness_weight", "foot_mass"}
+              "smoothness_weight", "foot_mass", "mtp_stiffness", "mtp_damping"}
         extra = set(ga) - ok
         if extra:
             raise ModelError(f"task: [gait] key(s) {sorted(extra)} do not apply to kind 'predictive'")
+        if ga.get("mtp_stiffness") == "none":           # TOML has no null
+            ga["mtp_stiffness"] = None
         if ga.get("guess", "walking") not in ("walking", "standing", "quasi-random"):
             # a stride file of pinmsk optimize (Moco's setGuessFile habit): its first half cycle
             stride = read_trial(path("guess"), strict=False)

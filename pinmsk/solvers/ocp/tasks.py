@@ -67,6 +67,8 @@ TASK_SCHEMA = {
              "guess": "'walking' (default: a walking-like guess from the speed alone) | 'standing' | 'quasi-random' | "
                       "a stride file of pinmsk optimize (its first half cycle; relative to the task file)",
              "foot_mass": "predictive: both feet's mass and inertia scaled by this (thesis Sec. 5.3: 0.67)",
+             "mtp_stiffness": "predictive: N m/rad, the toe joints' passive spring (default 20; 'none': no spring)",
+             "mtp_damping": "predictive: N m s/rad, the toe joints' damper (default 0.5)",
              "trunk": "rad, bound on the trunk angle (default 0.15)",
              "coarse_intervals": "predictive: intervals of the coarse first solve (0: none)",
              "smoothness_weight": "predictive: weight of the mean squared accelerations",
