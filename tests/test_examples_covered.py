@@ -129,6 +129,9 @@ SLOW = {
     "gait_foot_mass.py": ("tests/test_gait_foot_mass.py::test_foot_mass_67_percent_lowers_the_objective",
                           "tests/test_gait_foot_mass.py::test_foot_mass_example_code_on_a_tiny_problem",
                           "two predictive gaits, 3-5 min each"),
+    "gait_robustness.py": ("tests/test_gait_robustness.py::test_predictive_gait_converges_from_three_generic_guesses",
+                           "tests/test_gait_robustness.py::test_robustness_guesses_and_table_on_a_tiny_problem",
+                           "three predictive gaits, 2-5 min each"),
 }
 
 
