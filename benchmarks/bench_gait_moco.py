@@ -1,6 +1,6 @@
 """Moco's own 2-D walking problems (``example2DWalking``), timed, side by side with pinmsk (issue 17).
 
-    python benchmarks/bench_gait_moco.py [--moco-only] [--problems tracking,predictive]
+    python benchmarks/bench_gait_moco.py [--moco-only | --pinmsk-only] [--problems tracking,predictive]
         [--timeout-tracking 900] [--timeout-predictive 600] [--out DIR] [--data DIR]
 
 OpenSim (``pip install opensim``, 4.6 bundles Moco, CasADi and IPOPT) is an optional peer, never a
@@ -10,8 +10,18 @@ SOURCE.md), this script says so and exits 0.
 **One process per tool.**  OpenSim and the pip ``casadi`` both ship ``libcasadi.so.3.7`` with
 different ABIs, so they can never share a Python process (``/work/notes/ocp.md``).  Each Moco
 problem runs in a child process (this file with ``--_worker``), in its own process group, with a
-wall-clock timeout; the parent never imports opensim, and the pinmsk side (:func:`run_pinmsk`, which
-will use the CasADi engine) runs in the parent after the Moco children have exited.
+wall-clock timeout; the parent never imports opensim or casadi: the pinmsk side (:func:`run_pinmsk`,
+the CasADi engine) runs in a child too (``--_pinmsk``), after the Moco children have exited.
+
+**The pinmsk side** (:func:`build_pinmsk`) solves the same two problems on the same model, imported by
+pinmsk, with Moco's exact objective: the goals :class:`pinmsk.solvers.ocp.ControlEffort`,
+``StateTracking`` and ``ContactTracking`` are Moco's ``MocoControlGoal``, ``MocoStateTrackingGoal``
+(as MocoTrack sets it up) and ``MocoContactTrackingGoal`` (integrands, weights and normalisations read
+in opensim-core), so both objectives are in the same units and directly comparable.  Moco's own
+tracking solution scored by pinmsk's goals (:func:`moco_tracking_under_pinmsk`) reproduces Moco's
+reported terms (control effort exactly, contact within 0.1 %, state tracking within 1 %: pinmsk's
+Butterworth and spline of the reference against OpenSim's IIR filter with its own end padding and
+GCV spline differ by up to 1e-3 rad / 0.04 rad/s at the last reference frame).
 
 **The problems** are those of ``example2DWalking.py`` (Falisse et al. 2019, PLOS One 14:e0217730,
 as shipped with Moco; read there, formulated again here):
@@ -456,6 +466,42 @@ def pinmsk_against_reference(r, model_dir: Path, mass: float) -> dict:
     return {"reference_rms_deg": rms, "grf_rms_bw_pct": g_rms}
 
 
+def moco_grf_rms(grf_full_stride: Path, model_dir: Path, final_time: float) -> dict:
+    """RMS (% body weight) of Moco's half-cycle GRF (the first ``final_time`` s of its full-stride GRF
+    table) against referenceGRF.sto, fore-aft and vertical per side, over 0-100 % of each."""
+    import warnings
+
+    import numpy as np
+
+    import pinmsk
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        g = pinmsk.read_trial(grf_full_stride, strict=False)
+        ref = pinmsk.read_trial(Path(model_dir) / "referenceGRF.sto", strict=False)
+    t = np.asarray(g.time) - g.time[0]
+    keep = t <= final_time + 1e-9
+    ps = t[keep] / t[keep][-1]
+    pr = (np.asarray(ref.time) - ref.time[0]) / (ref.time[-1] - ref.time[0])
+    bw = 62.0 * 9.80665                        # 2D_gait.osim's mass (62 kg) times its gravity
+    return {f"{s}_v{a}": float(100.0 * np.sqrt(np.mean((np.asarray(g[f"ground_force_{s}_v{a}"])[keep]
+                                                        - np.interp(ps, pr, np.asarray(ref[f"ground_force_{s}_v{a}"])))
+                                                       ** 2)) / bw)
+            for s in "rl" for a in "xy"}
+
+
+def run_pinmsk_score(solution: Path, grf: Path, model_dir: Path) -> dict | None:
+    """:func:`moco_tracking_under_pinmsk` in a child process (the parent never imports casadi/opensim
+    state of the other tool; this one needs only numpy, scipy and pinmsk)."""
+    code = ("import json, sys; sys.path.insert(0, {root!r}); import importlib.util as u; "
+            "s = u.spec_from_file_location('b', {me!r}); b = u.module_from_spec(s); s.loader.exec_module(b); "
+            "from pathlib import Path; print(json.dumps(b.moco_tracking_under_pinmsk(Path({a!r}), Path({g!r}), "
+            "Path({d!r}))))").format(root=str(Path(__file__).resolve().parents[1]), me=str(Path(__file__).resolve()),
+                                     a=str(solution), g=str(grf), d=str(model_dir))
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    lines = [x for x in proc.stdout.splitlines() if x.startswith("{")]
+    return json.loads(lines[-1]) if proc.returncode == 0 and lines else None
+
+
 def moco_tracking_under_pinmsk(solution: Path, grf: Path, model_dir: Path) -> dict:
     """Moco's tracking solution (its half-cycle .sto and OpenSim's GRF of it) scored by pinmsk's goals
     (:class:`ocp.ControlEffort`, :class:`ocp.StateTracking`, :class:`ocp.ContactTracking`: their
@@ -533,6 +579,8 @@ def pinmsk_worker(problems, model_dir: Path, result: Path) -> int:
              "guess": "pinmsk's tracking solution of this run" if (p == "predictive" and guess is not None)
              else "the reference coordinates (low-passed at 6 Hz) and their derivatives"}
         o.update(pinmsk_against_reference(r, model_dir, float(sum(I.mass for I in model.pin.inertias))))
+        for n in (n for n in r.names if n.endswith("_control")):   # Moco's symmetry also pairs /lumbarAct
+            o[f"{n}_start_end"] = [float(r[n][0]), float(r[n][-1])]
         if p == "predictive":
             o["speed_m_per_s"] = float((r["pelvis_tx"][-1] - r["pelvis_tx"][0]) / o["final_time"])
         out[p] = o
@@ -623,6 +671,9 @@ def main(argv=None) -> int:
         r = _run_child(p, out, timeouts[p], guess if p == "predictive" else None)
         if r.get("solution"):
             r["reference_rms_deg"] = reference_rms_deg(Path(r["solution"]), out / "referenceCoordinates.sto")
+            r["grf_rms_bw_pct"] = moco_grf_rms(Path(r["grf_full_stride"]), out, r["final_time"])
+            if p == "tracking":
+                r["under_pinmsk_goals"] = run_pinmsk_score(Path(r["solution"]), Path(r["grf_full_stride"]), out)
             if p == "tracking" and a.predictive_guess is None:
                 guess = Path(r["solution"])
             r["validation"] = validate_moco(p, r, out)
@@ -647,12 +698,11 @@ def main(argv=None) -> int:
             if not x:
                 continue
             rms = x.get("reference_rms_deg") or {}
-            g = x.get("grf_rms_bw_pct") or (x.get("validation") or {}).get("grf_rms_bw_pct") or {}
-            g = g if isinstance(g, dict) else {"": g}
+            g = x.get("grf_rms_bw_pct") or {}
             ratio = r.get("ratio_moco_over_pinmsk") if tool == "pinmsk" else None
             print(f"| {p} | {tool} | {x['status']} | {_fmt(x.get('objective'))} | {_fmt(x.get('iterations'))} | "
-                  f"{x['wall_seconds']:.1f} | {_fmt(ratio, '.2f')} | {_fmt(max(rms.values()) if rms else None, '.2f')} | "
-                  f"{_fmt(max(v for v in g.values() if v is not None) if any(v is not None for v in g.values()) else None, '.2f')} |")
+                  f"{x['wall_seconds']:.1f} | {_fmt(ratio, '.2f')} | {_fmt(max(rms.values()) if rms else None, '.2f')} "
+                  f"| {_fmt(max(g.values()) if g else None, '.2f')} |")
     print(f"\nresults: {out / 'moco_2d_walking.json'}")
     return 0
 

@@ -237,8 +237,9 @@ def test_bench_gait_moco_symmetry_names_and_arguments(capsys):
     assert b.MOCO_INTERVALS == {"tracking": 24, "predictive": 50}   # MocoTrack's 0.02 s mesh; the example's 50
 
 
-#: the pinmsk tracking solution against Moco's reference data, measured (see the bench's docstring), with margin
-RMS_DEG_BOUND, GRF_BW_BOUND = 10.0, 10.0
+#: the pinmsk tracking solution against Moco's reference data: measured 2.47 deg (hip_flexion_l) and 1.28 % BW
+#: (right fore-aft) here, 217 s (see the bench's docstring); the bounds leave a margin for other machines
+RMS_DEG_BOUND, GRF_BW_BOUND = 4.0, 3.0
 
 
 def _moco_dir(shared_data):
@@ -292,9 +293,9 @@ def test_bench_gait_moco_pinmsk_problems_are_mocos(shared_data):
 
 @pytest.mark.slow
 def test_bench_gait_moco_pinmsk_tracking_converges(shared_data):
-    """Moco's tracking problem solved by pinmsk (about 1 min here): converged, joint angles within a few
-    degrees of the tracked reference and GRF within a few % of body weight (bounds measured: see the
-    bench's docstring)."""
+    """Moco's tracking problem solved by pinmsk (about 4 min here): converged, joint angles within a few
+    degrees of the tracked reference and GRF within a few % of body weight (bounds measured: RMS_DEG_BOUND);
+    the default test_bench_gait_moco_pinmsk_problems_are_mocos covers the same problem's construction."""
     pytest.importorskip("casadi")
     import pinmsk
     b = _bench()
