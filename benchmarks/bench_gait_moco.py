@@ -52,14 +52,26 @@ Each Moco stride is also mapped onto gait2d (:func:`moco_stride_on_gait2d`) and 
 :func:`pinmsk.gait_validation.validate_gait` (joint angles against Winter and the measured walk,
 the GRF double hump, activations against EMG): ``<problem>_validation.json`` / ``.html``.
 
-Measured here (2 cores shared with other jobs, pip opensim 4.6, OMP/BLAS threads 1; issue 17 reported
-tracking 387 s and a prediction unconverged after 58 min):
+Measured here in one run (``python benchmarks/bench_gait_moco.py``; 2 cores shared with other jobs,
+pip opensim 4.6, OMP/BLAS threads 1; objectives in Moco's units, both tools; issue 17 reported Moco's
+tracking at 387 s and its prediction unconverged after 58 min):
 
-* tracking: Solve_Succeeded, objective 1.5426 (state tracking 0.368, control effort 0.800, contact
-  0.375), 156 IPOPT iterations, 505 s solver / 508 s wall; joint RMS against the tracked reference
-  3.8-7.1 deg (ankle largest, pelvis tilt 4.4; the effort weight is 10 x the tracking weight).
-* predictive (guess: that tracking solution): not converged within 600 s, killed at IPOPT iteration
-  26 (objective 0.174, primal infeasibility 0.40).
+| problem | tool | status | objective | iterations | wall (s) | Moco/pinmsk | joint RMS max (deg) | GRF RMS max (% BW) |
+|---|---|---|---|---|---|---|---|---|
+| tracking | Moco | Solve_Succeeded | 1.543 | 156 | 675.5 | | 7.14 | 2.71 |
+| tracking | pinmsk | Solve_Succeeded | 1.001 | 1322 | 103.8 | 6.5 | 2.47 | 1.28 |
+| predictive | Moco | not converged within 600 s | (0.168, inf_pr 1.37) | 34 | 600 | | - | - |
+| predictive | pinmsk | Solve_Succeeded | 0.1197 | 606 | 113.4 | > 5.3 | 9.36 | 10.95 |
+
+* tracking terms: Moco control effort 0.800 / state tracking 0.368 / contact 0.375; pinmsk 0.743 / 0.142 /
+  0.115 (24 Hermite-Simpson intervals as MocoTrack's 0.02 s mesh, IPOPT tol 1e-4 and the limited-memory
+  Hessian; Moco: MocoTrack's tolerances 1e-2).  Moco's solution scored by pinmsk's goals: 0.800 / 0.371 /
+  0.374 (1.5455 against Moco's 1.5426), so the lower pinmsk optimum is a better solution of the same
+  objective on pinmsk's import of the model (fitted muscle paths, implicit dynamics), not another
+  objective.  Not imposed by pinmsk: the lumbar control's periodicity (its solution: 0.0018 -> 0.0033).
+* prediction: pinmsk from its own tracking solution of the same run (as Moco's example), 50 intervals,
+  final time 0.515 s, 1.2 m/s; joint RMS / GRF RMS against the (tracked) reference data, which a
+  prediction need not reproduce.  Moco (guess: its tracking solution) was killed at iteration 34.
 """
 from __future__ import annotations
 
