@@ -293,7 +293,7 @@ def test_bench_gait_moco_pinmsk_problems_are_mocos(shared_data):
 
 @pytest.mark.slow
 def test_bench_gait_moco_pinmsk_tracking_converges(shared_data):
-    """Moco's tracking problem solved by pinmsk (about 4 min here): converged, joint angles within a few
+    """Moco's tracking problem solved by pinmsk (about 2 min here): converged, joint angles within a few
     degrees of the tracked reference and GRF within a few % of body weight (bounds measured: RMS_DEG_BOUND);
     the default test_bench_gait_moco_pinmsk_problems_are_mocos covers the same problem's construction."""
     pytest.importorskip("casadi")
