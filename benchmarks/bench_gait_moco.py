@@ -1,6 +1,6 @@
 """Moco's own 2-D walking problems (``example2DWalking``), timed, side by side with pinmsk (issue 17).
 
-    python benchmarks/bench_gait_moco.py [--moco-only] [--problems tracking,predictive]
+    python benchmarks/bench_gait_moco.py [--moco-only | --pinmsk-only] [--problems tracking,predictive]
         [--timeout-tracking 900] [--timeout-predictive 600] [--out DIR] [--data DIR]
 
 OpenSim (``pip install opensim``, 4.6 bundles Moco, CasADi and IPOPT) is an optional peer, never a
@@ -10,8 +10,18 @@ SOURCE.md), this script says so and exits 0.
 **One process per tool.**  OpenSim and the pip ``casadi`` both ship ``libcasadi.so.3.7`` with
 different ABIs, so they can never share a Python process (``/work/notes/ocp.md``).  Each Moco
 problem runs in a child process (this file with ``--_worker``), in its own process group, with a
-wall-clock timeout; the parent never imports opensim, and the pinmsk side (:func:`run_pinmsk`, which
-will use the CasADi engine) runs in the parent after the Moco children have exited.
+wall-clock timeout; the parent never imports opensim or casadi: the pinmsk side (:func:`run_pinmsk`,
+the CasADi engine) runs in a child too (``--_pinmsk``), after the Moco children have exited.
+
+**The pinmsk side** (:func:`build_pinmsk`) solves the same two problems on the same model, imported by
+pinmsk, with Moco's exact objective: the goals :class:`pinmsk.solvers.ocp.ControlEffort`,
+``StateTracking`` and ``ContactTracking`` are Moco's ``MocoControlGoal``, ``MocoStateTrackingGoal``
+(as MocoTrack sets it up) and ``MocoContactTrackingGoal`` (integrands, weights and normalisations read
+in opensim-core), so both objectives are in the same units and directly comparable.  Moco's own
+tracking solution scored by pinmsk's goals (:func:`moco_tracking_under_pinmsk`) reproduces Moco's
+reported terms (control effort exactly, contact within 0.1 %, state tracking within 1 %: pinmsk's
+Butterworth and spline of the reference against OpenSim's IIR filter with its own end padding and
+GCV spline differ by up to 1e-3 rad / 0.04 rad/s at the last reference frame).
 
 **The problems** are those of ``example2DWalking.py`` (Falisse et al. 2019, PLOS One 14:e0217730,
 as shipped with Moco; read there, formulated again here):
@@ -42,14 +52,26 @@ Each Moco stride is also mapped onto gait2d (:func:`moco_stride_on_gait2d`) and 
 :func:`pinmsk.gait_validation.validate_gait` (joint angles against Winter and the measured walk,
 the GRF double hump, activations against EMG): ``<problem>_validation.json`` / ``.html``.
 
-Measured here (2 cores shared with other jobs, pip opensim 4.6, OMP/BLAS threads 1; issue 17 reported
-tracking 387 s and a prediction unconverged after 58 min):
+Measured here in one run (``python benchmarks/bench_gait_moco.py``; 2 cores shared with other jobs,
+pip opensim 4.6, OMP/BLAS threads 1; objectives in Moco's units, both tools; issue 17 reported Moco's
+tracking at 387 s and its prediction unconverged after 58 min):
 
-* tracking: Solve_Succeeded, objective 1.5426 (state tracking 0.368, control effort 0.800, contact
-  0.375), 156 IPOPT iterations, 505 s solver / 508 s wall; joint RMS against the tracked reference
-  3.8-7.1 deg (ankle largest, pelvis tilt 4.4; the effort weight is 10 x the tracking weight).
-* predictive (guess: that tracking solution): not converged within 600 s, killed at IPOPT iteration
-  26 (objective 0.174, primal infeasibility 0.40).
+| problem | tool | status | objective | iterations | wall (s) | Moco/pinmsk | joint RMS max (deg) | GRF RMS max (% BW) |
+|---|---|---|---|---|---|---|---|---|
+| tracking | Moco | Solve_Succeeded | 1.543 | 156 | 675.5 | | 7.14 | 2.71 |
+| tracking | pinmsk | Solve_Succeeded | 1.001 | 1322 | 103.8 | 6.5 | 2.47 | 1.28 |
+| predictive | Moco | not converged within 600 s | (0.168, inf_pr 1.37) | 34 | 600 | | - | - |
+| predictive | pinmsk | Solve_Succeeded | 0.1197 | 606 | 113.4 | > 5.3 | 9.36 | 10.95 |
+
+* tracking terms: Moco control effort 0.800 / state tracking 0.368 / contact 0.375; pinmsk 0.743 / 0.142 /
+  0.115 (24 Hermite-Simpson intervals as MocoTrack's 0.02 s mesh, IPOPT tol 1e-4 and the limited-memory
+  Hessian; Moco: MocoTrack's tolerances 1e-2).  Moco's solution scored by pinmsk's goals: 0.800 / 0.371 /
+  0.374 (1.5455 against Moco's 1.5426), so the lower pinmsk optimum is a better solution of the same
+  objective on pinmsk's import of the model (fitted muscle paths, implicit dynamics), not another
+  objective.  Not imposed by pinmsk: the lumbar control's periodicity (its solution: 0.0018 -> 0.0033).
+* prediction: pinmsk from its own tracking solution of the same run (as Moco's example), 50 intervals,
+  final time 0.515 s, 1.2 m/s; joint RMS / GRF RMS against the (tracked) reference data, which a
+  prediction need not reproduce.  Moco (guess: its tracking solution) was killed at iteration 34.
 """
 from __future__ import annotations
 
@@ -350,66 +372,254 @@ def validate_moco(problem: str, r: dict, out: Path) -> dict | None:
     return summary
 
 
-def run_pinmsk(problem: str, data_dir: Path | None = None) -> dict | None:
-    """The pinmsk side of ``problem`` on Moco's own model, in a child process (this one may have
-    imported opensim, and casadi cannot load beside it).
+#: Moco's intervals: MocoTrack's default mesh_interval 0.02 s (ceil(0.470089 / 0.02) = 24) for the
+#: tracking, the example's set_num_mesh_intervals(50) for the prediction; Hermite-Simpson (Moco's default)
+MOCO_INTERVALS = {"tracking": 24, "predictive": 50}
 
-    ``"tracking"``: 2D_gait.osim imported by pinmsk (De Groote muscles with fitted paths, the four
-    SmoothSphereHalfSpaceForce contacts, the lumbar CoordinateActuator), a half cycle of Moco's
-    reference length tracking ``referenceCoordinates.sto`` (10 x the mean squared error scaled by
-    each coordinate's range) plus muscle and actuator effort, left/right symmetry; 25 trapezoidal
-    intervals, IPOPT with the limited-memory Hessian.  Not Moco's exact objective: Moco's also
-    tracks the contact forces (``referenceGRF.sto``) and weights its terms differently, so the
-    objectives are not comparable, the solutions and times are.  ``"predictive"``: not yet (None).
-    """
-    if problem != "tracking":
-        print(f"pinmsk side ({problem}): not yet")
-        return None
-    import subprocess
-    root = Path(__file__).resolve().parents[1]
-    model_dir = (data_dir or root.parent / "shared" / "data") / "opensim-models" / "Moco2DWalking"
-    code = _PINMSK_TRACKING.replace("MODEL_DIR", str(model_dir))
-    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(root))
-    t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=1200)
-    wall = time.perf_counter() - t0
-    line = [x for x in proc.stdout.splitlines() if x.startswith("{")]
-    if proc.returncode or not line:
-        print(f"pinmsk side (tracking) failed: {proc.stderr.strip().splitlines()[-1:]}")
-        return None
-    out = json.loads(line[-1])
-    out["wall_seconds"] = wall
-    out["reference_rms_deg"] = out.pop("joint_rms_deg")    # the key the Moco side's table reads
+
+def _contact_spheres(osim_path: Path) -> dict:
+    """``{force name: sphere name}`` of the model's SmoothSphereHalfSpaceForces (contactHeel_r -> heel_r):
+    Moco's contact groups name the forces, pinmsk's contacts carry their sphere's name."""
+    import xml.etree.ElementTree as ET
+    out = {}
+    for el in ET.parse(osim_path).getroot().iter("SmoothSphereHalfSpaceForce"):
+        out[el.get("name")] = el.findtext("socket_sphere").rsplit("/", 1)[-1]
     return out
 
 
-_PINMSK_TRACKING = r"""
-import json, time, numpy as np, warnings
-warnings.simplefilter("ignore")
-import pinmsk
-from pinmsk.solvers import ocp
-t0 = time.perf_counter()
-m = pinmsk.load_model("MODEL_DIR/2D_gait.osim")
-ref = pinmsk.read_trial("MODEL_DIR/referenceCoordinates.sto", strict=False)
-cols = {p.split("/")[-2]: np.asarray(ref[p]) for p in ref.names if p.endswith("/value")}
-t = np.asarray(ref.time) - ref.time[0]
-T = float(t[-1])
-idx = [m.coordinate_index(c) for c in cols]
-vals = np.column_stack([cols[c] for c in cols])
-track = ocp.TrackSignals("q", idx, t, vals, scale=np.maximum(np.ptp(vals, axis=0), 0.05), name="state_tracking")
-pairs = {"hip_flexion_r": "hip_flexion_l", "knee_angle_r": "knee_angle_l", "ankle_angle_r": "ankle_angle_l"}
-fit = ocp.Collocation(m, cost=10.0 * track + ocp.Effort(2) + ocp.ActuatorEffort(),
-                      constraints=[ocp.Symmetric(pairs, exclude=("pelvis_tx",))], duration=T, intervals=25,
-                      scheme="trapezoidal", guess=pinmsk.Trial(t, cols),
-                      solver={"hessian": "limited-memory", "max_iter": 3000, "tol": 1e-4, "constraint_tol": 1e-4},
-                      verbose=False)
-r = fit.fit().result_
-rms = {c: float(np.degrees(np.sqrt(np.mean((np.interp(r.time, t, cols[c]) - r[c]) ** 2))))
-       for c in cols if c not in ("pelvis_tx", "pelvis_ty")}
-print(json.dumps({"status": r.status, "success": bool(r.converged), "objective": float(r.objective),
-                  "terms": r.terms, "iterations": int(r.nit), "solve_seconds": float(r.seconds),
-                  "seconds": time.perf_counter() - t0, "joint_rms_deg": rms}))
-"""
+def build_pinmsk(problem: str, model_dir: Path, *, intervals: int | None = None, guess=None, model=None):
+    """The pinmsk Collocation of Moco's ``problem`` on 2D_gait.osim, with Moco's exact objective.
+
+    Both: Moco's coordinate bounds (``setStateInfo`` -> :class:`ocp.Bounds`), the left/right symmetry of
+    the MocoPeriodicityGoal (every ``_r`` coordinate, speed and activation ends at its ``_l`` twin's
+    start and vice versa, the other coordinates and speeds periodic except pelvis_tx's value;
+    :class:`ocp.Symmetric` + :class:`ocp.Periodic` of pelvis_tx's speed), Hermite-Simpson.  Not imposed:
+    the lumbar actuator control's periodicity (the engine's boundary constraints see the states at the
+    ends, not the point controls).
+
+    * tracking: ``10 ControlEffort(2)`` (MocoTrack's control_effort, weight 10, all 19 controls)
+      ``+ StateTracking`` (all 10 coordinates' values and position derivatives, low-passed at 6 Hz,
+      weight 1) ``+ ContactTracking`` (Right_GRF = contactHeel_r + contactFront_r, Left_GRF, plane
+      projection, normal z, weight 1); the duration 0.470089 s; guess: the (filtered) reference
+      coordinates, as MocoTrack's apply_tracked_states_to_guess.
+    * predictive: ``10 ControlEffort(3, per="distance")``, average speed 1.2 m/s, free final time in
+      [0.4, 0.6] s; guess ``guess`` (the bench passes pinmsk's own tracking solution, as Moco's example
+      does), else the reference coordinates.
+    """
+    import warnings
+
+    import numpy as np
+
+    import pinmsk
+    from pinmsk.solvers import ocp
+    model_dir = Path(model_dir)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = model if model is not None else pinmsk.load_model(model_dir / "2D_gait.osim")
+        ref = pinmsk.read_trial(model_dir / "referenceCoordinates.sto", strict=False)
+    q = {p.split("/")[-2]: np.asarray(ref[p]) for p in ref.names if p.endswith("/value")}
+    t = np.asarray(ref.time) - ref.time[0]
+    bounds = ocp.Bounds(q={path.split("/")[-1]: (lo, hi) if path.endswith(("_tx", "_ty"))
+                           else (math.radians(lo), math.radians(hi)) for path, (lo, hi) in BOUNDS.items()})
+    pairs = {"hip_flexion_r": "hip_flexion_l", "knee_angle_r": "knee_angle_l", "ankle_angle_r": "ankle_angle_l"}
+    cons = [ocp.Symmetric(pairs, exclude=("pelvis_tx",)),
+            ocp.Periodic(states=("v",), exclude=tuple(c for c in m.coordinates if c != "pelvis_tx")), bounds]
+    tracking = ocp.StateTracking(t, q, lowpass=6.0, position_derivatives=True)
+    if problem == "tracking":
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            grf = pinmsk.read_trial(model_dir / "referenceGRF.sto", strict=False)
+        spheres = _contact_spheres(model_dir / "2D_gait.osim")
+        tg = np.asarray(grf.time) - grf.time[0]
+        groups = {label: (tuple(spheres[c] for c in CONTACTS[s]),
+                          np.column_stack([np.asarray(grf[f"ground_force_{s}_v{a}"]) for a in "xyz"]))
+                  for s, label in (("r", "Right_GRF"), ("l", "Left_GRF"))}
+        cost = (10.0 * ocp.ControlEffort(2) + tracking
+                + ocp.ContactTracking(groups, tg, projection="plane", vector=(0, 0, 1), name="contact"))
+        duration, start = HALF_CYCLE, pinmsk.Trial(t, tracking.reference(t))
+    else:
+        cost = 10.0 * ocp.ControlEffort(3, per="distance", coordinate="pelvis_tx", name="effort")
+        cons.append(ocp.AverageSpeed(SPEED, coordinate="pelvis_tx"))
+        duration, start = (0.4, 0.6), guess if guess is not None else pinmsk.Trial(t, tracking.reference(t))
+    return ocp.Collocation(m, cost=cost, constraints=cons, duration=duration,
+                           intervals=intervals or MOCO_INTERVALS[problem], scheme="hermite-simpson", guess=start,
+                           solver={"hessian": "limited-memory", "max_iter": 3000, "tol": 1e-4,
+                                   "constraint_tol": 1e-4}, verbose=False)
+
+
+def pinmsk_against_reference(r, model_dir: Path, mass: float) -> dict:
+    """A pinmsk half cycle against referenceCoordinates.sto (RMS deg) and referenceGRF.sto (RMS % of
+    body weight, fore-aft and vertical per side), both over 0-100 % of their own duration."""
+    import warnings
+
+    import numpy as np
+
+    import pinmsk
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ref = pinmsk.read_trial(model_dir / "referenceCoordinates.sto", strict=False)
+        grf = pinmsk.read_trial(model_dir / "referenceGRF.sto", strict=False)
+    spheres = _contact_spheres(model_dir / "2D_gait.osim")
+    t = np.asarray(r.time)
+    ps = (t - t[0]) / (t[-1] - t[0])
+    pr = (np.asarray(ref.time) - ref.time[0]) / (ref.time[-1] - ref.time[0])
+    rms = {}
+    for a in ANGLES:
+        col = next(n for n in ref.names if n.endswith(f"/{a}/value"))
+        rms[a] = float(np.degrees(np.sqrt(np.mean((np.asarray(r[a]) - np.interp(ps, pr, np.asarray(ref[col]))) ** 2))))
+    bw = mass * 9.80665
+    pg = (np.asarray(grf.time) - grf.time[0]) / (grf.time[-1] - grf.time[0])
+    g_rms = {}
+    for s in "rl":
+        for k, a in enumerate("xy"):
+            f = sum(np.asarray(r[f"smooth_sphere_half_space:{spheres[c]}_force_{a}"]) for c in CONTACTS[s])
+            d = f - np.interp(ps, pg, np.asarray(grf[f"ground_force_{s}_v{a}"]))
+            g_rms[f"{s}_v{a}"] = float(100.0 * np.sqrt(np.mean(d ** 2)) / bw)
+    return {"reference_rms_deg": rms, "grf_rms_bw_pct": g_rms}
+
+
+def moco_grf_rms(grf_full_stride: Path, model_dir: Path, final_time: float) -> dict:
+    """RMS (% body weight) of Moco's half-cycle GRF (the first ``final_time`` s of its full-stride GRF
+    table) against referenceGRF.sto, fore-aft and vertical per side, over 0-100 % of each."""
+    import warnings
+
+    import numpy as np
+
+    import pinmsk
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        g = pinmsk.read_trial(grf_full_stride, strict=False)
+        ref = pinmsk.read_trial(Path(model_dir) / "referenceGRF.sto", strict=False)
+    t = np.asarray(g.time) - g.time[0]
+    keep = t <= final_time + 1e-9
+    ps = t[keep] / t[keep][-1]
+    pr = (np.asarray(ref.time) - ref.time[0]) / (ref.time[-1] - ref.time[0])
+    bw = 62.0 * 9.80665                        # 2D_gait.osim's mass (62 kg) times its gravity
+    return {f"{s}_v{a}": float(100.0 * np.sqrt(np.mean((np.asarray(g[f"ground_force_{s}_v{a}"])[keep]
+                                                        - np.interp(ps, pr, np.asarray(ref[f"ground_force_{s}_v{a}"])))
+                                                       ** 2)) / bw)
+            for s in "rl" for a in "xy"}
+
+
+def run_pinmsk_score(solution: Path, grf: Path, model_dir: Path) -> dict | None:
+    """:func:`moco_tracking_under_pinmsk` in a child process (the parent never imports casadi/opensim
+    state of the other tool; this one needs only numpy, scipy and pinmsk)."""
+    code = ("import json, sys; sys.path.insert(0, {root!r}); import importlib.util as u; "
+            "s = u.spec_from_file_location('b', {me!r}); b = u.module_from_spec(s); s.loader.exec_module(b); "
+            "from pathlib import Path; print(json.dumps(b.moco_tracking_under_pinmsk(Path({a!r}), Path({g!r}), "
+            "Path({d!r}))))").format(root=str(Path(__file__).resolve().parents[1]), me=str(Path(__file__).resolve()),
+                                     a=str(solution), g=str(grf), d=str(model_dir))
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    lines = [x for x in proc.stdout.splitlines() if x.startswith("{")]
+    return json.loads(lines[-1]) if proc.returncode == 0 and lines else None
+
+
+def moco_tracking_under_pinmsk(solution: Path, grf: Path, model_dir: Path) -> dict:
+    """Moco's tracking solution (its half-cycle .sto and OpenSim's GRF of it) scored by pinmsk's goals
+    (:class:`ocp.ControlEffort`, :class:`ocp.StateTracking`, :class:`ocp.ContactTracking`: their
+    weights, references, projection and normalisation) with Moco's Hermite-Simpson quadrature (Simpson
+    over the mesh points and midpoints the .sto holds), in numpy: a cross-check that the goals are
+    Moco's (the terms should be Moco's objective_* header values)."""
+    import warnings
+
+    import numpy as np
+
+    import pinmsk
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sol = pinmsk.read_trial(solution, strict=False)
+        g = pinmsk.read_trial(grf, strict=False)
+    fit = build_pinmsk("tracking", model_dir, model=_LazyModel())
+    terms = {t.name: t for t in fit.cost.terms()}
+    t = np.asarray(sol.time) - sol.time[0]
+    w = np.zeros(t.size)                        # Simpson: nodes at even rows, midpoints at odd rows
+    h = t[2::2] - t[:-2:2]
+    w[:-2:2] += h / 6
+    w[2::2] += h / 6
+    w[1::2] += 4 * h / 6
+    controls = [n for n in sol.names if n.count("/") == 1]           # /lumbarAct, /hamstrings_r ...
+    u = np.column_stack([np.asarray(sol[n]) for n in controls])
+    out = {"control_effort": float(w @ np.sum(u ** 2, axis=1)), "controls": len(controls)}
+    st = terms["state_tracking"]
+    ref = st.reference(t)
+    err = 0.0
+    for key, y in ref.items():
+        c, what = (key[:-6], "speed") if key.endswith("_speed") else (key, "value")
+        col = next(n for n in sol.names if n.endswith(f"/{c}/{what}"))
+        err = err + (np.asarray(sol[col]) - y) ** 2
+    out["state_tracking"] = float(w @ err)
+    ct = terms["contact"]
+    tg = np.asarray(g.time) - g.time[0]
+    e2 = 0.0
+    for s, label in (("r", "Right_GRF"), ("l", "Left_GRF")):
+        fr = ct._splines[label](t)
+        fm = np.column_stack([np.interp(t, tg, np.asarray(g[f"ground_force_{s}_v{a}"])) for a in "xyz"])
+        e2 = e2 + np.sum((fm - fr)[:, :2] ** 2, axis=1)                 # plane projection, normal z
+    out["contact"] = float(w @ e2) / (62.0 * 9.80665)
+    out["objective"] = 10.0 * out["control_effort"] + out["state_tracking"] + out["contact"]
+    return out
+
+
+class _LazyModel:
+    """A stand-in model for building the goals only (they need the model when the problem is set up)."""
+    coordinates = ()
+
+
+def pinmsk_worker(problems, model_dir: Path, result: Path) -> int:
+    """The pinmsk side in its own process (casadi; never opensim): each problem's objective in Moco's
+    units (the same goals, weights and normalisations), its terms, times and the comparison with the
+    reference data.  The prediction starts from this run's pinmsk tracking solution when there is one."""
+    import numpy as np
+
+    import pinmsk
+    out, guess = {}, None
+    t0 = time.perf_counter()
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = pinmsk.load_model(model_dir / "2D_gait.osim")
+    t_load = time.perf_counter() - t0
+    for p in problems:
+        t1 = time.perf_counter()
+        fit = build_pinmsk(p, model_dir, model=model, guess=guess if p == "predictive" else None)
+        r = fit.fit().result_
+        wall = time.perf_counter() - t1
+        o = {"status": r.status, "success": bool(r.converged), "objective": float(r.objective),
+             "terms": r.terms, "iterations": int(r.nit), "solve_seconds": float(r.seconds), "wall_seconds": wall,
+             "load_seconds": t_load, "intervals": fit.intervals, "scheme": fit.scheme,
+             "final_time": float(r.time[-1] - r.time[0]),
+             "guess": "pinmsk's tracking solution of this run" if (p == "predictive" and guess is not None)
+             else "the reference coordinates (low-passed at 6 Hz) and their derivatives"}
+        o.update(pinmsk_against_reference(r, model_dir, float(sum(I.mass for I in model.pin.inertias))))
+        for n in (n for n in r.names if n.endswith("_control")):   # Moco's symmetry also pairs /lumbarAct
+            o[f"{n}_start_end"] = [float(r[n][0]), float(r[n][-1])]
+        if p == "predictive":
+            o["speed_m_per_s"] = float((r["pelvis_tx"][-1] - r["pelvis_tx"][0]) / o["final_time"])
+        out[p] = o
+        if p == "tracking" and r.converged:
+            guess = r
+        print(f"pinmsk {p}: {r.status}, objective {r.objective:.5g}, {r.nit} iterations, {wall:.1f} s",
+              flush=True)
+    result.write_text(json.dumps(out, indent=2, default=float))
+    return 0
+
+
+def run_pinmsk(problems, data_dir: Path | None = None, timeout: float = 1800.0) -> dict:
+    """The pinmsk side of ``problems`` (see :func:`build_pinmsk`) in a child process (the parent may have
+    imported opensim; casadi cannot load beside it): ``{problem: result dict}`` ({} if it failed)."""
+    root = Path(__file__).resolve().parents[1]
+    from pinmsk.io.shared_data import shared_data_dir
+    model_dir = Path(data_dir or shared_data_dir()) / FOLDER
+    result = Path(tempfile.mkdtemp(prefix="bench_gait_moco_pinmsk_")) / "pinmsk_result.json"
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", PYTHONPATH=str(root))
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--_pinmsk", ",".join(problems),
+           "--data", str(model_dir.parents[1]), "--_result", str(result)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=timeout)
+    print(proc.stdout, end="")
+    if proc.returncode or not result.exists():
+        print(f"pinmsk side failed: {proc.stderr.strip().splitlines()[-1:]}")
+        return {}
+    return json.loads(result.read_text())
 
 
 def _fmt(x, spec=".4g"):
@@ -419,6 +629,7 @@ def _fmt(x, spec=".4g"):
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--moco-only", action="store_true", help="run the Moco side only")
+    ap.add_argument("--pinmsk-only", action="store_true", help="run the pinmsk side only (no opensim needed)")
     ap.add_argument("--problems", default="tracking,predictive",
                     help="comma-separated subset of tracking,predictive")
     ap.add_argument("--timeout-tracking", type=float, default=900.0, help="s (default 900)")
@@ -430,9 +641,15 @@ def main(argv=None) -> int:
     ap.add_argument("--_worker", choices=PROBLEMS, help=argparse.SUPPRESS)
     ap.add_argument("--_result", type=Path, help=argparse.SUPPRESS)
     ap.add_argument("--_guess", type=Path, help=argparse.SUPPRESS)
+    ap.add_argument("--_pinmsk", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a._worker:
         return worker(a._worker, a.out, a._result, a._guess)
+    if a._pinmsk:
+        sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+        return pinmsk_worker(a._pinmsk.split(","), a.data / FOLDER, a._result)
+    if a.moco_only and a.pinmsk_only:
+        ap.error("--moco-only and --pinmsk-only exclude each other")
 
     problems = [p.strip() for p in a.problems.split(",") if p.strip()]
     bad = [p for p in problems if p not in PROBLEMS]
@@ -446,7 +663,7 @@ def main(argv=None) -> int:
         print(f"bench_gait_moco: {FOLDER} is absent (see its SOURCE.md); nothing to do")
         return 0
     probe = subprocess.run([sys.executable, "-c", "import opensim"], capture_output=True)
-    if probe.returncode != 0:
+    if probe.returncode != 0 and not a.pinmsk_only:
         print("bench_gait_moco: opensim is not installed (pip install opensim); nothing to do")
         return 0
     out = a.out or Path(tempfile.mkdtemp(prefix="bench_gait_moco_"))
@@ -459,33 +676,45 @@ def main(argv=None) -> int:
     if guess is not None and not guess.exists():
         ap.error(f"--predictive-guess: {guess} does not exist")
     for p in problems:
+        results[p] = {}
+        if a.pinmsk_only:
+            continue
         print(f"Moco {p}: running (timeout {timeouts[p]:.0f} s) in {out} ...", flush=True)
         r = _run_child(p, out, timeouts[p], guess if p == "predictive" else None)
         if r.get("solution"):
             r["reference_rms_deg"] = reference_rms_deg(Path(r["solution"]), out / "referenceCoordinates.sto")
+            r["grf_rms_bw_pct"] = moco_grf_rms(Path(r["grf_full_stride"]), out, r["final_time"])
+            if p == "tracking":
+                r["under_pinmsk_goals"] = run_pinmsk_score(Path(r["solution"]), Path(r["grf_full_stride"]), out)
             if p == "tracking" and a.predictive_guess is None:
                 guess = Path(r["solution"])
             r["validation"] = validate_moco(p, r, out)
-        results[p] = {"moco": r}
+        results[p]["moco"] = r
         print(f"  status {r['status']}, success {r['success']}, objective {_fmt(r.get('objective'))}, "
               f"iterations {_fmt(r.get('iterations'))}, wall {r['wall_seconds']:.1f} s", flush=True)
     if not a.moco_only:
+        print(f"pinmsk {', '.join(problems)}: running ...", flush=True)
+        ours = run_pinmsk(problems, a.data)
         for p in problems:
-            results[p]["pinmsk"] = run_pinmsk(p, a.data)
-            m, q = results[p]["moco"], results[p]["pinmsk"]
+            results[p]["pinmsk"] = ours.get(p)
+            m, q = results[p].get("moco") or {}, results[p]["pinmsk"]
             if q and m.get("wall_seconds") and q.get("wall_seconds"):
                 results[p]["ratio_moco_over_pinmsk"] = m["wall_seconds"] / q["wall_seconds"]
     (out / "moco_2d_walking.json").write_text(json.dumps(results, indent=2))
-    print("\n| problem | tool | status | objective | iterations | wall (s) | max joint RMS vs reference (deg) |")
-    print("|---|---|---|---|---|---|---|")
+    print("\n| problem | tool | status | objective (Moco's units) | iterations | wall (s) | Moco/pinmsk time "
+          "| max joint RMS vs reference (deg) | max GRF RMS (% BW) |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for p, r in results.items():
         for tool in ("moco", "pinmsk"):
             x = r.get(tool)
             if not x:
                 continue
             rms = x.get("reference_rms_deg") or {}
+            g = x.get("grf_rms_bw_pct") or {}
+            ratio = r.get("ratio_moco_over_pinmsk") if tool == "pinmsk" else None
             print(f"| {p} | {tool} | {x['status']} | {_fmt(x.get('objective'))} | {_fmt(x.get('iterations'))} | "
-                  f"{x['wall_seconds']:.1f} | {_fmt(max(rms.values()) if rms else None, '.2f')} |")
+                  f"{x['wall_seconds']:.1f} | {_fmt(ratio, '.2f')} | {_fmt(max(rms.values()) if rms else None, '.2f')} "
+                  f"| {_fmt(max(g.values()) if g else None, '.2f')} |")
     print(f"\nresults: {out / 'moco_2d_walking.json'}")
     return 0
 

@@ -21,11 +21,13 @@ from .constraints import (AverageSpeed, Bounds, Constraint, CoordinateBounds, Ex
                           Periodic,
                           Symmetric, TrackingTolerance)
 from .controls import GlobalControls, NodeControls
-from .costs import ActuatorEffort, Cost, CostSum, Effort, FinalTime, MetabolicEnergy, Smoothness, TrackCoordinates, TrackSignals
+from .costs import (ActuatorEffort, ContactTracking, ControlEffort, Cost, CostSum, Effort, FinalTime, MetabolicEnergy,
+                    Smoothness, StateTracking, TrackCoordinates, TrackSignals)
 from .problem import SCHEMES, Collocation
 from .target import Target
 
 __all__ = ["Collocation", "SCHEMES", "Target", "NodeControls", "GlobalControls",
            "Cost", "CostSum", "Effort", "ActuatorEffort", "MetabolicEnergy", "TrackCoordinates", "TrackSignals", "Smoothness", "FinalTime",
+           "ControlEffort", "StateTracking", "ContactTracking",
            "Constraint", "TrackingTolerance", "ExcitationBounds", "CoordinateBounds", "InitialState", "FinalState", "Periodic",
            "Symmetric", "AverageSpeed", "Bounds"]

@@ -26,7 +26,11 @@ Terms (thesis equation in brackets):
   the actuators' part of Moco's control effort);
 - :class:`FinalTime` -- the duration itself (s), with a free final time (Moco's final-time goal);
 - :class:`Smoothness` -- the mean square of the implicit controls (accelerations, tendon-force
-  rates) or of the excitations' rate, which regularizes the collocation solution.
+  rates) or of the excitations' rate, which regularizes the collocation solution;
+- :class:`ControlEffort`, :class:`StateTracking`, :class:`ContactTracking` -- OpenSim Moco's
+  ``MocoControlGoal``, ``MocoStateTrackingGoal`` (as ``MocoTrack`` configures it) and
+  ``MocoContactTrackingGoal``, with Moco's integrands and normalisations (plain integrals, no
+  ``1/T``), so that an objective is in Moco's units.
 """
 from __future__ import annotations
 
@@ -36,7 +40,7 @@ from ...errors import ModelError
 from ._values import ValueEq
 
 __all__ = ["Cost", "CostSum", "Effort", "ActuatorEffort", "MetabolicEnergy", "TrackCoordinates", "TrackSignals",
-           "Smoothness", "FinalTime"]
+           "Smoothness", "FinalTime", "ControlEffort", "StateTracking", "ContactTracking"]
 
 
 class Cost(ValueEq):
@@ -339,3 +343,272 @@ class FinalTime(Cost):
 
     def linear_finish(self, glob):
         return None
+
+
+# ---------------------------------------------------------------------------------------------
+# OpenSim Moco's goals, as Moco defines them (opensim-core OpenSim/Moco/MocoGoal/*.cpp, read there):
+# a goal's value is the plain time integral of its integrand (no 1/T), optionally divided by the
+# displacement and / or the duration (MocoGoal::calcGoal), times its weight.
+
+def _moco_divisor(per, glob, j):
+    """MocoGoal's ``divide_by_displacement`` / ``divide_by_duration`` of an integral."""
+    if per == "distance":
+        return glob["xN"][j] - glob["x0"][j]
+    if per == "time":
+        return glob["T"]
+    return 1.0
+
+
+class ControlEffort(Cost):
+    """Moco's ``MocoControlGoal``: ``int sum_k w_k |u_k|^p dt`` over ALL the model's controls.
+
+    The controls are the muscles' excitations and the CoordinateActuators' controls (Moco's
+    ``createControlNamesFromModel``), each weighted by ``weights`` (name -> weight, muscle names
+    or actuator names; default 1; a weight of 0 drops the control, as Moco does).  ``exponent``:
+    an integer >= 2 (Moco refuses less; 2 is ``u*u``, otherwise ``|u|^p``).  ``per``: None (Moco's
+    default: the integral itself), ``"distance"`` (``divide_by_displacement``) or ``"time"``
+    (``divide_by_duration``).  Moco divides by the norm of the centre of mass's displacement
+    (``MocoGoal::calcSystemDisplacement``); here it is the forward coordinate's displacement
+    (``coordinate``, default the problem's forward coordinate), which equals it in a half gait
+    cycle with left/right symmetry (every other coordinate ends mirrored, so the centre of mass
+    moves as the pelvis does) and in any motion whose posture at the end is the start's.
+    """
+
+    name = "control_effort"
+
+    def __init__(self, exponent: int = 2, *, per: str | None = None, weights: dict | None = None,
+                 coordinate: str | None = None, weight: float = 1.0, name: str | None = None):
+        super().__init__(weight=weight, name=name)
+        if int(exponent) != exponent or exponent < 2:
+            raise ModelError(f"ControlEffort exponent must be an integer >= 2 (as Moco's), got {exponent}")
+        if per not in (None, "distance", "time"):
+            raise ModelError(f"ControlEffort per must be None, 'distance' or 'time', not {per!r}")
+        self.exponent, self.per, self.coordinate = int(exponent), per, coordinate
+        self.weights = dict(weights or {})
+
+    def check(self, problem) -> None:
+        muscles = list(problem.model.muscle_names) if problem.model.muscles is not None else []
+        acts = [a.name for a in problem._pm.actuators]
+        if not muscles and not acts:
+            raise ModelError(f"cost '{self.name}': model '{problem.model.name}' has no controls")
+        unknown = sorted(set(self.weights) - set(muscles) - set(acts))
+        if unknown:
+            raise ModelError(f"cost '{self.name}': weights name no control of the model: {', '.join(unknown)} "
+                             f"(controls: {', '.join(muscles + acts)})")
+        self._wm = np.array([float(self.weights.get(n, 1.0)) for n in muscles])
+        self._wa = np.array([float(self.weights.get(n, 1.0)) for n in acts])
+        if self.per == "distance":
+            self._j = problem.model.coordinate_index(self.coordinate or problem.forward_coordinate())
+        else:
+            self._j = None
+
+    def _power(self, x):
+        import casadi as ca
+        return x * x if self.exponent == 2 else ca.fabs(x) ** self.exponent
+
+    def integrand(self, pt, ref=None):
+        import casadi as ca
+        out = 0.0
+        if self._wm.size:
+            out = out + ca.dot(ca.DM(self._wm), self._power(pt["e"]))
+        if self._wa.size:
+            out = out + ca.dot(ca.DM(self._wa), self._power(pt["act"]))
+        return out
+
+    def finish(self, integral, glob):
+        return integral / _moco_divisor(self.per, glob, self._j)
+
+    def linear_finish(self, glob):
+        if self.per is None:
+            return 1.0
+        if self.per == "time" and isinstance(glob["T"], (int, float)):
+            return 1.0 / glob["T"]
+        return None
+
+
+class StateTracking(Cost):
+    """Moco's ``MocoStateTrackingGoal`` as ``MocoTrack`` sets it up: ``int sum_i w_i (y_i - r_i(t))^2 dt``.
+
+    ``time`` (N,) and ``q`` (name -> (N,) coordinate values, model units) are the reference;
+    ``v`` (name -> (N,)) optional speed references.  ``lowpass``: cut-off (Hz) of a zero-lag
+    low-pass of the positions first (MocoTrack's ``TabOpLowPassFilter``; OpenSim's
+    ``Signal::LowpassIIR`` is a third-order Butterworth run forwards and backwards, here
+    :func:`pinmsk.signals.filtering.lowpass` of order 3).  ``position_derivatives``: also track
+    the positions' time derivatives as the speeds (``track_reference_position_derivatives``).
+    The references are splined (a quintic interpolating spline; Moco's ``GCVSplineSet`` is a
+    quintic GCV-smoothing spline, which on these smooth data interpolates too) and evaluated at
+    the collocation points; the speeds are the spline's derivative.  ``weights``: name -> weight
+    (``"<coord>"`` for the value, ``"<coord>_speed"`` for the speed; default 1);
+    ``scale_weights_with_range``: divide each weight by its reference's range (Moco's option,
+    off by default).  The value is the integral itself (``MocoStateTrackingGoal::calcGoalImpl``).
+    """
+
+    name = "state_tracking"
+
+    def __init__(self, time, q: dict, v: dict | None = None, *, lowpass: float | None = None,
+                 position_derivatives: bool = False, weights: dict | None = None,
+                 scale_weights_with_range: bool = False, weight: float = 1.0, name: str | None = None):
+        super().__init__(weight=weight, name=name)
+        t = np.asarray(time, dtype=float)
+        if t.ndim != 1 or t.size < 6 or np.any(np.diff(t) <= 0):
+            raise ModelError(f"cost '{self.name}': the reference time must increase, with >= 6 samples")
+        qs = {k: np.asarray(x, dtype=float) for k, x in q.items()}
+        for k, x in list(qs.items()) + list((v or {}).items()):
+            if np.shape(x) != t.shape or not np.all(np.isfinite(x)):
+                raise ModelError(f"cost '{self.name}': reference '{k}' needs {t.size} finite samples, "
+                                 f"got shape {np.shape(x)}")
+        if lowpass is not None and qs:
+            from ...signals.filtering import lowpass as _lp
+            rate = (t.size - 1) / (t[-1] - t[0])
+            Y = _lp(np.column_stack(list(qs.values())), rate=rate, cutoff=float(lowpass), order=3)
+            qs = {k: Y[:, i] for i, k in enumerate(qs)}
+        from scipy.interpolate import make_interp_spline
+        self.time = t
+        self._splines = {("q", k): make_interp_spline(t, x, k=5) for k, x in qs.items()}
+        if position_derivatives:
+            for k in qs:
+                if k not in (v or {}):
+                    self._splines[("v", k)] = self._splines[("q", k)].derivative()
+        for k, x in (v or {}).items():
+            self._splines[("v", k)] = make_interp_spline(t, np.asarray(x, dtype=float), k=5)
+        self.weights, self.scale_weights_with_range = dict(weights or {}), bool(scale_weights_with_range)
+        self.q = qs
+
+    def reference(self, times) -> dict:
+        """The splined references at ``times``: ``{"<coord>": ..., "<coord>_speed": ...}``."""
+        t = np.asarray(times, dtype=float)
+        return {(k if g == "q" else f"{k}_speed"): sp(t) for (g, k), sp in self._splines.items()}
+
+    def check(self, problem) -> None:
+        m = problem.model
+        keys = list(self._splines)
+        self._rows = [(g, m.coordinate_index(k)) for g, k in keys]
+        w = []
+        for g, k in keys:
+            label = k if g == "q" else f"{k}_speed"
+            wi = float(self.weights.get(label, 1.0))
+            if self.scale_weights_with_range:
+                y = self._splines[(g, k)](self.time)
+                wi /= abs(float(np.max(y) - np.min(y)))
+            w.append(wi)
+        unknown = sorted(set(self.weights) - {k if g == "q" else f"{k}_speed" for g, k in keys})
+        if unknown:
+            raise ModelError(f"cost '{self.name}': weights name no tracked state: {', '.join(unknown)}")
+        self._w = np.array(w)
+
+    def references(self, problem, times) -> np.ndarray:
+        t = np.asarray(times, dtype=float)
+        if t.min() < self.time[0] - 1e-9 or t.max() > self.time[-1] + 1e-9:
+            raise ModelError(f"cost '{self.name}': the reference covers {self.time[0]:g}-{self.time[-1]:g} s, "
+                             f"the horizon {t.min():g}-{t.max():g} s")
+        return np.vstack([self._splines[key](t) for key in self._splines])
+
+    def integrand(self, pt, ref=None):
+        import casadi as ca
+        y = ca.vertcat(*[pt[g][j] for g, j in self._rows])
+        e = y - ref
+        return ca.dot(ca.DM(self._w), e * e)
+
+    def finish(self, integral, glob):
+        return integral
+
+    def linear_finish(self, glob):
+        return 1.0
+
+
+class ContactTracking(Cost):
+    """Moco's ``MocoContactTrackingGoal``: ``1/(m g) int sum_groups |P (f_group - f_ref(t)) / n|^2 dt``.
+
+    ``groups``: external-force name -> ``(contacts, force)``: the contact components whose forces
+    on their bodies add up to the group's force (labels such as ``"smooth_sphere_half_space:heel_r"``,
+    the part after ``:`` or the contact's frame), and the reference force (N, 3) in the ground frame
+    sampled at ``time`` (splined like Moco's GCVSplineSet, quintic).  ``projection``: ``"none"``,
+    ``"plane"`` (remove the error's component along ``vector``: the plane's normal) or ``"vector"``
+    (keep only it).  ``normalize_tracking_error``: divide each axis's error by the reference's peak
+    magnitude on that axis, over all groups' own data (``n``; Moco's default False: ``n = 1``).  ``m g``:
+    the model's weight (total mass times the gravity's norm), Moco's denominator.
+    """
+
+    name = "contact_tracking"
+
+    def __init__(self, groups: dict, time, *, projection: str = "none", vector=None,
+                 normalize_tracking_error: bool = False, weight: float = 1.0, name: str | None = None):
+        super().__init__(weight=weight, name=name)
+        if projection not in ("none", "plane", "vector"):
+            raise ModelError(f"cost '{self.name}': projection must be 'none', 'plane' or 'vector', "
+                             f"not {projection!r}")
+        if projection != "none":
+            if vector is None:
+                raise ModelError(f"cost '{self.name}': projection '{projection}' needs its vector")
+            n = np.asarray(vector, dtype=float).reshape(3)
+            if not np.linalg.norm(n) > 0:
+                raise ModelError(f"cost '{self.name}': the projection vector must not be zero")
+            self.vector = n / np.linalg.norm(n)
+        else:
+            self.vector = None
+        t = np.asarray(time, dtype=float)
+        from scipy.interpolate import make_interp_spline
+        self.time, self.projection = t, projection
+        self.groups, self._splines, self._norm = {}, {}, {}
+        for g, (contacts, force) in groups.items():
+            F = np.asarray(force, dtype=float)
+            if F.shape != (t.size, 3) or not np.all(np.isfinite(F)):
+                raise ModelError(f"cost '{self.name}': group '{g}' needs a finite force of shape ({t.size}, 3), "
+                                 f"got {F.shape}")
+            self.groups[g] = (tuple(contacts), F)
+            self._splines[g] = make_interp_spline(t, F, k=5)
+            if normalize_tracking_error:
+                peak = np.max(np.abs(F), axis=0)
+                if np.any(peak < 1e-12):
+                    raise ModelError(f"cost '{self.name}': normalize_tracking_error needs a nonzero reference "
+                                     f"force on every axis; group '{g}' is zero along "
+                                     f"{'xyz'[int(np.argmin(peak))]}")
+                self._norm[g] = peak
+            else:
+                self._norm[g] = np.ones(3)
+
+    def check(self, problem) -> None:
+        contacts = list(problem._pm.contacts)
+        if not contacts:
+            raise ModelError(f"cost '{self.name}': model '{problem.model.name}' has no contacts")
+        keys = {}
+        for i, c in enumerate(contacts):
+            for k in (c.label, c.label.split(":")[-1], getattr(c, "target", None)):
+                if k:
+                    keys.setdefault(k, i)
+        self._idx = {}
+        for g, (names, _) in self.groups.items():
+            bad = [n for n in names if n not in keys]
+            if bad:
+                raise ModelError(f"cost '{self.name}': group '{g}' names unknown contacts {', '.join(bad)} "
+                                 f"(has: {', '.join(c.label for c in contacts)})")
+            self._idx[g] = [keys[n] for n in names]
+        g = np.asarray(problem.model.pin.gravity.linear, dtype=float)
+        self._den = problem._pm.mass * (float(np.linalg.norm(g)) or 1.0)
+
+    def references(self, problem, times) -> np.ndarray:
+        t = np.asarray(times, dtype=float)
+        if t.min() < self.time[0] - 1e-9 or t.max() > self.time[-1] + 1e-9:
+            raise ModelError(f"cost '{self.name}': the reference covers {self.time[0]:g}-{self.time[-1]:g} s, "
+                             f"the horizon {t.min():g}-{t.max():g} s")
+        return np.vstack([self._splines[g](t).T for g in self.groups])
+
+    def integrand(self, pt, ref=None):
+        import casadi as ca
+        cf = pt["contact_forces"]
+        out = 0.0
+        for k, g in enumerate(self.groups):
+            f = sum((cf[3 * i: 3 * i + 3] for i in self._idx[g]), ca.SX.zeros(3))
+            e = (f - ref[3 * k: 3 * k + 3]) / ca.DM(self._norm[g])
+            if self.projection != "none":
+                n = ca.DM(self.vector)
+                along = ca.dot(e, n) * n
+                e = along if self.projection == "vector" else e - along
+            out = out + ca.sumsqr(e)
+        return out
+
+    def finish(self, integral, glob):
+        return integral / self._den
+
+    def linear_finish(self, glob):
+        return 1.0 / self._den
