@@ -393,9 +393,9 @@ def build_pinmsk(problem: str, model_dir: Path, *, intervals: int | None = None,
     Both: Moco's coordinate bounds (``setStateInfo`` -> :class:`ocp.Bounds`), the left/right symmetry of
     the MocoPeriodicityGoal (every ``_r`` coordinate, speed and activation ends at its ``_l`` twin's
     start and vice versa, the other coordinates and speeds periodic except pelvis_tx's value;
-    :class:`ocp.Symmetric` + :class:`ocp.Periodic` of pelvis_tx's speed), Hermite-Simpson.  Not imposed:
-    the lumbar actuator control's periodicity (the engine's boundary constraints see the states at the
-    ends, not the point controls).
+    :class:`ocp.Symmetric` + :class:`ocp.Periodic` of pelvis_tx's speed) and, as its
+    ``addControlPair("/lumbarAct")``, the lumbar actuator's control periodic (``Symmetric(controls=)``),
+    Hermite-Simpson.
 
     * tracking: ``10 ControlEffort(2)`` (MocoTrack's control_effort, weight 10, all 19 controls)
       ``+ StateTracking`` (all 10 coordinates' values and position derivatives, low-passed at 6 Hz,
@@ -422,7 +422,9 @@ def build_pinmsk(problem: str, model_dir: Path, *, intervals: int | None = None,
     bounds = ocp.Bounds(q={path.split("/")[-1]: (lo, hi) if path.endswith(("_tx", "_ty"))
                            else (math.radians(lo), math.radians(hi)) for path, (lo, hi) in BOUNDS.items()})
     pairs = {"hip_flexion_r": "hip_flexion_l", "knee_angle_r": "knee_angle_l", "ankle_angle_r": "ankle_angle_l"}
-    cons = [ocp.Symmetric(pairs, exclude=("pelvis_tx",)),
+    from pinmsk.actuators import CoordinateActuator
+    acts = tuple(c.name for c in m.components if isinstance(c, CoordinateActuator))   # /lumbarAct
+    cons = [ocp.Symmetric(pairs, exclude=("pelvis_tx",), controls=acts),
             ocp.Periodic(states=("v",), exclude=tuple(c for c in m.coordinates if c != "pelvis_tx")), bounds]
     tracking = ocp.StateTracking(t, q, lowpass=6.0, position_derivatives=True)
     if problem == "tracking":

@@ -289,6 +289,8 @@ def test_bench_gait_moco_pinmsk_problems_are_mocos(shared_data):
     assert (effort.weight, effort.exponent, effort.per) == (10.0, 3, "distance")
     assert (pred.duration, pred.intervals) == ((0.4, 0.6), 50)
     assert [type(c).__name__ for c in pred.constraints] == ["Symmetric", "Periodic", "Bounds", "AverageSpeed"]
+    assert pred.constraints[0].controls == ("lumbarAct",)      # Moco's addControlPair("/lumbarAct")
+    assert pred.constraints[0]._mirror_act == {0: 0}
 
 
 @pytest.mark.slow

@@ -235,3 +235,29 @@ def test_gait_task_guess_file_is_the_strides_first_half_cycle(tmp_path):
     spec["gait"]["guess"] = "nowhere.sto"
     with pytest.raises(ModelError, match="guess file 'nowhere.sto' not found"):
         build_from_task(spec, base_dir=tmp_path)
+
+
+def test_symmetric_pairs_actuator_controls_like_mocos_control_pair():
+    """Symmetric(controls=...): an unsided actuator's control ends where it starts (Moco's
+    addControlPair of the lumbar actuator); without it the optimum's control does not; a name that is
+    not an actuator is refused."""
+    from pinmsk.actuators import CoordinateActuator
+    model = pinmsk.load_model("forearm") + CoordinateActuator("reserve", "elbow_flexion", optimal_force=1.0,
+                                                              min_control=-50.0, max_control=50.0)
+    tg = ocp.Target("sine", amplitude=0.3, frequency=1.0)
+
+    def ends(cons):
+        fit = ocp.Collocation(model, cost=ocp.Effort(2) + 1e-3 * ocp.ActuatorEffort() + 10 * ocp.TrackCoordinates(tg),
+                              constraints=cons, duration=1.0, intervals=20, scheme="trapezoidal",
+                              solver={"max_iter": 300}, verbose=False).fit()
+        assert fit.result_.converged
+        u = np.asarray(fit.result_["reserve_control"])
+        return u[0], u[-1]
+
+    u0, uN = ends([])
+    assert abs(uN - u0) > 0.1                              # measured: -0.49 -> -1.01
+    u0, uN = ends([ocp.Symmetric({}, controls=("reserve",))])
+    assert uN == pytest.approx(u0, abs=1e-8)
+    with pytest.raises(ModelError, match="'lumbar' is not an actuator"):
+        ocp.Collocation(model, cost=ocp.Effort(2), constraints=[ocp.Symmetric({}, controls=("lumbar",))],
+                        duration=1.0, intervals=4, solver={"max_iter": 0}, verbose=False).fit()

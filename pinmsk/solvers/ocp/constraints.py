@@ -177,11 +177,14 @@ class Symmetric(Constraint):
 
     ``pairs``: {right: left} coordinate names (muscles are paired by their ``_r``/``_l``
     suffixes); ``negate``: coordinates whose sign flips in the mirror (out-of-plane ones);
-    ``exclude``: coordinates left free (the forward translation, which advances).
+    ``exclude``: coordinates left free (the forward translation, which advances); ``controls``:
+    actuators (CoordinateActuators, by name) whose control at ``T`` is that of its ``_r``/``_l``
+    mirror at 0, or its own when it has no side (Moco's ``addControlPair``, e.g. a lumbar actuator).
     """
 
-    def __init__(self, pairs: dict, *, negate=(), exclude=()):
+    def __init__(self, pairs: dict, *, negate=(), exclude=(), controls=()):
         self.pairs, self.negate, self.exclude = dict(pairs), tuple(negate), tuple(exclude)
+        self.controls = tuple(controls)
 
     def check(self, problem) -> None:
         m = problem.model
@@ -202,6 +205,15 @@ class Symmetric(Constraint):
         self._mirror_m = mus
         for c in self.negate + self.exclude:
             m.coordinate_index(c)
+        acts = [a.name for a in problem._pm.actuators] if self.controls else []
+        ctl = {}
+        for n in self.controls:
+            if n not in acts:
+                raise ModelError(f"Symmetric: controls: '{n}' is not an actuator of model '{m.name}' "
+                                 f"(actuators: {', '.join(acts) or 'none'})")
+            other = _mirror_name(n)
+            ctl[acts.index(n)] = acts.index(other) if other in acts else acts.index(n)
+        self._mirror_act = ctl
 
     def boundary(self, glob) -> list:
         x0, xN, lay, names = glob["x0"], glob["xN"], glob["layout"], glob["coordinates"]
@@ -219,7 +231,22 @@ class Symmetric(Constraint):
             for i, name in enumerate(glob["muscles"]):
                 k = self._mirror_m.get(i, i)
                 rows.append((f"symmetry of {g} {name}", xN[lay[g][i]] - x0[lay[g][k]], 0.0, 0.0))
+        for i, k in self._mirror_act.items():
+            rows.append((f"symmetry of the control of {glob['actuators'][i]}", glob["actN"][i] - glob["act0"][k],
+                         0.0, 0.0))
         return rows
+
+
+def _mirror_name(name: str) -> str:
+    """``name`` with its side (``_r``/``_l`` suffix or infix, ``r_``/``l_`` prefix) swapped, else itself."""
+    for a, b in (("_r", "_l"), ("_l", "_r")):
+        if name.endswith(a):
+            return name[: -len(a)] + b
+        if f"{a}_" in name:
+            return name.replace(f"{a}_", f"{b}_", 1)
+        if name.startswith(f"{a[1]}_"):
+            return f"{b[1]}_" + name[2:]
+    return name
 
 
 class AverageSpeed(Constraint):

@@ -33,7 +33,7 @@ import numpy as np
 
 from ...errors import ModelError
 from ...trial import Trial
-from .constraints import AverageSpeed, Bounds, CoordinateBounds, Periodic, Symmetric
+from .constraints import AverageSpeed, Bounds, CoordinateBounds, Periodic, Symmetric, _mirror_name
 from .costs import Effort, MetabolicEnergy, Smoothness, TrackSignals
 from .problem import Collocation
 
@@ -550,17 +550,6 @@ class _TrackGRF(TrackSignals):
 
 
 # -- one stride -----------------------------------------------------------------------------------
-
-def _mirror_name(name: str) -> str:
-    for a, b in (("_r", "_l"), ("_l", "_r")):
-        if name.endswith(a):
-            return name[: -len(a)] + b
-        if f"{a}_" in name:
-            return name.replace(f"{a}_", f"{b}_", 1)
-        if name.startswith(f"{a[1]}_"):
-            return f"{b[1]}_" + name[2:]
-    return name
-
 
 def ground_reaction_channels(result, model) -> dict:
     """``{r_ground_force_vx, _vy, _vz, l_...}`` (N) per side: the sum of its spheres' forces."""

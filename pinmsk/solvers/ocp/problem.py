@@ -601,7 +601,11 @@ class Collocation(Fitter):
         x0, xN = X[:, 0], X[:, N]
         glob = {"T": T, "x0": x0, "xN": xN, "layout": st, "coordinates": names, "muscles": muscles, "m": m,
                 "mass": pm.mass, "e0": (S[:, 0] if pm.formulation == "ff" else U[co["e"][0]: co["e"][-1] + 1, 0])
-                if m else None}
+                if m else None,
+                # the actuators' controls at the first and last node (the points are the nodes first)
+                "actuators": [a_.name for a_ in pm.actuators],
+                "act0": U[co["act"][0]: co["act"][-1] + 1, 0] if pm.actuators else None,
+                "actN": U[co["act"][0]: co["act"][-1] + 1, N] if pm.actuators else None}
         for c in self._cons:
             for label, expr, lo, hi in c.boundary(glob):
                 other.append(ca.vec(expr))
