@@ -763,7 +763,9 @@ class Trial:
         if not idx:
             return
         block = self._values[:, idx]
-        peak = np.max(np.abs(block), axis=0, initial=0.0, where=np.isfinite(block))
+        peak = np.max(np.abs(block), axis=0, initial=0.0)
+        if not np.isfinite(peak).all():     # gaps (NaN, inf) are not angles: the peak of the finite samples
+            peak = np.max(np.abs(block), axis=0, initial=0.0, where=np.isfinite(block))
         over = np.flatnonzero(peak > DEGREES_THRESHOLD)
         if over.size == 0:
             return

@@ -120,6 +120,21 @@ def test_differentiate_degree_five_polynomial_is_exact_on_uneven_times():
     np.testing.assert_allclose(a, p.deriv(2)(t), rtol=0, atol=1e-8)
 
 
+def test_differentiate_matches_scipys_quintic_spline_and_keeps_grids_apart():
+    # the cached operators of a time grid give scipy's make_interp_spline(k=5) derivatives; a second grid
+    # of the same length (same cache key size) gets its own
+    from scipy.interpolate import make_interp_spline
+    rng = np.random.default_rng(5)
+    x = np.cumsum(rng.normal(size=(120, 3)), axis=0)
+    for t in (np.sort(rng.uniform(0.0, 1.2, 120)), np.arange(120) * 0.01, np.arange(120) * 0.01 + 0.5):
+        sp = make_interp_spline(t, x, k=5, axis=0)
+        for _ in range(2):                       # the first call builds the grid's operators, the second reuses them
+            xs, v, a = differentiate(t, x)
+            np.testing.assert_array_equal(xs, x)
+            np.testing.assert_allclose(v, sp.derivative(1)(t), rtol=0, atol=1e-9 * np.abs(v).max())
+            np.testing.assert_allclose(a, sp.derivative(2)(t), rtol=0, atol=1e-9 * np.abs(a).max())
+
+
 def test_cutoff_reduces_noise_in_acceleration():
     rate = 100.0
     t = np.arange(0.0, 4.0, 1.0 / rate)

@@ -206,33 +206,62 @@ def differentiate(time, x, *, cutoff: float | None = None, order: int = 4):
     if cutoff is not None:
         rate = uniform_rate(t)
         x = lowpass(x, rate=rate, cutoff=cutoff, order=order)
-    from scipy.interpolate import make_interp_spline
-
-    # t and x were checked finite above: scipy's second check of its system is skipped (the same solve)
-    spline = make_interp_spline(t, x, k=5, axis=0, check_finite=False)
-    d1, d2 = _derivative_splines(spline)
-    return x, d1(t), d2(t)
+    ops = _quintic_operators(t)
+    flat = x.reshape(n, -1)
+    c = ops.solve(flat)         # the interpolating spline's coefficients
+    return x, (ops.d1 @ c).reshape(x.shape), (ops.d2 @ c).reshape(x.shape)
 
 
-def _derivative_splines(spline):
-    """The spline's first and second derivative B-splines, as ``spline.derivative(1)`` and ``(2)`` build
-    them (scipy's ``splder`` formula, Schumaker ch. 5, the same operations in the same order: the same
-    numbers), the second from the first, without scipy's array-API dispatch, which costs more than the
-    arithmetic on a trial's splines."""
-    from scipy.interpolate import BSpline
+class _QuinticOperators:
+    """The linear maps of :func:`differentiate` on one time grid: the LU factors of the quintic
+    not-a-knot spline's collocation matrix (the one banded system ``make_interp_spline(k=5)`` solves) and
+    the sparse matrices taking the spline's coefficients to its first and second derivatives at the sample
+    times (the derivative splines' coefficient maps of scipy's ``splder``, Schumaker ch. 5, times their
+    collocation matrices).  A trial's channels, and later trials on the same grid, share them: one
+    factorization, then a triangular solve and two sparse products per call."""
 
-    t, k = spline.t, spline.k
-    c = np.asarray(spline.c, dtype=float)
-    if t.shape[0] > c.shape[0]:          # FITPACK convention: as many coefficients as knots
-        c = np.concatenate([c, np.zeros((t.shape[0] - c.shape[0],) + c.shape[1:])])
-    out = []
-    sh = (slice(None),) + (None,) * (c.ndim - 1)
-    with np.errstate(invalid="raise", divide="raise"):
+    __slots__ = ("t", "lu", "d1", "d2")
+
+    def __init__(self, t: np.ndarray):
+        from scipy.interpolate import BSpline, make_interp_spline
+        from scipy.sparse import diags_array
+        from scipy.sparse.linalg import splu
+
+        k = 5
+        knots = make_interp_spline(t, np.zeros(t.size), k=k, check_finite=False).t     # scipy's not-a-knot knots
+        self.t = t.copy()
+        # the collocation matrix (banded: k sub- and super-diagonals), factored once by SuperLU (its
+        # multi-column solve is several times faster than LAPACK's banded dgbtrs on a trial's channels)
+        self.lu = splu(BSpline.design_matrix(t, knots, k).tocsc())
+        ops = []
+        D = None
+        tk, kk = knots, k
         for _ in range(2):
-            dt = (t[k + 1:-1] - t[1:-k - 1])[sh]
-            c = (c[1:-1 - k, ...] - c[:-2 - k, ...]) * k / dt
-            c = np.concatenate([c, np.zeros((k,) + c.shape[1:])])
-            t = t[1:-1]
-            k -= 1
-            out.append(BSpline.construct_fast(t, c, k, extrapolate=spline.extrapolate, axis=spline.axis))
-    return out[0], out[1]
+            # c'_i = k (c_{i+1} - c_i) / (t_{i+k+1} - t_{i+1}): a bidiagonal map of the coefficients
+            m = tk.size - kk - 1
+            w = kk / (tk[kk + 1:kk + m] - tk[1:m])
+            step = diags_array([-w, w], offsets=[0, 1], shape=(m - 1, m), format="csr")
+            D = step if D is None else step @ D
+            tk, kk = tk[1:-1], kk - 1
+            ops.append((BSpline.design_matrix(t, tk, kk) @ D).tocsr())
+        self.d1, self.d2 = ops
+
+    def solve(self, x: np.ndarray) -> np.ndarray:
+        """The coefficients ``(N, k)`` of the interpolating splines through the columns of ``x`` ``(N, k)``."""
+        return self.lu.solve(np.ascontiguousarray(x))
+
+
+#: (N, hash of the time grid) -> its :class:`_QuinticOperators` (the grid itself checked on a hit)
+_OPERATORS: dict[tuple, _QuinticOperators] = {}
+
+
+def _quintic_operators(t: np.ndarray) -> _QuinticOperators:
+    key = (t.size, hash(t.tobytes()))
+    hit = _OPERATORS.get(key)
+    if hit is not None and np.array_equal(hit.t, t):
+        return hit
+    ops = _QuinticOperators(t)
+    if len(_OPERATORS) >= 16:
+        _OPERATORS.pop(next(iter(_OPERATORS)))
+    _OPERATORS[key] = ops
+    return ops
