@@ -68,7 +68,10 @@ tracking at 387 s and its prediction unconverged after 58 min):
   Hessian; Moco: MocoTrack's tolerances 1e-2).  Moco's solution scored by pinmsk's goals: 0.800 / 0.371 /
   0.374 (1.5455 against Moco's 1.5426), so the lower pinmsk optimum is a better solution of the same
   objective on pinmsk's import of the model (fitted muscle paths, implicit dynamics), not another
-  objective.  Not imposed by pinmsk: the lumbar control's periodicity (its solution: 0.0018 -> 0.0033).
+  objective.  The lumbar control's periodicity was not imposed in that run (pinmsk's control went 0.0018
+  -> 0.0033); with it (``Symmetric(controls=)``, ``--pinmsk-only`` right after, load average 1.6-1.9):
+  tracking 1.019 (1267 it, 117.6 s), prediction 0.1201 (564 it, 117.4 s), joints within 2.41 / 9.31 deg
+  and GRF within 1.26 / 10.81 % BW of the reference.
 * prediction: pinmsk from its own tracking solution of the same run (as Moco's example), 50 intervals,
   final time 0.515 s, 1.2 m/s; joint RMS / GRF RMS against the (tracked) reference data, which a
   prediction need not reproduce.  Moco (guess: its tracking solution) was killed at iteration 34.

@@ -326,7 +326,8 @@ def predictive_gait(model=None, *, speed: float | None = 1.3, duration=0.55, int
       -1 rad limit in swing; with the toe springs in the 25-interval stage (from the same 15-interval
       solution) the objective falls from 2.25 to 1.99 (CoT 1.98) and the knee comes right: 7.2 deg
       RMS against Winter (corr 0.98; it was 18.4, 0.60), swing flexion 51 deg (37 before; Winter
-      64-69), hip 13.0 (0.78), ankle 11.9 (-0.03), EMG correlation 0.37 on average (0.18), second
+      64-69), hip 13.0 (0.78), ankle 11.9 (-0.03), EMG correlation 0.37 on average (0.18; vasti and
+      rectus femoris nearly silent: 0.19 over the five active groups), second
       GRF peak 195 % BW (174), 5203 it in all, 152 s.  With the springs in the coarse stage too the
       15-interval solve ran (CoT 5.4, stance 29 %); 50 N m/rad, 1 N m s/rad stopped at 3000 it;
     - not defaults: 50 intervals from the 25-interval solution: CoT 2.87 with the same knee and GRF
