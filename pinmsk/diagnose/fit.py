@@ -64,6 +64,13 @@ from ..trial import moment_channel
 __all__ = ["EffectFit", "EffectProblem", "JointProblem", "cv_blocks", "describe_fit"]
 
 
+
+def _informative(se, span):
+    """Standard errors with those over a million times the parameter's whole range (``span``) set to
+    inf (not determined): such an error comes from a curvature or a condition number at rounding
+    level, and whether it is finite or not would flip with the last bits of the data."""
+    return np.where(se > 1e6 * np.where(np.isfinite(span), span, np.inf), np.inf, se)
+
 class EffectProblem:
     """One effect on one :class:`~pinmsk.diagnose.compare.EquationError`, prepared for fitting.
 
@@ -349,6 +356,7 @@ class EffectProblem:
             except np.linalg.LinAlgError:
                 se = np.full(p, np.inf)
             span = self.hi - self.lo
+            se = _informative(se, span)
             tol = np.where(np.isfinite(span), 1e-8 * span, 1e-9)
             at_bound = (x <= self.lo + tol) | (x >= self.hi - tol)
             se = np.where(at_bound, np.nan, se)          # no curvature-based error at a bound
@@ -807,7 +815,7 @@ class JointProblem:
         with np.errstate(invalid="ignore", divide="ignore"):
             se = np.sqrt(np.where(d >= 0, d, np.nan))
             corr = cov / np.outer(se, se)
-        return se, corr
+        return _informative(se, self.hi - self.lo), corr
 
     def components_at(self, x, stderr=None) -> list:
         """The components with the stacked values ``x`` (and standard errors)."""
