@@ -332,8 +332,8 @@ def predictive_gait(model=None, *, speed: float | None = 1.3, duration=0.55, int
       15-interval solve ran (CoT 5.4, stance 29 %); 50 N m/rad, 1 N m s/rad stopped at 3000 it;
     - not defaults: 50 intervals from the 25-interval solution: CoT 2.87 with the same knee and GRF
       (the grid does not cause them); effort ``a^3`` with weight 1 ran (CoT 5.2); a free speed from
-      the walking guess ran at 2.0 m/s (CoT 2.81), from the 1.3 m/s optimum it walks at 1.41 m/s
-      (CoT 2.31, 1078 it); a free duration in [0.45, 0.65] s ran to the 0.45 s bound (CoT 6.1, a worse
+      the walking guess ran at 2.0 m/s (CoT 2.81), from the 1.3 m/s optimum (with the toe springs)
+      it settles at 1.296 m/s (CoT 1.979, 2093 it); a free duration in [0.45, 0.65] s ran to the 0.45 s bound (CoT 6.1, a worse
       optimum); a smoothness weight 1e-3 did not converge in 3000 it; a loose coarse stage
       (tol 1e-2) saves nothing (the refinement then needs ~2000 it).
     """
