@@ -69,6 +69,7 @@ import numpy as np
 
 from ..actuators import IdealActuator, actuator_columns
 from ..components import Motion
+from ..dynamics import inverse_dynamics_array
 from ..effects._base import SignalEffect
 from ..errors import ConvergenceError, InfeasibleError, ModelError, ResidualWarning, SolverError
 from ..fitting import FitStatistics, Fitter, Result, format_report
