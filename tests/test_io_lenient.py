@@ -454,3 +454,25 @@ def test_read_trial_opens_the_real_c3d(shared_data):
             read_trial(path, part="platforms")
     assert mk.n_frames == 580 and mk.rate == pytest.approx(100.0) and mk.n_channels == 3 * 51
     assert emg.rate == pytest.approx(2000.0) and "Biceps.EMG4" in emg.names
+
+
+def test_read_mapped_takes_a_models_coordinates_from_opensim_state_paths(tmp_path, gait2d):
+    """A Moco / OpenSim states file (columns /jointset/<joint>/<coord>/value and .../speed, in degrees):
+    read_mapped gives the model's coordinates under their own names, in radians (speeds too); a
+    coordinate that already has its own column keeps it; without a model nothing is renamed."""
+    from pinmsk.io.channel_map import read_mapped
+    t = np.linspace(0.0, 1.0, 11)
+    cols = {}
+    for c in gait2d.coordinates:
+        cols[f"/jointset/j_{c}/{c}/value"] = (30.0 if c != "torso_x" else 0.0) * np.sin(t) + (t if c == "torso_x" else 0)
+        cols[f"/jointset/j_{c}/{c}/speed"] = 30.0 * np.cos(t)
+    cols["knee_r"] = np.full(t.size, 10.0)               # its own column wins over the state path
+    write_trial(Trial(t, cols), tmp_path / "states.sto")
+    text = (tmp_path / "states.sto").read_text().replace("inDegrees=no", "inDegrees=yes")
+    (tmp_path / "states.sto").write_text(text)
+    got = read_mapped(tmp_path / "states.sto", model=gait2d)
+    np.testing.assert_allclose(got["hip_r"], np.radians(30.0 * np.sin(t)), atol=1e-12)
+    np.testing.assert_allclose(got["hip_r_speed"], np.radians(30.0 * np.cos(t)), atol=1e-12)
+    np.testing.assert_allclose(got["torso_x"], t, atol=1e-12)             # a translation stays in m
+    np.testing.assert_allclose(got["knee_r"], np.radians(10.0), atol=1e-12)
+    assert "hip_r" not in read_mapped(tmp_path / "states.sto").names

@@ -71,6 +71,7 @@ from .tables import read_trial, state_path_coordinate
 from .toml_files import read_toml
 
 __all__ = ["MapEntry", "ChannelMap", "load_channel_map", "apply_channel_map", "read_mapped", "suggest_map",
+           "with_state_path_coordinates",
            "BUILTIN_MAPS", "MAP_SCHEMA", "opensim_gait2d_map", "RAJAGOPAL_HIP_OFFSET", "GAIT10DOF_HIP_OFFSET"]
 
 #: Hip joint centre in the pelvis frame of the Rajagopal et al. (2016) model (unscaled, m;
@@ -361,6 +362,28 @@ def apply_channel_map(trial: Trial, cmap, *, model=None, require_coordinates: bo
     return Trial(trial.time, out, units=units, meta=meta)
 
 
+#: an OpenSim state path's last part -> the suffix of pinmsk's channel for that quantity
+_STATE_SUFFIX = {"value": "", "speed": "_speed", "accel": "_acceleration", "acceleration": "_acceleration"}
+
+
+def with_state_path_coordinates(trial: Trial, coordinates) -> Trial:
+    """``trial`` with each of ``coordinates`` that has no channel of its own but an OpenSim 4 state
+    path column (``/jointset/<joint>/<coord>/value``, ``.../speed``, ``.../accel``: Moco's and
+    OpenSim's states files) given that column under pinmsk's name (``<coord>``, ``<coord>_speed``,
+    ``<coord>_acceleration``); the path columns stay as they are.  Degrees were already converted by
+    ``read_trial`` (it matches state paths too)."""
+    wanted = set(coordinates)
+    add = {}
+    for col in trial.names:
+        hit = state_path_coordinate(col)
+        if hit is None or hit[0] not in wanted:
+            continue
+        name = hit[0] + _STATE_SUFFIX[hit[1]]
+        if name not in trial.names and name not in add:
+            add[name] = trial[col]
+    return trial.with_channels(add) if add else trial
+
+
 def read_mapped(path, *, model=None, cmap=None, strict: bool = True, require_coordinates: bool = True) -> Trial:
     """:func:`pinmsk.io.read_trial`, then :func:`apply_channel_map` (what the CLI's ``--map`` does).
 
@@ -375,6 +398,8 @@ def read_mapped(path, *, model=None, cmap=None, strict: bool = True, require_coo
     trial = read_trial(path, angular=angular, strict=strict)
     if cmap is not None:
         return apply_channel_map(trial, cmap, model=model, require_coordinates=require_coordinates)
+    if model is not None:
+        trial = with_state_path_coordinates(trial, model.coordinate_order)
     name = suggest_map(trial, model) if model is not None and require_coordinates else None
     if name:
         missing = [c for c in model.coordinate_order if c not in trial]
