@@ -47,8 +47,8 @@ def solve(scale: float, *, verbose: bool = False, **options) -> dict:
     fit = predictive_gait(foot_mass=scale, verbose=verbose, **options).fit()
     r = fit.result_
     stride, summary = stride_result(fit)
-    val = validate_gait(stride, cost_of_transport=summary["cost_of_transport"], body_weight=summary["body_weight"],
-                        speed=summary["speed"], label=f"foot mass {100 * scale:.0f} %")
+    # the stride's info carries its speed, cost of transport and body weight (validate_gait reads them)
+    val = validate_gait(stride, label=f"foot mass {100 * scale:.0f} %")
     return {"scale": scale, "result": r, "stride": stride, "summary": summary, "validation": val,
             "mass": fit.model.mass}
 

@@ -39,6 +39,7 @@ def guess_options(name: str) -> dict:
 def solve(name: str, options: dict | None = None) -> dict:
     """One default predictive gait from guess ``name`` (``options``: more predictive_gait arguments):
     its numbers (JSON-ready)."""
+    from pinmsk.errors import PinmskError
     from pinmsk.gait_validation import validate_gait
     from pinmsk.solvers.ocp.gait import predictive_gait, stride_result
     fit = predictive_gait(verbose=False, **guess_options(name), **(options or {})).fit()
@@ -49,9 +50,8 @@ def solve(name: str, options: dict | None = None) -> dict:
            "cost_of_transport": s["cost_of_transport"],
            "swing_knee_deg": float(np.degrees(np.max(stride["knee_r"])))}
     try:
-        n = validate_gait(stride, cost_of_transport=s["cost_of_transport"], body_weight=s["body_weight"],
-                          speed=s["speed"]).numbers
-    except Exception as exc:          # a stride without a stance (e.g. a failed run) has no double hump
+        n = validate_gait(stride).numbers      # its speed, CoT and body weight from the stride's info
+    except PinmskError as exc:         # a stride without a stance (e.g. a failed run) has no double hump
         row["validation"] = f"not validated: {exc}"
         return row
     w = n["joint_angles"].get("winter", {})

@@ -100,7 +100,7 @@ _CASADI_MARKS = ("casadi", "LazyCasadi", "solvers.ocp", "import ocp", "optimize_
                  "finger_tapping", "forearm_dynamic_optimization", "finger_frequency_limit", "bench_ocp")
 
 
-def _module_group(path: Path, k: int) -> str | None:
+def _module_group(path: Path) -> str | None:
     text = path.read_text(errors="replace") if path.suffix == ".py" else ""
     if any(m in text for m in _OPENSIM_MARKS) and path.name != "conftest.py":
         return "opensim"
@@ -116,7 +116,7 @@ def pytest_itemcollected(item):
     # marked as each item is collected, so that xdist's own collection hook (which turns the mark
     # into the "@group" node-id suffix its loadgroup scheduler reads) finds it
     if item.path not in _GROUPS:
-        _GROUPS[item.path] = _module_group(Path(item.path), len(_GROUPS))
+        _GROUPS[item.path] = _module_group(Path(item.path))
     g = _GROUPS[item.path]
     if g is not None:
         item.add_marker(pytest.mark.xdist_group(g))

@@ -81,6 +81,14 @@ class Cost(ValueEq):
         """Per-point numeric reference (n_ref, n_points) this term needs, or None."""
         return None
 
+    def _covered(self, times) -> np.ndarray:
+        """``times`` as an array, refused by name when they leave the reference's ``self.time``."""
+        t = np.asarray(times, dtype=float)
+        if t.min() < self.time[0] - 1e-9 or t.max() > self.time[-1] + 1e-9:
+            raise ModelError(f"cost '{self.name}': the reference covers {self.time[0]:g}-{self.time[-1]:g} s, "
+                             f"the horizon {t.min():g}-{t.max():g} s")
+        return t
+
     def integrand(self, pt, ref=None):
         """The scalar integrand at one collocation point (``pt``: the point's quantities)."""
         raise NotImplementedError
@@ -296,10 +304,7 @@ class TrackSignals(Cost):
                              f"{', '.join(self.QUANTITIES)}")
 
     def references(self, problem, times) -> np.ndarray:
-        t = np.asarray(times, dtype=float)
-        if t.min() < self.time[0] - 1e-9 or t.max() > self.time[-1] + 1e-9:
-            raise ModelError(f"cost '{self.name}': the reference covers {self.time[0]:g}-{self.time[-1]:g} s, "
-                             f"the horizon {t.min():g}-{t.max():g} s")
+        t = self._covered(times)
         return np.vstack([np.interp(t, self.time, self.values[:, j]) / self.scale[j]
                           for j in range(len(self.index))])
 
@@ -497,10 +502,7 @@ class StateTracking(Cost):
         self._w = np.array(w)
 
     def references(self, problem, times) -> np.ndarray:
-        t = np.asarray(times, dtype=float)
-        if t.min() < self.time[0] - 1e-9 or t.max() > self.time[-1] + 1e-9:
-            raise ModelError(f"cost '{self.name}': the reference covers {self.time[0]:g}-{self.time[-1]:g} s, "
-                             f"the horizon {t.min():g}-{t.max():g} s")
+        t = self._covered(times)
         return np.vstack([self._splines[key](t) for key in self._splines])
 
     def integrand(self, pt, ref=None):
@@ -587,10 +589,7 @@ class ContactTracking(Cost):
         self._den = problem._pm.mass * (float(np.linalg.norm(g)) or 1.0)
 
     def references(self, problem, times) -> np.ndarray:
-        t = np.asarray(times, dtype=float)
-        if t.min() < self.time[0] - 1e-9 or t.max() > self.time[-1] + 1e-9:
-            raise ModelError(f"cost '{self.name}': the reference covers {self.time[0]:g}-{self.time[-1]:g} s, "
-                             f"the horizon {t.min():g}-{t.max():g} s")
+        t = self._covered(times)
         return np.vstack([self._splines[g](t).T for g in self.groups])
 
     def integrand(self, pt, ref=None):
