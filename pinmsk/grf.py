@@ -318,23 +318,26 @@ def plate_wrench(trial: Trial, plate: Plate, *, min_force: float = 20.0, planar:
     kinds = ("force", "torque") if cop is not None else ("force", "point", "torque")
     keys = [(k, a) for k in kinds for a in "xyz"]
     have = [i for i, key in enumerate(keys) if key in ch]
-    block = trial.get([ch[keys[i]] for i in have])
-    if rows is not None:
-        block = block[rows]
+    block = trial.get([ch[keys[i]] for i in have], rows=rows)
     X = np.zeros((block.shape[0], len(keys)))
     X[:, have] = block
-    F = X[:, 0:3]
-    P = np.asarray(cop, dtype=float) if cop is not None else X[:, 3:6]
-    T = X[:, -3:]
-    on = F[:, 1] >= min_force
-    bad = on & ~(np.isfinite(F).all(axis=1) & np.isfinite(T).all(axis=1))
-    if bad.any():
-        k = int(np.flatnonzero(bad)[0])
-        k = k if rows is None else int(rows[k])
-        raise TrialError(f"ground reaction {plate.name} is not finite at frame {k} (t = {trial.time[k]:.6g} s)")
-    F = np.where(on[:, None], F, 0.0)
-    P = np.where(on[:, None] & np.isfinite(P), P, 0.0)
-    T = np.where(on[:, None], T, 0.0)
+    on = X[:, 1] >= min_force
+    if cop is None and np.isfinite(block).all():
+        # the usual case, every sample finite: the unloaded frames zeroed in one pass (the same numbers)
+        X = np.where(on[:, None], X, 0.0)
+        F, P, T = X[:, 0:3], X[:, 3:6], X[:, 6:9]
+    else:
+        F = X[:, 0:3]
+        P = np.asarray(cop, dtype=float) if cop is not None else X[:, 3:6]
+        T = X[:, -3:]
+        bad = on & ~(np.isfinite(F).all(axis=1) & np.isfinite(T).all(axis=1))
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            k = k if rows is None else int(rows[k])
+            raise TrialError(f"ground reaction {plate.name} is not finite at frame {k} (t = {trial.time[k]:.6g} s)")
+        F = np.where(on[:, None], F, 0.0)
+        P = np.where(on[:, None] & np.isfinite(P), P, 0.0)
+        T = np.where(on[:, None], T, 0.0)
     if planar:
         F[:, 2] = 0.0
         P[:, 2] = 0.0

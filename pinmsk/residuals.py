@@ -154,7 +154,8 @@ def floating_base_residuals(model, motion, tau: np.ndarray, external=(), *, data
         f_peak = 0.0
     pm = model.pin
     pd = pm.createData() if data is None else data
-    rows = np.unique(np.linspace(0, t.size - 1, min(t.size, 50)).astype(int))
+    # a typical height for the threshold: a dozen frames spread over the trial (each a Pinocchio call)
+    rows = np.unique(np.linspace(0, t.size - 1, min(t.size, 12)).astype(int))
     heights = [float(pin.centerOfMass(pm, pd, motion.q[k]) @ up) for k in rows]
     com_h = float(np.mean(heights))
     thr = np.array([PEAK_FORCE_FRACTION * f_peak if u == "N" else PEAK_MOMENT_FRACTION * com_h * f_peak

@@ -482,12 +482,13 @@ class Trial:
             raise TrialError(msg)
         return [self._index[n] for n in names]
 
-    def get(self, names) -> np.ndarray:
+    def get(self, names, *, rows=None) -> np.ndarray:
         """Channels ``names`` as an (N, k) array (a copy), in the order given.
 
-        A single string gives an (N, 1) array.
+        A single string gives an (N, 1) array; ``rows`` (frame indices) takes only those frames.
         """
-        return self._values[:, self._indices(_as_names(names))]
+        idx = self._indices(_as_names(names))
+        return self._values[:, idx] if rows is None else self._values[np.ix_(np.asarray(rows), idx)]
 
     def channels_matching(self, pattern) -> tuple[str, ...]:
         """Names matching a glob pattern (``"*_moment"``) or a compiled regex (search)."""
@@ -725,9 +726,20 @@ class Trial:
                            nan_ok=nan_ok)
         return self
 
-    def _check_finite(self, names, hint: str = "", limit: float | None = None, nan_ok: bool = False) -> None:
+    def _block(self, idx: list[int]) -> np.ndarray:
+        """The (N, k) samples of channel indices ``idx``: a read-only view when they are consecutive (a
+        trial built from exactly the columns asked, in order), else a copy."""
+        if idx and idx[-1] - idx[0] == len(idx) - 1 and idx == list(range(idx[0], idx[-1] + 1)):
+            view = self._values[:, idx[0]:idx[-1] + 1]
+            view.flags.writeable = False
+            return view
+        return self._values[:, idx]
+
+    def _check_finite(self, names, hint: str = "", limit: float | None = None, nan_ok: bool = False,
+                      block: np.ndarray | None = None) -> None:
         idx = self._indices(tuple(names))
-        block = self._values[:, idx]
+        if block is None:
+            block = self._block(idx)
         bad = np.isinf(block) if nan_ok else ~np.isfinite(block)
         if limit is not None:
             with np.errstate(invalid="ignore"):
@@ -758,11 +770,12 @@ class Trial:
             + (f" {hint}" if hint else "")
         )
 
-    def _check_radians(self, names) -> None:
+    def _check_radians(self, names, block: np.ndarray | None = None) -> None:
         idx = self._indices(tuple(names))
         if not idx:
             return
-        block = self._values[:, idx]
+        if block is None:
+            block = self._block(idx)
         peak = np.max(np.abs(block), axis=0, initial=0.0)
         if not np.isfinite(peak).all():     # gaps (NaN, inf) are not angles: the peak of the finite samples
             peak = np.max(np.abs(block), axis=0, initial=0.0, where=np.isfinite(block))
@@ -825,9 +838,13 @@ class Trial:
         must look like radians.
         """
         names = self.require(coordinates)
-        self._check_finite(names)
-        self._check_radians([c for c in names if is_angular_name(c)])
-        return differentiate(self._time, self.get(names), cutoff=cutoff, order=order)
+        block = self._block(self._indices(tuple(names)))      # gathered once for the checks and the spline
+        self._check_finite(names, block=block)
+        angular = [i for i, c in enumerate(names) if is_angular_name(c)]
+        self._check_radians([names[i] for i in angular],
+                            block=block if len(angular) == len(names) else block[:, angular])
+        q, v, a = differentiate(self._time, block, cutoff=cutoff, order=order)
+        return (q.copy() if q is block else q), v, a
 
     def smoothed(self, cutoff: float, *, order: int = 4, names=None) -> Trial:
         """A new Trial with channels (all, or ``names``) low-passed at ``cutoff`` Hz.

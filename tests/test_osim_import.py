@@ -505,6 +505,36 @@ def test_simple_functions_and_nesting():
     assert fns.MultiplierFunction(fns.LinearFunction([1, 0.2]), -1.0).affine() == (-1.0, -0.2)
 
 
+def test_a_function_bank_gives_each_functions_own_numbers():
+    # a knee's functions of one angle evaluated together (FunctionBank) must give what each gives alone, to
+    # rounding: inside the knots, on an interior knot (OpenSim's bisection picks the piece), outside them,
+    # and at NaN
+    x = np.array([0.0, 0.3, 0.7, 1.2, 2.0])
+    fs = [fns.PolynomialFunction([0.0108, -0.0252, -0.0328, 0.0791, -1.47e-08]),
+          fns.MultiplierFunction(fns.PolynomialFunction([0.5, -1.0]), -1.3),
+          fns.PolynomialFunction([3.0]),
+          fns.SimmSpline(x, [0.0, 0.1, 0.5, 0.4, 0.2]),
+          fns.MultiplierFunction(fns.SimmSpline(x, [1.0, -0.2, 0.3, 0.1, 0.0]), 0.7),
+          fns.PiecewiseLinearFunction(x, [0.0, 1.0, 0.0, 1.0, 0.0]),
+          fns.SimmSpline([0.0, 1.0, 2.5], [0.0, 1.0, 0.5]),
+          fns.MultiplierFunction(fns.MultiplierFunction(fns.PolynomialFunction([1.0, 0.0, 0.0]), 2.0), 0.5),
+          fns.Constant(0.25), fns.LinearFunction([2.0, -1.0])]
+    bank = fns.FunctionBank(fs)
+    assert len(bank._knots) == 2 and bank._poly[0].tolist() == [0, 1, 2] and bank._other == (7, 8, 9)
+    rng = np.random.default_rng(4)
+    inner = np.concatenate([rng.uniform(0.01, 1.99, 40), [0.3, 0.7, 1.2]])
+    for arg in (inner, np.concatenate([inner, [-0.5, 2.6, 0.0, 2.0]]), np.array([0.5, np.nan, 1.0])):
+        F, D1, D2 = bank.evaluate(arg)
+        assert F.shape == (len(fs), arg.size)
+        for i, f in enumerate(fs):
+            for got, want in zip((F[i], D1[i], D2[i]), f.evaluate(arg)):
+                np.testing.assert_allclose(got, want, rtol=1e-14, atol=1e-15, err_msg=repr(f))
+        if np.isfinite(arg).all():              # the moments mapped back reuse the motion's slopes
+            assert bank.slope(arg.copy()) is D1
+    np.testing.assert_allclose(bank.slope(inner[:5]), np.array([f.derivative(inner[:5], 1) for f in fs]),
+                               rtol=1e-14, atol=1e-15)
+
+
 @needs_opensim
 def test_functions_match_opensim_to_1e12():
     rng = np.random.default_rng(3)

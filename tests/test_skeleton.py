@@ -50,9 +50,9 @@ def test_batch_matches_per_frame_and_mass_matrix(name):
 
 
 def test_batched_rnea_is_the_per_frame_loop_in_chunks(monkeypatch):
-    """A pinmsk model's frames go through Pinocchio's batch rneaInParallel (one thread), chunk by chunk:
-    the per-frame pin.rnea numbers exactly, with and without loads, progress told every chunk; no frames,
-    no output rows."""
+    """A pinmsk model's frames go through Pinocchio's batch rneaInParallel (one thread) on the compacted
+    skeleton, chunk by chunk: the per-frame pin.rnea numbers to rounding, with and without loads,
+    progress told every chunk; no frames, no output rows."""
     model = pinmsk.load_model("gait2d")
     q, v, a = _random_state(model, 11, seed=5)
     pm, pd = model.pin, model.pin.createData()
@@ -60,12 +60,36 @@ def test_batched_rnea_is_the_per_frame_loop_in_chunks(monkeypatch):
     monkeypatch.setattr(skeleton, "PROGRESS_CHUNK", 4)
     seen = []
     progress = type("P", (), {"update": lambda self, k: seen.append(k)})()
-    assert np.array_equal(skeleton.rnea(model, q, v, a, progress=progress), want)
+    np.testing.assert_allclose(skeleton.rnea(model, q, v, a, progress=progress), want, rtol=1e-13, atol=1e-11)
     assert seen == [4, 4, 3]
     ext = [skeleton.ExternalForce("foot_r", np.tile([10.0, 500.0, 0.0], (11, 1)), np.zeros((11, 3)))]
     loaded = skeleton.rnea(model, q, v, a, external=ext)
     assert np.allclose(loaded, skeleton.rnea(pm, q, v, a, external=ext), atol=1e-9)   # bare model: the loop
     assert skeleton.rnea(model, q[:0], v[:0], a[:0]).shape == (0, model.nv)
+
+
+@pytest.mark.parametrize("name, joints", [("human3d", (37, 18)), ("gait2d", (12, 10)), ("forearm", (2, 2))])
+def test_compact_skeleton_folds_massless_chains_and_keeps_the_dynamics(name, joints):
+    """Chains of joints with nothing between them but the next joint become one composite joint: fewer
+    joints, the same q/v layout, the same RNEA, mass matrix and gravity to rounding; a model with no
+    such chain is returned as it is."""
+    model = pinmsk.load_model(name)
+    pm = model.pin
+    pc = skeleton.compact_skeleton(pm)
+    assert (pm.njoints, pc.njoints) == joints
+    if joints[0] == joints[1]:
+        assert pc is pm
+        return
+    assert (pc.nq, pc.nv) == (pm.nq, pm.nv)
+    assert sum(i.mass for i in pc.inertias) == pytest.approx(sum(i.mass for i in pm.inertias), rel=1e-15)
+    q, v, a = _random_state(model, 20, seed=3)
+    d0, d1 = pm.createData(), pc.createData()
+    for k in range(20):
+        tau0 = pin.rnea(pm, d0, q[k], v[k], a[k])
+        np.testing.assert_allclose(pin.rnea(pc, d1, q[k], v[k], a[k]), tau0, rtol=1e-12,
+                                   atol=1e-12 * (1 + np.abs(tau0).max()))
+        M0 = pin.crba(pm, d0, q[k])
+        np.testing.assert_allclose(np.triu(pin.crba(pc, d1, q[k])), np.triu(M0), atol=1e-12 * np.abs(M0).max())
 
 
 def test_forearm_gravity_moment_at_90_degrees_matches_hand_calculation():

@@ -41,7 +41,8 @@ import numpy as np
 from ..errors import ModelError
 
 __all__ = ["Function", "Constant", "LinearFunction", "PolynomialFunction", "SimmSpline",
-           "PiecewiseLinearFunction", "MultiplierFunction", "FUNCTIONS", "from_osim", "to_spec", "from_spec"]
+           "PiecewiseLinearFunction", "MultiplierFunction", "FunctionBank", "FUNCTIONS", "from_osim", "to_spec",
+           "from_spec"]
 
 #: OpenSim's SimmMacros: knot spacings are at least TINY_NUMBER; "equal" means within ROUNDOFF_ERROR.
 TINY_NUMBER = 1e-7
@@ -415,6 +416,114 @@ class PiecewiseLinearFunction(_Knotted):
         s = np.diff(self.y) / np.maximum(TINY_NUMBER, np.diff(self.x))
         self.b = np.append(s, s[-1])
         self.c = self.d = np.zeros(self.x.size)
+
+
+def _lowered(f: Function) -> tuple[float | None, Function]:
+    """``(scale, base)`` with ``f = scale * base`` for one MultiplierFunction level (scale None: ``f`` itself)."""
+    if isinstance(f, MultiplierFunction) and not isinstance(f.function, MultiplierFunction):
+        return f.scale, f.function
+    return None, f
+
+
+class FunctionBank:
+    """Several one-argument functions evaluated at one argument together.
+
+    The coordinate map of an imported knee evaluates five to eight functions of the same knee angle
+    (Rajagopal's walker knee: five polynomials; its patella: three splines on the same knots), each a
+    dozen small array operations when evaluated alone.  A bank groups them once:
+
+    * the PolynomialFunctions, and MultiplierFunctions of one (the scale folded into the coefficients),
+      into one power-basis product: ``F = X P`` with ``X = [x^d ... x 1]``, and the same for the first
+      and second derivatives;
+    * the SimmSplines and PiecewiseLinearFunctions on the same knots (one MultiplierFunction level folded
+      in too) into one interval search (OpenSim's, :meth:`_Knotted._interval`) and one gather of the
+      stacked piece coefficients.
+
+    Any other function, or an argument a group's fast path does not cover (outside the knots' interior,
+    not finite), goes through the function's own :meth:`Function.evaluate`.  The results agree with the
+    separate evaluations to rounding (the power basis and the folded scale reorder the arithmetic: a
+    few 1e-16 relative).  Arrays are one row per function, ``(size, N)`` (the arithmetic runs along
+    contiguous rows of frames: on ``(N, size)`` arrays numpy's inner loops would be ``size`` long).  :meth:`slope` keeps the last
+    argument's slopes: the moments mapped back (``J^T tau``) need the slopes the motion's mapping
+    computed at the same angles.
+    """
+
+    def __init__(self, functions):
+        self.functions = tuple(functions)
+        self.size = len(self.functions)
+        poly, knots, other = [], {}, []
+        for i, f in enumerate(self.functions):
+            scale, base = _lowered(f)
+            scale = 1.0 if scale is None else scale
+            if isinstance(base, PolynomialFunction):
+                poly.append((i, scale, base))
+            elif isinstance(base, _Knotted):
+                knots.setdefault(base.x.tobytes(), []).append((i, scale, base))
+            else:
+                other.append(i)
+        self._poly = None
+        if poly:
+            idx = np.array([i for i, _, _ in poly])
+            width = max(b.coefficients.size for _, _, b in poly)
+            mats = []
+            for part, drop in (("coefficients", 0), ("_d1", 1), ("_d2", 2)):
+                # (m, w), padded at the front: column k multiplies x^(w - 1 - k)
+                w = max(width - drop, 1)
+                rows = [s * getattr(b, part) for _, s, b in poly]
+                mats.append(np.array([np.concatenate([np.zeros(w), r])[-w:] for r in rows]))
+            self._poly = (idx, width, mats)
+        self._knots = []
+        for members in knots.values():
+            idx = np.array([i for i, _, _ in members])
+            first = members[0][2]
+            # (4 m, pieces): the y, b, c, d rows of every member, gathered at the frames' pieces in one take
+            coef = np.concatenate([np.array([s * getattr(b, k) for _, s, b in members]) for k in ("y", "b", "c", "d")])
+            self._knots.append((idx, first, coef))
+        self._other = tuple(other)
+        self._last: tuple[np.ndarray, np.ndarray] | None = None
+
+    def evaluate(self, x) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(F, dF/dx, d2F/dx2)``, each ``(size, N)``: row ``i`` is ``functions[i].evaluate(x)``."""
+        x = np.asarray(x, dtype=float)
+        n = x.shape[0]
+        F, D1, D2 = np.empty((self.size, n)), np.empty((self.size, n)), np.empty((self.size, n))
+        rest = list(self._other)
+        if self._poly is not None:
+            idx, width, (P0, P1, P2) = self._poly
+            if np.isfinite(x).all():
+                X = np.empty((width, n))        # rows x^(w-1) ... x, 1
+                X[-1] = 1.0
+                for k in range(width - 2, -1, -1):
+                    np.multiply(X[k + 1], x, out=X[k])
+                F[idx] = P0 @ X
+                D1[idx] = P1 @ X[1:] if width > 1 else 0.0
+                D2[idx] = P2 @ X[2:] if width > 2 else 0.0
+            else:
+                rest += idx.tolist()
+        for idx, first, coef in self._knots:
+            xi = first._inner_only(x)
+            if xi is None:
+                rest += idx.tolist()
+                continue
+            k = first._interval(xi)
+            t = xi - first.x[k]
+            y, b, c, d = np.take(coef, k, axis=1).reshape(4, idx.size, n)
+            F[idx] = y + t * (b + t * (c + t * d))
+            D1[idx] = b + t * (2.0 * c + 3.0 * t * d)
+            D2[idx] = 2.0 * c + 6.0 * t * d
+        for i in rest:
+            F[i], D1[i], D2[i] = self.functions[i].evaluate(x)
+        D1.flags.writeable = False
+        self._last = (x.copy(), D1)
+        return F, D1, D2
+
+    def slope(self, x) -> np.ndarray:
+        """``dF/dx`` ``(size, N)``, the last :meth:`evaluate`'s when ``x`` equals its argument (read-only)."""
+        x = np.asarray(x, dtype=float)
+        last = self._last
+        if last is not None and last[0].shape == x.shape and np.array_equal(last[0], x):
+            return last[1]
+        return self.evaluate(x)[1]
 
 
 #: OpenSim function type -> pinmsk class (the 3.x spline names read as SimmSpline, as in OpenSim 4).

@@ -487,6 +487,20 @@ class CoordinateMap:
         self.defaults = dict(defaults)
         self.welded = dict(welded)
         self._col = {c: i for i, c in enumerate(self.osim_coordinates)}
+        # the one-argument dependent joints grouped by their argument, each group one FunctionBank: a knee's
+        # five to eight functions of its angle evaluated together (the same numbers as one by one)
+        groups: dict[str, list[int]] = {}
+        for j, name in enumerate(self.joints):
+            d = self.dependent.get(name)
+            if d is not None and len(d.of) == 1 and d.function.n_args <= 1:
+                groups.setdefault(d.of[0], []).append(j)
+        self._banks = tuple((self._col[c], np.array(js), fns.FunctionBank(
+            [self.dependent[self.joints[j]].function for j in js])) for c, js in groups.items())
+        self._banked = frozenset(j for _, js, _ in self._banks for j in js)
+        # the joints that are OpenSim coordinates, and their columns
+        same = [(j, self._col[n]) for j, n in enumerate(self.joints) if n not in self.dependent]
+        self._same_j = np.array([j for j, _ in same], dtype=np.intp)
+        self._same_i = np.array([i for _, i in same], dtype=np.intp)
 
     @property
     def identity(self) -> bool:
@@ -648,8 +662,7 @@ class CoordinateMap:
 
     def expand(self, q, v=None, a=None, *, couplers: bool = True):
         """Pinocchio ``(q, v, a)`` (N, nq) from OpenSim coordinates (``v``/``a`` None if not given)."""
-        q_, v_, a_, _ = self._expand(q, v, a, couplers)
-        return q_, v_, a_
+        return self._expand(q, v, a, couplers)
 
     def jacobian(self, q, *, couplers: bool = True) -> np.ndarray:
         """``d q_pinocchio / d q_osim`` (N, nq, n_osim)."""
@@ -662,26 +675,42 @@ class CoordinateMap:
 
     def generalized_forces(self, q, tau, *, couplers: bool = True) -> np.ndarray:
         """OpenSim coordinates' generalized forces (N, n_osim) from Pinocchio's ``tau`` (N, nq): J^T tau."""
-        Q, rows = self._rows(q, couplers)
         tau = np.atleast_2d(np.asarray(tau, dtype=float))
+        if couplers or any(j not in self._banked and n in self.dependent for j, n in enumerate(self.joints)):
+            Q, rows = self._rows(q, couplers)
+            out = np.zeros((Q.shape[0], Q.shape[1]))
+            for jp, row in enumerate(rows):
+                for i, c in row.items():
+                    out[:, i] += c * tau[:, jp]
+            return out
+        # no couplers applied, every dependent joint in a bank: each joint's row is its own column (an
+        # OpenSim coordinate) or its bank's slope on its argument's column, so J^T tau is one gather plus
+        # a weighted sum per bank
+        Q = self._osim(q, "q")
         out = np.zeros((Q.shape[0], Q.shape[1]))
-        for jp, row in enumerate(rows):
-            for i, c in row.items():
-                out[:, i] += c * tau[:, jp]
+        out[:, self._same_i] = tau[:, self._same_j]
+        for col, js, bank in self._banks:
+            out[:, col] += np.einsum("gn,ng->n", bank.slope(Q[:, col]), tau[:, js])
         return out
 
     def _rows(self, q, couplers):
         """OpenSim's ``Q`` and the sparse Jacobian row of each Pinocchio joint (no values of the dependent
         joints computed: the rows need the functions' slopes only)."""
         Q, _, _, rows = self._resolve(q, None, None, couplers)
-        out = []
-        for name in self.joints:
+        out = [None] * len(self.joints)
+        for col, js, bank in self._banks:
+            D1 = bank.slope(Q[:, col])
+            for g, j in enumerate(js):
+                out[j] = {i: D1[g] * c for i, c in rows[col].items()}
+        for j, name in enumerate(self.joints):
+            if j in self._banked:
+                continue
             d = self.dependent.get(name)
             if d is None:
-                out.append(rows[self._col[name]])
+                out[j] = rows[self._col[name]]
             else:
-                out.append(self._chain(d.function, [self._col[c] for c in d.of], Q, None, None, rows,
-                                       value=False)[1])
+                out[j] = self._chain(d.function, [self._col[c] for c in d.of], Q, None, None, rows,
+                                     value=False)[1]
         return Q, out
 
     def _expand(self, q, v, a, couplers):
@@ -691,19 +720,25 @@ class CoordinateMap:
         qp = np.empty((n, nq))
         vp = None if V is None else np.empty((n, nq))
         ap = None if A is None else np.empty((n, nq))
-        prows = []
+        for col, js, bank in self._banks:   # v = f' v_of, a = f' a_of + f'' v_of^2, a group at a time
+            F, D1, D2 = bank.evaluate(Q[:, col])
+            qp[:, js] = F.T
+            if vp is not None:
+                vv = V[:, col]
+                vp[:, js] = (D1 * vv).T
+                if ap is not None:
+                    ap[:, js] = (D1 * A[:, col] + D2 * vv ** 2).T
         same_j, same_i = [], []         # the joints that are OpenSim coordinates: copied in one gather
         for j, name in enumerate(self.joints):
+            if j in self._banked:
+                continue
             d = self.dependent.get(name)
             if d is None:
-                i = self._col[name]
                 same_j.append(j)
-                same_i.append(i)
-                prows.append(rows[i])
+                same_i.append(self._col[name])
                 continue
-            val, row, vel, acc = self._chain(d.function, [self._col[c] for c in d.of], Q, V, A, rows)
+            val, _, vel, acc = self._chain(d.function, [self._col[c] for c in d.of], Q, V, A, rows)
             qp[:, j] = val
-            prows.append(row)
             if vp is not None:
                 vp[:, j] = vel
             if ap is not None:
@@ -711,7 +746,7 @@ class CoordinateMap:
         for out, src in ((qp, Q), (vp, V), (ap, A)):
             if out is not None:
                 out[:, same_j] = src[:, same_i]
-        return qp, vp, ap, prows
+        return qp, vp, ap
 
 
 # ---------------------------------------------------------------------------
