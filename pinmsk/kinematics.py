@@ -295,10 +295,14 @@ def source_coordinates(model, motion: Motion, tau: np.ndarray) -> tuple[tuple[st
     if cmap is None:
         idx = [model.coordinate_index(c) for c in model.coordinate_order]
         return model.coordinate_order, motion.q[:, idx], tau[:, idx]
-    cols = {c: (motion.q[:, model.coordinate_index(c)] if c in model.coordinates else motion.signals[c])
-            for c in cmap.osim_coordinates if c in model.coordinates or c in motion.signals}
-    q = np.column_stack([cols[c] if c in cols else np.full(motion.n_frames, cmap.welded.get(c, cmap.defaults[c]))
-                         for c in cmap.osim_coordinates])
+    # the coordinates that are joints in one gather; the others from the motion's signals or their values
+    q = np.empty((motion.n_frames, len(cmap.osim_coordinates)))
+    joints = [(i, model.coordinate_index(c)) for i, c in enumerate(cmap.osim_coordinates) if c in model.coordinates]
+    if joints:
+        q[:, [i for i, _ in joints]] = motion.q[:, [k for _, k in joints]]
+    for i, c in enumerate(cmap.osim_coordinates):
+        if c not in model.coordinates:
+            q[:, i] = motion.signals[c] if c in motion.signals else cmap.welded.get(c, cmap.defaults[c])
     return cmap.osim_coordinates, q, cmap.generalized_forces(q, tau, couplers=False)
 
 

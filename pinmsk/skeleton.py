@@ -128,6 +128,9 @@ def _massless(inertia: pin.Inertia) -> bool:
     return inertia.mass == 0.0 and not np.any(inertia.lever) and not np.any(inertia.inertia)
 
 
+_XYZ = ["JointModelPX", "JointModelPY", "JointModelPZ"]
+
+
 def compact_skeleton(pm: pin.Model) -> pin.Model:
     """The same multibody system with each chain of joints that carry no mass between them folded into one
     ``JointModelComposite``, for the batched RNEA.
@@ -168,8 +171,19 @@ def compact_skeleton(pm: pin.Model) -> pin.Model:
             jm = pm.joints[h]
         else:
             jm = pin.JointModelComposite()
-            for k, j in enumerate(chain):
-                jm.addJoint(pm.joints[j], pin.SE3.Identity() if k == 0 else pm.jointPlacements[j])
+            k = 0
+            while k < len(chain):
+                j = chain[k]
+                placement = pin.SE3.Identity() if k == 0 else pm.jointPlacements[j]
+                if [pm.joints[i].shortname() for i in chain[k:k + 3]] == _XYZ and all(
+                        pm.jointPlacements[i].isIdentity() for i in chain[k + 1:k + 3]):
+                    # sliders along x, y, z with nothing between them: one 3-dof translation joint, whose
+                    # configuration and velocity are the three displacements in that order
+                    jm.addJoint(pin.JointModelTranslation(), placement)
+                    k += 3
+                    continue
+                jm.addJoint(pm.joints[j], placement)
+                k += 1
         jid = m.addJoint(new[pm.parents[h]], jm, pm.jointPlacements[h], pm.names[chain[-1]])
         m.appendBodyToJoint(jid, pm.inertias[chain[-1]], pin.SE3.Identity())
         for j in chain:
@@ -303,7 +317,7 @@ class _ChainJoint:
     wrench is a column ``x = [f; m]`` (force, moment about the frame's origin) in the joint's placement
     frame; ``S`` is the joint's motion subspace, so ``S . x`` is the joint's generalized force (the
     axial moment of a revolute joint, which its rotation leaves as it is; the axial force of a
-    prismatic one): row ``S_row`` of ``x`` for an axis along x, y or z.  The parent's ``x`` is carried
+    prismatic one): row ``S_row`` of ``x`` times ``S_sign`` for an axis along +-x, y or z.  The parent's ``x`` is carried
     through the parent's own motion (``parent_axis``, ``parent_iq`` the column of its angle or displacement; revolute:
     Rodrigues' rotation by ``-q`` of both halves, prismatic: the moment about the moved origin
     ``m - q a x f``) and then this joint's placement ``X`` (None: the identity, which a chain of an
@@ -314,12 +328,14 @@ class _ChainJoint:
     parent_revolute: bool
     parent_axis: np.ndarray | None      # None: the world parent
     parent_iq: int
-    parent_k: int                       # the parent's axis is e_k (-1: another axis, or the world)
+    parent_k: int                       # the parent's axis is parent_sign e_k (-1: another axis, or the world)
+    parent_sign: float
     joint: int
     iv: int
     X: np.ndarray | None
     S: np.ndarray
     S_row: int                          # -1: not along a frame axis (use S)
+    S_sign: float
     pick: tuple[int, ...] | None
 
 
@@ -363,12 +379,24 @@ def _support_tree(pm: pin.Model, loaded: tuple[int, ...]) -> tuple[_ChainJoint, 
         own = kinds[s]
         S = np.concatenate([np.zeros(3), own[1]] if own[0] else [own[1], np.zeros(3)])
         S.flags.writeable = False
-        hit = np.flatnonzero(S == 1.0)
-        S_row = int(hit[0]) if hit.size == 1 and np.count_nonzero(S) == 1 else -1
+        hit = np.flatnonzero(S)
+        S_row = int(hit[0]) if hit.size == 1 and abs(S[hit[0]]) == 1.0 else -1
         pick = None if loads[s] == loads[parent] else tuple(loads[parent].index(i) for i in loads[s])
-        k = -1 if a is None else _AXIS_INDEX.get(tuple(a.tolist()), -1)
-        out.append(_ChainJoint(parent, revolute, a, iq, k, s, own[3], X, S, S_row, pick))
+        k, sign = _signed_axis(a)
+        out.append(_ChainJoint(parent, revolute, a, iq, k, sign, s, own[3], X, S, S_row,
+                               float(S[S_row]) if S_row >= 0 else 1.0, pick))
     return tuple(out)
+
+
+def _signed_axis(a: np.ndarray | None) -> tuple[int, float]:
+    """``(k, sign)`` with ``a = sign e_k`` (a left leg's OpenSim axes are often -x, -y), or ``(-1, 1.0)``."""
+    if a is None:
+        return -1, 1.0
+    k = _AXIS_INDEX.get(tuple(a.tolist()), -1)
+    if k >= 0:
+        return k, 1.0
+    k = _AXIS_INDEX.get(tuple((-a).tolist()), -1)
+    return k, (-1.0 if k >= 0 else 1.0)
 
 
 def _axis_cross(a: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -410,13 +438,18 @@ def _loads_generalized_force(tree: tuple[_ChainJoint, ...], q: np.ndarray, nv: i
             cs, sn = cos_all[r], sin_all[r]
             a = c.parent_axis
             k = c.parent_k
-            if k >= 0:                  # about e_k: a plane rotation of the other two rows of both halves
+            if k >= 0:                  # about +-e_k: a plane rotation of the other two rows of both halves
                 i, j = (k + 1) % 3, (k + 2) % 3
-                y = xp.copy()
+                y = np.empty_like(xp)
                 h, yh = xp.reshape(2, 3, *xp.shape[1:]), y.reshape(2, 3, *xp.shape[1:])
+                yh[:, k] = h[:, k]
                 ui, uj = h[:, i], h[:, j]
-                yh[:, i] = cs * ui + sn * uj
-                yh[:, j] = cs * uj - sn * ui
+                if c.parent_sign > 0:
+                    yh[:, i] = cs * ui + sn * uj
+                    yh[:, j] = cs * uj - sn * ui
+                else:                   # about -e_k: the rotation by +q about e_k
+                    yh[:, i] = cs * ui - sn * uj
+                    yh[:, j] = cs * uj + sn * ui
             else:
                 y = np.empty_like(xp)
             cs1 = 1.0 - cs if k < 0 else None
@@ -432,6 +465,8 @@ def _loads_generalized_force(tree: tuple[_ChainJoint, ...], q: np.ndarray, nv: i
             d = q[:, c.parent_iq]
             if c.parent_k >= 0:         # along e_k: (e_k x f)_i = -f_j and (e_k x f)_j = f_i, the rest 0
                 i, j = (c.parent_k + 1) % 3, (c.parent_k + 2) % 3
+                if c.parent_sign < 0:
+                    i, j = j, i         # along -e_k: the opposite signs
                 y[3 + i] += d * xp[j]
                 y[3 + j] -= d * xp[i]
             else:
@@ -444,6 +479,8 @@ def _loads_generalized_force(tree: tuple[_ChainJoint, ...], q: np.ndarray, nv: i
         x[c.joint] = xc
         if c.S_row >= 0:
             out[c.iv] = xc[c.S_row, 0] if xc.shape[1] == 1 else xc[c.S_row].sum(axis=0)
+            if c.S_sign < 0:
+                out[c.iv] *= -1.0
         else:
             L = xc.shape[1]
             out[c.iv] = (c.S @ xc.reshape(6, L * n)).reshape(L, n).sum(axis=0)

@@ -220,7 +220,8 @@ def test_forward_static_optimization_matches_golden(tmp_path):
 # fractions to 1e-6.  A fitted parameter may sit anywhere inside the
 # optimizer's stopping tolerance, which is tiny beside its statistical uncertainty: 1e-3 of its
 # standard error (plus 1e-6 relative); a parameter without one (at a bound, or not identifiable:
-# stored as null) gets 1e-4 relative.  Standard errors come from the Jacobian at the optimum: 1e-4
+# stored as null) gets 1e-4 relative; a fit with a parameter flagged not identifiable is held to that
+# flag, not to its numbers (_compare_fit).  Standard errors come from the Jacobian at the optimum: 1e-4
 # relative.  The ranking order, the verdict and every yes/no must match exactly.
 DX_RTOL, DX_FRACTION_ATOL, DX_STDERR_SHARE, DX_FREE_RTOL, DX_STDERR_RTOL = 1e-6, 1e-6, 1e-3, 1e-4, 1e-4
 
@@ -244,6 +245,17 @@ TRUTH = {
 def _compare_fit(fresh: dict, gold: dict, where: str):
     """Fitted ``params`` within DX_STDERR_SHARE of their standard error, ``stderr`` within DX_STDERR_RTOL."""
     assert list(fresh["params"]) == list(gold["params"]), f"{where}: other parameters than the golden"
+    flags = gold.get("identifiability", {}).get("flags") or []
+    if any("is not identifiable" in f for f in flags):
+        # a fit the data leave free in some direction: where the optimizer stops along it, and so every
+        # parameter and standard error of the fit, is rounding on this machine's BLAS (passive_elastic's
+        # theta_0 at 1e-7 rad on one machine, 5e-10 on another, k_hi's standard error 3.6 against 88);
+        # the golden holds that the fit is reported unidentifiable, with the same parameters, and its
+        # explained fraction and residuals (compared by the caller), not those numbers
+        assert fresh["identifiability"]["identifiable"] is False, f"{where}: identifiable now"
+        assert sorted(f for f in fresh["identifiability"]["flags"] if "is not identifiable" in f), \
+            f"{where}: no parameter flagged unidentifiable now"
+        return
     for k, want in gold["params"].items():
         se = gold["stderr"][k]
         assert (fresh["stderr"][k] is None) == (se is None), f"{where} {k}: stderr null-ness differs"

@@ -728,14 +728,9 @@ class CoordinateMap:
                 vp[:, js] = (D1 * vv).T
                 if ap is not None:
                     ap[:, js] = (D1 * A[:, col] + D2 * vv ** 2).T
-        same_j, same_i = [], []         # the joints that are OpenSim coordinates: copied in one gather
         for j, name in enumerate(self.joints):
-            if j in self._banked:
-                continue
             d = self.dependent.get(name)
-            if d is None:
-                same_j.append(j)
-                same_i.append(self._col[name])
+            if d is None or j in self._banked:
                 continue
             val, _, vel, acc = self._chain(d.function, [self._col[c] for c in d.of], Q, V, A, rows)
             qp[:, j] = val
@@ -745,7 +740,7 @@ class CoordinateMap:
                 ap[:, j] = acc
         for out, src in ((qp, Q), (vp, V), (ap, A)):
             if out is not None:
-                out[:, same_j] = src[:, same_i]
+                out[:, self._same_j] = src[:, self._same_i]     # the joints that are OpenSim coordinates
         return qp, vp, ap
 
 
