@@ -39,7 +39,8 @@ def bench_id(name, n=20000):
     q = rng.uniform(-1, 1, (n, model.nq))
     v = rng.uniform(-1, 1, (n, model.nv))
     a = rng.uniform(-1, 1, (n, model.nv))
-    pm, pd = model.pin, model.create_data()
+    pm = model.pin
+    pd = pm.createData()        # the bare loop's Pinocchio workspace (a pinmsk Data is not one)
 
     def bare():
         out = np.empty((n, pm.nv))
@@ -48,7 +49,7 @@ def bench_id(name, n=20000):
         return out
 
     def ours():
-        return skeleton.rnea(model, q, v, a, data=pd)
+        return skeleton.rnea(model, q, v, a)
 
     t_bare = best_of(bare)
     t_ours = best_of(ours)
