@@ -132,9 +132,9 @@ def floating_base_residuals(model, motion, tau: np.ndarray, external=(), *, data
 
     ``external`` are the :class:`pinmsk.skeleton.ExternalForce` s used in that
     inverse dynamics; their summed force gives the peak external force.  The COM
-    height is the mean height of the model's centre of mass above the lowest
-    point of application of the loads (the ground), or above ``y = 0``.  ``data``: a Pinocchio Data of
-    the model to work in (default a new one).
+    height is the mean height of the model's centre of mass along ``-g`` above the world origin (the lab
+    floor of OpenSim's and pinmsk's data) over a dozen frames spread over the trial: a typical lever arm
+    for the moment threshold.  ``data``: a Pinocchio Data of the model to work in (default a new one).
     """
     import pinocchio as pin
 
