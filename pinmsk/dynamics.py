@@ -94,10 +94,12 @@ class InverseDynamicsResult:
 def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, external_loads=None,
                             frames=None, ground_reaction: str = "auto", grf_cutoff="same",
                             external: Sequence[skeleton.ExternalForce] = (),
-                            components: bool = True, progress=None) -> InverseDynamicsResult:
+                            components: bool = True, progress=None,
+                            missing_coordinates: str = "refuse") -> InverseDynamicsResult:
     """Inverse dynamics with its inputs and residual report (see :func:`inverse_dynamics`)."""
     inputs = prepare(model, trial, cutoff=cutoff, grf=grf, external_loads=external_loads, frames=frames,
-                     ground_reaction=ground_reaction, grf_cutoff=grf_cutoff)
+                     ground_reaction=ground_reaction, grf_cutoff=grf_cutoff,
+                     missing_coordinates=missing_coordinates)
     if external and inputs.external:
         raise TrialError("external= was given and the trial has its own ground reaction forces; "
                          "pass one source of external loads")
@@ -162,7 +164,7 @@ def _workspace(model):
 def inverse_dynamics(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, external_loads=None, frames=None,
                      ground_reaction: str = "auto", grf_cutoff="same",
                      external: Sequence[skeleton.ExternalForce] = (), components: bool = True,
-                     progress=None) -> Trial:
+                     progress=None, missing_coordinates: str = "refuse") -> Trial:
     """Inverse dynamics of a trial: the actuator moments ``<coord>_moment`` (N m or N).
 
     ``tau = M(q) a + h(q, v) - J^T f_ext - sum_k Q_k(q, v, a)``: what muscles
@@ -181,8 +183,8 @@ def inverse_dynamics(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, external_
     """
     return inverse_dynamics_result(model, trial, cutoff=cutoff, grf=grf, external_loads=external_loads,
                                    frames=frames, ground_reaction=ground_reaction, grf_cutoff=grf_cutoff,
-                                   external=external, components=components,
-                                   progress=progress).trial
+                                   external=external, components=components, progress=progress,
+                                   missing_coordinates=missing_coordinates).trial
 
 
 def skeleton_with_inertias(model) -> pin.Model:

@@ -55,6 +55,10 @@ __all__ = ["DEFAULT_CUTOFF", "FILTER_ORDER", "Filtering", "TrialInputs", "motion
 MIN_FORCE = 20.0
 
 GROUND_REACTION_MODES = ("auto", "ignore")
+#: What :func:`motion` does with an OpenSim coordinate the trial leaves out that is neither locked nor set by a
+#: coupler: ``"refuse"`` (a TrialError naming it) or ``"default"`` (held at its default value, noted, as
+#: OpenSim's InverseDynamicsTool does).
+MISSING_COORDINATE_MODES = ("refuse", "default")
 
 
 def cutoff_value(cutoff) -> float | None:
@@ -247,14 +251,65 @@ def _plate_loads(model, grf: Trial, motion: Motion, *, cutoff, external_loads, f
     return tuple(plist), tuple(ext)
 
 
-def motion(model, trial, *, cutoff=DEFAULT_CUTOFF, signals: Iterable[str] | None = None) -> Motion:
+def source_coordinate_gaps(model, trial, *, missing_coordinates: str = "refuse") -> tuple[dict, tuple[str, ...]]:
+    """The values of the OpenSim coordinates an exact import's trial leaves out, and a note on each.
+
+    Moco's and OpenSim's states and coordinates files often leave coordinates out (RajagopalWalk's
+    ``coordinates.sto`` has no ``mtp_angle_*``).  A locked coordinate (or one welded at import) is held at
+    its value, as the model says; the dependent coordinate of an enforced CoordinateCouplerConstraint is
+    set by its coupler in :func:`motion` whether the trial has it or not (``fill`` holds a placeholder
+    for it; :func:`prepare` notes trial values the coupler replaced); any other coordinate is refused
+    by name, or, with ``missing_coordinates="default"``, held at its default value as OpenSim's
+    InverseDynamicsTool does.  Returns ``({coordinate: value}, notes)``; ``({}, ())`` for a model without
+    a coordinate map."""
+    if missing_coordinates not in MISSING_COORDINATE_MODES:
+        raise TrialError(f"missing_coordinates must be one of {', '.join(MISSING_COORDINATE_MODES)}; "
+                         f"got {missing_coordinates!r}")
+    cmap = coordinate_map(model)
+    if cmap is None:
+        return {}, ()
+    coupled = {dep: indep for dep, indep, _, _ in cmap.couplers}
+    locked = {**(model.meta.get("locked_coordinates") or {}), **cmap.welded}
+    fill, notes, free = {}, [], []
+    for c in cmap.osim_coordinates:
+        if c in coupled:
+            # a placeholder, in the trial or not: the coupler sets it (motion), so the trial's own values
+            # (Moco's files carry patella angles that are not the coupling's) are neither checked nor used
+            fill[c] = cmap.defaults[c]
+            if c not in trial:
+                notes.append(f"{c}: not in the trial; set from {', '.join(coupled[c])} by its "
+                             "CoordinateCouplerConstraint")
+        elif c in trial:
+            continue
+        elif c in locked:
+            fill[c] = float(locked[c])
+            notes.append(f"{c}: not in the trial; locked at {float(locked[c]):.6g}")
+        else:
+            free.append(c)
+    if free and missing_coordinates == "refuse":
+        try:
+            trial.require(free)
+        except TrialError as exc:
+            raise TrialError(f"{exc}; to hold a coordinate the file leaves out at its default value, as OpenSim's "
+                             "ID tool does, pass --missing-coordinates default (missing_coordinates='default')"
+                             ) from None
+    for c in free:
+        fill[c] = cmap.defaults[c]
+        notes.append(f"{c}: not in the trial; held at its default value {cmap.defaults[c]:.6g} "
+                     "(missing_coordinates='default', as OpenSim's ID tool does)")
+    return fill, tuple(notes)
+
+
+def motion(model, trial, *, cutoff=DEFAULT_CUTOFF, signals: Iterable[str] | None = None,
+           missing_coordinates: str = "refuse") -> Motion:
     """The model's :class:`Motion` (q, v, a in coordinate order) from a Trial.
 
     Velocities and accelerations come from the trial's coordinates
     (:meth:`pinmsk.Trial.kinematics`): zero-lag low-pass at ``cutoff`` Hz (default
     :data:`DEFAULT_CUTOFF` = 6 Hz; 0 or None: none), then quintic-spline derivatives.
-    All other channels (or those named in ``signals``) are passed as signals.
-    Analyses use :func:`prepare`, which adds the external loads.
+    All other channels (or those named in ``signals``) are passed as signals.  On an exact OpenSim
+    import, the coordinates the trial leaves out are filled as :func:`source_coordinate_gaps` says
+    (``missing_coordinates``).  Analyses use :func:`prepare`, which adds the external loads.
     """
     cmap = coordinate_map(model)
     check_coordinate_columns(model, trial)
@@ -266,14 +321,16 @@ def motion(model, trial, *, cutoff=DEFAULT_CUTOFF, signals: Iterable[str] | None
         # dependent joints (an exact OpenSim import): the trial holds OpenSim's coordinates, which are
         # filtered and differentiated, then mapped: q_pin = f(q), v_pin = J v, a_pin = J a + dJ v
         measured = cmap.osim_coordinates
-        trial.require(measured)
-        q_os, v_os, a_os = trial.kinematics(measured, cutoff=cutoff_value(cutoff))
-        q, v, a = cmap.expand(q_os, v_os, a_os)
+        fill, _ = source_coordinate_gaps(model, trial, missing_coordinates=missing_coordinates)
+        source = trial.with_channels({c: np.full(trial.n_frames, x) for c, x in fill.items()}) if fill else trial
+        q_os, v_os, a_os = source.kinematics(measured, cutoff=cutoff_value(cutoff))
+        q, v, a, q_os = cmap.expand(q_os, v_os, a_os, with_source=True)
     names = [n for n in trial.names if n not in measured] if signals is None else list(signals)
     sig = {n: trial[n] for n in names}
     if cmap is not None:
         # OpenSim coordinates that drive only dependent joints are no column of q: they ride along as
-        # (filtered) signals, so moments map back at the same coordinates (source_coordinates)
+        # (filtered) signals, with the couplers applied (the angles the joints were mapped at), so
+        # moments map back at the same coordinates (source_coordinates)
         sig.update({c: q_os[:, i] for i, c in enumerate(measured) if c not in model.coordinates})
     return Motion(np.asarray(trial.time, dtype=float), q, v, a, sig)
 
@@ -415,9 +472,24 @@ def as_motion(model, data, cutoff=DEFAULT_CUTOFF) -> Motion:
     return mo
 
 
+def _coupler_notes(model, trial, mo: Motion) -> tuple[str, ...]:
+    """A note for each coupled coordinate whose values in the trial the coupler replaced (by > 1e-6)."""
+    cmap = coordinate_map(model)
+    if cmap is None:
+        return ()
+    out = []
+    for dep, indep, _, _ in cmap.couplers:
+        if dep in trial and dep in mo.signals:
+            dev = float(np.max(np.abs(np.asarray(trial[dep], dtype=float) - mo.signals[dep]), initial=0.0))
+            if dev > 1e-6:
+                out.append(f"{dep}: the trial's values replaced by its CoordinateCouplerConstraint's on "
+                           f"{', '.join(indep)} (they differed by up to {dev:.3g})")
+    return tuple(out)
+
+
 def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | None = None,
             external_loads=None, frames=None, ground_reaction: str = "auto",
-            grf_cutoff="same") -> TrialInputs:
+            grf_cutoff="same", missing_coordinates: str = "refuse") -> TrialInputs:
     """A trial (or a Motion) made ready for analysis; see the module docstring.
 
     Parameters (keyword-only after ``trial``)
@@ -436,6 +508,10 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
     grf_cutoff : "same" or float
         Low-pass of the GRF; default the kinematics' ``cutoff`` (the consistent
         choice); 0 leaves the GRF unfiltered, as OpenSim's ID tool does.
+    missing_coordinates : "refuse" | "default"
+        An exact OpenSim import's coordinate the trial leaves out (not locked, not coupled):
+        refused by name, or held at its default value as OpenSim's ID tool does
+        (:func:`source_coordinate_gaps`; each filled coordinate is noted).
     """
     if ground_reaction not in GROUND_REACTION_MODES:
         raise TrialError(f"ground_reaction must be one of {', '.join(GROUND_REACTION_MODES)}; "
@@ -453,7 +529,9 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
         return TrialInputs(trial, (), (), Filtering(None), ("a Motion was given: no filter applied",))
     if not isinstance(trial, Trial):
         raise TrialError(f"expected a Trial or a Motion, got {type(trial).__name__}")
-    mo = motion(model, trial, cutoff=c)
+    mo = motion(model, trial, cutoff=c, missing_coordinates=missing_coordinates)
+    gap_notes = _coupler_notes(model, trial, mo) + source_coordinate_gaps(
+        model, trial, missing_coordinates=missing_coordinates)[1]
     if external_loads is not None and not hasattr(external_loads, "loads"):
         external_loads = read_external_loads(external_loads)
     own = has_ground_reaction(trial)
@@ -461,7 +539,7 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
     if ground_reaction == "ignore":
         notes = ("ground reaction: left out on request (ground_reaction='ignore')",) if (
             own or grf is not None or external_loads is not None) else ()
-        return TrialInputs(mo, (), (), Filtering(c, grf_cutoff=gc), notes)
+        return TrialInputs(mo, (), (), Filtering(c, grf_cutoff=gc), gap_notes + notes)
     if grf is None and external_loads is not None and external_loads.datafile is not None and not own:
         grf = external_loads.datafile
     if grf is not None and own:
@@ -473,7 +551,7 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
     elif grf is not None:
         source = grf.meta.get("source", "grf trial")
     if grf is None and not own:
-        return TrialInputs(mo, (), (), Filtering(c, grf_cutoff=gc))
+        return TrialInputs(mo, (), (), Filtering(c, grf_cutoff=gc), gap_notes)
     data = grf if grf is not None else trial
     planar = is_planar(model)
     if external_loads is not None or model.nq != model.nv:
@@ -488,7 +566,7 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
                                   planar=planar, q_on_grf_time=q_g, same_time=grf is None)
     except ModelError as exc:
         raise TrialError(f"ground reaction: {exc}") from None
-    notes = []
+    notes = list(gap_notes)
     if planar:
         dropped = [n for p in plist for (kind, a), n in p.columns.items()
                    if (kind in ("force", "point") and a == "z") or (kind == "torque" and a in "xy")]

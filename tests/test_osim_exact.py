@@ -18,7 +18,7 @@ import pytest
 
 import pinmsk
 import test_osim_import as t
-from pinmsk.dynamics import inverse_dynamics
+from pinmsk.dynamics import inverse_dynamics, inverse_dynamics_result
 from pinmsk.errors import ModelError, TrialError
 from pinmsk.io.osim import read_osim
 from pinmsk.io.shared_data import shared_data_dir
@@ -345,6 +345,58 @@ def test_a_coordinate_the_osim_model_lacks_gets_a_did_you_mean(leg_path, tmp_pat
     del cols["knee_angel_r"]
     cols["knee_angle_speed"] = 0.0
     model.motion(pinmsk.read_trial(_coordinates_file(tmp_path / "ok.mot", cols)))
+
+
+def test_coordinates_a_file_leaves_out_are_filled_as_the_model_says_or_refused(leg_path, tmp_path, capsys):
+    """A states file often leaves coordinates out (Moco's: locked ones, the patella's): a locked one is held at
+    its value and a coupled one set by its coupler, each noted; a free one is refused by name with the flag
+    that holds it at its default value as OpenSim's ID tool does; every fill gives the moments of the trial
+    filled by hand.  The trial's own values of a coupled coordinate are replaced by the coupler's (noted),
+    not checked (Moco writes patella angles that are not the coupling's)."""
+    from pinmsk.kinematics import MISSING_COORDINATE_MODES
+    from pinmsk.presentation.cli import build_parser, main
+    model = _load(leg_path)
+    cmap = coordinate_map(model)
+    full = _walk(model)
+    beta = cmap.couplers[0][2]
+    full = full.with_channels(knee_beta=cmap.couplers[0][3] * beta.value(np.asarray(full["knee_angle"])))
+    want = inverse_dynamics(model, full, cutoff=0)
+    # locked lumbar_extension and coupled knee_beta left out; knee_beta's values in degrees-like garbage
+    partial = Trial(full.time, {c: np.asarray(full[c]) for c in full.names if c not in ("lumbar_extension", "knee_beta")})
+    res = inverse_dynamics_result(model, partial, cutoff=0)
+    assert any("lumbar_extension: not in the trial; locked at -0.05" in n for n in res.inputs.notes)
+    assert any("knee_beta: not in the trial; set from knee_angle by its CoordinateCouplerConstraint" in n
+               for n in res.inputs.notes)
+    np.testing.assert_allclose(res.trial.get(want.names), want.get(want.names), rtol=0, atol=1e-9)
+    odd = partial.with_channels(knee_beta=np.full(partial.n_frames, 72.0))     # 72 "rad": not checked, replaced
+    res = inverse_dynamics_result(model, odd, cutoff=0)
+    assert any(n.startswith("knee_beta: the trial's values replaced by its CoordinateCouplerConstraint's")
+               for n in res.inputs.notes)
+    np.testing.assert_allclose(res.trial.get(want.names), want.get(want.names), rtol=0, atol=1e-9)
+    # a free coordinate left out: refused by name, or held at its default value on request
+    no_ankle = Trial(full.time, {c: np.asarray(full[c]) for c in full.names if c != "ankle_angle"})
+    with pytest.raises(TrialError, match=r"'ankle_angle'.*--missing-coordinates default"):
+        inverse_dynamics(model, no_ankle, cutoff=0)
+    held = full.with_channels(ankle_angle=np.full(full.n_frames, cmap.defaults["ankle_angle"]))
+    res = inverse_dynamics_result(model, no_ankle, cutoff=0, missing_coordinates="default")
+    assert any("ankle_angle: not in the trial; held at its default value 0" in n for n in res.inputs.notes)
+    np.testing.assert_allclose(res.trial.get(want.names), inverse_dynamics(model, held, cutoff=0).get(want.names),
+                               rtol=0, atol=1e-9)
+    with pytest.raises(TrialError, match="missing_coordinates must be one of refuse, default"):
+        inverse_dynamics(model, no_ankle, cutoff=0, missing_coordinates="zero")
+    # the command line: one line naming it and the flag, exit 2, no file; the flag runs it
+    cols = {c: np.asarray(no_ankle[c])[:20] for c in no_ankle.names}
+    path = _coordinates_file(tmp_path / "ik.mot", cols)
+    out = tmp_path / "id.sto"
+    assert main(["id", str(leg_path), str(path), "-o", str(out), "--cutoff", "0"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("pinmsk: error:") and "'ankle_angle'" in err[-1] and "--missing-coordinates default" in err[-1]
+    assert not out.exists()
+    assert main(["id", str(leg_path), str(path), "-o", str(out), "--cutoff", "0", "--missing-coordinates", "default"]) == 0
+    assert "ankle_angle: not in the trial; held at its default value" in capsys.readouterr().out and out.is_file()
+    # the CLI spells the modes out (importing kinematics would load Pinocchio for --help): the same ones
+    sub = next(a for a in build_parser()._actions if a.dest == "command").choices["id"]
+    assert tuple(next(a for a in sub._actions if a.dest == "missing_coordinates").choices) == MISSING_COORDINATE_MODES
 
 
 def test_a_coordinate_a_builtin_model_lacks_gets_a_did_you_mean(tmp_path):

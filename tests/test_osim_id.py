@@ -274,6 +274,45 @@ def test_rajagopal_id_is_opensims_but_for_simbodys_walker_knee_term():
     assert np.max(np.abs(alpha_os - alpha_fd)) > 0.05           # measured 0.078 rad/s^2 (of ~12.5)
 
 
+def test_id_of_rajagopal_reads_mocos_own_coordinates_file(tmp_path):
+    """Moco's ``coordinates.sto`` as the user has it (state-path labels, an nColumns header that is off, no
+    mtp angles, patella angles that are not the coupling's): refused by name with the flag; with
+    ``missing_coordinates="default"`` the moments of the trial filled by hand as OpenSim fills it (mtp
+    angles at their defaults) with the couplers applied, which
+    test_id_of_rajagopal_against_opensims_inverse_dynamics_tool compares with OpenSim's tool."""
+    import warnings
+    from pinmsk.io.channel_map import read_mapped
+    model_path = _rajagopal()
+    walk = shared_data_dir() / "real" / "opensim-moco-walk-emg"
+    if not (walk / "coordinates.sto").is_file():
+        pytest.skip("../shared/data/real/opensim-moco-walk-emg is absent")
+    model, _ = import_osim(model_path, nonlinear="exact", hooks=())
+    cmap = coordinate_map(model)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", pinmsk_errors.RepairWarning)      # the nColumns header
+        trial = read_mapped(walk / "coordinates.sto", model=model, strict=False)
+    loads = tmp_path / "grf_walk.xml"       # its datafile is named relative to the model's folder
+    loads.write_text((model_path.parent / "grf_walk.xml").read_text().replace(
+        "<datafile>grf_walk.mot</datafile>", f"<datafile>{walk / 'grf_walk.mot'}</datafile>"))
+    with pytest.raises(pinmsk_errors.TrialError, match=r"'mtp_angle_r'.*'mtp_angle_l'.*--missing-coordinates default"):
+        inverse_dynamics_result(model, trial, cutoff=0, grf_cutoff=0, external_loads=loads)
+    res = inverse_dynamics_result(model, trial, cutoff=0, grf_cutoff=0, external_loads=loads,
+                                  missing_coordinates="default")
+    notes = "\n".join(res.inputs.notes)
+    for c in ("mtp_angle_r", "mtp_angle_l"):
+        assert f"{c}: not in the trial; held at its default value 0" in notes
+    for c in ("knee_angle_r_beta", "knee_angle_l_beta"):      # Moco wrote ~72 (rad) for them
+        assert f"{c}: the trial's values replaced by its CoordinateCouplerConstraint's" in notes
+    ch = {c: np.asarray(trial[c]) for c in cmap.osim_coordinates if c in trial}
+    ch.update({c: np.full(trial.n_frames, cmap.defaults[c]) for c in cmap.osim_coordinates if c not in ch})
+    for dep, indep, f, scale in cmap.couplers:
+        ch[dep] = scale * f.value(ch[indep[0]])
+    by_hand = inverse_dynamics_result(model, Trial(trial.time, ch), cutoff=0, grf_cutoff=0, external_loads=loads)
+    names = [n for n in by_hand.trial.names if n.endswith("_moment")]
+    assert len(names) == len(cmap.osim_coordinates)
+    np.testing.assert_allclose(res.trial.get(names), by_hand.trial.get(names), rtol=0, atol=1e-9)
+
+
 @pytest.mark.slow
 def test_id_of_rajagopal_against_opensims_inverse_dynamics_tool(tmp_path):
     """RajagopalWalk against OpenSim's InverseDynamicsTool run here (results in tmp_path, no filter on

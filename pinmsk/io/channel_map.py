@@ -399,7 +399,10 @@ def read_mapped(path, *, model=None, cmap=None, strict: bool = True, require_coo
     if cmap is not None:
         return apply_channel_map(trial, cmap, model=model, require_coordinates=require_coordinates)
     if model is not None:
-        trial = with_state_path_coordinates(trial, model.coordinate_order)
+        # an exact OpenSim import's own coordinates too (a patella angle that drives only dependent joints)
+        full = getattr(model, "meta", {}).get("coordinate_map")
+        trial = with_state_path_coordinates(
+            trial, tuple(model.coordinate_order) + tuple(getattr(full, "osim_coordinates", ())))
     name = suggest_map(trial, model) if model is not None and require_coordinates else None
     if name:
         missing = [c for c in model.coordinate_order if c not in trial]

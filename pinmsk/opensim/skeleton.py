@@ -660,9 +660,11 @@ class CoordinateMap:
                     A[:, i] = scale * acc
         return Q, V, A, rows
 
-    def expand(self, q, v=None, a=None, *, couplers: bool = True):
-        """Pinocchio ``(q, v, a)`` (N, nq) from OpenSim coordinates (``v``/``a`` None if not given)."""
-        return self._expand(q, v, a, couplers)
+    def expand(self, q, v=None, a=None, *, couplers: bool = True, with_source: bool = False):
+        """Pinocchio ``(q, v, a)`` (N, nq) from OpenSim coordinates (``v``/``a`` None if not given); with
+        ``with_source``, also OpenSim's ``q`` as mapped (N, n_osim), the couplers applied."""
+        out = self._expand(q, v, a, couplers)
+        return out if with_source else out[:3]
 
     def jacobian(self, q, *, couplers: bool = True) -> np.ndarray:
         """``d q_pinocchio / d q_osim`` (N, nq, n_osim)."""
@@ -741,7 +743,7 @@ class CoordinateMap:
         for out, src in ((qp, Q), (vp, V), (ap, A)):
             if out is not None:
                 out[:, self._same_j] = src[:, self._same_i]     # the joints that are OpenSim coordinates
-        return qp, vp, ap
+        return qp, vp, ap, Q
 
 
 # ---------------------------------------------------------------------------

@@ -106,7 +106,8 @@ def _inputs(args) -> dict:
     """The trial-preparation options every analysis takes (see :func:`pinmsk.kinematics.prepare`)."""
     return dict(cutoff=args.cutoff, grf=args.grf, external_loads=args.external_loads,
                 ground_reaction="ignore" if args.no_grf else "auto",
-                grf_cutoff="same" if args.grf_cutoff is None else args.grf_cutoff)
+                grf_cutoff="same" if args.grf_cutoff is None else args.grf_cutoff,
+                missing_coordinates=args.missing_coordinates)
 
 
 def _named_values(items, model, what) -> np.ndarray:
@@ -268,6 +269,9 @@ def cmd_diagnose(args) -> int:
     model = _model(args)
     trial = _read(args.trial, model, args)
     kw = _inputs(args)
+    if kw.pop("missing_coordinates") != "refuse":
+        raise PinmskError("pinmsk diagnose: --missing-coordinates is for an imported .osim model's dependent "
+                          "joints, which the diagnosis does not take; give the trial every coordinate")
     if kw.pop("ground_reaction") == "ignore":
         trial = trial.drop([n for n in trial.names if parse_ground_reaction(n) is not None])
     r = run(model, trial, add=args.add or [], mode=args.mode, frames=args.frame or None, **kw)
@@ -430,6 +434,12 @@ def input_flags(s) -> None:
                         "unless --grf or the trial gives the data)")
     s.add_argument("--no-grf", action="store_true",
                    help="leave the ground reaction forces out on purpose (recorded in the output)")
+    # pinmsk.kinematics.MISSING_COORDINATE_MODES, spelled out: importing kinematics here would load Pinocchio
+    # for `pinmsk --help` (tests/test_osim_id.py checks that the two agree)
+    s.add_argument("--missing-coordinates", choices=("refuse", "default"), default="refuse",
+                   help="an imported .osim model's coordinate the trial leaves out (not locked, not set by a "
+                        "coupler): refuse it by name (default), or hold it at its default value as OpenSim's ID "
+                        "tool does (noted in the output)")
 
 
 def build_parser() -> argparse.ArgumentParser:

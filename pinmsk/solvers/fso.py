@@ -271,7 +271,7 @@ class ForwardStaticOptimization(Fitter):
 
     # -- running -------------------------------------------------------------
     def fit(self, model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, external_loads=None, frames=None,
-            ground_reaction: str = "auto", grf_cutoff="same", progress=None):
+            ground_reaction: str = "auto", grf_cutoff="same", progress=None, missing_coordinates: str = "refuse"):
         """Simulate the model tracking ``trial`` (a Trial or a Motion); returns ``self``.
 
         The trial goes through :func:`pinmsk.kinematics.prepare` (coordinates and
@@ -289,7 +289,8 @@ class ForwardStaticOptimization(Fitter):
         path = excitation_path(model) if signal else None
         self.excitation_path_ = path
         inputs = prepare(model, trial, cutoff=cutoff, grf=grf, external_loads=external_loads, frames=frames,
-                         ground_reaction=ground_reaction, grf_cutoff=grf_cutoff)
+                         ground_reaction=ground_reaction, grf_cutoff=grf_cutoff,
+                         missing_coordinates=missing_coordinates)
         self.inputs_ = inputs
         ref = as_motion(model, inputs.motion)
         external_force = _external_drive(model, ref.t, inputs.external)

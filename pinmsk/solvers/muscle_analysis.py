@@ -26,7 +26,8 @@ __all__ = ["muscle_analysis"]
 
 
 def muscle_analysis(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, external_loads=None,
-                    ground_reaction: str = "auto", grf_cutoff="same", paths: str = "auto") -> Trial:
+                    ground_reaction: str = "auto", grf_cutoff="same", paths: str = "auto",
+                    missing_coordinates: str = "refuse") -> Trial:
     """Muscle-tendon lengths, rigid-tendon fiber lengths and moment arms of ``model``'s muscles over
     ``trial`` (the coordinates low-passed at ``cutoff`` Hz as every analysis does; see the module
     docstring for the channels).  The load options are accepted as every analysis takes them and
@@ -36,7 +37,8 @@ def muscle_analysis(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, external_l
     if model.muscles is None or model.n_muscles == 0:
         raise ModelError(f"model '{model.name}' has no muscles to analyse")
     inputs = prepare(model, trial, cutoff=cutoff, grf=grf, external_loads=external_loads,
-                     ground_reaction=ground_reaction, grf_cutoff=grf_cutoff)
+                     ground_reaction=ground_reaction, grf_cutoff=grf_cutoff,
+                     missing_coordinates=missing_coordinates)
     motion = inputs.motion
     ms = model.muscles
     gp = geometric_paths(model.meta.get("import_report")) if paths == "auto" else None

@@ -916,7 +916,8 @@ class StaticOptimization(Fitter):
 
     # -- fitting -----------------------------------------------------------
     def fit(self, model, trial, *, moments=None, cutoff=DEFAULT_CUTOFF, grf=None, external_loads=None,
-            frames=None, ground_reaction: str = "auto", grf_cutoff="same", progress=None):
+            frames=None, ground_reaction: str = "auto", grf_cutoff="same", progress=None,
+            missing_coordinates: str = "refuse"):
         """Solve every frame of ``trial`` (a Trial or a Motion); returns ``self``.
 
         The trial goes through :func:`pinmsk.kinematics.prepare` (coordinates and
@@ -933,7 +934,8 @@ class StaticOptimization(Fitter):
         t0 = _time.perf_counter()
         check_model(model)
         inputs = prepare(model, trial, cutoff=cutoff, grf=grf, external_loads=external_loads, frames=frames,
-                         ground_reaction=ground_reaction, grf_cutoff=grf_cutoff)
+                         ground_reaction=ground_reaction, grf_cutoff=grf_cutoff,
+                         missing_coordinates=missing_coordinates)
         motion = as_motion(model, inputs.motion)
         acts = self._actuators(model)
         space = balance_space(model, motion)
