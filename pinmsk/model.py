@@ -577,11 +577,18 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
     return _load_sidecar(sidecar, moment_arms=moment_arms, tendon=tendon, gravity=gravity)
 
 
-def import_osim(path, *, locked: str = "joint", nonlinear: str = "exact", gravity=None, hooks=None):
+def import_osim(path, *, locked: str = "joint", nonlinear: str = "exact", gravity=None, hooks=None,
+                fit_over=None):
     """``(Model, ImportReport)`` of an OpenSim ``.osim`` (the parts: :func:`pinmsk.opensim.importer.read_import`,
     whose docstring gives the options; ``load_model`` takes the defaults).  ``hooks`` default: the
     muscle import (:func:`pinmsk.opensim.muscle_import.muscle_hook`) and the contacts
     (:func:`pinmsk.opensim.contacts.contact_hook`); ``()`` imports the skeleton only.
+
+    ``fit_over`` (a Trial or a coordinates/states file in OpenSim's coordinates): the muscle paths'
+    polynomial surrogates are fitted over that motion's ranges, widened by 10 degrees, as OpenSim's
+    PolynomialPathFitter and PredSim fit them, instead of over the coordinates' whole ranges (where a
+    hip muscle's wrapping can cost millimetres of moment arm at the motion's own poses); the report says
+    which ranges were used and the fit error over them.
 
     Imports are cached in this process, keyed by the file (resolved path, modification time in ns, size
     and a digest of its content) and the options (``locked``, ``nonlinear``, ``gravity``, the hook objects): importing the same
@@ -593,6 +600,16 @@ def import_osim(path, *, locked: str = "joint", nonlinear: str = "exact", gravit
     from .opensim.importer import read_import
     from .opensim.contacts import contact_hook
     from .opensim.muscle_import import DEFAULT_HOOKS
+    if fit_over is not None:
+        from functools import partial
+
+        from .io.tables import read_trial
+        from .opensim.muscle_import import MAX_MUSCLES, muscle_hook
+        from .trial import Trial
+        if hooks is not None:
+            raise ModelError("import_osim: give hooks= or fit_over=, not both (fit_over sets the muscle hook)")
+        motion = fit_over if isinstance(fit_over, Trial) else read_trial(fit_over)
+        hooks = (partial(muscle_hook, motion=motion, max_muscles=MAX_MUSCLES), *DEFAULT_HOOKS[1:], contact_hook)
     hooks = tuple((*DEFAULT_HOOKS, contact_hook) if hooks is None else hooks)
     key = _import_key(path, locked, nonlinear, gravity, hooks)
     if key is not None and key in _IMPORTS:

@@ -501,6 +501,66 @@ def test_polynomial_surrogates_of_gait10dof18musc():
     assert max(r.moment_arm_max for r in reports) < 3.5e-3
 
 
+def _surrogate_errors(model, report, q_os, names):
+    """Max length and moment-arm errors (m) per muscle of the model's polynomial paths against the import's
+    geometric paths at OpenSim coordinates ``q_os`` (N, len(names)); the coupled patella-free models only."""
+    from pinmsk.opensim.muscle_import import geometric_paths
+    gp = geometric_paths(report)
+    cmap = model.meta["coordinate_map"]
+    q = np.column_stack([q_os[:, names.index(c)] if c in names else np.full(q_os.shape[0], cmap.defaults[c])
+                         for c in gp.coordinates])
+    L, A = gp.lengths_and_moment_arms(q)
+    poly = model.muscles.path
+    qm = np.column_stack([q[:, gp.coordinates.index(c)] if c in gp.coordinates else np.zeros(q.shape[0])
+                          for c in poly.coordinates])
+    common = [c for c in gp.coordinates if c in poly.coordinates]
+    arms = poly.moment_arms(qm)[:, :, [poly.coordinates.index(c) for c in common]]
+    return (np.abs(poly.lengths(qm) - L).max(axis=0),
+            np.abs(arms - A[:, :, [gp.coordinates.index(c) for c in common]]).max(axis=(0, 2)))
+
+
+def test_import_fits_the_muscle_paths_over_a_motion_as_opensims_path_fitter(tmp_path, capsys):
+    """``import_osim(path, fit_over=trial)`` (``pinmsk import --fit-over``) fits the surrogates over the
+    motion's ranges +- 10 degrees, as OpenSim's PolynomialPathFitter: at the motion's own poses the
+    errors against the geometric paths fall, the report says which ranges; a motion without the model's
+    coordinates, or both
+    ``hooks`` and ``fit_over``, is refused by name."""
+    from pinmsk.io.tables import read_trial
+    from pinmsk.model import import_osim
+    from pinmsk.trial import Trial
+    from pathlib import Path
+    path = Path(_model("Gait10dof18musc/subject01.osim"))
+    ik = read_trial(path.parent / "IK" / "subject01_walk_IK.mot")
+    names = list(ik.names)
+    q = ik.get(names)
+    whole, rep_whole = import_osim(path)
+    fitted, rep_fit = import_osim(path, fit_over=ik)
+    el0, ea0 = _surrogate_errors(whole, rep_whole, q, names)
+    el1, ea1 = _surrogate_errors(fitted, rep_fit, q, names)
+    # measured: lengths 0.29 -> 0.27 mm, moment arms 2.83 -> 1.64 mm at worst (the knee extensors' kink at
+    # full extension, test_polynomial_surrogates_of_gait10dof18musc, bounds the rest)
+    assert el1.max() < 1e-3 and ea1.max() < 2e-3
+    assert ea1.max() < 0.7 * ea0.max()
+    note = [e.became for e in rep_fit.entries if "fitted over the motion" in e.became]
+    assert note and "151 frames" in note[0] and "10 coordinates widened by 10 degrees" in note[0]
+    lo, hi = float(np.min(ik["knee_angle_r"])), float(np.max(ik["knee_angle_r"]))
+    span = f"knee_angle_r [{lo - math.radians(10):.3g}, {min(hi + math.radians(10), 0.175):.3g}]"
+    assert any(span in (e.approximation or "") for e in rep_fit.entries), span
+    with pytest.raises(ModelError, match="has none of the model's coordinates"):
+        import_osim(path, fit_over=Trial(ik.time, {"elbow": np.zeros(ik.n_frames)}))
+    with pytest.raises(ModelError, match="give hooks= or fit_over=, not both"):
+        import_osim(path, fit_over=ik, hooks=())
+    from pinmsk.presentation.cli import main
+    ik_file = path.parent / "IK" / "subject01_walk_IK.mot"
+    assert main(["import", str(path), "-o", str(tmp_path / "fit"), "--fit-over", str(ik_file)]) == 0
+    assert "fitted over the motion" in (tmp_path / "fit" / "subject01_import_report.txt").read_text()
+    capsys.readouterr()
+    assert main(["import", str(path), "-o", str(tmp_path / "bad"), "--fit-over", str(tmp_path / "none.mot")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("pinmsk: error:") and "none.mot" in err[0]
+    assert not (tmp_path / "bad").exists()
+
+
 def test_couplings_tie_the_sampled_poses_and_fold_into_the_moment_arms():
     """A path between the rotating arm and the slide, with the slide coupled to the arm (x = 2 * 0.25 theta):
     the fit samples theta only, sets x from the coupling, and its moment arm about theta is the total
@@ -529,14 +589,12 @@ _RAJAGOPAL_FIT = {}
 
 
 def _rajagopal_fitted_over_the_walk():
-    """RajagopalWalk with its muscles fitted over the walk's ranges +- 10 degrees (as OpenSim's
+    """RajagopalWalk with its muscles fitted over the walk's ranges +- 10 degrees (``fit_over``, as OpenSim's
     PolynomialPathFitter samples), the walk's poses with the patella coupled, and the import report."""
     if not _RAJAGOPAL_FIT:
-        from functools import partial
-
         from pinmsk.io.tables import read_trial
         from pinmsk.model import import_osim
-        from pinmsk.opensim.muscle_import import geometric_paths, muscle_hook
+        from pinmsk.opensim.muscle_import import geometric_paths
         path = _model("RajagopalWalk/subject_walk_scaled.osim")
         root = shared_data_dir() / "real" / "opensim-moco-walk-emg" / "coordinates.sto"
         if not root.is_file():
@@ -544,8 +602,7 @@ def _rajagopal_fitted_over_the_walk():
         raw = read_trial(root, strict=False)
         ch = {n.split("/")[-2]: np.asarray(raw[n])[::10] for n in raw.names}
         walked = [c for c in ch if not c.endswith("_beta")]          # its patella angles are not the coupling's
-        ranges = op.motion_ranges(np.column_stack([ch[c] for c in walked]), walked)
-        model, report = import_osim(path, hooks=(partial(muscle_hook, ranges=ranges),))
+        model, report = import_osim(path, fit_over=raw)      # as `pinmsk import --fit-over coordinates.sto`
         gp = geometric_paths(report)
         cmap = model.meta["coordinate_map"]
         q = np.column_stack([ch[c] if c in walked else np.full(len(ch[walked[0]]), cmap.defaults[c])
@@ -574,11 +631,12 @@ def test_rajagopal_polynomials_over_the_walk_match_the_geometric_paths():
         j, d = C.index(ind[0]), C.index(dep)
         A[:, :, j] += A[:, :, d] * (s * f.derivative(q[:, j], 1))[:, None]
         A[:, :, d] = 0.0
-    poly = model.muscles.path
-    qm = np.column_stack([q[:, C.index(c)] for c in poly.coordinates])
-    cols = [poly.coordinates.index(c) for c in C]
+    poly = model.muscles.path       # over the skeleton's joints: the dependent ones carry no moment arm
+    qm = np.column_stack([q[:, C.index(c)] if c in C else np.zeros(q.shape[0]) for c in poly.coordinates])
+    common = [c for c in C if c in poly.coordinates]     # the patella angles are no joint: folded above
     el = np.abs(poly.lengths(qm) - L).max(axis=0)
-    ea = np.abs(poly.moment_arms(qm)[:, :, cols] - A).max(axis=(0, 2))
+    ea = np.abs(poly.moment_arms(qm)[:, :, [poly.coordinates.index(c) for c in common]]
+                - A[:, :, [C.index(c) for c in common]]).max(axis=(0, 2))
     known = {"gaslat_r": (5.5e-3, 5e-3), "gaslat_l": (5.5e-3, 5e-3), "glmax1_r": (1e-3, 3.5e-3),
              "glmax1_l": (1e-3, 3.5e-3)}
     over = {m: (round(1e3 * el[i], 3), round(1e3 * ea[i], 3)) for i, m in enumerate(gp.muscles)

@@ -63,12 +63,17 @@ TOLERANCE = 1e-4
 MAX_ROTATION_SPAN = math.pi
 
 
-def muscle_hook(doc: OsimDocument, skeleton: Skeleton, *, ranges=None, max_muscles: int | None = None):
+def muscle_hook(doc: OsimDocument, skeleton: Skeleton, *, ranges=None, max_muscles: int | None = None,
+                motion=None):
     """``hook(doc, skeleton) -> HookResult``: the model's muscles as one MuscleSet (see the module docstring).
 
     ``ranges`` (``{coordinate: (lo, hi)}``, e.g. :func:`pinmsk.opensim.paths.motion_ranges` of a motion, as
     OpenSim's PolynomialPathFitter samples) replaces the sampling ranges of the coordinates it names; bind
     it with ``functools.partial(muscle_hook, ranges=...)`` to pass the hook to ``import_osim(hooks=...)``.
+    ``motion`` (a :class:`~pinmsk.trial.Trial` in OpenSim's coordinates, OpenSim's state-path labels
+    too) gives those ranges: each coordinate it holds (not locked, not a coupler's dependent, which the
+    coupling sets) over its frames widened by 10 degrees (:func:`~pinmsk.opensim.paths.motion_ranges`),
+    within the coordinate's own fit range; ``import_osim(path, fit_over=trial)`` binds it.
 
     ``max_muscles`` (default :data:`MAX_MUSCLES` for the default hook, None = no limit when called
     directly): a model with more muscles is not fitted (its muscles stay "not imported", with one
@@ -118,6 +123,10 @@ def muscle_hook(doc: OsimDocument, skeleton: Skeleton, *, ranges=None, max_muscl
     geometric = GeometricPaths(specs, coordinates=kin.coordinates,
                                placements=_Placements(kin, lock_cols, coupled_cols))
     given = dict(ranges or {})
+    motion_entry = []
+    if motion is not None:
+        from_motion, motion_entry = _motion_ranges(doc, skeleton, motion, locked, coupled)
+        given = {**from_motion, **given}
     unknown = sorted(set(given) - set(kin.coordinates))
     if unknown:
         raise ModelError(f"{doc.source}: muscle fit ranges name coordinate(s) {unknown} the model does not have")
@@ -128,7 +137,7 @@ def muscle_hook(doc: OsimDocument, skeleton: Skeleton, *, ranges=None, max_muscl
                                       tolerance=TOLERANCE, model_coordinates=model_coords)
     muscles = MuscleSet(names=names, model_type=imp.model_type, mtu=imp.mtu, path=path, tendon=imp.tendon)
 
-    entries = _fit_entries(doc, chosen, fits, ranges)
+    entries = motion_entry + _fit_entries(doc, chosen, fits, ranges)
     used = [c for c in couplers if c[0] in crossed]
     if used:
         entries.append(ReportEntry(
@@ -228,6 +237,27 @@ def _etree(source) -> ET.Element:
         return e
     with open(source, "rb") as fh:
         return convert(_parse_xml(fh.read(), str(source)))
+
+
+def _motion_ranges(doc, skeleton, motion, locked, coupled) -> tuple[dict, list]:
+    """The fit ranges a motion gives (:func:`muscle_hook`'s ``motion``) and a report entry on them."""
+    from ..io.channel_map import with_state_path_coordinates
+    from .paths import motion_ranges
+    names = [c.name for c in doc.coordinates]
+    trial = with_state_path_coordinates(motion, names)
+    use = [c for c in names if c in trial and c not in locked and c not in coupled]
+    src = trial.meta.get("source", "the motion")
+    if not use:
+        raise ModelError(f"{doc.source}: the motion to fit the muscle paths over ({src}) has none of the model's "
+                         f"coordinates ({', '.join(names[:8])}{', ...' if len(names) > 8 else ''})")
+    trial.check_finite(use, what="(the motion the muscle paths are fitted over)")
+    out = motion_ranges(trial.get(use), use, limits=_fit_ranges(doc, skeleton))
+    rest = [c for c in names if c not in use and c not in locked and c not in coupled]
+    became = (f"muscle paths fitted over the motion {src} ({trial.n_frames} frames): the ranges of its "
+              f"{len(use)} coordinates widened by 10 degrees, as OpenSim's PolynomialPathFitter samples")
+    if rest:
+        became += f"; {', '.join(rest)} (not in the motion) over their own ranges"
+    return out, [ReportEntry(element=f"{doc.source}: <ForceSet> muscle paths", status=NOTE, became=became)]
 
 
 def _fit_ranges(doc, skeleton) -> dict[str, tuple[float, float]]:

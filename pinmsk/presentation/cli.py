@@ -155,7 +155,12 @@ def cmd_info(args) -> int:
 def cmd_import(args) -> int:
     from ..model import import_osim
     from ..opensim.importer import write_import
-    model, report = import_osim(args.model, nonlinear=args.nonlinear or "exact")     # the report is printed
+    fit_over = None
+    if args.fit_over:       # read here, so a file's problem is named with the CLI's own strictness
+        from ..io.tables import read_trial
+        fit_over = read_trial(args.fit_over, strict=not args.lenient)
+    # the report is printed
+    model, report = import_osim(args.model, nonlinear=args.nonlinear or "exact", fit_over=fit_over)
     files = write_import(model, args.out, name=args.name)
     print(report.format(verbose=args.verbose))
     for what in ("urdf", "sidecar", "markers", "report"):
@@ -467,6 +472,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-o", "--out", required=True, metavar="DIR", help="folder for the files (created)")
     s.add_argument("--name", default=None, help="file stem (default: the .osim's)")
     s.add_argument("--verbose", action="store_true", help="also list what was imported exactly")
+    s.add_argument("--fit-over", metavar="TRIAL", default=None,
+                   help="fit the muscle paths' polynomials over this motion's coordinate ranges (+-10 degrees, as "
+                        "OpenSim's PolynomialPathFitter) instead of the coordinates' whole ranges: an IK .mot or a "
+                        "states/coordinates .sto")
+    s.add_argument("--lenient", action="store_true",
+                   help="read a --fit-over file whose header row/column counts disagree with the data")
     _nonlinear_flag(s)
     s.set_defaults(func=cmd_import)
 
