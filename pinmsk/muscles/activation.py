@@ -206,7 +206,6 @@ def _held_steps(a0, um, e_rise, e_fall, max_rounds: int = 40):
     disagreement.  Wide problems (many parameter sets, where a numpy call per
     step costs little beside the data it moves) go step by step from the start.
     """
-    n = um.shape[0]
     if int(np.prod(um.shape[1:])) > _SCAN_WIDTH:
         return _steps(a0, um, e_rise, e_fall, 0, np.empty(um.shape))
     rise = np.empty(um.shape, dtype=bool)

@@ -678,7 +678,11 @@ class Collocation(Fitter):
     def _guess_torques(self, guess):
         """Inverse-dynamics torques (nv, n_points) of the guess's motion (for scaling)."""
         from ...skeleton import rnea
-        return rnea(self.model, guess["q"].T, guess["v"].T, guess["qdd"].T).T
+        # frame by frame on the model's own skeleton (a bare pin.Model: not the batched RNEA on the skeleton
+        # with its massless chains folded, which agrees to rounding): the constraint scaling takes these
+        # numbers to the last bit, and IPOPT's path over thousands of iterations follows it (the folded
+        # skeleton's rounding alone sent the default predictive gait to its iteration limit)
+        return rnea(self.model.pin, guess["q"].T, guess["v"].T, guess["qdd"].T).T
 
     def _delayed_signal(self, S, P, period):
         """The signal through each muscle's electromechanical delay at the points (FF only)."""
