@@ -138,13 +138,17 @@ def compact_skeleton(pm: pin.Model) -> pin.Model:
     An OpenSim CustomJoint or a planar pelvis is a chain of one-dof joints with massless bodies between
     them (Rajagopal: 47 joints, 28 of them carrying nothing but the next joint).  RNEA costs about the
     same per joint whatever its body, so a composite of a chain (one body, one spatial-force pass, its
-    sub-joints' motion composed inside) does the same work in fewer steps: Rajagopal's 47 joints become
-    18, its RNEA ~15 % faster.  A joint joins its parent's composite when the parent's body is massless
-    (mass, lever and rotational inertia all zero) and the joint is the parent's only child: nothing then
-    acts on, or hangs from, the intermediate frame; and it follows its parent in the joint order, so the
-    chain's joints are consecutive in ``q`` and ``v``, and a composite's configuration and velocity are its sub-joints' in order, so ``q``, ``v``,
-    ``a`` and ``tau`` keep their layout; armature is copied.  The result agrees with RNEA on ``pm`` to
-    rounding (tests/test_skeleton.py).  Returns ``pm`` itself when there is no chain to fold.
+    sub-joints' motion composed inside) does the same work in fewer steps; sliders along x, y, z with
+    nothing between them become one ``JointModelTranslation`` inside it.  Rajagopal's 47 joints become
+    18, its RNEA ~20 % faster.
+
+    A joint joins its parent's composite when the parent's body is massless (mass, lever and rotational
+    inertia all zero), the joint is the parent's only child (nothing acts on, or hangs from, the
+    intermediate frame) and it follows its parent in the joint order.  The chain's joints are then
+    consecutive in ``q`` and ``v``, and a composite's configuration and velocity are its sub-joints' in
+    order, so ``q``, ``v``, ``a`` and ``tau`` keep their layout (checked); armature and what is welded to
+    the world are copied.  The result agrees with RNEA on ``pm`` to rounding (tests/test_skeleton.py).
+    Returns ``pm`` itself when there is no chain to fold.
     """
     n = pm.njoints
     children = [[] for _ in range(n)]
@@ -317,12 +321,12 @@ class _ChainJoint:
     wrench is a column ``x = [f; m]`` (force, moment about the frame's origin) in the joint's placement
     frame; ``S`` is the joint's motion subspace, so ``S . x`` is the joint's generalized force (the
     axial moment of a revolute joint, which its rotation leaves as it is; the axial force of a
-    prismatic one): row ``S_row`` of ``x`` times ``S_sign`` for an axis along +-x, y or z.  The parent's ``x`` is carried
-    through the parent's own motion (``parent_axis``, ``parent_iq`` the column of its angle or displacement; revolute:
-    Rodrigues' rotation by ``-q`` of both halves, prismatic: the moment about the moved origin
-    ``m - q a x f``) and then this joint's placement ``X`` (None: the identity, which a chain of an
-    OpenSim CustomJoint's axes mostly has).  ``pick`` selects this joint's loads among its parent's
-    (None: all of them)."""
+    prismatic one): row ``S_row`` of ``x`` times ``S_sign`` for an axis along +-x, y or z.  The
+    parent's ``x`` is carried through the parent's own motion (``parent_axis``, ``parent_iq`` the column
+    of its angle or displacement, ``parent_k``/``parent_sign`` its axis as ``+-e_k``; revolute: Rodrigues'
+    rotation by ``-q`` of both halves, prismatic: the moment about the moved origin ``m - q a x f``) and
+    then this joint's placement ``X`` (None: the identity, which a chain of an OpenSim CustomJoint's axes
+    mostly has).  ``pick`` selects this joint's loads among its parent's (None: all of them)."""
 
     parent: int
     parent_revolute: bool

@@ -442,10 +442,10 @@ class FunctionBank:
     Any other function, or an argument a group's fast path does not cover (outside the knots' interior,
     not finite), goes through the function's own :meth:`Function.evaluate`.  The results agree with the
     separate evaluations to rounding (the power basis and the folded scale reorder the arithmetic: a
-    few 1e-16 relative).  Arrays are one row per function, ``(size, N)`` (the arithmetic runs along
-    contiguous rows of frames: on ``(N, size)`` arrays numpy's inner loops would be ``size`` long).  :meth:`slope` keeps the last
-    argument's slopes: the moments mapped back (``J^T tau``) need the slopes the motion's mapping
-    computed at the same angles.
+    few 1e-16 relative).  The argument is ``(N,)``; the results have one row per function, ``(size, N)``
+    (the arithmetic runs along contiguous rows of frames: on ``(N, size)`` arrays numpy's inner loops
+    would be ``size`` long).  :meth:`slope` keeps the last argument's slopes: the moments mapped back
+    (``J^T tau``) need the slopes the motion's mapping computed at the same angles.
     """
 
     def __init__(self, functions):
@@ -485,6 +485,8 @@ class FunctionBank:
     def evaluate(self, x) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(F, dF/dx, d2F/dx2)``, each ``(size, N)``: row ``i`` is ``functions[i].evaluate(x)``."""
         x = np.asarray(x, dtype=float)
+        if x.ndim != 1:
+            raise ValueError(f"FunctionBank.evaluate takes one argument per frame, shape (N,); got {x.shape}")
         n = x.shape[0]
         F, D1, D2 = np.empty((self.size, n)), np.empty((self.size, n)), np.empty((self.size, n))
         rest = list(self._other)
