@@ -311,8 +311,14 @@ def motion(model, trial, *, cutoff=DEFAULT_CUTOFF, signals: Iterable[str] | None
     import, the coordinates the trial leaves out are filled as :func:`source_coordinate_gaps` says
     (``missing_coordinates``).  Analyses use :func:`prepare`, which adds the external loads.
     """
+    return _motion(model, trial, cutoff=cutoff, signals=signals, missing_coordinates=missing_coordinates)[0]
+
+
+def _motion(model, trial, *, cutoff, signals=None, missing_coordinates="refuse") -> tuple[Motion, tuple[str, ...]]:
+    """:func:`motion` and the notes on the OpenSim coordinates it filled or replaced (for :func:`prepare`)."""
     cmap = coordinate_map(model)
     check_coordinate_columns(model, trial)
+    notes: tuple[str, ...] = ()
     if cmap is None:
         trial.require(model.coordinates)
         q, v, a = trial.kinematics(model.coordinates, cutoff=cutoff_value(cutoff))
@@ -321,10 +327,11 @@ def motion(model, trial, *, cutoff=DEFAULT_CUTOFF, signals: Iterable[str] | None
         # dependent joints (an exact OpenSim import): the trial holds OpenSim's coordinates, which are
         # filtered and differentiated, then mapped: q_pin = f(q), v_pin = J v, a_pin = J a + dJ v
         measured = cmap.osim_coordinates
-        fill, _ = source_coordinate_gaps(model, trial, missing_coordinates=missing_coordinates)
+        fill, notes = source_coordinate_gaps(model, trial, missing_coordinates=missing_coordinates)
         source = trial.with_channels({c: np.full(trial.n_frames, x) for c, x in fill.items()}) if fill else trial
         q_os, v_os, a_os = source.kinematics(measured, cutoff=cutoff_value(cutoff))
         q, v, a, q_os = cmap.expand(q_os, v_os, a_os, with_source=True)
+        notes = _coupler_notes(cmap, trial, q_os) + notes
     names = [n for n in trial.names if n not in measured] if signals is None else list(signals)
     sig = {n: trial[n] for n in names}
     if cmap is not None:
@@ -332,7 +339,21 @@ def motion(model, trial, *, cutoff=DEFAULT_CUTOFF, signals: Iterable[str] | None
         # (filtered) signals, with the couplers applied (the angles the joints were mapped at), so
         # moments map back at the same coordinates (source_coordinates)
         sig.update({c: q_os[:, i] for i, c in enumerate(measured) if c not in model.coordinates})
-    return Motion(np.asarray(trial.time, dtype=float), q, v, a, sig)
+    return Motion(np.asarray(trial.time, dtype=float), q, v, a, sig), notes
+
+
+def _coupler_notes(cmap, trial, q_os: np.ndarray) -> tuple[str, ...]:
+    """A note for each coupled coordinate whose values in the trial the coupler replaced (by > 1e-6);
+    ``q_os`` the OpenSim coordinates as mapped."""
+    out = []
+    for dep, indep, _, _ in cmap.couplers:
+        if dep in trial:
+            mapped = q_os[:, cmap.osim_coordinates.index(dep)]
+            dev = float(np.max(np.abs(np.asarray(trial[dep], dtype=float) - mapped), initial=0.0))
+            if dev > 1e-6:
+                out.append(f"{dep}: the trial's values replaced by its CoordinateCouplerConstraint's on "
+                           f"{', '.join(indep)} (they differed by up to {dev:.3g})")
+    return tuple(out)
 
 
 def coordinate_map(model):
@@ -472,21 +493,6 @@ def as_motion(model, data, cutoff=DEFAULT_CUTOFF) -> Motion:
     return mo
 
 
-def _coupler_notes(model, trial, mo: Motion) -> tuple[str, ...]:
-    """A note for each coupled coordinate whose values in the trial the coupler replaced (by > 1e-6)."""
-    cmap = coordinate_map(model)
-    if cmap is None:
-        return ()
-    out = []
-    for dep, indep, _, _ in cmap.couplers:
-        if dep in trial and dep in mo.signals:
-            dev = float(np.max(np.abs(np.asarray(trial[dep], dtype=float) - mo.signals[dep]), initial=0.0))
-            if dev > 1e-6:
-                out.append(f"{dep}: the trial's values replaced by its CoordinateCouplerConstraint's on "
-                           f"{', '.join(indep)} (they differed by up to {dev:.3g})")
-    return tuple(out)
-
-
 def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | None = None,
             external_loads=None, frames=None, ground_reaction: str = "auto",
             grf_cutoff="same", missing_coordinates: str = "refuse") -> TrialInputs:
@@ -529,9 +535,7 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
         return TrialInputs(trial, (), (), Filtering(None), ("a Motion was given: no filter applied",))
     if not isinstance(trial, Trial):
         raise TrialError(f"expected a Trial or a Motion, got {type(trial).__name__}")
-    mo = motion(model, trial, cutoff=c, missing_coordinates=missing_coordinates)
-    gap_notes = _coupler_notes(model, trial, mo) + source_coordinate_gaps(
-        model, trial, missing_coordinates=missing_coordinates)[1]
+    mo, gap_notes = _motion(model, trial, cutoff=c, missing_coordinates=missing_coordinates)
     if external_loads is not None and not hasattr(external_loads, "loads"):
         external_loads = read_external_loads(external_loads)
     own = has_ground_reaction(trial)

@@ -165,6 +165,30 @@ def _rajagopal():
     return p
 
 
+def _rajagopal_walk(tmp_path):
+    """RajagopalWalk's model path, the Moco walk's folder, the skeleton import, its coordinate map and
+    ``grf_walk.xml`` copied into ``tmp_path`` (its datafile is named relative to the model's folder)."""
+    model_path = _rajagopal()
+    walk = shared_data_dir() / "real" / "opensim-moco-walk-emg"
+    if not (walk / "coordinates.sto").is_file():
+        pytest.skip("../shared/data/real/opensim-moco-walk-emg is absent")
+    model, _ = import_osim(model_path, nonlinear="exact", hooks=())
+    loads = tmp_path / "grf_walk.xml"
+    loads.write_text((model_path.parent / "grf_walk.xml").read_text().replace(
+        "<datafile>grf_walk.mot</datafile>", f"<datafile>{walk / 'grf_walk.mot'}</datafile>"))
+    return model_path, walk, model, coordinate_map(model), loads
+
+
+def _filled_by_hand(cmap, time, channels):
+    """A Trial of every OpenSim coordinate, filled as OpenSim's ID tool fills a file that lacks some (their
+    defaults), the coupled ones set by their couplers."""
+    ch = dict(channels)
+    ch.update({c: np.full(len(time), cmap.defaults[c]) for c in cmap.osim_coordinates if c not in ch})
+    for dep, indep, f, scale in cmap.couplers:
+        ch[dep] = scale * f.value(ch[indep[0]])
+    return Trial(time, {c: ch[c] for c in cmap.osim_coordinates})
+
+
 def _simbody_hdot_term(model, path, q, v):
     """The acceleration term Simbody's FunctionBased mobilizer (OpenSim's CustomJoint) adds to the exact
     one (:func:`pinmsk.opensim.skeleton.simbody_rotation_term`: Rajagopal's walker knee), as extra
@@ -282,18 +306,10 @@ def test_id_of_rajagopal_reads_mocos_own_coordinates_file(tmp_path):
     test_id_of_rajagopal_against_opensims_inverse_dynamics_tool compares with OpenSim's tool."""
     import warnings
     from pinmsk.io.channel_map import read_mapped
-    model_path = _rajagopal()
-    walk = shared_data_dir() / "real" / "opensim-moco-walk-emg"
-    if not (walk / "coordinates.sto").is_file():
-        pytest.skip("../shared/data/real/opensim-moco-walk-emg is absent")
-    model, _ = import_osim(model_path, nonlinear="exact", hooks=())
-    cmap = coordinate_map(model)
+    _, walk, model, cmap, loads = _rajagopal_walk(tmp_path)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", pinmsk_errors.RepairWarning)      # the nColumns header
         trial = read_mapped(walk / "coordinates.sto", model=model, strict=False)
-    loads = tmp_path / "grf_walk.xml"       # its datafile is named relative to the model's folder
-    loads.write_text((model_path.parent / "grf_walk.xml").read_text().replace(
-        "<datafile>grf_walk.mot</datafile>", f"<datafile>{walk / 'grf_walk.mot'}</datafile>"))
     with pytest.raises(pinmsk_errors.TrialError, match=r"'mtp_angle_r'.*'mtp_angle_l'.*--missing-coordinates default"):
         inverse_dynamics_result(model, trial, cutoff=0, grf_cutoff=0, external_loads=loads)
     res = inverse_dynamics_result(model, trial, cutoff=0, grf_cutoff=0, external_loads=loads,
@@ -303,11 +319,8 @@ def test_id_of_rajagopal_reads_mocos_own_coordinates_file(tmp_path):
         assert f"{c}: not in the trial; held at its default value 0" in notes
     for c in ("knee_angle_r_beta", "knee_angle_l_beta"):      # Moco wrote ~72 (rad) for them
         assert f"{c}: the trial's values replaced by its CoordinateCouplerConstraint's" in notes
-    ch = {c: np.asarray(trial[c]) for c in cmap.osim_coordinates if c in trial}
-    ch.update({c: np.full(trial.n_frames, cmap.defaults[c]) for c in cmap.osim_coordinates if c not in ch})
-    for dep, indep, f, scale in cmap.couplers:
-        ch[dep] = scale * f.value(ch[indep[0]])
-    by_hand = inverse_dynamics_result(model, Trial(trial.time, ch), cutoff=0, grf_cutoff=0, external_loads=loads)
+    hand = _filled_by_hand(cmap, trial.time, {c: np.asarray(trial[c]) for c in cmap.osim_coordinates if c in trial})
+    by_hand = inverse_dynamics_result(model, hand, cutoff=0, grf_cutoff=0, external_loads=loads)
     names = [n for n in by_hand.trial.names if n.endswith("_moment")]
     assert len(names) == len(cmap.osim_coordinates)
     np.testing.assert_allclose(res.trial.get(names), by_hand.trial.get(names), rtol=0, atol=1e-9)
@@ -324,20 +337,12 @@ def test_id_of_rajagopal_against_opensims_inverse_dynamics_tool(tmp_path):
     test_id_of_gait10dof18musc_matches_opensims_reference_with_the_same_filter."""
     from pinmsk.skeleton import rnea
     osim = _opensim()
-    model_path = _rajagopal()
-    walk = shared_data_dir() / "real" / "opensim-moco-walk-emg"
-    if not (walk / "coordinates.sto").is_file():
-        pytest.skip("../shared/data/real/opensim-moco-walk-emg is absent")
-    model, _ = import_osim(model_path, nonlinear="exact", hooks=())
-    cmap = coordinate_map(model)
+    model_path, walk, model, cmap, loads = _rajagopal_walk(tmp_path)
     raw = read_trial(walk / "coordinates.sto", strict=False)    # its nColumns header is off (40 for 32)
-    ch = {n.split("/")[-2]: np.asarray(raw[n]) for n in raw.names}    # /jointset/<joint>/<coord>/value
-    # the file lacks the locked mtp angles (OpenSim takes their defaults) and its patella angles
-    # (knee_angle_*_beta, coupled to the knee) are not the coupling's: both sides get the coupled values
-    ch.update({c: np.full(raw.n_frames, cmap.defaults[c]) for c in cmap.osim_coordinates if c not in ch})
-    for dep, indep, f, scale in cmap.couplers:
-        ch[dep] = scale * f.value(ch[indep[0]])
-    trial = Trial(raw.time, {c: ch[c] for c in cmap.osim_coordinates})
+    # /jointset/<joint>/<coord>/value; the file lacks the mtp angles (OpenSim takes their defaults) and its
+    # patella angles (knee_angle_*_beta, coupled to the knee) are not the coupling's: both sides get the
+    # coupled values
+    trial = _filled_by_hand(cmap, raw.time, {n.split("/")[-2]: np.asarray(raw[n]) for n in raw.names})
     names = list(cmap.osim_coordinates)
     X = np.column_stack([trial.time] + [trial[c] for c in names])
     coords = tmp_path / "coordinates.sto"
@@ -345,9 +350,6 @@ def test_id_of_rajagopal_against_opensims_inverse_dynamics_tool(tmp_path):
         fh.write(f"Coordinates\nversion=1\nnRows={X.shape[0]}\nnColumns={X.shape[1]}\ninDegrees=no\nendheader\n")
         fh.write("\t".join(["time"] + names) + "\n")
         np.savetxt(fh, X, delimiter="\t", fmt="%.12g")
-    xml = (model_path.parent / "grf_walk.xml").read_text()
-    loads = tmp_path / "grf_walk.xml"       # its datafile is named relative to the model's folder
-    loads.write_text(xml.replace("<datafile>grf_walk.mot</datafile>", f"<datafile>{walk / 'grf_walk.mot'}</datafile>"))
     om = osim.Model(str(model_path))
     om.initSystem()
     tool = osim.InverseDynamicsTool()

@@ -488,7 +488,7 @@ class CoordinateMap:
         self.welded = dict(welded)
         self._col = {c: i for i, c in enumerate(self.osim_coordinates)}
         # the one-argument dependent joints grouped by their argument, each group one FunctionBank: a knee's
-        # five to eight functions of its angle evaluated together (the same numbers as one by one)
+        # five to eight functions of its angle evaluated together (the numbers of one by one, to rounding)
         groups: dict[str, list[int]] = {}
         for j, name in enumerate(self.joints):
             d = self.dependent.get(name)
@@ -497,6 +497,7 @@ class CoordinateMap:
         self._banks = tuple((self._col[c], np.array(js), fns.FunctionBank(
             [self.dependent[self.joints[j]].function for j in js])) for c, js in groups.items())
         self._banked = frozenset(j for _, js, _ in self._banks for j in js)
+        self._all_banked = all(j in self._banked for j, n in enumerate(self.joints) if n in self.dependent)
         # the joints that are OpenSim coordinates, and their columns
         same = [(j, self._col[n]) for j, n in enumerate(self.joints) if n not in self.dependent]
         self._same_j = np.array([j for j, _ in same], dtype=np.intp)
@@ -678,7 +679,7 @@ class CoordinateMap:
     def generalized_forces(self, q, tau, *, couplers: bool = True) -> np.ndarray:
         """OpenSim coordinates' generalized forces (N, n_osim) from Pinocchio's ``tau`` (N, nq): J^T tau."""
         tau = np.atleast_2d(np.asarray(tau, dtype=float))
-        if couplers or any(j not in self._banked and n in self.dependent for j, n in enumerate(self.joints)):
+        if couplers or not self._all_banked:
             Q, rows = self._rows(q, couplers)
             out = np.zeros((Q.shape[0], Q.shape[1]))
             for jp, row in enumerate(rows):
