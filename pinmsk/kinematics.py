@@ -47,7 +47,8 @@ from .skeleton import ExternalForce, skeleton_constant, world_wrench
 from .trial import Trial, parse_ground_reaction
 
 __all__ = ["DEFAULT_CUTOFF", "FILTER_ORDER", "Filtering", "TrialInputs", "motion", "as_motion", "prepare",
-           "cutoff_value", "coordinate_map", "source_coordinates", "trial_coordinates", "actuated_forces",
+           "cutoff_value", "coordinate_map", "source_coordinates", "source_positions", "independent_coordinates",
+           "trial_coordinates", "actuated_forces",
            "require_independent_joints", "check_coordinate_columns",
            "is_planar", "has_ground_reaction", "lowpass_external"]
 
@@ -373,6 +374,15 @@ def source_coordinates(model, motion: Motion, tau: np.ndarray) -> tuple[tuple[st
     if cmap is None:
         idx = [model.coordinate_index(c) for c in model.coordinate_order]
         return model.coordinate_order, motion.q[:, idx], tau[:, idx]
+    q = source_positions(model, motion)
+    return cmap.osim_coordinates, q, cmap.generalized_forces(q, tau, couplers=False)
+
+
+def source_positions(model, motion: Motion) -> np.ndarray:
+    """OpenSim's coordinates ``(N, n_osim)`` (:attr:`CoordinateMap.osim_coordinates` order) of a motion of a model
+    with a coordinate map: the joints that are coordinates from ``q``, the others from the motion's signals
+    (:func:`motion` keeps them there, couplers applied) or their welded or default values."""
+    cmap = coordinate_map(model)
     # the coordinates that are joints in one gather; the others from the motion's signals or their values
     q = np.empty((motion.n_frames, len(cmap.osim_coordinates)))
     joints = [(i, model.coordinate_index(c)) for i, c in enumerate(cmap.osim_coordinates) if c in model.coordinates]
@@ -381,7 +391,21 @@ def source_coordinates(model, motion: Motion, tau: np.ndarray) -> tuple[tuple[st
     for i, c in enumerate(cmap.osim_coordinates):
         if c not in model.coordinates:
             q[:, i] = motion.signals[c] if c in motion.signals else cmap.welded.get(c, cmap.defaults[c])
-    return cmap.osim_coordinates, q, cmap.generalized_forces(q, tau, couplers=False)
+    return q
+
+
+def independent_coordinates(model) -> tuple[str, ...]:
+    """The coordinates whose generalized forces are the model's independent equations of motion: its own
+    coordinates, or, with a coordinate map (an exact OpenSim import), OpenSim's coordinates that are neither
+    welded nor set by an enforced CoordinateCouplerConstraint.  A coupled coordinate is no degree of freedom:
+    by virtual work its generalized force reaches its independent coordinates through the coupler's slope
+    (``J^T`` with the couplers applied, the equations static optimization balances), which is what an
+    actuator there (a dynamometer, the muscles) has to supply."""
+    cmap = coordinate_map(model)
+    if cmap is None:
+        return tuple(model.coordinates)
+    coupled = {dep for dep, *_ in cmap.couplers}
+    return tuple(c for c in cmap.osim_coordinates if c not in cmap.welded and c not in coupled)
 
 
 def trial_coordinates(model) -> tuple[str, ...]:

@@ -71,7 +71,8 @@ from ..effects._base import SignalEffect, unactuated_coordinates
 from ..effects.sensor import apply_sensors, sensors_of
 from ..errors import ModelError, TrialError
 from ..grf import external_forces
-from ..kinematics import DEFAULT_CUTOFF, TrialInputs, cutoff_value, prepare, require_independent_joints
+from ..kinematics import (DEFAULT_CUTOFF, TrialInputs, coordinate_map, cutoff_value, independent_coordinates,
+                          prepare, source_coordinate_gaps, source_positions)
 from ..signals.filtering import differentiate
 from ..skeleton import ExternalForce
 from ..trial import Trial, close_matches, moment_channel, moment_channels, parse_ground_reaction
@@ -120,6 +121,22 @@ def _subset_external(external, rows):
                           None if e.torque is None else np.asarray(e.torque)[rows]) for e in external]
 
 
+def _contacts_once(model, external) -> None:
+    """TrialError naming the contacts on bodies the measured ground reaction forces load (the ground
+    would act twice), with the flags that leave one of them out."""
+    if not (external and model.contacts):
+        return
+    pm = model.pin
+    loaded = {pm.frames[model.frame_id(e.frame)].parentJoint for e in external}
+    both = [c.label for c in model.contacts if pm.frames[model.frame_id(c.target)].parentJoint in loaded]
+    if both:
+        raise TrialError(
+            f"model '{model.name}' has contacts on the bodies the measured ground reaction forces load "
+            f"({', '.join(both)}): the ground would act twice; leave the contacts out "
+            f"({' '.join(f'--without {b}' for b in both)}; in Python model.without(label)) or the measured "
+            "GRF (--no-grf)")
+
+
 def _has_grf(trial) -> bool:
     return any(parse_ground_reaction(n) is not None for n in trial.names)
 
@@ -129,7 +146,11 @@ def _check_measured(model, trial) -> None:
     that are NaN, infinite or beyond :data:`MEASURED_LIMIT`, by channel, row and time.
 
     A centre of pressure may be NaN (undefined while its plate is unloaded), not infinite."""
-    names = [n for n in moment_channels(model.coordinates) if n in trial]
+    coords = list(model.coordinates)
+    cmap = coordinate_map(model)
+    if cmap is not None:
+        coords += [c for c in cmap.osim_coordinates if c not in model.coordinates]
+    names = [n for n in moment_channels(coords) if n in trial]
     names += [f"{m}_{kind}" for m in model.muscle_names for kind in ("excitation", "emg")
               if f"{m}_{kind}" in trial]
     grf = {n: parse_ground_reaction(n) for n in trial.names}
@@ -157,8 +178,16 @@ def _excitations(model, trial):
 
 
 def _muscle_coordinates(model) -> list[str]:
-    R = model.muscles.moment_arms(np.zeros((1, model.nq)))[0]
-    return [c for j, c in enumerate(model.coordinates) if np.any(np.abs(R[:, j]) > 0)]
+    """The coordinates some muscle spans (a nonzero moment arm at the zero pose; at OpenSim's default
+    pose, mapped to its coordinates by ``J^T``, on an exact import)."""
+    cmap = coordinate_map(model)
+    if cmap is None:
+        R = model.muscles.moment_arms(np.zeros((1, model.nq)))[0]
+        return [c for j, c in enumerate(model.coordinates) if np.any(np.abs(R[:, j]) > 0)]
+    q_os = np.array([[cmap.welded.get(c, cmap.defaults[c]) for c in cmap.osim_coordinates]])
+    J = cmap.jacobian(q_os, couplers=True)[0]                       # (nv, n_osim)
+    R = model.muscles.moment_arms(cmap.expand(q_os)[0])[0] @ J     # (m, n_osim)
+    return [c for j, c in enumerate(cmap.osim_coordinates) if np.any(np.abs(R[:, j]) > 0)]
 
 
 # -- channel selection -------------------------------------------------------------
@@ -171,8 +200,15 @@ class _Plan:
     excitation_kind: str | None
 
 
-def comparison_plan(model, trial, mode: str, *, has_grf: bool | None = None) -> _Plan:
-    """Which level compares ``model`` with ``trial`` and on which coordinates (no dynamics computed)."""
+def comparison_plan(model, trial, mode: str, *, has_grf: bool | None = None,
+                    missing_coordinates: str = "refuse") -> _Plan:
+    """Which level compares ``model`` with ``trial`` and on which coordinates (no dynamics computed).
+
+    The coordinates are the model's independent ones
+    (:func:`pinmsk.kinematics.independent_coordinates`): on an exact OpenSim import OpenSim's coordinates,
+    never a dependent joint nor the dependent coordinate of a coupler; the OpenSim coordinates the trial
+    leaves out are refused by name or, with ``missing_coordinates="default"``, held at their defaults
+    (:func:`pinmsk.kinematics.source_coordinate_gaps`)."""
     if mode not in ("auto",) + MODES:
         raise ModelError(f"unknown comparison mode {mode!r}; use one of auto, {', '.join(MODES)}")
     if mode == "contact" or (mode == "auto" and _contact.applicable(model, trial)):
@@ -180,13 +216,17 @@ def comparison_plan(model, trial, mode: str, *, has_grf: bool | None = None) -> 
         if why:
             raise TrialError(f"contact-level comparison impossible: {why}")
         return _Plan("contact", (), (), None)        # no coordinate is compared: joint effects do not apply
-    unact = unactuated_coordinates(model)
+    cmap = coordinate_map(model)
+    coordinates = independent_coordinates(model)
+    unact = tuple(c for c in unactuated_coordinates(model) if c in coordinates)
     grf = _has_grf(trial) if has_grf is None else has_grf
-    with_moment = [c for c in model.coordinates if moment_channel(c) in trial]
+    with_moment = [c for c in coordinates if moment_channel(c) in trial]
     actuated_moment = [c for c in with_moment if c not in unact]
     base_rows = [c for c in unact if grf or c in with_moment]
     kind, _ = _excitations(model, trial)
-    missing_coords = [c for c in model.coordinates if c not in trial]
+    if cmap is not None:
+        source_coordinate_gaps(model, trial, missing_coordinates=missing_coordinates)   # refuses a gap by name
+    missing_coords = [] if cmap is not None else [c for c in model.coordinates if c not in trial]
     if missing_coords:
         hints = {c: close_matches(c, trial.names) for c in missing_coords[:3]}
         hint = "; ".join(f"{c}: did you mean {', '.join(map(repr, h))}?" for c, h in hints.items() if h)
@@ -203,17 +243,17 @@ def comparison_plan(model, trial, mode: str, *, has_grf: bool | None = None) -> 
         else:
             raise TrialError(
                 f"the trial has no channel model '{model.name}' can be compared on: it needs "
-                f"measured generalized forces ({', '.join(f'{c}_moment' for c in model.coordinates[:4])}...), "
+                f"measured generalized forces ({', '.join(f'{c}_moment' for c in coordinates[:4])}...), "
                 "ground reaction forces (ground_force_v[xyz], ground_force_p[xyz]) for a floating base, "
                 "or muscle excitations/EMG (<muscle>_excitation, <muscle>_emg)"
                 + ("" if model.muscles is None else f" for {', '.join(model.muscle_names[:4])}...")
             )
     if mode == "torque":
-        coords = tuple(c for c in model.coordinates if c in actuated_moment or c in base_rows)
+        coords = tuple(c for c in coordinates if c in actuated_moment or c in base_rows)
         if not coords:
             raise TrialError(
                 f"torque-level comparison needs <coord>_moment channels (none of "
-                f"{', '.join(f'{c}_moment' for c in model.coordinates[:6])} is in the trial) or, for "
+                f"{', '.join(f'{c}_moment' for c in coordinates[:6])} is in the trial) or, for "
                 "a floating base, ground reaction force channels"
             )
     elif mode == "muscle":
@@ -225,8 +265,16 @@ def comparison_plan(model, trial, mode: str, *, has_grf: bool | None = None) -> 
                 + ", ".join(f"{m}_excitation" for m in model.muscle_names[:4]) + ", ..."
             )
         mc = _muscle_coordinates(model)
-        coords = tuple(c for c in model.coordinates if c in mc or c in base_rows)
+        coords = tuple(c for c in coordinates if c in mc or c in base_rows)
     else:  # motion
+        if cmap is not None:
+            deps = list(cmap.dependent)
+            raise ModelError(
+                f"motion-level comparison integrates the Pinocchio joints of model '{model.name}' forward, but "
+                f"{len(deps)} of them ({', '.join(deps[:4])}{' ...' if len(deps) > 4 else ''}) are dependent "
+                "joints, functions of OpenSim's coordinates (an exact import), which a forward simulation "
+                "cannot hold; use mode='torque' or 'muscle' (no simulation, in OpenSim's coordinates), or "
+                "load the .osim with nonlinear='fit' (--nonlinear fit)")
         if unact:
             raise TrialError(
                 f"motion-level comparison simulates the model open loop; '{model.name}' has a floating "
@@ -243,25 +291,41 @@ def comparison_plan(model, trial, mode: str, *, has_grf: bool | None = None) -> 
 # -- the equation error (what effects are fitted to) ---------------------------------------
 
 class EquationError:
-    """Torque-level (or muscle-level) residual ``e`` over the analysed frames, and how effects change it."""
+    """Torque-level (or muscle-level) residual ``e`` over the analysed frames, and how effects change it.
+
+    ``coordinates`` are the compared coordinates (C); ``measured_tau`` (N, C) their measured generalized
+    forces (torque mode; zeros on unactuated rows).  Every generalized force of the model's joints (inverse
+    dynamics, an effect's ``Q``, the muscles' moment arms) reaches them through :meth:`project`: a column
+    selection, or, on a model with a coordinate map (an exact OpenSim import, whose dependent joints are
+    functions of OpenSim's coordinates), ``J^T Q`` by virtual work with ``J = d q_joints / d q_osim`` at each
+    frame, the couplers applied (:func:`pinmsk.kinematics.independent_coordinates`).
+    ``kinematic_channels`` are the measured coordinates whose noise :meth:`perturbed_motion` propagates
+    (default: the model's coordinates).
+    """
 
     def __init__(self, *, model, motion: Motion, rows: np.ndarray, coordinates: Sequence[str],
-                 mode: str, measured_tau: np.ndarray | None, external, excitation: np.ndarray | None):
+                 mode: str, measured_tau: np.ndarray | None, external, excitation: np.ndarray | None,
+                 kinematic_channels: Sequence[str] | None = None):
         self.model = model
         self.motion = motion
         self.rows = rows
         self.motion_rows = motion.subset(rows)
         self.coordinates = tuple(coordinates)
-        self.columns = np.array([model.coordinate_index(c) for c in coordinates], dtype=int)
+        # each compared coordinate's joint column (-1: no joint of the model, e.g. a coupled coordinate)
+        self.columns = np.array([model.coordinate_index(c) if c in model.coordinates else -1
+                                 for c in coordinates], dtype=int)
+        self.kinematic_channels = tuple(model.coordinates if kinematic_channels is None else kinematic_channels)
         self.mode = "muscle" if mode == "muscle" else "torque"
         self.external = list(external)
-        self.measured_tau = measured_tau          # (N, nv) with zeros on unactuated rows (torque mode)
+        self.measured_tau = measured_tau          # (N, C) with zeros on unactuated rows (torque mode)
         self.excitation = excitation              # (N, m) measured signals (muscle mode)
         self._ext_rows = _subset_external(self.external, rows)
+        self._init_projection()
         self.data = model.create_data()           # the candidates' kinematics, shared (one thread)
-        tau_id = inverse_dynamics_array(model, self.motion_rows, external=self._ext_rows, data=self.data)
+        tau_id = inverse_dynamics_array(model, self.motion_rows, external=self._ext_rows, data=self.data,
+                                        actuated=False)
         # the actuators' generalized forces, and (torque level) what the model's sensors read of them
-        self.tau_act = tau_id[:, self.columns]
+        self.tau_act = self.project(tau_id)
         self.sensors = sensors_of(model) if self.mode == "torque" else []
         self.tau_id = apply_sensors(model, self.coordinates, self.tau_act) if self.sensors else self.tau_act
         if self.mode == "muscle":
@@ -269,13 +333,107 @@ class EquationError:
                                 key=lambda c: c.order)
             q, v = motion.q, motion.v
             self.f_active, self.f_passive = model.muscles.force_limits(q, v)
-            self.moment_arms = model.muscles.moment_arms(q)[:, :, self.columns]     # (N, m, C)
+            self.moment_arms = self.project_arms(model.muscles.moment_arms(q))     # (N, m, C)
             self.activation = self._apply_chain(self.chain, excitation)
             self.tau_mus = self._muscle_moment(self.activation)[rows]
             self.actuation = self.tau_mus
         else:
-            self.actuation = measured_tau[rows][:, self.columns]
+            self.actuation = np.asarray(measured_tau, dtype=float)[rows]
         self.e = self.actuation - self.tau_id
+
+    # -- the joints' generalized forces -> the compared coordinates' ----
+    def _init_projection(self) -> None:
+        """The sparse ``J`` of the compared coordinates: the (joint, coordinate) pairs ``J`` couples
+        anywhere in the trial (``_jn``, ``_cn``), their coefficients per frame and a scatter matrix."""
+        self._cmap = coordinate_map(self.model)
+        if self._cmap is None:
+            return
+        self._osim_cols = np.array([self._cmap.osim_coordinates.index(c) for c in self.coordinates], dtype=int)
+        J = self._jacobian(self.motion)                                  # (N, nv, C)
+        self._jn, self._cn = np.nonzero(np.any(J != 0.0, axis=0))
+        self._scatter = np.zeros((self._jn.size, len(self.coordinates)))
+        self._scatter[np.arange(self._jn.size), self._cn] = 1.0
+        self._coef_all = J[:, self._jn, self._cn]                        # (N, K)
+        self._coef = self._coef_all[self.rows]
+
+    def _jacobian(self, motion: Motion) -> np.ndarray:
+        """``d q_joints / d q_compared`` (n, nv, C) along ``motion`` (the couplers applied)."""
+        q = source_positions(self.model, motion)
+        return self._cmap.jacobian(q, couplers=True)[:, :, self._osim_cols]
+
+    def coefficients(self, motion: Motion) -> np.ndarray | None:
+        """The projection's coefficients (n, K) along another motion (None without a coordinate map)."""
+        if self._cmap is None:
+            return None
+        return self._jacobian(motion)[:, self._jn, self._cn]
+
+    def project(self, Q: np.ndarray, which=None, *, coef: np.ndarray | None = None) -> np.ndarray:
+        """Generalized forces ``Q`` (..., n, nv) of the model's joints as the compared coordinates'
+        (..., n, C), or those at positions ``which`` of :attr:`coordinates`: ``Q[..., columns]``, or with a
+        coordinate map ``J^T Q`` (virtual work; ``coef`` the coefficients of the ``n`` frames, default
+        the analysed rows)."""
+        Q = np.asarray(Q, dtype=float)
+        if self._cmap is None:
+            return Q[..., self.columns if which is None else self.columns[which]]
+        out = (Q[..., self._jn] * (self._coef if coef is None else coef)) @ self._scatter
+        return out if which is None else out[..., which]
+
+    def project_arms(self, R: np.ndarray, *, coef: np.ndarray | None = None) -> np.ndarray:
+        """Moment arms ``R`` (N, m, nv) over all frames of the motion (or those ``coef`` belongs to) as the
+        compared coordinates' (N, m, C): the muscles' generalized forces per unit force, by :meth:`project`."""
+        R = np.asarray(R, dtype=float)
+        if self._cmap is None:
+            return R[:, :, self.columns]
+        c = self._coef_all if coef is None else coef
+        return (R[:, :, self._jn] * c[:, None, :]) @ self._scatter
+
+    def project_jacobian(self, J: np.ndarray, which=None) -> np.ndarray:
+        """Parameter Jacobians ``dQ/dtheta`` (n, nv, p) on the analysed rows as (n, C, p) (:meth:`project`)."""
+        return np.moveaxis(self.project(np.moveaxis(np.asarray(J, dtype=float), -1, 0), which), 0, -1)
+
+    # -- kinematic noise through the measurement's path ----
+    def perturbed_motion(self, dq: np.ndarray, dv: np.ndarray, da: np.ndarray) -> Motion:
+        """The motion (all frames) when the measured coordinates :attr:`kinematic_channels` change by
+        ``dq`` (N, k), their filtered derivatives by ``dv``, ``da``: added to the joints, or, with a
+        coordinate map, to OpenSim's coordinates, which are mapped again (the dependent joints and the
+        couplers follow, as in :func:`pinmsk.kinematics.motion`)."""
+        m = self.motion
+        if self._cmap is None:
+            if self.kinematic_channels == tuple(self.model.coordinates):
+                return Motion(m.t, m.q + dq, m.v + dv, m.a + da, m.signals)
+            idx = [self.model.coordinate_index(c) for c in self.kinematic_channels]
+            q, v, a = m.q.copy(), m.v.copy(), m.a.copy()
+            q[:, idx] += dq
+            v[:, idx] += dv
+            a[:, idx] += da
+            return Motion(m.t, q, v, a, m.signals)
+        cmap = self._cmap
+        Q, V, A = (x.copy() for x in self._source_kinematics())
+        cols = [cmap.osim_coordinates.index(c) for c in self.kinematic_channels]
+        Q[:, cols] += dq
+        V[:, cols] += dv
+        A[:, cols] += da
+        q, v, a, Qm = cmap.expand(Q, V, A, with_source=True)
+        sig = dict(m.signals)
+        sig.update({c: Qm[:, i] for i, c in enumerate(cmap.osim_coordinates) if c not in self.model.coordinates})
+        return Motion(m.t, q, v, a, sig)
+
+    def _source_kinematics(self):
+        """OpenSim's coordinates, speeds and accelerations (N, n_osim) of the motion: the joints' columns, and
+        for a coordinate that is no joint the spline derivatives of its (filtered) values, as its first
+        differentiation gave them (a coupler's dependent coordinate is set again by the coupler)."""
+        if getattr(self, "_source_qva", None) is None:
+            m, cmap = self.motion, self._cmap
+            Q = source_positions(self.model, m)
+            V, A = np.zeros_like(Q), np.zeros_like(Q)
+            for i, c in enumerate(cmap.osim_coordinates):
+                if c in self.model.coordinates:
+                    k = self.model.coordinate_index(c)
+                    V[:, i], A[:, i] = m.v[:, k], m.a[:, k]
+                elif c in m.signals:
+                    _, V[:, i], A[:, i] = differentiate(m.t, Q[:, i])
+            self._source_qva = (Q, V, A)
+        return self._source_qva
 
     def sensor_input(self, component) -> np.ndarray:
         """What the measurement effect ``component`` reads on its channel (n_rows,): the actuator's
@@ -357,12 +515,15 @@ class EquationError:
         """``e`` for another motion (same frames) and, optionally, other external loads."""
         mrows = motion.subset(self.rows)
         ext = self._ext_rows if external is None else _subset_external(external, self.rows)
-        tau_id = inverse_dynamics_array(self.model, mrows, external=ext)[:, self.columns]
+        same = motion is self.motion
+        coef_all = None if same else self.coefficients(motion)
+        coef = None if coef_all is None else coef_all[self.rows]
+        tau_id = self.project(inverse_dynamics_array(self.model, mrows, external=ext, actuated=False), coef=coef)
         if self.mode == "muscle":
-            if motion is self.motion:
+            if same:
                 return self.tau_mus - tau_id
             fa, fp = self.model.muscles.force_limits(motion.q, motion.v)
-            R = self.model.muscles.moment_arms(motion.q)[:, :, self.columns]
+            R = self.project_arms(self.model.muscles.moment_arms(motion.q), coef=coef_all)
             act = np.einsum("nm,nmc->nc", self.activation * fa + fp, R)[self.rows]
             return act - tau_id
         if self.sensors:
@@ -376,22 +537,29 @@ class EquationError:
 def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = DEFAULT_CUTOFF,
             grf_frames: Mapping[str, str] | None = None, grf=None, external_loads=None,
             grf_cutoff="same", sim_window: float = 0.5, noise_floor: NoiseFloor | None = None,
-            _inputs: TrialInputs | None = None, _fits: dict | None = None) -> Comparison:
+            missing_coordinates: str = "refuse", _inputs: TrialInputs | None = None,
+            _fits: dict | None = None) -> Comparison:
     """Compare ``model`` with ``trial`` (see the module docstring for the modes and the noise floor).
 
     Kinematics and ground reaction forces (the trial's own, ``grf=`` at its own
     rate or an OpenSim ``external_loads=`` file; ``grf_frames`` overrides which
     body takes a plate) go through :func:`pinmsk.kinematics.prepare`, so the GRF
     is low-passed at the same ``cutoff`` as the kinematics.
+
+    On an exact OpenSim import (dependent joints, :func:`pinmsk.kinematics.coordinate_map`) the torque and
+    muscle levels compare OpenSim's independent coordinates: the trial's coordinates are mapped to the
+    joints as for inverse dynamics, and every generalized force of the joints is mapped back by
+    ``J^T`` (:meth:`EquationError.project`); a coordinate the trial leaves out is refused, or held at its
+    default with ``missing_coordinates="default"``.  The motion level, a forward simulation of the joints,
+    is refused on such a model.
     """
     if not isinstance(trial, Trial):
         raise TrialError(f"compare needs a Trial, got {type(trial).__name__}; read one with pinmsk.read_trial")
-    # the candidate effects' generalized forces and the motion-level simulation are in the Pinocchio joints
-    require_independent_joints(model, "the diagnosis")
     cutoff = cutoff_value(cutoff)              # 0 and None: no filter
     _check_measured(model, trial)
     external_given = grf is not None or external_loads is not None
-    plan = comparison_plan(model, trial, mode, has_grf=_has_grf(trial) or external_given)
+    plan = comparison_plan(model, trial, mode, has_grf=_has_grf(trial) or external_given,
+                           missing_coordinates=missing_coordinates)
     if plan.mode == "contact":
         return compare_contact(model, trial, cutoff=cutoff, noise_floor=noise_floor,
                                options={"grf_frames": grf_frames, "sim_window": sim_window})
@@ -401,7 +569,7 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
                          "(and several seconds for cross-validation)")
     inputs = _inputs if _inputs is not None else prepare(
         model, trial, cutoff=cutoff, grf=grf, external_loads=external_loads, frames=grf_frames,
-        grf_cutoff=grf_cutoff)
+        grf_cutoff=grf_cutoff, missing_coordinates=missing_coordinates)
     motion = inputs.motion
     rows = _rows_for(t, cutoff)
     if rows.size < 30:
@@ -409,22 +577,25 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
         raise TrialError(f"only {rows.size} samples remain after leaving out {edge} at each end; "
                          "the diagnosis needs at least 30: record a longer trial")
     external = list(inputs.external)
+    _contacts_once(model, external)
     measured_tau = None
     excitation = None
-    if plan.mode in ("torque", "motion"):
-        measured_tau = np.zeros((t.size, model.nv))
-        for c in plan.coordinates:
-            if moment_channel(c) in trial:
-                measured_tau[:, model.coordinate_index(c)] = trial[moment_channel(c)]
-    else:
-        _, excitation = _excitations(model, trial)
     eq_coords = plan.coordinates
     if plan.mode == "motion":
         eq_coords = tuple(c for c in plan.coordinates if moment_channel(c) in trial)
+    if plan.mode in ("torque", "motion"):
+        measured_tau = _measured_moments(model, trial, motion, eq_coords)
+    else:
+        _, excitation = _excitations(model, trial)
+    cmap = coordinate_map(model)
+    kin_channels = None if cmap is None else tuple(c for c in independent_coordinates(model) if c in trial)
     eq = EquationError(model=model, motion=motion, rows=rows, coordinates=eq_coords, mode=plan.mode,
-                       measured_tau=measured_tau, external=external, excitation=excitation)
+                       measured_tau=measured_tau, external=external, excitation=excitation,
+                       kinematic_channels=kin_channels)
     options = {"grf_frames": grf_frames, "grf": grf, "external_loads": external_loads, "grf_cutoff": grf_cutoff,
                "sim_window": sim_window}
+    if missing_coordinates != "refuse":
+        options["missing_coordinates"] = missing_coordinates
     channels = moment_channels(eq_coords)
     floor = noise_floor if noise_floor is not None and plan.mode != "motion" else propagated_floor(
         eq, trial, mode=plan.mode, excitation_kind=plan.excitation_kind, cutoff=cutoff, options=options,
@@ -452,10 +623,40 @@ def _remake(c: Comparison, model) -> Comparison:
                    _fits=fits, **opts)
 
 
+def _measured_moments(model, trial, motion, coords) -> np.ndarray:
+    """The measured generalized forces (N, C) of the compared ``coords``: ``<coord>_moment`` (0 where the
+    trial has none: the unactuated rows).  On an exact import, a recorded moment of a coupled coordinate
+    (OpenSim's ID reports ``knee_angle_r_beta_moment``) joins its independent coordinates through the
+    coupler's slope, ``tau_ind += s f'(q_ind) tau_dep``, as the model's own generalized forces do
+    (:func:`pinmsk.kinematics.independent_coordinates`)."""
+    out = np.zeros((trial.n_frames, len(coords)))
+    for j, c in enumerate(coords):
+        if moment_channel(c) in trial:
+            out[:, j] = trial[moment_channel(c)]
+    cmap = coordinate_map(model)
+    if cmap is None:
+        return out
+    q_os = None
+    for dep, indep, f, scale in reversed(cmap.couplers):      # the adjoint of applying them in order
+        if moment_channel(dep) not in trial or not any(c in coords for c in indep):
+            continue
+        q_os = source_positions(model, motion) if q_os is None else q_os
+        arg = q_os[:, cmap.osim_coordinates.index(indep[0])] if len(indep) == 1 else \
+            q_os[:, [cmap.osim_coordinates.index(c) for c in indep]]
+        tau_dep = np.asarray(trial[moment_channel(dep)], dtype=float)
+        for i, c in enumerate(indep):
+            if c in coords:
+                slope = f.derivative(arg, 1) if len(indep) == 1 else f.derivative(arg, 1, i)
+                out[:, coords.index(c)] += scale * np.asarray(slope, dtype=float) * tau_dep
+    return out
+
+
 def _states(model, trial, motion, rows, coords, excitation, kind, external) -> dict:
     """Candidate explanatory signals over the analysed rows, for residual correlations."""
     out = {}
     for c in coords:
+        if c not in model.coordinates:
+            continue
         i = model.coordinate_index(c)
         out[c] = motion.q[rows, i]
         out[f"{c}_speed"] = motion.v[rows, i]

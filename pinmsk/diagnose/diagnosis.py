@@ -568,7 +568,8 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
              threshold: float = THRESHOLD, at_floor: float | None = None, window: float = 1.0,
              grf_frames=None, grf=None, external_loads=None, grf_cutoff="same", sim_window: float = 0.5,
              comparison: Comparison | None = None, refit: Sequence = (), alpha: float = ALPHA,
-             pairs: bool = True, delta_bic: float | None = None, _fits=None) -> Diagnosis:
+             pairs: bool = True, delta_bic: float | None = None, missing_coordinates: str = "refuse",
+             _fits=None) -> Diagnosis:
     """Compare ``model`` with ``trial``, locate the failure and rank the missing effects.
 
     ``candidates``: effects to rank (Components, or family names / ``family:target``
@@ -583,7 +584,8 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
     improvement in noise variances on top of the test (default 0); ``pairs``:
     try pairs of candidates when the best single one leaves a residual.  See the
     module docstring for the scoring and :func:`pinmsk.diagnose.compare.compare`
-    for ``mode``, ``cutoff`` and the noise floor.
+    for ``mode``, ``cutoff``, ``missing_coordinates`` (an exact OpenSim import's coordinates the trial
+    leaves out) and the noise floor.
 
     In contact mode (:mod:`pinmsk.diagnose.contact`) the candidates are the
     contact models of the foot, scored by BIC with the noise floor as sigma
@@ -597,7 +599,7 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
         raise ModelError(f"alpha is a significance level in (0, 1), got {alpha}")
     c = comparison if comparison is not None else compare(
         model, trial, mode=mode, cutoff=cutoff, grf_frames=grf_frames, grf=grf, external_loads=external_loads,
-        grf_cutoff=grf_cutoff, sim_window=sim_window)
+        grf_cutoff=grf_cutoff, sim_window=sim_window, missing_coordinates=missing_coordinates)
     if c.mode == "contact":
         return _diagnose_contact(c, candidates, folds, threshold,
                                  CONTACT_AT_FLOOR if at_floor is None else at_floor, window, cutoff,
@@ -869,7 +871,8 @@ def run(model, trial, *, add: Sequence = (), first: Diagnosis | None = None, **o
             fam, tgt = entry, None
         comp = prev.comparison
         opts = {k: v for k, v in options.items() if k not in ("mode", "cutoff", "grf_frames", "grf", "grf_cutoff",
-                                                                    "external_loads", "sim_window")}
+                                                                    "external_loads", "sim_window",
+                                                                    "missing_coordinates")}
         if comp.mode == "contact":
             fit = prev.fit(fam, tgt)
             new_model = _model_plus(prev.model, fit)

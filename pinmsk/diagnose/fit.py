@@ -162,11 +162,10 @@ class EffectProblem:
         if self.sensor:      # the model reads measure(tau) instead of tau: e falls by the difference
             return np.stack([(self.reading - self.component.measure(self.reading, self._params(x)))[:, None]
                              for x in X])
-        cols = self.columns
-        out = np.empty((X.shape[0], self.eq.rows.size, cols.size))
+        out = np.empty((X.shape[0], self.eq.rows.size, self.act.size))
         for k, x in enumerate(X):
             Q = self.component.generalized_force(self.model, self.eq.motion_rows, self._params(x), self.cache)
-            out[k] = Q[:, cols]
+            out[k] = self.eq.project(Q, self.act)
         return out
 
     def jacobian(self, x) -> np.ndarray:
@@ -178,7 +177,7 @@ class EffectProblem:
         if not self.signal and hasattr(comp, "param_jacobian"):
             J = comp.param_jacobian(self.model, self.eq.motion_rows, self._params(x), self.cache)
             idx = [self.all_names.index(n) for n in self.names]
-            return J[:, self.columns][:, :, idx]
+            return self.eq.project_jacobian(J, self.act)[:, :, idx]
         x = np.asarray(x, dtype=float)
         span = np.where(np.isfinite(self.hi - self.lo), self.hi - self.lo, 1.0)
         h = 1e-6 * np.maximum(np.abs(x), 1e-3 * span) + 1e-12
@@ -204,8 +203,11 @@ class EffectProblem:
         comp = self.component
         if hasattr(comp, "initial_guess") and not self.signal and not self.sensor:
             rows_motion = self.eq.motion_rows.subset(np.flatnonzero(mask))
+            # the hook's target is per joint: the compared coordinates' (on an exact import, the joints that
+            # are OpenSim coordinates; a start value only, the fit itself uses the projection)
             target = np.full((rows_motion.n_frames, self.model.nv), np.nan)
-            target[:, self.columns] = -self.e[mask]
+            joint = self.columns >= 0
+            target[:, self.columns[joint]] = -self.e[mask][:, joint]
             try:
                 guesses = comp.initial_guess(self.model, rows_motion, target, None) or []
             except Exception:           # a bad guess hook must not stop the fit

@@ -48,7 +48,6 @@ from typing import Mapping
 
 import numpy as np
 
-from ..components import Motion
 from ..effects._base import is_prismatic
 from ..kinematics import prepare
 from ..signals.filtering import differentiate
@@ -68,9 +67,10 @@ def fit_sources(model, trial, eq, *, mode: str, excitation_kind: str | None, grf
     """``{group: NoiseModel}`` of the trial's measured channels (see the module notes)."""
     t = np.asarray(trial.time, dtype=float)
     rate = 1.0 / median_step(t)
-    raw_q = np.column_stack([trial[c] for c in model.coordinates])
+    names = eq.kinematic_channels          # the measured coordinates (OpenSim's on an exact import)
+    raw_q = np.column_stack([trial[c] for c in names])
     band_start = float(np.clip(2.0 * signal_band(raw_q, rate), 1.0, TOP_BAND * rate / 4.0))
-    out = {"coordinates": fit_noise(raw_q, rate, band_start, channels=model.coordinates)}
+    out = {"coordinates": fit_noise(raw_q, rate, band_start, channels=names)}
     if mode in ("torque", "motion"):
         names = [moment_channel(c) for c in eq.coordinates if moment_channel(c) in trial]
         if names:
@@ -108,8 +108,7 @@ def _kinematic(eq, models, cutoff):
     out = []
     for r in range(REALISATIONS):
         dq, dv, da = differentiate(t, xi[r], cutoff=cutoff)
-        m = eq.motion
-        out.append(eq.residual_for(Motion(t, m.q + dq, m.v + dv, m.a + da, m.signals)) - eq.e)
+        out.append(eq.residual_for(eq.perturbed_motion(dq, dv, da)) - eq.e)
     return np.array(out)
 
 
@@ -129,7 +128,8 @@ def _direct(eq, models, trial, options, cutoff):
         for r in range(REALISATIONS):
             noisy = trial.with_channels({n: np.asarray(trial[n]) + xi[r, :, k] for k, n in enumerate(gm.channels)})
             ext = prepare(eq.model, noisy, cutoff=cutoff, frames=options.get("grf_frames"),
-                          grf_cutoff=options.get("grf_cutoff", "same")).external
+                          grf_cutoff=options.get("grf_cutoff", "same"),
+                          missing_coordinates=options.get("missing_coordinates", "refuse")).external
             out[r] += eq.residual_for(eq.motion, external=ext) - eq.e
     if "excitation" in models:
         xi = _realisations(models, "excitation", t.size)

@@ -272,11 +272,10 @@ def cmd_diagnose(args) -> int:
     from ..diagnose import run
     from .report import save_diagnosis
     model = _model(args)
+    for label in args.without or ():
+        model = model.without(label)        # a component left out on request (e.g. contacts vs measured GRF)
     trial = _read(args.trial, model, args)
     kw = _inputs(args)
-    if kw.pop("missing_coordinates") != "refuse":
-        raise PinmskError("pinmsk diagnose: --missing-coordinates is for an imported .osim model's dependent "
-                          "joints, which the diagnosis does not take; give the trial every coordinate")
     if kw.pop("ground_reaction") == "ignore":
         trial = trial.drop([n for n in trial.names if parse_ground_reaction(n) is not None])
     r = run(model, trial, add=args.add or [], mode=args.mode, frames=args.frame or None, **kw)
@@ -590,6 +589,9 @@ def build_parser() -> argparse.ArgumentParser:
     input_flags(s)
     s.add_argument("--frame", action="append", metavar="FRAME",
                    help="frames to try frame effects (e.g. a payload) at, besides the defaults")
+    s.add_argument("--without", action="append", metavar="LABEL",
+                   help="leave this component of the model out (repeatable; e.g. the contact spheres when the "
+                        "trial's measured GRF loads the feet); `pinmsk info MODEL` lists the labels")
     s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
     _add_read_flags(s)
     _nonlinear_flag(s)
