@@ -26,7 +26,15 @@ Three comparison modes (:func:`compare`, ``mode=``):
     Forward simulation driven by the measured ``<coord>_moment`` against the
     measured coordinates, restarted from the measured state at the start of
     each ``sim_window`` (multiple shooting: open-loop simulations of a few
-    seconds drift).  Fixed-base models only.
+    seconds drift).  Fixed-base models with independent joints only.
+
+On an exact OpenSim import (dependent joints that are functions of OpenSim's
+coordinates, :func:`pinmsk.kinematics.coordinate_map`) the torque and muscle
+levels compare OpenSim's independent coordinates
+(:func:`pinmsk.kinematics.independent_coordinates`): every generalized force
+of the joints is mapped to them by virtual work, ``J^T Q``
+(:meth:`EquationError.project`), a coupled coordinate's folded into its
+independent one.
 
 Every mode has the same *residual* ``measured - model`` per channel.  For
 fitting effects, torque and motion modes use the torque-level equation error
@@ -172,8 +180,9 @@ def _excitations(model, trial):
             return kind, np.column_stack([trial[n] for n in names])
         if any(have):
             missing = [n for n, h in zip(names, have) if not h]
-            raise TrialError(f"the trial has {kind} channels for some muscles but not {', '.join(missing)}; "
-                             f"muscle-level comparison needs all {len(names)} (or none)")
+            shown = ", ".join(missing[:8]) + (f" and {len(missing) - 8} more" if len(missing) > 8 else "")
+            raise TrialError(f"the trial has {kind} channels for some muscles ({sum(have)} of {len(names)}) but "
+                             f"not {shown}; muscle-level comparison needs all {len(names)} (or none)")
     return None, None
 
 
