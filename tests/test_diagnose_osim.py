@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import pinmsk
-from pinmsk.diagnose import compare, diagnose
+from pinmsk.diagnose import compare, diagnose, run
 from pinmsk.dynamics import inverse_dynamics
 from pinmsk.effects import registry
 from pinmsk.errors import ModelError, TrialError
@@ -139,6 +139,14 @@ def test_motion_level_is_refused_by_name_on_an_exact_model(gait):
         compare(model, trial, mode="motion")
 
 
+def test_synthetic_trials_are_refused_by_name_on_an_exact_model(gait):
+    from pinmsk.diagnose import make_trial
+    _, model, _, _ = gait
+    with pytest.raises(ModelError, match=r"make_trial \(pinmsk synth\) moves the Pinocchio joints .* "
+                                         r"\(knee_r_translation1"):
+        make_trial(model, [])
+
+
 # -- (b) hidden effects recovered on the exact model ---------------------------------------------
 
 @pytest.mark.filterwarnings("ignore::pinmsk.errors.ResidualWarning")      # no GRF: the actuated rows only
@@ -150,21 +158,26 @@ def test_a_hidden_effect_is_recovered_on_the_exact_model(gait, family, target, n
     """Measured moments from pinmsk's exact ID of the richer model without the GRF (white noise of 0.5 N m
     added), compared on the actuated coordinates: the
     diagnosis of the plain model ranks the hidden effect first, significant, and recovers its value
-    within three standard errors."""
+    within three standard errors (and 5 %); added, the remade comparison is at its noise floor."""
     _, model, ik, _ = gait
     hidden = registry.get(family)(target).with_params(**{name: value})
     rich = inverse_dynamics(model.with_effect(hidden), ik)
     names = [f"{c}_moment" for c in coordinate_map(model).osim_coordinates if c not in PELVIS_2D]
-    rng = np.random.default_rng(3)
+    rng = np.random.default_rng(0)
     noisy = Trial(rich.time, {n: np.asarray(rich[n]) + 0.5 * rng.standard_normal(rich.n_frames) for n in names})
-    d = diagnose(model, _with_moments(ik, noisy, names))
+    trial = _with_moments(ik, noisy, names)
+    d = diagnose(model, trial)
     assert d.comparison.coordinates == tuple(n[: -len("_moment")] for n in names)
     best = d.ranking[0]
     assert best.label == hidden.label and best.significant
     se = best.stderr[name]
     assert np.isfinite(se) and 0 < se < 0.2 * value
-    assert abs(best.params[name] - value) < 3 * se
+    assert abs(best.params[name] - value) < min(3 * se, 0.05 * value)
     _no_dependent_target(model, [s.label for s in d.ranking])
+    # added (the diagnosis loop's next step, the comparison remade for the richer model): the noise is left
+    after = run(model, trial, add=[hidden.label], first=d).steps[-1]
+    assert after.model.component(hidden.label) is not None
+    assert after.rmse["total"] < 0.6 * d.rmse["total"] and after.verdict == "at_noise_floor"
 
 
 # -- muscle level ---------------------------------------------------------------------------------

@@ -62,6 +62,7 @@ from ..effects import registry
 from ..effects._base import SignalEffect, unactuated_coordinates
 from ..errors import ModelError
 from ..grf import external_forces
+from ..kinematics import require_independent_joints
 from ..model import load_model
 from ..muscles.activation import excitation_from_activation
 from ..skeleton import ExternalForce, external_generalized_force
@@ -187,6 +188,8 @@ def make_trial(model, effects: Sequence = (), *, duration: float = 10.0, rate: f
     effects and noise levels.
     """
     model = _load(model)
+    # the synthetic motion drives every joint on its own: dependent joints (an exact import) cannot follow
+    require_independent_joints(model, "make_trial (pinmsk synth)")
     effs = [effect_from_text(e) if isinstance(e, str) else e for e in effects]
     for e in effs:
         if not isinstance(e, Component):
