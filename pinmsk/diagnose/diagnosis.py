@@ -482,7 +482,8 @@ def _check_converged(s: EffectScore) -> None:
     if not s.converged:
         raise ConvergenceError(
             f"the fit of {s.label} did not converge ({s.fit.stats.message}); it cannot be added as "
-            "is. Check that the trial covers the effect or pass fixed parameter values"
+            "is. Check that the trial covers the effect, or hold some parameters at given values "
+            "(--add FAMILY:TARGET:NAME=VALUE; 'family:target:name=value' in Python)"
         )
 
 
@@ -566,7 +567,7 @@ def _resolve(effect, target, diag: Diagnosis) -> Component:
     if target is None:
         s = diag.score(family)
         if s is not None:
-            return s.effect if not values else s.effect.with_params(values)
+            return s.effect if not values else _held(s.effect, values)
         applicable = sorted({x.label for x in diag.ranking} | {lab for lab, _ in diag.skipped})
         raise ModelError(
             f"effect '{family}' does not apply to model '{model.name}' with this trial; name a target "
@@ -575,11 +576,17 @@ def _resolve(effect, target, diag: Diagnosis) -> Component:
     try:
         comp = cls(target)
         comp.check_target(model)
-        comp = _for_model(comp, model).with_params(values) if values else _for_model(comp, model)
+        comp = _held(_for_model(comp, model), values) if values else _for_model(comp, model)
     except ModelError as exc:
         targets = _targets(cls, model)
         raise ModelError(f"{exc}. Targets for {family} in model '{model.name}': {targets}") from None
     return comp
+
+
+def _held(comp: Component, values: dict) -> Component:
+    """``comp`` with the parameters an effect spec names (``family:target:p=v``) held at those values: the
+    fit moves only the others."""
+    return comp.with_params(values, vary={n: False for n in values})
 
 
 def _targets(cls, model) -> str:
@@ -867,6 +874,12 @@ class DiagnosisRun:
     @property
     def final(self) -> Diagnosis:
         return self.steps[-1]
+
+    @property
+    def step_labels(self) -> list:
+        """One short label per step: ``"model"``, ``"+ LABEL"`` per add, ``"- LABEL"`` per removal."""
+        return (["model"] + [f"+ {a.effect.label}" for a in self.added]
+                + [f"- {r['removed']}" for r in self.removed])
 
     @property
     def model(self):

@@ -592,9 +592,10 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("diagnose", help="where the model fails and which physical effect is missing")
     s.add_argument("model")
     s.add_argument("trial", help="measured trial: coordinates plus <coord>_moment, EMG/excitations or GRF")
-    s.add_argument("--add", action="append", metavar="EFFECT[:TARGET]",
+    s.add_argument("--add", action="append", metavar="EFFECT[:TARGET[:NAME=VALUE,...]]",
                    help="fit this effect jointly with the ones added before (their values move), add it, then "
-                        "diagnose again (repeat to iterate; the output prints what the refit changed)")
+                        "diagnose again (repeat to iterate; the output prints what the refit changed); "
+                        "NAME=VALUE holds that parameter at the value")
     s.add_argument("--remove", action="append", metavar="LABEL",
                    help="after the adds, drop this effect from the model (e.g. one the diagnosis names as no "
                         "longer significant), refit the others jointly and diagnose again (repeatable)")
