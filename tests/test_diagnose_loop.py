@@ -141,11 +141,11 @@ def test_cli_suggests_and_does_the_removal(tmp_path, capsys):
 def test_folds_are_chosen_for_the_trial_length():
     assert choose_folds(5 * MIN_BLOCK, None, 17) == (FOLDS, "")
     k, note = choose_folds(3 * MIN_BLOCK + 5, None, 10)
-    assert k == 3 and "3 blocks, not 5" in note
+    assert k == 3 and "3 folds, not 5" in note
     k, note = choose_folds(43, None, 10)                 # one stride at 60 Hz: 2 blocks of 21-22
     assert k == 2 and "43 analysable samples" in note
     k, note = choose_folds(34, None, 5)                  # blocks of 17: shorter than MIN_BLOCK, still valid
-    assert k == 2 and "too short for blocks of 20" in note
+    assert k == 2 and "too few for blocks of 20" in note
     assert choose_folds(100, 4, 10) == (4, "")           # given: as given
     with pytest.raises(TrialError, match=r"too few for 5 cross-validation blocks.*--folds 2 \(folds=2"):
         choose_folds(43, 5, 10)
@@ -164,7 +164,7 @@ def test_short_trial_hidden_effects_are_found(forearm):
         first = r.steps[0]
         assert first.comparison.eq.rows.size == 43 and first.settings["guard"] == 10
         assert first.stopping["folds"] == 2 and first.stopping["folds_chosen"] == "auto"
-        assert "2 blocks, not 5: 43 analysable samples" in first.stopping["blocks"]
+        assert "2 folds, not 5: 43 analysable samples" in first.stopping["blocks"]
         assert first.best.label == label and first.best.test["z"] > 5
         assert first.best.params[name] == pytest.approx(true, rel=0.05)
         assert r.verdict == "at_noise_floor"

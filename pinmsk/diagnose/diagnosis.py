@@ -44,9 +44,21 @@ estimate) and every effect in the model is identifiable; else
 says what it follows (states, time, dominant frequency, phase of the movement;
 :func:`~.scoring.residual_character`).
 
+Backward elimination (:meth:`~.scoring.Scorer.elimination`): every earlier
+effect is tested by leaving it out -- the model with it against the model
+without it, the others refitted jointly on the same blocks, by the same
+held-out test at level ``alpha`` over the effects in the model -- and named an
+alias of another whose sensitivity spans the same direction; the least
+significant one that is no longer significant is ``suggest_remove``.
+
+Short trials: ``folds=None`` (the default) takes :data:`FOLDS` blocks, fewer
+when the trial is too short for blocks of :data:`MIN_BLOCK` rows, at least two
+(:func:`choose_folds`; the choice is in ``stopping["blocks"]``).
+
 :func:`run` is the command-line loop: diagnose, then for each ``add`` entry fit
 that effect jointly with the ones added before (their values move), put them
-all in the model and diagnose again.
+all in the model and diagnose again; then drop each ``remove`` entry, refit the
+others without it and diagnose again.
 """
 from __future__ import annotations
 
@@ -72,7 +84,7 @@ from .scoring import (ALIAS_CORRELATION, Scorer, consistent_with_noise, critical
                       describe_character, model_with_components, residual_character)
 
 __all__ = ["Diagnosis", "DiagnosisRun", "EffectScore", "diagnose", "run", "parse_effect", "describe_fit",
-           "AT_FLOOR", "THRESHOLD", "ALPHA"]
+           "choose_folds", "AT_FLOOR", "THRESHOLD", "ALPHA", "FOLDS", "MIN_BLOCK", "MIN_TRAIN"]
 
 #: least held-out improvement (noise variances per channel and frame) a significant effect must make on
 #: top of the test: none -- the test decides, so an effect below the floor is found when it is real
@@ -656,10 +668,10 @@ def choose_folds(n: int, folds: int | None, guard: int) -> tuple[int, str]:
         note = ""
     else:
         folds = int(min(max(n // MIN_BLOCK, 2), FOLDS))
-        note = "" if folds == FOLDS else (f"{folds} blocks, not {FOLDS}: {n} analysable samples hold "
-                                          f"{folds} of {MIN_BLOCK} or more" if n >= 2 * MIN_BLOCK else
-                                          f"2 blocks of {n // 2} samples: a trial of {n} analysable samples "
-                                          f"is too short for blocks of {MIN_BLOCK}")
+        note = "" if folds == FOLDS else (f"{folds} folds, not {FOLDS}: {n} analysable samples make only "
+                                          f"{folds} blocks of {MIN_BLOCK} or more" if n >= 2 * MIN_BLOCK else
+                                          f"2 folds of {n // 2} samples: {n} analysable samples are too few "
+                                          f"for blocks of {MIN_BLOCK}")
     block = int(np.ceil(n / folds))
     train = n - block - (2 * guard if folds > 2 else guard)
     if train < MIN_TRAIN:
@@ -687,7 +699,9 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
     :data:`AT_FLOOR`; contact mode: the ratio at or below which the verdict is
     at_noise_floor, :data:`CONTACT_AT_FLOOR`); ``threshold``: least held-out
     improvement in noise variances on top of the test (default 0); ``pairs``:
-    try pairs of candidates when the best single one leaves a residual.  See the
+    try pairs of candidates when the best single one leaves a residual; ``folds``:
+    cross-validation blocks (default None: chosen for the trial's length,
+    :func:`choose_folds`).  See the
     module docstring for the scoring and :func:`pinmsk.diagnose.compare.compare`
     for ``mode``, ``cutoff`` and the noise floor.
 

@@ -19,7 +19,11 @@ exactly):
   candidate's parameters (Wald's for linear ones, where the two agree);
 * pairs (:meth:`Scorer.pairs`): when the best single candidate leaves a
   residual the noise does not explain, the pairs of the leading candidates are
-  fitted jointly and tested against that best single.
+  fitted jointly and tested against that best single;
+* backward elimination (:meth:`Scorer.elimination`): each earlier effect left
+  out, the others refitted jointly, tested by the same held-out test against
+  the model with it, and named an alias of another whose sensitivity spans the
+  same direction.
 
 :func:`residual_character` is what a residual outside the catalog follows.
 """
@@ -39,7 +43,7 @@ from .fit import EffectFit, JointProblem, _describe, cv_blocks
 from .ranking import EffectScore, held_out_test
 
 __all__ = ["Scorer", "identifiability", "model_with_components", "motion_rmse_after", "cycle_edges", "residual_character", "consistent_with_noise",
-           "critical_z", "PROFILE_LEVEL", "COND_MAX"]
+           "critical_z", "PROFILE_LEVEL", "COND_MAX", "ALIAS_PARAMETER"]
 
 #: chi-square(1) quantile of the profile-likelihood intervals (95 %)
 PROFILE_LEVEL = 3.841
@@ -410,7 +414,7 @@ class Scorer:
             out.append({"label": comp.label, "effect": comp.family, "target": comp.target, "significant": sig,
                         "improvement": test["improvement"], "z": test["z"], "critical_z": z_critical,
                         "bic_change": float(dbic), "alias_of": alias if r >= ALIAS_PARAMETER else None,
-                        "alias_correlation": r if alias is not None else None,
+                        "alias_correlation": r if r >= ALIAS_PARAMETER else None,
                         "determined": comp.label not in held, "suggest_remove": False, "without": how,
                         "components": comps})
         drop = [e for e in out if e["significant"] is False]
