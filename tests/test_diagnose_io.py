@@ -59,7 +59,7 @@ def test_motion_mode_refuses_a_floating_base():
 def test_too_few_samples(forearm):
     short = make_trial(forearm, [], duration=1.5, rate=50.0, seed=1)
     with pytest.raises(TrialError, match=r"too few for 5 cross-validation blocks.*folds=\d"):
-        diagnose(forearm, short)
+        diagnose(forearm, short, folds=5)
     tiny = make_trial(forearm, [], duration=0.4, rate=50.0, seed=1)
     with pytest.raises(TrialError, match="samples"):
         diagnose(forearm, tiny)

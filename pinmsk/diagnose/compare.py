@@ -288,7 +288,7 @@ def comparison_plan(model, trial, mode: str, *, has_grf: bool | None = None,
             raise TrialError(
                 f"motion-level comparison simulates the model open loop; '{model.name}' has a floating "
                 f"base ({', '.join(unact)}) whose ground contact the simulation does not model. "
-                "Use mode='torque' with ground reaction forces"
+                "Use mode='torque' (--mode torque) with ground reaction forces"
             )
         if not actuated_moment:
             raise TrialError("motion-level comparison is driven by measured <coord>_moment channels; "

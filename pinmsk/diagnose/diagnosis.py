@@ -44,9 +44,21 @@ estimate) and every effect in the model is identifiable; else
 says what it follows (states, time, dominant frequency, phase of the movement;
 :func:`~.scoring.residual_character`).
 
+Backward elimination (:meth:`~.scoring.Scorer.elimination`): every earlier
+effect is tested by leaving it out -- the model with it against the model
+without it, the others refitted jointly on the same blocks, by the same
+held-out test at level ``alpha`` over the effects in the model -- and named an
+alias of another whose sensitivity spans the same direction; the least
+significant one that is no longer significant is ``suggest_remove``.
+
+Short trials: ``folds=None`` (the default) takes :data:`FOLDS` blocks, fewer
+when the trial is too short for blocks of :data:`MIN_BLOCK` rows, at least two
+(:func:`choose_folds`; the choice is in ``stopping["blocks"]``).
+
 :func:`run` is the command-line loop: diagnose, then for each ``add`` entry fit
 that effect jointly with the ones added before (their values move), put them
-all in the model and diagnose again.
+all in the model and diagnose again; then drop each ``remove`` entry, refit the
+others without it and diagnose again.
 """
 from __future__ import annotations
 
@@ -72,7 +84,7 @@ from .scoring import (ALIAS_CORRELATION, Scorer, consistent_with_noise, critical
                       describe_character, model_with_components, residual_character)
 
 __all__ = ["Diagnosis", "DiagnosisRun", "EffectScore", "diagnose", "run", "parse_effect", "describe_fit",
-           "AT_FLOOR", "THRESHOLD", "ALPHA"]
+           "choose_folds", "AT_FLOOR", "THRESHOLD", "ALPHA", "FOLDS", "MIN_BLOCK", "MIN_TRAIN"]
 
 #: least held-out improvement (noise variances per channel and frame) a significant effect must make on
 #: top of the test: none -- the test decides, so an effect below the floor is found when it is real
@@ -83,7 +95,12 @@ ALPHA = 0.01
 AT_FLOOR = 1.25
 #: at_noise_floor limit of the contact mode (ratio to the floor; its candidates are scored by BIC)
 CONTACT_AT_FLOOR = 1.5
-_MIN_BLOCK = 20
+#: cross-validation blocks by default (fewer on a trial too short for them, see :func:`choose_folds`)
+FOLDS = 5
+#: fewest rows a held-out block holds when the trial allows
+MIN_BLOCK = 20
+#: fewest rows a training set keeps once a held-out block and its guard are left out
+MIN_TRAIN = 10
 
 
 class Diagnosis:
@@ -100,7 +117,8 @@ class Diagnosis:
     """
 
     def __init__(self, comparison: Comparison, ranking: list, worst_windows: list, correlations: dict,
-                 settings: dict, skipped: list, *, scorer: Scorer | None = None, pairs=None):
+                 settings: dict, skipped: list, *, scorer: Scorer | None = None, pairs=None,
+                 elimination=None):
         self.comparison = comparison
         self.model = comparison.model
         self.ranking = ranking
@@ -110,6 +128,7 @@ class Diagnosis:
         self.skipped = skipped
         self.scorer = scorer
         self.pairs = list(pairs or [])
+        self.elimination = list(elimination or [])
         self.rmse = comparison.rmse()
         self.noise_floor = comparison.noise.to_dict()
         self.ratio = comparison.ratio()
@@ -133,9 +152,11 @@ class Diagnosis:
                     "candidates (Bonferroni), in-sample BIC falls, identifiable parameters",
             "alpha": settings["alpha"], "critical_z": settings["z_critical"],
             "candidates_tested": len(ranking), "blocks": settings["blocks"],
+            "folds": settings["folds"], "folds_chosen": settings.get("folds_chosen", "given"),
             "held_out_ratio": ratio_cv, "consistent_limit": limit, "consistent_with_noise": ok,
             "noise_floor_method": comparison.noise.method,
             "not_identifiable_in_model": unidentified, "switched_off_in_model": switched_off,
+            "suggest_remove": self.suggest_remove,
         }
         if self.best is not None or self.best_pair is not None:
             self.verdict = "missing_effect"
@@ -167,6 +188,24 @@ class Diagnosis:
             if p["significant"]:
                 return p
         return None
+
+    @property
+    def suggest_remove(self) -> str | None:
+        """The label of the effect in the model that backward elimination drops (no longer significant
+        beside the others), or None."""
+        for e in self.elimination:
+            if e["suggest_remove"]:
+                return e["label"]
+        return None
+
+    def without(self, label: str):
+        """The model without the effect ``label``, the other effects refitted jointly without it (as the
+        backward elimination fitted them) when it is one of the effects refitted here."""
+        self.model.component(label)
+        for e in self.elimination:
+            if e["label"] == label and e.get("components") is not None:
+                return model_with_components(self.model.without(label), e["components"])
+        return self.model.without(label)
 
     @property
     def significant(self) -> list:
@@ -262,6 +301,7 @@ class Diagnosis:
             "pairs": [_pair_json(p) for p in self.pairs],
             "outside_catalog": _json(self.outside_catalog),
             "stopping": _json(self.stopping),
+            "elimination": [_json({k: v for k, v in e.items() if k != "components"}) for e in self.elimination],
         }
 
     def summary_text(self, *, header: bool = True) -> str:
@@ -303,6 +343,7 @@ class Diagnosis:
                 lines.append(f"  {eff['label']}: " + ", ".join(
                     f"{n} = {v['after']:.4g}" + (f" ± {v['stderr']:.2g}" if v["stderr"] is not None else "")
                     for n, v in eff["params"].items()))
+        lines.extend(self._elimination_lines())
         if self.ranking and c.mode == "contact":
             lines.append(f"ranking (contact models identified by Eq. 4.2, scored by BIC = chi2 + k ln n with the "
                          f"noise floor as sigma; significant when BIC falls by > {self.settings['delta_bic']:g}; "
@@ -355,7 +396,43 @@ class Diagnosis:
         lines.append(self.verdict_line())
         return "\n".join(lines)
 
+    def _elimination_lines(self) -> list:
+        """The backward elimination: each effect in the model tested by leaving it out."""
+        if not self.elimination:
+            return []
+        zc = self.elimination[0]["critical_z"]
+        out = [f"effects in the model, each tested by leaving it out (the others refitted; held-out z, "
+               f"significant above {zc:.2f}):"]
+        lw = max(len(e["label"]) for e in self.elimination)
+        for e in self.elimination:
+            if e["z"] is None:
+                out.append(f"  {e['label']:<{lw}}  not tested: {e['without']}")
+                continue
+            sig = "yes" if e["significant"] else "no "
+            alias = (f"  alias of {e['alias_of']} (r = {e['alias_correlation']:.3f})" if e["alias_of"] else "")
+            held = "" if e["determined"] else "  [its parameters are not determined]"
+            drop = f"  -> remove it: --remove {e['label']}" if e["suggest_remove"] else ""
+            out.append(f"  {e['label']:<{lw}}  z {e['z']:7.2f}  held-out gain {e['improvement']:+.3g}  "
+                       f"significant {sig}{alias}{held}{drop}")
+        return out
+
+    def _removal_clause(self) -> str:
+        """``"; X is no longer significant ...: remove it with --remove X"`` when elimination drops one."""
+        label = self.suggest_remove
+        if label is None:
+            return ""
+        e = next(x for x in self.elimination if x["label"] == label)
+        others = [x["label"] for x in self.elimination if x["label"] != label]
+        why = (f"; an alias of {e['alias_of']}, r = {e['alias_correlation']:.3f}" if e["alias_of"] else "")
+        beside = f" beside {', '.join(others)}" if others else ""
+        return (f"; {label} is no longer significant{beside} (held-out z {e['z']:.2f} < {e['critical_z']:.2f} "
+                f"when it is left out{why}): remove it with --remove {label}")
+
     def verdict_line(self) -> str:
+        line = self._verdict_line()
+        return line + self._removal_clause() if self.comparison.mode != "contact" else line
+
+    def _verdict_line(self) -> str:
         ch, worst = max(self.channel_ratios.items(), key=lambda kv: kv[1])
         where = (f"the error is {self.ratio:.2f}x the noise floor" if len(self.channel_ratios) == 1
                  else f"the error is {self.ratio:.2f}x the noise floor over all channels, {worst:.2f}x on {ch}")
@@ -417,7 +494,8 @@ def _check_converged(s: EffectScore) -> None:
     if not s.converged:
         raise ConvergenceError(
             f"the fit of {s.label} did not converge ({s.fit.stats.message}); it cannot be added as "
-            "is. Check that the trial covers the effect or pass fixed parameter values"
+            "is. Check that the trial covers the effect, or hold some parameters at given values "
+            "(--add FAMILY:TARGET:NAME=VALUE; 'family:target:name=value' in Python)"
         )
 
 
@@ -501,7 +579,7 @@ def _resolve(effect, target, diag: Diagnosis) -> Component:
     if target is None:
         s = diag.score(family)
         if s is not None:
-            return s.effect if not values else s.effect.with_params(values)
+            return s.effect if not values else _held(s.effect, values)
         applicable = sorted({x.label for x in diag.ranking} | {lab for lab, _ in diag.skipped})
         raise ModelError(
             f"effect '{family}' does not apply to model '{model.name}' with this trial; name a target "
@@ -510,11 +588,17 @@ def _resolve(effect, target, diag: Diagnosis) -> Component:
     try:
         comp = cls(target)
         comp.check_target(model)
-        comp = _for_model(comp, model).with_params(values) if values else _for_model(comp, model)
+        comp = _held(_for_model(comp, model), values) if values else _for_model(comp, model)
     except ModelError as exc:
         targets = _targets(cls, model)
         raise ModelError(f"{exc}. Targets for {family} in model '{model.name}': {targets}") from None
     return comp
+
+
+def _held(comp: Component, values: dict) -> Component:
+    """``comp`` with the parameters an effect spec names (``family:target:p=v``) held at those values: the
+    fit moves only the others."""
+    return comp.with_params(values, vary={n: False for n in values})
 
 
 def _targets(cls, model) -> str:
@@ -563,8 +647,42 @@ def _for_model(comp, model):
     return hook(model) if hook is not None else comp
 
 
+def choose_folds(n: int, folds: int | None, guard: int) -> tuple[int, str]:
+    """The number of cross-validation blocks for ``n`` analysed rows, and a note when a short trial set it.
+
+    Given ``folds`` are taken as they are, refused when a block would hold fewer than
+    :data:`MIN_BLOCK` rows.  By default (``folds=None``) :data:`FOLDS` blocks, fewer when the trial
+    is too short for blocks of :data:`MIN_BLOCK` rows, and at least two (one stride of a walk:
+    each half predicted by the fit on the other).  Every training set must keep
+    :data:`MIN_TRAIN` rows once ``guard`` rows either side of its held-out block are left out
+    (the filter's correlation length), else the trial is refused.
+    """
+    if folds is not None:
+        folds = int(folds)
+        if n < folds * MIN_BLOCK:
+            k = n // MIN_BLOCK
+            fix = (f"pass --folds {k} (folds={k} in Python)" if k >= 2 else
+                   "leave --folds out (folds=None) to let the diagnosis choose")
+            raise TrialError(f"{n} analysable samples are too few for {folds} cross-validation blocks of at "
+                             f"least {MIN_BLOCK}; record a longer trial or {fix}")
+        note = ""
+    else:
+        folds = int(min(max(n // MIN_BLOCK, 2), FOLDS))
+        note = "" if folds == FOLDS else (f"{folds} folds, not {FOLDS}: {n} analysable samples make only "
+                                          f"{folds} blocks of {MIN_BLOCK} or more" if n >= 2 * MIN_BLOCK else
+                                          f"2 folds of {n // 2} samples: {n} analysable samples are too few "
+                                          f"for blocks of {MIN_BLOCK}")
+    block = int(np.ceil(n / folds))
+    train = n - block - (2 * guard if folds > 2 else guard)
+    if train < MIN_TRAIN:
+        raise TrialError(f"{n} analysable samples are too few for {folds}-fold cross-validation: leaving out a "
+                         f"block of {block} and {guard} samples beside it (one period of the low-pass) leaves "
+                         f"{max(train, 0)} to fit on, fewer than {MIN_TRAIN}; record a longer trial")
+    return folds, note
+
+
 def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT_CUTOFF,
-             candidates=None, frames: Sequence[str] | None = None, folds: int = 5,
+             candidates=None, frames: Sequence[str] | None = None, folds: int | None = None,
              threshold: float = THRESHOLD, at_floor: float | None = None, window: float = 1.0,
              grf_frames=None, grf=None, external_loads=None, grf_cutoff="same", sim_window: float = 0.5,
              comparison: Comparison | None = None, refit: Sequence = (), alpha: float = ALPHA,
@@ -582,7 +700,9 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
     :data:`AT_FLOOR`; contact mode: the ratio at or below which the verdict is
     at_noise_floor, :data:`CONTACT_AT_FLOOR`); ``threshold``: least held-out
     improvement in noise variances on top of the test (default 0); ``pairs``:
-    try pairs of candidates when the best single one leaves a residual.  See the
+    try pairs of candidates when the best single one leaves a residual; ``folds``:
+    cross-validation blocks (default None: chosen for the trial's length,
+    :func:`choose_folds`).  See the
     module docstring for the scoring and :func:`pinmsk.diagnose.compare.compare`
     for ``mode``, ``cutoff``, ``missing_coordinates`` (an exact OpenSim import's coordinates the trial
     leaves out) and the noise floor.
@@ -593,32 +713,33 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
     :data:`~pinmsk.diagnose.contact.DELTA_BIC`); ``folds``, ``threshold``,
     ``refit`` and ``alpha`` do not apply.
     """
-    if folds < 2:
-        raise ModelError(f"folds must be >= 2 for cross-validation, got {folds}")
+    folds_given = folds is not None
+    if folds is not None and (int(folds) != folds or folds < 2):
+        raise ModelError(f"folds must be a whole number >= 2 for cross-validation, got {folds}")
     if not 0 < alpha < 1:
         raise ModelError(f"alpha is a significance level in (0, 1), got {alpha}")
     c = comparison if comparison is not None else compare(
         model, trial, mode=mode, cutoff=cutoff, grf_frames=grf_frames, grf=grf, external_loads=external_loads,
         grf_cutoff=grf_cutoff, sim_window=sim_window, missing_coordinates=missing_coordinates)
     if c.mode == "contact":
-        return _diagnose_contact(c, candidates, folds, threshold,
+        return _diagnose_contact(c, candidates, FOLDS if folds is None else int(folds), threshold,
                                  CONTACT_AT_FLOOR if at_floor is None else at_floor, window, cutoff,
                                  delta_bic, _fits)
     n = c.eq.rows.size
-    if n < folds * _MIN_BLOCK:
-        raise TrialError(
-            f"{n} analysable samples are too few for {folds} cross-validation blocks of at least "
-            f"{_MIN_BLOCK}; record a longer trial or pass folds={max(2, n // _MIN_BLOCK)}"
-        )
     refit_comps = _refit_components(c.model, refit)
     dt = median_step(c.eq.motion.t)
-    guard = int(np.ceil(1.0 / (cutoff * dt))) if cutoff else 2
+    # one period of the low-pass (60 Hz at 6 Hz: 10 rows, not 11 by round-off)
+    guard = int(np.ceil(1.0 / (cutoff * dt) - 1e-9)) if cutoff else 2
+    folds, short = choose_folds(n, folds, guard)
     cyc = cycle_edges(c.time, _main_coordinate(c), folds)
-    if cyc is not None and min(np.diff([0, *cyc[0], n])) < _MIN_BLOCK:
+    if cyc is not None and min(np.diff([0, *cyc[0], n])) < min(MIN_BLOCK, n // folds):
         cyc = None
     blocks = (f"{folds}-fold blocked cross-validation over whole cycles (period {cyc[1]:.3g} s)" if cyc
               else f"{folds}-fold blocked cross-validation")
-    settings = {"folds": folds, "threshold": threshold, "at_floor": AT_FLOOR if at_floor is None else at_floor,
+    if short:
+        blocks += f" ({short})"
+    settings = {"folds": folds, "folds_chosen": "given" if folds_given else "auto", "threshold": threshold,
+                "at_floor": AT_FLOOR if at_floor is None else at_floor,
                 "guard": guard, "window": window, "cutoff": cutoff, "alpha": alpha, "blocks": blocks,
                 "block_edges": cyc[0] if cyc else None, "joint_nfev": 50, "cv_nfev": 20, "profile": True,
                 "refit": [x.label for x in refit_comps]}
@@ -657,7 +778,9 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
             found = scorer.pairs(ranking)
     windows = _worst_windows(c, window)
     cors = _correlations(c)
-    return Diagnosis(c, ranking, windows, cors, settings, skipped, scorer=scorer, pairs=found)
+    elimination = scorer.elimination(critical_z(alpha, len(refit_comps))) if refit_comps else []
+    return Diagnosis(c, ranking, windows, cors, settings, skipped, scorer=scorer, pairs=found,
+                     elimination=elimination)
 
 
 def _main_coordinate(c) -> np.ndarray:
@@ -757,14 +880,22 @@ class DiagnosisRun:
     the final values of every added effect are those of the final model.
     """
 
-    def __init__(self, steps: list, added: list, refits: list | None = None):
+    def __init__(self, steps: list, added: list, refits: list | None = None, removed: list | None = None):
         self.steps = steps
         self.added = added
         self.refits = list(refits or [])
+        #: one entry per ``remove`` step (after the adds): the effect taken out and how the others moved
+        self.removed = list(removed or [])
 
     @property
     def final(self) -> Diagnosis:
         return self.steps[-1]
+
+    @property
+    def step_labels(self) -> list:
+        """One short label per step: ``"model"``, ``"+ LABEL"`` per add, ``"- LABEL"`` per removal."""
+        return (["model"] + [f"+ {a.effect.label}" for a in self.added]
+                + [f"- {r['removed']}" for r in self.removed])
 
     @property
     def model(self):
@@ -791,8 +922,11 @@ class DiagnosisRun:
         if sc is not None and sc.refit:
             for comp, prob, sl in zip(sc.base.components, sc.base.problems, sc.base.slices):
                 errs[comp.label] = dict(zip(prob.names, sc.base_se[sl]))
+        gone = {r["removed"] for r in self.removed}
         for a in self.added:
             label = a.effect.label
+            if label in gone:
+                continue
             try:
                 comp = final.model.component(label)
             except ModelError:
@@ -807,8 +941,12 @@ class DiagnosisRun:
         """The loop as a JSON-ready dict: the final diagnosis, the effects added (final values) and what
         each step's joint refit changed."""
         if self.final.comparison.mode == "contact":
-            return self.final.to_dict(self.added, self.refits)
-        return self.final.to_dict(self.final_effects(), self.refits)
+            out = self.final.to_dict([a for a in self.added if a.effect.label not in
+                                      {r["removed"] for r in self.removed}], self.refits)
+        else:
+            out = self.final.to_dict(self.final_effects(), self.refits)
+        out["removed"] = [_json(r) for r in self.removed]
+        return out
 
     def summary_text(self) -> str:
         first = self.steps[0]
@@ -833,6 +971,19 @@ class DiagnosisRun:
             out.append(f"  total rmse {prev.rmse['total']:.4g} -> {step.rmse['total']:.4g} "
                        f"(noise floor {step.noise_floor['total']:.4g}; {prev.ratio:.1f}x -> {step.ratio:.2f}x)")
             out.append(step.summary_text(header=False))
+        n_add = len(self.added)
+        for k, (rem, step) in enumerate(zip(self.removed, self.steps[1 + n_add:]), n_add + 1):
+            prev = self.steps[k - 1]
+            out.append("")
+            out.append(f"step {k}: removed {rem['removed']}")
+            if rem.get("effects"):
+                out.append("  the others refitted without it:")
+                for e in rem["effects"]:
+                    for n, v in e["params"].items():
+                        out.append(f"    {e['label']}.{n}: {v['before']:.4g} -> {v['after']:.4g} ({v['change']:+.3g})")
+            out.append(f"  total rmse {prev.rmse['total']:.4g} -> {step.rmse['total']:.4g} "
+                       f"(noise floor {step.noise_floor['total']:.4g}; {prev.ratio:.2f}x -> {step.ratio:.2f}x)")
+            out.append(step.summary_text(header=False))
         return "\n".join(out)
 
     def write_json(self, path) -> Path:
@@ -843,7 +994,8 @@ class DiagnosisRun:
         return f"<DiagnosisRun {len(self.added)} added, final {self.final!r}>"
 
 
-def run(model, trial, *, add: Sequence = (), first: Diagnosis | None = None, **options) -> DiagnosisRun:
+def run(model, trial, *, add: Sequence = (), remove: Sequence = (), first: Diagnosis | None = None,
+        **options) -> DiagnosisRun:
     """Diagnose, then fit and add each ``add`` entry in turn, diagnosing after each.
 
     Each add is a joint refit: the entry is fitted together with the effects
@@ -855,9 +1007,17 @@ def run(model, trial, *, add: Sequence = (), first: Diagnosis | None = None, **o
     :func:`pinmsk.presentation.report.save_diagnosis`.  ``options`` go to
     :func:`diagnose`; ``first`` reuses a diagnosis of this model and trial
     already made as step 0.
+
+    ``remove``: labels (``family:target``) of effects to drop after the adds, one
+    step each (backward elimination: the diagnosis names an effect no longer
+    significant beside the others, ``suggest_remove``).  The other effects
+    refitted jointly are refitted without it, as the elimination test fitted
+    them, and the model is diagnosed again.
     """
     if isinstance(add, (str, Component)):
         add = [add]
+    if isinstance(remove, str):
+        remove = [remove]
     refit = list(options.pop("refit", ()) or ())
     d = first if first is not None else diagnose(model, trial, refit=refit, **options)
     if first is not None and d.comparison.mode != "contact":
@@ -887,7 +1047,55 @@ def run(model, trial, *, add: Sequence = (), first: Diagnosis | None = None, **o
         steps.append(diagnose(new_model, trial, comparison=comp.with_model(new_model),
                               cutoff=prev.settings["cutoff"], **opts))
         added.append(fit)
-    return DiagnosisRun(steps, added, refits)
+    removed = []
+    for label in remove or ():
+        prev = steps[-1]
+        label = _removal_label(prev.model, label)
+        new_model = prev.without(label)
+        opts = {k: v for k, v in options.items() if k not in ("mode", "cutoff", "grf_frames", "grf", "grf_cutoff",
+                                                                    "external_loads", "sim_window")}
+        if prev.comparison.mode == "contact":
+            opts["_fits"] = getattr(prev, "contact_fits", None)
+        else:
+            refit = [r for r in refit if (r.label if isinstance(r, Component) else str(r)) != label]
+            opts["refit"] = refit
+        removed.append(_step_removal(prev, new_model, label))
+        steps.append(diagnose(new_model, trial, comparison=prev.comparison.with_model(new_model),
+                              cutoff=prev.settings["cutoff"], **opts))
+    return DiagnosisRun(steps, added, refits, removed)
+
+
+def _removal_label(model, label) -> str:
+    """The label of the effect ``label`` names in ``model`` (``family:target``, or a family the model holds
+    once); refused by name with the model's effects otherwise."""
+    label = label.label if isinstance(label, Component) else str(label).strip()
+    have = [c.label for c in model.components]
+    if label in have:
+        return label
+    same = [x for x in have if x.split(":", 1)[0] == label]
+    if len(same) == 1:
+        return same[0]
+    raise ModelError(f"remove names '{label}', which model '{model.name}' does not have "
+                     f"(its effects: {', '.join(have) or 'none'})"
+                     + ("; name its target, one of " + ", ".join(same) if len(same) > 1 else ""))
+
+
+def _step_removal(prev: Diagnosis, new_model, label: str) -> dict:
+    """What removing ``label`` did to the other effects: their values before (in ``prev``'s model) and after
+    the joint refit without it."""
+    out = {"removed": label, "effects": []}
+    have = {c.label for c in new_model.components}
+    for old in prev.model.components:
+        if old.label == label or old.label not in have:
+            continue
+        new = new_model.component(old.label)
+        params = {n: {"before": float(old.values[n]), "after": float(new.values[n]),
+                      "change": float(new.values[n] - old.values[n])}
+                  for n, p in old.params.items() if p.vary and new.values[n] != old.values[n]}
+        if params:
+            out["effects"].append({"effect": old.family, "target": old.target, "label": old.label,
+                                   "params": params})
+    return out
 
 
 def _step_refit(prev: Diagnosis, comps: list, fit: Result) -> dict:

@@ -506,7 +506,8 @@ class EffectFit(Fitter):
             raise ConvergenceError(
                 f"the fit of {self.effect.label} did not converge after {problem.nfev} evaluations "
                 f"({msg.rstrip('.')}); check the trial covers the effect (e.g. the joint range for "
-                "passive_elastic), or fix some parameters (Parameter.vary=False) and fit again"
+                "passive_elastic), or fix some parameters (Parameter.vary=False; on the command line "
+                "--add FAMILY:TARGET:NAME=VALUE) and fit again"
             )
         r = problem.result(x, conv, msg)
         self.problem_ = problem

@@ -191,13 +191,13 @@ def held_out_test(r0: np.ndarray, r1: np.ndarray, *, offset: float = 0.0) -> dic
 def windows_of(t, res, channels, floor: dict, window: float, k: int = 5, mask=None) -> list:
     """The ``k`` (channel, time window) pairs with the largest RMS residual / noise floor."""
     dur = t[-1] - t[0]
-    if dur / window < 3:
-        window = dur / 5
     dt = median_step(t)
+    if dur / window < 3:
+        window = max(dur / 5, 10 * dt)       # a short trial: five windows, each of 10 samples at least
     if window / dt < 10:
         raise TrialError(
             f"windows of {window:.3g} s hold {window / dt:.1f} samples at {1 / dt:.4g} Hz; need at least 10 "
-            "per window: pass a longer window= or a longer, denser trial"
+            "per window: pass a longer window (--window S; window= in Python) or a longer, denser trial"
         )
     out = []
     starts = np.arange(t[0], t[-1] - 0.5 * window, window)

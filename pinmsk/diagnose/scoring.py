@@ -19,7 +19,11 @@ exactly):
   candidate's parameters (Wald's for linear ones, where the two agree);
 * pairs (:meth:`Scorer.pairs`): when the best single candidate leaves a
   residual the noise does not explain, the pairs of the leading candidates are
-  fitted jointly and tested against that best single.
+  fitted jointly and tested against that best single;
+* backward elimination (:meth:`Scorer.elimination`): each earlier effect left
+  out, the others refitted jointly, tested by the same held-out test against
+  the model with it, and named an alias of another whose sensitivity spans the
+  same direction.
 
 :func:`residual_character` is what a residual outside the catalog follows.
 """
@@ -30,6 +34,7 @@ import itertools
 import numpy as np
 from scipy.stats import norm
 
+from ..effects._base import SignalEffect
 from ..errors import PinmskError
 from ..fitting import FitStatistics, Result, format_report
 from ..stats import bic_change
@@ -38,7 +43,7 @@ from .fit import EffectFit, JointProblem, _describe, cv_blocks
 from .ranking import EffectScore, held_out_test
 
 __all__ = ["Scorer", "identifiability", "model_with_components", "motion_rmse_after", "cycle_edges", "residual_character", "consistent_with_noise",
-           "critical_z", "PROFILE_LEVEL", "COND_MAX"]
+           "critical_z", "PROFILE_LEVEL", "COND_MAX", "ALIAS_PARAMETER"]
 
 #: chi-square(1) quantile of the profile-likelihood intervals (95 %)
 PROFILE_LEVEL = 3.841
@@ -51,6 +56,9 @@ COND_MAX = 1e6
 #: candidates whose fitted changes correlate beyond this, and whose held-out errors the test cannot tell
 #: apart, are reported as aliases of each other
 ALIAS_CORRELATION = 0.9
+#: an effect in the model whose sensitivity and a later effect's share a direction beyond this canonical
+#: correlation (their parameter estimates correlate near +-1) is named an alias of it
+ALIAS_PARAMETER = 0.99
 #: leading candidates combined into pairs
 PAIR_POOL = 4
 
@@ -217,6 +225,7 @@ class Scorer:
         self.blocks = cv_blocks(n, settings["folds"], settings.get("block_edges"))
         self.guard = settings["guard"]
         self.refit = list(refit)
+        self.given = list(refit)          # as in the model, before any is held (backward elimination)
         self.problems: dict = {}
         self.base = None
         self.base_x = np.zeros(0)
@@ -358,12 +367,153 @@ class Scorer:
         out.sort(key=lambda d: -d["improvement_over_best"])
         return out
 
+    # -- backward elimination -------------------------------------------------------------
+    def elimination(self, z_critical: float) -> list:
+        """Each earlier effect tested by leaving it out: is it still significant beside the others?
+
+        The model as it is (every earlier effect, refitted jointly, cross-validated: the
+        reference of the candidates) is tested against the model *without* the effect, the
+        others refitted jointly on the same blocks, by the held-out test of the candidates
+        (:func:`~.ranking.held_out_test`; ``z`` against ``z_critical``, the Bonferroni value over
+        the effects tested) and the in-sample BIC.  "Without" is the effect switched off (its
+        ``zero_params``) where a value does that, else the effect taken out of the model (its
+        noise floor propagated again: a muscle-level effect also filters the signals' noise).
+        ``alias_of``: the other effect whose sensitivity (whitened Jacobian columns) spans the
+        same direction, canonical correlation ``>= ALIAS_PARAMETER`` (the correlation of the
+        parameter estimates near +-1; 1 when the joint sensitivity is rank deficient).  One
+        effect at most has ``suggest_remove``: the least significant of those that are not
+        (the earlier on a tie), as backward elimination drops one effect per refit.  Returns one
+        dict per effect; ``components`` are the others as refitted without it (what
+        ``--remove`` puts in the model).
+        """
+        if not self.given:
+            return []
+        held = {c.label for c, info in zip(self.given, self.base_ident) if not info.get("determined", True)}
+        r_with = self.base_cv / self.sigma
+        canon = _canonical_correlations(self)
+        out = []
+        for k, comp in enumerate(self.given):
+            try:
+                e_cv, sse, comps, offset, how = self._without(k, held)
+            except PinmskError as exc:
+                out.append({"label": comp.label, "effect": comp.family, "target": comp.target,
+                            "significant": None, "improvement": None, "z": None, "critical_z": z_critical,
+                            "bic_change": None, "alias_of": None, "alias_correlation": None,
+                            "determined": comp.label not in held, "suggest_remove": False,
+                            "without": f"could not be fitted without it: {exc}", "components": None})
+                continue
+            test = held_out_test(e_cv / self.sigma, r_with, offset=offset)
+            n_free = sum(1 for p in comp.params.values() if p.vary)
+            dbic = bic_change(self.base_sse, sse, n=self.eq.e.size, k=n_free, variance="estimated")
+            sig = bool(comp.label not in held and test["z"] >= z_critical and test["improvement"] > 0
+                       and dbic < 0)
+            alias, r = None, 0.0
+            for j, other in enumerate(self.given):
+                if j != k and canon[k, j] > r:
+                    alias, r = other.label, float(canon[k, j])
+            out.append({"label": comp.label, "effect": comp.family, "target": comp.target, "significant": sig,
+                        "improvement": test["improvement"], "z": test["z"], "critical_z": z_critical,
+                        "bic_change": float(dbic), "alias_of": alias if r >= ALIAS_PARAMETER else None,
+                        "alias_correlation": r if r >= ALIAS_PARAMETER else None,
+                        "determined": comp.label not in held, "suggest_remove": False, "without": how,
+                        "components": comps})
+        drop = [e for e in out if e["significant"] is False]
+        if drop:
+            worst = min(drop, key=lambda e: (round(e["z"], 6), out.index(e)))
+            worst["suggest_remove"] = True
+        return out
+
+    def _without(self, k: int, held: set):
+        """The earlier effects without ``given[k]``, refitted jointly and cross-validated: ``(held-out
+        equation error, in-sample whitened SSE, the others as refitted, floor offset, how it was left out)``."""
+        comp = self.given[k]
+        zero = getattr(comp, "zero_params", None) or {}
+        # a muscle-level effect filters the measured signals' noise too: leaving it out changes the floor
+        signal = isinstance(comp, SignalEffect) and self.c.mode == "muscle"
+        if zero and all(n in comp.params for n in zero) and not signal:
+            comps = [comp if j == k else c for j, c in enumerate(self.refit)]
+            probs = {lab: p for lab, p in self.problems.items() if lab != comp.label}
+            jp = JointProblem(self.eq, self.sigma, comps, problems=probs)
+            x0 = jp.x_start.copy()
+            if self.base is not None:
+                for j, c in enumerate(comps):
+                    if j != k and jp.slices[j].stop - jp.slices[j].start == \
+                            self.base.slices[j].stop - self.base.slices[j].start:
+                        x0[jp.slices[j]] = self.base_x[self.base.slices[j]]
+            names = jp.problems[k].names
+            fixed = {jp.slices[k].start + i: float(zero.get(n, comp.values[n])) for i, n in enumerate(names)}
+            x, _, _ = jp.solve(x0=x0, fixed=fixed, max_nfev=100)
+            e_cv = _cross_validate_fixed(jp, self.blocks, self.guard, x, fixed, self.settings["cv_nfev"])
+            others = [c for j, c in enumerate(jp.components_at(x)) if j != k]
+            off = ", ".join(f"{n} = {zero[n]:g}" for n in zero)
+            return e_cv, jp.sse(x), others, 0.0, f"switched off ({off})"
+        # no value switches it off, or it filters the measured signals' noise: the model without it
+        c2 = self.c.with_model(self.c.model.without(comp.label))
+        if c2.eq.e.shape != self.eq.e.shape:
+            raise PinmskError(f"the comparison without {comp.label} covers other rows or channels")
+        sigma2 = c2.eq_noise.sigma
+        offset = float(np.mean((sigma2 ** 2 - self.sigma ** 2) / self.sigma ** 2))
+        rest = [c for j, c in enumerate(self.refit) if j != k]
+        if not rest:
+            return c2.eq.e, float(np.sum((c2.eq.e / self.sigma) ** 2)), [], offset, "taken out of the model"
+        jp = JointProblem(c2.eq, self.sigma, rest)
+        x, _, _ = jp.solve(x0=jp.x_start, max_nfev=100)
+        e_cv, _ = jp.cross_validate(self.blocks, self.guard, x, max_nfev=self.settings["cv_nfev"])
+        return e_cv, jp.sse(x), jp.components_at(x), offset, "taken out of the model"
+
     # -- the loop's record of a refit -----------------------------------------------------
     def base_moves(self) -> dict:
         """The earlier effects as the reference fit leaves them (values, errors, correlations)."""
         if not self.refit:
             return {}
         return _moves(self.base, self.base_x, self.base_se, self.base_corr, len(self.refit), every=True)
+
+
+def _cross_validate_fixed(jp: JointProblem, blocks, guard: int, x_full, fixed: dict, max_nfev: int) -> np.ndarray:
+    """:meth:`JointProblem.cross_validate` with the parameters ``fixed`` (index -> value) held."""
+    e_cv = jp.eq.e.copy()
+    for blk in blocks:
+        train = np.ones(jp.n, dtype=bool)
+        train[max(blk[0] - guard, 0):min(blk[-1] + guard + 1, jp.n)] = False
+        x, _, _ = jp.solve(train, x0=x_full, max_nfev=max_nfev, fixed=fixed)
+        e_cv[np.ix_(blk, jp.cols)] = (jp.e + jp.delta(x))[blk]
+    return e_cv
+
+
+def _canonical_correlations(sc) -> np.ndarray:
+    """``(m, m)``: for the earlier effects of scorer ``sc``, the largest canonical correlation between the
+    column spaces of their whitened sensitivities (the joint Jacobian at the current fit), every parameter
+    free: 1 when one effect's change is one of the other's (rank deficiency)."""
+    m = len(sc.given)
+    out = np.zeros((m, m))
+    if m < 2:
+        return out
+    try:
+        probs = {lab: p for lab, p in sc.problems.items() if lab not in
+                 {c.label for c, g in zip(sc.refit, sc.given) if c is not g}}
+        jp = JointProblem(sc.eq, sc.sigma, sc.given, problems=probs)
+        x = jp.x_start.copy()
+        if sc.base is not None:
+            for j in range(m):
+                a, b = jp.slices[j], sc.base.slices[j]
+                if a.stop - a.start == b.stop - b.start:
+                    x[a] = sc.base_x[b]
+        J = (jp.jacobian(x) / jp.sigma[None, :, None]).reshape(-1, jp.p)
+    except PinmskError:
+        return out
+    bases = []
+    for sl in jp.slices:
+        A = J[:, sl]
+        if A.size == 0 or not np.any(A):
+            bases.append(None)
+            continue
+        u, s, _ = np.linalg.svd(A, full_matrices=False)
+        bases.append(u[:, s > s[0] * 1e-10])
+    for i in range(m):
+        for j in range(m):
+            if i != j and bases[i] is not None and bases[j] is not None:
+                out[i, j] = float(np.clip(np.linalg.svd(bases[i].T @ bases[j], compute_uv=False)[0], 0.0, 1.0))
+    return out
 
 
 def model_with_components(model, components):

@@ -268,6 +268,17 @@ def cmd_fso(args) -> int:
     return _run_solver(args, fso, args.control_points, "FSO", "forward_static_optimization")
 
 
+def _folds(text: str) -> int:
+    """``--folds N``: a whole number of cross-validation blocks, 2 or more."""
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a whole number of blocks (2 or more), got '{text}'") from None
+    if n < 2:
+        raise argparse.ArgumentTypeError(f"cross-validation needs 2 blocks or more, got {n}")
+    return n
+
+
 def cmd_diagnose(args) -> int:
     from ..diagnose import run
     from .report import save_diagnosis
@@ -278,7 +289,9 @@ def cmd_diagnose(args) -> int:
     kw = _inputs(args)
     if kw.pop("ground_reaction") == "ignore":
         trial = trial.drop([n for n in trial.names if parse_ground_reaction(n) is not None])
-    r = run(model, trial, add=args.add or [], mode=args.mode, frames=args.frame or None, **kw)
+    loop = {k: v for k, v in (("folds", args.folds), ("window", args.window)) if v is not None}
+    r = run(model, trial, add=args.add or [], remove=args.remove or [], mode=args.mode,
+            frames=args.frame or None, **loop, **kw)
     save_diagnosis(r, json_path=args.json, report_path=args.report, plot_dir=args.plot)
     print(r.summary_text())
     for path in (args.json, args.report):
@@ -578,9 +591,18 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("diagnose", help="where the model fails and which physical effect is missing")
     s.add_argument("model")
     s.add_argument("trial", help="measured trial: coordinates plus <coord>_moment, EMG/excitations or GRF")
-    s.add_argument("--add", action="append", metavar="EFFECT[:TARGET]",
+    s.add_argument("--add", action="append", metavar="EFFECT[:TARGET[:NAME=VALUE,...]]",
                    help="fit this effect jointly with the ones added before (their values move), add it, then "
-                        "diagnose again (repeat to iterate; the output prints what the refit changed)")
+                        "diagnose again (repeat to iterate; the output prints what the refit changed); "
+                        "NAME=VALUE holds that parameter at the value")
+    s.add_argument("--remove", action="append", metavar="LABEL",
+                   help="after the adds, drop this effect from the model (e.g. one the diagnosis names as no "
+                        "longer significant), refit the others jointly and diagnose again (repeatable)")
+    s.add_argument("--folds", type=_folds, default=None, metavar="N",
+                   help="cross-validation blocks (default 5, fewer on a trial too short for blocks of 20 "
+                        "samples; the choice is printed with the ranking)")
+    s.add_argument("--window", type=float, default=None, metavar="S",
+                   help="length in s of the worst time windows reported (default 1, shorter on a short trial)")
     s.add_argument("--json", metavar="OUT.json", default=None, help="write the summary as JSON")
     s.add_argument("--report", metavar="OUT.html", default=None, help="write a self-contained HTML report")
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")

@@ -490,7 +490,7 @@ def plot_ranking(diag, path=None, *, max_effects: int = 12) -> Figure:
 def plot_error_steps(run, path=None) -> Figure:
     """Total (and per-channel) RMSE / noise floor after each added effect."""
     steps = run.steps if hasattr(run, "steps") else [run]
-    labels = ["model"] + [f"+ {a.effect.label}" for a in getattr(run, "added", [])]
+    labels = getattr(run, "step_labels", None) or ["model"] + [f"+ {a.effect.label}" for a in getattr(run, "added", [])]
     fig = new_figure(max(5.0, 1.8 * len(steps) + 3), 3.6)
     ax = fig.subplots()
     x = np.arange(len(steps))

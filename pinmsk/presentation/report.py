@@ -62,6 +62,8 @@ def render_report(run, *, title: str | None = None) -> str:
     """The report as an HTML string."""
     steps = run.steps if hasattr(run, "steps") else [run]
     added = list(getattr(run, "added", []))
+    gone = {r["removed"] for r in getattr(run, "removed", [])}
+    labels = getattr(run, "step_labels", None) or ["model"] + [f"+ {a.effect.label}" for a in added]
     first, last = steps[0], steps[-1]
     c = first.comparison
     trial = c.trial
@@ -86,7 +88,7 @@ def render_report(run, *, title: str | None = None) -> str:
     ], left=2))
 
     parts.append("<h2>Error per channel</h2>")
-    header = ["channel", "noise floor"] + ["model"] + [f"+ {a.effect.label}" for a in added]
+    header = ["channel", "noise floor"] + labels
     rows = []
     for ch in list(c.channels) + ["total"]:
         rows.append([ch, _g(last.noise_floor[ch])] + [_g(s.rmse[ch]) for s in steps])
@@ -97,7 +99,8 @@ def render_report(run, *, title: str | None = None) -> str:
         rows = []
         # their values in the final model: each add refits the earlier effects jointly
         final = run.final_effects() if hasattr(run, "final_effects") and last.comparison.mode != "contact" else None
-        for a, comp in zip(added, final or [None] * len(added)):
+        kept = [a for a in added if a.effect.label not in gone]      # a removed effect is not in the final model
+        for a, comp in zip(kept, final or [None] * len(kept)):
             for k, v in a.params.items():
                 se = a.stderr.get(k)
                 if comp is not None:
@@ -106,7 +109,8 @@ def render_report(run, *, title: str | None = None) -> str:
         parts.append(_table(["effect", "parameter", "value", "std. error", "unit"], rows, left=2))
 
     for k, d in enumerate(steps):
-        label = "model as given" if k == 0 else f"after adding {added[k - 1].effect.label}"
+        label = ("model as given" if k == 0 else f"after adding {labels[k][2:]}" if labels[k].startswith("+")
+                 else f"after removing {labels[k][2:]}")
         parts.append(f"<h2>Diagnosis: {_e(label)}</h2>")
         parts.append(f'<p>Verdict: <span class="v-{d.verdict}">{_e(d.verdict)}</span>; error '
                      f"{d.ratio:.2f}× the noise floor.</p>")
