@@ -178,10 +178,13 @@ def _write_sidecar_model(model, p: Path) -> Path:
 
 
 def _relative(target: Path, folder: Path) -> str:
+    full = Path(target).resolve()
     try:
-        return Path(os.path.relpath(Path(target).resolve(), Path(folder).resolve())).as_posix()
+        rel = Path(os.path.relpath(full, Path(folder).resolve())).as_posix()
     except ValueError:                          # another drive
-        return Path(target).resolve().as_posix()
+        return full.as_posix()
+    # beside or below the sidecar: relative (the folder moves as one); elsewhere: where it is
+    return full.as_posix() if rel.startswith("..") else rel
 
 
 # -- the .osim ---------------------------------------------------------------------------------
