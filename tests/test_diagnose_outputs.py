@@ -278,6 +278,28 @@ def test_written_osim_end_stop_matches_opensim(tmp_path, shared_data):
     assert np.max(np.abs(ours - theirs)) < 1e-6 * max(1.0, np.max(np.abs(ours)))
 
 
+def test_written_osim_com_offset_and_mass_match_opensim(tmp_path, shared_data):
+    if "com_offset" not in registry.families():
+        pytest.skip("no com_offset effect family in this build")
+    src = shared_data / "opensim-models" / "Arm26" / "arm26.osim"
+    m = pinmsk.load_model(src)
+    fixed = m.with_effect(registry.get("com_offset")("r_ulna_radius_hand", dx=0.02, dy=-0.03, dz=0.01),
+                          registry.get("segment_mass")("r_ulna_radius_hand", delta=-0.1),
+                          registry.get("payload")("r_humerus@com", mass=0.7))
+    res = write_osim(fixed, tmp_path / "arm26_com.osim")
+    assert not res.not_exported
+    body = {b.get("name"): b for b in ET.parse(res.path).getroot().iter("Body")}["r_ulna_radius_hand"]
+    assert float(body.find("mass").text) == pytest.approx(0.9 * 1.534315)
+    t = np.linspace(0.0, 1.0, 11)
+    q = np.column_stack([0.3 + 0.4 * np.sin(2 * t), 0.5 + 0.6 * np.cos(3 * t)])
+    v = np.column_stack([0.8 * np.cos(2 * t), -1.8 * np.sin(3 * t)])
+    a = np.column_stack([-1.6 * np.sin(2 * t), -5.4 * np.cos(3 * t)])
+    ours = inverse_dynamics_array(fixed, Motion(t, q, v, a))
+    theirs = _opensim_id(res.path, m.coordinates, q, v, a)
+    assert np.max(np.abs(ours - inverse_dynamics_array(m, Motion(t, q, v, a)))) > 0.1
+    assert np.max(np.abs(ours - theirs)) < 1e-9 * max(1.0, np.max(np.abs(ours)))
+
+
 # -- the command line ------------------------------------------------------------------------------
 
 def test_cli_save_model_then_id(tmp_path, capsys):

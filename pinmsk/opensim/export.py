@@ -388,8 +388,7 @@ def write_osim(model, path, *, source=None) -> OsimExport:
     coords = {doc.els[k].attrs.get("name"): k for k in doc.find("Coordinate")}
     pm = model.pin
     from ..actuators import IdealActuator
-    mass_scale: dict[str, float] = {}
-    com_shift: dict[str, np.ndarray] = {}
+    inertial = []
     new_bodies, new_joints, new_forces = [], [], []
     used = set(bodies) | {doc.els[k].attrs.get("name") for k, e in enumerate(doc.els)
                           if e.attrs.get("name")}
@@ -411,24 +410,14 @@ def write_osim(model, path, *, source=None) -> OsimExport:
         if isinstance(comp, IdealActuator) or comp.kind == "contact":
             continue
         v = comp.values
-        if fam == "segment_mass":
-            names = joint_bodies(comp.target)
-            for b in names:
-                mass_scale[b] = mass_scale.get(b, 1.0) * (1.0 + v["delta"])
-            res.changes.append(f"{comp.label}: mass and inertia of {', '.join(names)} x {1 + v['delta']:.6g}")
-        elif fam == "scale":
-            for b in bodies:
-                mass_scale[b] = mass_scale.get(b, 1.0) * (1.0 + v["delta"])
-            res.changes.append(f"{comp.label}: every body's mass and inertia x {1 + v['delta']:.6g}")
-        elif fam == "com_offset":
-            if comp.target not in bodies:
-                res.not_exported.append((comp.label, f"body {comp.target} is not an OpenSim body of {src.name}"))
-                continue
-            d = np.array([v.get("dx", 0.0), v.get("dy", 0.0), v.get("dz", 0.0)], dtype=float)
-            com_shift[comp.target] = com_shift.get(comp.target, np.zeros(3)) + d
-            res.changes.append(f"{comp.label}: mass_center of {comp.target} moved by {_vec(d)} m")
+        if fam in ("segment_mass", "scale", "com_offset") or (getattr(comp, "inertial", False)
+                                                              and fam != "payload"):
+            inertial.append(comp)
         elif fam == "payload":
-            body, point = _frame_in_body(model, comp.target, bodies)
+            if comp.target.endswith("@com"):            # at a body's centre of mass
+                body, point = _com_in_body(model, comp.target[:-len("@com")], bodies)
+            else:
+                body, point = _frame_in_body(model, comp.target, bodies)
             if body is None:
                 res.not_exported.append((comp.label, f"frame {comp.target} is on no OpenSim body"))
                 continue
@@ -494,19 +483,7 @@ def write_osim(model, path, *, source=None) -> OsimExport:
                                f"{'deg' if rot else 'm'} (the other limit out of reach)")
         else:
             res.not_exported.append((comp.label, _why_not(fam)))
-    for b, s in mass_scale.items():
-        k = bodies[b]
-        for tag, n in (("mass", 1), ("inertia", 6)):
-            c = doc.child(k, tag)
-            if c is None:
-                raise ModelError(f"{src}: Body {b} has no <{tag}>")
-            x = _floats(doc.text(c), n, f"{src}: Body {b} <{tag}>")
-            doc.set_text(c, _vec(x * s))
-    for b, dlt in com_shift.items():
-        c = doc.child(bodies[b], "mass_center")
-        if c is None:
-            raise ModelError(f"{src}: Body {b} has no <mass_center>")
-        doc.set_text(c, _vec(_floats(doc.text(c), 3, f"{src}: Body {b} <mass_center>") + dlt))
+    _inertias(doc, model, inertial, bodies, src, res)
     for blocks, set_tag in ((new_bodies, "BodySet"), (new_joints, "JointSet"), (new_forces, "ForceSet")):
         if not blocks:
             continue
@@ -521,6 +498,102 @@ def write_osim(model, path, *, source=None) -> OsimExport:
     _index(out)                                   # the edited document is well-formed
     atomic_write(p, lambda fh: fh.write(out), parents=True, binary=True)
     return res
+
+
+def _inertias(doc: _Doc, model, inertial, bodies, src, res: OsimExport) -> None:
+    """Write the bodies' masses, centres of mass and inertias after the inertial effects.
+
+    The effects are folded into a copy of the skeleton (``apply_inertia``, as forward dynamics does).
+    A joint that carries one OpenSim body with mass gets that body's new inertia exactly (expressed in
+    the body's frame: mass, centre of mass, inertia about it); a joint of several welded bodies (which
+    Pinocchio merges) is changed by scaling each body when the effects only scale (``segment_mass``,
+    ``scale``), else by moving the target body's centre of mass so that the joint's moves as fitted
+    (its rotational inertia then differs by the cross terms, which the change list says).
+    """
+    import pinocchio as pin
+    if not inertial:
+        return
+    pm = model.pin
+    new = pin.Model(pm)
+    for c in inertial:
+        c.apply_inertia(model, new)
+    body_frames = {f.name: k for k, f in enumerate(pm.frames) if f.type == pin.FrameType.BODY and f.name in bodies}
+    for c in inertial:
+        res.changes.append(f"{c.label}: " + ", ".join(f"{n} = {v:.6g}" for n, v in c.values.items()))
+    for j in range(1, pm.njoints):
+        old_pi = pm.inertias[j].toDynamicParameters()
+        new_pi = new.inertias[j].toDynamicParameters()
+        if np.allclose(old_pi, new_pi, rtol=0.0, atol=1e-15):
+            continue
+        names = [b for b, k in body_frames.items() if pm.frames[k].parentJoint == j]
+        massive = [b for b in names if _body_mass(doc, bodies[b], src) > 0]
+        if len(massive) == 1:
+            b = massive[0]
+            inert = pm.frames[body_frames[b]].placement.actInv(new.inertias[j])
+            I = np.asarray(inert.inertia, dtype=float)
+            _set_body(doc, bodies[b], src, b, inert.mass, np.asarray(inert.lever, dtype=float),
+                      [I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]])
+            res.changes.append(f"  body {b}: mass {inert.mass:.6g} kg, mass_center {_vec(inert.lever)} m")
+            continue
+        ratio = new_pi[0] / old_pi[0] if old_pi[0] > 0 else 1.0
+        if np.allclose(new_pi, ratio * old_pi, rtol=1e-12, atol=1e-15):
+            for b in massive:
+                m = _body_mass(doc, bodies[b], src)
+                com, I6 = _body_com_inertia(doc, bodies[b], src, b)
+                _set_body(doc, bodies[b], src, b, m * ratio, com, I6 * ratio)
+            res.changes.append(f"  bodies {', '.join(massive)} (one Pinocchio joint): mass and inertia x {ratio:.6g}")
+            continue
+        # several bodies and a moved centre of mass: move the heaviest body's so the joint's moves as fitted
+        masses = {b: _body_mass(doc, bodies[b], src) for b in massive}
+        b = max(masses, key=masses.get)
+        kb = body_frames[b]
+        M_new = new_pi[0]
+        c_old = pm.inertias[j].lever
+        c_new = new.inertias[j].lever
+        R = pm.frames[kb].placement.rotation
+        extra = np.asarray(c_new) * M_new - ratio * np.asarray(c_old) * old_pi[0]     # first moment to move
+        shift = R.T @ extra / (masses[b] * ratio)
+        for bb in massive:
+            m = masses[bb]
+            com, I6 = _body_com_inertia(doc, bodies[bb], src, bb)
+            _set_body(doc, bodies[bb], src, bb, m * ratio, com + (shift if bb == b else 0.0), I6 * ratio)
+        res.changes.append(f"  bodies {', '.join(massive)} (one Pinocchio joint): mass x {ratio:.6g}, the centre of "
+                           f"mass of {b} moved by {_vec(shift)} m (rotational inertia approximate: the bodies are "
+                           "welded together in pinmsk)")
+
+
+def _body_mass(doc: _Doc, k: int, src) -> float:
+    c = doc.child(k, "mass")
+    return 0.0 if c is None else float(_floats(doc.text(c), 1, f"{src}: <mass>")[0])
+
+
+def _body_com_inertia(doc: _Doc, k: int, src, name) -> tuple[np.ndarray, np.ndarray]:
+    c, i = doc.child(k, "mass_center"), doc.child(k, "inertia")
+    com = np.zeros(3) if c is None else _floats(doc.text(c), 3, f"{src}: Body {name} <mass_center>")
+    I6 = np.zeros(6) if i is None else _floats(doc.text(i), 6, f"{src}: Body {name} <inertia>")
+    return com, I6
+
+
+def _set_body(doc: _Doc, k: int, src, name, mass, com, I6) -> None:
+    for tag, val, n in (("mass", [mass], 1), ("mass_center", com, 3), ("inertia", I6, 6)):
+        c = doc.child(k, tag)
+        if c is None:
+            raise ModelError(f"{src}: Body {name} has no <{tag}> to write the fitted value in")
+        val = np.asarray(val, dtype=float)
+        old = _floats(doc.text(c), n, f"{src}: Body {name} <{tag}>")
+        scale = max(float(np.max(np.abs(old))), float(np.max(np.abs(val))), 1e-300)
+        if np.max(np.abs(val - old)) > 1e-13 * scale:        # an unchanged value keeps its text
+            doc.set_text(c, _vec(np.where(np.abs(val) < 1e-15 * scale, 0.0, val)))
+
+
+def _com_in_body(model, body: str, bodies) -> tuple[str | None, np.ndarray]:
+    """``(body, its joint's centre of mass in the body's frame)``: a payload at ``<body>@com``."""
+    if body not in bodies:
+        return None, np.zeros(3)
+    pm = model.pin
+    f = pm.frames[model.frame_id(body)]
+    return body, np.asarray(f.placement.actInv(np.asarray(pm.inertias[f.parentJoint].lever, dtype=float)),
+                            dtype=float)
 
 
 def _why_not(family: str) -> str:
