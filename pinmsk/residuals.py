@@ -111,7 +111,8 @@ class ResidualReport:
                "ok": self.ok, "coordinates": {}}
         fail = self.failing
         for j, c in enumerate(self.coordinates):
-            out["coordinates"][c] = {"unit": self.units[j], "peak": float(self.peak[j]), "rms": float(self.rms[j]),
+            out["coordinates"][c] = {"unit": self.units[j], "mean": float(self.mean[j]),
+                                     "peak": float(self.peak[j]), "rms": float(self.rms[j]),
                                      "threshold_peak": float(self.thresholds[j]),
                                      "frames_failing": int(fail[:, j].sum())}
         return out
@@ -135,8 +136,8 @@ class ResidualReport:
             u = self.units[j]
             n_bad = int(fail[:, j].sum())
             verdict = "ok" if n_bad == 0 else f"FAILS at {n_bad} of {fail.shape[0]} frames"
-            out.append(f"  {c:<14} peak {self.peak[j]:10.4g} {u:<4} rms {self.rms[j]:10.4g} {u:<4} "
-                       f"threshold {self.thresholds[j]:.4g} {u}: {verdict}")
+            out.append(f"  {c:<14} mean {self.mean[j]:10.4g} {u:<4} peak {self.peak[j]:10.4g} {u:<4} "
+                       f"rms {self.rms[j]:10.4g} {u:<4} threshold {self.thresholds[j]:.4g} {u}: {verdict}")
         bad = np.flatnonzero(fail.any(axis=1))
         if bad.size:
             spans = _spans(self.time, bad)
@@ -256,22 +257,18 @@ def residual_table(values, coordinates, units, *, body_weight: float, height: fl
 
 def residual_table_lines(table: dict, *, indent: str = "  ") -> list[str]:
     """One line per coordinate of a :func:`residual_table`: mean, RMS and peak in units and percent, and
-    the verdict of OpenSim's checklist."""
-    out = []
+    the verdict of OpenSim's checklist (its limits are :data:`OPENSIM_RESIDUAL_LIMITS`)."""
     rows = table.get("coordinates", {})
     if not rows:
-        return out
+        return []
     w = max(len(c) for c in rows)
+    out = []
     for c, r in rows.items():
         u = "N m" if r["unit"] == "N*m" else "N"
         p = "%BW" if r["unit"] == "N" else "%BWh"
-
-        def both(v, pc):
-            return f"{v:9.3g} {u:<3} ({pc:6.2f} {p})" if pc is not None else f"{v:9.3g} {u:<3}"
-        lim = r["limits"]
-        out.append(f"{indent}{c:<{w}}  mean {both(r['mean'], r['mean_percent'])}  rms {both(r['rms'], r['rms_percent'])}"
-                   f"  peak {both(r['peak'], r['peak_percent'])}  {r['status']} (peak <= {lim['peak'][0]:g}"
-                   f"{'' if lim['peak'][1] == lim['peak'][0] else '-' + format(lim['peak'][1], 'g')} {u}, "
-                   f"rms <= {lim['rms'][0]:g}{'' if lim['rms'][1] == lim['rms'][0] else '-' + format(lim['rms'][1], 'g')}"
-                   f" {u})")
+        cells = []
+        for what in ("mean", "rms", "peak"):
+            pc = r[f"{what}_percent"]
+            cells.append(f"{what} {r[what]:8.3g} {u:<3}" + (f" ({pc:6.2f} {p})" if pc is not None else ""))
+        out.append(f"{indent}{c:<{w}}  " + "  ".join(cells) + f"  {r['status']}")
     return out
