@@ -224,24 +224,32 @@ def test_written_osim_edits_only_what_changed(tmp_path, shared_data):
 
 
 def _opensim_id(path, coordinates, q, v, a):
-    with_logger_off = osim.Logger
-    with_logger_off.setLevelString("Off")
+    """OpenSim's InverseDynamicsSolver (muscles off, the other forces on) at rows of ``q, v, a`` in
+    ``coordinates``' order."""
+    osim.Logger.setLevelString("Off")
     om = osim.Model(str(path))
     for i in range(om.getMuscles().getSize()):
         om.getMuscles().get(i).set_appliesForce(False)
     s = om.initSystem()
     cs = om.getCoordinateSet()
-    coords = [cs.get(i) for i in range(cs.getSize())]
-    assert [c.getName() for c in coords] == list(coordinates)     # arm26: set order = mobility order
+    n = s.getNU()
+    order = [None] * n                     # the coordinate of each mobility
+    for i in range(cs.getSize()):
+        for k in range(cs.getSize()):
+            cs.get(k).setSpeedValue(s, 0.0)
+        cs.get(i).setSpeedValue(s, 1.0)
+        order[int(np.argmax([abs(s.getU().get(k)) for k in range(n)]))] = cs.get(i).getName()
+    col = [list(coordinates).index(c) for c in order]
     solver = osim.InverseDynamicsSolver(om)
     out = np.empty_like(q)
     for k in range(q.shape[0]):
-        for j, c in enumerate(coords):
-            c.setValue(s, float(q[k, j]), False)
-            c.setSpeedValue(s, float(v[k, j]))
+        for j, c in enumerate(coordinates):
+            cs.get(c).setValue(s, float(q[k, j]), False)
+            cs.get(c).setSpeedValue(s, float(v[k, j]))
         om.realizeVelocity(s)
-        tau = solver.solve(s, osim.Vector([float(x) for x in a[k]]))
-        out[k] = [tau.get(j) for j in range(len(coords))]
+        tau = solver.solve(s, osim.Vector([float(a[k, j]) for j in col]))
+        for i, j in enumerate(col):
+            out[k, j] = tau.get(i)
     return out
 
 

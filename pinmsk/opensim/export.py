@@ -604,7 +604,9 @@ def _why_not(family: str) -> str:
         "riener_edrich_1999": "OpenSim has no force of this law",
         "sensor_gain": "a measurement effect (of the data, not of the body)",
         "sensor_offset": "a measurement effect (of the data, not of the body)",
-    }.get(family, "no OpenSim force of the same physics (a measurement, muscle-level or other effect)")
+    }.get(family, "a correction of the force-plate data: apply it to the ground reaction file, not the model"
+          if family.startswith("plate_") else
+          "no OpenSim force of the same physics (a measurement, muscle-level or other effect)")
 
 
 def _coordinate_is_rotational(doc: _Doc, k: int) -> bool:
