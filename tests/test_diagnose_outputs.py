@@ -308,6 +308,26 @@ def test_written_osim_com_offset_and_mass_match_opensim(tmp_path, shared_data):
     assert np.max(np.abs(ours - theirs)) < 1e-9 * max(1.0, np.max(np.abs(ours)))
 
 
+def test_written_gait_osim_changes_opensim_id_as_pinmsk(tmp_path, shared_data):
+    # subject01's walk model: the torso 10 % heavier (and its COM moved, when com_offset exists); OpenSim's
+    # inverse dynamics of the written file changes by what pinmsk's does (the external loads cancel)
+    d = shared_data / "opensim-models" / "Gait10dof18musc"
+    m = pinmsk.load_model(d / "subject01.osim", nonlinear="fit")
+    effs = [registry.get("segment_mass")("torso", delta=0.1)]
+    if "com_offset" in registry.families():
+        effs.append(registry.get("com_offset")("torso", dx=0.04, dy=-0.02, dz=0.0))
+    fixed = m.with_effect(*effs)
+    res = write_osim(fixed, tmp_path / "s01.osim")
+    mo = m.motion(pinmsk.read_trial(d / "IK" / "subject01_walk_IK.mot"))
+    k = np.arange(20, 130, 22)
+    q, v, a = mo.q[k], mo.v[k], mo.a[k]
+    ours = (inverse_dynamics_array(fixed, Motion(mo.t[k], q, v, a))
+            - inverse_dynamics_array(m, Motion(mo.t[k], q, v, a)))
+    theirs = _opensim_id(res.path, m.coordinates, q, v, a) - _opensim_id(d / "subject01.osim", m.coordinates, q, v, a)
+    assert np.max(np.abs(ours)) > 5.0
+    assert np.max(np.abs(ours - theirs)) < 1e-9 * np.max(np.abs(ours))
+
+
 # -- the command line ------------------------------------------------------------------------------
 
 def test_cli_save_model_then_id(tmp_path, capsys):
