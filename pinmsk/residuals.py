@@ -11,10 +11,20 @@ thresholds) judges them against the trial's peak external force ``F_ext``:
 * residual **moments**: peak ``<= 1 %`` of ``COM height x F_ext``
   (RMS ``<= 0.75 %``).
 
+OpenSim's checklist for evaluating a simulation ("Simulation with OpenSim -
+Best Practices", *Evaluating your simulation*, RRA:
+https://simtk-confluence.stanford.edu:8443/display/OpenSim/Simulation+with+OpenSim+-+Best+Practices)
+gives absolute limits as well (:data:`OPENSIM_RESIDUAL_LIMITS`): peak
+residual forces below 10-25 N and RMS below 5-15 N; peak residual moments
+below 75 N m and RMS below 50 N m.
+
 :func:`floating_base_residuals` returns a :class:`ResidualReport` with each
 residual over time, its peak and RMS, the thresholds, and the frames that
 fail.  Without any external load the residuals carry the whole body weight;
-:meth:`ResidualReport.warning` says so by name.
+:meth:`ResidualReport.warning` says so by name.  :func:`residual_table` gives
+each residual's mean, RMS and peak in N (N m) and in percent of body weight
+(moments: of body weight x height) with the checklist's verdict, the per-dof
+table of the diagnosis' residual report.
 """
 from __future__ import annotations
 
@@ -25,12 +35,22 @@ import numpy as np
 from .effects._base import is_prismatic, unactuated_coordinates
 from .trial import Trial
 
-__all__ = ["ResidualReport", "floating_base_residuals", "PEAK_FORCE_FRACTION", "PEAK_MOMENT_FRACTION"]
+__all__ = ["ResidualReport", "floating_base_residuals", "residual_table", "residual_table_lines",
+           "height_from_com", "PEAK_FORCE_FRACTION", "PEAK_MOMENT_FRACTION", "OPENSIM_RESIDUAL_LIMITS",
+           "STATURE_PER_COM_HEIGHT"]
 
 #: OpenSim RRA guidance: peak residual force / peak external force.
 PEAK_FORCE_FRACTION = 0.05
 #: OpenSim RRA guidance: peak residual moment / (COM height x peak external force).
 PEAK_MOMENT_FRACTION = 0.01
+#: OpenSim's checklist for RRA results (module docstring): ``{unit: {"peak" | "rms": (good, acceptable)}}``
+#: in N and N m; a residual is ``ok`` within the first limit of both, ``marginal`` within the second.
+OPENSIM_RESIDUAL_LIMITS = {"N": {"peak": (10.0, 25.0), "rms": (5.0, 15.0)},
+                           "N*m": {"peak": (75.0, 75.0), "rms": (50.0, 50.0)}}
+#: Stature over the height of the standing body's centre of mass: the whole-body centre of mass of an
+#: adult stands at about 55 % of stature, so ``height ~= COM height / 0.55``.  Used when a model gives no
+#: stature, for percentages of ``body weight x height``.
+STATURE_PER_COM_HEIGHT = 1.0 / 0.55
 
 
 @dataclass(frozen=True)
@@ -45,6 +65,10 @@ class ResidualReport:
     com_height: float                  # m
     body_weight: float                 # N
     thresholds: np.ndarray             # (k,) peak thresholds in the coordinate's unit
+
+    @property
+    def mean(self) -> np.ndarray:
+        return np.mean(self.values, axis=0)
 
     @property
     def peak(self) -> np.ndarray:
@@ -87,10 +111,17 @@ class ResidualReport:
                "ok": self.ok, "coordinates": {}}
         fail = self.failing
         for j, c in enumerate(self.coordinates):
-            out["coordinates"][c] = {"unit": self.units[j], "peak": float(self.peak[j]), "rms": float(self.rms[j]),
+            out["coordinates"][c] = {"unit": self.units[j], "mean": float(self.mean[j]),
+                                     "peak": float(self.peak[j]), "rms": float(self.rms[j]),
                                      "threshold_peak": float(self.thresholds[j]),
                                      "frames_failing": int(fail[:, j].sum())}
         return out
+
+    def table(self, *, height: float | None = None) -> dict:
+        """:func:`residual_table` of these residuals (``height`` default: :func:`height_from_com`)."""
+        return residual_table(self.values, self.coordinates, self.units, body_weight=self.body_weight,
+                              height=height_from_com(self.com_height) if height is None else height,
+                              peak_external_force=self.peak_external_force, com_height=self.com_height)
 
     def lines(self) -> list[str]:
         """A table for reports: one line per coordinate, then the failing frames."""
@@ -105,8 +136,8 @@ class ResidualReport:
             u = self.units[j]
             n_bad = int(fail[:, j].sum())
             verdict = "ok" if n_bad == 0 else f"FAILS at {n_bad} of {fail.shape[0]} frames"
-            out.append(f"  {c:<14} peak {self.peak[j]:10.4g} {u:<4} rms {self.rms[j]:10.4g} {u:<4} "
-                       f"threshold {self.thresholds[j]:.4g} {u}: {verdict}")
+            out.append(f"  {c:<14} mean {self.mean[j]:10.4g} {u:<4} peak {self.peak[j]:10.4g} {u:<4} "
+                       f"rms {self.rms[j]:10.4g} {u:<4} threshold {self.thresholds[j]:.4g} {u}: {verdict}")
         bad = np.flatnonzero(fail.any(axis=1))
         if bad.size:
             spans = _spans(self.time, bad)
@@ -161,3 +192,83 @@ def floating_base_residuals(model, motion, tau: np.ndarray, external=(), *, data
     thr = np.array([PEAK_FORCE_FRACTION * f_peak if u == "N" else PEAK_MOMENT_FRACTION * com_h * f_peak
                     for u in units])
     return ResidualReport(t, coords, units, vals, f_peak, com_h, body_weight, thr)
+
+
+def height_from_com(com_height: float) -> float:
+    """Stature estimated from the centre of mass height: ``COM height x`` :data:`STATURE_PER_COM_HEIGHT`."""
+    return float(com_height) * STATURE_PER_COM_HEIGHT
+
+
+def _status(unit: str, peak: float, rms: float) -> str:
+    """OpenSim's checklist verdict on one residual: ``ok``, ``marginal`` or ``exceeds``."""
+    lim = OPENSIM_RESIDUAL_LIMITS[unit]
+    if peak <= lim["peak"][0] and rms <= lim["rms"][0]:
+        return "ok"
+    if peak <= lim["peak"][1] and rms <= lim["rms"][1]:
+        return "marginal"
+    return "exceeds"
+
+
+def residual_table(values, coordinates, units, *, body_weight: float, height: float,
+                   peak_external_force: float | None = None, com_height: float | None = None) -> dict:
+    """Mean, RMS and peak of each residual, in its unit and in percent, against OpenSim's limits.
+
+    ``values`` (N, k) residuals over frames at ``coordinates`` (``units`` ``"N"`` or ``"N*m"``); forces
+    in percent of ``body_weight`` (N), moments in percent of ``body_weight x height`` (N m).  Per
+    coordinate: ``unit``, ``mean`` (signed), ``rms``, ``peak`` (largest magnitude) and ``peak_signed``
+    (its value), ``mean_percent``, ``rms_percent``, ``peak_percent``, ``percent_of`` (the reference in
+    words), ``limits`` (:data:`OPENSIM_RESIDUAL_LIMITS` for the unit: ``peak`` and ``rms``, each
+    ``[good, acceptable]``), ``status`` (``ok`` within both good limits, ``marginal`` within both
+    acceptable ones, ``exceeds`` otherwise) and, with ``peak_external_force`` and ``com_height``,
+    ``threshold_peak`` (the RRA guidance: 5 % of the peak external force, moments 1 % of COM height times
+    it) with ``relative_status`` (``ok`` or ``exceeds``).  Plus ``body_weight_N``, ``height_m``,
+    ``frames`` and ``ok`` (every status ``ok``).
+    """
+    x = np.asarray(values, dtype=float)
+    x = x.reshape(x.shape[0], -1) if x.ndim else x.reshape(1, 1)
+    bw = float(body_weight)
+    h = float(height)
+    out = {"body_weight_N": bw, "height_m": h, "frames": int(x.shape[0]), "coordinates": {}}
+    f_ext = None if peak_external_force is None else float(peak_external_force)
+    if f_ext is not None:
+        out["peak_external_force_N"] = f_ext
+    if com_height is not None:
+        out["com_height_m"] = float(com_height)
+    for j, (c, u) in enumerate(zip(coordinates, units)):
+        col = x[:, j]
+        k = int(np.argmax(np.abs(col))) if col.size else 0
+        mean, rms = float(np.mean(col)), float(np.sqrt(np.mean(col * col)))
+        peak, signed = float(abs(col[k])), float(col[k])
+        ref = bw if u == "N" else bw * h
+        pct = (lambda v: 100.0 * v / ref) if ref > 0 else (lambda v: None)
+        row = {"unit": u, "mean": mean, "rms": rms, "peak": peak, "peak_signed": signed,
+               "mean_percent": pct(mean), "rms_percent": pct(rms), "peak_percent": pct(peak),
+               "percent_of": "body weight" if u == "N" else "body weight x height",
+               "limits": {k2: list(v) for k2, v in OPENSIM_RESIDUAL_LIMITS[u].items()},
+               "status": _status(u, peak, rms)}
+        if f_ext is not None and com_height is not None:
+            thr = PEAK_FORCE_FRACTION * f_ext if u == "N" else PEAK_MOMENT_FRACTION * float(com_height) * f_ext
+            row["threshold_peak"] = float(thr)
+            row["relative_status"] = "ok" if peak <= thr else "exceeds"
+        out["coordinates"][c] = row
+    out["ok"] = all(r["status"] == "ok" for r in out["coordinates"].values())
+    return out
+
+
+def residual_table_lines(table: dict, *, indent: str = "  ") -> list[str]:
+    """One line per coordinate of a :func:`residual_table`: mean, RMS and peak in units and percent, and
+    the verdict of OpenSim's checklist (its limits are :data:`OPENSIM_RESIDUAL_LIMITS`)."""
+    rows = table.get("coordinates", {})
+    if not rows:
+        return []
+    w = max(len(c) for c in rows)
+    out = []
+    for c, r in rows.items():
+        u = "N m" if r["unit"] == "N*m" else "N"
+        p = "%BW" if r["unit"] == "N" else "%BWh"
+        cells = []
+        for what in ("mean", "rms", "peak"):
+            pc = r[f"{what}_percent"]
+            cells.append(f"{what} {r[what]:8.3g} {u:<3}" + (f" ({pc:6.2f} {p})" if pc is not None else ""))
+        out.append(f"{indent}{c:<{w}}  " + "  ".join(cells) + f"  {r['status']}")
+    return out

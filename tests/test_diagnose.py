@@ -144,7 +144,8 @@ def test_json_shape_and_summary():
     r = run(m, trial)
     js = r.to_dict()
     assert list(js)[:7] == ["inputs", "rmse", "noise_floor", "worst_windows", "ranking", "verdict", "added"]
-    assert list(js)[7:] == ["noise_model", "refit", "pairs", "outside_catalog", "stopping", "elimination", "removed"]
+    assert list(js)[7:] == ["noise_model", "refit", "pairs", "outside_catalog", "stopping", "elimination", "removed",
+                            "residual_report"]
     assert js["noise_model"]["method"] == "propagated noise models"
     assert set(js["noise_model"]["sources"]) == {"coordinates", "moments"}
     assert js["noise_model"]["sources"]["moments"]["channels"]["elbow_flexion_moment"]["corner_hz"] is None

@@ -309,6 +309,16 @@ def _compare_diagnosis(fresh: dict, gold: dict):
     for got, want in zip(fresh["added"], gold["added"]):
         _compare_fit(got, want, f"added {want['effect']}:{want['target']}")
     assert set(fresh) == set(gold), f"JSON keys now {sorted(fresh)}, golden {sorted(gold)}"
+    # the floating-base residuals of each step: inverse dynamics, deterministic (1e-6 N or N m)
+    rf, rg = fresh["residual_report"], gold["residual_report"]
+    assert (rf is None) == (rg is None), "residual_report null-ness differs"
+    for sf, sg in zip((rf or {}).get("steps", ()), (rg or {}).get("steps", ())):
+        assert sf["model"] == sg["model"] and list(sf["coordinates"]) == list(sg["coordinates"])
+        for c, want in sg["coordinates"].items():
+            got = sf["coordinates"][c]
+            assert got["status"] == want["status"], f"residual_report step {sg['step']} {c}: status"
+            _close([got[k] for k in ("mean", "rms", "peak")], [want[k] for k in ("mean", "rms", "peak")],
+                   rtol=DX_RTOL, atol=1e-6, where=f"residual_report step {sg['step']} {c}")
 
 
 def _check_truth(name: str, js: dict):

@@ -938,20 +938,93 @@ class DiagnosisRun:
         return out
 
     def to_dict(self) -> dict:
-        """The loop as a JSON-ready dict: the final diagnosis, the effects added (final values) and what
-        each step's joint refit changed."""
+        """The loop as a JSON-ready dict: the final diagnosis, the effects added (final values), what
+        each step's joint refit changed and the floating-base ``residual_report`` of every step."""
         if self.final.comparison.mode == "contact":
             out = self.final.to_dict([a for a in self.added if a.effect.label not in
                                       {r["removed"] for r in self.removed}], self.refits)
         else:
             out = self.final.to_dict(self.final_effects(), self.refits)
         out["removed"] = [_json(r) for r in self.removed]
+        out["residual_report"] = self.residual_report()
         return out
+
+    def residual_report(self, *, height: float | None = None) -> dict | None:
+        """The floating-base residuals before and after each added effect (None without a floating base).
+
+        Per step (``steps``: ``step``, ``model`` as given or the effect ``added``), per unactuated
+        coordinate the diagnosis compares: the residual's mean, RMS and peak over the analysed frames, in
+        N (N m) and in percent of body weight (of body weight x height), against OpenSim's limits
+        (:func:`pinmsk.residuals.residual_table`).  The residual is what inverse dynamics of the step's
+        model (its effects included) leaves at the coordinate, as ``pinmsk id`` reports it.  Body weight:
+        the given model's mass times ``|g|``; ``height`` default: the given model's mean centre-of-mass
+        height over the analysed frames times :data:`~pinmsk.residuals.STATURE_PER_COM_HEIGHT`.  The
+        same body weight and height serve every step, so the percentages compare.
+        """
+        from ..residuals import OPENSIM_RESIDUAL_LIMITS, height_from_com, residual_table
+        first = self.steps[0]
+        if first.comparison.mode == "contact":
+            return None
+        model = first.model
+        base = unactuated_coordinates(model)
+        eq = first.comparison.eq
+        coords = [c for c in eq.coordinates if c in base]
+        if not coords:
+            return None
+        g = float(np.linalg.norm(model.gravity))
+        bw = model.mass * g
+        com_h = _com_height(model, eq.motion_rows.q)
+        h = height_from_com(com_h) if height is None else float(height)
+        out = {"body_weight_N": bw, "body_weight_from": f"mass of model '{model.name}' as given "
+                                                      f"({model.mass:.4g} kg) x |g| ({g:.4g} m/s^2)",
+               "height_m": h,
+               "height_from": ("given" if height is not None else
+                               f"mean centre-of-mass height {com_h:.4g} m over the analysed frames / 0.55"),
+               "limits": {u: {k: list(v) for k, v in lim.items()} for u, lim in OPENSIM_RESIDUAL_LIMITS.items()},
+               "limits_source": "OpenSim, Simulation with OpenSim - Best Practices: evaluating RRA results",
+               "steps": []}
+        for k, d in enumerate(self.steps):
+            e = d.comparison.eq
+            cols = [e.coordinates.index(c) for c in coords if c in e.coordinates]
+            names = [e.coordinates[j] for j in cols]
+            vals = e.tau_act[:, cols]
+            units = ["N" if is_prismatic(d.model, c) else "N*m" for c in names]
+            f_ext = 0.0
+            if e._ext_rows:
+                total = sum(np.asarray(x.force, dtype=float) for x in e._ext_rows)
+                f_ext = float(np.max(np.linalg.norm(total, axis=1)))
+            tab = residual_table(vals, names, units, body_weight=bw, height=h, peak_external_force=f_ext,
+                                 com_height=com_h)
+            n_add = len(self.added)
+            added = self.added[k - 1].effect.label if 0 < k <= n_add else None
+            removed = self.removed[k - 1 - n_add]["removed"] if k > n_add else None
+            entry = {"step": k, "model": "as given" if k == 0 else (f"+ {added}" if added else f"- {removed}"),
+                     "added": added, "removed": removed,
+                     "frames": tab["frames"], "peak_external_force_N": f_ext,
+                     "coordinates": tab["coordinates"], "ok": tab["ok"]}
+            out["steps"].append(entry)
+        return out
+
+    def residual_lines(self) -> list[str]:
+        """The residual report as text: one block per step."""
+        from ..residuals import residual_table_lines
+        rep = self.residual_report()
+        if rep is None:
+            return []
+        lines = [f"floating-base residuals (mean, RMS, peak; % of body weight {rep['body_weight_N']:.4g} N, "
+                 f"moments of body weight x height {rep['height_m']:.3g} m ({rep['height_from']}); "
+                 "verdict by OpenSim's checklist for RRA: forces peak <= 10-25 N and RMS <= 5-15 N, moments "
+                 "peak <= 75 N m and RMS <= 50 N m):"]
+        for st in rep["steps"]:
+            lines.append(f"  step {st['step']}: model {st['model']}")
+            lines += residual_table_lines(st, indent="    ")
+        return lines
 
     def summary_text(self) -> str:
         first = self.steps[0]
+        res = self.residual_lines()
         if len(self.steps) == 1:
-            return first.summary_text()
+            return "\n".join([first.summary_text()] + ([""] + res if res else []))
         out = [first.summary_text()]
         for k, (fit, step) in enumerate(zip(self.added, self.steps[1:]), 1):
             prev = self.steps[k - 1]
@@ -984,6 +1057,8 @@ class DiagnosisRun:
             out.append(f"  total rmse {prev.rmse['total']:.4g} -> {step.rmse['total']:.4g} "
                        f"(noise floor {step.noise_floor['total']:.4g}; {prev.ratio:.2f}x -> {step.ratio:.2f}x)")
             out.append(step.summary_text(header=False))
+        if res:
+            out += [""] + res
         return "\n".join(out)
 
     def write_json(self, path) -> Path:
@@ -1096,6 +1171,18 @@ def _step_removal(prev: Diagnosis, new_model, label: str) -> dict:
             out["effects"].append({"effect": old.family, "target": old.target, "label": old.label,
                                    "params": params})
     return out
+
+
+def _com_height(model, q: np.ndarray) -> float:
+    """Mean height of ``model``'s centre of mass along ``-g`` over a dozen frames of ``q`` spread evenly."""
+    import pinocchio as pin
+    g = np.asarray(model.gravity, dtype=float)
+    gn = float(np.linalg.norm(g))
+    up = -g / gn if gn > 0 else np.array([0.0, 1.0, 0.0])
+    pm = model.pin
+    pd = pm.createData()
+    rows = np.unique(np.linspace(0, q.shape[0] - 1, min(q.shape[0], 12)).astype(int))
+    return float(np.mean([pin.centerOfMass(pm, pd, q[k]) @ up for k in rows]))
 
 
 def _step_refit(prev: Diagnosis, comps: list, fit: Result) -> dict:

@@ -277,11 +277,36 @@ def _folds(text: str) -> int:
     if n < 2:
         raise argparse.ArgumentTypeError(f"cross-validation needs 2 blocks or more, got {n}")
     return n
+def _check_saves(args) -> None:
+    """``--save-model`` / ``--save-osim`` paths of the diagnosis, refused before any work if they cannot be."""
+    from ..opensim.export import check_model_path, check_osim_path
+    if getattr(args, "save_model", None):
+        check_model_path(args.save_model)
+    if getattr(args, "save_osim", None):
+        check_osim_path(args.save_osim)
+        if Path(str(args.model)).suffix.lower() != ".osim":
+            raise PinmskError(f"--save-osim writes a copy of an OpenSim model; MODEL {args.model} is not an .osim "
+                              "(save it with --save-model OUT.toml)")
+
+
+def _save_corrected(args, model) -> None:
+    """Write the diagnosed model with its added effects: ``--save-model`` (sidecar) and ``--save-osim``."""
+    from ..opensim.export import write_model, write_osim
+    if getattr(args, "save_model", None):
+        files = write_model(model, args.save_model)
+        for what in ("sidecar", "urdf", "markers", "report"):
+            if what in files:
+                print(f"wrote {files[what]}")
+    if getattr(args, "save_osim", None):
+        res = write_osim(model, args.save_osim)
+        for line in res.lines():
+            print(line, file=sys.stderr if line.startswith("pinmsk: warning") else sys.stdout)
 
 
 def cmd_diagnose(args) -> int:
     from ..diagnose import run
     from .report import save_diagnosis
+    _check_saves(args)
     model = _model(args)
     for label in args.without or ():
         model = model.without(label)        # a component left out on request (e.g. contacts vs measured GRF)
@@ -297,6 +322,7 @@ def cmd_diagnose(args) -> int:
     for path in (args.json, args.report):
         if path:
             print(f"wrote {path}")
+    _save_corrected(args, r.model)
     return 0
 
 
@@ -606,6 +632,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", metavar="OUT.json", default=None, help="write the summary as JSON")
     s.add_argument("--report", metavar="OUT.html", default=None, help="write a self-contained HTML report")
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
+    s.add_argument("--save-model", metavar="OUT.toml", default=None,
+                   help="write the model with the added effects (their fitted values) as a sidecar that "
+                        "`pinmsk id OUT.toml ...` runs on (an imported .osim: URDF + sidecar with its coordinate map)")
+    s.add_argument("--save-osim", metavar="OUT.osim", default=None,
+                   help="an .osim MODEL: write a copy of it with the adjusted masses and centres of mass and the "
+                        "added effects as OpenSim forces where one exists (the rest are listed)")
     s.add_argument("--mode", default="auto", choices=["auto", "torque", "motion", "muscle", "contact"],
                    help="comparison level (default: chosen from the trial's channels)")
     input_flags(s)
@@ -695,7 +727,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: Arguments naming output files, and output folders, of any command (checked before it runs).
-_OUTPUT_FILES = ("output", "json", "report")
+_OUTPUT_FILES = ("output", "json", "report", "save_model", "save_osim")
 _OUTPUT_FOLDERS = ("plot", "out")
 
 
