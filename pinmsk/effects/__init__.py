@@ -11,6 +11,8 @@ joint_damping              coordinate   ``-c qdot``
 coulomb_friction           coordinate   ``-F_c tanh(qdot / 0.01)``
 joint_spring               coordinate   ``-k (q - q0)``, ``q0`` within the joint's range
 passive_elastic            coordinate   ``A [exp(-k_lo (q - theta_0)) - exp(k_hi (q - theta_0))]``
+end_stop_upper             coordinate   ``-K S((q - q_up) / d) (q - q_up)``: OpenSim's CoordinateLimitForce, upper side
+end_stop_lower             coordinate   ``-K S((q_lo - q) / d) (q - q_lo)``: the same, lower side
 riener_edrich_1999         side r / l   thesis Eq. 5.11 on hip, knee, ankle (x ``scale``)
 payload                    frame        ``-m J_p^T (a_p - g)`` (point mass; inertial)
 segment_mass               body         ``-delta Y_j pi_j`` (mass/inertia scale; inertial)
@@ -65,6 +67,7 @@ from ._base import JointEffect, SignalEffect
 from .activation import ActivationDynamics, DelayedActivationDynamics, ExcitationPath, excitation_path
 from .damping import JointDamping
 from .delay import ElectromechanicalDelay
+from .end_stop import EndStop, EndStopLower, EndStopUpper
 from .friction import CoulombFriction
 from .passive import PassiveElastic, RienerEdrich1999PassiveMoment
 from .payload import Payload
@@ -86,7 +89,7 @@ _BUILTIN = frozenset(families())
 
 __all__ = [
     "ActivationDynamics", "CoulombFriction", "DelayedActivationDynamics", "ElectromechanicalDelay",
-    "ExcitationPath", "excitation_path",
+    "EndStop", "EndStopLower", "EndStopUpper", "ExcitationPath", "excitation_path",
     "JointDamping", "JointEffect", "JointSpring", "MassScale", "MeasurementEffect", "PassiveElastic", "Payload",
     "RienerEdrich1999PassiveMoment", "SegmentMass", "SensorGain", "SensorOffset", "SignalEffect", "families",
     "from_spec", "get", "register", "unregister",
