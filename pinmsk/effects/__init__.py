@@ -16,6 +16,7 @@ end_stop_lower             coordinate   ``-K S((q_lo - q) / d) (q - q_lo)``: the
 riener_edrich_1999         side r / l   thesis Eq. 5.11 on hip, knee, ankle (x ``scale``)
 payload                    frame        ``-m J_p^T (a_p - g)`` (point mass; inertial)
 segment_mass               body         ``-delta Y_j pi_j`` (mass/inertia scale; inertial)
+com_offset                 body         ``-Y_j delta pi(d)`` (centre of mass moved by ``d``, mass kept; inertial)
 scale                      model        ``-delta Y pi`` (every segment; model not scaled to the subject)
 sensor_gain                coordinate   none: the recorded ``<coord>_moment`` reads ``g tau`` (measurement)
 sensor_offset              coordinate   none: the recorded ``<coord>_moment`` reads ``tau + b`` (measurement)
@@ -65,6 +66,7 @@ from ..errors import ModelError
 from . import registry as _r
 from ._base import JointEffect, SignalEffect
 from .activation import ActivationDynamics, DelayedActivationDynamics, ExcitationPath, excitation_path
+from .com_offset import ComOffset
 from .damping import JointDamping
 from .delay import ElectromechanicalDelay
 from .end_stop import EndStop, EndStopLower, EndStopUpper
@@ -88,7 +90,7 @@ def unregister(family: str) -> None:
 _BUILTIN = frozenset(families())
 
 __all__ = [
-    "ActivationDynamics", "CoulombFriction", "DelayedActivationDynamics", "ElectromechanicalDelay",
+    "ActivationDynamics", "ComOffset", "CoulombFriction", "DelayedActivationDynamics", "ElectromechanicalDelay",
     "EndStop", "EndStopLower", "EndStopUpper", "ExcitationPath", "excitation_path",
     "JointDamping", "JointEffect", "JointSpring", "MassScale", "MeasurementEffect", "PassiveElastic", "Payload",
     "RienerEdrich1999PassiveMoment", "SegmentMass", "SensorGain", "SensorOffset", "SignalEffect", "families",

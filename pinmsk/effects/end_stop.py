@@ -65,7 +65,7 @@ class EndStop(JointEffect):
     side: int = 1
     parameters = (
         Parameter("stiffness", 10.0, 0.0, 1.0e5, "N m/rad", "stiffness of the stop beyond the transition"),
-        Parameter("limit", 0.0, -2 * np.pi, 2 * np.pi, "rad", "where the stop begins; bounded to the joint's range"),
+        Parameter("limit", 0.5, -2 * np.pi, 2 * np.pi, "rad", "where the stop begins; bounded to the joint's range"),
         Parameter("transition", np.deg2rad(2.0), 1.0e-4, 0.5, "rad",
                   "angle over which the stiffness rises from 0 to its value (held by the fit)", vary=False),
         Parameter("damping", 0.0, 0.0, 1.0e3, "N m s/rad", "damping inside the stop (held by the fit)",
