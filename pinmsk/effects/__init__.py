@@ -18,6 +18,11 @@ payload                    frame        ``-m J_p^T (a_p - g)`` (point mass; iner
 segment_mass               body         ``-delta Y_j pi_j`` (mass/inertia scale; inertial)
 com_offset                 body         ``-Y_j delta pi(d)`` (centre of mass moved by ``d``, mass kept; inertial)
 scale                      model        ``-delta Y pi`` (every segment; model not scaled to the subject)
+plate_offset               plate body   ``-J_b^T (b, p x b)``: zero offset of a force plate's channels (trial)
+plate_cop_offset           plate body   ``-J_b^T (0, d x F)``: the plate's COP read ``d`` off (trial)
+plate_tilt                 plate body   ``-J_b^T Delta``: the plate's axes turned by a small rotation (trial)
+plate_gain                 plate body   ``-(1 - 1/g) J_b^T w``: the plate's calibration off (trial)
+plate_lag                  plate body   ``lag J_b^T dw/dt``: the plate's samples behind the kinematics (trial)
 sensor_gain                coordinate   none: the recorded ``<coord>_moment`` reads ``g tau`` (measurement)
 sensor_offset              coordinate   none: the recorded ``<coord>_moment`` reads ``tau + b`` (measurement)
 activation_dynamics        muscles      excitation -> activation, Eq. A.2 (muscle level)
@@ -73,6 +78,7 @@ from .end_stop import EndStop, EndStopLower, EndStopUpper
 from .friction import CoulombFriction
 from .passive import PassiveElastic, RienerEdrich1999PassiveMoment
 from .payload import Payload
+from .plate import PlateCopOffset, PlateEffect, PlateGain, PlateLag, PlateOffset, PlateTilt
 from .registry import families, from_spec, get, register
 from .scale import MassScale
 from .segment_mass import SegmentMass
@@ -92,7 +98,8 @@ _BUILTIN = frozenset(families())
 __all__ = [
     "ActivationDynamics", "ComOffset", "CoulombFriction", "DelayedActivationDynamics", "ElectromechanicalDelay",
     "EndStop", "EndStopLower", "EndStopUpper", "ExcitationPath", "excitation_path",
-    "JointDamping", "JointEffect", "JointSpring", "MassScale", "MeasurementEffect", "PassiveElastic", "Payload",
+    "JointDamping", "JointEffect", "JointSpring", "MassScale", "MeasurementEffect", "PassiveElastic", "Payload", "PlateCopOffset", "PlateEffect", "PlateGain", "PlateLag",
+    "PlateOffset", "PlateTilt",
     "RienerEdrich1999PassiveMoment", "SegmentMass", "SensorGain", "SensorOffset", "SignalEffect", "families",
     "from_spec", "get", "register", "unregister",
 ]

@@ -19,9 +19,8 @@ model's inertia (``pi_j`` from the model as loaded, so the effect composes
 with a payload on the same body).
 
 Plausibility (:meth:`SegmentMass.plausibility`): the fitted mass must lie within the body's
-anthropometric range (de Leva 1996, :mod:`pinmsk.effects.anthropometry`), or at least not
-further outside it than the model's own mass; the diagnosis flags a fit that does not, and never
-suggests it.
+anthropometric range (de Leva 1996, :mod:`pinmsk.effects.anthropometry`), widened to the model's
+own mass +-30 %; the diagnosis flags a fit that does not, and never suggests it.
 """
 from __future__ import annotations
 
@@ -59,7 +58,7 @@ class SegmentMass(ScaledBasisEffect):
 
     def plausibility(self, model) -> list[str]:
         """Why the fitted mass is implausible (empty when it is not): outside the body's range of
-        de Leva (1996) and further from it than the model's mass (:func:`~.anthropometry.mass_plausibility`)."""
+        de Leva (1996), widened to the model's own mass (:func:`~.anthropometry.mass_plausibility`)."""
         j = self._joint(model)
         m = float(model.pin.inertias[j].mass)
         return mass_plausibility(model, j, (1.0 + self.values["delta"]) * m, f"{self.label} (delta = "
