@@ -308,7 +308,7 @@ class Scorer:
         except PinmskError as exc:            # a profile refit that fails: the candidate is not identifiable
             ident = {"identifiable": False, "flags": [f"profile likelihood failed: {exc}"]}
         # a fit outside the physically plausible range (a segment mass beyond the anthropometric table)
-        implausible = _plausibility(jp.components_at(x)[-1], c.model)
+        implausible = _plausibility(jp.components_at(x)[-1], c.model, eq.motion_rows)
         if implausible:
             ident = dict(ident, identifiable=False, plausible=False,
                          flags=list(ident.get("flags", [])) + implausible)
@@ -398,10 +398,11 @@ def motion_rmse_after(c, components) -> dict:
     return out
 
 
-def _plausibility(comp, model) -> list:
-    """The flags of a fitted component's own plausibility check (``plausibility(model)``), if it has one."""
+def _plausibility(comp, model, motion) -> list:
+    """The flags of a fitted component's own plausibility check (``plausibility(model, motion)``: a segment
+    mass beyond the anthropometric range, a stop pressed on every frame), if it has one."""
     check = getattr(comp, "plausibility", None)
-    return list(check(model)) if check is not None else []
+    return list(check(model, motion)) if check is not None else []
 
 
 def _own(score) -> np.ndarray:

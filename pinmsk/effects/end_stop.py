@@ -21,7 +21,8 @@ and damping in N m s/deg for a rotational coordinate, :meth:`EndStop.from_opensi
 
 * ``stiffness`` ``K`` (N m/rad, >= 0; 0 = no stop);
 * ``limit`` (rad): where the stop begins, bounded to the joint's range of motion when the
-  diagnosis builds the candidate (:meth:`EndStop.for_model`);
+  diagnosis builds the candidate (:meth:`EndStop.for_model`); a fitted stop that presses on
+  nearly every frame is a linear spring, not a stop, and is flagged (:meth:`EndStop.plausibility`);
 * ``transition`` ``d`` (rad, > 0): over which the stiffness rises; held at its value by the fit
   (``vary=False``) -- beyond the transition the moment is the linear spring ``-K (q - limit)``,
   which the data determine, while the shape inside it is barely seen;
@@ -40,7 +41,10 @@ from ..components import Parameter
 from ._base import JointEffect, bounded_to_range
 from .registry import register
 
-__all__ = ["EndStop", "EndStopLower", "EndStopUpper", "smooth_step"]
+__all__ = ["EndStop", "EndStopLower", "EndStopUpper", "smooth_step", "FREE_SHARE"]
+
+#: least share of the frames a fitted stop must leave free (else it is a spring over the whole motion)
+FREE_SHARE = 0.05
 
 
 def smooth_step(x):
@@ -87,6 +91,20 @@ class EndStop(JointEffect):
     def for_model(self, model) -> "EndStop":
         """This stop with its limit bounded to the target coordinate's range of motion."""
         return bounded_to_range(self, model, self.range_parameters)
+
+    def plausibility(self, model, motion=None) -> list[str]:
+        """Why this fitted stop is no stop (empty when it is one): on ``motion`` it presses on (nearly)
+        every frame -- fewer than :data:`FREE_SHARE` of them on its free side -- so it is a linear spring
+        over the whole motion, which ``joint_spring`` (with ``sensor_offset`` for the constant)
+        describes without a limit to determine."""
+        if motion is None or not self.values["stiffness"] > 0:
+            return []
+        q = motion.q[:, model.coordinate_index(self.target)]
+        free = float(np.mean(self._x(q, self.values) <= 0.0))
+        if free >= FREE_SHARE:
+            return []
+        return [f"{self.label} presses on {100 * (1 - free):.0f} % of the frames (limit {self.values['limit']:.4g} "
+                f"rad beyond the motion's other end): a linear spring here, not a stop"]
 
     # -- the law ---------------------------------------------------------------------
     def _x(self, q, p):

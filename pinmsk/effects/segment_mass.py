@@ -56,7 +56,7 @@ class SegmentMass(ScaledBasisEffect):
     def check_target(self, model) -> None:
         self._joint(model)
 
-    def plausibility(self, model) -> list[str]:
+    def plausibility(self, model, motion=None) -> list[str]:
         """Why the fitted mass is implausible (empty when it is not): outside the body's range of
         de Leva (1996), widened to the model's own mass (:func:`~.anthropometry.mass_plausibility`)."""
         j = self._joint(model)
