@@ -36,14 +36,20 @@ from .signals.sampling import median_step
 from .trial import Trial, moment_channels
 
 
-def component_forces(model, motion: Motion, *, data=None) -> dict[str, np.ndarray]:
+def component_forces(model, motion: Motion, *, data=None, loads=None) -> dict[str, np.ndarray]:
     """Generalized force ``(N, nv)`` of each of the model's effects and contacts, by label.
 
     ``data`` (``model.create_data()``, default a new one) is the workspace the components
-    share their kinematics in; pass the same one to reuse it for later work on ``motion``."""
+    share their kinematics in; pass the same one to reuse it for later work on ``motion``.
+    ``loads`` (the external loads of the motion) go to the components that correct them
+    (``needs_loads``: a force plate's offset, tilt, ...)."""
     data = model.create_data() if data is None else data
-    return {c.label: np.asarray(c.generalized_force(model, motion, cache=c.prepare(model, motion, data=data)))
-            for c in model.components}
+
+    def prep(c):
+        extra = {"loads": loads} if getattr(c, "needs_loads", False) else {}
+        return c.prepare(model, motion, data=data, **extra)
+
+    return {c.label: np.asarray(c.generalized_force(model, motion, cache=prep(c))) for c in model.components}
 
 
 def inverse_dynamics_array(model, motion: Motion, *, external: Sequence[skeleton.ExternalForce] = (),
@@ -59,7 +65,7 @@ def inverse_dynamics_array(model, motion: Motion, *, external: Sequence[skeleton
     tau = skeleton.rnea(model, motion.q, motion.v, motion.a, external=external,
                         progress=progress, data=None if data is None else data.pin)
     if components and model.components:
-        for f in component_forces(model, motion, data=data).values():
+        for f in component_forces(model, motion, data=data, loads=external).values():
             tau -= f
     return actuated_forces(model, motion, tau) if actuated else tau
 

@@ -231,7 +231,8 @@ def test_catalog_per_model(forearm, gait2d):
     labels = {c.label for c in catalog(forearm, tr)}
     assert labels == {"joint_damping:elbow_flexion", "coulomb_friction:elbow_flexion",
                       "joint_spring:elbow_flexion", "passive_elastic:elbow_flexion", "payload:hand",
-                      "segment_mass:forearm_hand", "sensor_offset:elbow_flexion", "sensor_gain:elbow_flexion"}
+                      "segment_mass:forearm_hand", "sensor_offset:elbow_flexion", "sensor_gain:elbow_flexion",
+                      "end_stop_upper:elbow_flexion", "end_stop_lower:elbow_flexion"}
     # ... each with its rest angle within the joint's range (0-2.6 rad)
     spring = next(c for c in catalog(forearm, tr) if c.family == "joint_spring")
     assert (spring.params["q0"].min, spring.params["q0"].max) == (0.0, 2.6)
@@ -255,6 +256,9 @@ def test_catalog_per_model(forearm, gait2d):
     # a whole-body mass scale besides the segments; no sensor on the torso rows (no recorded moment)
     assert "scale" in labels and not any(x.startswith("sensor_") for x in labels)
     assert not any(x.startswith("riener_edrich") for x in labels)      # already in the model
+    # the trunk's centre of mass (as RRA adjusts it) and each plate's corrections, one per loaded foot
+    assert "com_offset:hat" in labels
+    assert {f"plate_{k}:foot_{s}" for k in ("offset", "cop_offset", "tilt", "gain", "lag") for s in "rl"} <= labels
 
 
 def test_user_registered_effect_docstring_example(forearm):

@@ -257,8 +257,9 @@ def _compare_fit(fresh: dict, gold: dict, where: str):
             f"{where}: no parameter flagged unidentifiable now"
         return
     for k, want in gold["params"].items():
-        se = gold["stderr"][k]
-        assert (fresh["stderr"][k] is None) == (se is None), f"{where} {k}: stderr null-ness differs"
+        se = gold["stderr"].get(k)               # a parameter the fit holds (vary=False) has no error
+        assert (k in fresh["stderr"]) == (k in gold["stderr"]), f"{where} {k}: held by one fit, not the other"
+        assert (fresh["stderr"].get(k) is None) == (se is None), f"{where} {k}: stderr null-ness differs"
         atol = DX_STDERR_SHARE * se if se is not None else 0.0
         rtol = DX_RTOL if se is not None else DX_FREE_RTOL
         _close(fresh["params"][k], want, rtol=rtol, atol=atol, where=f"{where} {k}")

@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 
 from ..effects import registry
 from ..effects._base import hand_like_frames, moving_bodies, unactuated_coordinates
-from ..errors import ModelError
+from ..errors import ModelError, PinmskError
 from ..kinematics import coordinate_map, independent_coordinates
 from .compare import comparison_plan
 
@@ -49,6 +49,8 @@ class CatalogContext:
     coordinates: tuple[str, ...]
     unactuated: tuple[str, ...] = ()
     frames: tuple[str, ...] = field(default_factory=tuple)
+    #: the bodies the trial's measured external loads act on (force plates), for the plate corrections
+    loads: tuple[str, ...] = ()
 
 
 def catalog(model, trial=None, *, frames=None, mode: str = "auto", families=None,
@@ -135,4 +137,13 @@ def catalog_context(model, trial, *, mode: str = "auto", frames=None,
         return CatalogContext("torque", independent_coordinates(model), tuple(unactuated_coordinates(model)),
                               tuple(frames or ()))
     plan = comparison_plan(model, trial, mode, missing_coordinates=missing_coordinates)
-    return CatalogContext(plan.mode, plan.coordinates, plan.unactuated, tuple(frames or ()))
+    return CatalogContext(plan.mode, plan.coordinates, plan.unactuated, tuple(frames or ()), _load_bodies(model, trial))
+
+
+def _load_bodies(model, trial) -> tuple[str, ...]:
+    """The bodies the trial's ground reaction channels load (none without GRF or a body to put them on)."""
+    from ..grf import plates
+    try:
+        return tuple(sorted({p.body for p in plates(model, trial)}))
+    except PinmskError:
+        return ()

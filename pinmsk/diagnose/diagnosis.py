@@ -743,7 +743,8 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
                 "guard": guard, "window": window, "cutoff": cutoff, "alpha": alpha, "blocks": blocks,
                 "block_edges": cyc[0] if cyc else None, "joint_nfev": 50, "cv_nfev": 20, "profile": True,
                 "refit": [x.label for x in refit_comps]}
-    ctx = CatalogContext(c.mode, tuple(c.eq.coordinates), unactuated_coordinates(c.model), tuple(frames or ()))
+    ctx = CatalogContext(c.mode, tuple(c.eq.coordinates), unactuated_coordinates(c.model), tuple(frames or ()),
+                         tuple(sorted({e.frame for e in c.eq.external})))
     if candidates is None:
         cands = effect_catalog(model, trial, frames=frames, context=ctx)
     else:

@@ -115,8 +115,10 @@ class EffectProblem:
         self.lo = np.array([decl[n].min for n in self.names], dtype=float)
         self.hi = np.array([decl[n].max for n in self.names], dtype=float)
         self.x_default = np.array([decl[n].value for n in self.names], dtype=float)
+        # a correction of the measured loads (a force plate's) gets the comparison's loads
+        loads = {"loads": eq._ext_rows} if getattr(component, "needs_loads", False) else {}
         self.cache = None if self.signal or self.sensor else component.prepare(self.model, eq.motion_rows,
-                                                                              data=eq.data)
+                                                                              data=eq.data, **loads)
         if self.sensor:
             if eq.mode != "torque":
                 raise ModelError(f"{component.label} models the sensor of a recorded {component.channel}; "

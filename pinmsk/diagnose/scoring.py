@@ -316,6 +316,11 @@ class Scorer:
                                     base=self.base_rank_cond)
         except PinmskError as exc:            # a profile refit that fails: the candidate is not identifiable
             ident = {"identifiable": False, "flags": [f"profile likelihood failed: {exc}"]}
+        # a fit outside the physically plausible range (a segment mass beyond the anthropometric table)
+        implausible = _plausibility(jp.components_at(x)[-1], c.model, eq.motion_rows)
+        if implausible:
+            ident = dict(ident, identifiable=False, plausible=False,
+                         flags=list(ident.get("flags", [])) + implausible)
         note = "" if conv else f"fit did not converge: {fit.stats.message}"
         if not ident.get("identifiable", True):
             note = (note + "; " if note else "") + "not identifiable: " + "; ".join(ident["flags"]) + \
@@ -541,6 +546,13 @@ def motion_rmse_after(c, components) -> dict:
     out = {ch: float(v) for ch, v in zip(c.channels, r)}
     out["total"] = float(np.sqrt(np.mean(r ** 2)))
     return out
+
+
+def _plausibility(comp, model, motion) -> list:
+    """The flags of a fitted component's own plausibility check (``plausibility(model, motion)``: a segment
+    mass beyond the anthropometric range, a stop pressed on every frame), if it has one."""
+    check = getattr(comp, "plausibility", None)
+    return list(check(model, motion)) if check is not None else []
 
 
 def _own(score) -> np.ndarray:

@@ -11,10 +11,18 @@ joint_damping              coordinate   ``-c qdot``
 coulomb_friction           coordinate   ``-F_c tanh(qdot / 0.01)``
 joint_spring               coordinate   ``-k (q - q0)``, ``q0`` within the joint's range
 passive_elastic            coordinate   ``A [exp(-k_lo (q - theta_0)) - exp(k_hi (q - theta_0))]``
+end_stop_upper             coordinate   ``-K S((q - q_up) / d) (q - q_up)``: OpenSim's CoordinateLimitForce, upper side
+end_stop_lower             coordinate   ``-K S((q_lo - q) / d) (q - q_lo)``: the same, lower side
 riener_edrich_1999         side r / l   thesis Eq. 5.11 on hip, knee, ankle (x ``scale``)
 payload                    frame        ``-m J_p^T (a_p - g)`` (point mass; inertial)
 segment_mass               body         ``-delta Y_j pi_j`` (mass/inertia scale; inertial)
+com_offset                 body         ``-Y_j delta pi(d)`` (centre of mass moved by ``d``, mass kept; inertial)
 scale                      model        ``-delta Y pi`` (every segment; model not scaled to the subject)
+plate_offset               plate body   ``-J_b^T (b, p x b)``: zero offset of a force plate's channels (trial)
+plate_cop_offset           plate body   ``-J_b^T (0, d x F)``: the plate's COP read ``d`` off (trial)
+plate_tilt                 plate body   ``-J_b^T Delta``: the plate's axes turned by a small rotation (trial)
+plate_gain                 plate body   ``-(1 - 1/g) J_b^T w``: the plate's calibration off (trial)
+plate_lag                  plate body   ``lag J_b^T dw/dt``: the plate's samples behind the kinematics (trial)
 sensor_gain                coordinate   none: the recorded ``<coord>_moment`` reads ``g tau`` (measurement)
 sensor_offset              coordinate   none: the recorded ``<coord>_moment`` reads ``tau + b`` (measurement)
 activation_dynamics        muscles      excitation -> activation, Eq. A.2 (muscle level)
@@ -63,11 +71,14 @@ from ..errors import ModelError
 from . import registry as _r
 from ._base import JointEffect, SignalEffect
 from .activation import ActivationDynamics, DelayedActivationDynamics, ExcitationPath, excitation_path
+from .com_offset import ComOffset
 from .damping import JointDamping
 from .delay import ElectromechanicalDelay
+from .end_stop import EndStop, EndStopLower, EndStopUpper
 from .friction import CoulombFriction
 from .passive import PassiveElastic, RienerEdrich1999PassiveMoment
 from .payload import Payload
+from .plate import PlateCopOffset, PlateEffect, PlateGain, PlateLag, PlateOffset, PlateTilt
 from .registry import families, from_spec, get, register
 from .scale import MassScale
 from .segment_mass import SegmentMass
@@ -85,9 +96,10 @@ def unregister(family: str) -> None:
 _BUILTIN = frozenset(families())
 
 __all__ = [
-    "ActivationDynamics", "CoulombFriction", "DelayedActivationDynamics", "ElectromechanicalDelay",
-    "ExcitationPath", "excitation_path",
-    "JointDamping", "JointEffect", "JointSpring", "MassScale", "MeasurementEffect", "PassiveElastic", "Payload",
+    "ActivationDynamics", "ComOffset", "CoulombFriction", "DelayedActivationDynamics", "ElectromechanicalDelay",
+    "EndStop", "EndStopLower", "EndStopUpper", "ExcitationPath", "excitation_path",
+    "JointDamping", "JointEffect", "JointSpring", "MassScale", "MeasurementEffect", "PassiveElastic", "Payload", "PlateCopOffset", "PlateEffect", "PlateGain", "PlateLag",
+    "PlateOffset", "PlateTilt",
     "RienerEdrich1999PassiveMoment", "SegmentMass", "SensorGain", "SensorOffset", "SignalEffect", "families",
     "from_spec", "get", "register", "unregister",
 ]

@@ -15,6 +15,19 @@ linear in ``m``; ``prepare`` computes ``J_p^T (a_p - g)`` once per motion.
 The payload is *inertial*: forward dynamics folds it into the parent joint's
 inertia (:meth:`Payload.apply_inertia`) instead of calling
 :meth:`generalized_force`, which needs the acceleration.
+
+Sites.  ``target`` is a frame (a hand frame, a marker: an imported model's markers are frames of
+their bodies), or ``<body>@com``, the centre of mass of the body's joint inertia.  For a point
+that is not a frame the same force comes from the joint torque regressor ``Y_j`` of the joint
+carrying it (``computeJointTorqueRegressor``, ``rnea = Y pi``): a point mass ``m`` at ``p`` adds
+the dynamic parameters ``m pi_1(p)`` (unit mass, first moment ``p``, no rotational inertia), so
+``Q = -m Y_j(q, v, a) pi_1(p)``, which equals ``-m J_p^T (a_p - g)``.
+
+Without user-named frames the diagnosis offers (:meth:`Payload.candidates`) the model's hand-like
+frames (a frame named hand, palm, fingertip, tool, ...), else, on a fixed-base model, :func:`payload_sites`: on each
+distal body (a moving body without moving children: the forearm-and-hand of an arm model), its
+centre of mass and the markers on it, and its joint's origin, the distal end of the segment it
+hangs from.
 """
 from __future__ import annotations
 
@@ -22,13 +35,20 @@ import numpy as np
 import pinocchio as pin
 
 from ..components import Parameter
-from ._base import ScaledBasisEffect, add_dynamic_parameters, frame_point_kinematics
+from ..errors import ModelError
+from ._base import (ScaledBasisEffect, add_dynamic_parameters, frame_point_kinematics, hand_like_frames,
+                    moving_bodies, torque_regressor, unactuated_coordinates)
 from .registry import register
+
+__all__ = ["Payload", "payload_sites", "COM_SITE"]
+
+#: suffix of a target at a body's centre of mass (``r_ulna_radius_hand@com``)
+COM_SITE = "@com"
 
 
 @register
 class Payload(ScaledBasisEffect):
-    """Point mass ``m`` at the origin of frame ``target``."""
+    """Point mass ``m`` at the origin of frame ``target`` (or at the centre of mass of ``<body>@com``)."""
 
     family = "payload"
     level = "joint"
@@ -39,15 +59,76 @@ class Payload(ScaledBasisEffect):
     )
     zero_params = {"mass": 0.0}
 
+    @classmethod
+    def candidates(cls, model, context) -> list:
+        """The frames the user names; else the model's hand-like frames; else, on a fixed-base model,
+        :func:`payload_sites` (a floating-base model's load on the trunk is ``segment_mass`` and
+        ``com_offset``)."""
+        sites = list(context.frames) or hand_like_frames(model)
+        if not sites and not (context.unactuated or unactuated_coordinates(model)):
+            sites = payload_sites(model)
+        return [cls(f) for f in sites]
+
+    def site(self, model) -> tuple[int, np.ndarray]:
+        """``(joint, point)``: the joint carrying the payload and its position in that joint's frame."""
+        pm = model.pin
+        if self.target.endswith(COM_SITE):
+            body = self.target[:-len(COM_SITE)]
+            j = pm.frames[model.frame_id(body)].parentJoint
+            if j == 0 or pm.inertias[j].mass <= 0:
+                raise ModelError(f"payload: body '{body}' of model '{model.name}' does not move or has no mass, so "
+                                 f"'{self.target}' is no site; bodies with mass: {', '.join(moving_bodies(model))}")
+            return j, np.array(pm.inertias[j].lever)
+        f = pm.frames[model.frame_id(self.target)]
+        return f.parentJoint, np.array(f.placement.translation)
+
+    def check_target(self, model) -> None:
+        self.site(model)
+
     def prepare(self, model, motion, data=None):
-        """``J_p^T (a_p - g)`` over frames, ``(N, nv)``."""
+        """``J_p^T (a_p - g)`` over frames, ``(N, nv)`` (at a non-frame site: ``Y_j pi_1(p)``)."""
+        if self.target.endswith(COM_SITE):
+            j, p = self.site(model)
+            Y = torque_regressor(model, motion, data)[:, :, 10 * (j - 1):10 * j]
+            return Y @ pin.Inertia(1.0, p, np.zeros((3, 3))).toDynamicParameters()
         J, acc = frame_point_kinematics(model, motion, self.target, data)
         return np.einsum("nkv,nk->nv", J, acc - model.gravity[None, :])
 
     def apply_inertia(self, model, pin_model) -> None:
-        f = model.pin.frames[model.frame_id(self.target)]
         m = self.values["mass"]
         if m == 0.0:
             return
-        point = pin.Inertia(m, np.array(f.placement.translation), np.zeros((3, 3)))
-        add_dynamic_parameters(pin_model, f.parentJoint, point.toDynamicParameters())
+        j, p = self.site(model)
+        point = pin.Inertia(m, p, np.zeros((3, 3)))
+        add_dynamic_parameters(pin_model, j, point.toDynamicParameters())
+
+
+def payload_sites(model) -> list[str]:
+    """Where a held payload is plausible on a model without hand-like frames: on each distal body (a
+    moving body with no moving child) its centre of mass (``<body>@com``) and its markers (frames off
+    the joint axis), and its body frame (its joint's origin: the distal end of the parent segment)."""
+    pm = model.pin
+    bodies = moving_bodies(model)
+    parents = {int(pm.parents[k]) for k in range(1, pm.njoints) if pm.inertias[k].mass > 0}
+    markers = set()
+    for mk in (model.meta.get("markers") or ()) if hasattr(model, "meta") else ():
+        name = mk.get("name") if hasattr(mk, "get") else getattr(mk, "name", None)
+        if name:
+            markers.add(name)
+    out = []
+    for body, j in bodies.items():
+        if j in parents:
+            continue                                   # not distal: another moving body hangs from it
+        out.append(body + COM_SITE)
+        seen = []
+        for f in pm.frames:
+            if f.parentJoint != j or f.name not in markers or f.type != pin.FrameType.OP_FRAME:
+                continue
+            pos = np.array(f.placement.translation)
+            if np.linalg.norm(pos) < 1e-9 or any(np.allclose(pos, x) for x in seen):
+                continue
+            seen.append(pos)
+            out.append(f.name)
+        if pm.parents[j] != 0 and np.linalg.norm(pm.jointPlacements[j].translation) > 1e-9:
+            out.append(body)                           # the joint's origin, off the parent's joint
+    return out

@@ -17,11 +17,16 @@ linear in ``delta`` (gravity included).  ``delta = 0`` is no change;
 :meth:`SegmentMass.apply_inertia`, which adds ``delta pi_j`` to a copy of the
 model's inertia (``pi_j`` from the model as loaded, so the effect composes
 with a payload on the same body).
+
+Plausibility (:meth:`SegmentMass.plausibility`): the fitted mass must lie within the body's
+anthropometric range (de Leva 1996, :mod:`pinmsk.effects.anthropometry`), widened to the model's
+own mass +-30 %; the diagnosis flags a fit that does not, and never suggests it.
 """
 from __future__ import annotations
 
 from ..components import Parameter
 from ..errors import ModelError
+from .anthropometry import mass_plausibility
 from ._base import ScaledBasisEffect, add_dynamic_parameters, moving_bodies, torque_regressor
 from .registry import register
 
@@ -50,6 +55,14 @@ class SegmentMass(ScaledBasisEffect):
 
     def check_target(self, model) -> None:
         self._joint(model)
+
+    def plausibility(self, model, motion=None) -> list[str]:
+        """Why the fitted mass is implausible (empty when it is not): outside the body's range of
+        de Leva (1996), widened to the model's own mass (:func:`~.anthropometry.mass_plausibility`)."""
+        j = self._joint(model)
+        m = float(model.pin.inertias[j].mass)
+        return mass_plausibility(model, j, (1.0 + self.values["delta"]) * m, f"{self.label} (delta = "
+                                 f"{self.values['delta']:+.3g})")
 
     def prepare(self, model, motion, data=None):
         """``Y_j pi_j`` over frames, ``(N, nv)``: the body's own inverse-dynamics contribution."""

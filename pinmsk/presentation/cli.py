@@ -37,6 +37,19 @@ def _model(args):
                       nonlinear=getattr(args, "nonlinear", None))
 
 
+class _EffectFamiliesHelp(argparse.HelpFormatter):
+    """Help that ends with the registered effect families (imported only when the help is shown)."""
+
+    def format_help(self):
+        import textwrap
+
+        from ..effects import families
+
+        names = textwrap.fill(", ".join(families()), width=76, initial_indent="  ", subsequent_indent="  ")
+        return (super().format_help() + "\neffect families (--add FAMILY[:TARGET]; the catalog tries those "
+                "that apply):\n" + names + "\n")
+
+
 def _nonlinear_flag(s) -> None:
     """``--nonlinear`` on a command that takes a MODEL: how an .osim's nonlinear joint axes are imported."""
     s.add_argument("--nonlinear", choices=["exact", "fit"], default=None,
@@ -614,7 +627,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="write the result even if the tracking error exceeds 1 deg (flagged: 'diverged' channel)")
     s.set_defaults(func=cmd_fso)
 
-    s = sub.add_parser("diagnose", help="where the model fails and which physical effect is missing")
+    s = sub.add_parser("diagnose", help="where the model fails and which physical effect is missing",
+                       formatter_class=_EffectFamiliesHelp)
     s.add_argument("model")
     s.add_argument("trial", help="measured trial: coordinates plus <coord>_moment, EMG/excitations or GRF")
     s.add_argument("--add", action="append", metavar="EFFECT[:TARGET[:NAME=VALUE,...]]",
