@@ -30,6 +30,7 @@ import itertools
 import numpy as np
 from scipy.stats import norm
 
+from ..effects._base import SignalEffect
 from ..errors import PinmskError
 from ..fitting import FitStatistics, Result, format_report
 from ..stats import bic_change
@@ -280,12 +281,7 @@ class Scorer:
                     self.blocks, self.guard, x, max_nfev=settings["cv_nfev"])
             conv = est.converged_
             fit = single
-        floor_change = 0.0
-        if est.problem_.signal and c.mode == "muscle":
-            # a muscle-level effect also filters the measured signals' noise: that part of the fall is no physics
-            emg_after = c.eq.emg_noise(est.effect_)
-            after2 = c.noise.propagated ** 2 + emg_after ** 2
-            floor_change = float(np.mean((self.sigma ** 2 - after2) / self.sigma ** 2))
+        floor_change = self._floor_change(jp, x) if c.mode == "muscle" else 0.0
         test = held_out_test(self.r0, e_cv / self.sigma, offset=floor_change)
         improvement = test["improvement"]
         explained = max(improvement / self.mse0, -1.0) if self.mse0 > 0 else 0.0
@@ -315,6 +311,25 @@ class Scorer:
         return EffectScore(fit, rmse_after, explained, improvement, significant, bool(conv), note,
                            test=test, identifiability=ident, refit=refit_info,
                            components=jp.components_at(x, fit.info.get("joint_stderr")), heldout=e_cv, x=x)
+
+    def _floor_change(self, jp: JointProblem, x) -> float:
+        """Muscle level: the fall of the noise-whitened mean square that the joint fit ``x`` makes by
+        filtering the measured signals' noise (no physics), in noise variances per channel and frame.
+
+        The muscle-level chain of the joint fit (the candidate *and* the earlier effects at their jointly
+        refitted values: an earlier delay that goes to zero while activation dynamics joins changes the
+        filtering too) against the reference's (the earlier effects alone, as refitted), each through the
+        excitations' noise realisations (:meth:`~pinmsk.diagnose.compare.EquationError.emg_noise`)."""
+        after = [comp for comp in jp.components_at(x) if isinstance(comp, SignalEffect)]
+        if not after:
+            return 0.0
+        if self.base is not None:
+            before = [comp for comp in self.base.components_at(self.base_x) if isinstance(comp, SignalEffect)]
+        else:
+            before = []
+        emg_before = self.eq.emg_noise(before or None)
+        emg_after = self.eq.emg_noise(after)
+        return float(np.mean((emg_before ** 2 - emg_after ** 2) / self.sigma ** 2))
 
     # -- pairs ---------------------------------------------------------------------------
     def pairs(self, ranking: list) -> list:
