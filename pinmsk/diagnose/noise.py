@@ -57,10 +57,12 @@ from ..signals.sampling import median_step
 from ..trial import moment_channel, parse_ground_reaction
 from .comparison import NoiseFloor
 
-__all__ = ["REALISATIONS", "fit_sources", "propagated_floor"]
+__all__ = ["CONSISTENT_RATIO", "REALISATIONS", "consistency", "fit_sources", "propagated_floor"]
 
 #: Monte-Carlo realisations per source group.
 REALISATIONS = 3
+#: A floor more than this factor above the residual's RMS on a channel is inconsistent with it (capped).
+CONSISTENT_RATIO = 1.5
 _SEED = 12345
 
 
@@ -70,7 +72,7 @@ def fit_sources(model, trial, eq, *, mode: str, excitation_kind: str | None, grf
     rate = 1.0 / median_step(t)
     raw_q = np.column_stack([trial[c] for c in model.coordinates])
     band_start = float(np.clip(2.0 * signal_band(raw_q, rate), 1.0, TOP_BAND * rate / 4.0))
-    out = {"coordinates": fit_noise(raw_q, rate, band_start, channels=model.coordinates)}
+    out = {"coordinates": fit_noise(raw_q, rate, band_start, channels=model.coordinates, flat_passband=True)}
     if mode in ("torque", "motion"):
         names = [moment_channel(c) for c in eq.coordinates if moment_channel(c) in trial]
         if names:
@@ -190,15 +192,47 @@ def propagated_floor(eq, trial, *, mode: str, excitation_kind: str | None, cutof
     sigma = np.sqrt(kin_rms ** 2 + dir_rms ** 2)
     sigma = np.where(sigma > 0, sigma, np.finfo(float).tiny)
     method = _method(model, used, band_start, cutoff, correction)
+    check = consistency(eq.e, sigma, channels)
+    if check["capped"]:
+        f = check["factors"]
+        sigma, kin_rms, dir_rms = sigma * f, kin_rms * f, dir_rms * f
+        method += "; " + check["text"]
     info = {"method": "propagated noise models", "band_start_hz": band_start, "realisations": REALISATIONS,
             "sources": {g: m.to_dict() for g, m in used.items()},
             "kinematic": {c: float(v) for c, v in zip(channels, kin_rms)},
-            "direct": {c: float(v) for c, v in zip(channels, dir_rms)}}
+            "direct": {c: float(v) for c, v in zip(channels, dir_rms)},
+            "consistency": {k: v for k, v in check.items() if k not in ("factors", "text")}}
     if correction is not None:
         edges = band_edges(band_start, rate)
         info["band_correction"] = [{"band_hz": [float(a), float(b)], "factor": float(f)}
                                    for a, b, f in zip(edges[:-1], edges[1:], correction)]
     return NoiseFloor(tuple(channels), sigma, dir_rms, kin_rms, method, models=used, fits=fits, info=info)
+
+
+def consistency(residual, sigma, channels, *, limit: float = CONSISTENT_RATIO) -> dict:
+    """The floor checked against the residual it is the floor of.
+
+    The residual of any model holds the noise: ``E[rms^2] = sigma^2 + (what the model misses)^2``, so
+    a residual whose RMS lies below ``sigma / limit`` on a channel shows that the floor there counts
+    more than the noise (movement in the measured channels above the band start, a spectrum whose
+    tail the noise model took for noise).  Such a channel's floor is capped at the residual's RMS --
+    the most noise the residual admits.  Returns ``{"limit", "checked": {channel: {"estimate",
+    "residual_rms", "ratio"}}, "capped": [channels], "factors" (C,), "text"}``."""
+    e = np.asarray(residual, dtype=float)
+    rms = np.sqrt(np.mean(e ** 2, axis=0))
+    ratio = rms / sigma
+    bad = (ratio < 1.0 / limit) & (rms > 0)
+    factors = np.where(bad, rms / sigma, 1.0)
+    checked = {c: {"estimate": float(s), "residual_rms": float(r), "ratio": float(q)}
+               for c, s, r, q in zip(channels, sigma, rms, ratio)}
+    capped = [c for c, b in zip(channels, bad) if b]
+    text = ""
+    if capped:
+        text = ("inconsistent with the residual on " + ", ".join(
+            f"{c} (estimate {checked[c]['estimate']:.3g}, residual RMS {checked[c]['residual_rms']:.3g})"
+            for c in capped) + f": a residual below 1/{limit:g} of its floor shows the floor counts more than "
+            "the noise, so the floor there is capped at the residual's RMS")
+    return {"limit": float(limit), "checked": checked, "capped": capped, "factors": factors, "text": text}
 
 
 def _level(model, name, rms):
