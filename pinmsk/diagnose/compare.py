@@ -501,18 +501,22 @@ class EquationError:
         a = self._apply_chain(chain, self.excitation + xi)
         return np.einsum("nm,nmc->nc", (a - base) * self.f_active, self.moment_arms)[self.rows]
 
-    def emg_noise(self, extra: SignalEffect | None = None) -> np.ndarray:
+    def emg_noise(self, extra=None) -> np.ndarray:
         """RMS (C,) of the muscle moments' response to the measured signals' noise.
 
         The noise realisations are those of the excitations' own noise model
         (multiplicative, coloured by the envelope's low-pass; see
         :mod:`pinmsk.diagnose.noise`), passed through the model's muscle-level
-        chain (plus ``extra``, e.g. a fitted candidate) and the muscle moments.
+        chain (plus ``extra``, a fitted candidate or a list of them, each
+        replacing the chain's entry of the same label) and the muscle moments.
         """
         if self.mode != "muscle" or not getattr(self, "_u_noise", None):
             return np.zeros(self.columns.size)
-        chain = self.chain if extra is None else sorted(
-            [c for c in self.chain if c.label != extra.label] + [extra], key=lambda c: c.order)
+        if extra is not None and not isinstance(extra, (list, tuple)):
+            extra = [extra]
+        labels = {c.label for c in extra or ()}
+        chain = self.chain if not extra else sorted(
+            [c for c in self.chain if c.label not in labels] + list(extra), key=lambda c: c.order)
         base = self._apply_chain(chain, self.excitation) if extra is not None else self.activation
         acc = np.zeros(self.columns.size)
         for xi in self._u_noise:

@@ -74,6 +74,7 @@ from ..errors import ConvergenceError, ModelError, PinmskError, TrialError
 from ..fitting import Result
 from ..io.output_files import write_json
 from ..signals.sampling import median_step
+from ..trial import moment_channel
 from .catalog import CatalogContext
 from .catalog import catalog as effect_catalog
 from .compare import DEFAULT_CUTOFF, Comparison, compare
@@ -81,7 +82,8 @@ from .contact import DELTA_BIC, contact_window, model_with_contacts, rank_contac
 from .fit import EffectFit, JointProblem, describe_fit
 from .ranking import EffectScore, _json, finite_or_none, held_out_test, windows_of
 from .scoring import (ALIAS_CORRELATION, Scorer, consistent_with_noise, critical_z, cycle_edges,
-                      describe_character, model_with_components, residual_character)
+                      describe_character, describe_systematic, model_with_components, residual_character,
+                      systematic_residual)
 
 __all__ = ["Diagnosis", "DiagnosisRun", "EffectScore", "diagnose", "run", "parse_effect", "describe_fit",
            "choose_folds", "AT_FLOOR", "THRESHOLD", "ALPHA", "FOLDS", "MIN_BLOCK", "MIN_TRAIN"]
@@ -158,20 +160,28 @@ class Diagnosis:
             "not_identifiable_in_model": unidentified, "switched_off_in_model": switched_off,
             "suggest_remove": self.suggest_remove,
         }
+        # a systematic residual (a mean over the trial, a pattern locked to the movement's phase) is no noise
+        systematic = systematic_residual(comparison, held, alpha=settings["alpha"],
+                                         channels=[moment_channel(x) for x in comparison.eq.coordinates])
+        self.stopping["systematic"] = systematic
         if self.best is not None or self.best_pair is not None:
             self.verdict = "missing_effect"
-        elif ok and not unidentified:
+        elif ok and not unidentified and not systematic["systematic"]:
             self.verdict = "at_noise_floor"
         else:
             self.verdict = "missing_effect"
-            if not ok:
+            if not ok or systematic["systematic"]:
                 ch = residual_character(comparison, comparison.eq.e if comparison.mode != "motion"
                                         else comparison.residual)
                 names = comparison.channels if comparison.mode != "motion" else comparison.channels
+                sysch = systematic["channels"]
                 self.outside_catalog = {
                     "held_out_ratio": ratio_cv, "consistent_limit": limit,
-                    "channels": {n: dict(info, summary=describe_character(info, comparison.coordinates))
-                                 for n, info in ch.items() if n in names},
+                    "systematic": list(systematic["systematic"]),
+                    "channels": {n: dict(info, systematic=sysch.get(n), summary="; ".join(
+                        x for x in (describe_systematic(sysch.get(n) or {}),
+                                    describe_character(info, comparison.coordinates)) if x))
+                        for n, info in ch.items() if n in names},
                 }
 
     @property
@@ -474,6 +484,16 @@ class Diagnosis:
         held = st.get("not_identifiable_in_model") or []
         also = (f"; the model holds {', '.join(held)}, whose parameters this trial does not determine (held at "
                 "their values, see the flags): remove it and diagnose again" if held else "")
+        sysch = (st.get("systematic") or {}).get("systematic") or []
+        if sysch:
+            what = "; ".join(f"{ch}: {describe_systematic(st['systematic']['channels'][ch])}" for ch in sysch)
+            size = (f"held-out {st['held_out_ratio']:.2f}x, within what the noise model allows, "
+                    f"{st['consistent_limit']:.2f}x" if st.get("consistent_with_noise") else
+                    f"held-out {st['held_out_ratio']:.2f}x, more than the noise model allows, "
+                    f"{st['consistent_limit']:.2f}x")
+            return (f"verdict: missing_effect -- {where} ({size}), but the residual is systematic, not noise "
+                    f"({what}), and no catalog effect explains it out of sample: the gap is outside the catalog "
+                    "(see what the residual follows above)" + also)
         return (f"verdict: missing_effect -- {where} (held-out {st['held_out_ratio']:.2f}x, more than the noise "
                 f"model allows, {st['consistent_limit']:.2f}x), but no catalog effect explains it out of sample: "
                 "the gap is outside the catalog (see what the residual follows above: segment lengths, moment "

@@ -44,6 +44,8 @@ band powers are scaled down and their models refitted.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
 from typing import Mapping
 
 import numpy as np
@@ -51,40 +53,44 @@ import numpy as np
 from ..effects._base import is_prismatic
 from ..kinematics import prepare
 from ..signals.filtering import differentiate
-from ..signals.noise import LOG_VAR, TOP_BAND, band_edges, band_powers, fit_noise, signal_band
+from ..io.external_loads import read_external_loads
+from ..io.tables import read_trial
+from ..signals.noise import LOG_VAR, TOP_BAND, NoiseModel, band_edges, band_powers, fit_noise, signal_band
 from ..signals.sampling import median_step
-from ..trial import moment_channel, parse_ground_reaction
+from ..trial import Trial, moment_channel, parse_ground_reaction
 from .comparison import NoiseFloor
 
-__all__ = ["REALISATIONS", "fit_sources", "propagated_floor"]
+__all__ = ["CONSISTENT_RATIO", "REALISATIONS", "consistency", "fit_sources", "propagated_floor"]
 
 #: Monte-Carlo realisations per source group.
 REALISATIONS = 3
+#: A floor more than this factor above the residual's RMS on a channel is inconsistent with it (capped).
+CONSISTENT_RATIO = 1.5
 _SEED = 12345
 
 
-def fit_sources(model, trial, eq, *, mode: str, excitation_kind: str | None, grf_in_trial: bool) -> dict:
-    """``{group: NoiseModel}`` of the trial's measured channels (see the module notes)."""
+def fit_sources(model, trial, eq, *, mode: str, excitation_kind: str | None, grf_in_trial: bool,
+                grf_source=None) -> dict:
+    """``{group: NoiseModel}`` of the trial's measured channels (see the module notes).
+
+    ``grf_source``: the ground reaction record (a Trial at its own rate) when the loads come from a
+    separate file (``grf=``, ``external_loads=``) rather than the trial's own channels."""
     t = np.asarray(trial.time, dtype=float)
     rate = 1.0 / median_step(t)
     names = eq.kinematic_channels          # the measured coordinates (OpenSim's on an exact import)
     raw_q = np.column_stack([trial[c] for c in names])
     band_start = float(np.clip(2.0 * signal_band(raw_q, rate), 1.0, TOP_BAND * rate / 4.0))
-    out = {"coordinates": fit_noise(raw_q, rate, band_start, channels=names)}
+    out = {"coordinates": fit_noise(raw_q, rate, band_start, channels=names, flat_passband=True)}
     if mode in ("torque", "motion"):
         names = [moment_channel(c) for c in eq.coordinates if moment_channel(c) in trial]
         if names:
             out["moments"] = fit_noise(np.column_stack([trial[n] for n in names]), rate, band_start,
                                        channels=names, coloured=False)
-    if grf_in_trial:
-        names = []
-        for n in trial.names:
-            g = parse_ground_reaction(n)
-            if g is not None and np.all(np.isfinite(trial[n])) and np.ptp(trial[n]) > 0:
-                names.append(n)
-        if names:
-            out["ground reaction"] = fit_noise(np.column_stack([trial[n] for n in names]), rate, band_start,
-                                               channels=names, coloured=False)
+    grf = trial if grf_in_trial else grf_source
+    if grf is not None:
+        gm = _fit_ground_reaction(grf, band_start)
+        if gm is not None:
+            out["ground reaction"] = _WithSource.of(gm, None if grf_in_trial else grf_source)
     if mode == "muscle" and excitation_kind is not None:
         names = [f"{m}_{excitation_kind}" for m in model.muscle_names]
         corner = trial.meta.get("emg_lowpass")
@@ -94,6 +100,115 @@ def fit_sources(model, trial, eq, *, mode: str, excitation_kind: str | None, grf
         out["excitation"] = fit_noise(np.column_stack([trial[n] for n in names]), rate, band_start,
                                       channels=names, multiplicative=True, corner=corner, design_rate=made_at)
     return out
+
+
+@dataclass(frozen=True)
+class _WithSource(NoiseModel):
+    """A noise model of channels recorded in another file than the trial (``source``: that Trial)."""
+
+    source: object = field(default=None, repr=False, compare=False)
+
+    @classmethod
+    def of(cls, m: NoiseModel, source) -> "_WithSource":
+        return cls(**{f.name: getattr(m, f.name) for f in fields(NoiseModel)}, source=source)
+
+
+def ground_reaction_source(options: Mapping):
+    """The ground reaction record (a Trial at its own rate) of ``grf=`` or an ``external_loads=`` file's
+    ``datafile``, or None when the loads are the trial's own channels (or absent)."""
+    grf, xml = options.get("grf"), options.get("external_loads")
+    if grf is None and xml is not None:
+        loads = xml if hasattr(xml, "loads") else read_external_loads(xml)
+        grf = loads.datafile
+    if grf is None:
+        return None
+    return grf if isinstance(grf, Trial) else read_trial(grf)
+
+
+#: Vertical force (N) below which a plate is unloaded: the analyses give it no force there
+#: (:func:`pinmsk.grf.plate_wrench`'s ``min_force``), so its noise there never reaches a residual.
+UNLOADED_FORCE = 20.0
+#: Fewest unloaded samples (per plate, after the margins at the spans' ends) that give its noise directly.
+UNLOADED_MIN = 20
+
+
+def _plates(names):
+    """``{side: (vertical force channel or None, every channel name)}`` of ground reaction channels."""
+    out = {}
+    for n in names:
+        g = parse_ground_reaction(n)
+        vert, every = out.get(g.side, (None, []))
+        every.append(n)
+        if g.quantity == "force" and g.axis == "y":
+            vert = n
+        out[g.side] = (vert, every)
+    return out
+
+
+def _fit_ground_reaction(data, band_start):
+    """White noise model of the ground reaction channels of ``data`` (a Trial at the plates' rate), the
+    plates' own noise where their unloaded spans show it.
+
+    A plate is unloaded where its vertical force is below :data:`UNLOADED_FORCE`; there it records its
+    own noise.  Each unloaded span, less a margin of a fifth of it at either end (the load's onset and
+    release), without its linear trend (a drifting zero is no noise), gives the standard deviation of
+    each force and free-moment channel, white over the record's band; at least :data:`UNLOADED_MIN`
+    such samples are needed.  A plate whose unloaded samples mostly hold one value was zeroed by the
+    lab below a threshold and shows no noise there; its channels, and the centres of pressure
+    (undefined when unloaded), keep the spectral fit of the whole record (white only: a single record
+    cannot tell heel strikes and plate on/off from coloured noise).  The realisations act where each
+    plate is loaded (:attr:`NoiseModel.modulation`: 1 loaded, 0 unloaded), as the analyses do."""
+    names = []
+    for n in data.names:
+        g = parse_ground_reaction(n)
+        x = np.asarray(data[n], dtype=float)
+        if g is not None and np.all(np.isfinite(x)) and np.ptp(x) > 0:
+            names.append(n)
+    if not names:
+        return None
+    rate = 1.0 / median_step(np.asarray(data.time, dtype=float))
+    X = np.column_stack([np.asarray(data[n], dtype=float) for n in names])
+    model = fit_noise(X, rate, min(band_start, TOP_BAND * rate / 4.0), channels=names, coloured=False)
+    white = model.white.copy()
+    loaded = np.ones_like(X)
+    notes = []
+    col = {n: j for j, n in enumerate(names)}
+    for side, (vert, every) in _plates(names).items():
+        label = "plate" if side is None else f"plate {side}"
+        if vert is None:
+            continue
+        off = np.asarray(data[vert], dtype=float) < UNLOADED_FORCE
+        for n in every:
+            loaded[:, col[n]] = (~off).astype(float)
+        direct = [n for n in every if parse_ground_reaction(n).quantity != "point"]
+        idx = np.flatnonzero(off)
+        spans = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1) if idx.size else []
+        cores = [sp[sp.size // 5: sp.size - sp.size // 5] for sp in spans]
+        cores = [c for c in cores if c.size >= 5]
+        n_core = int(sum(c.size for c in cores))
+        if n_core < UNLOADED_MIN:
+            notes.append(f"{label}: not unloaded long enough to show its own noise; white noise from the "
+                         "spectrum of its record")
+            continue
+        core = np.concatenate(cores)
+        V = np.column_stack([np.asarray(data[n], dtype=float)[core] for n in direct])
+        _, counts = np.unique(V, axis=0, return_counts=True)
+        if counts.max() > 0.5 * core.size:
+            notes.append(f"{label}: zeroed by the lab while unloaded (no noise there); white noise from the "
+                         "spectrum of its record")
+            continue
+        for n in direct:
+            x = np.asarray(data[n], dtype=float)
+            ss, dof = 0.0, 0
+            for c in cores:
+                tt = np.arange(c.size, dtype=float)
+                res = x[c] - np.polyval(np.polyfit(tt, x[c], 1), tt)
+                ss += float(res @ res)
+                dof += c.size - 2
+            white[col[n]] = np.sqrt(ss / max(dof, 1)) / np.sqrt(0.5 * rate)
+        notes.append(f"{label}: force and moment noise from its {n_core} unloaded samples ("
+                     + ", ".join(f"{n} {white[col[n]] * np.sqrt(0.5 * rate):.3g}" for n in direct) + ")")
+    return replace(model, white=white, modulation=loaded, notes=tuple(notes))
 
 
 def _realisations(models, group, n):
@@ -124,13 +239,20 @@ def _direct(eq, models, trial, options, cutoff):
             out[:, :, col[name]] += xi[:, eq.rows, k]
     if "ground reaction" in models:
         gm = models["ground reaction"]
-        xi = _realisations(models, "ground reaction", t.size)
+        source = models["ground reaction"].source
+        data = trial if source is None else source
+        xi = _realisations(models, "ground reaction", np.asarray(data.time).size)
         for r in range(REALISATIONS):
-            noisy = trial.with_channels({n: np.asarray(trial[n]) + xi[r, :, k] for k, n in enumerate(gm.channels)})
-            ext = prepare(eq.model, noisy, cutoff=cutoff, frames=options.get("grf_frames"),
-                          grf_cutoff=options.get("grf_cutoff", "same"),
-                          missing_coordinates=options.get("missing_coordinates", "refuse")).external
-            out[r] += eq.residual_for(eq.motion, external=ext) - eq.e
+            noisy = data.with_channels({n: np.asarray(data[n]) + xi[r, :, k] for k, n in enumerate(gm.channels)})
+            if source is None:
+                inputs = prepare(eq.model, noisy, cutoff=cutoff, frames=options.get("grf_frames"),
+                                 grf_cutoff=options.get("grf_cutoff", "same"),
+                                 missing_coordinates=options.get("missing_coordinates", "refuse"))
+            else:
+                inputs = prepare(eq.model, trial, cutoff=cutoff, grf=noisy, external_loads=options.get("external_loads"),
+                                 frames=options.get("grf_frames"), grf_cutoff=options.get("grf_cutoff", "same"),
+                                 missing_coordinates=options.get("missing_coordinates", "refuse"))
+            out[r] += eq.residual_for(eq.motion, external=inputs.external) - eq.e
     if "excitation" in models:
         xi = _realisations(models, "excitation", t.size)
         eq.set_excitation_noise(list(xi))
@@ -162,8 +284,10 @@ def propagated_floor(eq, trial, *, mode: str, excitation_kind: str | None, cutof
 
     ``fits`` reuses the input noise models fitted for another model of the same trial."""
     model = eq.model
-    fits = fits if fits is not None else fit_sources(model, trial, eq, mode=mode, excitation_kind=excitation_kind,
-                                                     grf_in_trial=grf_in_trial)
+    if fits is None:
+        source = None if grf_in_trial else ground_reaction_source(options)
+        fits = fit_sources(model, trial, eq, mode=mode, excitation_kind=excitation_kind, grf_in_trial=grf_in_trial,
+                           grf_source=source)
     rate = fits["coordinates"].rate
     band_start = fits["coordinates"].band_start
     kin = _kinematic(eq, fits, cutoff)
@@ -178,6 +302,11 @@ def propagated_floor(eq, trial, *, mode: str, excitation_kind: str | None, cutof
             correction = s
             for g in direct_groups:
                 old = fits[g]
+                if g == "ground reaction":
+                    # white noise: one factor, its band powers' share-weighted mean
+                    w = np.diff(edges)
+                    used[g] = old.scaled(np.sqrt(float(np.sum(w * s) / np.sum(w))))
+                    continue
                 given = old.corner_given
                 used[g] = fit_noise(np.column_stack([trial[n] for n in old.channels]), rate, band_start,
                                     channels=old.channels, multiplicative=old.kind == "multiplicative",
@@ -190,15 +319,47 @@ def propagated_floor(eq, trial, *, mode: str, excitation_kind: str | None, cutof
     sigma = np.sqrt(kin_rms ** 2 + dir_rms ** 2)
     sigma = np.where(sigma > 0, sigma, np.finfo(float).tiny)
     method = _method(model, used, band_start, cutoff, correction)
+    check = consistency(eq.e, sigma, channels)
+    if check["capped"]:
+        f = check["factors"]
+        sigma, kin_rms, dir_rms = sigma * f, kin_rms * f, dir_rms * f
+        method += "; " + check["text"]
     info = {"method": "propagated noise models", "band_start_hz": band_start, "realisations": REALISATIONS,
             "sources": {g: m.to_dict() for g, m in used.items()},
             "kinematic": {c: float(v) for c, v in zip(channels, kin_rms)},
-            "direct": {c: float(v) for c, v in zip(channels, dir_rms)}}
+            "direct": {c: float(v) for c, v in zip(channels, dir_rms)},
+            "consistency": {k: v for k, v in check.items() if k not in ("factors", "text")}}
     if correction is not None:
         edges = band_edges(band_start, rate)
         info["band_correction"] = [{"band_hz": [float(a), float(b)], "factor": float(f)}
                                    for a, b, f in zip(edges[:-1], edges[1:], correction)]
     return NoiseFloor(tuple(channels), sigma, dir_rms, kin_rms, method, models=used, fits=fits, info=info)
+
+
+def consistency(residual, sigma, channels, *, limit: float = CONSISTENT_RATIO) -> dict:
+    """The floor checked against the residual it is the floor of.
+
+    The residual of any model holds the noise: ``E[rms^2] = sigma^2 + (what the model misses)^2``, so
+    a residual whose RMS lies below ``sigma / limit`` on a channel shows that the floor there counts
+    more than the noise (movement in the measured channels above the band start, a spectrum whose
+    tail the noise model took for noise).  Such a channel's floor is capped at the residual's RMS --
+    the most noise the residual admits.  Returns ``{"limit", "checked": {channel: {"estimate",
+    "residual_rms", "ratio"}}, "capped": [channels], "factors" (C,), "text"}``."""
+    e = np.asarray(residual, dtype=float)
+    rms = np.sqrt(np.mean(e ** 2, axis=0))
+    ratio = rms / sigma
+    bad = (ratio < 1.0 / limit) & (rms > 0)
+    factors = np.where(bad, rms / sigma, 1.0)
+    checked = {c: {"estimate": float(s), "residual_rms": float(r), "ratio": float(q)}
+               for c, s, r, q in zip(channels, sigma, rms, ratio)}
+    capped = [c for c, b in zip(channels, bad) if b]
+    text = ""
+    if capped:
+        text = ("inconsistent with the residual on " + ", ".join(
+            f"{c} (estimate {checked[c]['estimate']:.3g}, residual RMS {checked[c]['residual_rms']:.3g})"
+            for c in capped) + f": a residual below 1/{limit:g} of its floor shows the floor counts more than "
+            "the noise, so the floor there is capped at the residual's RMS")
+    return {"limit": float(limit), "checked": checked, "capped": capped, "factors": factors, "text": text}
 
 
 def _level(model, name, rms):
@@ -219,8 +380,12 @@ def _method(model, models, band_start, cutoff, correction) -> str:
             f"{c} {s:.3g} N m" for c, s in zip(mm.channels, mm.rms())) + ") directly")
     if "ground reaction" in models:
         gm = models["ground reaction"]
-        parts.append(f"ground-reaction noise ({gm.describe()}, {len(gm.channels)} channels) through the same "
-                     "low-pass and the feet")
+        src = getattr(gm, "source", None)
+        where = (f" of {Path(str(src.meta.get('source'))).name if src.meta.get('source') else 'the GRF record'}"
+                 f" at {gm.rate:.4g} Hz" if src is not None else "")
+        parts.append(f"ground-reaction noise{where} ({gm.describe()}, {len(gm.channels)} channels"
+                     + (": " + "; ".join(gm.notes) if gm.notes else "") + ") through the same low-pass and the feet, "
+                     "where each plate is loaded")
     if "excitation" in models:
         em = models["excitation"]
         parts.append("EMG/excitation noise (" + em.describe() + ", RMS " + ", ".join(

@@ -43,7 +43,8 @@ from .fit import EffectFit, JointProblem, _describe, cv_blocks
 from .ranking import EffectScore, held_out_test
 
 __all__ = ["Scorer", "identifiability", "model_with_components", "motion_rmse_after", "cycle_edges", "residual_character", "consistent_with_noise",
-           "critical_z", "PROFILE_LEVEL", "COND_MAX", "ALIAS_PARAMETER"]
+           "critical_z", "hac_mean", "systematic_residual", "describe_systematic", "PROFILE_LEVEL", "COND_MAX",
+           "ALIAS_PARAMETER"]
 
 #: chi-square(1) quantile of the profile-likelihood intervals (95 %)
 PROFILE_LEVEL = 3.841
@@ -124,6 +125,109 @@ def consistent_with_noise(residual: np.ndarray, sigma: np.ndarray, allowance: fl
     limit_total = allowance * float(np.sqrt(1 + z * np.sqrt(2 / np.sum(n_eff))))
     ok = bool(total <= limit_total and np.all(ratios <= limits))
     return ok, total, limit_total, ratios
+
+
+def hac_mean(x: np.ndarray) -> tuple:
+    """Mean ``(C,)`` of ``x`` (n, C) per column and its Newey-West standard error: the long-run variance
+    ``gamma_0 + 2 sum_j (1 - j / (L + 1)) gamma_j`` (Bartlett weights, Newey & West 1987) up to the
+    bandwidth of Andrews (1991) for an AR(1) plug-in, ``L = 1.1447 (a n)^(1/3)``, ``a = 4 rho^2 /
+    ((1 - rho)^2 (1 + rho)^2)``, as the held-out test (:func:`~pinmsk.diagnose.ranking.held_out_test`),
+    and never below the AR(1) long-run variance ``gamma_0 (1 + rho) / (1 - rho)`` (Bartlett weights
+    truncated at ``L`` under-count a strongly autocorrelated residual's).  Returns ``(mean, se,
+    bandwidth)``."""
+    x = np.asarray(x, dtype=float).reshape(len(x), -1)
+    n = x.shape[0]
+    mean = x.mean(axis=0)
+    r = x - mean
+    se = np.zeros(x.shape[1])
+    bw = np.zeros(x.shape[1], dtype=int)
+    m = 1 << int(np.ceil(np.log2(2 * max(n, 1))))
+    f = np.fft.rfft(r, m, axis=0)
+    acov = np.fft.irfft(np.abs(f) ** 2, m, axis=0)[:n] / n            # gamma_j, j = 0..n-1
+    for k in range(x.shape[1]):
+        g0 = acov[0, k]
+        if g0 <= 0:
+            continue
+        rho = float(np.clip(acov[1, k] / g0, 0.0, 0.995)) if n > 1 else 0.0
+        a = 4 * rho ** 2 / ((1 - rho) ** 2 * (1 + rho) ** 2)
+        L = int(min(max(np.ceil(1.1447 * (a * n) ** (1 / 3)), 1), max(n // 4, 1)))
+        j = np.arange(1, L + 1)
+        lrv = g0 + 2.0 * float(np.sum((1 - j / (L + 1)) * acov[1:L + 1, k]))
+        lrv = max(lrv, g0 * (1 + rho) / (1 - rho))
+        se[k] = np.sqrt(lrv / n)
+        bw[k] = L
+    return mean, se, bw
+
+
+def systematic_residual(c, residual: np.ndarray, *, alpha: float, bins: int = 16, channels=None) -> dict:
+    """What of the residual ``(n, C)`` is systematic, not noise, per channel.
+
+    * ``mean``: its mean over the trial against the Newey-West standard error (:func:`hac_mean`):
+      ``mean_z = mean / se``;
+    * ``phase``: the share of its variance that bin means over ``bins`` quantile bins of the movement's
+      phase explain (the phase of the analytic signal of the coordinate that moves most, as
+      :func:`residual_character`), against chance: ``share * n_eff`` is chi-square with ``bins - 1``
+      degrees of freedom for noise, ``n_eff = n (1 - rho) / (1 + rho)`` its effectively independent
+      frames (AR(1)).
+
+    Each is tested at ``alpha`` over the channels and the two tests (Bonferroni, the mean two-sided).
+    ``channels`` names the residual's columns (default ``c.channels``).
+    Returns ``{"alpha", "critical_z", "channels": {channel: {"mean", "mean_stderr", "mean_z",
+    "phase_share", "phase_critical_share", "systematic_mean", "phase_locked"}}, "systematic": [channels]}``.
+    """
+    from scipy.stats import chi2
+
+    r = np.asarray(residual, dtype=float).reshape(len(residual), -1)
+    n, C = r.shape
+    tests = 2 * max(C, 1)
+    zc = float(norm.isf(alpha / (2 * tests)))
+    mean, se, bw = hac_mean(r)
+    phase = _movement_phase(c)
+    out, flagged = {}, []
+    for jc, ch in enumerate(list(channels if channels is not None else c.channels)[:C]):
+        info = {"mean": float(mean[jc]), "mean_stderr": float(se[jc]), "newey_west_lags": int(bw[jc])}
+        z = float(mean[jc] / se[jc]) if se[jc] > 0 else 0.0
+        info["mean_z"] = z
+        info["systematic_mean"] = bool(abs(z) > zc)
+        x = r[:, jc] - mean[jc]
+        info["phase_locked"] = False
+        if phase is not None and np.dot(x, x) > 0:
+            rho = float(np.clip(np.dot(x[1:], x[:-1]) / np.dot(x, x), 0.0, 0.99))
+            n_eff = max(n * (1 - rho) / (1 + rho), 2.0)
+            share = _binned_share(phase, x, bins, np.inf)
+            crit = float(chi2.isf(alpha / tests, bins - 1)) / n_eff
+            info["phase_share"] = share
+            info["phase_critical_share"] = crit
+            info["phase_locked"] = bool(share > crit)
+        out[ch] = info
+        if info["systematic_mean"] or info["phase_locked"]:
+            flagged.append(ch)
+    return {"alpha": float(alpha), "critical_z": zc, "channels": out, "systematic": flagged}
+
+
+def describe_systematic(info: dict, unit: str = "") -> str:
+    """One phrase on a channel's systematic part (from :func:`systematic_residual`), or ''."""
+    parts = []
+    if info.get("systematic_mean"):
+        parts.append(f"its mean over the trial is {info['mean']:+.3g}{unit} ± {info['mean_stderr']:.2g} "
+                     f"(z {info['mean_z']:+.1f}, Newey-West)")
+    if info.get("phase_locked"):
+        parts.append(f"{100 * info['phase_share']:.0f} % of its variance is locked to the phase of the "
+                     f"movement (chance {100 * info['phase_critical_share']:.0f} %)")
+    return "; ".join(parts)
+
+
+def _movement_phase(c):
+    """The phase (rad) of the analytic signal of the compared coordinate that moves most, or None."""
+    states = c.states
+    coords = [k for k in c.coordinates if k in states]
+    if not coords:
+        return None
+    from scipy.signal import hilbert
+    q = np.column_stack([np.asarray(states[k], dtype=float) for k in coords])
+    j = int(np.argmax(q.std(axis=0)))
+    x = q[:, j] - q[:, j].mean()
+    return np.angle(hilbert(x))
 
 
 # -- identifiability ---------------------------------------------------------------------
@@ -289,12 +393,7 @@ class Scorer:
                     self.blocks, self.guard, x, max_nfev=settings["cv_nfev"])
             conv = est.converged_
             fit = single
-        floor_change = 0.0
-        if est.problem_.signal and c.mode == "muscle":
-            # a muscle-level effect also filters the measured signals' noise: that part of the fall is no physics
-            emg_after = c.eq.emg_noise(est.effect_)
-            after2 = c.noise.propagated ** 2 + emg_after ** 2
-            floor_change = float(np.mean((self.sigma ** 2 - after2) / self.sigma ** 2))
+        floor_change = self._floor_change(jp, x) if c.mode == "muscle" else 0.0
         test = held_out_test(self.r0, e_cv / self.sigma, offset=floor_change)
         improvement = test["improvement"]
         explained = max(improvement / self.mse0, -1.0) if self.mse0 > 0 else 0.0
@@ -329,6 +428,25 @@ class Scorer:
         return EffectScore(fit, rmse_after, explained, improvement, significant, bool(conv), note,
                            test=test, identifiability=ident, refit=refit_info,
                            components=jp.components_at(x, fit.info.get("joint_stderr")), heldout=e_cv, x=x)
+
+    def _floor_change(self, jp: JointProblem, x) -> float:
+        """Muscle level: the fall of the noise-whitened mean square that the joint fit ``x`` makes by
+        filtering the measured signals' noise (no physics), in noise variances per channel and frame.
+
+        The muscle-level chain of the joint fit (the candidate *and* the earlier effects at their jointly
+        refitted values: an earlier delay that goes to zero while activation dynamics joins changes the
+        filtering too) against the reference's (the earlier effects alone, as refitted), each through the
+        excitations' noise realisations (:meth:`~pinmsk.diagnose.compare.EquationError.emg_noise`)."""
+        after = [comp for comp in jp.components_at(x) if isinstance(comp, SignalEffect)]
+        if not after:
+            return 0.0
+        if self.base is not None:
+            before = [comp for comp in self.base.components_at(self.base_x) if isinstance(comp, SignalEffect)]
+        else:
+            before = []
+        emg_before = self.eq.emg_noise(before or None)
+        emg_after = self.eq.emg_noise(after)
+        return float(np.mean((emg_before ** 2 - emg_after ** 2) / self.sigma ** 2))
 
     # -- pairs ---------------------------------------------------------------------------
     def pairs(self, ranking: list) -> list:

@@ -162,15 +162,23 @@ def band_powers(x, rate: float, edges: Sequence[float], *, modulation=None, trim
         scale = np.median(np.abs(y), axis=0) / 0.6745
         event = np.abs(y) > 5.0 * np.maximum(scale, 1e-300)
         if event.any():
-            L = int(np.ceil(1.5 * rate / edges[j]))
-            kernel = np.ones(2 * L + 1)
-            event = np.column_stack([np.convolve(event[:, c], kernel, mode="same") > 0
-                                     for c in range(event.shape[1])])
+            event = _dilate(event, int(np.ceil(1.5 * rate / edges[j])))
         keep = ~event
         n_keep = keep.sum(axis=0)
         ms = np.sum(np.where(keep, y * y, 0.0), axis=0) / np.maximum(n_keep, 1)
         out[j] = np.where(n_keep >= 0.25 * y.shape[0], ms, scale ** 2)
     return out[:, 0] if squeeze else out
+
+
+def _dilate(mask: np.ndarray, half: int) -> np.ndarray:
+    """``mask`` (N, k) widened by ``half`` samples either side along axis 0, clipped at the ends: the
+    same shape whatever ``half`` (a window longer than the record covers all of it)."""
+    n = mask.shape[0]
+    c = np.concatenate([np.zeros((1, mask.shape[1])), np.cumsum(mask, axis=0)], axis=0)
+    i = np.arange(n)
+    hi = np.minimum(i + half + 1, n)
+    lo = np.maximum(i - half, 0)
+    return (c[hi] - c[lo]) > 0
 
 
 @dataclass(frozen=True)
@@ -293,9 +301,26 @@ def _nnls2(a, b, y):
     return x1, x2
 
 
-def _fit_column(P, A, B, weights, corners, shapes):
+def _flat_passband(P, A, weights, edges, corners) -> np.ndarray:
+    """``(n_corners, k)``: whether each corner's passband is seen flat in each column of band powers ``P``
+    (J, k) -- at least two bands wholly below the corner, and the first band's density ``P / A`` above
+    the last one's by no more than twice the spread of their log ratio (``1 / weights`` per band)."""
+    dens = np.log(np.maximum(P, 1e-300) / A[:, None])
+    out = np.zeros((len(corners), P.shape[1]), dtype=bool)
+    upper = np.asarray(edges[1:], dtype=float)
+    for i, fc in enumerate(corners):
+        m = int(np.sum(upper <= fc * (1 + 1e-9)))
+        if m < 2:
+            continue
+        spread = 2.0 * np.sqrt(1.0 / weights[0] + 1.0 / weights[m - 1])
+        out[i] = (dens[0] - dens[m - 1]) <= spread
+    return out
+
+
+def _fit_column(P, A, B, weights, corners, shapes, allowed=None):
     """Best ``(w2, c2, corner, (order, design))`` for band powers ``P`` (J,): white only or white + coloured
-    by BIC; ``B`` maps each shape key ``(order, design rate)`` to its band integrals per corner.
+    by BIC; ``B`` maps each shape key ``(order, design rate)`` to its band integrals per corner;
+    ``allowed`` (n_corners,) the corners a coloured part may take (default all).
 
     Non-negative least squares in error relative to the model (a band power's spread is proportional
     to its mean), starting from the data and reweighted twice, for the whole grid at once."""
@@ -307,13 +332,14 @@ def _fit_column(P, A, B, weights, corners, shapes):
     w = weights[ok]
     Pk = P[ok]
     Ak = A[ok]
+    # white only: the weighted median of the bands' own estimates, so that signal leaking into the
+    # lowest bands (the spectrum of friction steps, a movement's tail) cannot lift it
+    est = Pk / Ak
+    order_ = np.argsort(est)
+    cum = np.cumsum(w[order_])
+    median_white = (float(est[order_][np.searchsorted(cum, 0.5 * cum[-1])]),) + white_only[1:]
     if not shapes:
-        # white only: the weighted median of the bands' own estimates, so that signal leaking into the
-        # lowest bands (the spectrum of friction steps) cannot lift it
-        est = Pk / Ak
-        order_ = np.argsort(est)
-        cum = np.cumsum(w[order_])
-        return (float(est[order_][np.searchsorted(cum, 0.5 * cum[-1])]),) + white_only[1:]
+        return median_white
     keys = [(key, k) for key in shapes for k in range(len(corners))]
     Bk = np.array([B[key][k][ok] for key, k in keys])                          # (G, J)
     G = Bk.shape[0]
@@ -329,16 +355,20 @@ def _fit_column(P, A, B, weights, corners, shapes):
     chi2 = np.sum(w * np.log(np.maximum(model, 1e-300) / Pk) ** 2, axis=1)
     score = chi2 + np.where(np.arange(G + 1) == 0, 1.0, 3.0) * np.log(J)
     score[1:] = np.where(x2[1:] > 0, score[1:], np.inf)
+    if allowed is not None:
+        ok_corner = np.array([bool(allowed[k]) for _, k in keys])
+        score[1:] = np.where(ok_corner, score[1:], np.inf)
     i = int(np.argmin(score))
     if i == 0:
-        return (float(x1[0]),) + white_only[1:]
+        return median_white if allowed is not None else (float(x1[0]),) + white_only[1:]
     key, k = keys[i - 1]
     return float(x1[i]), float(x2[i]), float(corners[k]), key
 
 
 def fit_noise(x, rate: float, band_start: float, *, channels: Sequence[str] | None = None,
               multiplicative: bool = False, corner: float | None = None, design_rate: float | None = None,
-              coloured: bool = True, band_scale=None, trim: int | None = None) -> NoiseModel:
+              coloured: bool = True, band_scale=None, trim: int | None = None,
+              flat_passband: bool = False) -> NoiseModel:
     """Fit a :class:`NoiseModel` to ``x`` (N, k), sampled at ``rate`` Hz, above ``band_start`` Hz.
 
     ``corner`` fixes the coloured part's low-pass (Hz, e.g. an EMG envelope's);
@@ -348,7 +378,11 @@ def fit_noise(x, rate: float, band_start: float, *, channels: Sequence[str] | No
     whose spectrum a single record cannot tell from coloured noise);
     ``band_scale`` ``(J,)`` or ``(J, k)`` multiplies the measured band powers
     first (a correction from elsewhere, e.g. a residual that shows less noise
-    in a band than the input suggests).  See the module notes for the method.
+    in a band than the input suggests); ``flat_passband=True`` keeps a fitted coloured part only where
+    its passband is seen: at least two bands lie wholly below its corner and their power densities do
+    not fall from the first to the last by more than twice their statistical spread (a spectrum that
+    falls from the band start on is the tail of the signal, not low-passed noise: white only).  See the
+    module notes for the method.
     """
     x = np.asarray(x, dtype=float)
     if x.ndim == 1:
@@ -390,8 +424,11 @@ def fit_noise(x, rate: float, band_start: float, *, channels: Sequence[str] | No
     fc = np.full(k, corners[-1])
     order = np.full(k, 4)
     design = np.full(k, np.inf)
+    allowed = (_flat_passband(P, A, weights, edges, corners) if flat_passband and shapes
+               else np.ones((len(corners), k), dtype=bool))
     for j in range(k):
-        w2, c2, fcj, (pj, dj) = _fit_column(P[:, j], A, B, weights, corners, shapes)
+        w2, c2, fcj, (pj, dj) = _fit_column(P[:, j], A, B, weights, corners, shapes,
+                                            allowed[:, j] if flat_passband else None)
         w[j], c[j], fc[j], order[j], design[j] = np.sqrt(w2), np.sqrt(c2), fcj, pj, dj
     return NoiseModel(names, float(rate), float(band_start), w, c, fc, order, modulation, design,
                       "multiplicative" if multiplicative else "additive", corner is not None, tuple(notes))
