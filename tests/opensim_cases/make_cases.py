@@ -257,7 +257,7 @@ TUG_MOTION = {"block_tz": (0.0, [(0.15, 0.35, 0.0), (0.06, 0.81, 1.3)])}
 
 def fixed_base_case(root: Path, name: str, model_rel: str, motion: dict, effects: list, *, seed: int,
                     duration=5.0, rate=100.0, moment_noise=0.05, model_path: Path | None = None,
-                    sensor=None, description=""):
+                    sensor=None, description="", id_names=False):
     """One fixed-base case: truth model = plain + ``effects`` (callables on the OpenSim model)."""
     d = shared_data()
     path = model_path or d / model_rel
@@ -285,7 +285,7 @@ def fixed_base_case(root: Path, name: str, model_rel: str, motion: dict, effects
         m = tau_truth[c] + moment_noise * rng.normal(size=t.size)
         if sensor and c == sensor[0]:
             m = m + sensor[1]
-        cols[c + "_moment"] = m
+        cols[c + ("_force" if id_names and info[c][2] else "_moment")] = m
     return _write_case(root, name, t, cols, truth_model=truth, model_rel=model_rel, description=description,
                        effect_moment={c: tau_plain[c] - tau_truth[c] for c in info},
                        noise={"coordinates_deg": ANGLE_NOISE_DEG, "translations_m": TRANSLATION_NOISE,
@@ -444,9 +444,9 @@ def pendulum_cases(root: Path, zoo_dir: Path):
 
 
 def tug_cases(root: Path):
-    def case(name, effects, truth, seed, description, sensor=None):
+    def case(name, effects, truth, seed, description, sensor=None, id_names=False):
         c, info = fixed_base_case(root, name, TUG, TUG_MOTION, effects, seed=seed, moment_noise=0.5,
-                                  sensor=sensor, description=description)
+                                  sensor=sensor, description=description, id_names=id_names)
         finish(c, info, truth, shared_data() / TUG)
 
     case("tug_block_friction", [lambda m: add_expression_force(m, "block_tz", "-8.0*tanh(qdot/0.01)", "friction")],
@@ -457,7 +457,12 @@ def tug_cases(root: Path):
          [{"family": "joint_damping", "target": "block_tz", "params": {"c": 15.0},
            "opensim": "ExpressionBasedCoordinateForce block_tz '-15.0*qdot' (N s/m)"}], 32,
          "Tug_of_War's block with viscous damping 15 N s/m")
-    return ["tug_block_friction", "tug_block_damping"]
+    case("tug_block_damping_id_names", [lambda m: add_expression_force(m, "block_tz", "-15.0*qdot", "damping")],
+         [{"family": "joint_damping", "target": "block_tz", "params": {"c": 15.0},
+           "opensim": "ExpressionBasedCoordinateForce block_tz '-15.0*qdot' (N s/m)"}], 33,
+         "tug_block_damping with the generalized force named block_tz_force, as OpenSim's ID tool names a "
+         "translation's", id_names=True)
+    return ["tug_block_friction", "tug_block_damping", "tug_block_damping_id_names"]
 
 
 # ---------------------------------------------------------------------------
@@ -544,7 +549,7 @@ def gait_cases(root: Path):
     grf_xml = root / WALK / "walk_grf.xml"
     names_out = []
 
-    def case(name, effects, truth, seed, description, *, plate=None):
+    def case(name, effects, truth, seed, description, *, plate=None, id_names=False):
         with tempfile.TemporaryDirectory() as tmp:
             tmp = Path(tmp)
             plain = load(model_path)
@@ -560,7 +565,8 @@ def gait_cases(root: Path):
             for label, x in tau_truth.items():
                 coord = label.rsplit("_", 1)[0]
                 scale = 2.0 if coord.startswith("pelvis_t") else 1.0  # N on translations, N m on rotations
-                cols[coord + "_moment"] = x + scale * rng.normal(size=x.size)
+                # OpenSim's ID tool names them <coord>_moment and, for a translation, <coord>_force
+                cols[label if id_names else coord + "_moment"] = x + scale * rng.normal(size=x.size)
             extra = []
             ext = f"../{WALK}/walk_grf.xml"
             if plate is not None:
@@ -594,6 +600,11 @@ def gait_cases(root: Path):
          [{"family": "segment_mass", "target": "torso", "params": {"delta": 0.15},
            "opensim": "torso mass and inertia x 1.15 (33.07 -> 38.03 kg)"}], 42,
          "torso 15 % heavier than the scaled model says")
+    case("gait_torso_mass_id_names", [lambda m: scale_body_mass(m, "torso", 1.15)],
+         [{"family": "segment_mass", "target": "torso", "params": {"delta": 0.15},
+           "opensim": "torso mass and inertia x 1.15 (33.07 -> 38.03 kg)"}], 48,
+         "gait_torso_mass with the channels named as OpenSim's ID tool writes them (pelvis_tx_force, "
+         "pelvis_ty_force)", id_names=True)
     case("gait_torso_com", [lambda m: shift_com(m, "torso", (0.03, 0.0, 0.0))],
          [{"family": "com_offset", "target": "torso", "params": {"dx": 0.03, "dy": 0.0, "dz": 0.0},
            "opensim": "torso mass_center moved 3 cm anterior (x) in the torso frame"}], 43,
