@@ -44,6 +44,7 @@ SOLVED = (
     "arm26_elbow_spring",
     "arm26_elbow_offset",
     "arm26_forearm_mass",
+    "arm26_forearm_mass_noisy",
     "arm26_shoulder_friction",
     "pendulum_q2_damping",
     "tug_block_damping",
@@ -63,6 +64,8 @@ PENDING = {
                                       "at 1.5x the floor)",
     "arm26_end_stop_upper": "no one-sided end stop candidate (passive_elastic sits at its amplitude bound)",
     "arm26_end_stop_lower": "no one-sided end stop candidate (nothing significant)",
+    "arm26_elbow_damping_short": "a 2 s trial at 60 Hz is refused: 91 analysable samples are too few for 5 "
+                                 "cross-validation blocks of 20",
     "pendulum_tip_payload": "no payload site at a segment end (rod2's tip); segment_mass is not significant",
     "gait_plain": _EXACT + " reaches at_noise_floor)",
     "gait_torso_mass": _EXACT + " finds segment_mass:torso 0.149 +- 0.005, true 0.15)",

@@ -257,7 +257,7 @@ TUG_MOTION = {"block_tz": (0.0, [(0.15, 0.35, 0.0), (0.06, 0.81, 1.3)])}
 
 def fixed_base_case(root: Path, name: str, model_rel: str, motion: dict, effects: list, *, seed: int,
                     duration=5.0, rate=100.0, moment_noise=0.05, model_path: Path | None = None,
-                    sensor=None, description="", id_names=False):
+                    sensor=None, description="", id_names=False, angle_noise=ANGLE_NOISE_DEG):
     """One fixed-base case: truth model = plain + ``effects`` (callables on the OpenSim model)."""
     d = shared_data()
     path = model_path or d / model_rel
@@ -279,7 +279,7 @@ def fixed_base_case(root: Path, name: str, model_rel: str, motion: dict, effects
     cols = {}
     for c in info:
         rot = not info[c][2]
-        noise = band_noise(rng, t.size, rate, ANGLE_NOISE_DEG if rot else TRANSLATION_NOISE)
+        noise = band_noise(rng, t.size, rate, angle_noise if rot else TRANSLATION_NOISE)
         cols[c] = (np.degrees(q[c]) if rot else q[c]) + noise
     for c in info:
         m = tau_truth[c] + moment_noise * rng.normal(size=t.size)
@@ -288,7 +288,7 @@ def fixed_base_case(root: Path, name: str, model_rel: str, motion: dict, effects
         cols[c + ("_force" if id_names and info[c][2] else "_moment")] = m
     return _write_case(root, name, t, cols, truth_model=truth, model_rel=model_rel, description=description,
                        effect_moment={c: tau_plain[c] - tau_truth[c] for c in info},
-                       noise={"coordinates_deg": ANGLE_NOISE_DEG, "translations_m": TRANSLATION_NOISE,
+                       noise={"coordinates_deg": angle_noise, "translations_m": TRANSLATION_NOISE,
                               "band_hz": NOISE_BAND, "moments": moment_noise, "seed": seed},
                        motion="sum of sines (exact derivatives), " + ", ".join(
                            f"{c}: {np.degrees(q[c].min()):.0f}..{np.degrees(q[c].max()):.0f} deg"
@@ -351,9 +351,9 @@ def arm_cases(root: Path):
     hand_com = (0.0, -0.181479, 0.0)             # r_ulna_radius_hand's centre of mass
     cases = []
 
-    def case(name, effects, truth, seed, sensor=None, description=""):
+    def case(name, effects, truth, seed, sensor=None, description="", **kw):
         c, info = fixed_base_case(root, name, ARM26, ARM_MOTION, effects, seed=seed, sensor=sensor,
-                                  description=description)
+                                  description=description, **kw)
         finish(c, info, truth, shared_data() / ARM26)
         cases.append(name)
 
@@ -406,6 +406,13 @@ def arm_cases(root: Path):
            "opensim": "CoordinateLimitForce r_elbow_flex lower_limit 30 deg, lower_stiffness 0.2 N m/deg, "
                       "transition 5 deg, upper_stiffness 0, damping 0"}], 10,
          description="one-sided elbow end stop below 30 deg (the motion reaches 9 deg)")
+    case("arm26_elbow_damping_short", [lambda m: add_expression_force(m, "r_elbow_flex", "-0.6*qdot", "damping")],
+         [{**damping, "params": {"c": 0.6}, "opensim": "ExpressionBasedCoordinateForce r_elbow_flex '-0.6*qdot'"}],
+         13, duration=2.0, rate=60.0, description="a short trial: 2 s at 60 Hz, elbow damping 0.6 N m s/rad")
+    case("arm26_forearm_mass_noisy", [lambda m: scale_body_mass(m, "r_ulna_radius_hand", 1.25)],
+         [{"family": "segment_mass", "target": "r_ulna_radius_hand", "params": {"delta": 0.25},
+           "opensim": "r_ulna_radius_hand mass and inertia x 1.25"}], 14, angle_noise=0.5, moment_noise=0.15,
+         description="noisier: 0.5 deg on the angles, 0.15 N m on the moments; forearm-hand 25 % heavier")
     case("arm26_payload_damping",
          [lambda m: add_payload(m, "r_ulna_radius_hand", 1.5, styloid),
           lambda m: add_expression_force(m, "r_elbow_flex", "-0.3*qdot", "damping")],
