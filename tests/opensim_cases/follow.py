@@ -3,7 +3,8 @@
 :func:`follow` is the loop a user follows: diagnose, add the best significant candidate, diagnose again,
 until nothing is significant.  :func:`judge` compares what was added with ``truth.json``: the right
 family at the right target (a payload at the right site, within 2 cm), each value within 3 standard
-errors (its relative error is reported too), and nothing added that the truth does not hold.
+errors (its relative error is reported too), nothing added that the truth does not hold, and the
+final verdict ``at_noise_floor``.
 
 Used by ``tests/test_diagnose_opensim_cases.py`` and, as a script, to print the table of every case::
 
@@ -185,6 +186,7 @@ def run_case(name: str, shared: Path, *, nonlinear: str | None = None, **options
     sec = time.perf_counter() - t0
     top = d0.ranking[0] if d0.ranking else None
     j = judge(info, effects, model)
+    j["solved"] = j["solved"] and d.verdict == "at_noise_floor"   # and the user is told it is done
     return {"case": name, "truth": describe_truth(info),
             "top": (describe(top.effect) + (" [sig]" if top.significant else " [not sig]")) if top else "-",
             "added": [describe(e) for e in effects], "order": labels, "verdict_first": d0.verdict,

@@ -636,10 +636,134 @@ def gait_cases(root: Path):
     return names_out
 
 
+def filtered_coordinates(path: Path, cutoff: float = 6.0):
+    """The coordinates of ``path`` as OpenSim's ID tool filters them (pad by half, ``lowpassIIR``), on the
+    file's own frames: ``(t, names, values)`` in the file's units."""
+    sto = osim.Storage(str(path))
+    n0 = sto.getSize()
+    t0, tn = sto.getFirstTime(), sto.getLastTime()
+    sto.pad(n0 // 2)
+    sto.lowpassIIR(float(cutoff))
+    labels = sto.getColumnLabels()
+    names = [labels.get(i) for i in range(1, labels.getSize())]
+    t = np.array([sto.getStateVector(i).getTime() for i in range(sto.getSize())])
+    X = np.array([[sto.getStateVector(i).getData().get(j) for j in range(len(names))] for i in range(sto.getSize())])
+    keep = (t >= t0 - 1e-6) & (t <= tn + 1e-6)
+    return t[keep], names, X[keep]
+
+
+def root_origin(m, t, names, X, joint="ground_pelvis"):
+    """Ground position of ``joint``'s child frame (the point its rotation turns about) at each frame."""
+    s = m.initSystem()
+    cs = m.getCoordinateSet()
+    out = np.empty((t.size, 3))
+    for k in range(t.size):
+        for j, c in enumerate(names):
+            coord = cs.get(c)
+            coord.setValue(s, float(X[k, j] if coord.getMotionType() == 2 else np.radians(X[k, j])), False)
+        m.realizePosition(s)
+        p = m.getJointSet().get(joint).getChildFrame().getPositionInGround(s)
+        out[k] = [p.get(0), p.get(1), p.get(2)]
+    return out
+
+
+def consistent_forces(truth_model, ik: Path, grf_xml: Path, tmp: Path, tg, gnames, G):
+    """The measured forces corrected so that the truth model walks with no residual on the pelvis.
+
+    OpenSim's ID of the truth model with the measured forces leaves pelvis residuals ``R`` (the real
+    walk's own inconsistency plus the hidden effect's).  The wrench that removes them is added to the
+    plates, shared between the feet by their vertical loads: force ``(R_tx, R_ty)`` at each plate's
+    centre of pressure and a free moment about z making the total moment about the pelvis joint's
+    centre ``R_tilt``.  Returns the corrected values on the plate times ``tg``."""
+    t, tau = id_tool(truth_model, ik, grf_xml, tmp, "residual")
+    tf, names, X = filtered_coordinates(ik)
+    o = root_origin(truth_model, tf, names, X)
+    R = {c: np.interp(tg, t, tau[c]) for c in ("pelvis_tilt_moment", "pelvis_tx_force", "pelvis_ty_force")}
+    ox, oy = np.interp(tg, tf, o[:, 0]), np.interp(tg, tf, o[:, 1])
+    col = {n: j for j, n in enumerate(gnames)}
+    fy = np.stack([np.clip(G[:, col["ground_force_vy"]], 0, None), np.clip(G[:, col["1_ground_force_vy"]], 0, None)], 1)
+    w = fy / np.maximum(fy.sum(1, keepdims=True), 1e-9)
+    out = G.copy()
+    for k, pre in enumerate(("", "1_")):
+        dfx, dfy = w[:, k] * R["pelvis_tx_force"], w[:, k] * R["pelvis_ty_force"]
+        px, py = G[:, col[pre + "ground_force_px"]], G[:, col[pre + "ground_force_py"]]
+        dmz = w[:, k] * R["pelvis_tilt_moment"] - ((px - ox) * dfy - (py - oy) * dfx)
+        out[:, col[pre + "ground_force_vx"]] += dfx
+        out[:, col[pre + "ground_force_vy"]] += dfy
+        out[:, col[pre + "ground_torque_z"]] += dmz
+    return out
+
+
+def consistent_gait_cases(root: Path):
+    """The walk with forces consistent with the truth model: the trial has the coordinates and the joint
+    moments only, the pelvis none (a lab's trial); the plain model's pelvis residuals are the effect's."""
+    d = shared_data()
+    model_path = d / GAIT
+    ik = d / GAIT_IK
+    xml = (d / GAIT_GRF_XML).read_text().replace("<datafile>subject01_walk_grf.mot</datafile>",
+                                                 "<datafile>walk_grf.mot</datafile>")
+    tg, gnames, G0 = read_storage(d / GAIT_GRF_XML.replace("_grf.xml", "_grf.mot"))
+    t_ik, coords, Q = read_storage(ik)
+    # the plates at the kinematics' frames (60 Hz): what the ID evaluates, and small to store
+    G0 = np.stack([np.interp(t_ik, tg, G0[:, j]) for j in range(G0.shape[1])], 1)
+    tg = t_ik
+    names_out = []
+
+    def case(name, effects, truth, seed, description):
+        with tempfile.TemporaryDirectory() as tmp:
+            tmp = Path(tmp)
+            write_grf(tmp / "walk_grf.mot", tg, gnames, G0, "measured")
+            (tmp / "walk_grf.xml").write_text(xml)
+            truth_model = load(model_path)
+            for add in effects:
+                add(truth_model)
+            G = consistent_forces(truth_model, ik, tmp / "walk_grf.xml", tmp, tg, gnames, G0)
+            write_grf(tmp / "walk_grf.mot", tg, gnames, G, "subject01_walk_grf_consistent")
+            tt, tau_truth = id_tool(truth_model, ik, tmp / "walk_grf.xml", tmp, "truth")
+            left = {c: float(np.max(np.abs(tau_truth[c][2:-2]))) for c in tau_truth if c.startswith("pelvis")}
+            tp, tau_plain = id_tool(load(model_path), ik, tmp / "walk_grf.xml", tmp, "plain")
+            rng = np.random.default_rng(seed)
+            cols = {c: Q[:, j] for j, c in enumerate(coords)}
+            for label, x in tau_truth.items():
+                if not label.startswith("pelvis"):
+                    cols[label.rsplit("_", 1)[0] + "_moment"] = x + rng.normal(size=x.size)
+            eff = {lab.rsplit("_", 1)[0]: tau_plain[lab] - tau_truth[lab] for lab in tau_truth}
+            c, info = _write_case(root, name, t_ik, cols, truth_model=truth_model, model_rel=GAIT,
+                                  description=description, effect_moment=eff,
+                                  noise={"coordinates": "none added: OpenSim's IK of the measured markers",
+                                         "moments": "1 N m", "seed": seed},
+                                  motion="subject01_walk_IK.mot (60 Hz, 2.5 s); forces made consistent with the "
+                                         "truth model (no pelvis residual); moments by OpenSim's "
+                                         "InverseDynamicsTool, coordinates low-passed at 6 Hz",
+                                  plain_vs_opensim=None, external_loads="walk_grf.xml",
+                                  extra_files=[tmp / "walk_grf.mot", tmp / "walk_grf.xml"])
+            info["truth_pelvis_residual_max"] = left
+            finish(c, info, truth, model_path)
+            print(f"  truth model's pelvis residual with the corrected forces: {left}")
+        names_out.append(name)
+
+    case("gait_consistent_plain", [], [], 51,
+         "the walk, forces made consistent with the plain model: nothing to add, no pelvis residual")
+    case("gait_consistent_torso_mass", [lambda m: scale_body_mass(m, "torso", 1.15)],
+         [{"family": "segment_mass", "target": "torso", "params": {"delta": 0.15},
+           "opensim": "torso mass and inertia x 1.15; forces consistent with it"}], 52,
+         "torso 15 % heavier; the plates measured what that body needs, the pelvis residual is the effect's")
+    case("gait_consistent_torso_com", [lambda m: shift_com(m, "torso", (0.03, 0.0, 0.0))],
+         [{"family": "com_offset", "target": "torso", "params": {"dx": 0.03, "dy": 0.0, "dz": 0.0},
+           "opensim": "torso mass_center 3 cm anterior; forces consistent with it"}], 53,
+         "torso centre of mass 3 cm anterior, forces consistent with it (what RRA adjusts)")
+    case("gait_consistent_backpack", [lambda m: add_payload(m, "torso", 6.0, (-0.15, 0.35, 0.0))],
+         [{"family": "payload", "target": "torso", "params": {"mass": 6.0},
+           "site": {"body": "torso", "location": (-0.15, 0.35, 0.0), "kind": "point"},
+           "opensim": "Body 'payload' (6 kg) welded to the torso; forces consistent with it"}], 54,
+         "a 6 kg backpack, forces consistent with it")
+    return names_out
+
+
 def main(argv=None):
     global osim
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("only", nargs="*", help="groups or cases to make (arm26, pendulum, tug, gait); default all")
+    ap.add_argument("only", nargs="*", help="groups to make (arm26, pendulum, tug, gait, consistent); default all")
     ap.add_argument("--out", type=Path, default=OUT)
     args = ap.parse_args(argv)
     osim = import_opensim()
@@ -657,6 +781,8 @@ def main(argv=None):
         tug_cases(args.out)
     if "gait" in groups:
         gait_cases(args.out)
+    if "consistent" in groups or not args.only:
+        consistent_gait_cases(args.out)
 
 
 if __name__ == "__main__":
