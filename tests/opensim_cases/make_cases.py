@@ -229,7 +229,7 @@ def band_noise(rng, n, rate, std, band=NOISE_BAND):
     return std * x / np.std(x)
 
 
-def write_sto(path: Path, t, columns: dict, *, in_degrees: bool, name: str, digits: int = 7):
+def write_sto(path: Path, t, columns: dict, *, in_degrees: bool, name: str, digits: int = 6):
     """``columns`` in the layout of OpenSim's IK and ID outputs (version=1 header, ``inDegrees``, tabs),
     ``digits`` significant digits (far below the noise; keeps the stored cases small)."""
     labels = list(columns)
@@ -522,28 +522,30 @@ def write_grf(path: Path, t, names, X, header_name: str):
 
 
 WALK = "_walk"            # the walk's forces, shared by the gait cases (no truth.json: not a case)
-GRF_DECIMATE = 5          # 600 Hz plates stored at 120 Hz, twice the kinematics' rate
 
 
 def walk_forces(root: Path):
-    """The measured walk forces stored once, at 120 Hz: ``(times, names, values, xml text)``.
+    """The measured walk forces stored once, at the kinematics' 60 Hz frames (linear interpolation of
+    the 600 Hz plates: the values the ID evaluates): ``(times, names, values, xml text)``.
 
     Every gait case's truth is computed with this stored file, so the cases are consistent with what
     they ship; the plate cases store their own reading next to the trial."""
     d = shared_data()
     xml = (d / GAIT_GRF_XML).read_text()
     tg, names, G = read_storage(d / GAIT_GRF_XML.replace("_grf.xml", "_grf.mot"))
-    tg, G = tg[::GRF_DECIMATE], G[::GRF_DECIMATE]
+    t_ik = read_storage(d / GAIT_IK)[0]
+    G = np.stack([np.interp(t_ik, tg, G[:, j]) for j in range(G.shape[1])], 1)
+    tg = t_ik
     out = root / WALK
     out.mkdir(parents=True, exist_ok=True)
-    write_grf(out / "walk_grf.mot", tg, names, G, "subject01_walk_grf_120Hz")
+    write_grf(out / "walk_grf.mot", tg, names, G, "subject01_walk_grf_60Hz")
     xml = xml.replace("<datafile>subject01_walk_grf.mot</datafile>", "<datafile>walk_grf.mot</datafile>")
     (out / "walk_grf.xml").write_text(xml)
     (out / "SOURCE.md").write_text(
         "# The walk's ground reaction forces\n\n"
         "`walk_grf.mot` is `ExperimentalData/subject01_walk_grf.mot` of opensim-org/opensim-models "
-        "(Models/Gait10dof18musc, commit 20a888b9655e; Creative Commons CC BY 3.0), every fifth sample "
-        "(600 Hz -> 120 Hz), 7 significant digits; `walk_grf.xml` is its `subject01_walk_grf.xml` naming "
+        "(Models/Gait10dof18musc, commit 20a888b9655e; Creative Commons CC BY 3.0) at the IK's 60 Hz frames "
+        "(linear interpolation of the 600 Hz plates), 7 significant digits; `walk_grf.xml` is its `subject01_walk_grf.xml` naming "
         "this file.  Written by `tests/opensim_cases/make_cases.py`.\n")
     return tg, names, G, xml
 
