@@ -96,10 +96,11 @@ def test_an_exact_alias_is_dropped_and_the_true_effect_kept(forearm):
     """A sensor gain and a segment mass on a one-body model change the moment alike (rank deficient): the
     gain, added second on a segment-mass trial, explains nothing beside the mass and is the one to drop."""
     trial = make_trial(forearm, ["segment_mass:forearm_hand:delta=0.3"], seed=3)
-    r = run(forearm, trial, add=["segment_mass", "sensor_gain:elbow_flexion"])
-    gain = _entry(r.final, "sensor_gain:elbow_flexion")
+    r = run(forearm, trial, add=["segment_mass", "sensor_gain:elbow_flexion"], remove=["sensor_gain"])
+    both = r.steps[2]
+    gain = _entry(both, "sensor_gain:elbow_flexion")
     assert gain["suggest_remove"] and gain["alias_of"] == SEGMENT and gain["alias_correlation"] > 0.999
-    r = run(forearm, trial, add=["segment_mass", "sensor_gain:elbow_flexion"], remove=[r.final.suggest_remove])
+    assert both.suggest_remove == "sensor_gain:elbow_flexion"
     assert [c.label for c in r.model.components] == [SEGMENT]
     assert r.model.component(SEGMENT).values["delta"] == pytest.approx(0.3, abs=0.02)
     assert r.verdict == "at_noise_floor" and r.final.suggest_remove is None
@@ -122,11 +123,11 @@ def test_effect_spec_values_are_held(forearm):
 def test_cli_suggests_and_does_the_removal(tmp_path, capsys):
     src = tmp_path / "pay.csv"
     assert main(["synth", "forearm", "--effect", "payload:hand:mass=0.5", "--seed", "1", "-o", str(src)]) == 0
-    assert main(["diagnose", "forearm", str(src), "--add", "segment_mass", "--add", PAYLOAD]) == 0
-    assert f"remove it with --remove {SEGMENT}" in capsys.readouterr().out
     out = tmp_path / "d.json"
     assert main(["diagnose", "forearm", str(src), "--add", "segment_mass", "--add", PAYLOAD,
                  "--remove", SEGMENT, "--json", str(out)]) == 0
+    text = capsys.readouterr().out                     # every step: the suggestion after the adds, then the removal
+    assert f"remove it with --remove {SEGMENT}" in text and f"step 3: removed {SEGMENT}" in text
     d = json.loads(out.read_text())
     assert d["removed"][0]["removed"] == SEGMENT and d["verdict"] == "at_noise_floor"
     assert d["added"][0]["params"]["mass"] == pytest.approx(0.5, abs=0.01)
