@@ -370,15 +370,17 @@ def check_osim_path(path) -> Path:
 
 
 def write_osim(model, path, *, source=None) -> OsimExport:
-    """Write a copy of the ``.osim`` ``model`` was imported from (``source``, default ``meta['osim']``) with
+    """Write a copy of the ``.osim`` ``model`` was imported from (``source``, default ``meta['osim']``, or
+    the ``[model] osim`` of the sidecar it was loaded from) with
     the model's effects as OpenSim properties and forces (module docstring); returns an :class:`OsimExport`
     with the changes and the effects left out.  Effects the source's import already has (its actuators and
     contacts) are not added again."""
     p = check_osim_path(path)
-    src = Path(str(source or model.meta.get("osim") or ""))
-    if not model.meta.get("osim") and source is None:
+    origin = source or model.meta.get("osim") or model.meta.get("source_osim")
+    if not origin:
         raise ModelError(f"--save-osim: model '{model.name}' was not imported from an OpenSim .osim; "
                          "save it with --save-model OUT.toml")
+    src = Path(str(origin))
     if not src.is_file():
         raise ModelError(f"--save-osim: the model's source {src} is not there any more")
     data = src.read_bytes()
