@@ -753,6 +753,7 @@ class DiagnosisRun:
     the earlier ones); ``refits`` what each step's joint refit changed (the
     earlier effects' values before and after, their errors and correlations);
     the final values of every added effect are those of the final model.
+    :meth:`residual_report` gives the floating-base residuals of every step.
     """
 
     def __init__(self, steps: list, added: list, refits: list | None = None):

@@ -43,6 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..effects._base import is_prismatic
 from ..errors import ModelError
 from ..io.output_files import atomic_write
 
@@ -460,7 +461,7 @@ def write_osim(model, path, *, source=None) -> OsimExport:
 </ExpressionBasedCoordinateForce>""")
                 res.changes.append(f"{comp.label}: ExpressionBasedCoordinateForce {name}: {expr}")
                 continue
-            rot = _coordinate_is_rotational(doc, coords[comp.target])
+            rot = not is_prismatic(model, comp.target)
             w = np.pi / 180.0 if rot else 1.0          # OpenSim: N m/deg, deg, N m s/deg for a rotation
             k, lim, d, c = v["stiffness"] * w, v["limit"] / w, v["transition"] / w, v["damping"] * w
             far = 360.0 if rot else 1.0e3
@@ -609,29 +610,6 @@ def _why_not(family: str) -> str:
     }.get(family, "a correction of the force-plate data: apply it to the ground reaction file, not the model"
           if family.startswith("plate_") else
           "no OpenSim force of the same physics (a measurement, muscle-level or other effect)")
-
-
-def _coordinate_is_rotational(doc: _Doc, k: int) -> bool:
-    c = doc.child(k, "motion_type")
-    if c is not None:
-        return doc.text(c).strip().lower() != "translational"
-    # OpenSim 4: the motion type follows from the joint (a CustomJoint's TransformAxis of the coordinate)
-    name = doc.els[k].attrs.get("name")
-    for t in doc.find("TransformAxis"):
-        cs = doc.child(t, "coordinates")
-        if cs is not None and name in doc.text(cs).split():
-            return doc.els[t].attrs.get("name", "").startswith("rotation")
-    for tag in ("SliderJoint",):
-        for j in doc.find(tag):
-            if any(doc.els[x].attrs.get("name") == name for x in _descendants(doc, j)):
-                return False
-    return True
-
-
-def _descendants(doc: _Doc, k: int):
-    for c in doc.els[k].children:
-        yield c
-        yield from _descendants(doc, c)
 
 
 def _frame_in_body(model, frame: str, bodies) -> tuple[str | None, np.ndarray]:
