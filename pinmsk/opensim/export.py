@@ -105,7 +105,7 @@ def write_model(model, path) -> dict[str, Path]:
     :func:`~pinmsk.opensim.importer.write_import` next to ``path`` (``<stem>.urdf``, ``<stem>.toml``,
     ``<stem>_markers.toml``, ``<stem>_import_report.txt``): its skeleton, coordinate map, muscles and
     components.  A model loaded from a sidecar gets a copy of that sidecar with ``[model] urdf`` pointing at
-    the same URDF (relative to ``path``), its gravity, and the model's ``[[effects]]``, ``[[actuators]]`` and
+    the same URDF (relative to ``path`` when it lies beside or below it, else its absolute path), its gravity, and the model's ``[[effects]]``, ``[[actuators]]`` and
     ``[[contacts]]``.  A bare URDF model gets a sidecar naming the URDF and the gravity.  The returned dict
     has ``"sidecar"`` (and, for an import, ``"urdf"``, ``"markers"``, ``"report"``).  A component the
     sidecar cannot hold is refused by name before anything is written.
@@ -114,21 +114,12 @@ def write_model(model, path) -> dict[str, Path]:
     plain = _plain_model(model)
     meta = model.meta
     if meta.get("osim"):
-        import warnings
-
-        from .importer import write_import
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            # the components that cannot be written are found before any file is
-            from .importer import _component_entries
-            _, unwritten = _component_entries(plain.components)
-            if unwritten:
-                raise ModelError("cannot save the model: " + "; ".join(f"{lab} ({why})" for lab, why in unwritten))
-            files = write_import(plain, p.parent if str(p.parent) else ".", name=p.stem)
-        for w in caught:
-            if not issubclass(w.category, UserWarning):
-                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-        return files
+        from .importer import _component_entries, write_import
+        # refused before any file is written: a component the sidecar cannot hold
+        _, unwritten = _component_entries(plain.components)
+        if unwritten:
+            raise ModelError("cannot save the model: " + "; ".join(f"{lab} ({why})" for lab, why in unwritten))
+        return write_import(plain, p.parent if str(p.parent) else ".", name=p.stem)
     return {"sidecar": _write_sidecar_model(plain, p)}
 
 
