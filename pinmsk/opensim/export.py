@@ -527,7 +527,8 @@ def _inertias(doc: _Doc, model, inertial, bodies, src, res: OsimExport) -> None:
             I = np.asarray(inert.inertia, dtype=float)
             _set_body(doc, bodies[b], src, b, inert.mass, np.asarray(inert.lever, dtype=float),
                       [I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]])
-            res.changes.append(f"  body {b}: mass {inert.mass:.6g} kg, mass_center {_vec(inert.lever)} m")
+            res.changes.append(f"  body {b}: mass {inert.mass:.6g} kg, mass_center "
+                               + " ".join(f"{x:.6g}" for x in inert.lever) + " m")
             continue
         ratio = new_pi[0] / old_pi[0] if old_pi[0] > 0 else 1.0
         if np.allclose(new_pi, ratio * old_pi, rtol=1e-12, atol=1e-15):
@@ -577,7 +578,9 @@ def _set_body(doc: _Doc, k: int, src, name, mass, com, I6) -> None:
         old = _floats(doc.text(c), n, f"{src}: Body {name} <{tag}>")
         scale = max(float(np.max(np.abs(old))), float(np.max(np.abs(val))), 1e-300)
         if np.max(np.abs(val - old)) > 1e-13 * scale:        # an unchanged value keeps its text
-            doc.set_text(c, _vec(np.where(np.abs(val) < 1e-15 * scale, 0.0, val)))
+            # 15 digits: the round-off of the frame changes (1e-16 relative) is not written as data
+            val = np.where(np.abs(val) < 1e-15 * scale, 0.0, val)
+            doc.set_text(c, " ".join(repr(float(f"{x:.15g}")) for x in val))
 
 
 def _com_in_body(model, body: str, bodies) -> tuple[str | None, np.ndarray]:
