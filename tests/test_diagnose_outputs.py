@@ -351,3 +351,29 @@ def test_cli_refuses_bad_save_paths_before_any_work(tmp_path, capsys):
         err = capsys.readouterr().err
         assert err.startswith("pinmsk: error:") and what in err and "Traceback" not in err
         assert not (tmp_path / "d.json").exists()
+
+
+def test_cli_diagnose_arm26_saves_model_and_osim(tmp_path, shared_data, capsys):
+    # a synthetic arm26 trial with 1.5 kg at the wrist and elbow damping 0.5 N m s/rad; the two effects
+    # added, then saved both ways
+    from pinmsk.diagnose import make_trial
+    from pinmsk.io.tables import write_trial
+    src = shared_data / "opensim-models" / "Arm26" / "arm26.osim"
+    m = pinmsk.load_model(src)
+    trial = tmp_path / "arm26.csv"
+    write_trial(make_trial(m, ["payload:r_radius_styloid:mass=1.5", "joint_damping:r_elbow_flex:c=0.5"],
+                           duration=6.0, seed=3), trial)
+    toml, out = tmp_path / "arm26_fixed.toml", tmp_path / "arm26_fixed.osim"
+    assert main(["diagnose", str(src), str(trial), "--add", "payload:r_radius_styloid",
+                 "--add", "joint_damping:r_elbow_flex", "--save-model", str(toml), "--save-osim", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert f"wrote {toml}" in text and f"wrote {out}" in text
+    root = ET.parse(out).getroot()
+    payload = [b for b in root.iter("Body") if b.get("name") == "payload_r_radius_styloid"]
+    assert float(payload[0].find("mass").text) == pytest.approx(1.5, rel=0.1)
+    expr = [f.find("expression").text for f in root.iter("ExpressionBasedCoordinateForce")]
+    assert len(expr) == 1 and float(expr[0].split("*")[0]) == pytest.approx(-0.5, rel=0.1)
+    back = pinmsk.load_model(toml)
+    assert {c.label for c in back.effects} >= {"payload:r_radius_styloid", "joint_damping:r_elbow_flex"}
+    assert float(payload[0].find("mass").text) == back.component("payload:r_radius_styloid").values["mass"]
+    assert main(["id", str(toml), str(trial), "-o", str(tmp_path / "id.sto")]) == 0
