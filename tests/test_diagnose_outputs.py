@@ -23,7 +23,7 @@ from pinmsk.errors import ModelError
 from pinmsk.io.shared_data import shipped_trial
 from pinmsk.opensim.export import write_model, write_osim
 from pinmsk.presentation.cli import main
-from pinmsk.presentation.report import render_report
+from pinmsk.presentation.report import _residual_section
 from pinmsk.residuals import OPENSIM_RESIDUAL_LIMITS, residual_table
 
 from conftest import LazyOpenSim
@@ -97,9 +97,19 @@ def test_residual_report_in_text_json_and_html(gait_run, tmp_path):
     assert len(steps) == 2 and set(steps[1]["coordinates"]) == {"torso_x", "torso_y", "torso_angle"}
     assert {"mean", "rms", "peak", "unit", "mean_percent", "rms_percent", "peak_percent", "limits",
             "status"} <= set(steps[0]["coordinates"]["torso_y"])
-    html = render_report(r)
-    sec = html.split("<h2>Floating-base residuals</h2>")[1].split("<h2>")[0]
+    html = "\n".join(_residual_section(r))          # the report's section (render_report puts it in the page)
+    sec = html.split("<h2>Floating-base residuals</h2>")[1]
     assert sec.count("<tr>") == 1 + 3 * 2 and "+ segment_mass:hat" in sec and "% of body weight" in sec
+
+
+@pytest.mark.slow
+def test_residual_section_in_the_html_report(gait_run, tmp_path):
+    from pinmsk.presentation.report import write_report
+    _, _, r = gait_run
+    html = write_report(r, tmp_path / "r.html").read_text()
+    sec = html.split("<h2>Floating-base residuals</h2>")[1].split("<h2>")[0]
+    assert sec == "\n" + "\n".join(_residual_section(r)[1:]) + "\n"
+    assert html.index("Floating-base residuals") < html.index("Effects added")
 
 
 def test_no_residual_report_without_a_floating_base(forearm):
