@@ -160,6 +160,21 @@ def test_saved_sidecar_model_reads_back(forearm, tmp_path):
     assert np.max(np.abs(inverse_dynamics_array(back, m) - inverse_dynamics_array(r.model, m))) < 1e-9
 
 
+def test_every_builtin_model_saves_and_reads_back(tmp_path):
+    from pinmsk.builtin_models import builtin_names
+    for name in builtin_names():
+        m = pinmsk.load_model(name)
+        back = pinmsk.load_model(write_model(m, tmp_path / f"{name}_copy.toml")["sidecar"])
+        assert back.coordinates == m.coordinates and back.muscle_names == m.muscle_names, name
+        assert [c.label for c in back.components] == [c.label for c in m.components], name
+        assert np.array_equal(back.gravity, m.gravity), name
+        mo = _motion(m, n=4, seed=2)
+        assert np.max(np.abs(inverse_dynamics_array(back, mo) - inverse_dynamics_array(m, mo))) < 1e-12, name
+        if m.muscles is not None:
+            q = mo.q
+            assert np.allclose(back.muscles.moment_arms(q), m.muscles.moment_arms(q), rtol=0, atol=1e-15), name
+
+
 def test_saved_imported_model_keeps_the_import(tmp_path, shared_data):
     src = shared_data / "opensim-models" / "Arm26" / "arm26.osim"
     m = pinmsk.load_model(src)
