@@ -824,7 +824,7 @@ class DiagnosisRun:
         height over the analysed frames times :data:`~pinmsk.residuals.STATURE_PER_COM_HEIGHT`.  The
         same body weight and height serve every step, so the percentages compare.
         """
-        from ..residuals import OPENSIM_RESIDUAL_LIMITS, height_from_com, residual_table
+        from ..residuals import OPENSIM_RESIDUAL_LIMITS, com_height, height_from_com, residual_table
         first = self.steps[0]
         if first.comparison.mode == "contact":
             return None
@@ -836,7 +836,7 @@ class DiagnosisRun:
             return None
         g = float(np.linalg.norm(model.gravity))
         bw = model.mass * g
-        com_h = _com_height(model, eq.motion_rows.q)
+        com_h = com_height(model, eq.motion_rows.q)
         h = height_from_com(com_h) if height is None else float(height)
         out = {"body_weight_N": bw, "body_weight_from": f"mass of model '{model.name}' as given "
                                                       f"({model.mass:.4g} kg) x |g| ({g:.4g} m/s^2)",
@@ -960,18 +960,6 @@ def run(model, trial, *, add: Sequence = (), first: Diagnosis | None = None, **o
                               cutoff=prev.settings["cutoff"], **opts))
         added.append(fit)
     return DiagnosisRun(steps, added, refits)
-
-
-def _com_height(model, q: np.ndarray) -> float:
-    """Mean height of ``model``'s centre of mass along ``-g`` over a dozen frames of ``q`` spread evenly."""
-    import pinocchio as pin
-    g = np.asarray(model.gravity, dtype=float)
-    gn = float(np.linalg.norm(g))
-    up = -g / gn if gn > 0 else np.array([0.0, 1.0, 0.0])
-    pm = model.pin
-    pd = pm.createData()
-    rows = np.unique(np.linspace(0, q.shape[0] - 1, min(q.shape[0], 12)).astype(int))
-    return float(np.mean([pin.centerOfMass(pm, pd, q[k]) @ up for k in rows]))
 
 
 def _step_refit(prev: Diagnosis, comps: list, fit: Result) -> dict:
