@@ -36,7 +36,7 @@ from .effects._base import is_prismatic, unactuated_coordinates
 from .trial import Trial
 
 __all__ = ["ResidualReport", "floating_base_residuals", "residual_table", "residual_table_lines",
-           "height_from_com", "PEAK_FORCE_FRACTION", "PEAK_MOMENT_FRACTION", "OPENSIM_RESIDUAL_LIMITS",
+           "com_height", "height_from_com", "PEAK_FORCE_FRACTION", "PEAK_MOMENT_FRACTION", "OPENSIM_RESIDUAL_LIMITS",
            "STATURE_PER_COM_HEIGHT"]
 
 #: OpenSim RRA guidance: peak residual force / peak external force.
@@ -167,31 +167,35 @@ def floating_base_residuals(model, motion, tau: np.ndarray, external=(), *, data
     floor of OpenSim's and pinmsk's data) over a dozen frames spread over the trial: a typical lever arm
     for the moment threshold.  ``data``: a Pinocchio Data of the model to work in (default a new one).
     """
-    import pinocchio as pin
-
     coords = tuple(unactuated_coordinates(model))
     t = np.asarray(motion.t, dtype=float)
     idx = [model.coordinate_index(c) for c in coords]
     vals = np.asarray(tau, dtype=float)[:, idx] if idx else np.zeros((t.size, 0))
     units = tuple("N" if is_prismatic(model, c) else "N*m" for c in coords)
-    g = np.asarray(model.gravity, dtype=float)
-    gn = float(np.linalg.norm(g))
-    up = -g / gn if gn > 0 else np.array([0.0, 1.0, 0.0])
-    body_weight = model.mass * gn
+    body_weight = model.mass * float(np.linalg.norm(model.gravity))
     if external:
         total = sum(np.asarray(e.force, dtype=float) for e in external)
         f_peak = float(np.max(np.linalg.norm(total, axis=1)))
     else:
         f_peak = 0.0
-    pm = model.pin
-    pd = pm.createData() if data is None else data
-    # a typical height for the threshold: a dozen frames spread over the trial (each a Pinocchio call)
-    rows = np.unique(np.linspace(0, t.size - 1, min(t.size, 12)).astype(int))
-    heights = [float(pin.centerOfMass(pm, pd, motion.q[k]) @ up) for k in rows]
-    com_h = float(np.mean(heights))
+    com_h = com_height(model, motion.q, data=data)
     thr = np.array([PEAK_FORCE_FRACTION * f_peak if u == "N" else PEAK_MOMENT_FRACTION * com_h * f_peak
                     for u in units])
     return ResidualReport(t, coords, units, vals, f_peak, com_h, body_weight, thr)
+
+
+def com_height(model, q: np.ndarray, *, data=None) -> float:
+    """Mean height of ``model``'s centre of mass along ``-g`` above the world origin over a dozen frames of
+    ``q`` (N, nq) spread evenly (each a Pinocchio call): a typical lever arm for the moment limits."""
+    import pinocchio as pin
+    g = np.asarray(model.gravity, dtype=float)
+    gn = float(np.linalg.norm(g))
+    up = -g / gn if gn > 0 else np.array([0.0, 1.0, 0.0])
+    pm = model.pin
+    pd = pm.createData() if data is None else data
+    q = np.asarray(q, dtype=float)
+    rows = np.unique(np.linspace(0, q.shape[0] - 1, min(q.shape[0], 12)).astype(int))
+    return float(np.mean([pin.centerOfMass(pm, pd, q[k]) @ up for k in rows]))
 
 
 def height_from_com(com_height: float) -> float:

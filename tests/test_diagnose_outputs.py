@@ -23,7 +23,7 @@ from pinmsk.errors import ModelError
 from pinmsk.io.shared_data import shipped_trial
 from pinmsk.opensim.export import write_model, write_osim
 from pinmsk.presentation.cli import main
-from pinmsk.presentation.report import render_report
+from pinmsk.presentation.report import _residual_section
 from pinmsk.residuals import OPENSIM_RESIDUAL_LIMITS, residual_table
 
 from conftest import LazyOpenSim
@@ -97,9 +97,19 @@ def test_residual_report_in_text_json_and_html(gait_run, tmp_path):
     assert len(steps) == 2 and set(steps[1]["coordinates"]) == {"torso_x", "torso_y", "torso_angle"}
     assert {"mean", "rms", "peak", "unit", "mean_percent", "rms_percent", "peak_percent", "limits",
             "status"} <= set(steps[0]["coordinates"]["torso_y"])
-    html = render_report(r)
-    sec = html.split("<h2>Floating-base residuals</h2>")[1].split("<h2>")[0]
+    html = "\n".join(_residual_section(r))          # the report's section (render_report puts it in the page)
+    sec = html.split("<h2>Floating-base residuals</h2>")[1]
     assert sec.count("<tr>") == 1 + 3 * 2 and "+ segment_mass:hat" in sec and "% of body weight" in sec
+
+
+@pytest.mark.slow
+def test_residual_section_in_the_html_report(gait_run, tmp_path):
+    from pinmsk.presentation.report import write_report
+    _, _, r = gait_run
+    html = write_report(r, tmp_path / "r.html").read_text()
+    sec = html.split("<h2>Floating-base residuals</h2>")[1].split("<h2>")[0]
+    assert sec == "\n" + "\n".join(_residual_section(r)[1:]) + "\n"
+    assert html.index("Floating-base residuals") < html.index("Effects added")
 
 
 def test_no_residual_report_without_a_floating_base(forearm):
@@ -148,6 +158,21 @@ def test_saved_sidecar_model_reads_back(forearm, tmp_path):
     assert back.effects[1].values["c"] == pytest.approx(0.2, rel=0.2)        # and 0.2 N m s/rad
     m = _motion(forearm)
     assert np.max(np.abs(inverse_dynamics_array(back, m) - inverse_dynamics_array(r.model, m))) < 1e-9
+
+
+def test_every_builtin_model_saves_and_reads_back(tmp_path):
+    from pinmsk.builtin_models import builtin_names
+    for name in builtin_names():
+        m = pinmsk.load_model(name)
+        back = pinmsk.load_model(write_model(m, tmp_path / f"{name}_copy.toml")["sidecar"])
+        assert back.coordinates == m.coordinates and back.muscle_names == m.muscle_names, name
+        assert [c.label for c in back.components] == [c.label for c in m.components], name
+        assert np.array_equal(back.gravity, m.gravity), name
+        mo = _motion(m, n=4, seed=2)
+        assert np.max(np.abs(inverse_dynamics_array(back, mo) - inverse_dynamics_array(m, mo))) < 1e-12, name
+        if m.muscles is not None:
+            q = mo.q
+            assert np.allclose(back.muscles.moment_arms(q), m.muscles.moment_arms(q), rtol=0, atol=1e-15), name
 
 
 def test_saved_imported_model_keeps_the_import(tmp_path, shared_data):
@@ -351,3 +376,29 @@ def test_cli_refuses_bad_save_paths_before_any_work(tmp_path, capsys):
         err = capsys.readouterr().err
         assert err.startswith("pinmsk: error:") and what in err and "Traceback" not in err
         assert not (tmp_path / "d.json").exists()
+
+
+def test_cli_diagnose_arm26_saves_model_and_osim(tmp_path, shared_data, capsys):
+    # a synthetic arm26 trial with 1.5 kg at the wrist and elbow damping 0.5 N m s/rad; the two effects
+    # added, then saved both ways
+    from pinmsk.diagnose import make_trial
+    from pinmsk.io.tables import write_trial
+    src = shared_data / "opensim-models" / "Arm26" / "arm26.osim"
+    m = pinmsk.load_model(src)
+    trial = tmp_path / "arm26.csv"
+    write_trial(make_trial(m, ["payload:r_radius_styloid:mass=1.5", "joint_damping:r_elbow_flex:c=0.5"],
+                           duration=6.0, seed=3), trial)
+    toml, out = tmp_path / "arm26_fixed.toml", tmp_path / "arm26_fixed.osim"
+    assert main(["diagnose", str(src), str(trial), "--add", "payload:r_radius_styloid",
+                 "--add", "joint_damping:r_elbow_flex", "--save-model", str(toml), "--save-osim", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert f"wrote {toml}" in text and f"wrote {out}" in text
+    root = ET.parse(out).getroot()
+    payload = [b for b in root.iter("Body") if b.get("name") == "payload_r_radius_styloid"]
+    assert float(payload[0].find("mass").text) == pytest.approx(1.5, rel=0.1)
+    expr = [f.find("expression").text for f in root.iter("ExpressionBasedCoordinateForce")]
+    assert len(expr) == 1 and float(expr[0].split("*")[0]) == pytest.approx(-0.5, rel=0.1)
+    back = pinmsk.load_model(toml)
+    assert {c.label for c in back.effects} >= {"payload:r_radius_styloid", "joint_damping:r_elbow_flex"}
+    assert float(payload[0].find("mass").text) == back.component("payload:r_radius_styloid").values["mass"]
+    assert main(["id", str(toml), str(trial), "-o", str(tmp_path / "id.sto")]) == 0

@@ -899,6 +899,7 @@ class DiagnosisRun:
     the earlier ones); ``refits`` what each step's joint refit changed (the
     earlier effects' values before and after, their errors and correlations);
     the final values of every added effect are those of the final model.
+    :meth:`residual_report` gives the floating-base residuals of every step.
     """
 
     def __init__(self, steps: list, added: list, refits: list | None = None, removed: list | None = None):
@@ -982,7 +983,7 @@ class DiagnosisRun:
         height over the analysed frames times :data:`~pinmsk.residuals.STATURE_PER_COM_HEIGHT`.  The
         same body weight and height serve every step, so the percentages compare.
         """
-        from ..residuals import OPENSIM_RESIDUAL_LIMITS, height_from_com, residual_table
+        from ..residuals import OPENSIM_RESIDUAL_LIMITS, com_height, height_from_com, residual_table
         first = self.steps[0]
         if first.comparison.mode == "contact":
             return None
@@ -994,7 +995,7 @@ class DiagnosisRun:
             return None
         g = float(np.linalg.norm(model.gravity))
         bw = model.mass * g
-        com_h = _com_height(model, eq.motion_rows.q)
+        com_h = com_height(model, eq.motion_rows.q)
         h = height_from_com(com_h) if height is None else float(height)
         out = {"body_weight_N": bw, "body_weight_from": f"mass of model '{model.name}' as given "
                                                       f"({model.mass:.4g} kg) x |g| ({g:.4g} m/s^2)",
@@ -1192,18 +1193,6 @@ def _step_removal(prev: Diagnosis, new_model, label: str) -> dict:
             out["effects"].append({"effect": old.family, "target": old.target, "label": old.label,
                                    "params": params})
     return out
-
-
-def _com_height(model, q: np.ndarray) -> float:
-    """Mean height of ``model``'s centre of mass along ``-g`` over a dozen frames of ``q`` spread evenly."""
-    import pinocchio as pin
-    g = np.asarray(model.gravity, dtype=float)
-    gn = float(np.linalg.norm(g))
-    up = -g / gn if gn > 0 else np.array([0.0, 1.0, 0.0])
-    pm = model.pin
-    pd = pm.createData()
-    rows = np.unique(np.linspace(0, q.shape[0] - 1, min(q.shape[0], 12)).astype(int))
-    return float(np.mean([pin.centerOfMass(pm, pd, q[k]) @ up for k in rows]))
 
 
 def _step_refit(prev: Diagnosis, comps: list, fit: Result) -> dict:

@@ -43,6 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..effects._base import is_prismatic
 from ..errors import ModelError
 from ..io.output_files import atomic_write
 
@@ -104,7 +105,7 @@ def write_model(model, path) -> dict[str, Path]:
     :func:`~pinmsk.opensim.importer.write_import` next to ``path`` (``<stem>.urdf``, ``<stem>.toml``,
     ``<stem>_markers.toml``, ``<stem>_import_report.txt``): its skeleton, coordinate map, muscles and
     components.  A model loaded from a sidecar gets a copy of that sidecar with ``[model] urdf`` pointing at
-    the same URDF (relative to ``path``), its gravity, and the model's ``[[effects]]``, ``[[actuators]]`` and
+    the same URDF (relative to ``path`` when it lies beside or below it, else its absolute path), its gravity, and the model's ``[[effects]]``, ``[[actuators]]`` and
     ``[[contacts]]``.  A bare URDF model gets a sidecar naming the URDF and the gravity.  The returned dict
     has ``"sidecar"`` (and, for an import, ``"urdf"``, ``"markers"``, ``"report"``).  A component the
     sidecar cannot hold is refused by name before anything is written.
@@ -113,21 +114,12 @@ def write_model(model, path) -> dict[str, Path]:
     plain = _plain_model(model)
     meta = model.meta
     if meta.get("osim"):
-        import warnings
-
-        from .importer import write_import
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            # the components that cannot be written are found before any file is
-            from .importer import _component_entries
-            _, unwritten = _component_entries(plain.components)
-            if unwritten:
-                raise ModelError("cannot save the model: " + "; ".join(f"{lab} ({why})" for lab, why in unwritten))
-            files = write_import(plain, p.parent if str(p.parent) else ".", name=p.stem)
-        for w in caught:
-            if not issubclass(w.category, UserWarning):
-                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-        return files
+        from .importer import _component_entries, write_import
+        # refused before any file is written: a component the sidecar cannot hold
+        _, unwritten = _component_entries(plain.components)
+        if unwritten:
+            raise ModelError("cannot save the model: " + "; ".join(f"{lab} ({why})" for lab, why in unwritten))
+        return write_import(plain, p.parent if str(p.parent) else ".", name=p.stem)
     return {"sidecar": _write_sidecar_model(plain, p)}
 
 
@@ -370,15 +362,17 @@ def check_osim_path(path) -> Path:
 
 
 def write_osim(model, path, *, source=None) -> OsimExport:
-    """Write a copy of the ``.osim`` ``model`` was imported from (``source``, default ``meta['osim']``) with
+    """Write a copy of the ``.osim`` ``model`` was imported from (``source``, default ``meta['osim']``, or
+    the ``[model] osim`` of the sidecar it was loaded from) with
     the model's effects as OpenSim properties and forces (module docstring); returns an :class:`OsimExport`
     with the changes and the effects left out.  Effects the source's import already has (its actuators and
     contacts) are not added again."""
     p = check_osim_path(path)
-    src = Path(str(source or model.meta.get("osim") or ""))
-    if not model.meta.get("osim") and source is None:
+    origin = source or model.meta.get("osim") or model.meta.get("source_osim")
+    if not origin:
         raise ModelError(f"--save-osim: model '{model.name}' was not imported from an OpenSim .osim; "
                          "save it with --save-model OUT.toml")
+    src = Path(str(origin))
     if not src.is_file():
         raise ModelError(f"--save-osim: the model's source {src} is not there any more")
     data = src.read_bytes()
@@ -458,7 +452,7 @@ def write_osim(model, path, *, source=None) -> OsimExport:
 </ExpressionBasedCoordinateForce>""")
                 res.changes.append(f"{comp.label}: ExpressionBasedCoordinateForce {name}: {expr}")
                 continue
-            rot = _coordinate_is_rotational(doc, coords[comp.target])
+            rot = not is_prismatic(model, comp.target)
             w = np.pi / 180.0 if rot else 1.0          # OpenSim: N m/deg, deg, N m s/deg for a rotation
             k, lim, d, c = v["stiffness"] * w, v["limit"] / w, v["transition"] / w, v["damping"] * w
             far = 360.0 if rot else 1.0e3
@@ -533,7 +527,8 @@ def _inertias(doc: _Doc, model, inertial, bodies, src, res: OsimExport) -> None:
             I = np.asarray(inert.inertia, dtype=float)
             _set_body(doc, bodies[b], src, b, inert.mass, np.asarray(inert.lever, dtype=float),
                       [I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]])
-            res.changes.append(f"  body {b}: mass {inert.mass:.6g} kg, mass_center {_vec(inert.lever)} m")
+            res.changes.append(f"  body {b}: mass {inert.mass:.6g} kg, mass_center "
+                               + " ".join(f"{x:.6g}" for x in inert.lever) + " m")
             continue
         ratio = new_pi[0] / old_pi[0] if old_pi[0] > 0 else 1.0
         if np.allclose(new_pi, ratio * old_pi, rtol=1e-12, atol=1e-15):
@@ -583,7 +578,9 @@ def _set_body(doc: _Doc, k: int, src, name, mass, com, I6) -> None:
         old = _floats(doc.text(c), n, f"{src}: Body {name} <{tag}>")
         scale = max(float(np.max(np.abs(old))), float(np.max(np.abs(val))), 1e-300)
         if np.max(np.abs(val - old)) > 1e-13 * scale:        # an unchanged value keeps its text
-            doc.set_text(c, _vec(np.where(np.abs(val) < 1e-15 * scale, 0.0, val)))
+            # 15 digits: the round-off of the frame changes (1e-16 relative) is not written as data
+            val = np.where(np.abs(val) < 1e-15 * scale, 0.0, val)
+            doc.set_text(c, " ".join(repr(float(f"{x:.15g}")) for x in val))
 
 
 def _com_in_body(model, body: str, bodies) -> tuple[str | None, np.ndarray]:
@@ -607,29 +604,6 @@ def _why_not(family: str) -> str:
     }.get(family, "a correction of the force-plate data: apply it to the ground reaction file, not the model"
           if family.startswith("plate_") else
           "no OpenSim force of the same physics (a measurement, muscle-level or other effect)")
-
-
-def _coordinate_is_rotational(doc: _Doc, k: int) -> bool:
-    c = doc.child(k, "motion_type")
-    if c is not None:
-        return doc.text(c).strip().lower() != "translational"
-    # OpenSim 4: the motion type follows from the joint (a CustomJoint's TransformAxis of the coordinate)
-    name = doc.els[k].attrs.get("name")
-    for t in doc.find("TransformAxis"):
-        cs = doc.child(t, "coordinates")
-        if cs is not None and name in doc.text(cs).split():
-            return doc.els[t].attrs.get("name", "").startswith("rotation")
-    for tag in ("SliderJoint",):
-        for j in doc.find(tag):
-            if any(doc.els[x].attrs.get("name") == name for x in _descendants(doc, j)):
-                return False
-    return True
-
-
-def _descendants(doc: _Doc, k: int):
-    for c in doc.els[k].children:
-        yield c
-        yield from _descendants(doc, c)
 
 
 def _frame_in_body(model, frame: str, bodies) -> tuple[str | None, np.ndarray]:

@@ -297,9 +297,14 @@ def _check_saves(args) -> None:
         check_model_path(args.save_model)
     if getattr(args, "save_osim", None):
         check_osim_path(args.save_osim)
-        if Path(str(args.model)).suffix.lower() != ".osim":
+        mp = Path(str(args.model))
+        named = False
+        if mp.suffix.lower() == ".toml" and mp.is_file():      # a sidecar written from an .osim names it
+            from ..io.toml_files import read_toml
+            named = bool(read_toml(mp, what="model sidecar").get("model", {}).get("osim"))
+        if mp.suffix.lower() != ".osim" and not named:
             raise PinmskError(f"--save-osim writes a copy of an OpenSim model; MODEL {args.model} is not an .osim "
-                              "(save it with --save-model OUT.toml)")
+                              "(nor a sidecar imported from one); save it with --save-model OUT.toml")
 
 
 def _save_corrected(args, model) -> None:
