@@ -76,9 +76,11 @@ PENDING = {
     "gait_backpack": _EXACT + " adds segment_mass:pelvis +53 %; no payload site on the torso)",
     "gait_plate_offset_fy": _EXACT + " adds segment_mass:torso and a sensor gain; no force-plate candidates)",
     "gait_plate_gain_left": _EXACT + " adds two sensor gains; no force-plate candidates)",
-    "gait_consistent_plain": _EXACT + " ends missing_effect at 1.13x the floor with nothing significant)",
+    "gait_consistent_plain": _EXACT + " ends missing_effect at 1.13x the floor with nothing significant: the "
+                             "default 6 Hz low-pass of the GRF, which OpenSim's ID tool leaves unfiltered; with "
+                             "grf_cutoff=0 it is at_noise_floor, 0.48x)",
     "gait_consistent_torso_mass": _EXACT + " finds segment_mass:torso 0.150 +- 0.008, true 0.15, but ends "
-                                  "missing_effect at 1.13x)",
+                                  "missing_effect at 1.13x; solved with grf_cutoff=0)",
     "gait_consistent_torso_com": _EXACT + " adds sensor_offset:lumbar_extension 9.3 N m; no com_offset candidate)",
     "gait_consistent_backpack": _EXACT + " adds segment_mass:pelvis +53 % and a lumbar offset; no payload site)",
     "tug_block_damping_id_names": "OpenSim's ID tool names a translation's generalized force <coord>_force: "
