@@ -367,9 +367,10 @@ def arm_cases(root: Path):
     case("arm26_payload_styloid", [lambda m: add_payload(m, "r_ulna_radius_hand", 1.5, styloid)],
          [payload_styloid], 2, description="1.5 kg held at the wrist (r_radius_styloid marker)")
     case("arm26_payload_hand_com", [lambda m: add_payload(m, "r_ulna_radius_hand", 1.0, hand_com)],
-         [{"family": "payload", "target": "r_ulna_radius_hand", "params": {"mass": 1.0},
+         [{"family": "payload", "target": "r_ulna_radius_hand@com", "params": {"mass": 1.0},
            "site": {"body": "r_ulna_radius_hand", "location": hand_com, "kind": "com"},
-           "aliases": [{"family": "segment_mass", "target": "r_ulna_radius_hand", "params": {"delta": 1.0 / 1.534315}}],
+           "aliases": [{"family": "segment_mass", "target": "r_ulna_radius_hand", "params": {"delta": 1.0 / 1.534315},
+                        "note": "the mass at the centre of mass; only the rotational inertia differs"}],
            "opensim": "Body 'payload' (1.0 kg) welded to r_ulna_radius_hand at its centre of mass"}], 3,
          description="1 kg at the forearm-hand's centre of mass: a segment_mass of +65 % is its alias")
     case("arm26_elbow_damping", [lambda m: add_expression_force(m, "r_elbow_flex", "-0.3*qdot", "damping")],
@@ -383,9 +384,14 @@ def arm_cases(root: Path):
          [{"family": "coulomb_friction", "target": "r_shoulder_elev", "params": {"F_c": 0.4},
            "opensim": "ExpressionBasedCoordinateForce r_shoulder_elev '-0.4*tanh(qdot/0.01)'"}], 6,
          description="Coulomb friction 0.4 N m (tanh, 0.01 rad/s) at the shoulder")
+    forearm_mass = {"family": "segment_mass", "target": "r_ulna_radius_hand", "params": {"delta": 0.25},
+                    "aliases": [{"family": "payload", "target": "r_ulna_radius_hand@com",
+                                 "params": {"mass": 0.25 * 1.534315},
+                                 "note": "the added mass at the centre of mass; only the rotational inertia "
+                                         "(+25 %) differs"}],
+                    "opensim": "r_ulna_radius_hand mass and inertia x 1.25"}
     case("arm26_forearm_mass", [lambda m: scale_body_mass(m, "r_ulna_radius_hand", 1.25)],
-         [{"family": "segment_mass", "target": "r_ulna_radius_hand", "params": {"delta": 0.25},
-           "opensim": "r_ulna_radius_hand mass and inertia x 1.25"}], 7,
+         [forearm_mass], 7,
          description="forearm-hand 25 % heavier than modelled")
     case("arm26_elbow_offset", [], [{"family": "sensor_offset", "target": "r_elbow_flex",
                                      "params": {"offset": 0.4}, "opensim": "+0.4 N m added to r_elbow_flex_moment"}],
@@ -410,8 +416,7 @@ def arm_cases(root: Path):
          [{**damping, "params": {"c": 0.6}, "opensim": "ExpressionBasedCoordinateForce r_elbow_flex '-0.6*qdot'"}],
          13, duration=2.0, rate=60.0, description="a short trial: 2 s at 60 Hz, elbow damping 0.6 N m s/rad")
     case("arm26_forearm_mass_noisy", [lambda m: scale_body_mass(m, "r_ulna_radius_hand", 1.25)],
-         [{"family": "segment_mass", "target": "r_ulna_radius_hand", "params": {"delta": 0.25},
-           "opensim": "r_ulna_radius_hand mass and inertia x 1.25"}], 14, angle_noise=0.5, moment_noise=0.15,
+         [forearm_mass], 14, angle_noise=0.5, moment_noise=0.15,
          description="noisier: 0.5 deg on the angles, 0.15 N m on the moments; forearm-hand 25 % heavier")
     case("arm26_payload_damping",
          [lambda m: add_payload(m, "r_ulna_radius_hand", 1.5, styloid),
@@ -580,12 +585,15 @@ def gait_cases(root: Path):
             ext = f"../{WALK}/walk_grf.xml"
             if plate is not None:
                 G = G0.copy()
-                col, kind, value = plate
-                j = gnames.index(col)
-                if kind == "offset":
-                    G[:, j] += value
-                else:
-                    G[:, j] *= value
+                prefix, kind, value = plate
+                j = {n: k for k, n in enumerate(gnames)}
+                if kind == "offset":      # the plate's zero drift while it is loaded (unloaded samples are 0)
+                    loaded = G[:, j[prefix + "ground_force_vy"]] != 0.0
+                    G[loaded, j[prefix + "ground_force_vy"]] += value
+                else:                     # a calibration gain of every force and moment channel (COP kept)
+                    for n in ("ground_force_vx", "ground_force_vy", "ground_force_vz",
+                              "ground_torque_x", "ground_torque_y", "ground_torque_z"):
+                        G[:, j[prefix + n]] *= value
                 write_grf(tmp / "walk_grf.mot", tg, gnames, G, "subject01_walk_grf_reading")
                 (tmp / "walk_grf.xml").write_text(xml)
                 extra = [tmp / "walk_grf.mot", tmp / "walk_grf.xml"]
@@ -627,14 +635,17 @@ def gait_cases(root: Path):
          [{"family": "joint_damping", "target": "knee_angle_r", "params": {"c": 2.0},
            "opensim": "ExpressionBasedCoordinateForce knee_angle_r '-2.0*qdot'"}], 45,
          "viscous damping 2 N m s/rad at the right knee")
-    case("gait_plate_offset_fy", [], [{"family": "plate_offset", "target": "right", "params": {"fy": 20.0},
-                                       "channel": "ground_force_vy",
-                                       "opensim": "the right plate's ground_force_vy reads 20 N high"}], 46,
-         "a 20 N zero drift of the right plate's vertical force", plate=("ground_force_vy", "offset", 20.0))
-    case("gait_plate_gain_left", [], [{"family": "plate_gain", "target": "left", "params": {"gain": 1.04},
-                                       "channel": "1_ground_force_vy",
-                                       "opensim": "the left plate's vertical force reads 4 % high"}], 47,
-         "a 4 % gain error of the left plate's vertical force", plate=("1_ground_force_vy", "gain", 1.04))
+    case("gait_plate_offset_fy", [], [{"family": "plate_offset", "target": "calcn_r",
+                                       "params": {"fx": 0.0, "fy": 20.0, "fz": 0.0},
+                                       "channel": "ground_force_vy (the right plate, on calcn_r)",
+                                       "opensim": "the right plate's ground_force_vy reads 20 N high while loaded "
+                                                  "(reading - true); OpenSim's ID of the truth used the true forces"}],
+         46, "a 20 N zero drift of the right plate's vertical force", plate=("", "offset", 20.0))
+    case("gait_plate_gain_left", [], [{"family": "plate_gain", "target": "calcn_l", "params": {"gain": 1.04},
+                                       "channel": "1_ground_force_v[xyz], 1_ground_torque_[xyz] (the left plate)",
+                                       "opensim": "every force and moment channel of the left plate reads 4 % high "
+                                                  "(COP unchanged); OpenSim's ID of the truth used the true forces"}],
+         47, "a 4 % calibration gain of the left plate", plate=("1_", "gain", 1.04))
     return names_out
 
 
