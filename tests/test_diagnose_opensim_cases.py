@@ -176,7 +176,8 @@ def test_the_cli_ranks_the_hidden_damping_first(shared_data, tmp_path):
 # ---------------------------------------------------------------------------
 
 def _generator():
-    spec = importlib.util.spec_from_file_location("opensim_cases_make", REPO / "tests" / "opensim_cases" / "make_cases.py")
+    spec = importlib.util.spec_from_file_location("opensim_cases_make",
+                                                  REPO / "tests" / "opensim_cases" / "make_cases.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     mod.osim = require_opensim()

@@ -286,18 +286,17 @@ def fixed_base_case(root: Path, name: str, model_rel: str, motion: dict, effects
         if sensor and c == sensor[0]:
             m = m + sensor[1]
         cols[c + ("_force" if id_names and info[c][2] else "_moment")] = m
-    return _write_case(root, name, t, cols, truth_model=truth, model_rel=model_rel, description=description,
+    return _write_case(root, name, t, cols, model_rel=model_rel, description=description,
                        effect_moment={c: tau_plain[c] - tau_truth[c] for c in info},
                        noise={"coordinates_deg": angle_noise, "translations_m": TRANSLATION_NOISE,
                               "band_hz": NOISE_BAND, "moments": moment_noise, "seed": seed},
                        motion="sum of sines (exact derivatives), " + ", ".join(
                            f"{c}: {np.degrees(q[c].min()):.0f}..{np.degrees(q[c].max()):.0f} deg"
-                           if not info[c][2] else f"{c}: {q[c].min():.3f}..{q[c].max():.3f} m" for c in q),
-                       plain_vs_opensim=None)
+                           if not info[c][2] else f"{c}: {q[c].min():.3f}..{q[c].max():.3f} m" for c in q))
 
 
-def _write_case(root, name, t, cols, *, truth_model, model_rel, description, effect_moment, noise, motion,
-                plain_vs_opensim, external_loads=None, extra_files=()):
+def _write_case(root, name, t, cols, *, model_rel, description, effect_moment, noise, motion,
+                external_loads=None, extra_files=()):
     case = root / name
     if case.exists():
         shutil.rmtree(case)
@@ -550,8 +549,8 @@ def walk_forces(root: Path):
         "# The walk's ground reaction forces\n\n"
         "`walk_grf.mot` is `ExperimentalData/subject01_walk_grf.mot` of opensim-org/opensim-models "
         "(Models/Gait10dof18musc, commit 20a888b9655e; Creative Commons CC BY 3.0) at the IK's 60 Hz frames "
-        "(linear interpolation of the 600 Hz plates), 7 significant digits; `walk_grf.xml` is its `subject01_walk_grf.xml` naming "
-        "this file.  Written by `tests/opensim_cases/make_cases.py`.\n")
+        "(linear interpolation of the 600 Hz plates), 7 significant digits; `walk_grf.xml` is its "
+        "`subject01_walk_grf.xml` naming this file.  Written by `tests/opensim_cases/make_cases.py`.\n")
     return tg, names, G, xml
 
 
@@ -602,13 +601,13 @@ def gait_cases(root: Path):
             for label in tau_truth:
                 coord = label.rsplit("_", 1)[0]
                 eff[coord] = tau_plain[label] - tau_truth[label]
-            c, info = _write_case(root, name, t_ik, cols, truth_model=truth_model, model_rel=GAIT,
+            c, info = _write_case(root, name, t_ik, cols, model_rel=GAIT,
                                   description=description, effect_moment=eff,
                                   noise={"coordinates": "none added: OpenSim's IK of the measured markers",
                                          "moments": "1 N m on rotations, 2 N on pelvis translations", "seed": seed},
                                   motion="subject01_walk_IK.mot (60 Hz, 2.5 s); moments by OpenSim's "
                                          "InverseDynamicsTool, coordinates low-passed at 6 Hz",
-                                  plain_vs_opensim=None, external_loads=ext, extra_files=extra)
+                                  external_loads=ext, extra_files=extra)
             finish(c, info, truth, model_path)
         names_out.append(name)
 
@@ -741,14 +740,14 @@ def consistent_gait_cases(root: Path):
                 if not label.startswith("pelvis"):
                     cols[label.rsplit("_", 1)[0] + "_moment"] = x + rng.normal(size=x.size)
             eff = {lab.rsplit("_", 1)[0]: tau_plain[lab] - tau_truth[lab] for lab in tau_truth}
-            c, info = _write_case(root, name, t_ik, cols, truth_model=truth_model, model_rel=GAIT,
+            c, info = _write_case(root, name, t_ik, cols, model_rel=GAIT,
                                   description=description, effect_moment=eff,
                                   noise={"coordinates": "none added: OpenSim's IK of the measured markers",
                                          "moments": "1 N m", "seed": seed},
                                   motion="subject01_walk_IK.mot (60 Hz, 2.5 s); forces made consistent with the "
                                          "truth model (no pelvis residual); moments by OpenSim's "
                                          "InverseDynamicsTool, coordinates low-passed at 6 Hz",
-                                  plain_vs_opensim=None, external_loads="walk_grf.xml",
+                                  external_loads="walk_grf.xml",
                                   extra_files=[tmp / "walk_grf.mot", tmp / "walk_grf.xml"])
             info["truth_pelvis_residual_max"] = left
             finish(c, info, truth, model_path)
