@@ -43,49 +43,52 @@ _spec.loader.exec_module(follow)
 SOLVED = (
     "arm26_plain",
     "arm26_elbow_damping",
+    "arm26_elbow_damping_short",
     "arm26_elbow_spring",
     "arm26_elbow_offset",
+    "arm26_end_stop_lower",
+    "arm26_end_stop_upper",
     "arm26_forearm_mass",
     "arm26_forearm_mass_noisy",
+    "arm26_payload_styloid",
+    "arm26_payload_hand_com",
+    "arm26_payload_damping",
     "arm26_shoulder_friction",
-    "pendulum_q2_damping",
     "tug_block_damping",
     "tug_block_friction",
 )
 
-_EXACT = ("subject01's knee translations are functions of the knee angle (dependent joints); the diagnosis "
-          "refuses an exact import (with nonlinear='fit' it")
+_FLOOR = "the verdict stays missing_effect"
 #: not solved yet, with what is missing (their test checks they still fail)
 PENDING = {
-    "arm26_payload_styloid": "no payload site without --frame: segment_mass of the forearm takes the load "
-                             "(+110 %) and a sensor offset follows",
-    "arm26_payload_hand_com": "no payload candidate at a body's centre of mass: segment_mass (+63 %, the "
-                              "alias) is added instead",
-    "arm26_payload_damping": "payload site missing (segment_mass + damping + a spurious sensor offset)",
-    "arm26_payload_damping_end_stop": "payload site and one-sided end stop missing (stops after segment_mass "
-                                      "at 1.5x the floor)",
-    "arm26_end_stop_upper": "no one-sided end stop candidate (passive_elastic sits at its amplitude bound)",
-    "arm26_end_stop_lower": "no one-sided end stop candidate (nothing significant)",
-    "arm26_elbow_damping_short": "a 2 s trial at 60 Hz is refused: 91 analysable samples are too few for 5 "
-                                 "cross-validation blocks of 20",
-    "pendulum_tip_payload": "no payload site at a segment end (rod2's tip); segment_mass is not significant",
-    "gait_plain": _EXACT + " reaches at_noise_floor)",
-    "gait_torso_mass": _EXACT + " finds segment_mass:torso 0.149 +- 0.005, true 0.15)",
-    "gait_knee_damping": _EXACT + " finds joint_damping:knee_angle_r 2.02 +- 0.12, true 2)",
-    "gait_torso_com": _EXACT + " adds sensor_offset:lumbar_extension 9.3 N m; no com_offset candidate)",
-    "gait_backpack": _EXACT + " adds segment_mass:pelvis +53 %; no payload site on the torso)",
-    "gait_plate_offset_fy": _EXACT + " adds segment_mass:torso and a sensor gain; no force-plate candidates)",
-    "gait_plate_gain_left": _EXACT + " adds two sensor gains; no force-plate candidates)",
-    "gait_consistent_plain": _EXACT + " ends missing_effect at 1.13x the floor with nothing significant)",
-    "gait_consistent_torso_mass": _EXACT + " finds segment_mass:torso 0.150 +- 0.008, true 0.15, but ends "
-                                  "missing_effect at 1.13x)",
-    "gait_consistent_torso_com": _EXACT + " adds sensor_offset:lumbar_extension 9.3 N m; no com_offset candidate)",
-    "gait_consistent_backpack": _EXACT + " adds segment_mass:pelvis +53 % and a lumbar offset; no payload site)",
+    "arm26_payload_damping_end_stop": "stops after payload:r_radius_styloid (1.47 +- 0.10 kg) at 1.40x the floor: "
+                                      "the damping and the end stop are not significant after it",
+    "pendulum_q2_damping": "joint_damping:q2 is found (0.79 +- 0.09, true 0.8), but " + _FLOOR + " at 9.2x: "
+                           "the angle noise is fitted white at 0.023 deg (true 0.2 deg, low-passed at 12 Hz)",
+    "pendulum_tip_payload": "no payload site at a segment's free end (rod2's tip, no marker there)",
     "tug_block_damping_id_names": "OpenSim's ID tool names a translation's generalized force <coord>_force: "
                                   "the trial's block_tz_force is not read as a measured channel (refused)",
-    "gait_torso_mass_id_names": _EXACT + " ignores pelvis_tx_force / pelvis_ty_force without a word, compares "
-                                "those dofs with zero and adds sensor_gain:lumbar_extension)",
+    "gait_plain": _FLOOR + " at 1.37x with nothing significant",
+    "gait_torso_mass": "segment_mass:torso 0.149 +- 0.003 (true 0.15), but " + _FLOOR + " at 1.36x",
+    "gait_torso_mass_id_names": "pelvis_tx_force / pelvis_ty_force ignored without a word (those dofs compared "
+                                "with zero); adds sensor_gain:lumbar_extension",
+    "gait_torso_com": "com_offset:torso dx 0.025 +- 0.002 (true 0.03), dy 0.020 +- 0.009 (true 0); " + _FLOOR,
+    "gait_backpack": "segment_mass:torso +18 % and com_offset:torso (the backpack's mass and lever, not a "
+                     "payload site: none on a floating-base model); " + _FLOOR,
+    "gait_knee_damping": "joint_damping:knee_angle_r 2.02 +- 0.09 (true 2), but " + _FLOOR + " at 1.34x",
+    "gait_plate_offset_fy": "plate_gain:calcn_r 1.03 is preferred to the true plate_offset fy 20 N; " + _FLOOR,
+    "gait_plate_gain_left": "plate_gain:calcn_l 1.041 +- 0.002 (true 1.04), but " + _FLOOR + " at 1.41x",
+    "gait_consistent_plain": _FLOOR + " at 1.71x with nothing significant",
+    "gait_consistent_torso_mass": "segment_mass:torso 0.149 +- 0.004 (true 0.15), but " + _FLOOR + " at 1.80x",
+    "gait_consistent_torso_com": "com_offset:torso dx 0.023 +- 0.003 (true 0.03), dy 0.029 +- 0.011 (true 0); "
+                                 + _FLOOR,
+    "gait_consistent_backpack": "segment_mass:torso +18 % and com_offset:torso; " + _FLOOR,
 }
+
+
+def _cases(names):
+    """The walks of the 10-dof gait model take 5-40 s each: slow; the rest run by default."""
+    return [pytest.param(n, marks=pytest.mark.slow) if n.startswith("gait_") else n for n in names]
 
 
 def _shared(shared_data):
@@ -119,7 +122,7 @@ def test_truth_files_name_their_effects():
         assert (max(info["rms_effect_moment"].values()) > 0.1) == bool(physical), name
 
 
-@pytest.mark.parametrize("name", SOLVED)
+@pytest.mark.parametrize("name", _cases(SOLVED))
 def test_the_diagnosis_finds_the_hidden_effect(name, shared_data):
     row = _row(name, shared_data)
     assert "error" not in row, row.get("error")
@@ -130,20 +133,21 @@ def test_the_diagnosis_finds_the_hidden_effect(name, shared_data):
         return
     assert row["verdict_first"] == "missing_effect"
     if len(info["effects"]) == 1:
-        t = info["effects"][0]
-        # ranked first and suggested (the table's "top" is the first-ranked candidate)
-        assert row["order"][0] == f"{t['family']}:{t['target']}", row["top"]
-        assert row["top"].startswith(f"{t['family']}:{t['target']}") and row["top"].endswith("[sig]")
+        # the hidden effect (or its declared exact alias) ranked first and suggested
+        label = j["effects"][0]["found"]
+        assert row["order"][0] == label, row["top"]
+        assert row["top"].startswith(label + " ") and row["top"].endswith("[sig]"), row["top"]
     for f in j["effects"]:
         assert f["found"], f"{name}: {f['truth']['family']}:{f['truth']['target']} not added ({row['added']})"
         for p, v in f["values"].items():
-            assert v["within_stderr"], f"{name}: {p} = {v['fit']:.4g} +- {v['stderr']:.2g}, true {v['true']:.4g}"
+            if not v.get("held"):
+                assert v["within_stderr"], f"{name}: {p} = {v['fit']} +- {v['stderr']}, true {v['true']:.4g}"
     assert not j["extra"], f"{name}: added what the truth does not hold: {j['extra']}"
     assert row["verdict"] == "at_noise_floor" and row["ratio"] < row["ratio_first"]
     assert j["solved"]
 
 
-@pytest.mark.parametrize("name", sorted(PENDING))
+@pytest.mark.parametrize("name", _cases(sorted(PENDING)))
 def test_a_pending_case_is_still_unsolved(name, shared_data):
     # when this fails, the diagnosis solves the case: move it from PENDING to SOLVED
     row = _row(name, shared_data)
@@ -172,7 +176,8 @@ def test_the_cli_ranks_the_hidden_damping_first(shared_data, tmp_path):
 # ---------------------------------------------------------------------------
 
 def _generator():
-    spec = importlib.util.spec_from_file_location("opensim_cases_make", REPO / "tests" / "opensim_cases" / "make_cases.py")
+    spec = importlib.util.spec_from_file_location("opensim_cases_make",
+                                                  REPO / "tests" / "opensim_cases" / "make_cases.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     mod.osim = require_opensim()

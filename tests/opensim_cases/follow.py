@@ -2,7 +2,9 @@
 
 :func:`follow` is the loop a user follows: diagnose, add the best significant candidate, diagnose again,
 until nothing is significant.  :func:`judge` compares what was added with ``truth.json``: the right
-family at the right target (a payload at the right site, within 2 cm), each value within 3 standard
+family at the right target (a payload at the right site, within 2 cm; or an exact alias the truth
+declares, such as a payload at a body's centre of mass for a change of its mass), each value the fit
+varies within 3 standard
 errors (its relative error is reported too), nothing added that the truth does not hold, and the
 final verdict ``at_noise_floor``.
 
@@ -115,6 +117,19 @@ def _matches(eff, t: dict, model) -> tuple[bool, str]:
     return False, ""
 
 
+def _match(eff, t: dict, model):
+    """``(how, expected)``: ``eff`` is the truth effect ``t`` itself or one of its declared exact
+    ``aliases`` (another family that changes the data identically, with its own values), else None."""
+    ok, how = _matches(eff, t, model)
+    if ok:
+        return how, t
+    for a in t.get("aliases", ()):
+        ok, how = _matches(eff, a, model)
+        if ok:
+            return f"alias {a['family']}:{a['target']}", a
+    return None
+
+
 def judge(info: dict, effects: list, model, *, k: float = 3.0) -> dict:
     """Each truth effect found (family, target or site), its values within ``k`` standard errors of the
     truth, and the added effects the truth does not hold."""
@@ -122,24 +137,30 @@ def judge(info: dict, effects: list, model, *, k: float = 3.0) -> dict:
     for t in info["effects"]:
         hit = None
         for e in extra:
-            ok, how = _matches(e, t, model)
-            if ok:
-                hit = (e, how)
+            m = _match(e, t, model)
+            if m is not None:
+                hit = (e, *m)
                 break
         if hit is None:
             found.append({"truth": t, "found": None, "value_ok": False})
             continue
-        e, how = hit
+        e, how, expected = hit
         extra.remove(e)
         vals = {}
         ok = True
-        for p, true in t["params"].items():
+        for p, true in expected["params"].items():
             if p not in e.params:
+                ok = False          # a truth parameter the fitted effect does not have: the names disagree
+                vals[p] = {"true": true, "fit": None, "stderr": None, "within_stderr": False}
                 continue
+            if not e.params[p].vary:
+                vals[p] = {"true": true, "fit": e.params[p].value, "held": True}
+                continue            # held at its value by the fit (an end stop's transition): not judged
             got = e.params[p].value
             se = e.params[p].stderr
             err = got - true
-            within_se = se is not None and np.isfinite(se) and abs(err) <= k * se
+            # no error: a value the model fixes (a planar model's out-of-plane offset) must be the truth's
+            within_se = (abs(err) <= 1e-12 if se is None or not np.isfinite(se) else abs(err) <= k * se)
             vals[p] = {"true": true, "fit": got, "stderr": se, "within_stderr": bool(within_se),
                        "relative_error": float(err / true) if true else None}
             ok = ok and within_se

@@ -286,18 +286,17 @@ def fixed_base_case(root: Path, name: str, model_rel: str, motion: dict, effects
         if sensor and c == sensor[0]:
             m = m + sensor[1]
         cols[c + ("_force" if id_names and info[c][2] else "_moment")] = m
-    return _write_case(root, name, t, cols, truth_model=truth, model_rel=model_rel, description=description,
+    return _write_case(root, name, t, cols, model_rel=model_rel, description=description,
                        effect_moment={c: tau_plain[c] - tau_truth[c] for c in info},
                        noise={"coordinates_deg": angle_noise, "translations_m": TRANSLATION_NOISE,
                               "band_hz": NOISE_BAND, "moments": moment_noise, "seed": seed},
                        motion="sum of sines (exact derivatives), " + ", ".join(
                            f"{c}: {np.degrees(q[c].min()):.0f}..{np.degrees(q[c].max()):.0f} deg"
-                           if not info[c][2] else f"{c}: {q[c].min():.3f}..{q[c].max():.3f} m" for c in q),
-                       plain_vs_opensim=None)
+                           if not info[c][2] else f"{c}: {q[c].min():.3f}..{q[c].max():.3f} m" for c in q))
 
 
-def _write_case(root, name, t, cols, *, truth_model, model_rel, description, effect_moment, noise, motion,
-                plain_vs_opensim, external_loads=None, extra_files=()):
+def _write_case(root, name, t, cols, *, model_rel, description, effect_moment, noise, motion,
+                external_loads=None, extra_files=()):
     case = root / name
     if case.exists():
         shutil.rmtree(case)
@@ -367,9 +366,10 @@ def arm_cases(root: Path):
     case("arm26_payload_styloid", [lambda m: add_payload(m, "r_ulna_radius_hand", 1.5, styloid)],
          [payload_styloid], 2, description="1.5 kg held at the wrist (r_radius_styloid marker)")
     case("arm26_payload_hand_com", [lambda m: add_payload(m, "r_ulna_radius_hand", 1.0, hand_com)],
-         [{"family": "payload", "target": "r_ulna_radius_hand", "params": {"mass": 1.0},
+         [{"family": "payload", "target": "r_ulna_radius_hand@com", "params": {"mass": 1.0},
            "site": {"body": "r_ulna_radius_hand", "location": hand_com, "kind": "com"},
-           "aliases": [{"family": "segment_mass", "target": "r_ulna_radius_hand", "params": {"delta": 1.0 / 1.534315}}],
+           "aliases": [{"family": "segment_mass", "target": "r_ulna_radius_hand", "params": {"delta": 1.0 / 1.534315},
+                        "note": "the mass at the centre of mass; only the rotational inertia differs"}],
            "opensim": "Body 'payload' (1.0 kg) welded to r_ulna_radius_hand at its centre of mass"}], 3,
          description="1 kg at the forearm-hand's centre of mass: a segment_mass of +65 % is its alias")
     case("arm26_elbow_damping", [lambda m: add_expression_force(m, "r_elbow_flex", "-0.3*qdot", "damping")],
@@ -383,9 +383,14 @@ def arm_cases(root: Path):
          [{"family": "coulomb_friction", "target": "r_shoulder_elev", "params": {"F_c": 0.4},
            "opensim": "ExpressionBasedCoordinateForce r_shoulder_elev '-0.4*tanh(qdot/0.01)'"}], 6,
          description="Coulomb friction 0.4 N m (tanh, 0.01 rad/s) at the shoulder")
+    forearm_mass = {"family": "segment_mass", "target": "r_ulna_radius_hand", "params": {"delta": 0.25},
+                    "aliases": [{"family": "payload", "target": "r_ulna_radius_hand@com",
+                                 "params": {"mass": 0.25 * 1.534315},
+                                 "note": "the added mass at the centre of mass; only the rotational inertia "
+                                         "(+25 %) differs"}],
+                    "opensim": "r_ulna_radius_hand mass and inertia x 1.25"}
     case("arm26_forearm_mass", [lambda m: scale_body_mass(m, "r_ulna_radius_hand", 1.25)],
-         [{"family": "segment_mass", "target": "r_ulna_radius_hand", "params": {"delta": 0.25},
-           "opensim": "r_ulna_radius_hand mass and inertia x 1.25"}], 7,
+         [forearm_mass], 7,
          description="forearm-hand 25 % heavier than modelled")
     case("arm26_elbow_offset", [], [{"family": "sensor_offset", "target": "r_elbow_flex",
                                      "params": {"offset": 0.4}, "opensim": "+0.4 N m added to r_elbow_flex_moment"}],
@@ -410,8 +415,7 @@ def arm_cases(root: Path):
          [{**damping, "params": {"c": 0.6}, "opensim": "ExpressionBasedCoordinateForce r_elbow_flex '-0.6*qdot'"}],
          13, duration=2.0, rate=60.0, description="a short trial: 2 s at 60 Hz, elbow damping 0.6 N m s/rad")
     case("arm26_forearm_mass_noisy", [lambda m: scale_body_mass(m, "r_ulna_radius_hand", 1.25)],
-         [{"family": "segment_mass", "target": "r_ulna_radius_hand", "params": {"delta": 0.25},
-           "opensim": "r_ulna_radius_hand mass and inertia x 1.25"}], 14, angle_noise=0.5, moment_noise=0.15,
+         [forearm_mass], 14, angle_noise=0.5, moment_noise=0.15,
          description="noisier: 0.5 deg on the angles, 0.15 N m on the moments; forearm-hand 25 % heavier")
     case("arm26_payload_damping",
          [lambda m: add_payload(m, "r_ulna_radius_hand", 1.5, styloid),
@@ -545,8 +549,8 @@ def walk_forces(root: Path):
         "# The walk's ground reaction forces\n\n"
         "`walk_grf.mot` is `ExperimentalData/subject01_walk_grf.mot` of opensim-org/opensim-models "
         "(Models/Gait10dof18musc, commit 20a888b9655e; Creative Commons CC BY 3.0) at the IK's 60 Hz frames "
-        "(linear interpolation of the 600 Hz plates), 7 significant digits; `walk_grf.xml` is its `subject01_walk_grf.xml` naming "
-        "this file.  Written by `tests/opensim_cases/make_cases.py`.\n")
+        "(linear interpolation of the 600 Hz plates), 7 significant digits; `walk_grf.xml` is its "
+        "`subject01_walk_grf.xml` naming this file.  Written by `tests/opensim_cases/make_cases.py`.\n")
     return tg, names, G, xml
 
 
@@ -580,12 +584,15 @@ def gait_cases(root: Path):
             ext = f"../{WALK}/walk_grf.xml"
             if plate is not None:
                 G = G0.copy()
-                col, kind, value = plate
-                j = gnames.index(col)
-                if kind == "offset":
-                    G[:, j] += value
-                else:
-                    G[:, j] *= value
+                prefix, kind, value = plate
+                j = {n: k for k, n in enumerate(gnames)}
+                if kind == "offset":      # the plate's zero drift while it is loaded (unloaded samples are 0)
+                    loaded = G[:, j[prefix + "ground_force_vy"]] != 0.0
+                    G[loaded, j[prefix + "ground_force_vy"]] += value
+                else:                     # a calibration gain of every force and moment channel (COP kept)
+                    for n in ("ground_force_vx", "ground_force_vy", "ground_force_vz",
+                              "ground_torque_x", "ground_torque_y", "ground_torque_z"):
+                        G[:, j[prefix + n]] *= value
                 write_grf(tmp / "walk_grf.mot", tg, gnames, G, "subject01_walk_grf_reading")
                 (tmp / "walk_grf.xml").write_text(xml)
                 extra = [tmp / "walk_grf.mot", tmp / "walk_grf.xml"]
@@ -594,13 +601,13 @@ def gait_cases(root: Path):
             for label in tau_truth:
                 coord = label.rsplit("_", 1)[0]
                 eff[coord] = tau_plain[label] - tau_truth[label]
-            c, info = _write_case(root, name, t_ik, cols, truth_model=truth_model, model_rel=GAIT,
+            c, info = _write_case(root, name, t_ik, cols, model_rel=GAIT,
                                   description=description, effect_moment=eff,
                                   noise={"coordinates": "none added: OpenSim's IK of the measured markers",
                                          "moments": "1 N m on rotations, 2 N on pelvis translations", "seed": seed},
                                   motion="subject01_walk_IK.mot (60 Hz, 2.5 s); moments by OpenSim's "
                                          "InverseDynamicsTool, coordinates low-passed at 6 Hz",
-                                  plain_vs_opensim=None, external_loads=ext, extra_files=extra)
+                                  external_loads=ext, extra_files=extra)
             finish(c, info, truth, model_path)
         names_out.append(name)
 
@@ -627,14 +634,17 @@ def gait_cases(root: Path):
          [{"family": "joint_damping", "target": "knee_angle_r", "params": {"c": 2.0},
            "opensim": "ExpressionBasedCoordinateForce knee_angle_r '-2.0*qdot'"}], 45,
          "viscous damping 2 N m s/rad at the right knee")
-    case("gait_plate_offset_fy", [], [{"family": "plate_offset", "target": "right", "params": {"fy": 20.0},
-                                       "channel": "ground_force_vy",
-                                       "opensim": "the right plate's ground_force_vy reads 20 N high"}], 46,
-         "a 20 N zero drift of the right plate's vertical force", plate=("ground_force_vy", "offset", 20.0))
-    case("gait_plate_gain_left", [], [{"family": "plate_gain", "target": "left", "params": {"gain": 1.04},
-                                       "channel": "1_ground_force_vy",
-                                       "opensim": "the left plate's vertical force reads 4 % high"}], 47,
-         "a 4 % gain error of the left plate's vertical force", plate=("1_ground_force_vy", "gain", 1.04))
+    case("gait_plate_offset_fy", [], [{"family": "plate_offset", "target": "calcn_r",
+                                       "params": {"fx": 0.0, "fy": 20.0, "fz": 0.0},
+                                       "channel": "ground_force_vy (the right plate, on calcn_r)",
+                                       "opensim": "the right plate's ground_force_vy reads 20 N high while loaded "
+                                                  "(reading - true); OpenSim's ID of the truth used the true forces"}],
+         46, "a 20 N zero drift of the right plate's vertical force", plate=("", "offset", 20.0))
+    case("gait_plate_gain_left", [], [{"family": "plate_gain", "target": "calcn_l", "params": {"gain": 1.04},
+                                       "channel": "1_ground_force_v[xyz], 1_ground_torque_[xyz] (the left plate)",
+                                       "opensim": "every force and moment channel of the left plate reads 4 % high "
+                                                  "(COP unchanged); OpenSim's ID of the truth used the true forces"}],
+         47, "a 4 % calibration gain of the left plate", plate=("1_", "gain", 1.04))
     return names_out
 
 
@@ -730,14 +740,14 @@ def consistent_gait_cases(root: Path):
                 if not label.startswith("pelvis"):
                     cols[label.rsplit("_", 1)[0] + "_moment"] = x + rng.normal(size=x.size)
             eff = {lab.rsplit("_", 1)[0]: tau_plain[lab] - tau_truth[lab] for lab in tau_truth}
-            c, info = _write_case(root, name, t_ik, cols, truth_model=truth_model, model_rel=GAIT,
+            c, info = _write_case(root, name, t_ik, cols, model_rel=GAIT,
                                   description=description, effect_moment=eff,
                                   noise={"coordinates": "none added: OpenSim's IK of the measured markers",
                                          "moments": "1 N m", "seed": seed},
                                   motion="subject01_walk_IK.mot (60 Hz, 2.5 s); forces made consistent with the "
                                          "truth model (no pelvis residual); moments by OpenSim's "
                                          "InverseDynamicsTool, coordinates low-passed at 6 Hz",
-                                  plain_vs_opensim=None, external_loads="walk_grf.xml",
+                                  external_loads="walk_grf.xml",
                                   extra_files=[tmp / "walk_grf.mot", tmp / "walk_grf.xml"])
             info["truth_pelvis_residual_max"] = left
             finish(c, info, truth, model_path)
