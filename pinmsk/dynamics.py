@@ -98,7 +98,7 @@ class InverseDynamicsResult:
 
 
 def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, external_loads=None,
-                            frames=None, ground_reaction: str = "auto", grf_cutoff="same",
+                            frames=None, ground_reaction: str = "auto", grf_cutoff="auto",
                             external: Sequence[skeleton.ExternalForce] = (),
                             components: bool = True, progress=None,
                             missing_coordinates: str = "refuse") -> InverseDynamicsResult:
@@ -168,7 +168,7 @@ def _workspace(model):
 
 
 def inverse_dynamics(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, external_loads=None, frames=None,
-                     ground_reaction: str = "auto", grf_cutoff="same",
+                     ground_reaction: str = "auto", grf_cutoff="auto",
                      external: Sequence[skeleton.ExternalForce] = (), components: bool = True,
                      progress=None, missing_coordinates: str = "refuse") -> Trial:
     """Inverse dynamics of a trial: the actuator moments ``<coord>_moment`` (N m or N).

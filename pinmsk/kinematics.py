@@ -83,6 +83,8 @@ class Filtering:
     order: int = FILTER_ORDER
     grf_cutoff: float | None = None
     has_grf: bool = False
+    #: why the GRF got its filter: "" (asked or the kinematics' own), or the convention that chose it
+    grf_convention: str = ""
 
     @property
     def applied_to(self) -> tuple[str, ...]:
@@ -97,15 +99,18 @@ class Filtering:
         head = f"zero-lag Butterworth low-pass, order {self.order} (x2 forwards-backwards): "
         if not self.has_grf:
             return head + f"coordinates {one(self.cutoff)}" + (" (cutoff 0)" if self.cutoff is None else "")
+        why = f" ({self.grf_convention})" if self.grf_convention else ""
         if self.cutoff == self.grf_cutoff:
-            return head + f"coordinates and ground reaction {one(self.cutoff)}"
-        return head + f"coordinates {one(self.cutoff)}, ground reaction {one(self.grf_cutoff)}"
+            return head + f"coordinates and ground reaction {one(self.cutoff)}{why}"
+        return head + f"coordinates {one(self.cutoff)}, ground reaction {one(self.grf_cutoff)}{why}"
 
     def meta(self) -> dict:
         out = {"lowpass_cutoff_hz": 0.0 if self.cutoff is None else float(self.cutoff),
                "lowpass_order": self.order}
         if self.has_grf:
             out["grf_lowpass_cutoff_hz"] = 0.0 if self.grf_cutoff is None else float(self.grf_cutoff)
+            if self.grf_convention:
+                out["grf_convention"] = self.grf_convention
         return out
 
 
@@ -517,9 +522,25 @@ def as_motion(model, data, cutoff=DEFAULT_CUTOFF) -> Motion:
     return mo
 
 
+GRF_CUTOFF_MODES = ("auto", "same")
+
+
+def _grf_cutoff(grf_cutoff, cutoff, external_loads) -> tuple[float | None, str]:
+    """The GRF low-pass of :func:`prepare` and the convention that chose it (see its ``grf_cutoff``)."""
+    if isinstance(grf_cutoff, str):
+        if grf_cutoff not in GRF_CUTOFF_MODES:
+            raise TrialError(f"grf_cutoff must be a frequency in Hz or one of {', '.join(GRF_CUTOFF_MODES)}; "
+                             f"got {grf_cutoff!r}")
+        if grf_cutoff == "auto" and external_loads is not None:
+            return None, ("OpenSim's ExternalLoads convention: loads applied unfiltered, as its ID tool "
+                          "applies them; --grf-cutoff HZ to filter them")
+        return cutoff, ""
+    return cutoff_value(grf_cutoff), ""
+
+
 def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | None = None,
             external_loads=None, frames=None, ground_reaction: str = "auto",
-            grf_cutoff="same", missing_coordinates: str = "refuse") -> TrialInputs:
+            grf_cutoff="auto", missing_coordinates: str = "refuse") -> TrialInputs:
     """A trial (or a Motion) made ready for analysis; see the module docstring.
 
     Parameters (keyword-only after ``trial``)
@@ -535,9 +556,12 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
         Side or ExternalForce name -> body, overriding the automatic choice.
     ground_reaction : "auto" | "ignore"
         "ignore" leaves all GRF out on purpose (recorded in the metadata).
-    grf_cutoff : "same" or float
-        Low-pass of the GRF; default the kinematics' ``cutoff`` (the consistent
-        choice); 0 leaves the GRF unfiltered, as OpenSim's ID tool does.
+    grf_cutoff : "auto", "same" or float
+        Low-pass of the GRF.  "same": the kinematics' ``cutoff`` (the consistent choice for
+        a plain trial).  "auto" (default): "same", except when the loads come from an OpenSim
+        ExternalLoads file, which follows OpenSim's convention: its ID tool applies the loads
+        unfiltered (it filters the coordinates only), so the plain command reproduces OpenSim's
+        results; :class:`Filtering` says which convention ran.  0 leaves the GRF unfiltered.
     missing_coordinates : "refuse" | "default"
         An exact OpenSim import's coordinate the trial leaves out (not locked, not coupled):
         refused by name, or held at its default value as OpenSim's ID tool does
@@ -547,7 +571,7 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
         raise TrialError(f"ground_reaction must be one of {', '.join(GROUND_REACTION_MODES)}; "
                          f"got {ground_reaction!r}")
     c = cutoff_value(cutoff)
-    gc = c if isinstance(grf_cutoff, str) and grf_cutoff == "same" else cutoff_value(grf_cutoff)
+    gc, convention = _grf_cutoff(grf_cutoff, c, external_loads)
     if isinstance(trial, TrialInputs):
         return trial
     if isinstance(trial, Motion):
@@ -601,4 +625,5 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
         if dropped and any(np.any(np.abs(np.asarray(data[n])) > 0) for n in dropped):
             notes.append(f"planar model: out-of-plane GRF components ({', '.join(dropped)}) cannot act "
                          "on it and were left out")
-    return TrialInputs(mo, ext, plist, Filtering(c, grf_cutoff=gc, has_grf=True), tuple(notes), source)
+    filtering = Filtering(c, grf_cutoff=gc, has_grf=True, grf_convention=convention)
+    return TrialInputs(mo, ext, plist, filtering, tuple(notes), source)

@@ -89,7 +89,7 @@ from .comparison import Comparison, NoiseFloor, white_noise_sigma
 from .contact import compare_contact
 from .noise import propagated_floor
 
-__all__ = ["DEFAULT_CUTOFF", "MODES", "Comparison", "EquationError", "NoiseFloor", "compare",
+__all__ = ["DEFAULT_CUTOFF", "MODES", "Comparison", "EquationError", "NoiseFloor", "compare", "opensim_force_names",
            "comparison_plan", "external_forces_from_trial", "white_noise_sigma"]
 
 MODES = ("torque", "motion", "muscle", "contact")
@@ -547,9 +547,21 @@ class EquationError:
 # -- the comparison ------------------------------------------------------------------------
 
 
+def opensim_force_names(model, trial: Trial) -> Trial:
+    """``trial`` with OpenSim's inverse-dynamics names of measured generalized forces read as pinmsk's:
+    OpenSim's ID tool writes ``<coord>_force`` for a translational coordinate (``pelvis_tx_force``) and
+    ``<coord>_moment`` for a rotational one; both are the coordinate's generalized force, so a
+    ``<coord>_force`` column of a model coordinate is its ``<coord>_moment`` (unless the trial has both)."""
+    rename = {f"{c}_force": moment_channel(c) for c in independent_coordinates(model)
+              if f"{c}_force" in trial and moment_channel(c) not in trial}
+    if not rename:
+        return trial
+    return trial.drop(list(rename)).with_channels({new: trial[old] for old, new in rename.items()})
+
+
 def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = DEFAULT_CUTOFF,
             grf_frames: Mapping[str, str] | None = None, grf=None, external_loads=None,
-            grf_cutoff="same", sim_window: float = 0.5, noise_floor: NoiseFloor | None = None,
+            grf_cutoff="auto", sim_window: float = 0.5, noise_floor: NoiseFloor | None = None,
             missing_coordinates: str = "refuse", _inputs: TrialInputs | None = None,
             _fits: dict | None = None) -> Comparison:
     """Compare ``model`` with ``trial`` (see the module docstring for the modes and the noise floor).
@@ -569,6 +581,7 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
     if not isinstance(trial, Trial):
         raise TrialError(f"compare needs a Trial, got {type(trial).__name__}; read one with pinmsk.read_trial")
     cutoff = cutoff_value(cutoff)              # 0 and None: no filter
+    trial = opensim_force_names(model, trial)
     _check_measured(model, trial)
     external_given = grf is not None or external_loads is not None
     plan = comparison_plan(model, trial, mode, has_grf=_has_grf(trial) or external_given,

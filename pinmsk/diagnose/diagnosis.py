@@ -704,7 +704,7 @@ def choose_folds(n: int, folds: int | None, guard: int) -> tuple[int, str]:
 def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT_CUTOFF,
              candidates=None, frames: Sequence[str] | None = None, folds: int | None = None,
              threshold: float = THRESHOLD, at_floor: float | None = None, window: float = 1.0,
-             grf_frames=None, grf=None, external_loads=None, grf_cutoff="same", sim_window: float = 0.5,
+             grf_frames=None, grf=None, external_loads=None, grf_cutoff="auto", sim_window: float = 0.5,
              comparison: Comparison | None = None, refit: Sequence = (), alpha: float = ALPHA,
              pairs: bool = True, delta_bic: float | None = None, missing_coordinates: str = "refuse",
              _fits=None) -> Diagnosis:

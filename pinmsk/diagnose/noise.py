@@ -246,11 +246,11 @@ def _direct(eq, models, trial, options, cutoff):
             noisy = data.with_channels({n: np.asarray(data[n]) + xi[r, :, k] for k, n in enumerate(gm.channels)})
             if source is None:
                 inputs = prepare(eq.model, noisy, cutoff=cutoff, frames=options.get("grf_frames"),
-                                 grf_cutoff=options.get("grf_cutoff", "same"),
+                                 grf_cutoff=options.get("grf_cutoff", "auto"),
                                  missing_coordinates=options.get("missing_coordinates", "refuse"))
             else:
                 inputs = prepare(eq.model, trial, cutoff=cutoff, grf=noisy, external_loads=options.get("external_loads"),
-                                 frames=options.get("grf_frames"), grf_cutoff=options.get("grf_cutoff", "same"),
+                                 frames=options.get("grf_frames"), grf_cutoff=options.get("grf_cutoff", "auto"),
                                  missing_coordinates=options.get("missing_coordinates", "refuse"))
             out[r] += eq.residual_for(eq.motion, external=inputs.external) - eq.e
     if "excitation" in models:

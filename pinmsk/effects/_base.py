@@ -252,10 +252,13 @@ def moving_bodies(model) -> dict[str, int]:
     for j in range(1, pm.njoints):
         if pm.inertias[j].mass <= 0:
             continue
-        for f in pm.frames:
-            if f.type == pin.FrameType.BODY and f.parentJoint == j:
-                out[f.name] = j
-                break
+        bodies = [f.name for f in pm.frames if f.type == pin.FrameType.BODY and f.parentJoint == j]
+        if not bodies:
+            continue
+        # an imported joint's moving link between it and the source's child body is named
+        # '<source joint>_<coordinate>' (pinmsk.opensim.skeleton); the body a user knows comes after it
+        named = [b for b in bodies if not b.endswith(f"_{pm.names[j]}")]
+        out[(named or bodies)[0]] = j
     return out
 
 

@@ -119,7 +119,7 @@ def _inputs(args) -> dict:
     """The trial-preparation options every analysis takes (see :func:`pinmsk.kinematics.prepare`)."""
     return dict(cutoff=args.cutoff, grf=args.grf, external_loads=args.external_loads,
                 ground_reaction="ignore" if args.no_grf else "auto",
-                grf_cutoff="same" if args.grf_cutoff is None else args.grf_cutoff,
+                grf_cutoff="auto" if args.grf_cutoff is None else args.grf_cutoff,
                 missing_coordinates=args.missing_coordinates)
 
 
@@ -486,7 +486,8 @@ def input_flags(s) -> None:
                         "synthetic data)")
     s.add_argument("--grf-cutoff", type=float, default=None, metavar="HZ",
                    help="low-pass of the GRF (default: the same as --cutoff, which avoids artificial residual "
-                        "peaks; 0 = unfiltered, as OpenSim's ID tool)")
+                        "peaks; with --external-loads, OpenSim's convention: unfiltered, as its ID tool "
+                        "applies them; 0 = unfiltered)")
     s.add_argument("--grf", metavar="FILE", default=None,
                    help="ground reaction forces at their own rate (.mot/.sto/.csv with [side_]ground_force_v[xyz], "
                         "_p[xyz], ground_torque_[xyz]); default: the trial's own GRF channels")

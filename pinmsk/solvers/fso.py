@@ -271,7 +271,7 @@ class ForwardStaticOptimization(Fitter):
 
     # -- running -------------------------------------------------------------
     def fit(self, model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, external_loads=None, frames=None,
-            ground_reaction: str = "auto", grf_cutoff="same", progress=None, missing_coordinates: str = "refuse"):
+            ground_reaction: str = "auto", grf_cutoff="auto", progress=None, missing_coordinates: str = "refuse"):
         """Simulate the model tracking ``trial`` (a Trial or a Motion); returns ``self``.
 
         The trial goes through :func:`pinmsk.kinematics.prepare` (coordinates and

@@ -26,7 +26,7 @@ __all__ = ["muscle_analysis"]
 
 
 def muscle_analysis(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, external_loads=None,
-                    ground_reaction: str = "auto", grf_cutoff="same", paths: str = "auto",
+                    ground_reaction: str = "auto", grf_cutoff="auto", paths: str = "auto",
                     missing_coordinates: str = "refuse") -> Trial:
     """Muscle-tendon lengths, rigid-tendon fiber lengths and moment arms of ``model``'s muscles over
     ``trial`` (the coordinates low-passed at ``cutoff`` Hz as every analysis does; see the module

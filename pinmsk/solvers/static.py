@@ -916,7 +916,7 @@ class StaticOptimization(Fitter):
 
     # -- fitting -----------------------------------------------------------
     def fit(self, model, trial, *, moments=None, cutoff=DEFAULT_CUTOFF, grf=None, external_loads=None,
-            frames=None, ground_reaction: str = "auto", grf_cutoff="same", progress=None,
+            frames=None, ground_reaction: str = "auto", grf_cutoff="auto", progress=None,
             missing_coordinates: str = "refuse"):
         """Solve every frame of ``trial`` (a Trial or a Motion); returns ``self``.
 
