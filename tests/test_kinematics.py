@@ -148,7 +148,9 @@ def test_opensim_external_loads_file_maps_plates_to_bodies(gait2d, tmp_path):
     assert [s.body for s in loads.loads] == ["calcn_r", "calcn_l"]
     kin = tr.select(list(gait2d.coordinates))
     a = inverse_dynamics_result(gait2d, kin, external_loads=xml)      # reads the datafile beside the XML
-    b = inverse_dynamics_result(gait2d, tr)
+    # OpenSim's ExternalLoads convention: the loads unfiltered, as its ID tool applies them, and said so
+    assert a.inputs.filtering.grf_cutoff is None and "ExternalLoads convention" in a.inputs.filtering.describe()
+    b = inverse_dynamics_result(gait2d, tr, grf_cutoff=0)
     assert [p.body for p in a.inputs.plates] == ["foot_r", "foot_l"]
     assert "calcn_r" in a.inputs.plates[0].reason
     np.testing.assert_allclose(a.trial["hip_r_moment"], b.trial["hip_r_moment"], atol=1e-6)

@@ -200,7 +200,7 @@ def test_load_model_of_an_osim_is_cached_until_the_file_changes(tmp_path):
 
 # -- downstream analyses take OpenSim's coordinates, or refuse by name -------------------------------------
 
-def test_simulation_fso_and_diagnosis_refuse_dependent_joints_by_name(leg_path):
+def test_simulation_fso_and_motion_level_diagnosis_refuse_dependent_joints_by_name(leg_path):
     from pinmsk.diagnose.compare import compare
     from pinmsk.dynamics import simulate
     from pinmsk.solvers.fso import ForwardStaticOptimization
@@ -212,8 +212,12 @@ def test_simulation_fso_and_diagnosis_refuse_dependent_joints_by_name(leg_path):
         simulate(model, t=np.linspace(0, 0.1, 11), q0=np.zeros(model.nq), v0=np.zeros(model.nv))
     with pytest.raises(ModelError, match=r"forward static optimization \(FSO\) .*dependent joints"):
         ForwardStaticOptimization().fit(model, trial)
-    with pytest.raises(ModelError, match=r"the diagnosis .*dependent joints"):
-        compare(model, trial)
+    # the motion level integrates the joints forward: refused by name (the torque level runs,
+    # tests/test_diagnose_osim.py)
+    moments = trial.with_channels({f"{c}_moment": np.zeros(trial.n_frames) for c in model.coordinates
+                                   if c in trial})
+    with pytest.raises(ModelError, match=r"motion-level comparison .*dependent"):
+        compare(model, moments, mode="motion")
 
 
 def test_the_cli_refusal_is_one_line_and_fit_mode_runs(leg_path, tmp_path, capsys):
