@@ -82,7 +82,7 @@ def test_rra_adjusted_torso_is_pinmsks_com_offset(gait2354):
     names = [n for n in a.names if n.endswith("_moment")]
     assert len(names) == 23
     scale = max(float(np.max(np.abs(a[n]))) for n in names)
-    assert max(float(np.max(np.abs(a[n] - b[n]))) for n in names) < 1e-6 * scale
+    assert max(float(np.max(np.abs(a[n] - b[n]))) for n in names) < 1e-12 * scale
 
 
 def test_rra_torso_shift_answers_the_mean_moments_not_the_forces(gait2354):
