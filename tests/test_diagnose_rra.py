@@ -149,6 +149,9 @@ def test_subject01_torso_offset_brings_the_means_to_rra_level(gait10_torso, gait
     means, res = _means(back, trial, xml, r.steps[1].comparison.time, RRA_10DOF)
     for c in RRA_10DOF:
         assert means[c] == pytest.approx(after[c], abs=1e-6), c
+    # both low-pass the coordinates and the ground reaction at 6 Hz (the GRF cut-off defaults to the same)
+    assert r.steps[0].comparison.cutoff == 6.0 and r.steps[0].comparison.options["grf_cutoff"] == "same"
+    assert res.trial.meta["lowpass_cutoff_hz"] == res.trial.meta["grf_lowpass_cutoff_hz"] == 6.0
     # over every frame the filter's ends (peaks of 124 N and 167 N in the first 0.1 s) pull the force means
     # past RRA's, as they do in OpenSim's own ID of this walk (reference_outputs/ID: -5.2 N, -3.4 N)
     full = {c: float(np.mean(res.trial[f"{c}_moment"])) for c in RRA_10DOF}
