@@ -76,6 +76,19 @@ def body_jacobian_world(model, motion: Motion, frame: str, data=None) -> np.ndar
     return motion_cached(data, model, ("world_joint_jacobian", j), motion, compute)
 
 
+def _moves_in_plane(model, frame: str) -> bool:
+    """Whether the body of ``frame`` can only move in the world's x-y plane (a planar model's)."""
+    pm = model.pin
+    j = pm.frames[model.frame_id(frame)].parentJoint
+    if j == 0:
+        return False
+    pd = pm.createData()
+    q = pin.randomConfiguration(pm, -np.ones(pm.nq), np.ones(pm.nq))
+    pin.computeJointJacobians(pm, pd, q)
+    J = pin.getJointJacobian(pm, pd, j, pin.ReferenceFrame.WORLD)
+    return bool(np.max(np.abs(J[[2, 3, 4], :]), initial=0.0) < 1e-9)
+
+
 class PlateEffect(Component):
     """A correction of the measured loads on body ``target`` (one plate): ``Q = -J_b^T Delta(theta)``.
 
@@ -104,10 +117,10 @@ class PlateEffect(Component):
         model.frame_id(self.target)
 
     def for_model(self, model) -> "PlateEffect":
-        """This correction with the parameters a planar model cannot see held at 0 (``vary=False``)."""
-        from ..kinematics import is_planar
-
-        if not self.out_of_plane or not is_planar(model):
+        """This correction with the parameters a planar model cannot see held at 0 (``vary=False``): the
+        loaded body moves in the x-y plane only (its world Jacobian's ``v_z, omega_x, omega_y`` rows vanish
+        at a generic configuration)."""
+        if not self.out_of_plane or not _moves_in_plane(model, self.target):
             return self
         return self.with_params({n: 0.0 for n in self.out_of_plane}, vary={n: False for n in self.out_of_plane})
 
