@@ -24,7 +24,8 @@ the dynamic parameters ``m pi_1(p)`` (unit mass, first moment ``p``, no rotation
 ``Q = -m Y_j(q, v, a) pi_1(p)``, which equals ``-m J_p^T (a_p - g)``.
 
 Without user-named frames the diagnosis offers (:meth:`Payload.candidates`) the model's hand-like
-frames (a frame named hand, palm, fingertip, tool, ...), else, on a fixed-base model, :func:`payload_sites`: on each
+frames (a frame named hand, palm, fingertip, tool, ...), else on a floating-base model the centres
+of mass of its hand bodies, and on a fixed-base model :func:`payload_sites`: on each
 distal body (a moving body without moving children: the forearm-and-hand of an arm model), its
 centre of mass and the markers on it, and its joint's origin, the distal end of the segment it
 hangs from.
@@ -36,7 +37,7 @@ import pinocchio as pin
 
 from ..components import Parameter
 from ..errors import ModelError
-from ._base import (ScaledBasisEffect, add_dynamic_parameters, frame_point_kinematics, hand_like_frames,
+from ._base import (_HAND_RE, ScaledBasisEffect, add_dynamic_parameters, frame_point_kinematics, hand_like_frames,
                     moving_bodies, torque_regressor, unactuated_coordinates)
 from .registry import register
 
@@ -62,11 +63,13 @@ class Payload(ScaledBasisEffect):
     @classmethod
     def candidates(cls, model, context) -> list:
         """The frames the user names; else the model's hand-like frames; else, on a fixed-base model,
-        :func:`payload_sites` (a floating-base model's load on the trunk is ``segment_mass`` and
-        ``com_offset``)."""
+        :func:`payload_sites`, and on a floating-base one the centres of mass of its hand bodies (an
+        object carried while walking; a load on the trunk is ``segment_mass`` and ``com_offset``)."""
         sites = list(context.frames) or hand_like_frames(model)
-        if not sites and not (context.unactuated or unactuated_coordinates(model)):
-            sites = payload_sites(model)
+        if not sites:
+            floating = bool(context.unactuated or unactuated_coordinates(model))
+            sites = [b + COM_SITE for b in moving_bodies(model) if _HAND_RE.search(b)] if floating \
+                else payload_sites(model)
         return [cls(f) for f in sites]
 
     def site(self, model) -> tuple[int, np.ndarray]:
