@@ -192,6 +192,11 @@ def test_payload_at_a_body_com_is_inverse_dynamics_of_the_point_mass(forearm):
                                    atol=1e-9)
     with pytest.raises(ModelError, match="no_body"):
         Payload("no_body@com").check_target(forearm)
+    # at the centre of mass a light load is the segment's own mass (an alias but for the rotational
+    # inertia): flagged; one the segment could not weigh itself is a payload
+    assert Payload("forearm_hand@com", mass=0.3).plausibility(forearm)
+    assert Payload("forearm_hand@com", mass=1.5).plausibility(forearm) == []
+    assert Payload("hand", mass=0.3).plausibility(forearm) == []
 
 
 def test_imported_arm_offers_its_wrist_marker_and_finds_the_held_mass():
