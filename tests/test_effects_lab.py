@@ -186,12 +186,15 @@ def test_trunk_com_offset_is_recovered(gait2d):
 
 def test_payload_at_a_body_com_is_inverse_dynamics_of_the_point_mass(forearm):
     mo = _motion(forearm)
-    for target in ("hand", "forearm_hand@com"):
+    for target in ("hand", "forearm_hand@com", "forearm_hand@end"):
         p = Payload(target, mass=1.3)
         np.testing.assert_allclose(p.generalized_force(forearm, mo), _id_change(forearm, p, mo), rtol=1e-9,
                                    atol=1e-9)
     with pytest.raises(ModelError, match="no_body"):
         Payload("no_body@com").check_target(forearm)
+    c = np.array(forearm.pin.inertias[1].lever)
+    np.testing.assert_allclose(Payload("forearm_hand@com").site(forearm)[1], c)
+    np.testing.assert_allclose(Payload("forearm_hand@end").site(forearm)[1], 2 * c)     # a uniform rod's tip
     # at the centre of mass a light load is the segment's own mass (an alias but for the rotational
     # inertia): flagged; one the segment could not weigh itself is a payload
     assert Payload("forearm_hand@com", mass=0.3).plausibility(forearm)
@@ -205,7 +208,7 @@ def test_imported_arm_offers_its_wrist_marker_and_finds_the_held_mass():
         warnings.simplefilter("ignore")
         arm = pinmsk.load_model(path)
     sites = payload_sites(arm)
-    assert sites == ["r_ulna_radius_hand@com", "r_radius_styloid", "r_ulna_radius_hand"]
+    assert sites == ["r_ulna_radius_hand@com", "r_ulna_radius_hand@end", "r_radius_styloid", "r_ulna_radius_hand"]
     tr = synth.make_trial(arm, [Payload("r_radius_styloid", mass=1.5)], duration=8, seed=1)
     d = diagnose(arm, tr)
     assert d.best is not None and d.best.label == "payload:r_radius_styloid", d.verdict_line()
