@@ -30,8 +30,8 @@ frames (a frame named hand, palm, fingertip, tool, ...), else on a floating-base
 of mass of its hand bodies, and on a fixed-base model :func:`payload_sites`: on each
 distal body (a moving body without moving children: the forearm-and-hand of an arm model), its
 centre of mass, its far end and the markers on it, and its joint's origin, the distal end of the
-segment it hangs from.  A payload at a centre of mass is flagged when the same mass could be the segment's own
-(:meth:`Payload.plausibility`): only the rotational inertia tells the two apart.
+segment it hangs from.  A payload at a centre of mass and ``segment_mass`` of that body differ only by the
+rotational inertia: the diagnosis reports them as aliases when the trial cannot tell them apart.
 """
 from __future__ import annotations
 
@@ -40,7 +40,6 @@ import pinocchio as pin
 
 from ..components import Parameter
 from ..errors import ModelError
-from .anthropometry import mass_plausibility, mass_range
 from ._base import (_HAND_RE, ScaledBasisEffect, add_dynamic_parameters, frame_point_kinematics, hand_like_frames,
                     moving_bodies, torque_regressor, unactuated_coordinates)
 from .registry import register
@@ -102,23 +101,6 @@ class Payload(ScaledBasisEffect):
 
     def check_target(self, model) -> None:
         self.site(model)
-
-    def plausibility(self, model, motion=None) -> list[str]:
-        """At a body's centre of mass a point mass changes the dynamics as ``segment_mass`` of that body
-        does, but for the rotational inertia: a payload there is the explanation only when the body itself
-        could not be that heavy.  Flags it (empty otherwise) when the same mass added to the segment stays
-        within the segment's anthropometric range (:func:`~.anthropometry.mass_plausibility`): the
-        segment's own mass is then the simpler answer."""
-        if not self.target.endswith(COM_SITE) or not self.values["mass"] > 0:
-            return []
-        j, _ = self.site(model)
-        body = self.target[:-len(COM_SITE)]
-        m = float(model.pin.inertias[j].mass)
-        if mass_range(model, j) is None or mass_plausibility(model, j, m + self.values["mass"], body):
-            return []
-        return [f"{self.label}: a point mass at the centre of mass of {body} is segment_mass:{body} "
-                f"({100 * self.values['mass'] / m:+.0f} %, within its anthropometric range) but for the "
-                "rotational inertia: the segment's own mass is the simpler explanation"]
 
     def prepare(self, model, motion, data=None):
         """``J_p^T (a_p - g)`` over frames, ``(N, nv)`` (at a non-frame site: ``Y_j pi_1(p)``)."""
