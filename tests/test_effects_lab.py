@@ -186,12 +186,15 @@ def test_trunk_com_offset_is_recovered(gait2d):
 
 def test_payload_at_a_body_com_is_inverse_dynamics_of_the_point_mass(forearm):
     mo = _motion(forearm)
-    for target in ("hand", "forearm_hand@com"):
+    for target in ("hand", "forearm_hand@com", "forearm_hand@end"):
         p = Payload(target, mass=1.3)
         np.testing.assert_allclose(p.generalized_force(forearm, mo), _id_change(forearm, p, mo), rtol=1e-9,
                                    atol=1e-9)
     with pytest.raises(ModelError, match="no_body"):
         Payload("no_body@com").check_target(forearm)
+    c = np.array(forearm.pin.inertias[1].lever)
+    np.testing.assert_allclose(Payload("forearm_hand@com").site(forearm)[1], c)
+    np.testing.assert_allclose(Payload("forearm_hand@end").site(forearm)[1], 2 * c)     # a uniform rod's tip
 
 
 def test_imported_arm_offers_its_wrist_marker_and_finds_the_held_mass():
@@ -200,7 +203,7 @@ def test_imported_arm_offers_its_wrist_marker_and_finds_the_held_mass():
         warnings.simplefilter("ignore")
         arm = pinmsk.load_model(path)
     sites = payload_sites(arm)
-    assert sites == ["r_ulna_radius_hand@com", "r_radius_styloid", "r_ulna_radius_hand"]
+    assert sites == ["r_ulna_radius_hand@com", "r_ulna_radius_hand@end", "r_radius_styloid", "r_ulna_radius_hand"]
     tr = synth.make_trial(arm, [Payload("r_radius_styloid", mass=1.5)], duration=8, seed=1)
     d = diagnose(arm, tr)
     assert d.best is not None and d.best.label == "payload:r_radius_styloid", d.verdict_line()
@@ -323,3 +326,36 @@ def test_payload_damping_and_end_stop_are_all_found(forearm):
     assert got["joint_damping:elbow_flexion"]["c"] == pytest.approx(0.3, rel=0.1)
     assert got["end_stop_upper:elbow_flexion"]["stiffness"] == pytest.approx(30.0, rel=0.05)
     assert got["end_stop_upper:elbow_flexion"]["limit"] == pytest.approx(2.1, abs=0.02)
+
+
+@pytest.mark.parametrize("cls", [PlateOffset, PlateCopOffset, PlateTilt, PlateGain, PlateLag])
+def test_plate_corrections_conform(gait2d, walk, cls):
+    """What the shared conformance suite checks, on loads it cannot supply: declarations, zero parameters,
+    the parameter Jacobian against central differences, pickling and immutability."""
+    import pickle
+
+    tr, mo, ext = walk
+    comp = cls("foot_r")
+    assert comp.__doc__ and comp.label == f"{comp.family}:foot_r" and comp.needs_loads
+    for name, p in comp.params.items():
+        assert p.unit is not None and p.doc and p.min <= p.value <= p.max, name
+    cache = comp.prepare(gait2d, mo, loads=ext)
+    Q = comp.generalized_force(gait2d, mo, cache=cache)
+    assert Q.shape == (mo.n_frames, gait2d.nv) and np.all(np.isfinite(Q)) and np.abs(Q).max() > 0
+    np.testing.assert_array_equal(comp.generalized_force(gait2d, mo, comp.zero_params, cache), 0.0)
+    J = comp.param_jacobian(gait2d, mo, cache=cache)
+    assert J.shape == (mo.n_frames, gait2d.nv, len(comp.params))
+    for k, (name, v) in enumerate(comp.values.items()):
+        h = 1e-6 * max(abs(v), 1.0)
+        fd = (comp.generalized_force(gait2d, mo, {name: v + h}, cache)
+              - comp.generalized_force(gait2d, mo, {name: v - h}, cache)) / (2 * h)
+        np.testing.assert_allclose(J[:, :, k], fd, rtol=1e-5, atol=1e-7 * max(1.0, np.abs(fd).max()))
+    back = pickle.loads(pickle.dumps(comp))
+    assert back == comp
+    np.testing.assert_array_equal(back.generalized_force(gait2d, mo, cache=cache), Q)
+    with pytest.raises(AttributeError):
+        comp.target = "foot_l"
+    # the model holding it: inverse dynamics passes it the loads
+    with_it = inverse_dynamics_array(gait2d.with_effect(comp), mo, external=ext, actuated=False)
+    np.testing.assert_allclose(with_it, inverse_dynamics_array(gait2d, mo, external=ext, actuated=False) - Q,
+                               rtol=1e-10, atol=1e-8)

@@ -11,7 +11,9 @@ gets candidates by its ``target_kind``:
 * ``"side"`` -- each leg (``r``, ``l``) with hip, knee and ankle coordinates,
   one of them compared;
 * ``"model"`` -- one instance without target;
-* ``"muscle"`` -- one instance for all muscles, in muscle-level comparisons.
+* ``"muscle"`` -- one instance for all muscles, in muscle-level comparisons;
+* ``"plate"`` -- one per body the trial's measured external loads act on
+  (``CatalogContext.loads``), in torque-level comparisons: none without loads.
 
 A user family may override its rule with a classmethod ``candidates(model, context)``.
 
@@ -25,10 +27,19 @@ body with mass; ``scale`` (every segment's mass at once: the model not scaled
 to the subject) on models of two bodies or more; ``riener_edrich_1999`` on
 legs with hip, knee and ankle coordinates; ``activation_dynamics`` and
 ``electromechanical_delay`` only when the trial has excitation or EMG
-channels and the model has muscles.  Effects the model already has (same
+channels and the model has muscles; ``end_stop_upper`` and ``end_stop_lower``
+(one side of a CoordinateLimitForce each) on the compared, actuated
+coordinates; ``com_offset`` on the heaviest bodies (at most two, each at least
+12 % of the mass) of a floating-base model in a torque-level comparison; the
+plate corrections (``plate_offset``, ``plate_cop_offset``, ``plate_tilt``,
+``plate_gain``, ``plate_lag``) on each loaded body; ``payload`` on a
+fixed-base model without hand-like frames at its distal bodies' centres of
+mass, markers and joint origins (:func:`pinmsk.effects.payload.payload_sites`).  Effects the model already has (same
 label) are left out.  Each candidate comes with its model-dependent bounds
-(``for_model``: the rest angles of ``joint_spring`` and ``passive_elastic``
-within the joint's range of motion), so that it stays identifiable.
+(``for_model``: the rest angles of ``joint_spring`` and ``passive_elastic`` and
+the end stops' limits within the joint's range of motion, a COM offset within a
+fifth of its segment, the axes a planar model cannot see held at zero), so that
+it stays identifiable.
 """
 from __future__ import annotations
 

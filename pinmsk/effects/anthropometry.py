@@ -27,9 +27,12 @@ not an error; a fit that moves a segment well beyond both is.
 from __future__ import annotations
 
 import re
+from types import MappingProxyType
 
 import numpy as np
 import pinocchio as pin
+
+from ..skeleton import skeleton_constant
 
 __all__ = ["DE_LEVA_1996", "ALLOWANCE", "body_mass", "body_segments", "mass_range", "mass_plausibility"]
 
@@ -73,11 +76,6 @@ def _side(name: str) -> str:
     return next((s for s in ("r", "l") if s in toks), "")
 
 
-def _named(model, joint: int) -> list[str]:
-    pm = model.pin
-    return [f.name for f in pm.frames if f.type == pin.FrameType.BODY and f.parentJoint == joint]
-
-
 def _raw_segments(names) -> set[str]:
     out = set()
     for name in names:
@@ -88,41 +86,41 @@ def _raw_segments(names) -> set[str]:
     return out
 
 
-def _all_raw(model) -> dict[int, set[str]]:
-    pm = model.pin
-    return {j: _raw_segments(_named(model, j)) for j in range(1, pm.njoints) if pm.inertias[j].mass > 0}
+def _table(pm) -> MappingProxyType:
+    """Per joint with mass: ``(segments, group)`` -- the table segments its bodies carry and the joints of
+    the same side carrying the same ones (talus, calcn and toes) -- computed once per skeleton."""
+    names = {j: [f.name for f in pm.frames if f.type == pin.FrameType.BODY and f.parentJoint == j]
+             for j in range(1, pm.njoints) if pm.inertias[j].mass > 0}
+    raw = {j: _raw_segments(n) for j, n in names.items()}
+    every = set().union(*raw.values()) if raw else set()
+    segs = {}
+    for j, sg in raw.items():
+        out = set(sg - {"torso"})
+        if "torso" in sg:
+            out |= {"upper_trunk", "middle_trunk"}
+            if "head" not in every:
+                out.add("head")
+            if "lower_trunk" not in every:
+                out.add("lower_trunk")                 # gait2d's HAT: head, arms and the whole trunk
+            out |= {s for s in _ARM if s not in every}
+        segs[j] = tuple(sorted(out))
+    sides = {j: frozenset(_side(x) for x in n) for j, n in names.items()}
+    return MappingProxyType({j: (segs[j], tuple(k for k in segs if segs[k] == segs[j] and sides[k] == sides[j]))
+                             for j in segs})
+
+
+def _entry(model, joint: int):
+    return skeleton_constant(model.pin, "anthropometry_table", _table).get(joint, ((), ()))
 
 
 def body_segments(model, joint: int) -> tuple[str, ...]:
     """The table segments (keys of :data:`DE_LEVA_1996`) whose mass the body(ies) of ``joint`` carry."""
-    raw = _all_raw(model)
-    segs = raw.get(joint, set())
-    every = set().union(*raw.values()) if raw else set()
-    out = set(segs - {"torso"})
-    if "torso" in segs:
-        out |= {"upper_trunk", "middle_trunk"}
-        if "head" not in every:
-            out.add("head")
-        if "lower_trunk" not in every:
-            out.add("lower_trunk")                 # gait2d's HAT: head, arms and the whole trunk
-        for s in _ARM:
-            if s not in every:
-                out.add(s)
-    return tuple(sorted(out))
+    return _entry(model, joint)[0]
 
 
-def _group(model, joint: int) -> list[int]:
+def _group(model, joint: int) -> tuple[int, ...]:
     """The joints of the same side whose bodies carry the same segments (talus, calcn and toes)."""
-    pm = model.pin
-    segs = body_segments(model, joint)
-    side = {_side(n) for n in _named(model, joint)}
-    out = []
-    for j in range(1, pm.njoints):
-        if pm.inertias[j].mass <= 0:
-            continue
-        if body_segments(model, j) == segs and {_side(n) for n in _named(model, j)} == side:
-            out.append(j)
-    return out
+    return _entry(model, joint)[1]
 
 
 def _mean_fraction(segs) -> float:

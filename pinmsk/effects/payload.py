@@ -17,17 +17,21 @@ inertia (:meth:`Payload.apply_inertia`) instead of calling
 :meth:`generalized_force`, which needs the acceleration.
 
 Sites.  ``target`` is a frame (a hand frame, a marker: an imported model's markers are frames of
-their bodies), or ``<body>@com``, the centre of mass of the body's joint inertia.  For a point
+their bodies), ``<body>@com``, the centre of mass of the body's joint inertia, or ``<body>@end``,
+the body's far end estimated as twice its centre of mass from its joint (exact for a uniform rod;
+0.86 of a limb's length for a COM at 43 %).  For a point
 that is not a frame the same force comes from the joint torque regressor ``Y_j`` of the joint
 carrying it (``computeJointTorqueRegressor``, ``rnea = Y pi``): a point mass ``m`` at ``p`` adds
 the dynamic parameters ``m pi_1(p)`` (unit mass, first moment ``p``, no rotational inertia), so
 ``Q = -m Y_j(q, v, a) pi_1(p)``, which equals ``-m J_p^T (a_p - g)``.
 
 Without user-named frames the diagnosis offers (:meth:`Payload.candidates`) the model's hand-like
-frames (a frame named hand, palm, fingertip, tool, ...), else, on a fixed-base model, :func:`payload_sites`: on each
+frames (a frame named hand, palm, fingertip, tool, ...), else on a floating-base model the centres
+of mass of its hand bodies, and on a fixed-base model :func:`payload_sites`: on each
 distal body (a moving body without moving children: the forearm-and-hand of an arm model), its
-centre of mass and the markers on it, and its joint's origin, the distal end of the segment it
-hangs from.
+centre of mass, its far end and the markers on it, and its joint's origin, the distal end of the
+segment it hangs from.  A payload at a centre of mass and ``segment_mass`` of that body differ only by the
+rotational inertia: the diagnosis reports them as aliases when the trial cannot tell them apart.
 """
 from __future__ import annotations
 
@@ -36,14 +40,16 @@ import pinocchio as pin
 
 from ..components import Parameter
 from ..errors import ModelError
-from ._base import (ScaledBasisEffect, add_dynamic_parameters, frame_point_kinematics, hand_like_frames,
+from ._base import (_HAND_RE, ScaledBasisEffect, add_dynamic_parameters, frame_point_kinematics, hand_like_frames,
                     moving_bodies, torque_regressor, unactuated_coordinates)
 from .registry import register
 
-__all__ = ["Payload", "payload_sites", "COM_SITE"]
+__all__ = ["Payload", "payload_sites", "COM_SITE", "END_SITE"]
 
 #: suffix of a target at a body's centre of mass (``r_ulna_radius_hand@com``)
 COM_SITE = "@com"
+#: suffix of a target at a distal body's far end, twice its centre of mass from its joint (``rod2@end``)
+END_SITE = "@end"
 
 
 @register
@@ -62,23 +68,34 @@ class Payload(ScaledBasisEffect):
     @classmethod
     def candidates(cls, model, context) -> list:
         """The frames the user names; else the model's hand-like frames; else, on a fixed-base model,
-        :func:`payload_sites` (a floating-base model's load on the trunk is ``segment_mass`` and
-        ``com_offset``)."""
+        :func:`payload_sites`, and on a floating-base one the centres of mass of its hand bodies (an
+        object carried while walking; a load on the trunk is ``segment_mass`` and ``com_offset``)."""
         sites = list(context.frames) or hand_like_frames(model)
-        if not sites and not (context.unactuated or unactuated_coordinates(model)):
-            sites = payload_sites(model)
+        if not sites:
+            floating = bool(context.unactuated or unactuated_coordinates(model))
+            sites = [b + COM_SITE for b in moving_bodies(model) if _HAND_RE.search(b)] if floating \
+                else payload_sites(model)
         return [cls(f) for f in sites]
+
+    def _body_site(self) -> tuple[str, str] | None:
+        """``(body, "@com" | "@end")`` for a target at a body's centre of mass or distal end, else None."""
+        for suffix in (COM_SITE, END_SITE):
+            if self.target.endswith(suffix):
+                return self.target[:-len(suffix)], suffix
+        return None
 
     def site(self, model) -> tuple[int, np.ndarray]:
         """``(joint, point)``: the joint carrying the payload and its position in that joint's frame."""
         pm = model.pin
-        if self.target.endswith(COM_SITE):
-            body = self.target[:-len(COM_SITE)]
+        at = self._body_site()
+        if at is not None:
+            body, suffix = at
             j = pm.frames[model.frame_id(body)].parentJoint
             if j == 0 or pm.inertias[j].mass <= 0:
                 raise ModelError(f"payload: body '{body}' of model '{model.name}' does not move or has no mass, so "
                                  f"'{self.target}' is no site; bodies with mass: {', '.join(moving_bodies(model))}")
-            return j, np.array(pm.inertias[j].lever)
+            c = np.array(pm.inertias[j].lever)
+            return j, (c if suffix == COM_SITE else 2.0 * c)
         f = pm.frames[model.frame_id(self.target)]
         return f.parentJoint, np.array(f.placement.translation)
 
@@ -87,7 +104,7 @@ class Payload(ScaledBasisEffect):
 
     def prepare(self, model, motion, data=None):
         """``J_p^T (a_p - g)`` over frames, ``(N, nv)`` (at a non-frame site: ``Y_j pi_1(p)``)."""
-        if self.target.endswith(COM_SITE):
+        if self._body_site() is not None:
             j, p = self.site(model)
             Y = torque_regressor(model, motion, data)[:, :, 10 * (j - 1):10 * j]
             return Y @ pin.Inertia(1.0, p, np.zeros((3, 3))).toDynamicParameters()
@@ -105,8 +122,9 @@ class Payload(ScaledBasisEffect):
 
 def payload_sites(model) -> list[str]:
     """Where a held payload is plausible on a model without hand-like frames: on each distal body (a
-    moving body with no moving child) its centre of mass (``<body>@com``) and its markers (frames off
-    the joint axis), and its body frame (its joint's origin: the distal end of the parent segment)."""
+    moving body with no moving child) its centre of mass (``<body>@com``), its far end (``<body>@end``)
+    and its markers (frames off the joint axis), and its body frame (its joint's origin: the distal
+    end of the parent segment)."""
     pm = model.pin
     bodies = moving_bodies(model)
     parents = {int(pm.parents[k]) for k in range(1, pm.njoints) if pm.inertias[k].mass > 0}
@@ -120,6 +138,8 @@ def payload_sites(model) -> list[str]:
         if j in parents:
             continue                                   # not distal: another moving body hangs from it
         out.append(body + COM_SITE)
+        if np.linalg.norm(pm.inertias[j].lever) > 1e-9:
+            out.append(body + END_SITE)
         seen = []
         for f in pm.frames:
             if f.parentJoint != j or f.name not in markers or f.type != pin.FrameType.OP_FRAME:

@@ -76,6 +76,19 @@ def body_jacobian_world(model, motion: Motion, frame: str, data=None) -> np.ndar
     return motion_cached(data, model, ("world_joint_jacobian", j), motion, compute)
 
 
+def _moves_in_plane(model, frame: str) -> bool:
+    """Whether the body of ``frame`` can only move in the world's x-y plane (a planar model's)."""
+    pm = model.pin
+    j = pm.frames[model.frame_id(frame)].parentJoint
+    if j == 0:
+        return False
+    pd = pm.createData()
+    q = pin.randomConfiguration(pm, -np.ones(pm.nq), np.ones(pm.nq))
+    pin.computeJointJacobians(pm, pd, q)
+    J = pin.getJointJacobian(pm, pd, j, pin.ReferenceFrame.WORLD)
+    return bool(np.max(np.abs(J[[2, 3, 4], :]), initial=0.0) < 1e-9)
+
+
 class PlateEffect(Component):
     """A correction of the measured loads on body ``target`` (one plate): ``Q = -J_b^T Delta(theta)``.
 
@@ -104,10 +117,10 @@ class PlateEffect(Component):
         model.frame_id(self.target)
 
     def for_model(self, model) -> "PlateEffect":
-        """This correction with the parameters a planar model cannot see held at 0 (``vary=False``)."""
-        from ..kinematics import is_planar
-
-        if not self.out_of_plane or not is_planar(model):
+        """This correction with the parameters a planar model cannot see held at 0 (``vary=False``): the
+        loaded body moves in the x-y plane only (its world Jacobian's ``v_z, omega_x, omega_y`` rows vanish
+        at a generic configuration)."""
+        if not self.out_of_plane or not _moves_in_plane(model, self.target):
             return self
         return self.with_params({n: 0.0 for n in self.out_of_plane}, vary={n: False for n in self.out_of_plane})
 
@@ -163,6 +176,15 @@ class PlateEffect(Component):
         c = self._cache(model, motion, cache)
         return -np.einsum("nkv,nkp->nvp", c["J"], self.delta_jacobian(c, params))
 
+    #: what the correction means for the lab (completed by :meth:`describe_remedy`)
+    remedy = "correct the plate's data"
+
+    def describe_remedy(self, model) -> str:
+        """What to do about a fitted plate error: correct the recording (or keep this effect for the trial)."""
+        vals = ", ".join(f"{n} = {p.value:.4g} {p.unit}".rstrip() for n, p in self.params.items() if p.vary)
+        return (f"the force plate under {self.target} reads off ({vals}): {self.remedy}, or keep this effect "
+                "for this trial")
+
     def generalized_force_at(self, model, q, v):
         """Refused by name: a plate correction acts on a trial's measured loads, not on a state."""
         raise ModelError(f"component {self.label} corrects a trial's measured ground reaction; it has no closed "
@@ -183,6 +205,7 @@ class PlateOffset(PlateEffect):
                                                               "(reading - true)") for n in ("fx", "fy", "fz"))
     zero_params = {"fx": 0.0, "fy": 0.0, "fz": 0.0}
     out_of_plane = ("fz",)
+    remedy = "re-zero the plate (subtract its unloaded reading)"
 
     def delta_basis(self, c):
         on = c["on"].astype(float)[:, None]
@@ -203,6 +226,7 @@ class PlateCopOffset(PlateEffect):
                   Parameter("dz", 0.005, -0.05, 0.05, "m", "COP offset along z (reading - true)"))
     zero_params = {"dx": 0.0, "dz": 0.0}
     out_of_plane = ("dz",)
+    remedy = "check the plate's origin against the lab's (its position in the capture volume)"
 
     def delta_basis(self, c):
         F = c["F"]
@@ -224,6 +248,7 @@ class PlateTilt(PlateEffect):
                   Parameter("tilt_z", 0.002, -0.0873, 0.0873, "rad", "tilt of the plate about z"))
     zero_params = {"tilt_x": 0.0, "rot_y": 0.0, "tilt_z": 0.0}
     out_of_plane = ("tilt_x", "rot_y")
+    remedy = "check the plate's alignment with the lab's axes (level, orientation)"
 
     def delta_basis(self, c):
         F, p, T = c["F"], c["p"], c["T"]
@@ -244,6 +269,7 @@ class PlateGain(PlateEffect):
     linear = False
     parameters = (Parameter("gain", 1.02, 0.8, 1.25, "", "reading / true value (1 = calibrated)"),)
     zero_params = {"gain": 1.0}
+    remedy = "recalibrate the plate"
 
     def delta(self, c, params):
         g = self._p(params)["gain"]
@@ -261,6 +287,7 @@ class PlateLag(PlateEffect):
     family = "plate_lag"
     parameters = (Parameter("lag", 0.002, -0.05, 0.05, "s", "delay of the plate's samples behind the kinematics"),)
     zero_params = {"lag": 0.0}
+    remedy = "synchronise the plates with the motion capture"
 
     def delta_basis(self, c):
         return -c["dw"][:, :, None]
