@@ -91,12 +91,33 @@ class ComOffset(Component):
 
     def for_model(self, model) -> "ComOffset":
         """This offset bounded to a fifth of the segment's length (2-10 cm), with the axes the skeleton's
-        dynamics cannot see held at 0 (:meth:`visible_axes`: the out-of-plane axis of a planar model)."""
+        dynamics cannot see held at 0 (:meth:`visible_axes`: the out-of-plane axis of a planar model) and
+        the segment's long axis held at 0 (:meth:`long_axis`)."""
         b = float(np.clip(0.2 * self.segment_length(model), 0.02, 0.1))
         seen = self.visible_axes(model)
+        along = self.long_axis(model)
+        if along is not None:
+            seen = seen.copy()
+            seen[along] = False
         vals = {n: (float(np.clip(self.values[n], -b, b)) if k else 0.0) for n, k in zip(_AXES, seen)}
         return self.with_params(vals, bounds={n: (-b, b) for n in _AXES},
                                 vary={n: bool(k) for n, k in zip(_AXES, seen)})
+
+    def long_axis(self, model) -> int | None:
+        """The body-frame axis along the segment (its joint to its centre of mass), when one axis carries
+        at least 90 % of that direction, else None (and None for the floating base's body).  A shift along the segment moves the COM's lever only
+        as the segment tilts, so a near-upright trunk leaves it undetermined (a flat likelihood); RRA, too,
+        moves the torso's COM across the trunk only (x and z, against the mean MX and MZ residuals)."""
+        pm = model.pin
+        j = self._joint(model)
+        if pm.names[j] in unactuated_coordinates(model):
+            return None             # the floating base's own body: its joint is no segment's end
+        u = self._rotation(model).T @ np.asarray(pm.inertias[j].lever, dtype=float)
+        n = float(np.linalg.norm(u))
+        if n <= 0.0:
+            return None
+        k = int(np.argmax(np.abs(u)))
+        return k if abs(u[k]) >= 0.9 * n else None
 
     def visible_axes(self, model, samples: int = 6) -> np.ndarray:
         """Boolean (3,): the body-frame axes along which a COM shift changes some generalized force, from
