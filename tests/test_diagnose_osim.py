@@ -257,6 +257,14 @@ def test_rajagopal_patella_moment_folds_into_the_knee(rajagopal):
     got = c.eq.tau_id[:, c.coordinates.index("knee_angle_r")]
     np.testing.assert_allclose(got, expect, rtol=0, atol=1e-9)
     assert np.max(np.abs(got - np.asarray(ref["knee_angle_r_moment"])[rows])) > 1e-3   # the fold is not nil
+    # the sparse projection is the coordinate map's dense J^T (couplers applied) for any joint forces
+    from pinmsk.kinematics import source_positions
+    Q = np.random.default_rng(1).standard_normal((2, rows.size, model.nv))
+    dense = np.stack([cmap.generalized_forces(source_positions(model, c.eq.motion_rows), x, couplers=True)
+                      for x in Q])[:, :, [cmap.osim_coordinates.index(x) for x in c.coordinates]]
+    np.testing.assert_allclose(c.eq.project(Q), dense, rtol=0, atol=1e-12)
+    k = [c.coordinates.index("knee_angle_l"), 0]
+    np.testing.assert_allclose(c.eq.project(Q, k), dense[:, :, k], rtol=0, atol=1e-12)
 
 
 def test_without_names_an_unknown_component_on_the_command_line(gait, capsys):
