@@ -31,6 +31,8 @@ import re
 import numpy as np
 import pinocchio as pin
 
+from ..skeleton import skeleton_constant
+
 __all__ = ["DE_LEVA_1996", "ALLOWANCE", "body_mass", "body_segments", "mass_range", "mass_plausibility"]
 
 #: de Leva (1996) Table 4: segment mass in % of body mass, (female, male)
@@ -73,9 +75,17 @@ def _side(name: str) -> str:
     return next((s for s in ("r", "l") if s in toks), "")
 
 
-def _named(model, joint: int) -> list[str]:
-    pm = model.pin
-    return [f.name for f in pm.frames if f.type == pin.FrameType.BODY and f.parentJoint == joint]
+def _named(model, joint: int) -> tuple[str, ...]:
+    """The body frames on ``joint`` (from one pass over the skeleton's frames, kept per skeleton)."""
+    return skeleton_constant(model.pin, "anthropometry_bodies", _bodies_by_joint).get(joint, ())
+
+
+def _bodies_by_joint(pm) -> dict[int, tuple[str, ...]]:
+    out: dict[int, list[str]] = {}
+    for f in pm.frames:
+        if f.type == pin.FrameType.BODY:
+            out.setdefault(int(f.parentJoint), []).append(f.name)
+    return {j: tuple(v) for j, v in out.items()}
 
 
 def _raw_segments(names) -> set[str]:
@@ -88,9 +98,10 @@ def _raw_segments(names) -> set[str]:
     return out
 
 
-def _all_raw(model) -> dict[int, set[str]]:
-    pm = model.pin
-    return {j: _raw_segments(_named(model, j)) for j in range(1, pm.njoints) if pm.inertias[j].mass > 0}
+def _all_raw(model) -> dict[int, frozenset[str]]:
+    """Each massive joint's table segments by its body names (kept per skeleton: asked per body and fit)."""
+    return skeleton_constant(model.pin, "anthropometry_segments", lambda pm: {
+        j: frozenset(_raw_segments(_named(model, j))) for j in range(1, pm.njoints) if pm.inertias[j].mass > 0})
 
 
 def body_segments(model, joint: int) -> tuple[str, ...]:
