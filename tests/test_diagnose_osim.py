@@ -265,6 +265,17 @@ def test_rajagopal_patella_moment_folds_into_the_knee(rajagopal):
     np.testing.assert_allclose(c.eq.project(Q), dense, rtol=0, atol=1e-12)
     k = [c.coordinates.index("knee_angle_l"), 0]
     np.testing.assert_allclose(c.eq.project(Q, k), dense[:, :, k], rtol=0, atol=1e-12)
+    # the noise floor's path: no perturbation of OpenSim's coordinates gives the motion back (the walker
+    # knee and the patella mapped again); one of the knee angle moves its dependent joints with it
+    z = np.zeros((c.eq.motion.n_frames, len(c.eq.kinematic_channels)))
+    same = c.eq.perturbed_motion(z, z, z)
+    for x in ("q", "v", "a"):
+        np.testing.assert_allclose(getattr(same, x), getattr(c.eq.motion, x), rtol=0, atol=1e-9)
+    dq = z.copy()
+    dq[:, c.eq.kinematic_channels.index("knee_angle_r")] = 1e-3
+    moved = c.eq.perturbed_motion(dq, z, z).q - c.eq.motion.q
+    assert np.max(np.abs(moved[:, model.coordinate_index("walker_knee_r_translation1")])) > 1e-7
+    assert np.max(np.abs(moved[:, model.coordinate_index("patellofemoral_r_rotation1")])) > 1e-5
 
 
 def test_without_names_an_unknown_component_on_the_command_line(gait, capsys):
