@@ -48,7 +48,7 @@ from dataclasses import dataclass, field
 from ..effects import registry
 from ..effects._base import hand_like_frames, moving_bodies, unactuated_coordinates
 from ..errors import ModelError, PinmskError
-from ..kinematics import coordinate_map, independent_coordinates
+from ..kinematics import independent_coordinates
 from .compare import comparison_plan
 
 
@@ -114,27 +114,10 @@ def _default_candidates(cls, model, context) -> list:
                 and any(f"{j}_{s}" in context.coordinates for j in ("hip", "knee", "ankle"))]
         return [cls(s) for s in legs]
     if kind == "body":
-        return [cls(b) for b in _bodies(model)]
+        return [cls(b) for b in moving_bodies(model)]
     if kind == "model":
         return [cls(None)]
     return []
-
-
-def _bodies(model) -> list[str]:
-    """A body name per joint that carries mass (:func:`~pinmsk.effects._base.moving_bodies`); on an exact
-    OpenSim import, the OpenSim body the joint moves rather than the massless link of its joint chain
-    (named ``<joint>_<coordinate>``) that comes first on it."""
-    first = moving_bodies(model)
-    if coordinate_map(model) is None:
-        return list(first)
-    import pinocchio as pin
-    pm = model.pin
-    out = []
-    for name, j in first.items():
-        links = [f.name for f in pm.frames if f.type == pin.FrameType.BODY and f.parentJoint == j]
-        own = [n for n in links if not n.endswith("_" + pm.names[j])]
-        out.append(own[0] if own else name)
-    return out
 
 
 def catalog_context(model, trial, *, mode: str = "auto", frames=None,

@@ -352,17 +352,26 @@ class EquationError:
 
     # -- the joints' generalized forces -> the compared coordinates' ----
     def _init_projection(self) -> None:
-        """The sparse ``J`` of the compared coordinates: the (joint, coordinate) pairs ``J`` couples
-        anywhere in the trial (``_jn``, ``_cn``), their coefficients per frame and a scatter matrix."""
+        """The sparse ``J`` of the compared coordinates.  A compared coordinate that is a joint has the
+        unit row there (``q_joint = q_coordinate``): a plain gather.  The other (joint, coordinate) pairs
+        ``J`` couples anywhere in the trial -- a dependent joint's slope on its coordinate, through a
+        coupler's slope where one applies -- are few (a knee's translations and its patella): their
+        coefficients per frame (``_coef_all``, (N, K)) and, per compared coordinate, which of them it sums
+        (``_extra``)."""
         self._cmap = coordinate_map(self.model)
         if self._cmap is None:
             return
         self._osim_cols = np.array([self._cmap.osim_coordinates.index(c) for c in self.coordinates], dtype=int)
         J = self._jacobian(self.motion)                                  # (N, nv, C)
-        self._jn, self._cn = np.nonzero(np.any(J != 0.0, axis=0))
-        self._scatter = np.zeros((self._jn.size, len(self.coordinates)))
-        self._scatter[np.arange(self._jn.size), self._cn] = 1.0
-        self._coef_all = J[:, self._jn, self._cn]                        # (N, K)
+        jn, cn = np.nonzero(np.any(J != 0.0, axis=0))
+        coef = J[:, jn, cn]
+        own = (jn == self.columns[cn]) & np.all(coef == 1.0, axis=0)
+        self._own = np.zeros(len(self.coordinates), dtype=bool)
+        self._own[cn[own]] = True
+        order = np.argsort(cn[~own], kind="stable")
+        self._jx, self._cx = jn[~own][order], cn[~own][order]
+        self._extra = {int(c): np.flatnonzero(self._cx == c) for c in np.unique(self._cx)}
+        self._coef_all = coef[:, ~own][:, order]                         # (N, K)
         self._coef = self._coef_all[self.rows]
 
     def _jacobian(self, motion: Motion) -> np.ndarray:
@@ -374,7 +383,7 @@ class EquationError:
         """The projection's coefficients (n, K) along another motion (None without a coordinate map)."""
         if self._cmap is None:
             return None
-        return self._jacobian(motion)[:, self._jn, self._cn]
+        return self._jacobian(motion)[:, self._jx, self._cx]
 
     def project(self, Q: np.ndarray, which=None, *, coef: np.ndarray | None = None) -> np.ndarray:
         """Generalized forces ``Q`` (..., n, nv) of the model's joints as the compared coordinates'
@@ -384,8 +393,16 @@ class EquationError:
         Q = np.asarray(Q, dtype=float)
         if self._cmap is None:
             return Q[..., self.columns if which is None else self.columns[which]]
-        out = (Q[..., self._jn] * (self._coef if coef is None else coef)) @ self._scatter
-        return out if which is None else out[..., which]
+        sel = np.arange(len(self.coordinates)) if which is None else np.atleast_1d(np.asarray(which, dtype=int))
+        coef = self._coef if coef is None else coef
+        out = np.zeros(Q.shape[:-1] + (sel.size,))
+        own = self._own[sel]
+        out[..., own] = np.take(Q, self.columns[sel[own]], axis=-1)
+        for k, c in enumerate(sel):
+            seg = self._extra.get(int(c))
+            if seg is not None:
+                out[..., k] += np.einsum("...nk,nk->...n", np.take(Q, self._jx[seg], axis=-1), coef[:, seg])
+        return out
 
     def project_arms(self, R: np.ndarray, *, coef: np.ndarray | None = None) -> np.ndarray:
         """Moment arms ``R`` (N, m, nv) over all frames of the motion (or those ``coef`` belongs to) as the
@@ -394,7 +411,7 @@ class EquationError:
         if self._cmap is None:
             return R[:, :, self.columns]
         c = self._coef_all if coef is None else coef
-        return (R[:, :, self._jn] * c[:, None, :]) @ self._scatter
+        return np.moveaxis(self.project(np.moveaxis(R, 1, 0), coef=c), 0, 1)
 
     def project_jacobian(self, J: np.ndarray, which=None) -> np.ndarray:
         """Parameter Jacobians ``dQ/dtheta`` (n, nv, p) on the analysed rows as (n, C, p) (:meth:`project`)."""

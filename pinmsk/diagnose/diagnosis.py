@@ -73,6 +73,7 @@ from ..effects._base import is_prismatic, moving_bodies, unactuated_coordinates
 from ..errors import ConvergenceError, ModelError, PinmskError, TrialError
 from ..fitting import Result
 from ..io.output_files import write_json
+from ..kinematics import independent_coordinates
 from ..signals.sampling import median_step
 from ..trial import moment_channel
 from .catalog import CatalogContext
@@ -624,7 +625,7 @@ def _held(comp: Component, values: dict) -> Component:
 def _targets(cls, model) -> str:
     kind = getattr(cls, "target_kind", "coordinate")
     if kind == "coordinate":
-        return ", ".join(model.coordinates)
+        return ", ".join(independent_coordinates(model))      # OpenSim's on an exact import
     if kind in ("frame", "body"):
         names = list(moving_bodies(model)) if kind == "body" else list(model.frame_names)
         return ", ".join(names)

@@ -167,7 +167,8 @@ class ComOffset(Component):
     def prepare(self, model, motion, data=None):
         """``Y_j`` over frames, ``(N, nv, 10)``: the body's columns of the joint torque regressor."""
         j = self._joint(model)
-        return torque_regressor(model, motion, data)[:, :, 10 * (j - 1):10 * j]
+        # contiguous: the fit multiplies it many times, a strided view of the regressor is several times slower
+        return np.ascontiguousarray(torque_regressor(model, motion, data)[:, :, 10 * (j - 1):10 * j])
 
     def generalized_force(self, model, motion, params=None, cache=None):
         Yj = self.prepare(model, motion) if cache is None else cache
@@ -175,7 +176,7 @@ class ComOffset(Component):
 
     def param_jacobian(self, model, motion, params=None, cache=None):
         Yj = self.prepare(model, motion) if cache is None else cache
-        return -np.einsum("nvk,kp->nvp", Yj, self._dpi_dd(model, self._d(params)))
+        return -(Yj @ self._dpi_dd(model, self._d(params)))
 
     def generalized_force_at(self, model, q, v):
         """Refused by name: the force needs the accelerations; fold it into the skeleton instead."""
@@ -186,7 +187,7 @@ class ComOffset(Component):
     def initial_guess(self, model, motion, target, cache=None) -> list[dict]:
         """The linearised least-squares offset (``delta pi`` linear at ``d = 0``), clipped to the bounds."""
         Yj = self.prepare(model, motion) if cache is None else cache
-        B = -np.einsum("nvk,kp->nvp", Yj, self._dpi_dd(model, np.zeros(3)))
+        B = -(Yj @ self._dpi_dd(model, np.zeros(3)))
         y = np.asarray(target)
         ok = np.isfinite(y)
         A = B[ok]
