@@ -380,13 +380,16 @@ class EquationError:
 def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = DEFAULT_CUTOFF,
             grf_frames: Mapping[str, str] | None = None, grf=None, external_loads=None,
             grf_cutoff="same", sim_window: float = 0.5, noise_floor: NoiseFloor | None = None,
+            noise: Mapping[str, float] | None = None,
             _inputs: TrialInputs | None = None, _fits: dict | None = None) -> Comparison:
     """Compare ``model`` with ``trial`` (see the module docstring for the modes and the noise floor).
 
     Kinematics and ground reaction forces (the trial's own, ``grf=`` at its own
     rate or an OpenSim ``external_loads=`` file; ``grf_frames`` overrides which
     body takes a plate) go through :func:`pinmsk.kinematics.prepare`, so the GRF
-    is low-passed at the same ``cutoff`` as the kinematics.
+    is low-passed at the same ``cutoff`` as the kinematics.  ``noise`` states noise levels of measured
+    inputs (``{channel or group: sigma}`` in SI units; :func:`pinmsk.diagnose.noise.propagated_floor`)
+    in place of the fitted ones.
     """
     if not isinstance(trial, Trial):
         raise TrialError(f"compare needs a Trial, got {type(trial).__name__}; read one with pinmsk.read_trial")
@@ -396,6 +399,9 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
     _check_measured(model, trial)
     external_given = grf is not None or external_loads is not None
     plan = comparison_plan(model, trial, mode, has_grf=_has_grf(trial) or external_given)
+    if noise and plan.mode in ("contact", "motion"):
+        raise ModelError(f"noise= (stated noise levels) sets the torque- and muscle-level noise floors; the "
+                         f"{plan.mode}-level comparison estimates its own: leave noise out or pick mode='torque'")
     if plan.mode == "contact":
         return compare_contact(model, trial, cutoff=cutoff, noise_floor=noise_floor,
                                options={"grf_frames": grf_frames, "sim_window": sim_window})
@@ -428,11 +434,11 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
     eq = EquationError(model=model, motion=motion, rows=rows, coordinates=eq_coords, mode=plan.mode,
                        measured_tau=measured_tau, external=external, excitation=excitation)
     options = {"grf_frames": grf_frames, "grf": grf, "external_loads": external_loads, "grf_cutoff": grf_cutoff,
-               "sim_window": sim_window}
+               "sim_window": sim_window, "noise": noise}
     channels = moment_channels(eq_coords)
     floor = noise_floor if noise_floor is not None and plan.mode != "motion" else propagated_floor(
         eq, trial, mode=plan.mode, excitation_kind=plan.excitation_kind, cutoff=cutoff, options=options,
-        channels=channels, grf_in_trial=_has_grf(trial) and not external_given, fits=_fits)
+        channels=channels, grf_in_trial=_has_grf(trial) and not external_given, fits=_fits, noise=noise)
     if noise_floor is not None:
         options["noise_given"] = True
     states = _states(model, trial, motion, rows, eq_coords, excitation, plan.excitation_kind, external)

@@ -279,6 +279,9 @@ def cmd_diagnose(args) -> int:
                           "joints, which the diagnosis does not take; give the trial every coordinate")
     if kw.pop("ground_reaction") == "ignore":
         trial = trial.drop([n for n in trial.names if parse_ground_reaction(n) is not None])
+    if args.noise:
+        from ..diagnose.noise import parse_noise
+        kw["noise"] = parse_noise(args.noise)
     r = run(model, trial, add=args.add or [], mode=args.mode, frames=args.frame or None, **kw)
     save_diagnosis(r, json_path=args.json, report_path=args.report, plot_dir=args.plot)
     print(r.summary_text())
@@ -591,6 +594,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--frame", action="append", metavar="FRAME",
                    help="frames to try frame effects (e.g. a payload) at, besides the defaults")
     s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
+    s.add_argument("--noise", action="append", metavar="NAME=SIGMA",
+                   help="a noise level you know, in place of the one fitted to the data: a measured channel "
+                        "(pelvis_tx=0.5mm, knee_angle_r=0.2deg, elbow_flexion_moment=0.2) or a group (angles, "
+                        "translations, moments, ground_reaction, excitations); white noise of that RMS, "
+                        "SI units unless deg/mm is given (repeat for several)")
     _add_read_flags(s)
     _nonlinear_flag(s)
     s.set_defaults(func=cmd_diagnose)
