@@ -39,7 +39,9 @@ held-out residual is consistent with the noise model
 (:func:`~.scoring.consistent_with_noise`: each channel's and the total
 RMS / floor within ``at_floor`` times the chi-square spread of its effectively
 independent frames; ``at_floor`` allows for the uncertainty of the floor's
-estimate) and every effect in the model is identifiable; else
+estimate), every effect in the model is identifiable and the residual is not
+systematic (:func:`~.scoring.systematic_residual`: a mean over the trial
+against its Newey-West error, a share locked to the movement's phase); else
 ``"missing_effect"`` with the residual *outside the catalog*: ``outside_catalog``
 says what it follows (states, time, dominant frequency, phase of the movement;
 :func:`~.scoring.residual_character`).

@@ -6,13 +6,21 @@ the trial's own channel above the movement's band (``band_start = 2 f_99``,
 
 ``coordinates``
     the raw angles and translations; white, or coloured when the spectrum
-    shows a low-pass (a lab that filtered them);
+    shows a low-pass (a lab that filtered them) *with its flat passband*
+    (``fit_noise(flat_passband=True)``): a movement's own spectrum falls like
+    a low-pass just above its band (a walk's heel strikes), so a spectrum that
+    falls from the band start on is movement, and the noise is white at the
+    weighted median of the bands' levels, which the flat top of the spectrum
+    sets -- movement is never counted as noise;
 ``moments``
     measured ``<coord>_moment`` channels; white only: a single record cannot
     tell low-passed noise from friction steps, which are signal;
 ``ground reaction``
-    force, free-moment and centre-of-pressure channels of the trial; white
-    only, for the same reason (heel strikes, plate on/off);
+    force, free-moment and centre-of-pressure channels of the trial, or of the
+    separate record a ``grf=`` / ``external_loads=`` file gives (at its own
+    rate); white only, for the same reason (heel strikes, plate on/off).  A
+    plate's unloaded spans give its noise directly (:func:`_fit_ground_reaction`);
+    the realisations act where the plate is loaded, as the analyses do;
 ``excitation``
     EMG envelopes / excitations, their own model: multiplicative (the noise
     scales with the envelope) and coloured by the envelope's low-pass, whose
@@ -34,6 +42,14 @@ change, ``sigma_c^2 = kinematic_c^2 + direct_c^2`` (coordinates vs. the rest).
 Because the propagation runs through the model, the floor is recomputed for
 every model compared (an added payload makes the angle noise count for more;
 an added activation dynamics filters the EMG noise).
+
+Levels the user states (``noise={channel or group: sigma}``) replace the
+fitted models of those channels by white noise of that RMS (:func:`_stated`).
+
+The floor is checked against the residual (:func:`consistency`): the residual
+of any model holds the noise, so on a channel where its RMS lies below
+``1 / CONSISTENT_RATIO`` of the floor, the floor counts more than the noise and
+is capped at the residual's RMS (not a stated level), and the method says so.
 
 A correction keeps the direct sources honest: in each band, the residual's
 power beyond the propagated kinematic noise bounds the direct sources' (an
