@@ -510,7 +510,8 @@ def _method(model, models, band_start, cutoff, correction) -> str:
         parts.append("EMG/excitation noise (" + em.describe() + ", RMS " + ", ".join(
             f"{s:.2g}" for s in em.rms()) + ") through the muscle-level chain and the muscle moments")
     text = (f"noise models fitted to each measured channel above {band_start:.3g} Hz (twice the top of the "
-            "movement's band; robust half-octave band powers, white or Butterworth-coloured spectrum by BIC), "
+            "movement's band; robust half-octave band powers, white or Butterworth-coloured spectrum by BIC, "
+            "the angles coloured only where a flat passband shows, so the movement's own tail is not noise), "
             f"propagated by {REALISATIONS} seeded Monte-Carlo realisations: " + "; ".join(parts))
     if correction is not None:
         text += (f"; direct noise capped by the residual's band powers (lowest factor {np.min(correction):.2g})")
