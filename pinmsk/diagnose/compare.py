@@ -54,7 +54,8 @@ muscle moments), and the RMS change of the residual is the floor: angles give
 ``sigma_kinematic``, the other channels ``sigma_direct``.  The propagation runs
 through the model compared, so a model with an added effect gets its own
 floor (:meth:`Comparison.with_model` reuses the fitted noise models, not the
-floor).  Motion mode: the angle noise combined with the spread of the
+floor).  ``noise=`` states noise levels of measured inputs (``{channel or group:
+sigma}``, SI units) in place of the fitted ones.  Motion mode: the angle noise combined with the spread of the
 simulated angles when the driving moments get their white noise and the
 initial states their filtered-kinematics noise (two Monte-Carlo runs).
 """
@@ -378,18 +379,15 @@ class EquationError:
 
 
 def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = DEFAULT_CUTOFF,
-            grf_frames: Mapping[str, str] | None = None, grf=None, external_loads=None,
+            grf_frames: Mapping[str, str] | None = None, grf=None, external_loads=None, noise=None,
             grf_cutoff="same", sim_window: float = 0.5, noise_floor: NoiseFloor | None = None,
-            noise: Mapping[str, float] | None = None,
             _inputs: TrialInputs | None = None, _fits: dict | None = None) -> Comparison:
     """Compare ``model`` with ``trial`` (see the module docstring for the modes and the noise floor).
 
     Kinematics and ground reaction forces (the trial's own, ``grf=`` at its own
     rate or an OpenSim ``external_loads=`` file; ``grf_frames`` overrides which
     body takes a plate) go through :func:`pinmsk.kinematics.prepare`, so the GRF
-    is low-passed at the same ``cutoff`` as the kinematics.  ``noise`` states noise levels of measured
-    inputs (``{channel or group: sigma}`` in SI units; :func:`pinmsk.diagnose.noise.propagated_floor`)
-    in place of the fitted ones.
+    is low-passed at the same ``cutoff`` as the kinematics.
     """
     if not isinstance(trial, Trial):
         raise TrialError(f"compare needs a Trial, got {type(trial).__name__}; read one with pinmsk.read_trial")
@@ -399,13 +397,13 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
     _check_measured(model, trial)
     external_given = grf is not None or external_loads is not None
     plan = comparison_plan(model, trial, mode, has_grf=_has_grf(trial) or external_given)
-    if noise and plan.mode in ("contact", "motion"):
-        raise ModelError(f"noise= (stated noise levels) sets the torque- and muscle-level noise floors; the "
-                         f"{plan.mode}-level comparison estimates its own: leave noise out or pick mode='torque'")
     if plan.mode == "contact":
+        _no_stated_noise(noise, plan.mode)
         return compare_contact(model, trial, cutoff=cutoff, noise_floor=noise_floor,
                                options={"grf_frames": grf_frames, "sim_window": sim_window})
     t = np.asarray(trial.time, dtype=float)
+    if plan.mode == "motion":
+        _no_stated_noise(noise, plan.mode)
     if t.size < 30:
         raise TrialError(f"the trial has {t.size} samples; the diagnosis needs at least 30 "
                          "(and several seconds for cross-validation)")
@@ -434,13 +432,15 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
     eq = EquationError(model=model, motion=motion, rows=rows, coordinates=eq_coords, mode=plan.mode,
                        measured_tau=measured_tau, external=external, excitation=excitation)
     options = {"grf_frames": grf_frames, "grf": grf, "external_loads": external_loads, "grf_cutoff": grf_cutoff,
-               "sim_window": sim_window, "noise": noise}
+               "sim_window": sim_window}
     channels = moment_channels(eq_coords)
     floor = noise_floor if noise_floor is not None and plan.mode != "motion" else propagated_floor(
         eq, trial, mode=plan.mode, excitation_kind=plan.excitation_kind, cutoff=cutoff, options=options,
         channels=channels, grf_in_trial=_has_grf(trial) and not external_given, fits=_fits, noise=noise)
     if noise_floor is not None:
         options["noise_given"] = True
+    if noise:
+        options["noise"] = noise                 # stated noise levels (the remade comparisons keep them)
     states = _states(model, trial, motion, rows, eq_coords, excitation, plan.excitation_kind, external)
     if plan.mode == "motion":
         eq_floor = floor
@@ -450,6 +450,13 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
                           meas, mod, floor, eq, states, options, eq_floor, inputs=inputs, remake=_remake)
     return Comparison(plan.mode, model, trial, cutoff, t[rows], channels, eq_coords, eq.actuation.copy(),
                       eq.tau_id.copy(), floor, eq, states, options, inputs=inputs, remake=_remake)
+
+
+def _no_stated_noise(noise, mode: str) -> None:
+    """Refuse stated noise levels where they would not be used (the contact and motion levels)."""
+    if noise:
+        raise ModelError(f"noise= (stated noise levels) sets the torque- and muscle-level noise floors; the "
+                         f"{mode}-level comparison estimates its own: leave noise out or pick mode='torque'")
 
 
 def _remake(c: Comparison, model) -> Comparison:

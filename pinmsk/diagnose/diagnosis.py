@@ -52,6 +52,7 @@ all in the model and diagnose again.
 """
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 from typing import Sequence
 
@@ -588,9 +589,9 @@ def _for_model(comp, model):
 def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT_CUTOFF,
              candidates=None, frames: Sequence[str] | None = None, folds: int = 5,
              threshold: float = THRESHOLD, at_floor: float | None = None, window: float = 1.0,
-             grf_frames=None, grf=None, external_loads=None, grf_cutoff="same", sim_window: float = 0.5,
+             grf_frames=None, grf=None, external_loads=None, grf_cutoff="same", sim_window: float = 0.5, noise=None,
              comparison: Comparison | None = None, refit: Sequence = (), alpha: float = ALPHA,
-             pairs: bool = True, delta_bic: float | None = None, noise=None, _fits=None) -> Diagnosis:
+             pairs: bool = True, delta_bic: float | None = None, _fits=None) -> Diagnosis:
     """Compare ``model`` with ``trial``, locate the failure and rank the missing effects.
 
     ``candidates``: effects to rank (Components, or family names / ``family:target``
@@ -603,8 +604,7 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
     :data:`AT_FLOOR`; contact mode: the ratio at or below which the verdict is
     at_noise_floor, :data:`CONTACT_AT_FLOOR`); ``threshold``: least held-out
     improvement in noise variances on top of the test (default 0); ``pairs``:
-    try pairs of candidates when the best single one leaves a residual; ``noise``: noise levels the
-    user states (``{channel or group: sigma}``, SI; see :func:`pinmsk.diagnose.compare.compare`).  See the
+    try pairs of candidates when the best single one leaves a residual.  See the
     module docstring for the scoring and :func:`pinmsk.diagnose.compare.compare`
     for ``mode``, ``cutoff`` and the noise floor.
 
@@ -613,14 +613,17 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
     (significant below ``-delta_bic``, default
     :data:`~pinmsk.diagnose.contact.DELTA_BIC`); ``folds``, ``threshold``,
     ``refit`` and ``alpha`` do not apply.
+
+    ``noise``: noise levels the user states (``{channel or group: sigma}``, SI units), in place of
+    the fitted ones (:func:`pinmsk.diagnose.noise.propagated_floor`).
     """
     if folds < 2:
         raise ModelError(f"folds must be >= 2 for cross-validation, got {folds}")
     if not 0 < alpha < 1:
         raise ModelError(f"alpha is a significance level in (0, 1), got {alpha}")
-    c = comparison if comparison is not None else compare(
+    c = comparison if comparison is not None else (partial(compare, noise=noise) if noise else compare)(
         model, trial, mode=mode, cutoff=cutoff, grf_frames=grf_frames, grf=grf, external_loads=external_loads,
-        grf_cutoff=grf_cutoff, sim_window=sim_window, **({"noise": noise} if noise else {}))
+        grf_cutoff=grf_cutoff, sim_window=sim_window)
     if c.mode == "contact":
         return _diagnose_contact(c, candidates, folds, threshold,
                                  CONTACT_AT_FLOOR if at_floor is None else at_floor, window, cutoff,

@@ -13,6 +13,7 @@ and the error handling need are imported here.
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import sys
 import warnings
@@ -270,6 +271,9 @@ def cmd_fso(args) -> int:
 
 def cmd_diagnose(args) -> int:
     from ..diagnose import run
+    if getattr(args, "noise", None):                 # stated noise levels, for every diagnosis of the loop
+        from ..diagnose.noise import parse_noise
+        run = functools.partial(run, noise=parse_noise(args.noise))
     from .report import save_diagnosis
     model = _model(args)
     trial = _read(args.trial, model, args)
@@ -279,9 +283,6 @@ def cmd_diagnose(args) -> int:
                           "joints, which the diagnosis does not take; give the trial every coordinate")
     if kw.pop("ground_reaction") == "ignore":
         trial = trial.drop([n for n in trial.names if parse_ground_reaction(n) is not None])
-    if args.noise:
-        from ..diagnose.noise import parse_noise
-        kw["noise"] = parse_noise(args.noise)
     r = run(model, trial, add=args.add or [], mode=args.mode, frames=args.frame or None, **kw)
     save_diagnosis(r, json_path=args.json, report_path=args.report, plot_dir=args.plot)
     print(r.summary_text())
