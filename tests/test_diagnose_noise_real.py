@@ -125,6 +125,7 @@ def test_low_passed_noise_needs_its_flat_passband():
     m = fit_noise(s + col, rate, 2.2, flat_passband=True)
     assert m.coloured[0] > 0 and m.corner[0] == pytest.approx(8.0, rel=0.2)
     assert m.rms()[0] == pytest.approx(0.05, rel=0.2)
+    rng = np.random.default_rng(4)
     f = np.fft.rfftfreq(n, 1 / rate)
     tail = np.where(f > 0, 1.0 / np.maximum(f, 2.0) ** 4, 0.0)
     spec = np.sqrt(tail) * (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size))

@@ -304,9 +304,10 @@ def _nnls2(a, b, y):
 def _flat_passband(P, A, weights, edges, corners) -> np.ndarray:
     """``(n_corners, k)``: whether each corner's passband is seen flat in each column of band powers ``P``
     (J, k) -- at least two bands wholly below the corner, and the first band's density ``P / A`` above
-    the last one's by no more than one standard deviation of their log ratio (``1 / weights`` per band):
-    a movement's tail falls by a factor 4 per half octave (power ~ f^-4), low-passed noise not at all
-    before its corner, and a record of a few seconds tells the two apart at about that margin."""
+    the last one's by no more than twice the standard deviation of their log ratio (``1 / weights`` per
+    band): a movement's tail falls by a factor 4 or more per half octave (power ~ f^-4), low-passed
+    noise not at all before its corner; the margin keeps low-passed noise coloured in all but a few
+    per cent of records."""
     dens = np.log(np.maximum(P, 1e-300) / A[:, None])
     out = np.zeros((len(corners), P.shape[1]), dtype=bool)
     upper = np.asarray(edges[1:], dtype=float)
@@ -314,7 +315,7 @@ def _flat_passband(P, A, weights, edges, corners) -> np.ndarray:
         m = int(np.sum(upper <= fc * (1 + 1e-9)))
         if m < 2:
             continue
-        spread = np.sqrt(1.0 / weights[0] + 1.0 / weights[m - 1])
+        spread = 2.0 * np.sqrt(1.0 / weights[0] + 1.0 / weights[m - 1])
         out[i] = (dens[0] - dens[m - 1]) <= spread
     return out
 
@@ -382,7 +383,7 @@ def fit_noise(x, rate: float, band_start: float, *, channels: Sequence[str] | No
     first (a correction from elsewhere, e.g. a residual that shows less noise
     in a band than the input suggests); ``flat_passband=True`` keeps a fitted coloured part only where
     its passband is seen: at least two bands lie wholly below its corner and their power densities do
-    not fall from the first to the last by more than their statistical spread (a spectrum that
+    not fall from the first to the last by more than twice their statistical spread (a spectrum that
     falls from the band start on is the tail of the signal, not low-passed noise: white only).  See the
     module notes for the method.
     """
