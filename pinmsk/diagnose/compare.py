@@ -62,7 +62,8 @@ muscle moments), and the RMS change of the residual is the floor: angles give
 ``sigma_kinematic``, the other channels ``sigma_direct``.  The propagation runs
 through the model compared, so a model with an added effect gets its own
 floor (:meth:`Comparison.with_model` reuses the fitted noise models, not the
-floor).  Motion mode: the angle noise combined with the spread of the
+floor).  ``noise=`` states noise levels of measured inputs (``{channel or group:
+sigma}``, SI units) in place of the fitted ones.  Motion mode: the angle noise combined with the spread of the
 simulated angles when the driving moments get their white noise and the
 initial states their filtered-kinematics noise (two Monte-Carlo runs).
 """
@@ -577,7 +578,7 @@ def opensim_force_names(model, trial: Trial) -> Trial:
 
 
 def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = DEFAULT_CUTOFF,
-            grf_frames: Mapping[str, str] | None = None, grf=None, external_loads=None,
+            grf_frames: Mapping[str, str] | None = None, grf=None, external_loads=None, noise=None,
             grf_cutoff="auto", sim_window: float = 0.5, noise_floor: NoiseFloor | None = None,
             missing_coordinates: str = "refuse", _inputs: TrialInputs | None = None,
             _fits: dict | None = None) -> Comparison:
@@ -604,9 +605,12 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
     plan = comparison_plan(model, trial, mode, has_grf=_has_grf(trial) or external_given,
                            missing_coordinates=missing_coordinates)
     if plan.mode == "contact":
+        _no_stated_noise(noise, plan.mode)
         return compare_contact(model, trial, cutoff=cutoff, noise_floor=noise_floor,
                                options={"grf_frames": grf_frames, "sim_window": sim_window})
     t = np.asarray(trial.time, dtype=float)
+    if plan.mode == "motion":
+        _no_stated_noise(noise, plan.mode)
     if t.size < 30:
         raise TrialError(f"the trial has {t.size} samples; the diagnosis needs at least 30 "
                          "(and several seconds for cross-validation)")
@@ -642,9 +646,11 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
     channels = moment_channels(eq_coords)
     floor = noise_floor if noise_floor is not None and plan.mode != "motion" else propagated_floor(
         eq, trial, mode=plan.mode, excitation_kind=plan.excitation_kind, cutoff=cutoff, options=options,
-        channels=channels, grf_in_trial=_has_grf(trial) and not external_given, fits=_fits)
+        channels=channels, grf_in_trial=_has_grf(trial) and not external_given, fits=_fits, noise=noise)
     if noise_floor is not None:
         options["noise_given"] = True
+    if noise:
+        options["noise"] = noise                 # stated noise levels (the remade comparisons keep them)
     states = _states(model, trial, motion, rows, eq_coords, excitation, plan.excitation_kind, external)
     if plan.mode == "motion":
         eq_floor = floor
@@ -654,6 +660,13 @@ def compare(model, trial: Trial, *, mode: str = "auto", cutoff: float | None = D
                           meas, mod, floor, eq, states, options, eq_floor, inputs=inputs, remake=_remake)
     return Comparison(plan.mode, model, trial, cutoff, t[rows], channels, eq_coords, eq.actuation.copy(),
                       eq.tau_id.copy(), floor, eq, states, options, inputs=inputs, remake=_remake)
+
+
+def _no_stated_noise(noise, mode: str) -> None:
+    """Refuse stated noise levels where they would not be used (the contact and motion levels)."""
+    if noise:
+        raise ModelError(f"noise= (stated noise levels) sets the torque- and muscle-level noise floors; the "
+                         f"{mode}-level comparison estimates its own: leave noise out or pick mode='torque'")
 
 
 def _remake(c: Comparison, model) -> Comparison:

@@ -39,7 +39,9 @@ held-out residual is consistent with the noise model
 (:func:`~.scoring.consistent_with_noise`: each channel's and the total
 RMS / floor within ``at_floor`` times the chi-square spread of its effectively
 independent frames; ``at_floor`` allows for the uncertainty of the floor's
-estimate) and every effect in the model is identifiable; else
+estimate), every effect in the model is identifiable and the residual is not
+systematic (:func:`~.scoring.systematic_residual`: a mean over the trial
+against its Newey-West error, a share locked to the movement's phase); else
 ``"missing_effect"`` with the residual *outside the catalog*: ``outside_catalog``
 says what it follows (states, time, dominant frequency, phase of the movement;
 :func:`~.scoring.residual_character`).
@@ -62,6 +64,7 @@ others without it and diagnose again.
 """
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 from typing import Sequence
 
@@ -706,6 +709,7 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
              candidates=None, frames: Sequence[str] | None = None, folds: int | None = None,
              threshold: float = THRESHOLD, at_floor: float | None = None, window: float = 1.0,
              grf_frames=None, grf=None, external_loads=None, grf_cutoff="auto", sim_window: float = 0.5,
+             noise=None,
              comparison: Comparison | None = None, refit: Sequence = (), alpha: float = ALPHA,
              pairs: bool = True, delta_bic: float | None = None, missing_coordinates: str = "refuse",
              _fits=None) -> Diagnosis:
@@ -733,13 +737,16 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
     (significant below ``-delta_bic``, default
     :data:`~pinmsk.diagnose.contact.DELTA_BIC`); ``folds``, ``threshold``,
     ``refit`` and ``alpha`` do not apply.
+
+    ``noise``: noise levels the user states (``{channel or group: sigma}``, SI units), in place of
+    the fitted ones (:func:`pinmsk.diagnose.noise.propagated_floor`).
     """
     folds_given = folds is not None
     if folds is not None and (int(folds) != folds or folds < 2):
         raise ModelError(f"folds must be a whole number >= 2 for cross-validation, got {folds}")
     if not 0 < alpha < 1:
         raise ModelError(f"alpha is a significance level in (0, 1), got {alpha}")
-    c = comparison if comparison is not None else compare(
+    c = comparison if comparison is not None else (partial(compare, noise=noise) if noise else compare)(
         model, trial, mode=mode, cutoff=cutoff, grf_frames=grf_frames, grf=grf, external_loads=external_loads,
         grf_cutoff=grf_cutoff, sim_window=sim_window, missing_coordinates=missing_coordinates)
     if c.mode == "contact":

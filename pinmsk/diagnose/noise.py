@@ -6,13 +6,21 @@ the trial's own channel above the movement's band (``band_start = 2 f_99``,
 
 ``coordinates``
     the raw angles and translations; white, or coloured when the spectrum
-    shows a low-pass (a lab that filtered them);
+    shows a low-pass (a lab that filtered them) *with its flat passband*
+    (``fit_noise(flat_passband=True)``): a movement's own spectrum falls like
+    a low-pass just above its band (a walk's heel strikes), so a spectrum that
+    falls from the band start on is movement, and the noise is white at the
+    weighted median of the bands' levels, which the flat top of the spectrum
+    sets -- movement is never counted as noise;
 ``moments``
     measured ``<coord>_moment`` channels; white only: a single record cannot
     tell low-passed noise from friction steps, which are signal;
 ``ground reaction``
-    force, free-moment and centre-of-pressure channels of the trial; white
-    only, for the same reason (heel strikes, plate on/off);
+    force, free-moment and centre-of-pressure channels of the trial, or of the
+    separate record a ``grf=`` / ``external_loads=`` file gives (at its own
+    rate); white only, for the same reason (heel strikes, plate on/off).  A
+    plate's unloaded spans give its noise directly (:func:`_fit_ground_reaction`);
+    the realisations act where the plate is loaded, as the analyses do;
 ``excitation``
     EMG envelopes / excitations, their own model: multiplicative (the noise
     scales with the envelope) and coloured by the envelope's low-pass, whose
@@ -34,6 +42,14 @@ change, ``sigma_c^2 = kinematic_c^2 + direct_c^2`` (coordinates vs. the rest).
 Because the propagation runs through the model, the floor is recomputed for
 every model compared (an added payload makes the angle noise count for more;
 an added activation dynamics filters the EMG noise).
+
+Levels the user states (``noise={channel or group: sigma}``) replace the
+fitted models of those channels by white noise of that RMS (:func:`_stated`).
+
+The floor is checked against the residual (:func:`consistency`): the residual
+of any model holds the noise, so on a channel where its RMS lies below
+``1 / CONSISTENT_RATIO`` of the floor, the floor counts more than the noise and
+is capped at the residual's RMS (not a stated level), and the method says so.
 
 A correction keeps the direct sources honest: in each band, the residual's
 power beyond the propagated kinematic noise bounds the direct sources' (an
@@ -60,7 +76,8 @@ from ..signals.sampling import median_step
 from ..trial import Trial, moment_channel, parse_ground_reaction
 from .comparison import NoiseFloor
 
-__all__ = ["CONSISTENT_RATIO", "REALISATIONS", "consistency", "fit_sources", "propagated_floor"]
+__all__ = ["CONSISTENT_RATIO", "REALISATIONS", "STATED_GROUPS", "consistency", "fit_sources", "ground_reaction_source",
+           "parse_noise", "propagated_floor"]
 
 #: Monte-Carlo realisations per source group.
 REALISATIONS = 3
@@ -211,6 +228,80 @@ def _fit_ground_reaction(data, band_start):
     return replace(model, white=white, modulation=loaded, notes=tuple(notes))
 
 
+#: Group names a stated noise level may use for all channels of a kind.
+STATED_GROUPS = {"angles": "coordinates", "translations": "coordinates", "coordinates": "coordinates",
+                 "moments": "moments", "ground_reaction": "ground reaction", "excitations": "excitation"}
+_UNITS = {"deg": np.pi / 180.0, "rad": 1.0, "mm": 1e-3, "m": 1.0, "n": 1.0, "nm": 1.0}
+
+
+def parse_noise(items) -> dict:
+    """``["NAME=SIGMA[unit]", ...]`` (the command line's ``--noise``) -> ``{name: sigma}`` in SI units.
+
+    ``unit`` is optional: ``deg`` or ``rad`` for angles, ``mm`` or ``m`` for translations, ``N`` or
+    ``Nm`` for forces and moments (no unit: SI)."""
+    from ..errors import TrialError
+
+    out = {}
+    for item in items or ():
+        if "=" not in item:
+            raise TrialError(f"--noise entries look like NAME=SIGMA (e.g. angles=0.1deg, pelvis_tx=0.5mm, "
+                             f"moments=0.2), got {item!r}")
+        name, val = (x.strip() for x in item.split("=", 1))
+        low = val.lower().replace(" ", "")
+        unit = next((u for u in sorted(_UNITS, key=len, reverse=True) if low.endswith(u)), None)
+        num = low[: len(low) - len(unit)] if unit else low
+        try:
+            sigma = float(num) * (_UNITS[unit] if unit else 1.0)
+        except ValueError:
+            raise TrialError(f"--noise {item!r}: {val!r} is not a number with an optional unit "
+                             "(deg, rad, mm, m, N, Nm)") from None
+        out[name] = sigma
+    return out
+
+
+def _stated(models: dict, stated: Mapping, model) -> tuple[dict, list]:
+    """The noise models with the user's stated levels (white, ``sigma`` RMS over the record's band) in
+    place of the fitted ones; each name must be a measured channel or a group (:data:`STATED_GROUPS`).
+    Returns ``(models, [(channel, sigma), ...])``."""
+    from ..errors import TrialError
+
+    if not stated:
+        return models, []
+    out = dict(models)
+    done = []
+    known = {n: g for g, m in models.items() for n in m.channels}
+    for name, sigma in stated.items():
+        sigma = float(sigma)
+        if not np.isfinite(sigma) or sigma < 0:
+            raise TrialError(f"noise: the level of {name!r} must be a finite sigma >= 0, got {sigma!r}")
+        if name in STATED_GROUPS:
+            g = STATED_GROUPS[name]
+            if g not in out:
+                raise TrialError(f"noise: {name!r} names {g} noise, but this comparison measures none "
+                                 f"(its noise sources: {', '.join(out) or 'none'})")
+            chans = list(out[g].channels)
+            if g == "coordinates" and name != "coordinates":
+                chans = [c for c in chans if is_prismatic(model, c) == (name == "translations")]
+        elif name in known:
+            g, chans = known[name], [name]
+        else:
+            raise TrialError(f"noise: {name!r} is no measured channel of this comparison nor a group; use "
+                             f"one of {', '.join(sorted(STATED_GROUPS))} or a channel: "
+                             f"{', '.join(list(known)[:12])}{', ...' if len(known) > 12 else ''}")
+        m = out[g]
+        white, coloured = m.white.copy(), m.coloured.copy()
+        for c in chans:
+            j = m.channels.index(c)
+            level = sigma
+            if m.modulation is not None and m.kind == "multiplicative":
+                level = sigma / max(float(np.sqrt(np.mean(m.modulation[:, j] ** 2))), 1e-300)
+            white[j], coloured[j] = level / np.sqrt(0.5 * m.rate), 0.0
+            done.append((c, sigma))
+        out[g] = replace(m, white=white, coloured=coloured,
+                         notes=tuple(m.notes) + (f"stated: {', '.join(chans)} {sigma!r}",))
+    return out, done
+
+
 def _realisations(models, group, n):
     """Seeded realisations (R, n, k) of one group (its own stream, so groups are independent)."""
     seed = _SEED + sum(ord(ch) for ch in group)
@@ -279,15 +370,21 @@ def _band_correction(eq, rate, edges, kin, direct):
 
 
 def propagated_floor(eq, trial, *, mode: str, excitation_kind: str | None, cutoff, options: Mapping,
-                     channels, grf_in_trial: bool, fits: dict | None = None) -> NoiseFloor:
+                     channels, grf_in_trial: bool, fits: dict | None = None, noise: Mapping | None = None
+                     ) -> NoiseFloor:
     """The comparison's :class:`~pinmsk.diagnose.comparison.NoiseFloor` (see the module notes).
 
-    ``fits`` reuses the input noise models fitted for another model of the same trial."""
+    ``fits`` reuses the input noise models fitted for another model of the same trial; ``noise`` states
+    noise levels (``{channel or group: sigma}``, SI units, white over the record's band) in place of
+    the fitted ones: they are propagated like the fitted ones, neither corrected by the residual's band
+    powers nor capped by it (the consistency check is still reported)."""
     model = eq.model
     if fits is None:
         source = None if grf_in_trial else ground_reaction_source(options)
         fits = fit_sources(model, trial, eq, mode=mode, excitation_kind=excitation_kind, grf_in_trial=grf_in_trial,
                            grf_source=source)
+        fits, _ = _stated(fits, noise or {}, model)
+    stated = [(c, float(v)) for g in fits.values() for c, v in _stated_of(g)]
     rate = fits["coordinates"].rate
     band_start = fits["coordinates"].band_start
     kin = _kinematic(eq, fits, cutoff)
@@ -298,9 +395,10 @@ def propagated_floor(eq, trial, *, mode: str, excitation_kind: str | None, cutof
     if direct_groups:
         edges = band_edges(band_start, rate)
         s = _band_correction(eq, rate, edges, kin, direct)
-        if np.any(s < 0.999):
+        free = [g for g in direct_groups if not any(n.startswith("stated: ") for n in fits[g].notes)]
+        if np.any(s < 0.999) and free:
             correction = s
-            for g in direct_groups:
+            for g in free:                       # the user's stated levels stand
                 old = fits[g]
                 if g == "ground reaction":
                     # white noise: one factor, its band powers' share-weighted mean
@@ -319,7 +417,17 @@ def propagated_floor(eq, trial, *, mode: str, excitation_kind: str | None, cutof
     sigma = np.sqrt(kin_rms ** 2 + dir_rms ** 2)
     sigma = np.where(sigma > 0, sigma, np.finfo(float).tiny)
     method = _method(model, used, band_start, cutoff, correction)
+    if stated:
+        method += ("; noise levels stated by the user (white over the record's band, in place of the fitted "
+                   "ones): " + ", ".join(f"{c} {_level(model, c, v) if c in model.coordinates else f'{v:.4g}'}"
+                                         .replace(f"{c} {c} ", f"{c} ") for c, v in stated))
     check = consistency(eq.e, sigma, channels)
+    if stated:
+        check["stated"] = True
+        if check["capped"]:
+            method += "; " + check["text"].replace("so the floor there is capped at the residual's RMS",
+                                                   "but the levels are stated, so the floor stands")
+        check["capped"], check["factors"] = [], np.ones_like(sigma)
     if check["capped"]:
         f = check["factors"]
         sigma, kin_rms, dir_rms = sigma * f, kin_rms * f, dir_rms * f
@@ -328,7 +436,8 @@ def propagated_floor(eq, trial, *, mode: str, excitation_kind: str | None, cutof
             "sources": {g: m.to_dict() for g, m in used.items()},
             "kinematic": {c: float(v) for c, v in zip(channels, kin_rms)},
             "direct": {c: float(v) for c, v in zip(channels, dir_rms)},
-            "consistency": {k: v for k, v in check.items() if k not in ("factors", "text")}}
+            "consistency": {k: v for k, v in check.items() if k not in ("factors", "text")},
+            **({"stated": {c: v for c, v in stated}} if stated else {})}
     if correction is not None:
         edges = band_edges(band_start, rate)
         info["band_correction"] = [{"band_hz": [float(a), float(b)], "factor": float(f)}
@@ -362,6 +471,17 @@ def consistency(residual, sigma, channels, *, limit: float = CONSISTENT_RATIO) -
     return {"limit": float(limit), "checked": checked, "capped": capped, "factors": factors, "text": text}
 
 
+def _stated_of(m) -> list:
+    """``[(channel, sigma)]`` of the levels stated in a noise model's notes (see :func:`_stated`)."""
+    out = []
+    for note in m.notes:
+        if note.startswith("stated: "):
+            body = note[len("stated: "):]
+            names, _, val = body.rpartition(" ")
+            out.extend((c.strip(), float(val)) for c in names.split(","))
+    return out
+
+
 def _level(model, name, rms):
     if name in model.coordinates:
         return f"{name} {rms * 1000:.3g} mm" if is_prismatic(model, name) else f"{name} {np.rad2deg(rms):.3g} deg"
@@ -391,7 +511,8 @@ def _method(model, models, band_start, cutoff, correction) -> str:
         parts.append("EMG/excitation noise (" + em.describe() + ", RMS " + ", ".join(
             f"{s:.2g}" for s in em.rms()) + ") through the muscle-level chain and the muscle moments")
     text = (f"noise models fitted to each measured channel above {band_start:.3g} Hz (twice the top of the "
-            "movement's band; robust half-octave band powers, white or Butterworth-coloured spectrum by BIC), "
+            "movement's band; robust half-octave band powers, white or Butterworth-coloured spectrum by BIC, "
+            "the angles coloured only where a flat passband shows, so the movement's own tail is not noise), "
             f"propagated by {REALISATIONS} seeded Monte-Carlo realisations: " + "; ".join(parts))
     if correction is not None:
         text += (f"; direct noise capped by the residual's band powers (lowest factor {np.min(correction):.2g})")

@@ -13,6 +13,7 @@ and the error handling need are imported here.
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import sys
 import warnings
@@ -323,6 +324,9 @@ def _save_corrected(args, model) -> None:
 
 def cmd_diagnose(args) -> int:
     from ..diagnose import run
+    if getattr(args, "noise", None):                 # stated noise levels, for every diagnosis of the loop
+        from ..diagnose.noise import parse_noise
+        run = functools.partial(run, noise=parse_noise(args.noise))
     from .report import save_diagnosis
     _check_saves(args)
     model = _model(args)
@@ -667,6 +671,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="leave this component of the model out (repeatable; e.g. the contact spheres when the "
                         "trial's measured GRF loads the feet); `pinmsk info MODEL` lists the labels")
     s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
+    s.add_argument("--noise", action="append", metavar="NAME=SIGMA",
+                   help="a noise level you know, in place of the one fitted to the data: a measured channel "
+                        "(pelvis_tx=0.5mm, knee_angle_r=0.2deg, elbow_flexion_moment=0.2) or a group (angles, "
+                        "translations, moments, ground_reaction, excitations); white noise of that RMS, "
+                        "SI units unless deg/mm is given (repeat for several)")
     _add_read_flags(s)
     _nonlinear_flag(s)
     s.set_defaults(func=cmd_diagnose)

@@ -304,7 +304,10 @@ def _nnls2(a, b, y):
 def _flat_passband(P, A, weights, edges, corners) -> np.ndarray:
     """``(n_corners, k)``: whether each corner's passband is seen flat in each column of band powers ``P``
     (J, k) -- at least two bands wholly below the corner, and the first band's density ``P / A`` above
-    the last one's by no more than twice the spread of their log ratio (``1 / weights`` per band)."""
+    the last one's by no more than twice the standard deviation of their log ratio (``1 / weights`` per
+    band): a movement's tail falls by a factor 4 or more per half octave (power ~ f^-4), low-passed
+    noise not at all before its corner; the margin keeps low-passed noise coloured in all but a few
+    per cent of records."""
     dens = np.log(np.maximum(P, 1e-300) / A[:, None])
     out = np.zeros((len(corners), P.shape[1]), dtype=bool)
     upper = np.asarray(edges[1:], dtype=float)
