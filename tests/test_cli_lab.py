@@ -86,6 +86,11 @@ def test_grf_file_and_external_loads_from_the_cli(tmp_path, capsys):
     assert main(["id", "gait2d", str(kin), "--external-loads", str(xml), "-o", str(out)]) == 0
     text = capsys.readouterr().out
     assert "right (ground_force_v[xyz]) -> foot_r" in text
+    # an ExternalLoads file follows OpenSim's convention (the loads unfiltered, as its ID tool applies
+    # them) and says so; the bounce's impacts then stay in the residual, and --grf-cutoff filters them
+    assert "ground reaction none (OpenSim's ExternalLoads convention" in text
+    assert main(["id", "gait2d", str(kin), "--external-loads", str(xml), "--grf-cutoff", "6", "-o", str(out)]) == 0
+    capsys.readouterr()
     assert np.max(np.abs(read_trial(out)["torso_y_moment"][30:-30])) < 0.01 * m.mass * 9.81
     # a plate that cannot be placed is refused by name, and nothing is written
     bad = _external_loads_xml(tmp_path / "bad.xml", "os_grf.mot", body_r="pelvis_nope")
