@@ -200,7 +200,7 @@ def run(folder: Path, out: Path, *, diagnose: bool = True, plots: bool = True) -
             res["diagnosis"] = "pinmsk.diagnose not available"
         else:
             d = dx.diagnose(model, diagnosis_trial(kin, grf, cops), grf_frames={"r": "foot_r", "l": "foot_l"})
-            best = d.ranking[0] if d.ranking else None
+            best = d.best                   # the suggested effect (the first-ranked may be flagged)
             res["diagnosis"] = {
                 "verdict": d.verdict,
                 "best": None if best is None else best.label,
