@@ -1,4 +1,4 @@
-"""Validation of one simulated gait stride on ``gait2d`` against measured walking (issue 17, thesis Sec. 5.2).
+"""Validation of one simulated gait stride on ``gait2d`` against measured walking (thesis Sec. 5.2).
 
 :func:`validate_gait` takes a Result or Trial holding ONE full stride (gait2d coordinate channels in rad:
 ``hip_r``, ``knee_r``, ``ankle_r``, ... and optionally ``torso_x``; ``<muscle>_activation``; ground

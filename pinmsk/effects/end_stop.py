@@ -89,7 +89,7 @@ class EndStop(JointEffect):
                    damping=damping / w)
 
     def for_model(self, model) -> "EndStop":
-        """This stop with its limit bounded to the target coordinate's range of motion."""
+        """The end stop with its limit bounded to the target coordinate's range of motion."""
         return bounded_to_range(self, model, self.range_parameters)
 
     def plausibility(self, model, motion=None) -> list[str]:
