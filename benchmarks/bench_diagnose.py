@@ -13,7 +13,7 @@ pairs).  Also shown: the muscle-level forearm case, the motion-level forearm cas
 Rajagopal walk: OpenSim's RajagopalWalk model imported exactly (walker knees, patella couplers,
 its 80 muscles) with Moco's coordinates (1,350 frames, 33 coordinates, the mtp angles held at
 their defaults) and the measured GRF through ``grf_walk.xml``, <= 10 s per call (the import
-outside the clock).
+outside the clock), also with a centre-of-pressure offset added and refitted jointly with every candidate.
 
 Detection sensitivity.  For each catalog effect, the effect size -- the RMS of the change it makes
 to the compared channel, in multiples of the noise floor -- at which the diagnosis finds it (the
@@ -96,7 +96,10 @@ def speed():
     else:
         model, trial, kw = walk
         results["rajagopal"] = case("Rajagopal walk, exact .osim, pelvis rows with GRF", model, trial, 10.0, **kw)
-        ok = ok and results["rajagopal"] <= 10.0
+        r_step = run(model, trial, add=["plate_cop_offset:calcn_l"], **kw).final
+        results["rajagopal refit"] = case("Rajagopal walk, a COP offset refitted jointly", r_step.model, trial, 10.0,
+                                          refit=r_step.settings["refit"], **kw)
+        ok = ok and results["rajagopal"] <= 10.0 and results["rajagopal refit"] <= 10.0
     print("speed targets met" if ok else "SPEED TARGETS MISSED")
     return ok
 
