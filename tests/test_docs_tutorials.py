@@ -60,7 +60,8 @@ def assert_excerpt(excerpt: str, output: str, where: str) -> None:
         w = w[:-3].rstrip() if prefix else w
         while i < len(lines) and not (lines[i].startswith(w) if prefix else lines[i] == w):
             i += 1
-        assert i < len(lines), f"{where}: the output has no line {want.strip()!r} (in this order)\n--- output:\n{output}"
+        assert i < len(lines), (f"{where}: the output has no line {want.strip()!r} (in this order)\n"
+                                f"--- output:\n{output}")
         i += 1
 
 
