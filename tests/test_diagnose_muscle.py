@@ -45,3 +45,23 @@ def test_delay_activation_or_both(forearm, family, truth):          # forearm: t
         assert ratio == pytest.approx(1.0, abs=0.05)
     else:
         assert ratio < 0.97
+
+
+def test_emg_for_some_muscles_refuses_the_muscle_level_not_the_torque_level():
+    """EMG for 2 of the forearm's 7 muscles: the muscle level (and the automatic choice, which would
+    otherwise drop the EMG unseen) is refused by name, pointing at the torque level; the torque level
+    compares no excitation and gives the same equation error as without the EMG channels."""
+    from pinmsk.diagnose import compare
+    from pinmsk.errors import TrialError
+    model = pinmsk.load_model("forearm")
+    trial = make_trial(model, ["joint_damping:elbow_flexion:c=0.2"], duration=2.0, rate=100.0, seed=1)
+    emg = {f"{m}_emg": 0.1 + 0.05 * np.sin(np.asarray(trial.time) + k)
+           for k, m in enumerate(model.muscle_names[:2])}
+    part = trial.with_channels(emg)
+    for mode in ("auto", "muscle"):
+        with pytest.raises(TrialError, match=r"emg channels for some muscles \(2 of 7\) but not BICSH_emg, .*"
+                                             r"mode='torque' \(--mode torque\)"):
+            compare(model, part, mode=mode)
+    got, ref = compare(model, part, mode="torque"), compare(model, trial, mode="torque")
+    assert got.mode == "torque"
+    np.testing.assert_array_equal(got.eq.e, ref.eq.e)

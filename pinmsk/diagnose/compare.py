@@ -183,7 +183,8 @@ def _excitations(model, trial):
             missing = [n for n, h in zip(names, have) if not h]
             shown = ", ".join(missing[:8]) + (f" and {len(missing) - 8} more" if len(missing) > 8 else "")
             raise TrialError(f"the trial has {kind} channels for some muscles ({sum(have)} of {len(names)}) but "
-                             f"not {shown}; muscle-level comparison needs all {len(names)} (or none)")
+                             f"not {shown}; muscle-level comparison needs all {len(names)} (or none); the "
+                             "torque level alone compares no excitation: mode='torque' (--mode torque)")
     return None, None
 
 
@@ -233,7 +234,8 @@ def comparison_plan(model, trial, mode: str, *, has_grf: bool | None = None,
     with_moment = [c for c in coordinates if moment_channel(c) in trial]
     actuated_moment = [c for c in with_moment if c not in unact]
     base_rows = [c for c in unact if grf or c in with_moment]
-    kind, _ = _excitations(model, trial)
+    # the torque level compares no excitation: EMG for only some muscles is no reason to refuse it
+    kind = None if mode == "torque" else _excitations(model, trial)[0]
     if cmap is not None:
         source_coordinate_gaps(model, trial, missing_coordinates=missing_coordinates)   # refuses a gap by name
     missing_coords = [] if cmap is not None else [c for c in model.coordinates if c not in trial]

@@ -210,8 +210,11 @@ class EffectProblem:
             target = np.full((rows_motion.n_frames, self.model.nv), np.nan)
             joint = self.columns >= 0
             target[:, self.columns[joint]] = -self.e[mask][:, joint]
+            # a cache indexed by frame (``frame_cache``) is the masked rows' own: not recomputed for the guess
+            by_frame = getattr(comp, "frame_cache", False) and self.cache is not None
+            cache = self.cache[np.flatnonzero(mask)] if by_frame else None
             try:
-                guesses = comp.initial_guess(self.model, rows_motion, target, None) or []
+                guesses = comp.initial_guess(self.model, rows_motion, target, cache) or []
             except Exception:           # a bad guess hook must not stop the fit
                 guesses = []
             for g in guesses:

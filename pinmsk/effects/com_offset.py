@@ -164,6 +164,9 @@ class ComOffset(Component):
         p = self._p(params)
         return np.array([p[n] for n in _AXES], dtype=float)
 
+    #: :meth:`prepare`'s cache is indexed by frame: its rows are the cache of those frames
+    frame_cache = True
+
     def prepare(self, model, motion, data=None):
         """``Y_j`` over frames, ``(N, nv, 10)``: the body's columns of the joint torque regressor."""
         j = self._joint(model)
