@@ -18,9 +18,9 @@ payload within 2 cm of its site) -- each value within 3 standard errors of the t
 ``at_noise_floor``.  ``PENDING``: cases the diagnosis does not solve yet, each with the reason;
 their test checks that they still fail, so a case that starts to pass says to move it to ``SOLVED``.
 
-The tests that need ``opensim`` check that the cases are what OpenSim makes: pinmsk's inverse
-dynamics of the plain models equals OpenSim's on the cases' motions, and the generator reproduces a
-stored case.
+The tests in ``tests/test_diagnose_opensim_cases_peer.py`` (they need ``opensim``) check that the
+cases are what OpenSim makes: pinmsk's inverse dynamics of the plain models equals OpenSim's on the
+cases' motions, and the generator reproduces a stored case.
 """
 from __future__ import annotations
 
@@ -30,10 +30,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 
-from conftest import REPO, require_opensim
+from conftest import REPO
 
 _spec = importlib.util.spec_from_file_location("opensim_cases_follow", REPO / "tests" / "opensim_cases" / "follow.py")
 follow = importlib.util.module_from_spec(_spec)
@@ -84,14 +83,16 @@ PENDING = {
 }
 
 
-#: the walk run by default: an exact import, OpenSim's ExternalLoads and its ID tool's column names
-DEFAULT_WALKS = ("gait_torso_mass_id_names",)
+#: the cases run by default, one per kind of hidden effect and input (a payload at a marker, an end
+#: stop, damping on a 2-s trial, OpenSim's ID-tool column names on a translation and on a walk with an
+#: ExternalLoads file, no effect at all); every other case, and the check that a pending case still
+#: fails, is slow (each takes 3-40 s)
+DEFAULT_CASES = ("arm26_plain", "arm26_payload_styloid", "arm26_end_stop_upper", "arm26_elbow_damping_short",
+                 "tug_block_damping_id_names", "gait_torso_mass_id_names")
 
 
 def _cases(names):
-    """The walks of the 10-dof gait model take 5-40 s each: slow; the rest run by default."""
-    return [pytest.param(n, marks=pytest.mark.slow) if n.startswith("gait_") and n not in DEFAULT_WALKS else n
-            for n in names]
+    return [n if n in DEFAULT_CASES else pytest.param(n, marks=pytest.mark.slow) for n in names]
 
 
 def _shared(shared_data):
@@ -172,77 +173,3 @@ def test_the_cli_ranks_the_hidden_damping_first(shared_data, tmp_path):
     assert (top["effect"], top["target"], top["significant"]) == ("joint_damping", "r_elbow_flex", True)
     assert abs(top["params"]["c"] - 0.3) <= 3 * top["stderr"]["c"]
     assert d["verdict"] == "missing_effect"
-
-
-# ---------------------------------------------------------------------------
-# the cases are OpenSim's: same inverse dynamics, reproducible generator
-# ---------------------------------------------------------------------------
-
-def _generator():
-    spec = importlib.util.spec_from_file_location("opensim_cases_make",
-                                                  REPO / "tests" / "opensim_cases" / "make_cases.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    mod.osim = require_opensim()
-    return mod
-
-
-@pytest.mark.parametrize("which", ["arm26", "tug"])
-def test_pinmsk_inverse_dynamics_is_opensims_on_the_case_motions(which, shared_data):
-    from pinmsk import skeleton
-    mc = _generator()
-    rel, motion = {"arm26": (mc.ARM26, mc.ARM_MOTION), "tug": (mc.TUG, mc.TUG_MOTION)}[which]
-    path = _shared(shared_data) / rel
-    if not path.is_file():
-        pytest.skip(f"{rel} is absent")
-    t = np.arange(0.0, 5.0 + 0.005, 0.01)
-    q, v, a = {}, {}, {}
-    for c, terms in motion.items():
-        q[c], v[c], a[c] = mc.sines(t, terms)
-    ref = mc.solver_id(mc.load(path), t, q, v, a)
-    model = follow.load_model(str(path))
-    co = model.coordinate_order
-    tau = skeleton.rnea(model, *(np.stack([x[c] for c in co], 1) for x in (q, v, a)))
-    scale = max(np.max(np.abs(ref[c])) for c in co)
-    assert scale > 1.0
-    err = max(np.max(np.abs(tau[:, i] - ref[c])) for i, c in enumerate(co))
-    assert err <= 1e-9 * scale, f"max |pinmsk - OpenSim| {err:.3g} (max |tau| {scale:.3g})"
-
-
-def test_the_generator_reproduces_a_stored_case(shared_data, tmp_path):
-    mc = _generator()
-    if not (_shared(shared_data) / mc.ARM26).is_file():
-        pytest.skip("Arm26 is absent")
-    mc.arm_cases(tmp_path)
-    from pinmsk.io.tables import read_trial
-    for name in ("arm26_payload_styloid", "arm26_end_stop_upper"):
-        new, old = read_trial(tmp_path / name / "trial.sto"), read_trial(follow.CASES / name / "trial.sto")
-        assert new.names == old.names
-        for n in old.names:
-            assert np.allclose(new[n], old[n], rtol=1e-6, atol=1e-6), (name, n)
-        assert json.loads((tmp_path / name / "truth.json").read_text()) == follow.truth(name)
-
-
-def test_the_walk_cases_moments_are_opensims_id_of_the_plain_model(shared_data, tmp_path):
-    # gait_plain's moment channels (noise removed by its 1 N m / 2 N scale) against pinmsk's ID on the
-    # same coordinates with OpenSim's own 6 Hz filter and the GRF unfiltered, as OpenSim's ID tool runs
-    from pinmsk.dynamics import inverse_dynamics_result
-    from pinmsk.io.tables import read_trial
-    from test_osim_id import _opensim_filtered
-    mc = _generator()
-    d = _shared(shared_data)
-    if not (d / mc.GAIT).is_file():
-        pytest.skip("Gait10dof18musc is absent")
-    model = follow.load_model(str(d / mc.GAIT))
-    trial = read_trial(follow.CASES / "gait_plain" / "trial.sto")
-    filtered = _opensim_filtered(mc.osim, d / mc.GAIT_IK, 6.0, np.asarray(trial.time))
-    out = inverse_dynamics_result(model, filtered, cutoff=0, grf_cutoff=0,
-                                  external_loads=follow.CASES / "_walk" / "walk_grf.xml").trial
-    rows = slice(1, -1)
-    coords = [n[:-len("_moment")] for n in trial.names if n.endswith("_moment")]
-    assert len(coords) == 10
-    for c in coords:
-        m = np.asarray(trial[c + "_moment"])[rows]
-        mine = np.interp(trial.time, out.time, out[c + "_moment"])[rows]
-        noise = 2.0 if c.startswith("pelvis_t") else 1.0
-        assert np.sqrt(np.mean((mine - m) ** 2)) < 1.5 * noise, c
