@@ -38,6 +38,16 @@ def motion():
     return gaussian_elbow_motion()
 
 
+def shared_folder(rel: str, probe: str) -> Path:
+    """``../shared/data/<rel>`` when its file ``probe`` is there, else a skip naming the folder."""
+    from pinmsk.io.shared_data import shared_data_dir
+    d = shared_data_dir()
+    p = None if d is None else d / rel
+    if p is None or not (p / probe).is_file():
+        pytest.skip(f"../shared/data/{rel} is absent")
+    return p
+
+
 @contextlib.contextmanager
 def _as_command(argv: list[str], *, path: str | None = None):
     """Run the body as a command line: ``sys.argv = argv`` (and ``path`` first on ``sys.path``), stdout

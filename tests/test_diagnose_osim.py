@@ -20,6 +20,7 @@ from pinmsk.diagnose import compare, diagnose, run
 from pinmsk.dynamics import inverse_dynamics
 from pinmsk.effects import registry
 from pinmsk.errors import ModelError, TrialError
+from conftest import shared_folder
 from pinmsk.io.shared_data import shared_data_dir
 from pinmsk.kinematics import coordinate_map
 from pinmsk.model import import_osim
@@ -34,11 +35,7 @@ PELVIS_2D = ("pelvis_tilt", "pelvis_tx", "pelvis_ty")
 
 
 def _gait_dir():
-    d = shared_data_dir()
-    p = None if d is None else d / GAIT
-    if p is None or not (p / "subject01.osim").is_file():
-        pytest.skip(f"../shared/data/{GAIT} is absent")
-    return p
+    return shared_folder(GAIT, "subject01.osim")
 
 
 @pytest.fixture(scope="module")

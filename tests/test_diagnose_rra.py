@@ -23,7 +23,7 @@ import pinmsk
 from pinmsk.diagnose import run
 from pinmsk.dynamics import inverse_dynamics_result
 from pinmsk.effects import registry
-from pinmsk.io.shared_data import shared_data_dir
+from conftest import shared_folder
 from pinmsk.model import import_osim
 from pinmsk.opensim.export import write_model
 
@@ -35,12 +35,7 @@ RRA_10DOF = {"pelvis_tx": -3.76711, "pelvis_ty": -2.84942, "pelvis_tilt": -3.375
 TORSO_COM_2354 = (np.array([-0.0323916, 0.34551, 0.0]), np.array([0.0161184, 0.34551, 0.0166874]))
 
 
-def _folder(rel, probe):
-    d = shared_data_dir()
-    p = None if d is None else d / rel
-    if p is None or not (p / probe).is_file():
-        pytest.skip(f"../shared/data/{rel} is absent")
-    return p
+_folder = shared_folder
 
 
 @pytest.fixture(scope="module")

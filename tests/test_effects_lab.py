@@ -33,11 +33,6 @@ def shared_file(relative: str):
 
 
 @pytest.fixture(scope="module")
-def forearm():
-    return pinmsk.load_model("forearm")
-
-
-@pytest.fixture(scope="module")
 def gait2d():
     return pinmsk.load_model("gait2d")
 

@@ -16,7 +16,7 @@ without them.
 import numpy as np
 import pytest
 
-from conftest import require_opensim
+from conftest import require_opensim, shared_folder
 
 from pinmsk import errors as pinmsk_errors
 from pinmsk.dynamics import inverse_dynamics_result
@@ -31,11 +31,7 @@ TRANSLATIONS = ("pelvis_tx", "pelvis_ty", "pelvis_tz")
 
 
 def _gait_dir():
-    d = shared_data_dir()
-    p = None if d is None else d / GAIT
-    if p is None or not (p / "subject01.osim").is_file():
-        pytest.skip(f"../shared/data/{GAIT} is absent")
-    return p
+    return shared_folder(GAIT, "subject01.osim")
 
 
 def _exact(d):

@@ -239,6 +239,15 @@ def _root_chain(pm) -> tuple[str, ...]:
     return tuple(pm.names[k] for k in root)
 
 
+def coordinate_target(model, motion: Motion, target, coordinate: str) -> tuple[np.ndarray, np.ndarray]:
+    """``(q, y)`` of ``coordinate`` on the frames where an ``initial_guess`` target (N, nv; NaN where not
+    compared) is finite: the angle and the generalized force an effect there should supply."""
+    i = model.coordinate_index(coordinate)
+    y = np.asarray(target)[:, i]
+    ok = np.isfinite(y)
+    return motion.q[ok, i], y[ok]
+
+
 def is_prismatic(model, coordinate: str) -> bool:
     """Whether ``coordinate`` is a translation (its generalized force is in N, not N m)."""
     pm = model.pin

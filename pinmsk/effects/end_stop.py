@@ -38,7 +38,7 @@ import numpy as np
 
 from ..backend import backend_of
 from ..components import Parameter
-from ._base import JointEffect, bounded_to_range
+from ._base import JointEffect, bounded_to_range, coordinate_target
 from .registry import register
 
 __all__ = ["EndStop", "EndStopLower", "EndStopUpper", "smooth_step", "FREE_SHARE"]
@@ -135,10 +135,7 @@ class EndStop(JointEffect):
     def initial_guess(self, model, motion, target, cache=None) -> list[dict]:
         """Variable projection: on a grid of limits within the bounds and the data, the stiffness
         (and the damping, when it is free) by non-negative least squares; the best few."""
-        i = model.coordinate_index(self.target)
-        y = np.asarray(target)[:, i]
-        ok = np.isfinite(y)
-        q, y = motion.q[ok, i], y[ok]
+        q, y = coordinate_target(model, motion, target, self.target)
         if q.size < 4:
             return []
         decl = self.params

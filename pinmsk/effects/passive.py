@@ -68,7 +68,7 @@ import numpy as np
 from ..backend import backend_of
 from ..components import Parameter, state_vector
 from ..errors import ModelError
-from ._base import JointEffect, bounded_to_range, joint_range
+from ._base import JointEffect, bounded_to_range, coordinate_target, joint_range
 from .registry import register
 
 _EXP_CLIP = 50.0
@@ -157,10 +157,7 @@ class PassiveElastic(JointEffect):
     def initial_guess(self, model, motion, target, cache=None) -> list[dict]:
         """Variable projection: on a grid of ``(theta_0, k_lo, k_hi)`` within the bounds, ``A`` by
         non-negative least squares; the best few."""
-        i = model.coordinate_index(self.target)
-        y = np.asarray(target)[:, i]
-        ok = np.isfinite(y)
-        q, y = motion.q[ok, i], y[ok]
+        q, y = coordinate_target(model, motion, target, self.target)
         if q.size < 4:
             return []
         decl = self.params
