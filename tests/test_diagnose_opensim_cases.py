@@ -157,6 +157,8 @@ def test_a_pending_case_is_still_unsolved(name, shared_data):
     assert not row["judge"]["solved"], f"{name} is solved now ({row['added']}): move it to SOLVED"
 
 
+# slow (5 s, a subprocess): the CLI's diagnose --json is covered by tests/test_diagnose_outputs.py's arm26 run
+@pytest.mark.slow
 def test_the_cli_ranks_the_hidden_damping_first(shared_data, tmp_path):
     info = follow.truth("arm26_elbow_damping")
     model = follow.model_path(info, _shared(shared_data))
