@@ -41,13 +41,7 @@ def _exact(d):
 
 
 def _opensim():
-    osim = require_opensim()
-    osim.Logger.setLevelString("Off")
-    try:
-        osim.Logger.removeFileSink()
-    except Exception:  # pragma: no cover - older opensim
-        pass
-    return osim
+    return require_opensim()         # its logger off (conftest.import_opensim)
 
 
 def _opensim_filtered(osim, path, cutoff, times):
