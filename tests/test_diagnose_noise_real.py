@@ -172,12 +172,12 @@ def test_newey_west_standard_error_of_a_mean():
 
 
 def test_offset_below_the_floor_is_systematic_not_noise(forearm):
-    """A sensor offset of 0.03 N m (0.3x the floor) left out of the candidates: the residual is
-    consistent with the noise by size (1.06x), but its mean over the trial is 0.031 N m at z = 5.8
-    (Newey-West): missing_effect, outside the catalog, never at_noise_floor.  The clean trial's mean is
-    not systematic and it is at the floor."""
+    """A sensor offset of 0.03 N m (0.3x the floor) left out of the candidates (joint damping cannot make a
+    mean): the residual is consistent with the noise by size (1.06x), but its mean over the trial is
+    0.031 N m at z = 5.8 (Newey-West): missing_effect, outside the catalog, never at_noise_floor.  The
+    clean trial's mean is not systematic and it is at the floor."""
     trial = make_trial(forearm, ["sensor_offset:elbow_flexion:offset=0.03"], duration=8.0, rate=100.0, seed=1)
-    d = diagnose(forearm, trial, candidates=["joint_damping", "payload:hand"])
+    d = diagnose(forearm, trial, candidates=["joint_damping"])
     st = d.stopping["systematic"]
     ch = st["channels"]["elbow_flexion_moment"]
     assert d.stopping["consistent_with_noise"] and d.ratio < 1.25
@@ -189,6 +189,24 @@ def test_offset_below_the_floor_is_systematic_not_noise(forearm):
     clean = make_trial(forearm, [], duration=8.0, rate=100.0, seed=1)
     d0 = diagnose(forearm, clean, candidates=["joint_damping", "payload:hand"])
     assert d0.verdict == "at_noise_floor" and d0.stopping["systematic"]["systematic"] == []
+
+
+def test_offset_below_the_floor_is_found_by_its_mean(forearm):
+    """The same offset with the whole catalog: its squared-error test cannot see it (held-out z 2.86 <
+    3.2), the mean test can (the Wald chi-square of the mean falls from 33.5 to 0.0: z 5.79), and of the
+    candidates that take the mean away the offset takes most; its value is the hidden one."""
+    trial = make_trial(forearm, ["sensor_offset:elbow_flexion:offset=0.03"], duration=8.0, rate=100.0, seed=1)
+    d = diagnose(forearm, trial)
+    best = d.best
+    assert best.label == "sensor_offset:elbow_flexion" and best.test["passes_by"] == "mean"
+    assert best.test["z"] < best.test["critical_z"] < best.test["mean"]["z"]
+    assert best.test["mean"]["chi2_before"] == pytest.approx(33.5, abs=1.0)
+    assert best.test["mean"]["chi2_after"] < 0.5
+    assert best.effect.values["offset"] == pytest.approx(0.03, abs=0.005)
+    # the others that take the mean away take less of it, and are named beside the suggestion
+    by_mean = [s for s in d.significant if s.test["passes_by"] == "mean" and s is not best]
+    assert by_mean and all(s.test["mean"]["z"] < best.test["mean"]["z"] for s in by_mean)
+    assert "takes the systematic mean of elbow_flexion_moment away" in d.verdict_line()
 
 
 # -- noise the user states -----------------------------------------------------------------------------

@@ -28,8 +28,17 @@ explains *out of sample* (:mod:`.scoring`):
   a full-rank, well-conditioned sensitivity matrix, 95 % profile-likelihood
   intervals that close inside the bounds).  A non-identifiable candidate is
   shown, flagged, and never suggested;
+* or, where the residual's mean over the trial is systematic on some channel,
+  significant when it takes that mean away out of sample
+  (:func:`~.scoring.mean_test`: the fall of the Wald chi-square of the held-out
+  means, against the same critical value) while its held-out error and its
+  BIC still fall.  A squared-error test gives a constant shift only half the
+  power of the mean it explains, and a real walk's gait-locked residual, which
+  no candidate explains, widens its error further; ``test["passes_by"]`` says
+  which test passed;
 * ranked by held-out improvement, best first (within 0.05 noise variances,
-  fewer parameters first).
+  fewer parameters first); ``best`` is the first that passes by its error,
+  else the one that takes most of the mean away.
 
 Stopping rule and verdict.  ``"missing_effect"`` while a candidate (or a pair,
 :meth:`~.scoring.Scorer.pairs`, tried when the best single one leaves a residual
@@ -155,7 +164,9 @@ class Diagnosis:
                         if info.get("determined", True) and not info.get("identifiable", True)]
         self.stopping = {
             "rule": "held-out test (Diebold-Mariano, HAC variance) at family-wise level alpha over the "
-                    "candidates (Bonferroni), in-sample BIC falls, identifiable parameters",
+                    "candidates (Bonferroni), or, where the residual's mean over the trial is systematic, the "
+                    "held-out test of that mean (Wald chi-square, Newey-West) at the same level; in-sample "
+                    "BIC falls, held-out error falls, identifiable parameters",
             "alpha": settings["alpha"], "critical_z": settings["z_critical"],
             "candidates_tested": len(ranking), "blocks": settings["blocks"],
             "folds": settings["folds"], "folds_chosen": settings.get("folds_chosen", "given"),
@@ -190,9 +201,14 @@ class Diagnosis:
 
     @property
     def best(self) -> EffectScore | None:
-        for s in self.ranking:
-            if s.significant:
+        """The first significant candidate by held-out error; else, of those that pass only by taking a
+        systematic mean away (:func:`~.scoring.mean_test`), the one that takes most of it."""
+        sig = [s for s in self.ranking if s.significant]
+        for s in sig:
+            if s.test.get("passes_by") != "mean":
                 return s
+        if sig:
+            return max(sig, key=lambda s: s.test["mean"]["z"])
         return None
 
     @property
@@ -473,8 +489,21 @@ class Diagnosis:
                 remedy = ""
                 if hasattr(best.effect, "describe_remedy"):
                     remedy = f"; {best.effect.describe_remedy(self.model)}"
-                parts.append(f"best explanation: {best.label} ({best.describe_params()}; held-out z "
-                             f"{best.test['z']:.1f}){alias}{remedy}; add it with --add {best.label}")
+                if best.test.get("passes_by") == "mean":
+                    mt = best.test["mean"]
+                    names = [self.comparison.channels[k] for k in mt["systematic"]]
+                    named = {a for a, _ in best.aliases}
+                    others = [s.label for s in self.significant if s is not best and s.label not in named
+                              and s.test.get("passes_by") == "mean"]
+                    also = (f"; {', '.join(others)} take{'s' if len(others) == 1 else ''} less of it away"
+                            if others else "")
+                    why = (f"takes the systematic mean of {', '.join(names)} away (held-out chi-square of the "
+                           f"means {mt['chi2_before']:.3g} -> {mt['chi2_after']:.2g}, z {mt['z']:.1f}; its "
+                           f"held-out error z {best.test['z']:.1f}){also}")
+                else:
+                    why = f"held-out z {best.test['z']:.1f}"
+                parts.append(f"best explanation: {best.label} ({best.describe_params()}; {why}){alias}{remedy}; "
+                             f"add it with --add {best.label}")
             if pair is not None and (best is None or best.label not in pair["effects"]):
                 adds = " ".join(f"--add {e}" for e in pair["effects"])
                 parts.append(f"the pair {' + '.join(pair['effects'])} fitted jointly explains significantly more "
