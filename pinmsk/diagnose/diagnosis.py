@@ -203,13 +203,7 @@ class Diagnosis:
     def best(self) -> EffectScore | None:
         """The first significant candidate by held-out error; else, of those that pass only by taking a
         systematic mean away (:func:`~.scoring.mean_test`), the one that takes most of it."""
-        sig = [s for s in self.ranking if s.significant]
-        for s in sig:
-            if s.test.get("passes_by") != "mean":
-                return s
-        if sig:
-            return max(sig, key=lambda s: s.test["mean"]["z"])
-        return None
+        return best_of(self.ranking)
 
     @property
     def best_pair(self) -> dict | None:
@@ -389,15 +383,20 @@ class Diagnosis:
                              + f"  significant {sig}{where}" + (f"  [{s.note}]" if s.note else ""))
                 lines.append(f"      {s.describe_params()}")
         elif self.ranking:
+            means = [s.test["mean"] for s in self.ranking if (s.test.get("mean") or {}).get("applies")]
+            on = (", ".join(c.channels[k] for k in means[0]["systematic"]) if means else "")
+            mean_note = (f"; z mean = held-out test of the systematic mean of {on} (significant above the same "
+                         "value, when the held-out error falls too)" if means else "")
             lines.append(f"ranking ({self.settings['blocks']}; explained = held-out share of the residual's "
                          f"mean square; z = held-out test, significant above {self.settings['z_critical']:.2f} "
-                         f"with identifiable parameters):")
+                         f"with identifiable parameters{mean_note}):")
             lw = max(len(s.label) for s in self.ranking)
             for k, s in enumerate(self.ranking, 1):
-                sig = "yes" if s.significant else "no "
+                sig = ("yes (mean)" if s.test.get("passes_by") == "mean" else "yes") if s.significant else "no"
                 z = s.test.get("z", float("nan"))
+                zm = f"  z mean {s.test['mean']['z']:6.2f}" if means and s.test.get("mean") else ""
                 lines.append(f"  {k:>2}. {s.label:<{lw}}  explained {100 * s.explained_fraction:6.1f}%  "
-                             f"z {z:7.2f}  rmse after {s.rmse_after['total']:.4g}  significant {sig}  "
+                             f"z {z:7.2f}{zm}  rmse after {s.rmse_after['total']:.4g}  significant {sig:<10}  "
                              f"{s.describe_params()}" + (f"  [{s.note}]" if s.note else ""))
                 if s.refit:
                     moved = [f"{e['label']}.{n} {v['before']:.4g} -> {v['after']:.4g}"
@@ -830,10 +829,10 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
     _aliases(ranking, c.eq_noise.sigma)
     found = []
     if pairs and ranking:
-        best = next((s for s in ranking if s.significant), None)
+        best = best_of(ranking)
         left = best.heldout if best is not None else scorer.base_cv
         if not consistent_with_noise(left, c.eq_noise.sigma, settings["at_floor"])[0]:
-            found = scorer.pairs(ranking)
+            found = scorer.pairs(ranking, best)
     windows = _worst_windows(c, window)
     cors = _correlations(c)
     elimination = scorer.elimination(critical_z(alpha, len(refit_comps))) if refit_comps else []
@@ -869,6 +868,16 @@ def _refit_components(model, refit) -> list:
     return out
 
 
+def best_of(ranking: list) -> EffectScore | None:
+    """The suggestion of a ranking: the first significant candidate that passes by its held-out error;
+    else, of those that pass only by taking a systematic mean away, the one that takes most of it."""
+    sig = [s for s in ranking if s.significant]
+    for s in sig:
+        if s.test.get("passes_by") != "mean":
+            return s
+    return max(sig, key=lambda s: s.test["mean"]["z"]) if sig else None
+
+
 def _aliases(ranking: list, sigma, *, top: int = 3) -> None:
     """Record, on the leading significant candidates, the others this trial cannot tell them from: their
     fitted changes correlate (``|r| >= 0.9``) and the held-out test between the two is not significant
@@ -876,6 +885,9 @@ def _aliases(ranking: list, sigma, *, top: int = 3) -> None:
     pool = [s for s in ranking if s.converged and s.fit.info.get("delta") is not None and s.improvement > 0
             and s.heldout is not None]
     lead = [s for s in pool if s.significant][:top]
+    best = best_of(ranking)
+    if best is not None and best in pool and best not in lead:
+        lead.append(best)
     if not lead:
         return
     vec = {}

@@ -490,13 +490,15 @@ class Scorer:
         return float(np.mean((emg_before ** 2 - emg_after ** 2) / self.sigma ** 2))
 
     # -- pairs ---------------------------------------------------------------------------
-    def pairs(self, ranking: list) -> list:
+    def pairs(self, ranking: list, best=None) -> list:
         """Pairs of the leading significant candidates fitted jointly (with the earlier effects) and tested
-        against the best single candidate; sorted by held-out improvement."""
-        pool = [s for s in ranking if s.significant][:PAIR_POOL]
+        against the best single candidate (``best``, default the first significant); sorted by held-out
+        improvement."""
+        sig = [s for s in ranking if s.significant]
+        best = best if best is not None else (sig[0] if sig else None)
+        pool = ([best] + [s for s in sig if s is not best])[:PAIR_POOL] if best is not None else []
         if len(pool) < 2:
             return []
-        best = pool[0]
         r_best = best.heldout / self.sigma
         out = []
         for a, b in itertools.combinations(pool, 2):
