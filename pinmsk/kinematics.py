@@ -85,6 +85,8 @@ class Filtering:
     has_grf: bool = False
     #: why the GRF got its filter: "" (asked or the kinematics' own), or the convention that chose it
     grf_convention: str = ""
+    #: the coordinates' low-pass: "butterworth" (pinmsk's, ``order``) or "opensim" (its ID tool's)
+    method: str = "butterworth"
 
     @property
     def applied_to(self) -> tuple[str, ...]:
@@ -97,6 +99,9 @@ class Filtering:
         def one(c):
             return "none" if c is None else f"{c:g} Hz"
         head = f"zero-lag Butterworth low-pass, order {self.order} (x2 forwards-backwards): "
+        if self.method == "opensim":
+            head = ("OpenSim's ID-tool filter (the trial padded by half its length at each end, third-order "
+                    "Butterworth IIR forwards and backwards, quintic spline through the padded samples): ")
         if not self.has_grf:
             return head + f"coordinates {one(self.cutoff)}" + (" (cutoff 0)" if self.cutoff is None else "")
         why = f" ({self.grf_convention})" if self.grf_convention else ""
@@ -106,7 +111,7 @@ class Filtering:
 
     def meta(self) -> dict:
         out = {"lowpass_cutoff_hz": 0.0 if self.cutoff is None else float(self.cutoff),
-               "lowpass_order": self.order}
+               "lowpass_order": 3 if self.method == "opensim" else self.order, "lowpass_method": self.method}
         if self.has_grf:
             out["grf_lowpass_cutoff_hz"] = 0.0 if self.grf_cutoff is None else float(self.grf_cutoff)
             if self.grf_convention:
@@ -320,14 +325,15 @@ def motion(model, trial, *, cutoff=DEFAULT_CUTOFF, signals: Iterable[str] | None
     return _motion(model, trial, cutoff=cutoff, signals=signals, missing_coordinates=missing_coordinates)[0]
 
 
-def _motion(model, trial, *, cutoff, signals=None, missing_coordinates="refuse") -> tuple[Motion, tuple[str, ...]]:
+def _motion(model, trial, *, cutoff, signals=None, missing_coordinates="refuse",
+            method: str = "butterworth") -> tuple[Motion, tuple[str, ...]]:
     """:func:`motion` and the notes on the OpenSim coordinates it filled or replaced (for :func:`prepare`)."""
     cmap = coordinate_map(model)
     check_coordinate_columns(model, trial)
     notes: tuple[str, ...] = ()
     if cmap is None:
         trial.require(model.coordinates)
-        q, v, a = trial.kinematics(model.coordinates, cutoff=cutoff_value(cutoff))
+        q, v, a = trial.kinematics(model.coordinates, cutoff=cutoff_value(cutoff), method=method)
         measured = model.coordinates
     else:
         # dependent joints (an exact OpenSim import): the trial holds OpenSim's coordinates, which are
@@ -335,7 +341,7 @@ def _motion(model, trial, *, cutoff, signals=None, missing_coordinates="refuse")
         measured = cmap.osim_coordinates
         fill, notes = source_coordinate_gaps(model, trial, missing_coordinates=missing_coordinates)
         source = trial.with_channels({c: np.full(trial.n_frames, x) for c, x in fill.items()}) if fill else trial
-        q_os, v_os, a_os = source.kinematics(measured, cutoff=cutoff_value(cutoff))
+        q_os, v_os, a_os = source.kinematics(measured, cutoff=cutoff_value(cutoff), method=method)
         q, v, a, q_os = cmap.expand(q_os, v_os, a_os, with_source=True)
         notes = _coupler_notes(cmap, trial, q_os) + notes
     names = [n for n in trial.names if n not in measured] if signals is None else list(signals)
@@ -532,10 +538,17 @@ def _grf_cutoff(grf_cutoff, cutoff, external_loads) -> tuple[float | None, str]:
             raise TrialError(f"grf_cutoff must be a frequency in Hz or one of {', '.join(GRF_CUTOFF_MODES)}; "
                              f"got {grf_cutoff!r}")
         if grf_cutoff == "auto" and external_loads is not None:
-            return None, ("OpenSim's ExternalLoads convention: loads applied unfiltered, as its ID tool "
-                          "applies them; --grf-cutoff HZ to filter them")
+            return None, ("OpenSim's ExternalLoads convention: coordinates filtered and loads applied "
+                          "unfiltered, as its ID tool does; --grf-cutoff HZ to filter both with pinmsk's filter")
         return cutoff, ""
     return cutoff_value(grf_cutoff), ""
+
+
+def coordinate_filter(grf_cutoff, external_loads) -> str:
+    """The coordinates' low-pass of :func:`prepare`: OpenSim's ID tool's under OpenSim's ExternalLoads
+    convention (``grf_cutoff="auto"`` with an ExternalLoads file), else pinmsk's Butterworth."""
+    return "opensim" if (isinstance(grf_cutoff, str) and grf_cutoff == "auto" and external_loads is not None) \
+        else "butterworth"
 
 
 def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | None = None,
@@ -560,7 +573,8 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
         Low-pass of the GRF.  "same": the kinematics' ``cutoff`` (the consistent choice for
         a plain trial).  "auto" (default): "same", except when the loads come from an OpenSim
         ExternalLoads file, which follows OpenSim's convention: its ID tool applies the loads
-        unfiltered (it filters the coordinates only), so the plain command reproduces OpenSim's
+        unfiltered and filters the coordinates its own way (:func:`coordinate_filter`,
+        :func:`~pinmsk.signals.filtering.lowpass_opensim`), so the plain command reproduces OpenSim's
         results; :class:`Filtering` says which convention ran.  0 leaves the GRF unfiltered.
     missing_coordinates : "refuse" | "default"
         An exact OpenSim import's coordinate the trial leaves out (not locked, not coupled):
@@ -583,7 +597,8 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
         return TrialInputs(trial, (), (), Filtering(None), ("a Motion was given: no filter applied",))
     if not isinstance(trial, Trial):
         raise TrialError(f"expected a Trial or a Motion, got {type(trial).__name__}")
-    mo, gap_notes = _motion(model, trial, cutoff=c, missing_coordinates=missing_coordinates)
+    method = coordinate_filter(grf_cutoff, external_loads)
+    mo, gap_notes = _motion(model, trial, cutoff=c, missing_coordinates=missing_coordinates, method=method)
     if external_loads is not None and not hasattr(external_loads, "loads"):
         external_loads = read_external_loads(external_loads)
     own = has_ground_reaction(trial)
@@ -591,7 +606,7 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
     if ground_reaction == "ignore":
         notes = ("ground reaction: left out on request (ground_reaction='ignore')",) if (
             own or grf is not None or external_loads is not None) else ()
-        return TrialInputs(mo, (), (), Filtering(c, grf_cutoff=gc), gap_notes + notes)
+        return TrialInputs(mo, (), (), Filtering(c, grf_cutoff=gc, method=method), gap_notes + notes)
     if grf is None and external_loads is not None and external_loads.datafile is not None and not own:
         grf = external_loads.datafile
     if grf is not None and own:
@@ -603,7 +618,7 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
     elif grf is not None:
         source = grf.meta.get("source", "grf trial")
     if grf is None and not own:
-        return TrialInputs(mo, (), (), Filtering(c, grf_cutoff=gc), gap_notes)
+        return TrialInputs(mo, (), (), Filtering(c, grf_cutoff=gc, method=method), gap_notes)
     data = grf if grf is not None else trial
     planar = is_planar(model)
     if external_loads is not None or model.nq != model.nv:
@@ -625,5 +640,5 @@ def prepare(model, trial, *, cutoff=DEFAULT_CUTOFF, grf: Trial | str | Path | No
         if dropped and any(np.any(np.abs(np.asarray(data[n])) > 0) for n in dropped):
             notes.append(f"planar model: out-of-plane GRF components ({', '.join(dropped)}) cannot act "
                          "on it and were left out")
-    filtering = Filtering(c, grf_cutoff=gc, has_grf=True, grf_convention=convention)
+    filtering = Filtering(c, grf_cutoff=gc, has_grf=True, grf_convention=convention, method=method)
     return TrialInputs(mo, ext, plist, filtering, tuple(notes), source)

@@ -828,12 +828,13 @@ class Trial:
 
     # -- filtering -------------------------------------------------------------
 
-    def kinematics(self, coordinates, *, cutoff: float | None = None, order: int = 4):
+    def kinematics(self, coordinates, *, cutoff: float | None = None, order: int = 4, method: str = "butterworth"):
         """Coordinates, speeds and accelerations ``(q, v, a)``, each (N, n).
 
         ``q`` are the ``coordinates`` channels (low-passed at ``cutoff`` Hz if
         given); ``v`` and ``a`` are derivatives of the quintic spline through
-        them (:func:`pinmsk.signals.filtering.differentiate`).  The coordinates must be
+        them (:func:`pinmsk.signals.filtering.differentiate`, whose ``method`` picks the low-pass:
+        pinmsk's Butterworth or OpenSim's ID tool's).  The coordinates must be
         present and finite, and rotational ones (by :func:`is_angular_name`)
         must look like radians.
         """
@@ -843,7 +844,7 @@ class Trial:
         angular = [i for i, c in enumerate(names) if is_angular_name(c)]
         self._check_radians([names[i] for i in angular],
                             block=block if len(angular) == len(names) else block[:, angular])
-        q, v, a = differentiate(self._time, block, cutoff=cutoff, order=order)
+        q, v, a = differentiate(self._time, block, cutoff=cutoff, order=order, method=method)
         return (q.copy() if q is block else q), v, a
 
     def smoothed(self, cutoff: float, *, order: int = 4, names=None) -> Trial:

@@ -12,7 +12,7 @@ Two walks of OpenSim's examples, each with RRA's own outputs beside it:
   and changed nothing else in the model.
 
 Every figure compared is a residual of inverse dynamics over the analysed frames of the diagnosis (the
-trial less 0.25 s at each end), with the coordinates low-passed at 6 Hz and the loads of OpenSim's
+trial less 0.25 s at each end), with the coordinates low-passed at 6 Hz by OpenSim's ID-tool filter and the loads of OpenSim's
 ExternalLoads file applied unfiltered, as OpenSim's ID tool applies them (the default of both
 ``pinmsk diagnose`` and ``pinmsk id``).  Needs ``../shared/data``; skips without it.
 """
@@ -83,19 +83,19 @@ def test_rra_adjusted_torso_is_pinmsks_com_offset(gait2354):
 
 def test_rra_torso_shift_answers_the_mean_moments_not_the_forces(gait2354):
     """Over RRA's window (0.75-1.25 s) with the IK kinematics unchanged, RRA's torso shift takes the mean
-    pelvis-tilt moment from -15.5 to -0.6 N m and pelvis-list from 5.6 to 1.5 N m; the mean forces stay
-    (pelvis_tx -5.7 -> -6.0 N): RRA's own FX -0.52 N comes from its kinematic changes."""
+    pelvis-tilt moment from -15.3 to -0.4 N m and pelvis-list from 5.5 to 1.4 N m; the mean forces stay
+    (pelvis_tx -5.4 -> -5.8 N): RRA's own FX -0.52 N comes from its kinematic changes."""
     d, model, adjusted, trial, xml = gait2354
     t = trial.time[(trial.time >= 0.75 - 1e-9) & (trial.time <= 1.25 + 1e-9)]
     coords = ("pelvis_tilt", "pelvis_list", "pelvis_tx")
     before, _ = _means(model, trial, xml, t, coords)
     after, _ = _means(adjusted, trial, xml, t, coords)
-    assert before["pelvis_tilt"] == pytest.approx(-15.46, abs=0.05)
-    assert after["pelvis_tilt"] == pytest.approx(-0.55, abs=0.05)
+    assert before["pelvis_tilt"] == pytest.approx(-15.29, abs=0.05)
+    assert after["pelvis_tilt"] == pytest.approx(-0.40, abs=0.05)
     assert abs(after["pelvis_tilt"]) < 1.42             # RRA's MZ -1.42 N m
-    assert before["pelvis_list"] == pytest.approx(5.55, abs=0.05)
-    assert after["pelvis_list"] == pytest.approx(1.49, abs=0.05)
-    assert after["pelvis_tx"] == pytest.approx(-6.02, abs=0.05)
+    assert before["pelvis_list"] == pytest.approx(5.50, abs=0.05)
+    assert after["pelvis_list"] == pytest.approx(1.43, abs=0.05)
+    assert after["pelvis_tx"] == pytest.approx(-5.78, abs=0.05)
 
 
 # -- Gait10dof18musc: the loop, and the torso offset RRA would make ------------------------------------
@@ -135,8 +135,8 @@ def test_subject01_walk_suggests_the_torso_offset_by_its_mean(gait10_torso):
 
 
 def test_subject01_torso_offset_brings_the_means_to_rra_level(gait10_torso, gait10, tmp_path):
-    """``com_offset:torso`` (dx = +2.5 cm: the torso COM from x -0.032 to -0.007 m) takes the mean
-    pelvis-tilt moment from -9.52 to -1.35 N m, below RRA's -3.38, the forces' means stay below RRA's, and
+    """``com_offset:torso`` (dx = +2.6 cm: the torso COM from x -0.032 to -0.007 m) takes the mean
+    pelvis-tilt moment from -9.52 to -1.56 N m, below RRA's -3.38, the forces' means stay below RRA's, and
     the kinematics stay as measured; the saved model's inverse dynamics gives the same means."""
     d, model, trial, xml = gait10
     r = gait10_torso
@@ -147,7 +147,7 @@ def test_subject01_torso_offset_brings_the_means_to_rra_level(gait10_torso, gait
     assert fit.values["dy"] == 0.0 and fit.values["dz"] == 0.0
     before, after = _report_means(r, 0), _report_means(r, 1)
     assert before["pelvis_tilt"] == pytest.approx(-9.52, abs=0.05)
-    assert after["pelvis_tilt"] == pytest.approx(-1.35, abs=0.1)
+    assert after["pelvis_tilt"] == pytest.approx(-1.56, abs=0.1)
     for c, rra in RRA_10DOF.items():
         assert abs(after[c]) <= abs(rra), c
     # the kinematics are the measured ones at both steps
@@ -190,7 +190,7 @@ def _follow(model, trial, xml, steps=6):
 def test_subject01_following_the_suggestions_reaches_rra(gait10, tmp_path):
     """Following pinmsk's suggestions alone (add the best, drop what elimination names, until nothing is
     suggested) adds the torso offset and stops; the saved model's inverse dynamics has each mean pelvis
-    residual at RRA's level or below (-1.35 N m, -2.32 N, -0.92 N against RRA's -3.38, -3.77, -2.85), with
+    residual at RRA's level or below (-1.56 N m, -2.36 N, -0.99 N against RRA's -3.38, -3.77, -2.85), with
     the kinematics as measured."""
     d, model, trial, xml = gait10
     r, adds, removes = _follow(model, trial, xml)
@@ -203,12 +203,12 @@ def test_subject01_following_the_suggestions_reaches_rra(gait10, tmp_path):
     first, last = r.residual_report()["steps"][0]["coordinates"], r.residual_report()["steps"][-1]["coordinates"]
     for c in RRA_10DOF:
         assert last[c]["mean"] == pytest.approx(means[c], abs=1e-6)
-    # RMS and peak: pelvis tilt 13.0 -> 9.1 N m and 34.1 -> 25.4 N m; the forces within 1 % and 2 %
-    assert last["pelvis_tilt"]["rms"] == pytest.approx(9.06, abs=0.05)
+    # RMS and peak: pelvis tilt 12.8 -> 8.8 N m and 32.8 -> 24.3 N m; the forces within 1.1 % and 2 %
+    assert last["pelvis_tilt"]["rms"] == pytest.approx(8.83, abs=0.05)
     assert last["pelvis_tilt"]["rms"] < 0.75 * first["pelvis_tilt"]["rms"]
     assert last["pelvis_tilt"]["peak"] < 0.8 * first["pelvis_tilt"]["peak"]
     for c in ("pelvis_tx", "pelvis_ty"):
-        assert last[c]["rms"] < 1.01 * first[c]["rms"] and last[c]["peak"] < 1.02 * first[c]["peak"], c
+        assert last[c]["rms"] < 1.015 * first[c]["rms"] and last[c]["peak"] < 1.02 * first[c]["peak"], c
     assert np.array_equal(r.steps[0].comparison.eq.motion_rows.q, r.steps[-1].comparison.eq.motion_rows.q)
 
 

@@ -430,7 +430,9 @@ class Diagnosis:
         if not self.elimination:
             return []
         zc = self.elimination[0]["critical_z"]
-        out = [f"effects in the model, each tested by leaving it out (the others refitted; held-out z, "
+        mean = any(e.get("z_mean") is not None for e in self.elimination)
+        out = [f"effects in the model, each tested by leaving it out (the others refitted; held-out z"
+               f"{', and z mean of the systematic mean that comes back without it' if mean else ''}, "
                f"significant above {zc:.2f}):"]
         lw = max(len(e["label"]) for e in self.elimination)
         for e in self.elimination:
@@ -441,7 +443,8 @@ class Diagnosis:
             alias = (f"  alias of {e['alias_of']} (r = {e['alias_correlation']:.3f})" if e["alias_of"] else "")
             held = "" if e["determined"] else "  [its parameters are not determined]"
             drop = f"  -> remove it: --remove {e['label']}" if e["suggest_remove"] else ""
-            out.append(f"  {e['label']:<{lw}}  z {e['z']:7.2f}  held-out gain {e['improvement']:+.3g}  "
+            zm = f"  z mean {e['z_mean']:6.2f}" if e.get("z_mean") is not None else ""
+            out.append(f"  {e['label']:<{lw}}  z {e['z']:7.2f}{zm}  held-out gain {e['improvement']:+.3g}  "
                        f"significant {sig}{alias}{held}{drop}")
         return out
 
@@ -454,7 +457,8 @@ class Diagnosis:
         others = [x["label"] for x in self.elimination if x["label"] != label]
         why = (f"; an alias of {e['alias_of']}, r = {e['alias_correlation']:.3f}" if e["alias_of"] else "")
         beside = f" beside {', '.join(others)}" if others else ""
-        return (f"; {label} is no longer significant{beside} (held-out z {e['z']:.2f} < {e['critical_z']:.2f} "
+        zm = f", z mean {e['z_mean']:.2f}" if e.get("z_mean") is not None else ""
+        return (f"; {label} is no longer significant{beside} (held-out z {e['z']:.2f}{zm} < {e['critical_z']:.2f} "
                 f"when it is left out{why}): remove it with --remove {label}")
 
     def verdict_line(self) -> str:

@@ -67,7 +67,7 @@ from typing import Mapping
 import numpy as np
 
 from ..effects._base import is_prismatic
-from ..kinematics import prepare
+from ..kinematics import coordinate_filter, prepare
 from ..signals.filtering import differentiate
 from ..io.external_loads import read_external_loads
 from ..io.tables import read_trial
@@ -308,12 +308,13 @@ def _realisations(models, group, n):
     return models[group].sample(np.random.default_rng(seed), n, REALISATIONS)
 
 
-def _kinematic(eq, models, cutoff):
+def _kinematic(eq, models, cutoff, method="butterworth"):
     t = eq.motion.t
     xi = _realisations(models, "coordinates", t.size)
     out = []
     for r in range(REALISATIONS):
-        dq, dv, da = differentiate(t, xi[r], cutoff=cutoff)
+        # the coordinates' own filter (OpenSim's under its ExternalLoads convention): its noise gain
+        dq, dv, da = differentiate(t, xi[r], cutoff=cutoff, method=method)
         out.append(eq.residual_for(eq.perturbed_motion(dq, dv, da)) - eq.e)
     return np.array(out)
 
@@ -387,7 +388,8 @@ def propagated_floor(eq, trial, *, mode: str, excitation_kind: str | None, cutof
     stated = [(c, float(v)) for g in fits.values() for c, v in _stated_of(g)]
     rate = fits["coordinates"].rate
     band_start = fits["coordinates"].band_start
-    kin = _kinematic(eq, fits, cutoff)
+    kin = _kinematic(eq, fits, cutoff, coordinate_filter(options.get("grf_cutoff", "auto"),
+                                                       options.get("external_loads")))
     used = dict(fits)
     direct_groups = [g for g in fits if g != "coordinates"]
     direct = _direct(eq, fits, trial, options, cutoff)

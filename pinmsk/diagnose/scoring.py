@@ -111,16 +111,19 @@ def cycle_edges(t: np.ndarray, q: np.ndarray, folds: int, *, min_corr: float = 0
 
 
 def consistent_with_noise(residual: np.ndarray, sigma: np.ndarray, allowance: float, z: float = 2.326):
-    """Whether a residual ``(n, C)`` is consistent with the noise floor ``sigma``: per channel and over all,
-    ``rms / sigma <= allowance * sqrt(1 + z sqrt(2 / n_eff))`` (the chi-square spread of a mean square of
-    ``n_eff`` effectively independent frames, AR(1), times an allowance for the uncertainty of the floor
-    estimate itself).  Returns ``(consistent, ratio, limit, ratios per channel)``."""
+    """Whether a residual ``(n, C)`` is consistent with the noise floor ``sigma``: over all channels and per
+    channel, ``rms / sigma <= allowance * sqrt(1 + z sqrt(2 / n_eff))`` (the chi-square spread of a mean
+    square of ``n_eff`` effectively independent frames, AR(1), times an allowance for the uncertainty of
+    the floor estimate itself), ``z`` at its one-sided level over all channels and, per channel, at that
+    level over the ``C`` channels (Bonferroni: ten channels are not ten chances for a false alarm).
+    Returns ``(consistent, ratio, limit, ratios per channel)``."""
     r = residual / sigma
-    n = r.shape[0]
+    n, C = r.shape
     rho = np.array([float(np.clip(np.dot(c[1:], c[:-1]) / max(np.dot(c, c), 1e-300), 0.0, 0.99)) for c in r.T])
     n_eff = np.maximum(n * (1 - rho) / (1 + rho), 2.0)
     ratios = np.sqrt(np.mean(r ** 2, axis=0))
-    limits = allowance * np.sqrt(1 + z * np.sqrt(2 / n_eff))
+    z_channel = float(norm.isf(norm.sf(z) / max(C, 1)))
+    limits = allowance * np.sqrt(1 + z_channel * np.sqrt(2 / n_eff))
     total = float(np.sqrt(np.mean(ratios ** 2)))
     limit_total = allowance * float(np.sqrt(1 + z * np.sqrt(2 / np.sum(n_eff))))
     ok = bool(total <= limit_total and np.all(ratios <= limits))

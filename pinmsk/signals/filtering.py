@@ -164,7 +164,51 @@ def _butterworth(order: int, wn: float) -> np.ndarray:
     return sos
 
 
-def differentiate(time, x, *, cutoff: float | None = None, order: int = 4):
+#: the coordinate filters of :func:`differentiate`: pinmsk's own, and OpenSim's ID tool's
+FILTER_METHODS = ("butterworth", "opensim")
+
+
+def lowpass_opensim(x, *, rate: float, cutoff: float) -> tuple[np.ndarray, int]:
+    """OpenSim's coordinate low-pass as its InverseDynamicsTool applies it: the trial padded at each end
+    by half its length (``Storage::pad(size / 2)``: a point reflection about the end sample, which keeps
+    the end value and slope, ``Signal::Pad``), then ``Signal::LowpassIIR``: a third-order Butterworth
+    filter (bilinear transform with pre-warped cut-off, ``wa = tan(pi fc T)``) run forwards and then
+    backwards, each pass started with its first three outputs equal to its inputs.
+
+    Returns ``(padded and filtered samples (N + 2 pad, ...), pad)``: the ID tool fits its quintic
+    spline through the padded samples (:func:`differentiate` with ``method="opensim"``)."""
+    from scipy.signal import lfilter, lfiltic  # here, not at import: scipy.signal costs ~1 s
+
+    x = np.asarray(x, dtype=float)
+    n = x.shape[0]
+    rate, cutoff = float(rate), float(cutoff)
+    if not (0 < cutoff < 0.5 * rate):
+        raise TrialError(f"cutoff {cutoff:g} Hz must be above 0 and below the Nyquist frequency "
+                         f"{0.5 * rate:g} Hz (rate {rate:g} Hz); choose a lower cutoff")
+    pad = n // 2
+    if n < 8:
+        raise TrialError(f"OpenSim's coordinate filter needs at least 8 samples, got {n}")
+    _check_finite(x, "lowpass input")
+    flat = x.reshape(n, -1)
+    s = np.concatenate((2 * flat[0:1] - flat[pad:0:-1], flat, 2 * flat[-1:] - flat[-2:-(pad + 2):-1]), axis=0)
+    wa = np.tan(np.pi * cutoff / rate)
+    wa2, wa3 = wa * wa, wa ** 3
+    den = (wa + 1.0) * (wa2 + wa + 1.0)
+    b = np.array([wa3, 3 * wa3, 3 * wa3, wa3]) / den
+    a = np.array([1.0, (3 * wa3 + 2 * wa2 - 2 * wa - 3) / den, (3 * wa3 - 2 * wa2 - 2 * wa + 3) / den,
+                  (wa - 1) * (wa2 - wa + 1) / den])
+
+    def one_pass(sig):
+        out = sig.copy()
+        zi = np.column_stack([lfiltic(b, a, y=sig[2::-1, k], x=sig[2::-1, k]) for k in range(sig.shape[1])])
+        out[3:], _ = lfilter(b, a, sig[3:], axis=0, zi=zi)
+        return out
+
+    y = one_pass(one_pass(s)[::-1])[::-1]
+    return y.reshape((y.shape[0],) + x.shape[1:]), pad
+
+
+def differentiate(time, x, *, cutoff: float | None = None, order: int = 4, method: str = "butterworth"):
     """Smoothed samples and first and second time derivatives of ``x``.
 
     Parameters
@@ -179,6 +223,11 @@ def differentiate(time, x, *, cutoff: float | None = None, order: int = 4):
         the time steps must then be uniform within :data:`pinmsk.signals.sampling.UNIFORM_TOLERANCE`.
     order : int
         Butterworth order used when ``cutoff`` is given.
+    method : "butterworth" or "opensim"
+        The low-pass when ``cutoff`` is given: :func:`lowpass` (``order``), or OpenSim's
+        InverseDynamicsTool's (:func:`lowpass_opensim`, whose spline is fitted through the padded
+        samples, as the tool's ``GCVSplineSet`` of degree 5 with no smoothing is, and evaluated at
+        ``time``).
 
     Returns
     -------
@@ -187,6 +236,8 @@ def differentiate(time, x, *, cutoff: float | None = None, order: int = 4):
         quintic interpolating spline through them, at ``time``; each with the
         shape of ``x``.
     """
+    if method not in FILTER_METHODS:
+        raise TrialError(f"the coordinate filter must be one of {', '.join(FILTER_METHODS)}; got {method!r}")
     t = np.asarray(time, dtype=float)
     x = np.asarray(x, dtype=float)
     if t.ndim != 1:
@@ -203,6 +254,16 @@ def differentiate(time, x, *, cutoff: float | None = None, order: int = 4):
     _check_finite(t, "time")
     check_increasing(t)
     _check_finite(x, "signal to differentiate")
+    if cutoff is not None and method == "opensim":
+        rate = uniform_rate(t)
+        y, pad = lowpass_opensim(x, rate=rate, cutoff=cutoff)
+        step = (t[-1] - t[0]) / (n - 1)
+        tp = np.concatenate((t[0] - step * np.arange(pad, 0, -1), t, t[-1] + step * np.arange(1, pad + 1)))
+        ops = _quintic_operators(tp)
+        c = ops.solve(y.reshape(tp.size, -1))
+        keep = slice(pad, pad + n)
+        return (y[keep].reshape(x.shape), (ops.d1 @ c)[keep].reshape(x.shape),
+                (ops.d2 @ c)[keep].reshape(x.shape))
     if cutoff is not None:
         rate = uniform_rate(t)
         x = lowpass(x, rate=rate, cutoff=cutoff, order=order)
