@@ -150,10 +150,18 @@ def test_opensim_external_loads_file_maps_plates_to_bodies(gait2d, tmp_path):
     a = inverse_dynamics_result(gait2d, kin, external_loads=xml)      # reads the datafile beside the XML
     # OpenSim's ExternalLoads convention: the loads unfiltered, as its ID tool applies them, and said so
     assert a.inputs.filtering.grf_cutoff is None and "ExternalLoads convention" in a.inputs.filtering.describe()
-    b = inverse_dynamics_result(gait2d, tr, grf_cutoff=0)
+    # ... and the coordinates filtered as its ID tool filters them
+    assert a.inputs.filtering.method == "opensim" and a.trial.meta["lowpass_method"] == "opensim"
     assert [p.body for p in a.inputs.plates] == ["foot_r", "foot_l"]
     assert "calcn_r" in a.inputs.plates[0].reason
-    np.testing.assert_allclose(a.trial["hip_r_moment"], b.trial["hip_r_moment"], atol=1e-6)
+    # an explicit GRF cut-off leaves OpenSim's convention: pinmsk's filter on the coordinates, and the
+    # same loads as the trial's own columns
+    a0 = inverse_dynamics_result(gait2d, kin, external_loads=xml, grf_cutoff=0)
+    b = inverse_dynamics_result(gait2d, tr, grf_cutoff=0)
+    assert a0.inputs.filtering.method == "butterworth"
+    np.testing.assert_allclose(a0.trial["hip_r_moment"], b.trial["hip_r_moment"], atol=1e-6)
+    # the two filters differ by less than their difference in order would allow to pass unseen
+    assert not np.allclose(a.trial["hip_r_moment"], b.trial["hip_r_moment"], atol=1e-6)
     # what cannot be honoured is refused by name
     with pytest.raises(TrialError, match="pelvis_frame"):
         read_external_loads(_external_loads_xml(tmp_path / "bad.xml", "walk_grf.mot", frame="pelvis_frame"))
