@@ -449,6 +449,13 @@ def cmd_view(args) -> int:
     return 0
 
 
+def cmd_run(args) -> int:
+    from ..tools import run_setup
+    for path in run_setup(args.setup, results_dir=args.results_dir):
+        print(f"wrote {path}")
+    return 0
+
+
 def cmd_batch(args) -> int:
     from ..pipeline import batch_cli
     summary = batch_cli(args.config, scheduler=args.scheduler, jobs=args.jobs)
@@ -745,6 +752,13 @@ def build_parser() -> argparse.ArgumentParser:
     _add_read_flags(s)
     _nonlinear_flag(s)
     s.set_defaults(func=cmd_view)
+
+    s = sub.add_parser("run", help="run an OpenSim setup file (InverseDynamicsTool, AnalyzeTool, ...): "
+                                   "results as OpenSim writes them")
+    s.add_argument("setup", help="OpenSim setup .xml (its paths resolve against its folder)")
+    s.add_argument("--results-dir", metavar="DIR", default=None,
+                   help="write the results in DIR instead of the setup's <results_directory>")
+    s.set_defaults(func=cmd_run)
 
     s = sub.add_parser("batch", help="run IK -> ID -> SO -> report over the trials of a config file")
     s.add_argument("config", help="TOML config listing trials (see pinmsk.pipeline)")

@@ -60,15 +60,20 @@ def make_results_folder(path: Path) -> Path:
     return output_folder(path)
 
 
-def load_setup_model(node, prop: str = "model_file", *, folder=None):
-    """The model the setup names (an ``.osim``, imported as :func:`pinmsk.model.load_model` does), and its path."""
-    from ..model import load_model
-
+def model_file(node, prop: str = "model_file", *, folder=None) -> Path:
+    """The ``.osim`` the setup names (resolved; a missing file is refused with its resolved path)."""
     path = node.file(prop, folder=folder)
     if path is None:
         raise node.error(prop, "no model named; give the .osim file to run")
+    return path
+
+
+def load_setup_model(node, path: Path, prop: str = "model_file"):
+    """The model at ``path`` (an ``.osim``, imported as :func:`pinmsk.model.load_model` does)."""
+    from ..model import load_model
+
     try:
-        return load_model(path), path
+        return load_model(path)
     except PinmskError as exc:
         raise node.error(prop, str(exc)) from None
 
@@ -96,17 +101,21 @@ def _is_translation(model, coordinate: str) -> bool:
     return "P" in model.pin.joints[j].shortname()[-2:] if j < model.pin.njoints else False
 
 
-def read_coordinates(node, prop: str, model, *, folder=None, degrees_prop: str | None = None) -> tuple[Trial, Path]:
-    """The coordinates file ``prop`` (``.mot`` / ``.sto``), its angles in radians (the file's ``inDegrees``;
-    ``degrees_prop`` names a setup flag that states it for a file whose header does not)."""
+def coordinates_file(node, prop: str, *, folder=None, degrees_prop: str | None = None) -> tuple[Path, bool | None]:
+    """The coordinates file ``prop`` (resolved) and what ``degrees_prop`` (a setup flag) says of its angles."""
     path = node.file(prop, folder=folder)
     if path is None:
         raise node.error(prop, "no coordinates file named")
     declared = None
-    if degrees_prop is not None:
-        flag = node.text(degrees_prop)
-        if flag is not None:
-            declared = node.flag(degrees_prop)
+    if degrees_prop is not None and node.text(degrees_prop) is not None:
+        declared = node.flag(degrees_prop)
+    return path, declared
+
+
+def read_coordinates(node, prop: str, path: Path, model, *, declared: bool | None = None,
+                     degrees_prop: str | None = None) -> Trial:
+    """The coordinates file (``.mot`` / ``.sto``), its angles in radians as its ``inDegrees`` says (or, for a
+    header that does not say, as ``declared``, the setup's ``degrees_prop``); a disagreement is refused."""
     try:
         header_says = read_sto_header(path).in_degrees if path.suffix.lower() in (".sto", ".mot") else None
     except PinmskError as exc:
@@ -122,7 +131,7 @@ def read_coordinates(node, prop: str, model, *, folder=None, degrees_prop: str |
         rot = set(rotational(model))
         trial = Trial(trial.time, {n: np.radians(trial[n]) if n in rot else trial[n] for n in trial.names},
                       meta=trial.meta)
-    return trial, path
+    return trial
 
 
 def lowpass_cutoff(node, prop: str) -> float | None:
@@ -216,7 +225,7 @@ class ForceChoice:
     excluded: tuple[str, ...]
 
 
-def exclude_forces(node, prop: str, model, model_path) -> ForceChoice:
+def exclude_forces(node, prop: str, words, model, model_path) -> ForceChoice:
     """Apply ``<forces_to_exclude>`` as OpenSim's ``DynamicsTool::disableModelForces`` does: the keywords
     ``All``, ``actuators`` (muscles among them) and ``Muscles`` (any case), else a force's name.
 
@@ -225,7 +234,6 @@ def exclude_forces(node, prop: str, model, model_path) -> ForceChoice:
     import did not carry (it would act in OpenSim) and a name that is no force of the model."""
     from ..io.osim import read_osim
 
-    words = node.words(prop)
     doc = read_osim(model_path)
     muscles = [m.name for m in doc.muscles]
     actuators = [a.name for a in doc.actuators]

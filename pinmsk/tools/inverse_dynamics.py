@@ -49,12 +49,11 @@ def run(setup, *, results_dir=None) -> list[Path]:
 
     node = setup.node
     folder = _common.input_folder(node)
-    model, model_path = _common.load_setup_model(node, folder=folder)
+    model_path = _common.model_file(node, folder=folder)
     start, end = _common.time_range(node)
-    choice = _common.exclude_forces(node, "forces_to_exclude", model, model_path)
     loads_path = node.file("external_loads_file", folder=folder)
-    coords, coords_path = _common.read_coordinates(node, "coordinates_file", model, folder=folder,
-                                                   degrees_prop="coordinates_in_degrees")
+    coords_path, declared = _common.coordinates_file(node, "coordinates_file", folder=folder,
+                                                     degrees_prop="coordinates_in_degrees")
     cutoff = _common.lowpass_cutoff(node, "lowpass_cutoff_frequency_for_coordinates")
     name = _common.output_name(node, "output_gen_force_file", "inverse_dynamics.sto")
     out_dir = _common.results_folder(node, results_dir)
@@ -62,8 +61,13 @@ def run(setup, *, results_dir=None) -> list[Path]:
         raise node.error("joints_to_report_body_forces", "joints' equivalent body forces are not computed by "
                                                          "pinmsk; leave it empty")
     node.ignore("output_body_forces_file")      # written only for joints_to_report_body_forces
+    exclude = node.words("forces_to_exclude")
     node.finish()
 
+    model = _common.load_setup_model(node, model_path)
+    choice = _common.exclude_forces(node, "forces_to_exclude", exclude, model, model_path)
+    coords = _common.read_coordinates(node, "coordinates_file", coords_path, model, declared=declared,
+                                      degrees_prop="coordinates_in_degrees")
     trial = _common.opensim_filtered(coords, cutoff, str(coords_path))
     kw = {}
     if loads_path is not None:
