@@ -36,14 +36,14 @@ analysis reads ``on``, ``start_time``, ``end_time``, ``step_interval`` (every n-
   an error.  Files ``<tool>_<analysis>_activation.sto`` (muscle activations and actuator controls)
   and ``<tool>_<analysis>_force.sto`` (muscle and actuator forces), named bare as OpenSim names them.
 * **MuscleAnalysis** (``OpenSim/Analyses/MuscleAnalysis.cpp``) -- ``muscle_list`` and
-  ``moment_arm_coordinate_list`` (``all`` or names), ``compute_moments`` false (the moments need
-  the muscle forces: true is refused).  Files ``<tool>_<analysis>_Length.sto`` and
-  ``..._MomentArm_<coord>.sto`` (geometric paths, OpenSim's path algorithm:
-  :func:`pinmsk.solvers.muscle_analysis.muscle_analysis`), and, when every muscle analysed has an
-  inextensible tendon, ``FiberLength``, ``NormalizedFiberLength``, ``TendonLength`` and
-  ``PennationAngle``.  OpenSim's other files (the fiber quantities of compliant tendons, fiber
-  velocities, forces and powers) depend on muscle states a kinematic analysis does not have: they
-  are not written, and a warning names them.
+  ``moment_arm_coordinate_list`` (``all`` or names), ``compute_moments`` (OpenSim's default false).
+  Files ``<tool>_<analysis>_Length.sto``, with ``compute_moments`` ``..._MomentArm_<coord>.sto``
+  (geometric paths, OpenSim's path algorithm: :func:`pinmsk.solvers.muscle_analysis.muscle_analysis`),
+  and, when every muscle analysed has an inextensible tendon (pinmsk's rigid-tendon fiber
+  kinematics are then OpenSim's), ``FiberLength``, ``NormalizedFiberLength``, ``TendonLength`` and
+  ``PennationAngle``.  OpenSim's other files (``Moment_<coord>``, the fiber quantities of compliant
+  tendons, fiber velocities, forces and powers) depend on muscle states and forces a kinematic
+  analysis does not have: they are not written, and a warning names them.
 """
 from __future__ import annotations
 
@@ -114,9 +114,7 @@ def _read_analysis(member) -> _Analysis | None:
     else:
         opts["muscles"] = member.words("muscle_list", ["all"])
         opts["coordinates"] = member.words("moment_arm_coordinate_list", ["all"])
-        if member.text("compute_moments") is not None and member.flag("compute_moments"):
-            raise member.error("compute_moments", "the muscles' moments need their forces, which a kinematic "
-                                                  "analysis does not have; set it false")
+        opts["moments"] = member.flag("compute_moments", False)
     member.finish()
     return _Analysis(member, kind, member.name or kind, start, end, step, opts) if on else None
 
@@ -216,7 +214,7 @@ def _static_optimization(a: _Analysis, model, trial, rows, actuators, kw, base):
 
     from ..components import Motion
     from ..dynamics import inverse_dynamics_array
-    from ..kinematics import prepare
+    from ..kinematics import coordinate_map, prepare, source_coordinates
 
     so = StaticOptimization(mode="activation" if a.options["physiology"] else "force",
                             exponent=a.options["exponent"], convention="opensim",
@@ -226,7 +224,9 @@ def _static_optimization(a: _Analysis, model, trial, rows, actuators, kw, base):
         # ends), the optimization on the frames analysed only
         inputs = prepare(model, trial, cutoff=0, missing_coordinates="default", **kw)
         mo = inputs.motion
-        tau = inverse_dynamics_array(model, mo, external=inputs.external)
+        tau = inverse_dynamics_array(model, mo, external=inputs.external, actuated=False)
+        if coordinate_map(model) is not None:         # OpenSim's coordinates' forces, as SO balances them
+            tau = source_coordinates(model, mo, tau)[2]
         sub = Motion(mo.t[rows], mo.q[rows], mo.v[rows], mo.a[rows],
                      {k: np.asarray(v)[rows] for k, v in mo.signals.items()})
         so.fit(model, sub, moments=tau[rows])
@@ -241,8 +241,46 @@ def _static_optimization(a: _Analysis, model, trial, rows, actuators, kw, base):
     force = np.column_stack([np.asarray(res[f"{m}_force"]) for m in muscles]
                             + [np.asarray(res[f"{n}_force"]) for n in acts])
     names = muscles + acts
+    ext_names, ext = _external_force_columns(model, kw, sub) if kw else ([], np.zeros((len(t), 0)))
     return [(f"{base}_{a.name}_activation.sto", _common.storage_trial(TITLE, t, names, act)),
-            (f"{base}_{a.name}_force.sto", _common.storage_trial(TITLE, t, names, force))]
+            (f"{base}_{a.name}_force.sto", _common.storage_trial(TITLE, t, names + ext_names,
+                                                                 np.hstack([force, ext])))]
+
+
+def _external_force_columns(model, kw, motion):
+    """The external loads as OpenSim's ForceReporter records them beside the actuators' forces:
+    ``<body>_<name>_F[xyz]`` (ground frame), ``_p[xyz]`` (the point in the body's frame) and ``_T[xyz]``, the
+    data file's columns interpolated at the frames (opensim-core ``ExternalForce::getRecordValues``)."""
+    import pinocchio as pin
+
+    loads, grf = kw["external_loads"], kw["grf"]
+    t = np.asarray(motion.t)
+    tg = np.asarray(grf.time, dtype=float)
+
+    def at(cols):
+        return np.column_stack([np.interp(t, tg, np.asarray(grf[c], dtype=float)) for c in cols])
+
+    pm = model.pin
+    pd = pm.createData()
+    names, blocks = [], []
+    for spec in loads.loads:
+        head = f"{spec.body}_{spec.name}_"
+        names += [head + f"F{x}" for x in "xyz"]
+        blocks.append(at(spec.columns("force")))
+        if spec.columns("point") is not None:
+            p = at(spec.columns("point"))
+            fid = model.frame_id(spec.body)
+            local = np.empty_like(p)
+            for k in range(t.size):
+                pin.framesForwardKinematics(pm, pd, np.asarray(motion.q[k]))
+                M = pd.oMf[fid]
+                local[k] = M.rotation.T @ (p[k] - M.translation)
+            names += [head + f"p{x}" for x in "xyz"]
+            blocks.append(local)
+        if spec.columns("torque") is not None:
+            names += [head + f"T{x}" for x in "xyz"]
+            blocks.append(at(spec.columns("torque")))
+    return names, np.hstack(blocks) if blocks else np.zeros((t.size, 0))
 
 
 def _pick(a: _Analysis, prop: str, words, offered, what: str):
@@ -277,15 +315,19 @@ def _muscle_analysis(a: _Analysis, model, trial, rows, base):
         return np.asarray(out[name])[rows] if name in out else np.zeros(n)
 
     files = [("Length", np.column_stack([col(f"{m}_length") for m in muscles]))]
-    for c in coords:
-        files.append((f"MomentArm_{c}", np.column_stack([col(f"{m}_moment_arm_{c}") for m in muscles])))
+    if a.options["moments"]:
+        for c in coords:
+            files.append((f"MomentArm_{c}", np.column_stack([col(f"{m}_moment_arm_{c}") for m in muscles])))
     idx = [all_muscles.index(m) for m in muscles]
     mtu = model.muscles.mtu
-    rigid = np.asarray(getattr(mtu, "_rigid", np.zeros(len(all_muscles), dtype=bool)), dtype=bool)
-    rigid = np.broadcast_to(rigid, (len(all_muscles),))
-    skipped = list(_STATE_FILES)
+    # OpenSim's ignore_tendon_compliance, carried by the import as the muscle set's tendon
+    rigid = np.full(len(all_muscles), getattr(model.muscles, "tendon", "compliant") == "rigid")
+    skipped = list(_STATE_FILES) + ([f"Moment_{c}" for c in coords] if a.options["moments"] else [])
     if rigid[idx].all():
         l_ce = np.column_stack([col(f"{m}_fiber_length") for m in muscles])
+        l_min = getattr(mtu, "l_min", None)
+        if l_min is not None:          # OpenSim clamps an inextensible tendon's fiber at its minimum length
+            l_ce = np.maximum(l_ce, np.asarray(l_min, dtype=float)[idx])
         l_opt = np.asarray(mtu.l_opt, dtype=float)[idx]
         alpha0 = np.asarray(mtu.pennation, dtype=float)[idx]
         h = l_opt * np.sin(alpha0)                       # constant fiber-width pennation
