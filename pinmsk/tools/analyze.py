@@ -61,8 +61,10 @@ __all__ = ["run", "ANALYSES", "TITLE"]
 
 #: The analyses of an AnalysisSet this runner runs.
 ANALYSES = ("StaticOptimization", "MuscleAnalysis")
-#: The first line OpenSim writes in StaticOptimization's files.
+#: The first line OpenSim writes in StaticOptimization's activation file, and in its force file (the
+#: storage of OpenSim's ForceReporter).
 TITLE = "Static Optimization"
+FORCE_TITLE = "ModelForces"
 
 #: MuscleAnalysis files that need muscle states (activation, fiber dynamics) or forces.
 _STATE_FILES = ("FiberVelocity", "NormFiberVelocity", "PennationAngularVelocity", "TendonForce", "FiberForce",
@@ -188,7 +190,8 @@ def run(setup, *, results_dir=None) -> list[Path]:
     for a in analyses:
         t = np.asarray(cut.time)
         r = rows - keep[0]
-        r = np.intersect1d(r, _common.reported_rows(t, a.start, a.end))[:: a.step]
+        r = np.intersect1d(r, _common.reported_rows(t, a.start, a.end))
+        r = _every(r + keep[0], a.step) - keep[0]
         if not r.size:
             raise a.node.error(None, f"no frame between its start_time {a.start:g} s and end_time {a.end:g} s "
                                      "within the tool's time range")
@@ -199,6 +202,17 @@ def run(setup, *, results_dir=None) -> list[Path]:
     folder_out = _common.make_results_folder(out_dir)
     return [_common.write_storage(tab, folder_out / name, precision=_digits(tab, decimals))
             for name, tab in tables]
+
+
+def _every(rows: np.ndarray, step: int) -> np.ndarray:
+    """The frames an analysis records with ``step_interval`` ``step``, as OpenSim's AnalyzeTool steps it
+    through the states: the first (its ``begin``), the last (its ``end``) and between them those whose
+    index in the (padded) states is a multiple of ``step`` (``Analysis::proceed``)."""
+    if step == 1 or rows.size <= 2:
+        return rows
+    k = np.arange(rows.size)
+    keep = (k == 0) | (k == rows.size - 1) | (rows % step == 0)
+    return rows[keep]
 
 
 def _digits(table, decimals: int) -> int:
@@ -243,7 +257,7 @@ def _static_optimization(a: _Analysis, model, trial, rows, actuators, kw, base):
     names = muscles + acts
     ext_names, ext = _external_force_columns(model, kw, sub) if kw else ([], np.zeros((len(t), 0)))
     return [(f"{base}_{a.name}_activation.sto", _common.storage_trial(TITLE, t, names, act)),
-            (f"{base}_{a.name}_force.sto", _common.storage_trial(TITLE, t, names + ext_names,
+            (f"{base}_{a.name}_force.sto", _common.storage_trial(FORCE_TITLE, t, names + ext_names,
                                                                  np.hstack([force, ext])))]
 
 
