@@ -216,3 +216,49 @@ def test_forces_excluded_as_opensim_names_them(tmp_path, words):
     ref = read_trial(d / "reference_outputs" / "InverseDynamics_Filtered" / "arm26_InverseDynamics.sto")
     assert max(_rms_of_peak(read_trial(files[0]), ref).values()) < 0.01
     assert read_sto_header(files[0]).in_degrees is False
+
+
+# -- OpenSim's layout for models from OpenSim, outside setups too ------------------------------------------
+
+def test_cli_id_of_an_opensim_model_writes_opensims_layout(tmp_path, capsys):
+    d = shared_folder(f"{MODELS}/Gait10dof18musc", "subject01.osim")
+    out = tmp_path / "id.sto"
+    assert main(["id", str(d / "subject01.osim"), str(d / "IK" / "subject01_walk_IK.mot"), "--external-loads",
+                 str(d / "ExperimentalData" / "subject01_walk_grf.xml"), "-o", str(out)]) == 0
+    ref = read_trial(d / "reference_outputs" / "ID" / "subject01_walk_ID.sto")
+    got = read_trial(out)
+    assert got.names == ref.names            # translations as forces, no coordinates before them
+    assert out.read_text().splitlines()[0] == "Inverse Dynamics Generalized Forces"
+    # pinmsk's own 6 Hz filter here (not OpenSim's): the same moments as the library's
+    from pinmsk.dynamics import inverse_dynamics
+    from pinmsk.model import load_model
+    lib = inverse_dynamics(load_model(d / "subject01.osim"), read_trial(d / "IK" / "subject01_walk_IK.mot"),
+                           external_loads=d / "ExperimentalData" / "subject01_walk_grf.xml")
+    np.testing.assert_allclose(got["pelvis_tx_force"], lib["pelvis_tx_moment"], rtol=1e-8, atol=1e-8)
+    np.testing.assert_allclose(got["knee_angle_r_moment"], lib["knee_angle_r_moment"], rtol=1e-8, atol=1e-8)
+
+
+def test_cli_so_of_an_opensim_model_writes_opensims_two_files(tmp_path, capsys):
+    d = shared_folder(f"{MODELS}/Arm26", "arm26.osim")
+    out = tmp_path / "so.sto"
+    assert main(["so", str(d / "arm26.osim"), str(d / "arm26_InverseKinematics.mot"), "--convention", "opensim",
+                 "--mode", "activation", "-o", str(out)]) == 0
+    printed = capsys.readouterr().out
+    act, force = tmp_path / "so_activation.sto", tmp_path / "so_force.sto"
+    assert f"wrote {act}" in printed and f"wrote {force}" in printed and not out.exists()
+    muscles = ["TRIlong", "TRIlat", "TRImed", "BIClong", "BICshort", "BRA"]
+    assert read_trial(act).names == tuple(muscles) and read_trial(force).names == tuple(muscles)
+    # the reference's layout (its values are an older OpenSim's: tests/test_tools_analyze.py)
+    ref = read_trial(d / "reference_outputs" / "StaticOptimization_Physiological" / "arm26_StaticOptimization_force.sto")
+    assert read_trial(force).names == ref.names
+
+
+def test_builtin_models_keep_pinmsks_layout(tmp_path):
+    from pinmsk.io.shared_data import shipped_trial
+    out = tmp_path / "id.sto"
+    assert main(["id", "forearm", str(shipped_trial("forearm_payload.csv")), "-o", str(out)]) == 0
+    names = read_trial(out).names
+    assert "elbow_flexion" in names and "elbow_flexion_moment" in names
+    assert main(["so", "forearm", str(shipped_trial("forearm_payload.csv")), "-o", str(tmp_path / "so.sto")]) == 0
+    so = read_trial(tmp_path / "so.sto")
+    assert any(n.endswith("_activation") for n in so.names) and any(n.endswith("_force") for n in so.names)

@@ -84,23 +84,6 @@ def rotational(model) -> tuple[str, ...]:
     return tuple(c for c, t in types.items() if t == "Rotational") if types else tuple(model.coordinates)
 
 
-def generalized_force_name(model, coordinate: str) -> str:
-    """OpenSim's label of a coordinate's generalized force: ``<coord>_moment`` (rotation) or ``<coord>_force``."""
-    types = model.meta.get("osim_motion_types") or {}
-    kind = types.get(coordinate)
-    if kind is None:
-        kind = "Translational" if _is_translation(model, coordinate) else "Rotational"
-    return f"{coordinate}_{'moment' if kind == 'Rotational' else 'force'}"
-
-
-def _is_translation(model, coordinate: str) -> bool:
-    try:
-        j = model.pin.getJointId(coordinate)
-    except Exception:                    # not a joint of the skeleton: a rotation unless it says so
-        return False
-    return "P" in model.pin.joints[j].shortname()[-2:] if j < model.pin.njoints else False
-
-
 def coordinates_file(node, prop: str, *, folder=None, degrees_prop: str | None = None) -> tuple[Path, bool | None]:
     """The coordinates file ``prop`` (resolved) and what ``degrees_prop`` (a setup flag) says of its angles."""
     path = node.file(prop, folder=folder)

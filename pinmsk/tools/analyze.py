@@ -55,16 +55,12 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import PinmskError
-from . import _common
+from . import _common, layout
 
-__all__ = ["run", "ANALYSES", "TITLE"]
+__all__ = ["run", "ANALYSES"]
 
 #: The analyses of an AnalysisSet this runner runs.
 ANALYSES = ("StaticOptimization", "MuscleAnalysis")
-#: The first line OpenSim writes in StaticOptimization's activation file, and in its force file (the
-#: storage of OpenSim's ForceReporter).
-TITLE = "Static Optimization"
-FORCE_TITLE = "ModelForces"
 
 #: MuscleAnalysis files that need muscle states (activation, fiber dynamics) or forces.
 _STATE_FILES = ("FiberVelocity", "NormFiberVelocity", "PennationAngularVelocity", "TendonForce", "FiberForce",
@@ -246,19 +242,9 @@ def _static_optimization(a: _Analysis, model, trial, rows, actuators, kw, base):
         so.fit(model, sub, moments=tau[rows])
     except PinmskError as exc:
         raise a.node.error(None, str(exc)) from None
-    res = so.result_
-    muscles = list(model.muscles.names)
-    acts = [x.name for x in so.actuators_]
-    t = np.asarray(res.time)
-    act = np.column_stack([np.asarray(res[f"{m}_activation"]) for m in muscles]
-                          + [np.asarray(res[f"{n}_control"]) for n in acts])
-    force = np.column_stack([np.asarray(res[f"{m}_force"]) for m in muscles]
-                            + [np.asarray(res[f"{n}_force"]) for n in acts])
-    names = muscles + acts
-    ext_names, ext = _external_force_columns(model, kw, sub) if kw else ([], np.zeros((len(t), 0)))
-    return [(f"{base}_{a.name}_activation.sto", _common.storage_trial(TITLE, t, names, act)),
-            (f"{base}_{a.name}_force.sto", _common.storage_trial(FORCE_TITLE, t, names + ext_names,
-                                                                 np.hstack([force, ext])))]
+    external = _external_force_columns(model, kw, sub) if kw else None
+    act, force = layout.so_tables(model, so.result_, [x.name for x in so.actuators_], external=external)
+    return [(f"{base}_{a.name}_activation.sto", act), (f"{base}_{a.name}_force.sto", force)]
 
 
 def _external_force_columns(model, kw, motion):

@@ -32,13 +32,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.opensim_setup import SetupError
-from . import _common
+from . import _common, layout
 
-__all__ = ["run", "TITLE"]
-
-#: The first line OpenSim writes in the generalized forces file.
-TITLE = "Inverse Dynamics Generalized Forces"
+__all__ = ["run"]
 
 
 def run(setup, *, results_dir=None) -> list[Path]:
@@ -88,13 +84,7 @@ def run(setup, *, results_dir=None) -> list[Path]:
         np.asarray(trial.time)[keep], trial.names, np.asarray(trial.values)[keep], meta=dict(trial.meta))
     res = inverse_dynamics_result(choice.model, cut, cutoff=0, components=choice.components,
                                   missing_coordinates="default", **kw)
-    out = res.trial
-    coordinates = out.names[: out.n_channels // 2]
-    forces = np.column_stack([out[f"{c}_moment"] for c in coordinates])[rows - keep[0]]
-    table = _common.storage_trial(TITLE, np.asarray(out.time)[rows - keep[0]],
-                                  [_common.generalized_force_name(model, c) for c in coordinates], forces)
+    table = layout.id_table(model, res.trial, rows=rows - keep[0])
     folder_out = _common.make_results_folder(out_dir)
     return [_common.write_storage(table, folder_out / name)]
 
-
-__all__ += ["SetupError"]
