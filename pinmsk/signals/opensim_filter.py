@@ -61,17 +61,16 @@ def iir_coefficients(rate: float, cutoff: float) -> tuple[np.ndarray, np.ndarray
 
 
 def _one_pass(num, den, x: np.ndarray) -> np.ndarray:
-    """One forward pass: ``y[0:3] = x[0:3]``, then the recursion from sample 3 on."""
-    from scipy.signal import lfilter, lfiltic
-
+    """One forward pass: ``y[0:3] = x[0:3]``, then the recursion from sample 3 on, every column at once."""
     y = np.array(x, dtype=float)
     if x.shape[0] <= 3:
         return y
-    flat = x.reshape(x.shape[0], -1)
-    out = y.reshape(x.shape[0], -1)
-    for j in range(flat.shape[1]):          # the initial state differs per column
-        zi = lfiltic(num, den, y=flat[2::-1, j], x=flat[2::-1, j])
-        out[3:, j], _ = lfilter(num, den, flat[3:, j], zi=zi)
+    b0, b1, b2, b3 = num
+    _, a1, a2, a3 = den
+    # the feed-forward part at once, the feedback sample by sample (three multiply-adds per row)
+    ff = b0 * x[3:] + b1 * x[2:-1] + b2 * x[1:-2] + b3 * x[:-3]
+    for i in range(3, x.shape[0]):
+        y[i] = ff[i - 3] - a1 * y[i - 1] - a2 * y[i - 2] - a3 * y[i - 3]
     return y
 
 

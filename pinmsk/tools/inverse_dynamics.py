@@ -60,7 +60,8 @@ def run(setup, *, results_dir=None) -> list[Path]:
     exclude = node.words("forces_to_exclude")
     node.finish()
 
-    model = _common.load_setup_model(node, model_path)
+    # the muscles apply no force here (exclude_forces refuses a setup where they would): not imported
+    model = _common.load_setup_model(node, model_path, muscles=False)
     choice = _common.exclude_forces(node, "forces_to_exclude", exclude, model, model_path)
     coords = _common.read_coordinates(node, "coordinates_file", coords_path, model, declared=declared,
                                       degrees_prop="coordinates_in_degrees")

@@ -6,8 +6,10 @@ default: the runners of :mod:`pinmsk.tools` and the commands ``pinmsk id`` and `
 Built-in models keep pinmsk's layout (:func:`pinmsk.io.tables.write_trial` of the result).
 
 * inverse dynamics (opensim-core ``InverseDynamicsTool.cpp``): ``time`` and each coordinate's
-  generalized force, ``<coord>_moment`` for a rotation and ``<coord>_force`` for a translation, in
-  OpenSim's coordinate order, no coordinates before them; title ``Inverse Dynamics Generalized Forces``;
+  generalized force, ``<coord>_moment`` for a rotation and ``<coord>_force`` for a translation, no
+  coordinates before them, in OpenSim 4's multibody-tree order (``getCoordinatesInMultibodyTreeOrder``:
+  the joints by their child body's depth below the ground, joints of one depth in the model's order;
+  :func:`tree_order`); title ``Inverse Dynamics Generalized Forces``;
 * static optimization (``StaticOptimization.cpp``): two files, ``..._activation`` (each muscle's
   activation, then each actuator's control) and ``..._force`` (each muscle's and actuator's force),
   their columns the bare muscle and actuator names.
@@ -20,7 +22,7 @@ import numpy as np
 
 from ..trial import Trial
 
-__all__ = ["is_opensim_model", "generalized_force_name", "id_table", "so_tables", "so_paths",
+__all__ = ["is_opensim_model", "generalized_force_name", "tree_order", "id_table", "so_tables", "so_paths",
            "ID_TITLE", "SO_TITLE", "FORCE_TITLE"]
 
 #: First lines OpenSim writes: the ID tool's file, StaticOptimization's activation file, and its force
@@ -54,12 +56,46 @@ def _prismatic(model, coordinate: str) -> bool:
     return "Prismatic" in name or name.startswith("JointModelP")
 
 
+def tree_order(model, coordinates) -> list[str]:
+    """``coordinates`` in OpenSim 4's multibody-tree order: Simbody's graph of the model's joints built a
+    depth at a time from the ground (a joint's depth is its child body's), joints of one depth in the
+    order of the model's JointSet, each joint's coordinates in its own order.  Unchanged when the model's
+    ``.osim`` cannot be read (a sidecar whose source file is gone)."""
+    from ..io.osim import read_osim
+
+    src = model.meta.get("osim") or model.meta.get("source_osim")
+    try:
+        doc = read_osim(src)
+    except Exception:                # the order is a courtesy of the layout, never a reason to fail
+        return list(coordinates)
+    depth = {doc.ground.name: 0}
+    joints = list(doc.joints)
+    links = []
+    for j in joints:
+        try:
+            parent, child = doc.frame_body(j.parent_frame)[0].name, doc.frame_body(j.child_frame)[0].name
+        except Exception:
+            return list(coordinates)
+        links.append((parent, child) if not j.reverse else (child, parent))
+    for _ in range(len(joints)):
+        for parent, child in links:
+            if parent in depth and child not in depth:
+                depth[child] = depth[parent] + 1
+    rank = {}
+    for k, (j, (_, child)) in enumerate(sorted(zip(joints, links),
+                                               key=lambda jl: depth.get(jl[1][1], len(joints) + 1))):
+        for c in j.coordinates:
+            rank.setdefault(c.name, (k, len(rank)))
+    known = [c for c in coordinates if c in rank]
+    return sorted(known, key=rank.get) + [c for c in coordinates if c not in rank]
+
+
 def id_table(model, trial: Trial, *, rows=None, keep_meta: bool = False) -> Trial:
     """OpenSim's generalized forces table from an inverse dynamics result's trial (``<coord>`` then
     ``<coord>_moment`` channels, :func:`pinmsk.dynamics.inverse_dynamics_result`): the forces only, named
     by :func:`generalized_force_name`; ``rows`` selects frames; ``keep_meta`` keeps the analysis' record
     (filter, loads) as header fields after the title."""
-    coordinates = [n for n in trial.names if f"{n}_moment" in trial.names]
+    coordinates = tree_order(model, [n for n in trial.names if f"{n}_moment" in trial.names])
     idx = slice(None) if rows is None else np.asarray(rows)
     forces = np.column_stack([np.asarray(trial[f"{c}_moment"]) for c in coordinates])[idx]
     meta = {**(dict(trial.meta) if keep_meta else {}), "name": ID_TITLE}
