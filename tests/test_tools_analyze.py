@@ -3,7 +3,7 @@
 Against OpenSim 4.x (the opensim peer) running the same setup: Arm26's ``arm26_Setup_StaticOptimization.xml``
 unchanged (and in force mode), the Working_with_Static_Optimization model and strong actuators on the walk
 (a setup written here: the tutorial ships none), and MuscleAnalysis of both models; against the reference
-outputs Arm26 ships (an older OpenSim, whose muscles' activations went down to 0 where OpenSim 4.x stops
+outputs Arm26 ships (an older OpenSim, whose muscles' activations went down to 0 where OpenSim 4.x ends
 at their min_control 0.01).  Needs ``../shared/data`` and ``opensim``; skips cleanly without them.
 """
 from __future__ import annotations
@@ -65,7 +65,7 @@ def test_arm26_static_optimization_setup_matches_opensim(tmp_path, physiology):
 
 
 def test_arm26_static_optimization_against_the_shipped_reference(tmp_path):
-    # the setup unchanged: the older OpenSim let activations go to 0 where OpenSim 4.x and pinmsk stop at the
+    # the setup unchanged: the older OpenSim let activations go to 0 where OpenSim 4.x and pinmsk end at the
     # muscles' min_control 0.01, which moves the others too: above 0.05 they agree within 0.06 (measured
     # 0.055; with min_control 0 in the model, 0.0204: tests/test_osim_so.py; against OpenSim 4.x, 0.0061 above)
     d = shared_folder(f"{MODELS}/Arm26", "arm26_Setup_StaticOptimization.xml")
