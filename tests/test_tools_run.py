@@ -208,6 +208,12 @@ def test_missing_file_is_refused_with_its_resolved_path(tmp_path, capsys):
     assert str(setup.parent) in err or "/Arm26/nowhere.mot" in err
 
 
+def test_a_time_range_outside_the_data_is_refused(tmp_path, capsys):
+    setup = _arm26_setup(tmp_path, lambda t: t.replace("0.00000000       1.00000000 </time_range>",
+                                                       "5 6 </time_range>"))
+    _refused(tmp_path, capsys, setup, "<time_range>", "5-6 s lies outside")
+
+
 def test_missing_setup_is_refused(tmp_path, capsys):
     _refused(tmp_path, capsys, tmp_path / "none.xml", "none.xml", "not found")
 

@@ -203,6 +203,13 @@ def time_range(node, prop: str = "time_range") -> tuple[float, float]:
     return float(r[0]), float(r[1])
 
 
+def check_range(node, prop: str, time, start: float, end: float) -> None:
+    """Refuse a time range that misses the data altogether (naming the property and the data's span)."""
+    t = np.asarray(time, dtype=float)
+    if start > t[-1] or end < t[0]:
+        raise node.error(prop, f"{start:g}-{end:g} s lies outside the coordinates' {t[0]:.6g}-{t[-1]:.6g} s")
+
+
 def reported_rows(time: np.ndarray, start: float, end: float) -> np.ndarray:
     """The rows OpenSim's tools report for ``[start, end]`` on ``time``: from the last row at or before
     the start to the last row at or before the end (``Storage::findIndex``), the range clipped to the data."""

@@ -164,6 +164,7 @@ def run(setup, *, results_dir=None) -> list[Path]:
             except PinmskError as exc:
                 raise node.error("force_set_files", str(exc)) from None
     coords = _common.read_coordinates(node, "coordinates_file", coords_path, model)
+    _common.check_range(node, "initial_time", coords.time, start, end)
     trial = _common.opensim_filtered(coords, cutoff, str(coords_path))
     kw = {}
     keep = np.arange(trial.n_frames)

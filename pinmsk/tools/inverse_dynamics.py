@@ -65,6 +65,7 @@ def run(setup, *, results_dir=None) -> list[Path]:
     choice = _common.exclude_forces(node, "forces_to_exclude", exclude, model, model_path)
     coords = _common.read_coordinates(node, "coordinates_file", coords_path, model, declared=declared,
                                       degrees_prop="coordinates_in_degrees")
+    _common.check_range(node, "time_range", coords.time, start, end)
     trial = _common.opensim_filtered(coords, cutoff, str(coords_path))
     kw = {}
     if loads_path is not None:
