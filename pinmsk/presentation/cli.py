@@ -190,6 +190,9 @@ def cmd_id(args) -> int:
         res = inverse_dynamics_result(model, trial, **_inputs(args), progress=bar)
     print(res.report())
     out = res.trial
+    from ..tools.layout import id_table, is_opensim_model
+    if is_opensim_model(model):          # OpenSim's ID file: generalized forces only, by motion type
+        out = id_table(model, out, keep_meta=True)
     _write(out, args.output, args.precision)
     _plot(args, out, [n for n in moment_channels(model.coordinate_order) if n in out]    # OpenSim's, with a map
           or [n for n in out.names if n.endswith("_moment")], "inverse_dynamics", "moment (N m)")
@@ -249,8 +252,9 @@ def _report_results(args, model, trial, result, title, text):
         print(f"wrote {args.report}")
 
 
-def _run_solver(args, solver, total: int | None, label: str, title: str) -> int:
-    """Fit a muscle-redundancy solver on the trial with a progress bar, then write and report."""
+def _run_solver(args, solver, total: int | None, label: str, title: str, *, opensim_files: bool = False) -> int:
+    """Fit a muscle-redundancy solver on the trial with a progress bar, then write and report
+    (``opensim_files``: a model from OpenSim gets OpenSim's activation and force files)."""
     model = _model(args)
     trial = _read(args.trial, model, args)
     kw = _inputs(args)
@@ -261,7 +265,13 @@ def _run_solver(args, solver, total: int | None, label: str, title: str) -> int:
         solver.fit(model, trial, progress=bar, **kw)
     text = solver.report()
     print(text)
-    _write(solver.result_, args.output, args.precision)
+    from ..tools.layout import is_opensim_model, so_paths, so_tables
+    if opensim_files and is_opensim_model(model):
+        tables = so_tables(model, solver.result_, [a.name for a in solver.actuators_])
+        for path, table in zip(so_paths(args.output), tables):
+            _write(table, path, args.precision)
+    else:
+        _write(solver.result_, args.output, args.precision)
     _report_results(args, model, trial, solver.result_, title, text)
     return 0
 
@@ -271,7 +281,7 @@ def cmd_so(args) -> int:
     dofs = [d.strip() for d in args.dofs.split(",") if d.strip()] if args.dofs else None
     so = StaticOptimization(**_so_options(args), minmax=args.minmax, dofs=dofs, actuators=args.actuators,
                             convention=args.convention)
-    return _run_solver(args, so, None, "SO", "static_optimization")
+    return _run_solver(args, so, None, "SO", "static_optimization", opensim_files=True)
 
 
 def cmd_fso(args) -> int:
@@ -449,6 +459,13 @@ def cmd_view(args) -> int:
     return 0
 
 
+def cmd_run(args) -> int:
+    from ..tools import run_setup
+    for path in run_setup(args.setup, results_dir=args.results_dir):
+        print(f"wrote {path}")
+    return 0
+
+
 def cmd_batch(args) -> int:
     from ..pipeline import batch_cli
     summary = batch_cli(args.config, scheduler=args.scheduler, jobs=args.jobs)
@@ -545,7 +562,9 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("id", help="inverse dynamics of a trial: <coord>_moment channels")
     s.add_argument("model")
     s.add_argument("trial", help="trial file (.csv with a time column, .sto or .mot)")
-    s.add_argument("-o", "--output", required=True, help="output .sto or .csv")
+    s.add_argument("-o", "--output", required=True,
+                   help="output .sto or .csv (an OpenSim model's as OpenSim's ID tool writes it: the "
+                        "generalized forces only, <coord>_moment and <coord>_force for translations)")
     _precision_flag(s)
     input_flags(s)
     s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
@@ -605,7 +624,8 @@ def build_parser() -> argparse.ArgumentParser:
         _add_read_flags(s)
         _nonlinear_flag(s)
 
-    s = sub.add_parser("so", help="static optimization: muscle forces and activations frame by frame")
+    s = sub.add_parser("so", help="static optimization: muscle forces and activations frame by frame "
+                                  "(an OpenSim model's in OpenSim's two files, OUT_activation and OUT_force)")
     so_flags(s)
     s.add_argument("--minmax", action="store_true", help="min/max criterion (thesis Eq. 2.13) as an epigraph LP")
     s.add_argument("--moments", choices=["id", "measured"], default="id",
@@ -745,6 +765,13 @@ def build_parser() -> argparse.ArgumentParser:
     _add_read_flags(s)
     _nonlinear_flag(s)
     s.set_defaults(func=cmd_view)
+
+    s = sub.add_parser("run", help="run an OpenSim setup file (InverseDynamicsTool, AnalyzeTool, ...): "
+                                   "results as OpenSim writes them")
+    s.add_argument("setup", help="OpenSim setup .xml (its paths resolve against its folder)")
+    s.add_argument("--results-dir", metavar="DIR", default=None,
+                   help="write the results in DIR instead of the setup's <results_directory>")
+    s.set_defaults(func=cmd_run)
 
     s = sub.add_parser("batch", help="run IK -> ID -> SO -> report over the trials of a config file")
     s.add_argument("config", help="TOML config listing trials (see pinmsk.pipeline)")
