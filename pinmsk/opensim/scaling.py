@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import copy
 import difflib
-import io
+import warnings
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -49,10 +49,11 @@ from ..io.output_files import atomic_write
 from .paths import GeometricPaths, path_specs
 from .skeleton import OsimKinematics
 
-__all__ = ["ScaleError", "BodyScale", "Measurement", "ManualScale", "MeasurementResult", "ScaleFactors",
+__all__ = ["ScaleError", "ScaleWarning", "BodyScale", "Measurement", "ManualScale", "MeasurementResult", "ScaleFactors",
            "read_osim_tree", "read_marker_set", "with_markers", "model_marker_positions", "frame_range",
            "scale_factors", "scale_model", "write_osim_tree", "write_scale_set", "total_mass",
-           "measurement_from_node", "manual_scale_from_node", "SCALING_STEPS"]
+           "measurement_from_node", "manual_scale_from_node", "SCALING_STEPS", "model_markers",
+           "delete_unused_markers", "coordinate_defaults", "coordinate_paths", "move_markers", "write_marker_set"]
 
 #: The steps of ``scaling_order``.
 SCALING_STEPS = ("measurements", "manualScale")
@@ -66,6 +67,10 @@ _UNSCALABLE_JOINTS = ("EllipsoidJoint", "ScapulothoracicJoint", "ConstantCurvatu
 
 class ScaleError(PinmskError):
     """A model, marker set or scale setup that cannot be scaled as asked (named element, marker, body)."""
+
+
+class ScaleWarning(UserWarning):
+    """A part of a scale setup that OpenSim skips silently and pinmsk skips with this warning."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -454,13 +459,24 @@ def frame_range(time: np.ndarray, start: float, end: float) -> tuple[int, int]:
 def scale_factors(root: ET.Element, *, measurements: Sequence[Measurement] = (),
                   manual: Sequence[ManualScale] = (), order: Sequence[str] = ("measurements",),
                   markers: Mapping[str, np.ndarray] | None = None, time: np.ndarray | None = None,
-                  time_range: tuple[float, float] = (-1.0, -1.0), source: str = "the marker file") -> ScaleFactors:
+                  time_range: tuple[float, float] = (-1.0, -1.0), source: str = "the marker file",
+                  unknown_bodies: str = "error") -> ScaleFactors:
     """The scale factors of every physical frame (``ModelScaler::processModel``).
 
     ``markers``: ``{marker: (N, 3)}`` experimental positions (m) at ``time`` (N,); needed when a
     ``measurements`` step applies a measurement.  A marker missing from the model or the data, a body or
-    segment the model does not have, or a step other than ``measurements`` / ``manualScale`` is refused.
+    segment the model does not have, or a step other than ``measurements`` / ``manualScale`` is refused;
+    with ``unknown_bodies="warn"`` a body or segment the model does not have is skipped with a warning, as
+    OpenSim skips it silently (its own Gait2354 setup scales patellae the model does not have).
     """
+    if unknown_bodies not in ("error", "warn"):
+        raise ScaleError(f"unknown_bodies must be 'error' or 'warn', got {unknown_bodies!r}")
+
+    def unknown(message):
+        if unknown_bodies == "error":
+            raise ScaleError(message)
+        warnings.warn(message + "; skipped, as OpenSim skips it", ScaleWarning, stacklevel=3)
+
     model = _model(root)
     frames = _physical_frames(model)
     segments = tuple(f.get("name", "") for f in frames)
@@ -479,9 +495,9 @@ def scale_factors(root: ET.Element, *, measurements: Sequence[Measurement] = (),
                 for b in m.bodies:
                     if b.body not in known:
                         close = difflib.get_close_matches(b.body, bodies, n=1)
-                        raise ScaleError(f"measurement '{m.name}': body '{b.body}' is not in the model"
-                                         + (f"; did you mean '{close[0]}'?" if close else "")
-                                         + f" (bodies: {', '.join(bodies)})")
+                        unknown(f"measurement '{m.name}': body '{b.body}' is not in the model"
+                                + (f"; did you mean '{close[0]}'?" if close else "")
+                                + f" (bodies: {', '.join(bodies)})")
                 if not m.pairs:
                     continue
                 if model_pos is None:
@@ -499,8 +515,8 @@ def scale_factors(root: ET.Element, *, measurements: Sequence[Measurement] = (),
                     continue
                 if ms.segment not in known:
                     close = difflib.get_close_matches(ms.segment, segments, n=1)
-                    raise ScaleError(f"manual scale: segment '{ms.segment}' is not in the model"
-                                     + (f"; did you mean '{close[0]}'?" if close else ""))
+                    unknown(f"manual scale: segment '{ms.segment}' is not in the model"
+                            + (f"; did you mean '{close[0]}'?" if close else ""))
                 for k, s in enumerate(segments):
                     if s == ms.segment:
                         factors[k] = ms.factors
@@ -838,3 +854,88 @@ def _multiply_function_el(holder: ET.Element, f: ET.Element, factor: float) -> N
     ET.SubElement(mf, "scale").text = _fmt(factor)
     holder.remove(f)
     holder.insert(idx, mf)
+
+
+# --------------------------------------------------------------------------------------------
+# marker placement on the model tree (the pose is solved elsewhere)
+# --------------------------------------------------------------------------------------------
+def model_markers(root: ET.Element) -> list[dict]:
+    """The model's markers: ``{"name", "frame", "location" (3,), "fixed"}`` in marker-set order."""
+    out = []
+    ms = _model(root).find("MarkerSet/objects")
+    for m in (ms if ms is not None else []):
+        if m.tag != "Marker":
+            continue
+        out.append({"name": m.get("name"), "frame": (m.findtext("socket_parent_frame") or "").strip(),
+                    "location": _numbers(m.find("location"), f"marker '{m.get('name')}' <location>", 3),
+                    "fixed": (m.findtext("fixed") or "false").strip().lower() in ("true", "1")})
+    return out
+
+
+def delete_unused_markers(root: ET.Element, keep: Iterable[str]) -> tuple[ET.Element, list[str]]:
+    """A copy without the markers not named in ``keep`` (``Model::deleteUnusedMarkers``), and their names."""
+    new = copy.deepcopy(root)
+    keep = set(keep)
+    ms = _model(new).find("MarkerSet/objects")
+    gone = []
+    for m in list(ms if ms is not None else []):
+        if m.tag == "Marker" and m.get("name") not in keep:
+            ms.remove(m)
+            gone.append(m.get("name"))
+    return new, gone
+
+
+def coordinate_defaults(root: ET.Element) -> dict[str, float]:
+    """``{coordinate: default value}`` in OpenSim's order."""
+    return {c.name: float(c.default_value) for c in _doc(root).coordinates}
+
+
+def coordinate_paths(root: ET.Element) -> dict[str, str]:
+    """``{coordinate: "/jointset/<joint>/<coordinate>"}`` (OpenSim's state names without ``/value``)."""
+    out = {}
+    for j in _doc(root).joints:
+        for c in j.coordinates:
+            out[c.name] = f"/jointset/{j.name}/{c.name}"
+    return out
+
+
+def move_markers(root: ET.Element, q: Mapping[str, float], targets: Mapping[str, np.ndarray]) -> tuple[ET.Element, list[str]]:
+    """A copy with every marker that is not ``fixed`` and has a finite target moved, in its own frame, onto
+    its target (ground, m) at the pose ``q`` (``{coordinate: value}``; others at their defaults), as
+    ``MarkerPlacer::moveModelMarkersToPose`` moves them; and the names moved."""
+    from .skeleton import _chain
+    new = copy.deepcopy(root)
+    doc = _doc(new)
+    kin = OsimKinematics(doc)
+    poses = kin.body_poses({c: np.array([float(v)]) for c, v in q.items()})
+    frames = {}
+    for m in doc.markers:
+        body, chain = doc.frame_body(m.frame)
+        frames[m.name] = poses[body.name][0] @ _chain(chain)
+    moved = []
+    ms = _model(new).find("MarkerSet/objects")
+    for m in (ms if ms is not None else []):
+        if m.tag != "Marker" or (m.findtext("fixed") or "false").strip().lower() in ("true", "1"):
+            continue
+        y = targets.get(m.get("name"))
+        if y is None or not np.all(np.isfinite(y)):
+            continue
+        T = frames[m.get("name")]
+        loc = T[:3, :3].T @ (np.asarray(y, dtype=float) - T[:3, 3])
+        _set_numbers(m.find("location"), loc)
+        moved.append(m.get("name"))
+    return new, moved
+
+
+def write_marker_set(root: ET.Element, path) -> Path:
+    """Write the model's markers as an OpenSim ``<MarkerSet>`` file."""
+    lines = ['<?xml version="1.0" encoding="UTF-8" ?>', '<OpenSimDocument Version="40000">',
+             '\t<MarkerSet name="markerset">', "\t\t<objects>"]
+    for m in model_markers(root):
+        lines += [f'\t\t\t<Marker name="{m["name"]}">',
+                  f'\t\t\t\t<socket_parent_frame>{m["frame"]}</socket_parent_frame>',
+                  f'\t\t\t\t<location>{_vec_text(m["location"])}</location>',
+                  f'\t\t\t\t<fixed>{"true" if m["fixed"] else "false"}</fixed>', "\t\t\t</Marker>"]
+    lines += ["\t\t</objects>", "\t\t<groups />", "\t</MarkerSet>", "</OpenSimDocument>", ""]
+    text = "\n".join(lines)
+    return atomic_write(path, lambda fh: fh.write(text))

@@ -1,0 +1,1 @@
+"""Runners of OpenSim tool setup files."""
