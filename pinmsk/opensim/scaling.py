@@ -250,7 +250,7 @@ def write_osim_tree(root: ET.Element, path) -> Path:
 
 def _fmt(x: float) -> str:
     x = float(x)
-    return "0" if x == 0 else repr(x)
+    return "0" if x == 0 else format(x, ".17g")
 
 
 def _vec_text(v) -> str:
