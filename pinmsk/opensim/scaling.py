@@ -24,6 +24,8 @@ Read from OpenSim 4.x's ``ModelScaler.cpp``, ``Measurement.cpp``, ``Model::scale
   taken as a cylinder about its smallest principal moment and its radius and length are scaled.
 * **Mass** (``Model::scale``).  With a subject mass, every body's mass and inertia are then multiplied
   by ``subject mass / model mass``: with ``preserve_mass_distribution`` this keeps every body's share.
+* **Couplers.** A CoordinateCouplerConstraint whose dependent coordinate is a translation has its
+  ``scale_factor`` multiplied by the (uniform) factor of the body its joint hangs from.
 * **Muscles** (``extendPostScale``).  A muscle's ``optimal_fiber_length`` and ``tendon_slack_length``
   (a ligament's or path spring's ``resting_length``) are multiplied by the ratio of its path length
   after and before scaling, both in the default pose (wrapping included).
@@ -35,6 +37,7 @@ from __future__ import annotations
 
 import copy
 import difflib
+import re
 import warnings
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
@@ -47,10 +50,10 @@ from ..errors import PinmskError
 from ..io.osim import parse_osim
 from ..io.output_files import atomic_write
 from .paths import GeometricPaths, path_specs
-from .skeleton import OsimKinematics
+from .skeleton import OsimKinematics, _motion_types
 
 __all__ = ["ScaleError", "ScaleWarning", "BodyScale", "Measurement", "ManualScale", "MeasurementResult", "ScaleFactors",
-           "read_osim_tree", "read_marker_set", "with_markers", "model_marker_positions", "frame_range",
+           "read_osim_tree", "read_marker_set", "with_markers", "model_marker_positions", "default_pose", "frame_range",
            "scale_factors", "scale_model", "write_osim_tree", "write_scale_set", "total_mass",
            "measurement_from_node", "manual_scale_from_node", "SCALING_STEPS", "model_markers",
            "delete_unused_markers", "coordinate_defaults", "coordinate_paths", "move_markers", "write_marker_set"]
@@ -193,8 +196,15 @@ def manual_scale_from_node(node) -> ManualScale:
 # --------------------------------------------------------------------------------------------
 # the .osim as an element tree
 # --------------------------------------------------------------------------------------------
+#: OpenSim names some elements ``Class::Property`` (``<HuntCrossleyForce::ContactParametersSet>``), which an
+#: XML parser that resolves namespaces refuses; they are renamed while in the tree.
+_COLONS = b"__colons__"
+_TAG_COLONS = re.compile(rb"(</?[A-Za-z_][\w.\-]*)::")
+
+
 def _parse(data: bytes, source: str) -> ET.Element:
     parser = ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
+    data = _TAG_COLONS.sub(lambda m: m.group(1) + _COLONS, data)
     try:
         parser.feed(data)
         return parser.close()
@@ -234,7 +244,7 @@ def _model(root: ET.Element, source: str | None = None) -> ET.Element:
 def _to_bytes(root: ET.Element) -> bytes:
     r = copy.copy(root)
     r.attrib = {k: v for k, v in root.attrib.items() if k != "__source__"}
-    body = ET.tostring(r, encoding="unicode")
+    body = ET.tostring(r, encoding="unicode").replace(_COLONS.decode(), "::")
     return ('<?xml version="1.0" encoding="UTF-8" ?>\n' + body + "\n").encode("utf-8")
 
 
@@ -429,10 +439,26 @@ def with_markers(root: ET.Element, markers: Iterable[ET.Element]) -> ET.Element:
     return new
 
 
+def default_pose(doc, kin: OsimKinematics) -> np.ndarray:
+    """OpenSim's default pose ``(1, n)`` in ``kin.coordinates`` order: the default values, with each coupled
+    coordinate set by its enforced CoordinateCouplerConstraint (as the default state is assembled)."""
+    from .functions import from_osim
+    q = np.array([[kin.defaults[c] for c in kin.coordinates]])
+    col = {c: i for i, c in enumerate(kin.coordinates)}
+    couplers = [(col[k.dependent], [col[i] for i in k.independent], from_osim(k.function), float(k.scale_factor))
+                for k in doc.constraints if k.enforced and k.function is not None and k.dependent in col
+                and all(i in col for i in k.independent)]
+    for _ in range(max(1, len(couplers))):       # chains of couplers settle in as many passes
+        for d, ind, f, scale in couplers:
+            q[:, d] = scale * np.asarray(f.value(q[:, ind[0]] if len(ind) == 1 else q[:, ind]), dtype=float)
+    return q
+
+
 def model_marker_positions(root: ET.Element) -> dict[str, np.ndarray]:
     """``{marker: (3,)}`` ground positions of the model's markers in the default pose (m)."""
-    kin = OsimKinematics(_doc(root))
-    return {k: v[0] for k, v in kin.marker_positions({}).items()}
+    doc = _doc(root)
+    kin = OsimKinematics(doc)
+    return {k: v[0] for k, v in kin.marker_positions(default_pose(doc, kin)).items()}
 
 
 # --------------------------------------------------------------------------------------------
@@ -656,7 +682,7 @@ def _path_lengths(root: ET.Element) -> dict[str, float]:
         return T[..., :3, :3], T[..., :3, 3]
 
     gp = GeometricPaths(specs, coordinates=kin.coordinates, placements=placements)
-    q = np.array([[kin.defaults[c] for c in kin.coordinates]])
+    q = default_pose(doc, kin)
     L = gp.lengths(q)[0]
     return dict(zip(gp.muscles, (float(x) for x in L)))
 
@@ -684,8 +710,10 @@ def scale_model(root: ET.Element, factors: ScaleFactors | Mapping[str, Sequence[
     if unknown:
         raise ScaleError(f"{source}: scale factors for {unknown}, which the model does not have")
 
-    def sf(body: str) -> np.ndarray:
-        return np.asarray(table.get(body, np.ones(3)), dtype=float)
+    def sf(body: str) -> np.ndarray | None:
+        # a body without factors is left alone (OpenSim's InvalidScaleFactors), as one with 1 1 1 is not:
+        # a constant joint translation still becomes a MultiplierFunction of 1 then
+        return None if body not in table else np.asarray(table[body], dtype=float)
 
     def of_frame(frame_el: ET.Element) -> np.ndarray:
         return sf(index.base_body(frame_el))
@@ -695,20 +723,40 @@ def scale_model(root: ET.Element, factors: ScaleFactors | Mapping[str, Sequence[
         if j is not None:
             raise ScaleError(f"{source}: {tag} '{j.get('name')}' cannot be scaled by pinmsk (its own scaling "
                              "rule is not implemented); scale the model with OpenSim")
-    for cc in model.iter("CoordinateCouplerConstraint"):
-        dep = (cc.findtext("dependent_coordinate_name") or "").strip()
-        for c in model.iter("Coordinate"):
-            if c.get("name") == dep and (c.findtext("motion_type") or "").strip().lower() == "translational":
-                raise ScaleError(f"{source}: coupler '{cc.get('name')}' drives the translation '{dep}', whose "
-                                 "scaling pinmsk does not implement; scale the model with OpenSim")
-
     before = _path_lengths(new)
+
+    # coupler constraints of a translation: the factor of the dependent coordinate's joint's parent body
+    couplers = list(model.iter("CoordinateCouplerConstraint"))
+    if couplers:
+        doc = _doc(new)
+        motion = _motion_types(OsimKinematics(doc))
+        joint_of = {c.name: c.joint for c in doc.coordinates}
+        joints = {j.get("name"): j for j in model.iterfind("JointSet/objects/*")}
+        for cc in couplers:
+            dep = (cc.findtext("dependent_coordinate_name") or "").strip()
+            if motion.get(dep) != "Translational" or joint_of.get(dep) not in joints:
+                continue
+            j = joints[joint_of[dep]]
+            s = of_frame(index.resolve(j.findtext("socket_parent_frame", ""), j))
+            if s is None:
+                continue
+            if not (s[0] == s[1] == s[2]):
+                raise ScaleError(f"{source}: coupler '{cc.get('name')}' drives the translation '{dep}' of joint "
+                                 f"'{j.get('name')}', whose parent body is scaled unevenly ({_vec_text(s)}): "
+                                 "OpenSim does not define that scaling either; scale that body uniformly")
+            el = cc.find("scale_factor")
+            if el is None:
+                el = ET.SubElement(cc, "scale_factor")
+                el.text = "1"
+            el.text = _fmt(float(el.text) * s[0])
 
     # bodies: centre of mass
     for b in model.iterfind("BodySet/objects/Body"):
         mc = b.find("mass_center")
         if mc is not None:
-            _set_numbers(mc, _numbers(mc, f"{source}: body '{b.get('name')}' <mass_center>", 3) * sf(b.get("name")))
+            s = sf(b.get("name"))
+            if s is not None:
+                _set_numbers(mc, _numbers(mc, f"{source}: body '{b.get('name')}' <mass_center>", 3) * s)
     # geometry attached to any frame
     for fr in [model.find("Ground")] + list(model.iterfind("BodySet/objects/Body")) + list(model.iter("PhysicalOffsetFrame")):
         if fr is None:
@@ -717,6 +765,8 @@ def scale_model(root: ET.Element, factors: ScaleFactors | Mapping[str, Sequence[
         if ag is None:
             continue
         s = of_frame(fr)
+        if s is None:
+            continue
         for g in ag:
             if isinstance(g.tag, str) and g.find("scale_factors") is not None:
                 el = g.find("scale_factors")
@@ -726,14 +776,15 @@ def scale_model(root: ET.Element, factors: ScaleFactors | Mapping[str, Sequence[
         tr = fr.find("translation")
         if tr is None:
             continue
-        parent = index.resolve(fr.findtext("socket_parent", ""), fr)
-        _set_numbers(tr, _numbers(tr, f"{source}: {index.owner_path(fr)} <translation>", 3) * of_frame(parent))
+        s = of_frame(index.resolve(fr.findtext("socket_parent", ""), fr))
+        if s is not None:
+            _set_numbers(tr, _numbers(tr, f"{source}: {index.owner_path(fr)} <translation>", 3) * s)
     # custom joints: translational transform axes
     for j in model.iterfind("JointSet/objects/CustomJoint"):
         pf = j.findtext("socket_parent_frame", "")
         s = of_frame(index.resolve(pf, j))
         st = j.find("SpatialTransform")
-        if st is None:
+        if st is None or s is None:
             continue
         for axis_name in ("translation1", "translation2", "translation3"):
             ta = st.find(f"TransformAxis[@name='{axis_name}']")
@@ -752,11 +803,15 @@ def scale_model(root: ET.Element, factors: ScaleFactors | Mapping[str, Sequence[
             continue
         loc = m.find("location")
         s = of_frame(index.resolve(m.findtext("socket_parent_frame", ""), m))
+        if s is None:
+            continue
         _set_numbers(loc, _numbers(loc, f"{source}: marker '{m.get('name')}' <location>", 3) * s)
     # path points
     for tag in _POINT_TAGS:
         for p in model.iter(tag):
             s = of_frame(index.resolve(p.findtext("socket_parent_frame", ""), p))
+            if s is None:
+                continue
             if tag == "MovingPathPoint":
                 for k, a in enumerate("xyz"):
                     if (p.findtext(f"socket_{a}_coordinate") or "").strip():
@@ -772,6 +827,8 @@ def scale_model(root: ET.Element, factors: ScaleFactors | Mapping[str, Sequence[
         owner = index.parent.get(id(ws))
         s = of_frame(owner)
         objs = ws.find("objects")
+        if s is None:
+            continue
         for w in (objs if objs is not None else []):
             if not isinstance(w.tag, str):
                 continue
@@ -806,7 +863,8 @@ def scale_model(root: ET.Element, factors: ScaleFactors | Mapping[str, Sequence[
     # inertial properties, then the subject's mass
     bodies = list(model.iterfind("BodySet/objects/Body"))
     for b in bodies:
-        _scale_inertia(b, sf(b.get("name")), not preserve_mass_distribution, f"{source}: body '{b.get('name')}'")
+        if sf(b.get("name")) is not None:
+            _scale_inertia(b, sf(b.get("name")), not preserve_mass_distribution, f"{source}: body '{b.get('name')}'")
     if mass is not None and mass > 0:
         m_total = sum(float(b.findtext("mass", "0")) for b in bodies)
         if m_total > 0:
