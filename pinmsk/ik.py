@@ -193,9 +193,11 @@ class InverseKinematics(Fitter):
         targets = dict(self.coordinate_targets or {})
         tcols = np.array([column(c) for c in targets], dtype=int)
         tval = np.array([float(v) for v, _ in targets.values()])
-        tw = np.sqrt(np.array([float(w) for _, w in targets.values()]))
+        tw = np.array([float(w) for _, w in targets.values()])
         if np.any(~np.isfinite(tw)) or np.any(tw < 0):
-            raise ModelError("inverse kinematics: coordinate target weights must be finite and >= 0")
+            bad = [c for c, (_, w) in targets.items() if not (np.isfinite(float(w)) and float(w) >= 0)]
+            raise ModelError(f"inverse kinematics: coordinate target weights must be finite and >= 0 ({', '.join(bad)})")
+        tw = np.sqrt(tw)
         if self.coordinates is None:
             free = np.flatnonzero(moves | np.isin(np.arange(nq), tcols[tw > 0]))
         else:
