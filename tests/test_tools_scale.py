@@ -163,3 +163,31 @@ def test_cli_bad_input_exit_2(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "body 'patella_r' is not in the model" in err[0]
     assert list(tmp_path.iterdir()) == []
+
+
+def test_coordinate_file_task_and_marker_movement(tmp_path):
+    case = _copy_case(tmp_path)
+    t = np.arange(0.9, 1.1001, 0.025)              # OpenSim's GCV spline needs 6 or more samples
+    (case / "static_coords.mot").write_text(
+        f"Coordinates\nversion=1\nnRows={t.size}\nnColumns=2\ninDegrees=yes\nendheader\ntime\tlumbar_extension\n"
+        + "".join(f"{x:.4f}\t{6 + 40 * (x - 1):.6f}\n" for x in t))
+    text = (case / SETUP).read_text()
+    task = text.index('<IKCoordinateTask name="lumbar_extension">')
+    end = text.index("</IKCoordinateTask>", task)
+    text = (text[:task] + text[task:end].replace("manual_value", "from_file") + text[end:])
+    text = text.replace("<coordinate_file> </coordinate_file>", "<coordinate_file> static_coords.mot </coordinate_file>")
+    text = text.replace("<max_marker_movement>      -1.00000000 </max_marker_movement>",
+                        "<max_marker_movement> 0.2 </max_marker_movement>")   # mm, the file's unit
+    (case / SETUP).write_text(text)
+    with pytest.warns(sc.ScaleWarning) as record:
+        st.run(read_setup(case / SETUP))
+    # the markers that move more than 0.2 mm over frames 61-62, as OpenSim 4.6 reports them on this setup
+    moving = {str(w.message).split()[3] for w in record if "max_marker_movement" in str(w.message)}
+    assert moving == {"L.Midfoot.Lat", "R.Acromium", "R.Toe.Lat"}
+    trc = st._static(case / "subject01_static.trc")
+    for n, X in st._markers(trc).items():
+        span = np.ptp(X[60:62], axis=0).max() * 1000
+        assert (span > 0.2) == (n in moving), n
+    pose = read_trial(case / "subject01_static_output.mot")
+    # 6 degrees at t = 1 s, held by weight 1000 against the markers (OpenSim 4.6: the same to 1e-8)
+    assert pose["/jointset/back/lumbar_extension/value"][0] == pytest.approx(np.deg2rad(6.0), abs=1e-6)

@@ -56,7 +56,7 @@ __all__ = ["ScaleError", "ScaleWarning", "BodyScale", "Measurement", "ManualScal
            "read_osim_tree", "read_marker_set", "with_markers", "model_marker_positions", "default_pose", "frame_range",
            "scale_factors", "scale_model", "write_osim_tree", "write_scale_set", "total_mass",
            "measurement_from_node", "manual_scale_from_node", "SCALING_STEPS", "model_markers",
-           "delete_unused_markers", "coordinate_defaults", "coordinate_paths", "move_markers", "write_marker_set"]
+           "delete_unused_markers", "coordinate_defaults", "coordinate_paths", "rotational_coordinates", "state_coordinate", "move_markers", "write_marker_set"]
 
 #: The steps of ``scaling_order``.
 SCALING_STEPS = ("measurements", "manualScale")
@@ -946,6 +946,20 @@ def delete_unused_markers(root: ET.Element, keep: Iterable[str]) -> tuple[ET.Ele
 def coordinate_defaults(root: ET.Element) -> dict[str, float]:
     """``{coordinate: default value}`` in OpenSim's order."""
     return {c.name: float(c.default_value) for c in _doc(root).coordinates}
+
+
+def rotational_coordinates(root: ET.Element) -> list[str]:
+    """The coordinates OpenSim calls Rotational (converted from degrees in its files)."""
+    doc = _doc(root)
+    return [c for c, t in _motion_types(OsimKinematics(doc)).items() if t == "Rotational"]
+
+
+def state_coordinate(name: str) -> str:
+    """A coordinate's name from an OpenSim 4 state path (``/jointset/hip_r/hip_flexion_r/value``) or itself."""
+    parts = name.strip("/").split("/")
+    if len(parts) >= 3 and parts[0] == "jointset" and parts[-1] == "value":
+        return parts[-2]
+    return name
 
 
 def coordinate_paths(root: ET.Element) -> dict[str, str]:

@@ -34,7 +34,7 @@ import numpy as np
 from ..errors import PinmskError
 from ..io.opensim_setup import SetupError, read_setup
 from ..io.output_files import output_transaction
-from ..io.tables import write_trial
+from ..io.tables import read_trial, write_trial
 from ..io.trc import read_trc
 from ..opensim import scaling as sc
 from ..trial import Trial, marker_array, marker_names
@@ -90,11 +90,17 @@ class MarkerPlacement:
 
 
 def place_markers(root, static: Trial, *, time_range, marker_weights: Mapping[str, float] | None = None,
-                  coordinate_tasks: Mapping[str, tuple] | None = None, move: bool = True) -> MarkerPlacement:
+                  coordinate_tasks: Mapping[str, tuple] | None = None, coordinates: Trial | None = None,
+                  max_marker_movement: float = -1.0, move: bool = True) -> MarkerPlacement:
     """OpenSim's MarkerPlacer on a model tree (:func:`pinmsk.opensim.scaling.read_osim_tree`).
 
     ``marker_weights``: ``{marker: weight}`` of the applied IK marker tasks (others weigh 1);
-    ``coordinate_tasks``: ``{coordinate: (value, weight)}``.  See the module docstring for the steps.
+    ``coordinate_tasks``: ``{coordinate: (value, weight)}`` with ``value`` a number, ``None`` (the
+    coordinate's default value) or ``"from_file"`` (``coordinates``' value at the start of the time
+    range, linearly interpolated: OpenSim fits a GCV spline, which passes within its smoothing of the
+    samples).  ``max_marker_movement`` (> 0, in the marker file's units, as OpenSim compares it before
+    converting them): a marker that moves more than that along an axis over the averaged frames is
+    reported with a warning, as OpenSim reports it.  See the module docstring.
     """
     from ..ik import InverseKinematics, MarkerSet
     from ..markers import ModelMarker
@@ -111,6 +117,19 @@ def place_markers(root, static: Trial, *, time_range, marker_weights: Mapping[st
         raise PinmskError(f"marker placement: no frame of the static trial lies in {t0:g} to {t1:g} s")
     ik_target = {n: X[in_range].mean(axis=0) for n, X in markers.items()}
     i0, i1 = sc.frame_range(static.time, t0, t1)
+    if max_marker_movement is not None and max_marker_movement > 0:
+        from ..io.trc import UNIT_SCALE
+        unit = str(static.meta.get("units") or "m")
+        per_unit = UNIT_SCALE.get(unit.lower(), 1.0)
+        for n, X in markers.items():
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                span = float(np.nanmax(np.nanmax(X[i0:i1 + 1], axis=0) - np.nanmin(X[i0:i1 + 1], axis=0)))
+            span /= per_unit
+            if span > max_marker_movement:
+                warnings.warn(f"marker placement: marker {n} moves {span:.6g} {unit} over {static.time[i0]:g} to "
+                              f"{static.time[i1]:g} s (max_marker_movement {max_marker_movement:g} {unit})",
+                              sc.ScaleWarning, stacklevel=2)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         move_target = {n: np.nanmean(X[i0:i1 + 1], axis=0) for n, X in markers.items()}
@@ -140,6 +159,11 @@ def place_markers(root, static: Trial, *, time_range, marker_weights: Mapping[st
     for c, (v, w) in (coordinate_tasks or {}).items():
         if c not in defaults:
             raise PinmskError(f"marker placement: coordinate task '{c}' names no coordinate of the model")
+        if isinstance(v, str) and v == "from_file":
+            if coordinates is None or c not in coordinates:
+                raise PinmskError(f"marker placement: coordinate task '{c}' takes its value from the coordinate "
+                                  "file, which " + ("is not given" if coordinates is None else "has no such column"))
+            v = float(np.interp(t0, coordinates.time, coordinates[c]))
         tasks[c] = (defaults[c] if v is None else float(v), float(w) * w_markers)
     ik = InverseKinematics(markers=mset, axes="xyz", q0=dict(defaults), coordinate_targets=tasks,
                            max_iter=200, tol=1e-12).fit(model, target_trial)
@@ -299,23 +323,18 @@ def run(setup, *, results_dir=None) -> list[Path]:
                 value = t.number("value", 0.0)
                 if kind not in ("default_value", "manual_value", "from_file"):
                     raise t.error("value_type", f"'{kind}' is not default_value, manual_value or from_file")
-                if kind == "from_file":
-                    raise t.error("value_type", "from_file (a coordinate file's values) is not supported by "
-                                                "pinmsk; use default_value or manual_value")
                 if apply:
-                    coord_tasks[t.name] = (None if kind == "default_value" else value, w)
+                    coord_tasks[t.name] = ({"default_value": None, "from_file": "from_file"}.get(kind, value), w)
             else:
                 raise t.error(None, f"<{t.tag}> is not an IKMarkerTask or IKCoordinateTask")
             t.finish()
         place_markers_file = placer.file("marker_file")
-        if placer.has("coordinate_file") and placer.text("coordinate_file") != "Unassigned":
-            raise placer.error("coordinate_file", "initial coordinates from a file are not supported by pinmsk; "
-                                                  "leave it empty")
+        coordinate_file = placer.file("coordinate_file")
         place_range = placer.numbers("time_range", 2)
         motion_out = out(placer, "output_motion_file")
         placed_out = out(placer, "output_model_file")
         markers_out = out(placer, "output_marker_file")
-        placer.ignore("max_marker_movement")
+        max_movement = placer.number("max_marker_movement", -1.0)
         placer.finish()
     node.finish()
 
@@ -339,8 +358,17 @@ def run(setup, *, results_dir=None) -> list[Path]:
         if place_markers_file is None or place_range is None:
             raise placer.error("marker_file" if place_markers_file is None else "time_range",
                                "marker placement needs a marker file and a time range")
+        coords = None
+        if coordinate_file is not None:
+            coords = read_trial(coordinate_file, angular=sc.rotational_coordinates(root), time_unit="s")
+            coords = Trial(coords.time, {sc.state_coordinate(k): coords[k] for k in coords.names},
+                           meta=dict(coords.meta))
+        elif any(v == "from_file" for v, _ in coord_tasks.values()):
+            raise placer.error("coordinate_file", "coordinate tasks take values from_file but no coordinate "
+                                                  "file is named")
         placement = place_markers(root, _static(place_markers_file), time_range=place_range,
-                                  marker_weights=weights, coordinate_tasks=coord_tasks)
+                                  marker_weights=weights, coordinate_tasks=coord_tasks, coordinates=coords,
+                                  max_marker_movement=max_movement)
     written = []
     with output_transaction():
         if out_dir is not None:
