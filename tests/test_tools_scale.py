@@ -12,6 +12,7 @@ coordinate tasks are held) and OpenSim 4.6 in ``test_tools_scale_peer.py``.
 from __future__ import annotations
 
 import shutil
+import warnings
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -191,3 +192,51 @@ def test_coordinate_file_task_and_marker_movement(tmp_path):
     pose = read_trial(case / "subject01_static_output.mot")
     # 6 degrees at t = 1 s, held by weight 1000 against the markers (OpenSim 4.6: the same to 1e-8)
     assert pose["/jointset/back/lumbar_extension/value"][0] == pytest.approx(np.deg2rad(6.0), abs=1e-6)
+
+
+def _synthetic_static(kin, doc, q):
+    """A 5-frame static trial of the model's markers at the pose ``q`` (couplers applied)."""
+    from pinmsk.opensim.functions import from_osim
+    from pinmsk.trial import Trial
+    col = {c: i for i, c in enumerate(kin.coordinates)}
+    Q = np.array([[q[c] for c in kin.coordinates]])
+    for k in doc.constraints:
+        Q[0, col[k.dependent]] = k.scale_factor * float(np.asarray(from_osim(k.function).value(Q[:, col[k.independent[0]]]))[0])
+    pos = kin.marker_positions(Q)
+    t = np.arange(5) / 100
+    ch = {f"{n}_{a}": np.full(5, p[0, i]) for n, p in pos.items() for i, a in enumerate("xyz")}
+    return Trial(t, ch, meta={"markers": list(pos)}), dict(zip(kin.coordinates, Q[0]))
+
+
+def test_placement_recovers_a_known_pose_with_locked_and_coupled_coordinates(tmp_path):
+    import tarfile
+    zoo = shared_folder("osim-zoo", "zoo_models.tar.xz")
+    with tarfile.open(zoo / "zoo_models.tar.xz") as tar:
+        tar.extractall(tmp_path, members=[tar.getmember("Rajagopal2016.osim")], filter="data")
+    root = sc.read_osim_tree(tmp_path / "Rajagopal2016.osim")
+    doc = sc._doc(root)
+    kin = OsimKinematics(doc)
+    locked = {c.name for c in doc.coordinates if c.locked}
+    coupled = {k.dependent for k in doc.constraints}
+    assert locked and coupled
+    rng = np.random.default_rng(1)
+    q = dict(kin.defaults)
+    for c in doc.coordinates:
+        if c.name not in locked | coupled:
+            q[c.name] = float(np.clip(q[c.name] + rng.normal(0, 0.1), *c.range))
+    trial, truth = _synthetic_static(kin, doc, q)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        placed = st.place_markers(root, trial, time_range=(0.0, 0.04))
+    for c in kin.coordinates:
+        assert placed.pose[c] == pytest.approx(truth[c], abs=1e-9), c
+    before = {m["name"]: m["location"] for m in sc.model_markers(root)}
+    for m in sc.model_markers(placed.tree):
+        np.testing.assert_allclose(m["location"], before[m["name"]], atol=1e-12)
+    # a locked coordinate stays at its default even where the markers say otherwise
+    moved = dict(q, mtp_angle_r=q["mtp_angle_r"] + 0.3)
+    trial, _ = _synthetic_static(kin, doc, moved)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        placed = st.place_markers(root, trial, time_range=(0.0, 0.04))
+    assert placed.pose["mtp_angle_r"] == kin.defaults["mtp_angle_r"]

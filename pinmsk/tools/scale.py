@@ -10,12 +10,13 @@ Three steps, as ``ScaleTool::run`` takes them (``OpenSim/Tools/ScaleTool.cpp``):
    pose is solved by :class:`pinmsk.ik.InverseKinematics` on the marker positions averaged over the time
    range (the rows inside it, as ``TimeSeriesTable::averageRow``) with the IK task set's marker weights
    (a marker without an applied task weighs 1, as OpenSim's ``MarkersReference`` weighs it) and its
-   coordinate tasks (``default_value``, ``manual_value``), weighted as Simbody's assembler weighs them
-   against the markers (a coordinate task's weight times the sum of the marker weights); then every model marker that is not ``fixed``
-   is moved, in its own frame, onto its measured position averaged as ``MarkerData::averageFrames``
-   averages it (from the last frame at or before the start to the first at or after the end, gaps
-   skipped).  The pose is written as OpenSim's states file (``/jointset/<joint>/<coordinate>/value``
-   and ``/speed``, radians and metres).
+   coordinate tasks (``default_value``, ``manual_value``, ``from_file``), weighted as Simbody's
+   assembler weighs them against the markers (a coordinate task's weight times the sum of the marker
+   weights); locked coordinates stay at their default values.  Then every model marker that is not
+   ``fixed`` is moved, in its own frame, onto its measured position averaged as
+   ``MarkerData::averageFrames`` averages it (from the last frame at or before the start to the first
+   at or after the end, gaps skipped).  The pose is written as OpenSim's states file
+   (``/jointset/<joint>/<coordinate>/value`` and ``/speed``, radians and metres).
 
 :func:`run` runs a ScaleTool setup file; :func:`scale_subject` is the command line's version (a model,
 a static trial, the subject's mass, and a measurement set or the default measurements of
@@ -138,7 +139,7 @@ def place_markers(root, static: Trial, *, time_range, marker_weights: Mapping[st
         path = sc.write_osim_tree(tree, Path(tmp) / "model.osim")
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            model, _ = import_osim(path, hooks=())
+            model, _ = import_osim(path, hooks=(), locked="weld")     # OpenSim holds locked coordinates
     weights = dict(marker_weights or {})
     mm = [ModelMarker(d["name"], d["body"], tuple(d["position"]), float(weights.get(d["name"], 1.0)))
           for d in model.meta.get("markers") or ()]
