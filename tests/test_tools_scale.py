@@ -240,3 +240,22 @@ def test_placement_recovers_a_known_pose_with_locked_and_coupled_coordinates(tmp
         warnings.simplefilter("ignore")
         placed = st.place_markers(root, trial, time_range=(0.0, 0.04))
     assert placed.pose["mtp_angle_r"] == kin.defaults["mtp_angle_r"]
+
+
+def test_cli_place_markers(tmp_path, capsys):
+    d = shared_folder(REL, SETUP)
+    out = tmp_path / "p.osim"
+    rc = main(["scale", str(d / "gait2354_simbody.osim"), str(d / "subject01_static.trc"), "--mass", "72.6",
+               "-o", str(out), "--marker-set", str(d / "gait2354_Scale_MarkerSet.xml"), "--time", "1", "1.2",
+               "--place-markers"])
+    assert rc == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.osim", "p_scale_set.xml", "p_static_pose.mot"]
+    root = sc.read_osim_tree(out)
+    pose = read_trial(tmp_path / "p_static_pose.mot")
+    q = {k.split("/")[-2]: pose[k] for k in pose.names if k.endswith("/value")}
+    pos = OsimKinematics(sc._doc(root)).marker_positions(q)
+    trc = st._static(d / "subject01_static.trc")
+    i0, i1 = sc.frame_range(trc.time, 1.0, 1.2)
+    for n, x in st._markers(trc).items():
+        if n in pos:
+            np.testing.assert_allclose(pos[n][0], x[i0:i1 + 1].mean(axis=0), atol=1e-12, err_msg=n)

@@ -114,3 +114,28 @@ def test_static_pose_objective_no_worse_than_opensim(both):
     dist = np.array([np.linalg.norm(x["location"] - y["location"]) for x, y in zip(ma, mb)])
     assert [x["name"] for x in ma] == [y["name"] for y in mb]
     assert np.median(dist) < 5e-4 and dist.max() < 0.015
+
+
+def test_coordinate_file_task_as_opensim(tmp_path):
+    d = shared_folder(REL, SETUP)
+    osim = require_opensim()
+    for f in FILES:
+        shutil.copy(d / f, tmp_path / f)
+    t = np.arange(0.9, 1.1001, 0.025)
+    (tmp_path / "static_coords.mot").write_text(
+        f"Coordinates\nversion=1\nnRows={t.size}\nnColumns=2\ninDegrees=yes\nendheader\ntime\tlumbar_extension\n"
+        + "".join(f"{x:.4f}\t{6 + 40 * (x - 1):.6f}\n" for x in t))
+    text = (tmp_path / SETUP).read_text()
+    i = text.index('<IKCoordinateTask name="lumbar_extension">')
+    j = text.index("</IKCoordinateTask>", i)
+    text = text[:i] + text[i:j].replace("manual_value", "from_file") + text[j:]
+    text = text.replace("<coordinate_file> </coordinate_file>", "<coordinate_file> static_coords.mot </coordinate_file>")
+    (tmp_path / SETUP).write_text(text)
+    assert osim.ScaleTool(str(tmp_path / SETUP)).run()
+    peer = _pose(tmp_path / "subject01_static_output.mot")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", sc.ScaleWarning)
+        st.run(read_setup(tmp_path / SETUP), results_dir=tmp_path / "ours")
+    ours = _pose(tmp_path / "ours" / "subject01_static_output.mot")
+    assert ours["lumbar_extension"] == pytest.approx(peer["lumbar_extension"], abs=1e-6)
+    assert ours["lumbar_extension"] == pytest.approx(np.deg2rad(6.0), abs=1e-6)
