@@ -27,8 +27,9 @@ Read from OpenSim 4.x's ``ModelScaler.cpp``, ``Measurement.cpp``, ``Model::scale
 * **Couplers.** A CoordinateCouplerConstraint whose dependent coordinate is a translation has its
   ``scale_factor`` multiplied by the (uniform) factor of the body its joint hangs from.
 * **Muscles** (``extendPostScale``).  A muscle's ``optimal_fiber_length`` and ``tendon_slack_length``
-  (a ligament's or path spring's ``resting_length``) are multiplied by the ratio of its path length
-  after and before scaling, both in the default pose (wrapping included).
+  (a ligament's or path spring's ``resting_length``, a Blankevoort1991Ligament's ``slack_length``) are
+  multiplied by the ratio of its path length after and before scaling, both in the default pose
+  (wrapping included); a RigidTendonMuscle, UmbergerMuscle or path actuator keeps its lengths.
 
 Only the ``.osim`` format of OpenSim 4 (``Version >= 40000``: joints with offset frames) is edited; an
 older file is refused with what to do.  Everything else in the file is kept as written.
@@ -65,6 +66,15 @@ _FIRST_VERSION = 40000
 _AXES = {"x": 0, "y": 1, "z": 2}
 _POINT_TAGS = ("PathPoint", "ConditionalPathPoint", "MovingPathPoint")
 _WRAP_TAGS = ("WrapCylinder", "WrapSphere", "WrapEllipsoid", "WrapTorus", "WrapCylinderObst", "WrapDoubleCylinderObst")
+#: The path forces whose lengths ``extendPostScale`` scales by the path's length ratio, and those lengths
+#: (a RigidTendonMuscle, UmbergerMuscle or PathActuator keeps its own).
+_MUSCLE_LENGTHS = ("optimal_fiber_length", "tendon_slack_length")
+_POST_SCALED = {**{t: _MUSCLE_LENGTHS for t in (
+    "Thelen2003Muscle", "Millard2012EquilibriumMuscle", "Millard2012AccelerationMuscle", "DeGrooteFregly2016Muscle",
+    "MeyerFregly2016Muscle", "Thelen2003Muscle_Deprecated", "Schutte1993Muscle_Deprecated",
+    "Delp1990Muscle_Deprecated")},
+    "Ligament": ("resting_length",), "PathSpring": ("resting_length",),
+    "ExpressionBasedPathForce": ("resting_length",), "Blankevoort1991Ligament": ("slack_length",)}
 _UNSCALABLE_JOINTS = ("EllipsoidJoint", "ScapulothoracicJoint", "ConstantCurvatureJoint")
 
 
@@ -878,16 +888,16 @@ def scale_model(root: ET.Element, factors: ScaleFactors | Mapping[str, Sequence[
                     _set_numbers(iel, _numbers(iel, f"{source}: body '{b.get('name')}' <inertia>", 6) * factor)
     # muscles and other path forces: lengths by the path's length ratio
     after = _path_lengths(new)
+    owners = {el.get("name"): el for el in model.iter() if el.tag in _POST_SCALED and el.find("GeometryPath") is not None}
     for owner_name, L0 in before.items():
-        if L0 <= 0 or owner_name not in after:
+        el = owners.get(owner_name)
+        if L0 <= 0 or owner_name not in after or el is None:
             continue
         ratio = after[owner_name] / L0
-        for el in model.iter():
-            if el.get("name") == owner_name and el.find("GeometryPath") is not None:
-                for prop in ("optimal_fiber_length", "tendon_slack_length", "resting_length"):
-                    p = el.find(prop)
-                    if p is not None and (p.text or "").strip():
-                        p.text = _fmt(float(p.text) * ratio)
+        for prop in _POST_SCALED[el.tag]:
+            p = el.find(prop)
+            if p is not None and (p.text or "").strip():
+                p.text = _fmt(float(p.text) * ratio)
     if name is not None:
         model.set("name", name)
     return new
