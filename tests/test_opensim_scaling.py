@@ -3,8 +3,9 @@ Gait2354 subject01 (``OutputReference/``: the scale set applied and the scaled m
 placement).
 
 The reference files were written by an OpenSim 4.0-era build: numbers to 6 significant digits, and
-inertias scaled by the mass factor only.  OpenSim 4.x since the fix of its issue #2871 (and pinmsk) also
-multiplies the inertia by the length factor squared; the test checks that relation exactly.  Three
+inertias scaled by the mass factor only.  Later OpenSim 4.x (its change #2871 to
+``Body::scaleInertialProperties``), and pinmsk, also multiply the inertia by the length factor squared;
+the test checks that relation to print precision.  Three
 numbers of the reference differ from the generic model shipped beside it (pelvis_ty's default value and
 two coordinate ranges, which scaling never touches): the reference was written from a slightly different
 generic model, and those three are compared with the generic model instead.

@@ -2,7 +2,7 @@
 
 The scaled model (before marker placement) must agree number by number to 1e-12.  The marker placement
 solves the same static-pose objective (Simbody's assembler: sum w_m r_m^2 / (2 sum w_m) +
-sum w_c (q_c - v_c)^2 / 2); OpenSim stops at its assembler's accuracy (1e-4), pinmsk at the optimum, so
+sum w_c (q_c - v_c)^2 / 2); OpenSim ends at its assembler's accuracy (1e-4), pinmsk at the optimum, so
 pinmsk's objective must be no larger, and the poses and markers close (the lumbar rotations are nearly
 free in that objective: their markers are the torso's, weighted 1 against the pelvis's 1000).
 """

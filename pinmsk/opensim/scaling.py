@@ -535,6 +535,8 @@ def scale_factors(root: ET.Element, *, measurements: Sequence[Measurement] = (),
                                 + (f"; did you mean '{close[0]}'?" if close else "")
                                 + f" (bodies: {', '.join(bodies)})")
                 if not m.pairs:
+                    warnings.warn(f"measurement '{m.name}' has no marker pairs; not used (as OpenSim skips it)",
+                                  ScaleWarning, stacklevel=2)
                     continue
                 if model_pos is None:
                     model_pos = model_marker_positions(root)
