@@ -41,7 +41,7 @@ import difflib
 import re
 import warnings
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
@@ -153,7 +153,7 @@ class ScaleFactors:
     segments: tuple
     factors: np.ndarray
     measurements: tuple = ()
-    bodies: tuple = field(default=())
+    bodies: tuple = ()
 
     def factors_of(self, name: str) -> np.ndarray:
         for s, f in zip(self.segments, self.factors):
@@ -167,6 +167,24 @@ class ScaleFactors:
         for s, f in zip(self.segments, self.factors):
             out.setdefault(s, f.copy())
         return out
+
+    def summary(self) -> str:
+        """The measurements as OpenSim logs them (each pair's model and experimental distance, the factor),
+        then every body's factors."""
+        lines = []
+        for m in self.measurements:
+            lines.append(f"measurement '{m.name}': factor {m.factor:.6f}")
+            for a, b, d_mod, d_exp in m.pairs:
+                lines.append(f"  {a} - {b}: model {d_mod:.6f} m, experimental {d_exp:.6f} m")
+        table = self.as_dict()
+        for b in self.bodies:
+            f = table[b]
+            lines.append(f"{b:>16}: {' '.join(f'{x:.6f}' for x in f)}")
+        return "\n".join(lines)
+
+    def write(self, path) -> Path:
+        """Write the factors as OpenSim's ``<ScaleSet>`` file (:func:`write_scale_set`)."""
+        return write_scale_set(self, path)
 
 
 def measurement_from_node(node) -> Measurement:

@@ -453,7 +453,7 @@ def cmd_scale(args) -> int:
     from ..tools.scale import scale_subject
     written = scale_subject(args.model, args.static, mass=args.mass, output=args.output,
                             measurements=args.setup_measurements, marker_set=args.marker_set,
-                            time_range=args.time, place=args.place_markers)
+                            time_range=args.time, place=args.place_markers, report=print)
     for path in written:
         print(f"wrote {path}")
     return 0

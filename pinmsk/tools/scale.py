@@ -79,6 +79,14 @@ class MarkerPlacement:
     ik: object
     marker_errors: dict
 
+    def summary(self) -> str:
+        """The static pose's marker errors before the markers were moved (OpenSim's placement log)."""
+        e = np.array([v for v in self.marker_errors.values() if np.isfinite(v)])
+        worst = max(self.marker_errors, key=lambda k: self.marker_errors[k]) if e.size else "-"
+        return (f"static pose at t = {self.time:g} s: marker error RMS {np.sqrt(np.mean(e ** 2)) if e.size else 0:.6f} m, "
+                f"max {e.max() if e.size else 0:.6f} m ({worst}); {len(self.moved)} markers moved, "
+                f"{len(self.removed)} removed (not in the trial)")
+
     def pose_trial(self, root=None) -> Trial:
         """The pose as OpenSim's states table (one row): ``/jointset/<joint>/<coordinate>/value`` and
         ``/speed`` (zero)."""
@@ -228,12 +236,13 @@ def read_measurement_file(path) -> list:
 
 def scale_subject(model, static, *, mass: float, output, measurements=None, marker_set=None,
                   time_range=None, preserve_mass_distribution: bool = True,
-                  place: bool = False) -> list[Path]:
+                  place: bool = False, report=None) -> list[Path]:
     """Scale ``model`` (.osim) to the static trial ``static`` (.trc) and a subject of ``mass`` kg; write
     ``output`` (.osim) and ``<output stem>_scale_set.xml`` beside it (with ``place``, the markers are also
     placed and ``<output stem>_static_pose.mot`` is written).  ``measurements``: a measurement set file
     (default: :func:`default_measurements`); ``marker_set``: a marker set file merged into the model;
-    ``time_range``: ``(start, end)`` s (default: the whole trial).  Returns the paths written."""
+    ``time_range``: ``(start, end)`` s (default: the whole trial); ``report``: a callable given the
+    factors' and the placement's summaries (e.g. ``print``).  Returns the paths written."""
     output = Path(output)
     root = sc.read_osim_tree(model)
     if marker_set is not None:
@@ -254,6 +263,10 @@ def scale_subject(model, static, *, mass: float, output, measurements=None, mark
                                    order=("measurements", "manualScale"), **kw)
     scaled = sc.scale_model(root, factors, mass=mass, preserve_mass_distribution=preserve_mass_distribution)
     placement = place_markers(scaled, trial, time_range=tr) if place else None
+    if report is not None:
+        report(factors.summary())
+        if placement is not None:
+            report(placement.summary())
     stem = output.with_suffix("")
     written = []
     with output_transaction():
