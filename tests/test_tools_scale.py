@@ -283,3 +283,7 @@ def test_cli_measurement_set_file(tmp_path, capsys):
     for seg in ("pelvis", "torso", "talus_r", "talus_l", "calcn_r", "toes_l"):
         assert f[seg] == pytest.approx(ref[seg], rel=5e-6), seg
     assert f["femur_r"] != pytest.approx(ref["femur_r"], rel=1e-3)        # the manual 1.14724 is not applied
+    # the summary prints the pairs as OpenSim 4.6 logs them (R.ASIS, L.ASIS: model 0.256, experimental 0.2622917...)
+    printed = capsys.readouterr().out
+    assert "R.ASIS - L.ASIS: model 0.256000 m, experimental 0.262292 m" in printed
+    assert "measurement 'pelvis': factor 1.024577" in printed
