@@ -139,3 +139,39 @@ def test_coordinate_file_task_as_opensim(tmp_path):
     ours = _pose(tmp_path / "ours" / "subject01_static_output.mot")
     assert ours["lumbar_extension"] == pytest.approx(peer["lumbar_extension"], abs=1e-6)
     assert ours["lumbar_extension"] == pytest.approx(np.deg2rad(6.0), abs=1e-6)
+
+
+def test_order_axes_apply_and_mass_rule_as_opensim(tmp_path):
+    # the setup varied: manual scales first (the measurements then override them), the thigh measured
+    # along Y only (non-uniform femur factors: the cylinder rule for its inertia), the foot measurement
+    # and one manual scale not applied, and the masses scaled with the volume before the subject's mass
+    d = shared_folder(REL, SETUP)
+    osim = require_opensim()
+    for f in FILES:
+        shutil.copy(d / f, tmp_path / f)
+    text = (tmp_path / SETUP).read_text()
+    text = text.replace("<scaling_order> measurements manualScale </scaling_order>",
+                        "<scaling_order> manualScale measurements </scaling_order>")
+    i = text.index('<Measurement name="thigh">')
+    j = text.index("</Measurement>", i)
+    text = text[:i] + text[i:j].replace("<axes> X Y Z </axes>", "<axes> Y </axes>") + text[j:]
+    i = text.index('<Measurement name="foot">')
+    text = text[:i] + text[i:].replace("<apply> true </apply>", "<apply> false </apply>", 1)
+    i = text.index("<segment> tibia_l </segment>")
+    text = text[:i] + text[i:].replace("<apply> true </apply>", "<apply> false </apply>", 1)
+    text = text.replace("<preserve_mass_distribution> true </preserve_mass_distribution>",
+                        "<preserve_mass_distribution> false </preserve_mass_distribution>")
+    (tmp_path / SETUP).write_text(text)
+    assert osim.ScaleTool(str(tmp_path / SETUP)).run()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", sc.ScaleWarning)
+        st.run(read_setup(tmp_path / SETUP), results_dir=tmp_path / "ours")
+    a = _numbers(ET.parse(tmp_path / "ours" / "subject01_scaledOnly.osim").getroot(), "", {})
+    b = _numbers(ET.parse(tmp_path / "subject01_scaledOnly.osim").getroot(), "", {})
+    assert set(a) == set(b)
+    for p in b:
+        np.testing.assert_allclose(a[p], b[p], rtol=1e-12, atol=1e-15, err_msg=p)
+    femur = [s for s in ET.parse(tmp_path / "ours" / "subject01_scaleSet_applied.xml").getroot().iter("Scale")
+             if s.findtext("segment") == "femur_r"][0]
+    fx, fy, fz = (float(x) for x in femur.findtext("scales").split())
+    assert fx == fz == pytest.approx(1.14724, rel=1e-12) and fy != pytest.approx(fx, rel=1e-3)
