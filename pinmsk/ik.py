@@ -109,6 +109,10 @@ class InverseKinematics(Fitter):
     strict : bool
         Raise :class:`~pinmsk.errors.ConvergenceError` at the first frame that does not
         converge in ``max_iter`` iterations (default: keep it, flagged in ``converged_``).
+    coordinate_targets : dict, optional
+        ``{coordinate: (value, weight)}``: OpenSim's coordinate tasks, each adding
+        ``weight * (q_c - value)^2`` to every frame's objective (rad or m); the coordinate
+        is solved for even when no marker moves it.
 
     ``result_.stats``: ``n`` the measured marker coordinates used, ``k`` the free
     coordinates times the frames, ``sse`` the weighted sum of squared marker errors (m^2),
@@ -117,7 +121,7 @@ class InverseKinematics(Fitter):
 
     def __init__(self, *, markers, coordinates: Sequence[str] | None = None, axes: str | None = None,
                  weights: dict | None = None, q0=None, max_iter: int = 50, tol: float = 1e-10,
-                 max_step: float = 0.5, strict: bool = False):
+                 max_step: float = 0.5, strict: bool = False, coordinate_targets: dict | None = None):
         self.markers = markers
         self.coordinates = coordinates
         self.axes = axes
@@ -127,6 +131,7 @@ class InverseKinematics(Fitter):
         self.tol = tol
         self.max_step = max_step
         self.strict = strict
+        self.coordinate_targets = coordinate_targets
 
     def fit(self, model, trial: Trial, *, progress=None) -> "InverseKinematics":
         """Solve every frame of the marker ``trial``; returns self."""
@@ -185,10 +190,30 @@ class InverseKinematics(Fitter):
         x0, J0 = np.empty((nm, na)), np.empty((nm, na, nq))
         evaluate(q, x0, J0)
         moves = np.abs(J0).sum(axis=(0, 1)) > 0
+        targets = dict(self.coordinate_targets or {})
+        tcols = np.array([column(c) for c in targets], dtype=int)
+        tval = np.array([float(v) for v, _ in targets.values()])
+        tw = np.array([float(w) for _, w in targets.values()])
+        if np.any(~np.isfinite(tw)) or np.any(tw < 0):
+            bad = [c for c, (_, w) in targets.items() if not (np.isfinite(float(w)) and float(w) >= 0)]
+            raise ModelError(f"inverse kinematics: coordinate target weights must be finite and >= 0 ({', '.join(bad)})")
+        tw = np.sqrt(tw)
         if self.coordinates is None:
-            free = np.flatnonzero(moves)
+            free = np.flatnonzero(moves | np.isin(np.arange(nq), tcols[tw > 0]))
         else:
             free = np.array([column(c) for c in self.coordinates])
+        fpos = {int(c): i for i, c in enumerate(free)}
+        trow = np.array([fpos.get(int(c), -1) for c in tcols], dtype=int)
+
+        def target_residual(qk):
+            return tw * (qk[tcols] - tval) if tcols.size else np.zeros(0)
+
+        def target_jacobian():
+            Jt = np.zeros((tcols.size, free.size))
+            for i, r in enumerate(trow):
+                if r >= 0:
+                    Jt[i, r] = tw[i]
+            return Jt
         if free.size == 0:
             raise ModelError("inverse kinematics: no coordinate moves any measured marker")
         if nm * na < free.size:
@@ -216,14 +241,16 @@ class InverseKinematics(Fitter):
             lam = 1e-6
             evaluate(q, xk, Jk)
             r = (xk - yk) * sw
-            cost = float(np.sum(r * r))
+            rt = target_residual(q)
+            Jt = target_jacobian()
+            cost = float(np.sum(r * r) + np.sum(rt * rt))
             it = 0
             done = False
             while it < self.max_iter:
                 it += 1
                 J = (Jk[:, :, free] * sw[:, :, None]).reshape(nm * na, nf)
-                g = J.T @ r.ravel()
-                H = J.T @ J
+                g = J.T @ r.ravel() + Jt.T @ rt
+                H = J.T @ J + Jt.T @ Jt
                 scale = np.diag(H).copy()
                 scale[scale <= 0] = 1.0
                 while True:
@@ -235,21 +262,22 @@ class InverseKinematics(Fitter):
                     qn[free] += dq
                     evaluate(qn, xn, Jn)
                     rn = (xn - yk) * sw
-                    cn = float(np.sum(rn * rn))
+                    rtn = target_residual(qn)
+                    cn = float(np.sum(rn * rn) + np.sum(rtn * rtn))
                     if cn <= cost or np.max(np.abs(dq)) < self.tol:
                         break
                     lam *= 10.0
                     if lam > 1e10:
                         break
                 if cn <= cost:          # accept: the trial point's positions and Jacobians become current
-                    q, cost, r = qn, cn, rn
+                    q, cost, r, rt = qn, cn, rn, rtn
                     xk, xn = xn, xk
                     Jk, Jn = Jn, Jk
                     lam = max(lam / 10.0, 1e-12)
                 step = float(np.max(np.abs(dq)))
                 if step < self.tol or lam > 1e10:
                     Jw = (Jk[:, :, free] * sw[:, :, None]).reshape(nm * na, nf)
-                    done = step < self.tol or np.max(np.abs(Jw.T @ r.ravel())) < 1e-12
+                    done = step < self.tol or np.max(np.abs(Jw.T @ r.ravel() + Jt.T @ rt)) < 1e-12
                     break
             # final residual per marker (unweighted, only measured)
             d = np.linalg.norm(xk - yk, axis=1)

@@ -101,3 +101,27 @@ def test_marker_positions_follow_the_body(gait2d):
     x = model_marker_positions(gait2d, ms, q)[0]
     np.testing.assert_allclose(x[0, :2], [0.0, 0.05268445], atol=1e-6)        # ankle centre at standing
     np.testing.assert_allclose(x[1, :2], [0.0, 1.0681 + 0.266], atol=1e-12)
+
+
+def test_coordinate_target_weighs_against_markers(gait2d):
+    # every marker shifted by d along x, only torso_x solved: the markers alone put it at q + d; a target q
+    # with weight w against n markers of weight 1 gives the weighted mean q + n d / (n + w)
+    ms = load_marker_set("gait2d").subset("csu")
+    t, q = _motion(gait2d, n=3)
+    mk = markers_trial(gait2d, ms, t, q, axes="xy")
+    d = 0.05
+    shifted = Trial(t, {k: mk[k] + (d if k.endswith("_x") else 0.0) for k in mk.names}, meta=dict(mk.meta))
+    ix = gait2d.coordinate_index("torso_x")
+    w = 7.0
+    targets = {"torso_x": (float(q[1, ix]), w)}
+    q0 = {c: float(q[1, gait2d.coordinate_index(c)]) for c in gait2d.coordinates}
+    ik = InverseKinematics(markers=ms, q0=q0, coordinates=["torso_x"], coordinate_targets=targets,
+                           tol=1e-13).fit(gait2d, Trial(t[1:2], {k: shifted[k][1:2] for k in shifted.names},
+                                                        meta=dict(mk.meta)))
+    n = len(ms)
+    assert ik.q_[0, ix] == pytest.approx(q[1, ix] + n * d / (n + w), abs=1e-9)
+    free = InverseKinematics(markers=ms, q0=q0, coordinates=["torso_x"]).fit(
+        gait2d, Trial(t[1:2], {k: shifted[k][1:2] for k in shifted.names}, meta=dict(mk.meta)))
+    assert free.q_[0, ix] == pytest.approx(q[1, ix] + d, abs=1e-9)
+    with pytest.raises(pinmsk.ModelError, match="weights must be finite"):
+        InverseKinematics(markers=ms, coordinate_targets={"torso_x": (0.0, -1.0)}).fit(gait2d, mk)

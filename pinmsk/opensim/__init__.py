@@ -13,6 +13,9 @@ Below ``model.py`` (which builds the Model from these parts), above the reader :
   (the import hook, and OpenSim force set files such as ``*_Reserve_Actuators.xml``);
 * :mod:`.contacts` -- :func:`contact_hook`: SmoothSphereHalfSpaceForce and HuntCrossleyForce as
   :mod:`pinmsk.contact` components (Simbody's laws), each sphere a frame on its body.
+* :mod:`.scaling` -- OpenSim's ScaleTool scaling: scale factors from marker measurements and manual
+  scales, and the scaled ``.osim`` (bodies, joints, markers, paths, wrap objects, masses, muscles)
+  with its scale set (the setup runner is :mod:`pinmsk.tools.scale`).
 
 Reading needs no ``opensim`` package; it is an optional peer for the tests that compare with OpenSim.
 """

@@ -466,6 +466,16 @@ def cmd_run(args) -> int:
     return 0
 
 
+def cmd_scale(args) -> int:
+    from ..tools.scale import scale_subject
+    written = scale_subject(args.model, args.static, mass=args.mass, output=args.output,
+                            measurements=args.setup_measurements, marker_set=args.marker_set,
+                            time_range=args.time, place=args.place_markers, report=print)
+    for path in written:
+        print(f"wrote {path}")
+    return 0
+
+
 def cmd_batch(args) -> int:
     from ..pipeline import batch_cli
     summary = batch_cli(args.config, scheduler=args.scheduler, jobs=args.jobs)
@@ -772,6 +782,30 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--results-dir", metavar="DIR", default=None,
                    help="write the results in DIR instead of the setup's <results_directory>")
     s.set_defaults(func=cmd_run)
+
+    s = sub.add_parser(
+        "scale", help="scale an OpenSim model to a subject from a static trial, as OpenSim's ScaleTool",
+        description="Scale MODEL (.osim) to the subject of STATIC (.trc) and --mass: writes OUTPUT and "
+                    "<OUTPUT stem>_scale_set.xml (OpenSim's formats).  With --setup-measurements, the "
+                    "measurements of that file (a <MeasurementSet> or a ScaleTool setup) scale the bodies they "
+                    "name; without it, each body carrying two or more markers found in STATIC is scaled "
+                    "uniformly by the mean ratio of its own marker pairs' distances (trial / model default "
+                    "pose), and every other body by the mean of those factors.  Masses keep their "
+                    "distribution and sum to --mass.")
+    s.add_argument("model", help="the generic OpenSim model (.osim, OpenSim 4 format)")
+    s.add_argument("static", help="the static trial (.trc)")
+    s.add_argument("--mass", type=float, required=True, help="the subject's mass (kg)")
+    s.add_argument("-o", "--output", required=True, help="the scaled model (.osim)")
+    s.add_argument("--setup-measurements", default=None, metavar="MEASUREMENTS.xml",
+                   help="a measurement set file, or a ScaleTool setup whose measurement set is used")
+    s.add_argument("--marker-set", default=None, metavar="MARKERS.xml",
+                   help="an OpenSim marker set merged into the model first (markers of the same name replaced)")
+    s.add_argument("--time", type=float, nargs=2, default=None, metavar=("START", "END"),
+                   help="the time range averaged (s; default: the whole trial)")
+    s.add_argument("--place-markers", action="store_true",
+                   help="also solve the static pose and move the model's free markers onto the trial (all "
+                        "weights 1); writes <OUTPUT stem>_static_pose.mot")
+    s.set_defaults(func=cmd_scale)
 
     s = sub.add_parser("batch", help="run IK -> ID -> SO -> report over the trials of a config file")
     s.add_argument("config", help="TOML config listing trials (see pinmsk.pipeline)")

@@ -12,8 +12,8 @@ tool                     runner
 =======================  =====================================================
 InverseDynamicsTool      :mod:`pinmsk.tools.inverse_dynamics`
 AnalyzeTool              :mod:`pinmsk.tools.analyze` (StaticOptimization, MuscleAnalysis)
-InverseKinematicsTool    ``pinmsk.tools.inverse_kinematics``
-ScaleTool                ``pinmsk.tools.scale``
+InverseKinematicsTool    :mod:`pinmsk.tools.inverse_kinematics`
+ScaleTool                :mod:`pinmsk.tools.scale`
 =======================  =====================================================
 
 Paths in a setup resolve against the setup file's folder, as OpenSim's tools
