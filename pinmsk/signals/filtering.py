@@ -168,35 +168,53 @@ def _butterworth(order: int, wn: float) -> np.ndarray:
 FILTER_METHODS = ("butterworth", "opensim")
 
 
-def lowpass_opensim(x, *, rate: float, cutoff: float) -> tuple[np.ndarray, int]:
-    """OpenSim's coordinate low-pass as its InverseDynamicsTool applies it: the trial padded at each end
-    by half its length (``Storage::pad(size / 2)``: a point reflection about the end sample, which keeps
-    the end value and slope, ``Signal::Pad``), then ``Signal::LowpassIIR``: a third-order Butterworth
-    filter (bilinear transform with pre-warped cut-off, ``wa = tan(pi fc T)``) run forwards and then
-    backwards, each pass started with its first three outputs equal to its inputs.
-
-    Returns ``(padded and filtered samples (N + 2 pad, ...), pad)``: the ID tool fits its quintic
-    spline through the padded samples (:func:`differentiate` with ``method="opensim"``)."""
-    from scipy.signal import lfilter, lfiltic  # here, not at import: scipy.signal costs ~1 s
-
+def reflect_pad(x, pad: int) -> np.ndarray:
+    """``x`` (N,) or (N, k) with ``pad`` samples added at each end, reflected about the end samples and
+    negated (``2 x_0 - x_k``: OpenSim's ``Signal::Pad``, which keeps the value and the slope at each end);
+    a pad of N or more is built up in steps, as OpenSim does."""
     x = np.asarray(x, dtype=float)
-    n = x.shape[0]
+    pad = int(pad)
+    if pad <= 0:
+        return x
+    if x.shape[0] < 2:
+        raise TrialError(f"padding needs at least 2 samples, got {x.shape[0]}")
+    target = x.shape[0] + 2 * pad
+    while x.shape[0] < target:
+        p = min((target - x.shape[0]) // 2, x.shape[0] - 1)
+        x = np.concatenate([2.0 * x[0] - x[p:0:-1], x, 2.0 * x[-1] - x[-2:-2 - p:-1]], axis=0)
+    return x
+
+
+def iir_coefficients(rate: float, cutoff: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """``(numerator, denominator, cutoff used)`` of OpenSim's third-order IIR low-pass
+    (``Signal::LowpassIIR``): a Butterworth by the bilinear transform with a pre-warped cut-off,
+    ``w_a = tan(pi f_c / f_s)``, ``H(z) = w_a^3 (1 + z^-1)^3 / D(z)``; a cut-off at or above half the
+    rate is lowered to 0.49 times the rate, as OpenSim lowers it."""
     rate, cutoff = float(rate), float(cutoff)
-    if not (0 < cutoff < 0.5 * rate):
-        raise TrialError(f"cutoff {cutoff:g} Hz must be above 0 and below the Nyquist frequency "
-                         f"{0.5 * rate:g} Hz (rate {rate:g} Hz); choose a lower cutoff")
-    pad = n // 2
-    if n < 8:
-        raise TrialError(f"OpenSim's coordinate filter needs at least 8 samples, got {n}")
-    _check_finite(x, "lowpass input")
-    flat = x.reshape(n, -1)
-    s = np.concatenate((2 * flat[0:1] - flat[pad:0:-1], flat, 2 * flat[-1:] - flat[-2:-(pad + 2):-1]), axis=0)
+    if not (rate > 0 and cutoff > 0):
+        raise TrialError(f"the IIR low-pass needs a positive rate and cut-off, got {rate:g} Hz and {cutoff:g} Hz")
+    if cutoff >= 0.5 * rate:
+        cutoff = 0.49 * rate
     wa = np.tan(np.pi * cutoff / rate)
     wa2, wa3 = wa * wa, wa ** 3
     den = (wa + 1.0) * (wa2 + wa + 1.0)
-    b = np.array([wa3, 3 * wa3, 3 * wa3, wa3]) / den
+    b = np.array([1.0, 3.0, 3.0, 1.0]) * wa3 / den
     a = np.array([1.0, (3 * wa3 + 2 * wa2 - 2 * wa - 3) / den, (3 * wa3 - 2 * wa2 - 2 * wa + 3) / den,
                   (wa - 1) * (wa2 - wa + 1) / den])
+    return b, a, cutoff
+
+
+def lowpass_iir(x, *, rate: float, cutoff: float) -> np.ndarray:
+    """OpenSim's ``Storage::lowpassIIR``: the filter of :func:`iir_coefficients` run forwards, then
+    backwards, each pass started with its first three outputs equal to its inputs (OpenSim's start, not
+    a steady state); every column at once."""
+    from scipy.signal import lfilter, lfiltic  # here, not at import: scipy.signal costs ~1 s
+
+    x = np.asarray(x, dtype=float)
+    if x.shape[0] < 4:
+        raise TrialError(f"the IIR low-pass needs at least 4 samples, got {x.shape[0]}")
+    b, a, _ = iir_coefficients(rate, cutoff)
+    flat = x.reshape(x.shape[0], -1)
 
     def one_pass(sig):
         out = sig.copy()
@@ -204,8 +222,26 @@ def lowpass_opensim(x, *, rate: float, cutoff: float) -> tuple[np.ndarray, int]:
         out[3:], _ = lfilter(b, a, sig[3:], axis=0, zi=zi)
         return out
 
-    y = one_pass(one_pass(s)[::-1])[::-1]
-    return y.reshape((y.shape[0],) + x.shape[1:]), pad
+    return one_pass(one_pass(flat)[::-1])[::-1].reshape(x.shape)
+
+
+def lowpass_opensim(x, *, rate: float, cutoff: float) -> tuple[np.ndarray, int]:
+    """OpenSim's coordinate low-pass as its InverseDynamicsTool applies it: the trial padded at each end
+    by half its length (``Storage::pad(size / 2)``, :func:`reflect_pad`), then :func:`lowpass_iir`.
+
+    Returns ``(padded and filtered samples (N + 2 pad, ...), pad)``: the ID tool fits its quintic
+    spline through the padded samples (:func:`differentiate` with ``method="opensim"``)."""
+    x = np.asarray(x, dtype=float)
+    n = x.shape[0]
+    rate, cutoff = float(rate), float(cutoff)
+    if not (0 < cutoff < 0.5 * rate):
+        raise TrialError(f"cutoff {cutoff:g} Hz must be above 0 and below the Nyquist frequency "
+                         f"{0.5 * rate:g} Hz (rate {rate:g} Hz); choose a lower cutoff")
+    if n < 8:
+        raise TrialError(f"OpenSim's coordinate filter needs at least 8 samples, got {n}")
+    _check_finite(x, "lowpass input")
+    pad = n // 2
+    return lowpass_iir(reflect_pad(x, pad), rate=rate, cutoff=cutoff), pad
 
 
 def differentiate(time, x, *, cutoff: float | None = None, order: int = 4, method: str = "butterworth"):

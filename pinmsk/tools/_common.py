@@ -7,7 +7,7 @@ Each is read as OpenSim's tools read it (opensim-core ``OpenSim/Tools/InverseDyn
 * paths resolve against the setup file's folder (or ``<input_directory>`` when it is given);
 * the coordinates are filtered, when ``<lowpass_cutoff_frequency_for_coordinates>`` is not
   negative, as ``Storage.pad(n // 2)``, a resample to the smallest time step when the steps
-  are not uniform, and ``Storage.lowpassIIR`` (:mod:`pinmsk.signals.opensim_filter`), so the
+  are not uniform, and ``Storage.lowpassIIR`` (:func:`pinmsk.signals.filtering.lowpass_iir`), so the
   padded frames stay with the trial and its derivatives come from the padded signal;
 * the frames reported run from the last frame at or before the range's start to the last
   frame at or before its end (``Storage::findIndex``), within the data.
@@ -24,7 +24,7 @@ from ..errors import PinmskError
 from ..io.opensim_setup import SetupError
 from ..io.output_files import output_folder
 from ..io.tables import read_sto_header, read_trial, write_trial
-from ..signals.opensim_filter import lowpass_iir, reflect_pad
+from ..signals.filtering import lowpass_iir, reflect_pad
 from ..trial import Trial
 
 #: Smallest time-step excess over the shortest step that makes OpenSim resample a storage (``SimTK::Eps``).
