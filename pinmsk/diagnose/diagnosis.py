@@ -988,15 +988,17 @@ class DiagnosisRun:
     correlations = property(lambda self: self.final.correlations)
 
     def final_effects(self) -> list:
-        """The added effects as they are in the final model (after every joint refit), with the errors
-        of the final joint fit."""
+        """The added effects with the values and errors of the final joint fit (the last step's refit of
+        every added effect, against that step's noise floor); an effect that fit holds keeps its value
+        in the final model."""
         out = []
         final = self.final
         sc = final.scorer
-        errs = {}
+        errs, refit = {}, {}
         if sc is not None and sc.refit:
             for comp, prob, sl in zip(sc.base.components, sc.base.problems, sc.base.slices):
                 errs[comp.label] = dict(zip(prob.names, sc.base_se[sl]))
+            refit = {c.label: c for c in sc.base.components_at(sc.base_x)}
         gone = {r["removed"] for r in self.removed}
         for a in self.added:
             label = a.effect.label
@@ -1007,6 +1009,8 @@ class DiagnosisRun:
             except ModelError:
                 out.append(a.effect)
                 continue
+            if label in refit:
+                comp = refit[label]
             if label in errs:
                 comp = comp.with_params(stderr={k: float(v) for k, v in errs[label].items()})
             out.append(comp)

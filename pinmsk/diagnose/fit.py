@@ -340,7 +340,7 @@ class EffectProblem:
         stderr = {}
         if p:
             s2 = (sse - rest) / max(n - p, 1)
-            infl = ar1_inflation(r)
+            J3 = self.jacobian(x)[mask] / self.sigma[None, :, None]            # (n, C, p)
             if p == 1 and not self.linear:
                 # curvature of the sum of squares itself (see _fit_scalar): cov = 2 s^2 / SSE''
                 span = (self.hi - self.lo)[0] if np.isfinite(self.hi - self.lo)[0] else max(abs(x[0]), 1.0)
@@ -351,13 +351,15 @@ class EffectProblem:
                 curv = (S[0] - 2 * S[1] + S[2]) / hh ** 2 if hh > 0 else 0.0
                 JtJ = np.array([[0.5 * curv]]) if curv > 0 else np.zeros((1, 1))
             else:
-                J = (self.jacobian(x)[mask] / self.sigma[None, :, None]).reshape(-1, p)
+                J = J3.reshape(-1, p)
                 JtJ = J.T @ J
             try:
                 if not np.all(np.isfinite(JtJ)) or np.linalg.cond(JtJ) > 1e12:
                     raise np.linalg.LinAlgError("singular")      # parameters not identifiable here
                 with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-                    cov = np.linalg.inv(JtJ) * s2 * infl
+                    A_inv = np.linalg.inv(JtJ)
+                    G = channel_inflation(J3, r)
+                    cov = A_inv * s2 * G[0, 0] if p == 1 else A_inv @ G @ A_inv * s2
                     se = np.sqrt(np.clip(np.diag(cov), 0, None))
                 se = np.where(np.isfinite(se), se, np.inf)
             except np.linalg.LinAlgError:
@@ -435,6 +437,23 @@ def ar1_inflation(r: np.ndarray) -> float:
     den = np.sum(r * r)
     rho = float(np.clip(np.sum(r[1:] * r[:-1]) / den if den > 0 else 0.0, 0.0, 0.98))
     return (1 + rho) / (1 - rho)
+
+
+def channel_inflation(J3: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """The meat of the channel-wise sandwich covariance ``s^2 (J^T J)^-1 B (J^T J)^-1``: ``B = sum_c k_c
+    J_c^T J_c`` ``(p, p)``, ``k_c`` the AR(1) inflation of channel ``c``'s residual
+    (:func:`ar1_inflation`); for one parameter, ``B / (J^T J)``, the information-weighted mean
+    inflation ``sum_c k_c |J_c|^2 / sum_c |J_c|^2`` (so a curvature-based ``J^T J`` can use it).
+    ``J3`` (n, C, p) is the whitened Jacobian, ``r`` (n, C) the whitened residual.  A parameter one
+    smooth channel determines gets that channel's inflation, not the pooled one of channels it barely
+    sees."""
+    n, C, p = J3.shape
+    k = np.array([ar1_inflation(r[:, c]) for c in range(C)])
+    B = np.einsum("c,ncp,ncq->pq", k, J3, J3)
+    if p == 1:
+        tot = float(np.sum(J3 ** 2))
+        return np.array([[float(B[0, 0]) / tot if tot > 0 else float(np.max(k, initial=1.0))]])
+    return B
 
 
 def inflation(r: np.ndarray) -> float:
@@ -785,7 +804,8 @@ class JointProblem:
             return {"cov": np.zeros((0, 0)), "rank": 0, "cond": 1.0, "at_bound": np.zeros(0, bool),
                     "s2": float(np.mean(r ** 2)) if r.size else 1.0, "inflation": 1.0, "integrated_inflation": 1.0,
                     "singular_values": np.zeros(0)}
-        J = (self.jacobian(x)[mask] / self.sigma[None, :, None]).reshape(-1, self.p)
+        J3 = self.jacobian(x)[mask] / self.sigma[None, :, None]            # (n, C, p)
+        J = J3.reshape(-1, self.p)
         span = self.hi - self.lo
         tol = np.where(np.isfinite(span), 1e-8 * span, 1e-9)
         at_bound = (x <= self.lo + tol) | (x >= self.hi - tol)
@@ -809,8 +829,15 @@ class JointProblem:
                 # (a combination the data do not see) has no finite error, the others keep theirs
                 w, V = np.linalg.eigh(JtJ)
                 keep = w > max(w.max(), 1e-300) * 1e-12
-                sub = (V[:, keep] / w[keep]) @ V[:, keep].T / np.outer(norms[inner], norms[inner])
-                sub = sub * s2 * infl
+                # sandwich over the channels: each channel's information counted with its own residual's
+                # AR(1) inflation (a parameter that one smooth channel determines gets that channel's,
+                # not the pooled one of channels it barely sees)
+                A_inv = (V[:, keep] / w[keep]) @ V[:, keep].T
+                meat = channel_inflation(J3[:, :, inner] / norms[inner], r)
+                if meat.shape == (1, 1):
+                    meat = meat * float(np.sum((J3[:, :, inner] / norms[inner]) ** 2))
+                sub = A_inv @ meat @ A_inv / np.outer(norms[inner], norms[inner])
+                sub = sub * s2
                 blind = np.any(np.abs(V[:, ~keep]) > 0.05, axis=1) if np.any(~keep) else np.zeros(sub.shape[0], bool)
                 sub[blind, :] = np.inf
                 sub[:, blind] = np.inf

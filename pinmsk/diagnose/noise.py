@@ -356,18 +356,26 @@ def _direct(eq, models, trial, options, cutoff):
 
 
 def _band_correction(eq, rate, edges, kin, direct):
-    """``(J,)`` factors (<= 1) on the direct sources' band powers from the residual's band powers.
+    """Factors (<= 1) on the direct sources' band powers from the residual's band powers: ``(J,)`` over
+    all channels, and ``(J, C)`` per compared channel (for a source whose channels are the compared ones:
+    the measured moments).
 
-    A band is corrected only where the residual's power, allowed two standard
-    deviations of its statistical spread, falls short of the propagated total."""
-    P = band_powers(eq.e, rate, edges).sum(axis=1)
-    K = np.mean([band_powers(x, rate, edges) for x in kin], axis=0).sum(axis=1)
-    D = np.mean([band_powers(x, rate, edges) for x in direct], axis=0).sum(axis=1)
+    A band is corrected only where the residual's power, allowed two standard deviations of its
+    statistical spread, falls short of the propagated total.  Per channel, because one channel's
+    propagated kinematic noise (a floating base's, say) says nothing of another's measured moment."""
+    Pc = band_powers(eq.e, rate, edges)
+    Kc = np.mean([band_powers(x, rate, edges) for x in kin], axis=0)
+    Dc = np.mean([band_powers(x, rate, edges) for x in direct], axis=0)
     n_eff = 2.0 * np.diff(edges) * (eq.rows.size / rate)
     slack = np.exp(2.0 * np.sqrt(LOG_VAR / n_eff))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = np.where((D > 0) & (P * slack < K + D), (P * slack - K) / D, 1.0)
-    return np.clip(s, 0.01, 1.0)
+
+    def factor(P, K, D, slack):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            f = np.where((D > 0) & (P * slack < K + D), (P * slack - K) / D, 1.0)
+        return np.clip(f, 0.01, 1.0)
+
+    return (factor(Pc.sum(axis=1), Kc.sum(axis=1), Dc.sum(axis=1), slack),
+            factor(Pc, Kc, Dc, slack[:, None]))
 
 
 def propagated_floor(eq, trial, *, mode: str, excitation_kind: str | None, cutoff, options: Mapping,
@@ -396,9 +404,10 @@ def propagated_floor(eq, trial, *, mode: str, excitation_kind: str | None, cutof
     correction = None
     if direct_groups:
         edges = band_edges(band_start, rate)
-        s = _band_correction(eq, rate, edges, kin, direct)
+        s, s_channel = _band_correction(eq, rate, edges, kin, direct)
+        col = {moment_channel(c): j for j, c in enumerate(eq.coordinates)}
         free = [g for g in direct_groups if not any(n.startswith("stated: ") for n in fits[g].notes)]
-        if np.any(s < 0.999) and free:
+        if (np.any(s < 0.999) or np.any(s_channel < 0.999)) and free:
             correction = s
             for g in free:                       # the user's stated levels stand
                 old = fits[g]
@@ -408,11 +417,14 @@ def propagated_floor(eq, trial, *, mode: str, excitation_kind: str | None, cutof
                     used[g] = old.scaled(np.sqrt(float(np.sum(w * s) / np.sum(w))))
                     continue
                 given = old.corner_given
+                # the measured moments are the compared channels: each gets its own channel's factors
+                scale = (s_channel[:, [col[n] for n in old.channels]]
+                         if g == "moments" and all(n in col for n in old.channels) else s[:, None])
                 used[g] = fit_noise(np.column_stack([trial[n] for n in old.channels]), rate, band_start,
                                     channels=old.channels, multiplicative=old.kind == "multiplicative",
                                     corner=float(old.corner[0]) if given else None,
                                     design_rate=float(old.design_rate[0]) if given else None,
-                                    coloured=g in ("excitation", "coordinates"), band_scale=s[:, None])
+                                    coloured=g in ("excitation", "coordinates"), band_scale=scale)
             direct = _direct(eq, used, trial, options, cutoff)
     kin_rms = np.sqrt(np.mean(kin ** 2, axis=(0, 1)))
     dir_rms = np.sqrt(np.mean(direct ** 2, axis=(0, 1)))
