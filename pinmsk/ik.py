@@ -41,7 +41,7 @@ from .kinematics import coordinate_map, trial_coordinates
 from .markers import MarkerSet, load_marker_set
 from .trial import Trial, marker_array, marker_names
 
-__all__ = ["InverseKinematics", "inverse_kinematics", "model_marker_positions", "add_marker_frames"]
+__all__ = ["InverseKinematics", "BatchKinematics", "inverse_kinematics", "model_marker_positions", "add_marker_frames"]
 
 
 def add_marker_frames(model, markers: MarkerSet) -> tuple[pin.Model, list[int]]:
@@ -109,6 +109,19 @@ class InverseKinematics(Fitter):
     strict : bool
         Raise :class:`~pinmsk.errors.ConvergenceError` at the first frame that does not
         converge in ``max_iter`` iterations (default: keep it, flagged in ``converged_``).
+    coordinate_tasks : dict, optional
+        ``{coordinate: (weight, target)}``, target a number or one per frame (rad or m): adds
+        ``weight * W_k * (q - target)^2`` to frame k's objective, ``W_k`` the frame's total marker
+        weight, as OpenSim's IKCoordinateTask (Simbody's Assembler divides the marker goal by
+        ``W_k``).  Each such coordinate is solved even if no marker moves it.
+    bounds : dict, optional
+        ``{coordinate: (lower, upper)}``: the coordinate stays in the range (projected steps), as
+        OpenSim's IK keeps clamped coordinates in theirs.
+    method : str
+        ``"batch"``: all frames' steps at once (:class:`BatchKinematics`; one-dof joints), after
+        key frames every ``key_stride`` frames (default 8) solved in turn; ``"frames"``: frame
+        after frame with Pinocchio's Jacobians (any joints); ``"auto"`` (default): batch when the
+        model allows it.
 
     ``result_.stats``: ``n`` the measured marker coordinates used, ``k`` the free
     coordinates times the frames, ``sse`` the weighted sum of squared marker errors (m^2),
@@ -117,7 +130,8 @@ class InverseKinematics(Fitter):
 
     def __init__(self, *, markers, coordinates: Sequence[str] | None = None, axes: str | None = None,
                  weights: dict | None = None, q0=None, max_iter: int = 50, tol: float = 1e-10,
-                 max_step: float = 0.5, strict: bool = False):
+                 max_step: float = 0.5, strict: bool = False, coordinate_tasks: dict | None = None,
+                 bounds: dict | None = None, method: str = "auto", key_stride: int | None = None):
         self.markers = markers
         self.coordinates = coordinates
         self.axes = axes
@@ -127,6 +141,10 @@ class InverseKinematics(Fitter):
         self.tol = tol
         self.max_step = max_step
         self.strict = strict
+        self.coordinate_tasks = coordinate_tasks
+        self.bounds = bounds
+        self.method = method
+        self.key_stride = key_stride
 
     def fit(self, model, trial: Trial, *, progress=None) -> "InverseKinematics":
         """Solve every frame of the marker ``trial``; returns self."""
@@ -194,6 +212,94 @@ class InverseKinematics(Fitter):
         if nm * na < free.size:
             raise TrialError(f"inverse kinematics: {nm} markers x {na} axes = {nm * na} measurements "
                              f"cannot determine {free.size} coordinates; add markers or fix coordinates")
+        nf = free.size
+        lo = np.full(nq, -np.inf)
+        hi = np.full(nq, np.inf)
+        for c, (a, b) in (self.bounds or {}).items():
+            lo[column(c)], hi[column(c)] = a, b
+        tasks = dict(self.coordinate_tasks or {})
+        if tasks:
+            task_cols = np.array([column(c) for c in tasks], dtype=int)
+            task_w = np.array([float(v[0]) for v in tasks.values()])
+            task_y = np.column_stack([np.broadcast_to(np.asarray(v[1], dtype=float), (n,)) for v in tasks.values()])
+            free = np.union1d(free, task_cols)
+            nf = free.size
+        use_batch = self.method == "batch" or (self.method == "auto" and BatchKinematics.supports(model.pin))
+        if not use_batch and (tasks or self.bounds):
+            raise ModelError(f"inverse kinematics: coordinate tasks and bounds need the batched solver "
+                             f"(one-dof joints); model '{model.name}' has other joints")
+        if use_batch:
+            kin = BatchKinematics(model.pin, [m.body for m in used], [m.position for m in used])
+
+            def batch_eval(Qs, cols=free, jacobian=True):
+                qp = Qs if cmap is None else cmap.expand(Qs)[0]
+                X, Jp = kin(qp, jacobian)
+                X = X[:, :, ax]
+                if not jacobian:
+                    return X, None
+                Jp = Jp[:, :, ax, :]
+                if cmap is None:
+                    return X, Jp[..., cols]
+                return X, np.einsum("nmav,nvc->nmac", Jp, cmap.jacobian(Qs)[:, :, cols], optimize=True)
+
+            ok_all = np.isfinite(Y).all(axis=2)
+            W = np.where(ok_all, w[None, :], 0.0)
+            Y0 = np.where(ok_all[..., None], Y, 0.0)
+            few = np.flatnonzero(np.count_nonzero(W, axis=1) * na < nf)
+            if few.size:
+                k = int(few[0])
+                raise TrialError(f"inverse kinematics: frame {k} (t = {trial.time[k]:.6g} s) has only "
+                                 f"{int(np.count_nonzero(W[k]))} measured marker(s) for {nf} coordinates; "
+                                 "fill the gaps (read_trc max_gap=...) or cut the frames")
+            if not tasks:
+                task_cols, task_w, task_y = np.zeros(0, dtype=int), np.zeros(0), np.zeros((n, 0))
+            Q, iters, conv = self._solve_batch(batch_eval, Y0, W, q, free, task_cols, task_w, task_y, lo, hi,
+                                               progress)
+            X, _ = batch_eval(Q, jacobian=False)
+            err = np.where(ok_all, np.linalg.norm(X - Y0, axis=2), np.nan)
+            rot = np.array([index[c] for c in model.rotational_coordinates if c in index], dtype=int)
+            Q[:, rot] = np.angle(np.exp(1j * Q[:, rot]))        # revolute coordinates in (-pi, pi]
+        else:
+            Q, err, iters, conv = self._solve_frames(evaluate, Y, w, q, free, nm, na, nq, n, trial,
+                                                     model, index, progress)
+
+        if self.strict and not conv.all():
+            k = int(np.flatnonzero(~conv)[0])
+            raise ConvergenceError(f"inverse kinematics did not converge at frame {k} "
+                                   f"(t = {trial.time[k]:.6g} s) in {self.max_iter} iterations")
+        with np.errstate(invalid="ignore"):
+            self.marker_rms_ = {m: float(np.sqrt(np.nanmean(err[:, j] ** 2))) for j, m in enumerate(mset.names)}
+            self.frame_rms_ = np.sqrt(np.nanmean(err ** 2, axis=1))
+        self.marker_error_ = err
+        self.iterations_ = iters
+        self.converged_ = conv
+        self.free_coordinates_ = tuple(names[i] for i in free)
+        self.axes_ = axes
+        if cmap is None:
+            self.q_ = Q
+            chans = {c: Q[:, model.coordinate_index(c)] for c in model.coordinate_order}
+        else:
+            # coupled coordinates take their couplers' values (OpenSim's IK enforces them); q_ is Pinocchio's
+            for dep, indep, f, scale in cmap.couplers:
+                x = Q[:, index[indep[0]]] if len(indep) == 1 else Q[:, [index[c] for c in indep]]
+                Q[:, index[dep]] = scale * f.value(x)
+            self.q_ = cmap.expand(Q)[0]
+            chans = {c: Q[:, index[c]] for c in trial_coordinates(model)}
+        used_k = np.isfinite(err)                        # (n, nm) markers measured in each frame
+        stats = FitStatistics(
+            n=int(used_k.sum()) * na, k=n * nf, sse=float(np.sum(np.where(used_k, w * err ** 2, 0.0))),
+            variance="estimated", converged=bool(conv.all()),
+            message=f"{int(conv.sum())}/{n} frames converged", iterations=int(iters.sum()),
+            objective=float(np.sum(np.where(used_k, w * err ** 2, 0.0))))
+        self.result_ = Result(trial.time, chans,
+                              meta={"analysis": "inverse_kinematics", "model": model.name,
+                                    "markers": mset.names, "axes": axes,
+                                    "marker_rms": self.marker_rms_},
+                              stats=stats, report=self._report_text(model, stats))
+        return self
+
+    def _solve_frames(self, evaluate, Y, w, q, free, nm, na, nq, n, trial, model, index, progress):
+        """Frame after frame, each warm-started from the previous one (any Pinocchio joints)."""
         Q = np.empty((n, nq))
         err = np.full((n, nm), np.nan)
         iters = np.zeros(n, dtype=int)
@@ -260,40 +366,42 @@ class InverseKinematics(Fitter):
             conv[k] = done
             if progress is not None:
                 progress.update(1)
-        if self.strict and not conv.all():
-            k = int(np.flatnonzero(~conv)[0])
-            raise ConvergenceError(f"inverse kinematics did not converge at frame {k} "
-                                   f"(t = {trial.time[k]:.6g} s) in {self.max_iter} iterations")
-        with np.errstate(invalid="ignore"):
-            self.marker_rms_ = {m: float(np.sqrt(np.nanmean(err[:, j] ** 2))) for j, m in enumerate(mset.names)}
-            self.frame_rms_ = np.sqrt(np.nanmean(err ** 2, axis=1))
-        self.marker_error_ = err
-        self.iterations_ = iters
-        self.converged_ = conv
-        self.free_coordinates_ = tuple(names[i] for i in free)
-        self.axes_ = axes
-        if cmap is None:
-            self.q_ = Q
-            chans = {c: Q[:, model.coordinate_index(c)] for c in model.coordinate_order}
-        else:
-            # coupled coordinates take their couplers' values (OpenSim's IK enforces them); q_ is Pinocchio's
-            for dep, indep, f, scale in cmap.couplers:
-                x = Q[:, index[indep[0]]] if len(indep) == 1 else Q[:, [index[c] for c in indep]]
-                Q[:, index[dep]] = scale * f.value(x)
-            self.q_ = cmap.expand(Q)[0]
-            chans = {c: Q[:, index[c]] for c in trial_coordinates(model)}
-        used_k = np.isfinite(err)                        # (n, nm) markers measured in each frame
-        stats = FitStatistics(
-            n=int(used_k.sum()) * na, k=n * nf, sse=float(np.sum(np.where(used_k, w * err ** 2, 0.0))),
-            variance="estimated", converged=bool(conv.all()),
-            message=f"{int(conv.sum())}/{n} frames converged", iterations=int(iters.sum()),
-            objective=float(np.sum(np.where(used_k, w * err ** 2, 0.0))))
-        self.result_ = Result(trial.time, chans,
-                              meta={"analysis": "inverse_kinematics", "model": model.name,
-                                    "markers": mset.names, "axes": axes,
-                                    "marker_rms": self.marker_rms_},
-                              stats=stats, report=self._report_text(model, stats))
-        return self
+        return Q, err, iters, conv
+
+    def _solve_batch(self, evaluate, Y, W, q, free, task_cols, task_w, task_y, lo, hi, progress):
+        """Key frames first, one after the other (each from the constant-velocity extrapolation of the
+        two before), then every other frame at once from the key frames' linear interpolation."""
+        n = Y.shape[0]
+        stride = self.key_stride if self.key_stride is not None else 8
+        keys = np.unique(np.r_[np.arange(0, n, max(int(stride), 1)), n - 1])
+        Q = np.empty((n, q.size))
+        iters = np.zeros(n, dtype=int)
+        conv = np.zeros(n, dtype=bool)
+        opts = dict(max_iter=self.max_iter, tol=self.tol, max_step=self.max_step)
+        # key frames: seeds only, to a loose step tolerance
+        seed = dict(opts, tol=max(self.tol, KEY_FRAME_TOL))
+        prev, prev_k = [], []
+        for k in keys:
+            if len(prev) >= 2:
+                guess = prev[-1] + (prev[-1] - prev[-2]) * (k - prev_k[-1]) / (prev_k[-1] - prev_k[-2])
+            else:
+                guess = prev[-1] if prev else q
+            Qk = np.array(guess, dtype=float)[None].copy()
+            s = slice(k, k + 1)
+            it, cv = _lm_frames(evaluate, Y[s], W[s], Qk, free, task_cols, task_w, task_y[s], lo, hi, **seed)
+            if not cv[0] and prev:                    # the extrapolation overshot: start from the last key frame
+                Qk = prev[-1][None].copy()
+                it2, cv = _lm_frames(evaluate, Y[s], W[s], Qk, free, task_cols, task_w, task_y[s], lo, hi, **seed)
+                it = it + it2
+            Q[k], iters[k] = Qk[0], it[0]
+            prev.append(Qk[0])
+            prev_k.append(k)
+        # every frame from the key frames' interpolation, all at once
+        for c in range(q.size):
+            Q[:, c] = np.interp(np.arange(n), keys, Q[keys, c])
+        it, conv = _lm_frames(evaluate, Y, W, Q, free, task_cols, task_w, task_y, lo, hi, progress=progress, **opts)
+        iters += it
+        return Q, iters, conv
 
     def _report_text(self, model, stats: FitStatistics) -> str:
         return format_report(f"Inverse kinematics of model '{model.name}' from markers", [
@@ -307,3 +415,198 @@ class InverseKinematics(Fitter):
 def inverse_kinematics(model, trial: Trial, *, markers, **options) -> Trial:
     """Shortcut: ``InverseKinematics(markers=markers, **options).fit(model, trial).result_``."""
     return InverseKinematics(markers=markers, **options).fit(model, trial).result_
+
+
+# ---------------------------------------------------------------------------------------------
+# the batched solver: every frame's Gauss-Newton step at once
+# ---------------------------------------------------------------------------------------------
+
+#: Pinocchio joints the batched kinematics handles (one degree of freedom, ``nq = nv = 1``).
+#: Step tolerance (rad or m) of the key frames, which only seed the frames between them.
+KEY_FRAME_TOL = 1e-4
+
+_ONE_DOF = frozenset({"JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned",
+                      "JointModelPX", "JointModelPY", "JointModelPZ", "JointModelPrismaticUnaligned"})
+
+
+def _skew(a: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a x b`` over the last axis (broadcast), without :func:`numpy.cross`'s per-call set-up."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
+
+
+class BatchKinematics:
+    """World positions of points fixed in the bodies of a tree of one-dof joints, and their Jacobians,
+    for N configurations at once (numpy over frames; the same numbers as Pinocchio's
+    ``framesForwardKinematics`` and ``LOCAL_WORLD_ALIGNED`` frame Jacobians, to rounding).
+
+    Each joint's pose is ``oMi = oMparent * placement * exp(axis q)`` (a rotation about, or a
+    translation along, the joint's axis, read from its motion subspace).  A point ``x`` fixed
+    below a revolute joint with world axis ``a`` through ``o`` moves by ``a x (x - o)`` per radian;
+    below a prismatic joint by ``a`` per metre.  ``bodies`` are Pinocchio frame names, ``points``
+    (M, 3) the points in those frames.
+    """
+
+    def __init__(self, pm: pin.Model, bodies: Sequence[str], points: np.ndarray):
+        if not self.supports(pm):
+            raise ModelError("batched kinematics needs one-dof joints only")
+        pd = pm.createData()
+        pin.forwardKinematics(pm, pd, pin.neutral(pm))
+        self.nq = pm.nq
+        self.njoints = pm.njoints
+        self.joints = []
+        for j in range(1, pm.njoints):
+            S = np.array(pd.joints[j].S).ravel()
+            rev = pm.joints[j].shortname().startswith("JointModelR")
+            axis = S[3:] if rev else S[:3]
+            axis = axis / np.linalg.norm(axis)
+            K = _skew(axis)
+            pl = pm.jointPlacements[j]
+            self.joints.append((j, pm.parents[j], pl.rotation.copy(), pl.translation.copy(), rev, axis, K, K @ K,
+                                pm.idx_qs[j]))
+        points = np.asarray(points, dtype=float).reshape(-1, 3)
+        mj, loc = [], []
+        for b, x in zip(bodies, points):
+            f = pm.frames[pm.getFrameId(b)]
+            mj.append(f.parentJoint)
+            loc.append(f.placement.act(np.asarray(x, dtype=float)))
+        self.marker_joint = np.array(mj, dtype=int)
+        self.marker_point = np.array(loc).reshape(-1, 3)
+        # the markers each joint moves (those on it or below it)
+        below = {j: [] for j in range(pm.njoints)}
+        for m, jm in enumerate(mj):
+            for s in pm.supports[jm]:
+                below[s].append(m)
+        self.moved = {j: np.array(v, dtype=int) for j, v in below.items()}
+
+    @staticmethod
+    def supports(pm: pin.Model) -> bool:
+        return all(pm.joints[j].shortname() in _ONE_DOF for j in range(1, pm.njoints))
+
+    def __call__(self, q: np.ndarray, jacobian: bool = True):
+        """Positions (N, M, 3) and, with ``jacobian``, d position / d q (N, M, 3, nq) at ``q`` (N, nq)."""
+        q = np.atleast_2d(q)
+        n = q.shape[0]
+        R = np.empty((n, self.njoints, 3, 3))
+        p = np.empty((n, self.njoints, 3))
+        R[:, 0] = np.eye(3)
+        p[:, 0] = 0.0
+        axes = np.empty((n, self.njoints, 3))
+        for j, parent, Rpl, tpl, rev, axis, K, K2, iq in self.joints:
+            if parent == 0:
+                Rb = np.broadcast_to(Rpl, (n, 3, 3))
+                pb = np.broadcast_to(tpl, (n, 3))
+            else:
+                Rb = R[:, parent] @ Rpl
+                pb = p[:, parent] + R[:, parent] @ tpl
+            x = q[:, iq]
+            aw = Rb @ axis
+            axes[:, j] = aw
+            if rev:
+                Rq = np.eye(3) + np.sin(x)[:, None, None] * K + (1.0 - np.cos(x))[:, None, None] * K2
+                R[:, j] = Rb @ Rq
+                p[:, j] = pb
+            else:
+                R[:, j] = Rb
+                p[:, j] = pb + aw * x[:, None]
+        mj = self.marker_joint
+        X = np.einsum("nmij,mj->nmi", R[:, mj], self.marker_point) + p[:, mj]
+        if not jacobian:
+            return X, None
+        J = np.zeros((self.nq, n, len(mj), 3))
+        for j, parent, Rpl, tpl, rev, axis, K, K2, iq in self.joints:
+            ms = self.moved[j]
+            if ms.size == 0:
+                continue
+            if rev:
+                J[iq][:, ms] = _cross(axes[:, j, None, :], X[:, ms] - p[:, j, None, :])
+            else:
+                J[iq][:, ms] = axes[:, j, None, :]
+        return X, J.transpose(1, 2, 3, 0)
+
+
+def _lm_frames(evaluate, Y, W, Q, free, task_cols, task_w, task_y, lo, hi, *, max_iter, tol, max_step,
+               progress=None):
+    """Levenberg-Marquardt on every frame at once (each frame its own damping, acceptance and end).
+
+    ``evaluate(Q)`` -> marker positions (n, M, A) and their Jacobians (n, M, A, nf) in the free
+    coordinates ``free`` (column indices of ``Q``); ``Y`` (n, M, A) measured (0 where missing), ``W`` (n, M) weights (0 where missing);
+    ``Q`` (n, nq) the start, solved in place.  Coordinate tasks add rows ``sqrt(wc Wk) (q_c - y_c)``
+    with ``Wk`` the frame's total marker weight (Simbody's Assembler divides the marker goal by it).
+    ``lo``/``hi`` (nq,) bound the coordinates (projected steps).  Returns (iterations, converged).
+    """
+    n, nm, na = Y.shape
+    nf = free.size
+    its = np.zeros(n, dtype=int)
+    conv = np.zeros(n, dtype=bool)
+    sw = np.sqrt(W)[:, :, None]                                    # (n, M, 1)
+    tw = np.sqrt(task_w[None, :] * W.sum(axis=1)[:, None]) if task_cols.size else None   # (n, T)
+    tpos = np.array([int(np.flatnonzero(free == c)[0]) for c in task_cols], dtype=int)
+
+    def residual(idx, Qs):
+        X, J = evaluate(Qs)
+        r = ((X - Y[idx]) * sw[idx]).reshape(len(idx), nm * na)
+        Jf = (J * sw[idx][..., None]).reshape(len(idx), nm * na, nf)
+        if tw is not None:
+            rt = tw[idx] * (Qs[:, task_cols] - task_y[idx])
+            Jt = np.zeros((len(idx), task_cols.size, nf))
+            Jt[:, np.arange(task_cols.size), tpos] = tw[idx]
+            r = np.concatenate([r, rt], axis=1)
+            Jf = np.concatenate([Jf, Jt], axis=1)
+        return r, Jf
+
+    act = np.arange(n)
+    r, J = residual(act, Q)
+    cost = np.einsum("ni,ni->n", r, r)
+    lam = np.full(n, 1e-6)
+    eye = np.eye(nf)
+    bounded = np.isfinite(lo[free]).any() or np.isfinite(hi[free]).any()
+    for _ in range(max_iter):
+        if act.size == 0:
+            break
+        H = np.einsum("nri,nrj->nij", J, J)
+        g = np.einsum("nri,nr->ni", J, r)
+        d = np.einsum("nii->ni", H).copy()
+        d[d <= 0] = 1.0
+        A = H + lam[act, None, None] * d[:, :, None] * eye
+        dq = -np.linalg.solve(A, g[..., None])[..., 0]
+        big = np.abs(dq).max(axis=1)
+        cut = big > max_step                                       # a trust region: no jumps by whole turns
+        dq[cut] *= (max_step / big[cut])[:, None]
+        Qn = Q[act].copy()
+        Qn[:, free] += dq
+        if bounded:
+            Qn[:, free] = np.clip(Qn[:, free], lo[free], hi[free])
+        step = np.abs(Qn[:, free] - Q[act][:, free]).max(axis=1)
+        rn, Jn = residual(act, Qn)
+        cn = np.einsum("ni,ni->n", rn, rn)
+        ok = cn <= cost[act]
+        its[act] += 1
+        a_ok = act[ok]
+        Q[a_ok] = Qn[ok]
+        small = (step < tol) | (ok & (cost[act] - cn <= 1e-14 * cost[act]))
+        cost[a_ok] = cn[ok]
+        r[ok] = rn[ok]
+        J[ok] = Jn[ok]
+        lam[a_ok] = np.maximum(lam[a_ok] / 10.0, 1e-12)
+        lam[act[~ok]] *= 10.0
+        stuck = lam[act] > 1e10
+        done = small | stuck
+        conv[act[small]] = True
+        if stuck.any():                                            # no descent left: converged if the gradient is nil
+            gmax = np.abs(g[stuck]).max(axis=1)
+            conv[act[stuck]] |= gmax < 1e-12
+        if progress is not None and done.any():
+            progress.update(int(done.sum()))
+        keep = ~done
+        act, r, J = act[keep], r[keep], J[keep]
+    if progress is not None and act.size:
+        progress.update(int(act.size))
+    return its, conv
