@@ -1,0 +1,1 @@
+"""OpenSim tool setups (``<OpenSimDocument><...Tool>``) run by pinmsk."""
