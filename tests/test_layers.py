@@ -26,6 +26,7 @@ LAYERS = {
     "diagnose": 12,
     "presentation": 13,
     "pipeline": 14, "demo": 14, "gait_validation": 14,
+    "tools": 14,
     "presentation.cli": 15, "__main__": 15,
 }
 
