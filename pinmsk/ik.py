@@ -240,7 +240,8 @@ class InverseKinematics(Fitter):
                 Jp = Jp[:, :, ax, :]
                 if cmap is None:
                     return X, Jp[..., cols]
-                return X, np.einsum("nmav,nvc->nmac", Jp, cmap.jacobian(Qs)[:, :, cols], optimize=True)
+                Jm = cmap.jacobian(Qs)[:, :, cols]
+                return X, (Jp.reshape(len(Qs), -1, Jp.shape[-1]) @ Jm).reshape(Jp.shape[:3] + (len(cols),))
 
             ok_all = np.isfinite(Y).all(axis=2)
             W = np.where(ok_all, w[None, :], 0.0)
@@ -485,6 +486,10 @@ class BatchKinematics:
             for s in pm.supports[jm]:
                 below[s].append(m)
         self.moved = {j: np.array(v, dtype=int) for j, v in below.items()}
+        self.n_markers = len(mj)
+        # the markers of each joint, with their points as columns (3, k)
+        self.groups = [(j, np.flatnonzero(self.marker_joint == j), self.marker_point[self.marker_joint == j].T.copy())
+                       for j in sorted(set(mj))]
 
     @staticmethod
     def supports(pm: pin.Model) -> bool:
@@ -494,42 +499,50 @@ class BatchKinematics:
         """Positions (N, M, 3) and, with ``jacobian``, d position / d q (N, M, 3, nq) at ``q`` (N, nq)."""
         q = np.atleast_2d(q)
         n = q.shape[0]
-        R = np.empty((n, self.njoints, 3, 3))
-        p = np.empty((n, self.njoints, 3))
-        R[:, 0] = np.eye(3)
-        p[:, 0] = 0.0
-        axes = np.empty((n, self.njoints, 3))
+        # one contiguous (n, 3, 3) / (n, 3) array per joint: numpy's stacked 3x3 products are fastest so,
+        # and a product with a constant matrix is one 2-D product of the (3n, 3) stack
+        R = [np.broadcast_to(np.eye(3), (n, 3, 3))] + [None] * (self.njoints - 1)
+        p = [np.zeros((n, 3))] + [None] * (self.njoints - 1)
+        axes = [None] * self.njoints
+        s, c = np.sin(q), 1.0 - np.cos(q)
         for j, parent, Rpl, tpl, rev, axis, K, K2, iq in self.joints:
             if parent == 0:
                 Rb = np.broadcast_to(Rpl, (n, 3, 3))
                 pb = np.broadcast_to(tpl, (n, 3))
+                aw = np.broadcast_to(Rpl @ axis, (n, 3))
             else:
-                Rb = R[:, parent] @ Rpl
-                pb = p[:, parent] + R[:, parent] @ tpl
-            x = q[:, iq]
-            aw = Rb @ axis
-            axes[:, j] = aw
+                Rp = R[parent].reshape(3 * n, 3)
+                Rb = (Rp @ Rpl).reshape(n, 3, 3)
+                pb = p[parent] + (Rp @ tpl).reshape(n, 3)
+                aw = (Rb.reshape(3 * n, 3) @ axis).reshape(n, 3)
+            axes[j] = aw
             if rev:
-                Rq = np.eye(3) + np.sin(x)[:, None, None] * K + (1.0 - np.cos(x))[:, None, None] * K2
-                R[:, j] = Rb @ Rq
-                p[:, j] = pb
+                # Rodrigues: R exp(K x) = R + sin(x) R K + (1 - cos(x)) R K^2
+                Rf = Rb.reshape(3 * n, 3)
+                Rj = (Rf @ K).reshape(n, 3, 3) * s[:, iq, None, None]
+                Rj += (Rf @ K2).reshape(n, 3, 3) * c[:, iq, None, None]
+                Rj += Rb
+                R[j] = Rj
+                p[j] = pb
             else:
-                R[:, j] = Rb
-                p[:, j] = pb + aw * x[:, None]
-        mj = self.marker_joint
-        X = np.einsum("nmij,mj->nmi", R[:, mj], self.marker_point) + p[:, mj]
+                R[j] = Rb
+                p[j] = pb + aw * q[:, iq, None]
+        X = np.empty((n, self.n_markers, 3))
+        for j, ms, pts in self.groups:
+            X[:, ms] = (R[j] @ pts).transpose(0, 2, 1) + p[j][:, None, :]
         if not jacobian:
             return X, None
-        J = np.zeros((self.nq, n, len(mj), 3))
+        J = np.zeros((n, self.nq, self.n_markers, 3))
         for j, parent, Rpl, tpl, rev, axis, K, K2, iq in self.joints:
             ms = self.moved[j]
             if ms.size == 0:
                 continue
+            col = J[:, iq]
             if rev:
-                J[iq][:, ms] = _cross(axes[:, j, None, :], X[:, ms] - p[:, j, None, :])
+                col[:, ms] = _cross(axes[j][:, None, :], X[:, ms] - p[j][:, None, :])
             else:
-                J[iq][:, ms] = axes[:, j, None, :]
-        return X, J.transpose(1, 2, 3, 0)
+                col[:, ms] = axes[j][:, None, :]
+        return X, J.transpose(0, 2, 3, 1)
 
 
 def _lm_frames(evaluate, Y, W, Q, free, task_cols, task_w, task_y, lo, hi, *, max_iter, tol, max_step,
@@ -571,8 +584,9 @@ def _lm_frames(evaluate, Y, W, Q, free, task_cols, task_w, task_y, lo, hi, *, ma
     for _ in range(max_iter):
         if act.size == 0:
             break
-        H = np.einsum("nri,nrj->nij", J, J)
-        g = np.einsum("nri,nr->ni", J, r)
+        Jt = J.transpose(0, 2, 1)
+        H = Jt @ J
+        g = (Jt @ r[..., None])[..., 0]
         d = np.einsum("nii->ni", H).copy()
         d[d <= 0] = 1.0
         A = H + lam[act, None, None] * d[:, :, None] * eye
