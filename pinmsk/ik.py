@@ -118,8 +118,9 @@ class InverseKinematics(Fitter):
         ``{coordinate: (lower, upper)}``: the coordinate stays in the range (projected steps), as
         OpenSim's IK keeps clamped coordinates in theirs.
     method : str
-        ``"batch"``: all frames' steps at once (:class:`BatchKinematics`; one-dof joints), after
-        key frames every ``key_stride`` frames (default 8) solved in turn; ``"frames"``: frame
+        ``"batch"``: all frames' steps at once (:class:`BatchKinematics`; one-dof joints), coarse to
+        fine in time: key frames every ``key_stride`` frames (default 8) from ``q0``, then every
+        quarter of that from their cubic interpolation, down to every frame; ``"frames"``: frame
         after frame with Pinocchio's Jacobians (any joints); ``"auto"`` (default): batch when the
         model allows it.
 
@@ -231,16 +232,26 @@ class InverseKinematics(Fitter):
         if use_batch:
             kin = BatchKinematics(model.pin, [m.body for m in used], [m.position for m in used])
 
+            all_axes = ax == [0, 1, 2]
+            mapping = _fast_map(cmap) if cmap is not None else None
+
             def batch_eval(Qs, cols=free, jacobian=True):
-                qp = Qs if cmap is None else cmap.expand(Qs)[0]
+                if cmap is None:
+                    qp, Jm = Qs, None
+                elif mapping is not None:
+                    qp, Jm = mapping(Qs, jacobian)
+                else:
+                    qp, Jm = cmap.expand(Qs)[0], (cmap.jacobian(Qs) if jacobian else None)
                 X, Jp = kin(qp, jacobian)
-                X = X[:, :, ax]
+                if not all_axes:
+                    X = X[:, :, ax]
                 if not jacobian:
                     return X, None
-                Jp = Jp[:, :, ax, :]
-                if cmap is None:
+                if not all_axes:
+                    Jp = Jp[:, :, ax, :]
+                if Jm is None:
                     return X, Jp[..., cols]
-                Jm = cmap.jacobian(Qs)[:, :, cols]
+                Jm = Jm[:, :, cols]
                 return X, (Jp.reshape(len(Qs), -1, Jp.shape[-1]) @ Jm).reshape(Jp.shape[:3] + (len(cols),))
 
             ok_all = np.isfinite(Y).all(axis=2)
@@ -370,38 +381,37 @@ class InverseKinematics(Fitter):
         return Q, err, iters, conv
 
     def _solve_batch(self, evaluate, Y, W, q, free, task_cols, task_w, task_y, lo, hi, progress):
-        """Key frames first, one after the other (each from the constant-velocity extrapolation of the
-        two before), then every other frame at once from the key frames' linear interpolation."""
+        """Coarse to fine in time, every level's frames at once: the key frames every ``key_stride``
+        (default 8) frames start from ``q`` (the default pose, as OpenSim assembles its first frame), each finer level
+        from the cubic interpolation of the coarser one's solutions, the last level (every frame) to
+        ``tol``, the others to :data:`KEY_FRAME_TOL` (they only seed); each level's stride is a quarter of the
+        one before (8, 2, 1)."""
         n = Y.shape[0]
-        stride = self.key_stride if self.key_stride is not None else 8
-        keys = np.unique(np.r_[np.arange(0, n, max(int(stride), 1)), n - 1])
+        top = max(int(self.key_stride if self.key_stride is not None else 8), 1)
+        strides = [top]
+        while strides[-1] > 1:
+            strides.append(max(strides[-1] // 4, 1))
+        strides = [x for x in strides if x == 1 or 2 * x <= n - 1]
         Q = np.empty((n, q.size))
         iters = np.zeros(n, dtype=int)
         conv = np.zeros(n, dtype=bool)
-        opts = dict(max_iter=self.max_iter, tol=self.tol, max_step=self.max_step)
-        # key frames: seeds only, to a loose step tolerance
-        seed = dict(opts, tol=max(self.tol, KEY_FRAME_TOL))
-        prev, prev_k = [], []
-        for k in keys:
-            if len(prev) >= 2:
-                guess = prev[-1] + (prev[-1] - prev[-2]) * (k - prev_k[-1]) / (prev_k[-1] - prev_k[-2])
+        solved = np.zeros(0, dtype=int)
+        for level, stride in enumerate(strides):
+            last = stride == 1
+            frames = np.arange(n) if last else np.unique(np.r_[np.arange(0, n, stride), n - 1])
+            if solved.size == 0:
+                Qs = np.repeat(q[None], frames.size, axis=0)
             else:
-                guess = prev[-1] if prev else q
-            Qk = np.array(guess, dtype=float)[None].copy()
-            s = slice(k, k + 1)
-            it, cv = _lm_frames(evaluate, Y[s], W[s], Qk, free, task_cols, task_w, task_y[s], lo, hi, **seed)
-            if not cv[0] and prev:                    # the extrapolation overshot: start from the last key frame
-                Qk = prev[-1][None].copy()
-                it2, cv = _lm_frames(evaluate, Y[s], W[s], Qk, free, task_cols, task_w, task_y[s], lo, hi, **seed)
-                it = it + it2
-            Q[k], iters[k] = Qk[0], it[0]
-            prev.append(Qk[0])
-            prev_k.append(k)
-        # every frame from the key frames' interpolation, all at once
-        for c in range(q.size):
-            Q[:, c] = np.interp(np.arange(n), keys, Q[keys, c])
-        it, conv = _lm_frames(evaluate, Y, W, Q, free, task_cols, task_w, task_y, lo, hi, progress=progress, **opts)
-        iters += it
+                Qs = _interpolate(solved, Q[solved], frames)
+            tol = self.tol if last else max(self.tol, KEY_FRAME_TOL)
+            it, cv = _lm_frames(evaluate, Y[frames], W[frames], Qs, free, task_cols, task_w, task_y[frames], lo, hi,
+                                max_iter=self.max_iter, tol=tol, max_step=self.max_step,
+                                progress=progress if last else None)
+            Q[frames] = Qs
+            iters[frames] += it
+            if last:
+                conv[:] = cv
+            solved = frames
         return Q, iters, conv
 
     def _report_text(self, model, stats: FitStatistics) -> str:
@@ -424,7 +434,7 @@ def inverse_kinematics(model, trial: Trial, *, markers, **options) -> Trial:
 
 #: Pinocchio joints the batched kinematics handles (one degree of freedom, ``nq = nv = 1``).
 #: Step tolerance (rad or m) of the key frames, which only seed the frames between them.
-KEY_FRAME_TOL = 1e-4
+KEY_FRAME_TOL = 1e-3
 
 _ONE_DOF = frozenset({"JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned",
                       "JointModelPX", "JointModelPY", "JointModelPZ", "JointModelPrismaticUnaligned"})
@@ -543,6 +553,41 @@ class BatchKinematics:
             else:
                 col[:, ms] = axes[j][:, None, :]
         return X, J.transpose(0, 2, 3, 1)
+
+
+def _fast_map(cmap):
+    """``(q_pinocchio, d q_pinocchio / d q)`` of a coordinate map in one pass, when it has no couplers and
+    each dependent joint is a one-argument function in one of its banks (an imported knee): the banks'
+    values and slopes from one evaluation.  None when the map needs its general path."""
+    if cmap.couplers or not getattr(cmap, "_all_banked", False):
+        return None
+    same_j, same_i, banks = cmap._same_j, cmap._same_i, cmap._banks
+    nj, nc = len(cmap.joints), len(cmap.osim_coordinates)
+
+    def mapping(Q, jacobian=True):
+        n = Q.shape[0]
+        qp = np.empty((n, nj))
+        qp[:, same_j] = Q[:, same_i]
+        J = None
+        if jacobian:
+            J = np.zeros((n, nj, nc))
+            J[:, same_j, same_i] = 1.0
+        for col, js, bank in banks:
+            F, D1, _ = bank.evaluate(Q[:, col])
+            qp[:, js] = F.T
+            if jacobian:
+                J[:, js, col] = D1.T
+        return qp, J
+    return mapping
+
+
+def _interpolate(t, Q, at):
+    """``Q`` (k, nq) at the frames ``t`` interpolated at ``at``: a cubic spline through four or more
+    frames (the ends not-a-knot), else linear."""
+    if t.size >= 4:
+        from scipy.interpolate import CubicSpline
+        return CubicSpline(t, Q, axis=0)(at)
+    return np.column_stack([np.interp(at, t, Q[:, c]) for c in range(Q.shape[1])])
 
 
 def _lm_frames(evaluate, Y, W, Q, free, task_cols, task_w, task_y, lo, hi, *, max_iter, tol, max_step,

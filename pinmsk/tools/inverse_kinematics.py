@@ -194,7 +194,7 @@ def inverse_kinematics(model, markers: Trial, *, tasks=None, time_range=None, co
     ik = InverseKinematics(markers=MarkerSet(tuple(used), {}, model.name, mset.source), axes="xyz",
                            q0={c: v for c, v in defaults.items() if c in coordinates} or None,
                            coordinate_tasks=targets or None, bounds=bounds or None,
-                           tol=min(1e-6, 0.1 * accuracy))
+                           tol=accuracy)
     ik.fit(model, trial, progress=progress)
     res = ik.result_
     times = file_time[frames]
