@@ -119,7 +119,7 @@ class InverseKinematics(Fitter):
         OpenSim's IK keeps clamped coordinates in theirs.
     method : str
         ``"batch"``: all frames' steps at once (:class:`BatchKinematics`; one-dof joints), coarse to
-        fine in time: key frames every ``key_stride`` frames (default 8) from ``q0``, then every
+        fine in time: key frames every ``key_stride`` frames (default 4) from ``q0``, then every
         quarter of that from their cubic interpolation, down to every frame; ``"frames"``: frame
         after frame with Pinocchio's Jacobians (any joints); ``"auto"`` (default): batch when the
         model allows it.
@@ -382,12 +382,11 @@ class InverseKinematics(Fitter):
 
     def _solve_batch(self, evaluate, Y, W, q, free, task_cols, task_w, task_y, lo, hi, progress):
         """Coarse to fine in time, every level's frames at once: the key frames every ``key_stride``
-        (default 8) frames start from ``q`` (the default pose, as OpenSim assembles its first frame), each finer level
-        from the cubic interpolation of the coarser one's solutions, the last level (every frame) to
-        ``tol``, the others to :data:`KEY_FRAME_TOL` (they only seed); each level's stride is a quarter of the
-        one before (8, 2, 1)."""
+        (default 4) frames start from ``q`` (the default pose, as OpenSim assembles its first frame), each finer level
+        from the cubic interpolation of the coarser one's solutions, each level solving its new
+        frames to ``tol``; each level's stride is a quarter of the one before (4, 1; 16, 4, 1)."""
         n = Y.shape[0]
-        top = max(int(self.key_stride if self.key_stride is not None else 8), 1)
+        top = max(int(self.key_stride if self.key_stride is not None else 4), 1)
         strides = [top]
         while strides[-1] > 1:
             strides.append(max(strides[-1] // 4, 1))
@@ -396,22 +395,16 @@ class InverseKinematics(Fitter):
         iters = np.zeros(n, dtype=int)
         conv = np.zeros(n, dtype=bool)
         solved = np.zeros(0, dtype=int)
-        for level, stride in enumerate(strides):
-            last = stride == 1
-            frames = np.arange(n) if last else np.unique(np.r_[np.arange(0, n, stride), n - 1])
-            if solved.size == 0:
-                Qs = np.repeat(q[None], frames.size, axis=0)
-            else:
-                Qs = _interpolate(solved, Q[solved], frames)
-            tol = self.tol if last else max(self.tol, KEY_FRAME_TOL)
-            it, cv = _lm_frames(evaluate, Y[frames], W[frames], Qs, free, task_cols, task_w, task_y[frames], lo, hi,
-                                max_iter=self.max_iter, tol=tol, max_step=self.max_step,
-                                progress=progress if last else None)
-            Q[frames] = Qs
-            iters[frames] += it
-            if last:
-                conv[:] = cv
-            solved = frames
+        for stride in strides:
+            frames = np.unique(np.r_[np.arange(0, n, stride), n - 1])
+            new = np.setdiff1d(frames, solved)
+            if new.size == 0:
+                continue
+            Qs = np.repeat(q[None], new.size, axis=0) if solved.size == 0 else _interpolate(solved, Q[solved], new)
+            it, cv = _lm_frames(evaluate, Y[new], W[new], Qs, free, task_cols, task_w, task_y[new], lo, hi,
+                                max_iter=self.max_iter, tol=self.tol, max_step=self.max_step, progress=progress)
+            Q[new], iters[new], conv[new] = Qs, it, cv
+            solved = np.union1d(solved, new)
         return Q, iters, conv
 
     def _report_text(self, model, stats: FitStatistics) -> str:
@@ -433,9 +426,6 @@ def inverse_kinematics(model, trial: Trial, *, markers, **options) -> Trial:
 # ---------------------------------------------------------------------------------------------
 
 #: Pinocchio joints the batched kinematics handles (one degree of freedom, ``nq = nv = 1``).
-#: Step tolerance (rad or m) of the key frames, which only seed the frames between them.
-KEY_FRAME_TOL = 1e-3
-
 _ONE_DOF = frozenset({"JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned",
                       "JointModelPX", "JointModelPY", "JointModelPZ", "JointModelPrismaticUnaligned"})
 
@@ -480,8 +470,10 @@ class BatchKinematics:
             axis = axis / np.linalg.norm(axis)
             K = _skew(axis)
             pl = pm.jointPlacements[j]
-            self.joints.append((j, pm.parents[j], pl.rotation.copy(), pl.translation.copy(), rev, axis, K, K @ K,
-                                pm.idx_qs[j]))
+            Rpl, tpl = pl.rotation.copy(), pl.translation.copy()
+            # one product with the parent's rotation gives all of these: [Rpl | Rpl K | Rpl K^2 | Rpl a | t]
+            C = np.column_stack([Rpl, Rpl @ K, Rpl @ K @ K, Rpl @ axis, tpl])
+            self.joints.append((j, pm.parents[j], C, rev, pm.idx_qs[j]))
         points = np.asarray(points, dtype=float).reshape(-1, 3)
         mj, loc = [], []
         for b, x in zip(bodies, points):
@@ -509,50 +501,47 @@ class BatchKinematics:
         """Positions (N, M, 3) and, with ``jacobian``, d position / d q (N, M, 3, nq) at ``q`` (N, nq)."""
         q = np.atleast_2d(q)
         n = q.shape[0]
-        # one contiguous (n, 3, 3) / (n, 3) array per joint: numpy's stacked 3x3 products are fastest so,
-        # and a product with a constant matrix is one 2-D product of the (3n, 3) stack
-        R = [np.broadcast_to(np.eye(3), (n, 3, 3))] + [None] * (self.njoints - 1)
-        p = [np.zeros((n, 3))] + [None] * (self.njoints - 1)
+        # one (n, 3, 3) / (n, 3) array per joint; the constants of a joint meet its parent's rotation in one
+        # 2-D product of the (3n, 3) stack
+        R = [None] * self.njoints
+        p = [None] * self.njoints
         axes = [None] * self.njoints
         s, c = np.sin(q), 1.0 - np.cos(q)
-        for j, parent, Rpl, tpl, rev, axis, K, K2, iq in self.joints:
+        for j, parent, C, rev, iq in self.joints:
             if parent == 0:
-                Rb = np.broadcast_to(Rpl, (n, 3, 3))
-                pb = np.broadcast_to(tpl, (n, 3))
-                aw = np.broadcast_to(Rpl @ axis, (n, 3))
+                M = np.broadcast_to(C, (n, 3, 11))
+                pb = C[:, 10]
             else:
-                Rp = R[parent].reshape(3 * n, 3)
-                Rb = (Rp @ Rpl).reshape(n, 3, 3)
-                pb = p[parent] + (Rp @ tpl).reshape(n, 3)
-                aw = (Rb.reshape(3 * n, 3) @ axis).reshape(n, 3)
+                M = (R[parent].reshape(3 * n, 3) @ C).reshape(n, 3, 11)
+                pb = p[parent] + M[:, :, 10]
+            aw = M[:, :, 9]
             axes[j] = aw
             if rev:
                 # Rodrigues: R exp(K x) = R + sin(x) R K + (1 - cos(x)) R K^2
-                Rf = Rb.reshape(3 * n, 3)
-                Rj = (Rf @ K).reshape(n, 3, 3) * s[:, iq, None, None]
-                Rj += (Rf @ K2).reshape(n, 3, 3) * c[:, iq, None, None]
-                Rj += Rb
+                Rj = M[:, :, 3:6] * s[:, iq, None, None]
+                Rj += M[:, :, 6:9] * c[:, iq, None, None]
+                Rj += M[:, :, 0:3]
                 R[j] = Rj
-                p[j] = pb
+                p[j] = pb if parent else np.broadcast_to(pb, (n, 3))
             else:
-                R[j] = Rb
+                R[j] = np.ascontiguousarray(M[:, :, 0:3])
                 p[j] = pb + aw * q[:, iq, None]
         X = np.empty((n, self.n_markers, 3))
         for j, ms, pts in self.groups:
             X[:, ms] = (R[j] @ pts).transpose(0, 2, 1) + p[j][:, None, :]
         if not jacobian:
             return X, None
-        J = np.zeros((n, self.nq, self.n_markers, 3))
-        for j, parent, Rpl, tpl, rev, axis, K, K2, iq in self.joints:
+        J = np.zeros((n, self.n_markers, 3, self.nq))
+        for j, parent, C, rev, iq in self.joints:
             ms = self.moved[j]
             if ms.size == 0:
                 continue
-            col = J[:, iq]
+            col = J[..., iq]
             if rev:
                 col[:, ms] = _cross(axes[j][:, None, :], X[:, ms] - p[j][:, None, :])
             else:
                 col[:, ms] = axes[j][:, None, :]
-        return X, J.transpose(0, 2, 3, 1)
+        return X, J
 
 
 def _fast_map(cmap):
@@ -573,12 +562,36 @@ def _fast_map(cmap):
             J = np.zeros((n, nj, nc))
             J[:, same_j, same_i] = 1.0
         for col, js, bank in banks:
-            F, D1, _ = bank.evaluate(Q[:, col])
+            F, D1 = _bank_values(bank, Q[:, col])
             qp[:, js] = F.T
             if jacobian:
                 J[:, js, col] = D1.T
         return qp, J
     return mapping
+
+
+def _bank_values(bank, x):
+    """A :class:`~pinmsk.opensim.functions.FunctionBank`'s values and slopes (size, N): its splines'
+    pieces looked up directly when the bank holds splines only and ``x`` is inside their knots (a
+    spline is C1, so at a knot either piece gives the same value and slope); else the bank's own
+    evaluation."""
+    knots = getattr(bank, "_knots", None)
+    if bank._poly is None and not bank._other and knots and np.isfinite(x).all():
+        F = np.empty((bank.size, x.size))
+        D1 = np.empty((bank.size, x.size))
+        for idx, first, coef in knots:
+            kx = first.x
+            if not (x.min() > kx[0] and x.max() < kx[-1]):
+                break
+            k = np.searchsorted(kx, x, side="right") - 1
+            t = x - kx[k]
+            y, b, c, d = coef[:, k].reshape(4, idx.size, x.size)
+            F[idx] = y + t * (b + t * (c + t * d))
+            D1[idx] = b + t * (2.0 * c + 3.0 * t * d)
+        else:
+            return F, D1
+    F, D1, _ = bank.evaluate(x)
+    return F, D1
 
 
 def _interpolate(t, Q, at):
@@ -624,6 +637,7 @@ def _lm_frames(evaluate, Y, W, Q, free, task_cols, task_w, task_y, lo, hi, *, ma
     r, J = residual(act, Q)
     cost = np.einsum("ni,ni->n", r, r)
     lam = np.full(n, 1e-6)
+    prev = np.full(n, np.inf)
     eye = np.eye(nf)
     bounded = np.isfinite(lo[free]).any() or np.isfinite(hi[free]).any()
     for _ in range(max_iter):
@@ -644,13 +658,19 @@ def _lm_frames(evaluate, Y, W, Q, free, task_cols, task_w, task_y, lo, hi, *, ma
         if bounded:
             Qn[:, free] = np.clip(Qn[:, free], lo[free], hi[free])
         step = np.abs(Qn[:, free] - Q[act][:, free]).max(axis=1)
+        # Gauss-Newton on a residual that is not zero converges linearly: with the rate rho = step / the
+        # step before, the error left after this step is about step * rho / (1 - rho)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rho = np.where(np.isfinite(prev[act]), step / prev[act], np.inf)
+            left = np.where(rho < 0.5, step * rho / (1.0 - rho), np.inf)
         rn, Jn = residual(act, Qn)
         cn = np.einsum("ni,ni->n", rn, rn)
         ok = cn <= cost[act]
         its[act] += 1
         a_ok = act[ok]
         Q[a_ok] = Qn[ok]
-        small = (step < tol) | (ok & (cost[act] - cn <= 1e-14 * cost[act]))
+        small = (step < tol) | (ok & (left < tol)) | (ok & (cost[act] - cn <= 1e-14 * cost[act]))
+        prev[act] = np.where(ok, step, prev[act])
         cost[a_ok] = cn[ok]
         r[ok] = rn[ok]
         J[ok] = Jn[ok]

@@ -234,3 +234,42 @@ def test_task_set_refuses_an_unknown_field(tmp_path):
                      '</IKMarkerTask></objects></IKTaskSet></OpenSimDocument>\n')
     with pytest.raises(SetupError, match=r"IKMarkerTask 'r_acromion'.*<gain>"):
         read_ik_tasks(tasks)
+
+
+# -- the batched kinematics ------------------------------------------------------------------------
+
+def test_batch_kinematics_matches_pinocchio_frames():
+    """Positions and LOCAL_WORLD_ALIGNED Jacobians of the markers, to rounding, at random poses."""
+    import pinocchio as pin
+
+    import pinmsk
+    from pinmsk.ik import BatchKinematics, add_marker_frames
+    from pinmsk.markers import model_marker_set
+    model = pinmsk.load_model("gait2d")
+    ms = model_marker_set(model)
+    kin = BatchKinematics(model.pin, [m.body for m in ms.markers], [m.position for m in ms.markers])
+    pm, fids = add_marker_frames(model, ms)
+    pd = pm.createData()
+    rng = np.random.default_rng(3)
+    q = rng.uniform(-1.0, 1.0, (5, model.nq))
+    X, J = kin(q)
+    for k in range(q.shape[0]):
+        pin.computeJointJacobians(pm, pd, q[k])
+        pin.updateFramePlacements(pm, pd)
+        for j, fid in enumerate(fids):
+            np.testing.assert_allclose(X[k, j], pd.oMf[fid].translation, atol=1e-12)
+            np.testing.assert_allclose(J[k, j], pin.getFrameJacobian(pm, pd, fid, pin.LOCAL_WORLD_ALIGNED)[:3],
+                                       atol=1e-12)
+
+
+@pytest.mark.slow
+def test_knee_map_in_one_pass_matches_the_coordinate_map(gait10dof):
+    from pinmsk.ik import _fast_map
+    from pinmsk.kinematics import coordinate_map
+    d, _, _ = gait10dof
+    cmap = coordinate_map(_osim_model(d / "subject01.osim"))
+    rng = np.random.default_rng(5)
+    Q = np.array([cmap.defaults[c] for c in cmap.osim_coordinates]) + rng.uniform(-1.0, 0.1, (40, len(cmap.osim_coordinates)))
+    qp, J = _fast_map(cmap)(Q)
+    np.testing.assert_allclose(qp, cmap.expand(Q)[0], atol=1e-13)
+    np.testing.assert_allclose(J, cmap.jacobian(Q), atol=1e-12)
