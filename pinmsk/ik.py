@@ -163,8 +163,6 @@ class InverseKinematics(Fitter):
         Y = marker_array(trial, mset.names, axes=axes)              # (N, M, A)
         n, nm, na = Y.shape
         w = np.array([(self.weights or {}).get(m.name, m.weight) for m in used], dtype=float)
-        pm, fids = add_marker_frames(model, mset)
-        pd = pm.createData()
         # the solved coordinates: the model's joints, or OpenSim's coordinates of a model with dependent
         # joints (an exact import), whose joints follow by the map (marker Jacobians J_pin dq_pin/dq)
         cmap = coordinate_map(model)
@@ -189,20 +187,51 @@ class InverseKinematics(Fitter):
             else:
                 q[:] = np.asarray(self.q0, dtype=float)
 
-        def evaluate(qk, x, Jall):
-            """Marker positions (and Jacobians in the solved coordinates) at qk into x (nm, na), Jall (nm, na, nq)."""
-            qp = qk if cmap is None else cmap.expand(qk[None])[0][0]
-            Jm = None if cmap is None else cmap.jacobian(qk[None])[0]
-            pin.computeJointJacobians(pm, pd, qp)      # also runs forward kinematics
-            pin.updateFramePlacements(pm, pd)
-            for j, fid in enumerate(fids):
-                x[j] = pd.oMf[fid].translation[ax]
-                Jp = pin.getFrameJacobian(pm, pd, fid, pin.LOCAL_WORLD_ALIGNED)[ax]
-                Jall[j] = Jp if Jm is None else Jp @ Jm
+        use_batch = self.method == "batch" or (self.method == "auto" and BatchKinematics.supports(model.pin))
+        all_axes = ax == [0, 1, 2]
+        if use_batch:
+            kin = _batch_kinematics(model.pin, mset)
+            mapping = _fast_map(cmap) if cmap is not None else None
 
+            def batch_eval(Qs, cols, jacobian=True):
+                """Marker positions (n, M, A) and Jacobians (n, M, A, len(cols)) in the solved coordinates."""
+                if cmap is None:
+                    qp, Jm = Qs, None
+                elif mapping is not None:
+                    qp, Jm = mapping(Qs, jacobian)
+                else:
+                    qp, Jm = cmap.expand(Qs)[0], (cmap.jacobian(Qs) if jacobian else None)
+                X, Jp = kin(qp, jacobian)
+                if not all_axes:
+                    X = X[:, :, ax]
+                if not jacobian:
+                    return X, None
+                if not all_axes:
+                    Jp = Jp[:, :, ax, :]
+                if Jm is None:
+                    return X, Jp[..., cols]
+                Jm = Jm[:, :, cols]
+                return X, (Jp.reshape(len(Qs), -1, Jp.shape[-1]) @ Jm).reshape(Jp.shape[:3] + (len(cols),))
+
+            J0 = batch_eval(q[None], np.arange(nq))[1][0]
+        else:
+            pm, fids = add_marker_frames(model, mset)
+            pd = pm.createData()
+
+            def evaluate(qk, x, Jall):
+                """Marker positions (and Jacobians in the solved coordinates) at qk into x (nm, na), Jall (nm, na, nq)."""
+                qp = qk if cmap is None else cmap.expand(qk[None])[0][0]
+                Jm = None if cmap is None else cmap.jacobian(qk[None])[0]
+                pin.computeJointJacobians(pm, pd, qp)      # also runs forward kinematics
+                pin.updateFramePlacements(pm, pd)
+                for j, fid in enumerate(fids):
+                    x[j] = pd.oMf[fid].translation[ax]
+                    Jp = pin.getFrameJacobian(pm, pd, fid, pin.LOCAL_WORLD_ALIGNED)[ax]
+                    Jall[j] = Jp if Jm is None else Jp @ Jm
+
+            x0, J0 = np.empty((nm, na)), np.empty((nm, na, nq))
+            evaluate(q, x0, J0)
         # free coordinates: those that move a marker
-        x0, J0 = np.empty((nm, na)), np.empty((nm, na, nq))
-        evaluate(q, x0, J0)
         moves = np.abs(J0).sum(axis=(0, 1)) > 0
         if self.coordinates is None:
             free = np.flatnonzero(moves)
@@ -225,34 +254,12 @@ class InverseKinematics(Fitter):
             task_y = np.column_stack([np.broadcast_to(np.asarray(v[1], dtype=float), (n,)) for v in tasks.values()])
             free = np.union1d(free, task_cols)
             nf = free.size
-        use_batch = self.method == "batch" or (self.method == "auto" and BatchKinematics.supports(model.pin))
         if not use_batch and (tasks or self.bounds):
             raise ModelError(f"inverse kinematics: coordinate tasks and bounds need the batched solver "
                              f"(one-dof joints); model '{model.name}' has other joints")
         if use_batch:
-            kin = BatchKinematics(model.pin, [m.body for m in used], [m.position for m in used])
-
-            all_axes = ax == [0, 1, 2]
-            mapping = _fast_map(cmap) if cmap is not None else None
-
-            def batch_eval(Qs, cols=free, jacobian=True):
-                if cmap is None:
-                    qp, Jm = Qs, None
-                elif mapping is not None:
-                    qp, Jm = mapping(Qs, jacobian)
-                else:
-                    qp, Jm = cmap.expand(Qs)[0], (cmap.jacobian(Qs) if jacobian else None)
-                X, Jp = kin(qp, jacobian)
-                if not all_axes:
-                    X = X[:, :, ax]
-                if not jacobian:
-                    return X, None
-                if not all_axes:
-                    Jp = Jp[:, :, ax, :]
-                if Jm is None:
-                    return X, Jp[..., cols]
-                Jm = Jm[:, :, cols]
-                return X, (Jp.reshape(len(Qs), -1, Jp.shape[-1]) @ Jm).reshape(Jp.shape[:3] + (len(cols),))
+            def solve_eval(Qs, jacobian=True):
+                return batch_eval(Qs, free, jacobian)
 
             ok_all = np.isfinite(Y).all(axis=2)
             W = np.where(ok_all, w[None, :], 0.0)
@@ -265,9 +272,9 @@ class InverseKinematics(Fitter):
                                  "fill the gaps (read_trc max_gap=...) or cut the frames")
             if not tasks:
                 task_cols, task_w, task_y = np.zeros(0, dtype=int), np.zeros(0), np.zeros((n, 0))
-            Q, iters, conv = self._solve_batch(batch_eval, Y0, W, q, free, task_cols, task_w, task_y, lo, hi,
+            Q, iters, conv = self._solve_batch(solve_eval, Y0, W, q, free, task_cols, task_w, task_y, lo, hi,
                                                progress)
-            X, _ = batch_eval(Q, jacobian=False)
+            X, _ = solve_eval(Q, jacobian=False)
             err = np.where(ok_all, np.linalg.norm(X - Y0, axis=2), np.nan)
             rot = np.array([index[c] for c in model.rotational_coordinates if c in index], dtype=int)
             Q[:, rot] = np.angle(np.exp(1j * Q[:, rot]))        # revolute coordinates in (-pi, pi]
@@ -280,7 +287,8 @@ class InverseKinematics(Fitter):
             raise ConvergenceError(f"inverse kinematics did not converge at frame {k} "
                                    f"(t = {trial.time[k]:.6g} s) in {self.max_iter} iterations")
         with np.errstate(invalid="ignore"):
-            self.marker_rms_ = {m: float(np.sqrt(np.nanmean(err[:, j] ** 2))) for j, m in enumerate(mset.names)}
+            rms = np.sqrt(np.nanmean(err ** 2, axis=0))
+            self.marker_rms_ = {m: float(rms[j]) for j, m in enumerate(mset.names)}
             self.frame_rms_ = np.sqrt(np.nanmean(err ** 2, axis=1))
         self.marker_error_ = err
         self.iterations_ = iters
@@ -542,6 +550,23 @@ class BatchKinematics:
             else:
                 col[:, ms] = axes[j][:, None, :]
         return X, J
+
+
+#: BatchKinematics of (Pinocchio model, marker set) pairs lately used (the model kept with it, so an id
+#: is never taken for another model's).
+_KINEMATICS: dict = {}
+
+
+def _batch_kinematics(pm: pin.Model, mset: MarkerSet) -> "BatchKinematics":
+    key = (id(pm), tuple((m.body, tuple(m.position)) for m in mset.markers))
+    hit = _KINEMATICS.get(key)
+    if hit is not None and hit[0] is pm:
+        return hit[1]
+    kin = BatchKinematics(pm, [m.body for m in mset.markers], [m.position for m in mset.markers])
+    if len(_KINEMATICS) >= 16:
+        _KINEMATICS.pop(next(iter(_KINEMATICS)))
+    _KINEMATICS[key] = (pm, kin)
+    return kin
 
 
 def _fast_map(cmap):
