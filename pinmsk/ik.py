@@ -10,11 +10,19 @@ keeps the measured axes (``"xy"`` for sagittal data, ``"xyz"`` for 3-D) and
 ``w_m`` the marker weight.  A marker that is NaN in a frame has zero weight
 there (gaps that :func:`pinmsk.signals.gaps.fill_gaps` did not fill).
 
-The solver is Levenberg-Marquardt on the Gauss-Newton normal equations with
-Pinocchio frame Jacobians (``LOCAL_WORLD_ALIGNED``: the linear rows are the
-marker point's world velocity Jacobian), warm-started from the previous
-frame's solution, so after the first frame it typically converges in 2-3
-iterations.  Coordinates that no marker moves are held at ``q0``.
+The solver is Levenberg-Marquardt on the Gauss-Newton normal equations.  On a tree of
+one-dof joints (every model pinmsk builds or imports) all frames take their steps at once
+(:class:`BatchKinematics`: forward kinematics and marker Jacobians as numpy over frames, each
+frame with its own damping, acceptance and end), coarse to fine in time: key frames every
+``key_stride`` frames start from ``q0`` (as OpenSim assembles its first frame from the default
+pose), every quarter of that from the cubic interpolation of their solutions, down to every
+frame.  A frame ends when its step, or the error left estimated from the linear rate of
+Gauss-Newton on a nonzero residual (``step * rho / (1 - rho)``, ``rho`` the ratio of the last
+two steps), is below ``tol``.  ``method="frames"`` solves frame after frame instead, warm-started
+from the previous one, with Pinocchio frame Jacobians (``LOCAL_WORLD_ALIGNED``), for any joints.
+Coordinates that no marker moves (and no coordinate task names) are held at ``q0``.
+Coordinate tasks (``coordinate_tasks``, OpenSim's IKCoordinateTask) and bounds (``bounds``,
+OpenSim's clamped ranges) add to the batched problem.
 
 :class:`InverseKinematics` is a :class:`~pinmsk.fitting.Fitter`: ``fit(model, markers)``
 returns self; ``result_`` (a :class:`~pinmsk.fitting.Result`: the Trial of coordinates
@@ -105,7 +113,8 @@ class InverseKinematics(Fitter):
     max_iter, tol : int, float
         Per-frame iteration limit and step tolerance (rad or m).
     max_step : float
-        Largest change of any coordinate in one iteration (rad or m; a trust region).
+        Largest change of any coordinate in one iteration (rad or m; a trust region); the batched
+        solver bounds the rotations' steps only.
     strict : bool
         Raise :class:`~pinmsk.errors.ConvergenceError` at the first frame that does not
         converge in ``max_iter`` iterations (default: keep it, flagged in ``converged_``).
@@ -272,8 +281,11 @@ class InverseKinematics(Fitter):
                                  "fill the gaps (read_trc max_gap=...) or cut the frames")
             if not tasks:
                 task_cols, task_w, task_y = np.zeros(0, dtype=int), np.zeros(0), np.zeros((n, 0))
+            rotational = set(model.rotational_coordinates)
+            turning = np.array([names[i] in rotational or (cmap is not None and names[i] not in model.coordinates)
+                                for i in free])
             Q, iters, conv = self._solve_batch(solve_eval, Y0, W, q, free, task_cols, task_w, task_y, lo, hi,
-                                               progress)
+                                               progress, turning)
             X, _ = solve_eval(Q, jacobian=False)
             err = np.where(ok_all, np.linalg.norm(X - Y0, axis=2), np.nan)
             rot = np.array([index[c] for c in model.rotational_coordinates if c in index], dtype=int)
@@ -388,7 +400,7 @@ class InverseKinematics(Fitter):
                 progress.update(1)
         return Q, err, iters, conv
 
-    def _solve_batch(self, evaluate, Y, W, q, free, task_cols, task_w, task_y, lo, hi, progress):
+    def _solve_batch(self, evaluate, Y, W, q, free, task_cols, task_w, task_y, lo, hi, progress, turning=None):
         """Coarse to fine in time, every level's frames at once: the key frames every ``key_stride``
         (default 4) frames start from ``q`` (the default pose, as OpenSim assembles its first frame), each finer level
         from the cubic interpolation of the coarser one's solutions, each level solving its new
@@ -410,7 +422,8 @@ class InverseKinematics(Fitter):
                 continue
             Qs = np.repeat(q[None], new.size, axis=0) if solved.size == 0 else _interpolate(solved, Q[solved], new)
             it, cv = _lm_frames(evaluate, Y[new], W[new], Qs, free, task_cols, task_w, task_y[new], lo, hi,
-                                max_iter=self.max_iter, tol=self.tol, max_step=self.max_step, progress=progress)
+                                max_iter=self.max_iter, tol=self.tol, max_step=self.max_step, turning=turning,
+                                progress=progress)
             Q[new], iters[new], conv[new] = Qs, it, cv
             solved = np.union1d(solved, new)
         return Q, iters, conv
@@ -629,14 +642,15 @@ def _interpolate(t, Q, at):
 
 
 def _lm_frames(evaluate, Y, W, Q, free, task_cols, task_w, task_y, lo, hi, *, max_iter, tol, max_step,
-               progress=None):
+               turning=None, progress=None):
     """Levenberg-Marquardt on every frame at once (each frame its own damping, acceptance and end).
 
     ``evaluate(Q)`` -> marker positions (n, M, A) and their Jacobians (n, M, A, nf) in the free
     coordinates ``free`` (column indices of ``Q``); ``Y`` (n, M, A) measured (0 where missing), ``W`` (n, M) weights (0 where missing);
     ``Q`` (n, nq) the start, solved in place.  Coordinate tasks add rows ``sqrt(wc Wk) (q_c - y_c)``
     with ``Wk`` the frame's total marker weight (Simbody's Assembler divides the marker goal by it).
-    ``lo``/``hi`` (nq,) bound the coordinates (projected steps).  Returns (iterations, converged).
+    ``lo``/``hi`` (nq,) bound the coordinates (projected steps); ``turning`` (nf,) marks the rotations,
+    whose largest step is at most ``max_step``.  Returns (iterations, converged).
     """
     n, nm, na = Y.shape
     nf = free.size
@@ -663,6 +677,7 @@ def _lm_frames(evaluate, Y, W, Q, free, task_cols, task_w, task_y, lo, hi, *, ma
     cost = np.einsum("ni,ni->n", r, r)
     lam = np.full(n, 1e-6)
     prev = np.full(n, np.inf)
+    turning = np.ones(nf, dtype=bool) if turning is None else np.asarray(turning, dtype=bool)
     eye = np.eye(nf)
     bounded = np.isfinite(lo[free]).any() or np.isfinite(hi[free]).any()
     for _ in range(max_iter):
@@ -675,8 +690,10 @@ def _lm_frames(evaluate, Y, W, Q, free, task_cols, task_w, task_y, lo, hi, *, ma
         d[d <= 0] = 1.0
         A = H + lam[act, None, None] * d[:, :, None] * eye
         dq = -np.linalg.solve(A, g[..., None])[..., 0]
-        big = np.abs(dq).max(axis=1)
-        cut = big > max_step                                       # a trust region: no jumps by whole turns
+        # a trust region on the rotations (no jumps by whole turns); a translation enters the markers
+        # nearly linearly, so its Gauss-Newton step is kept whole
+        big = np.abs(dq[:, turning]).max(axis=1) if turning.any() else np.abs(dq).max(axis=1)
+        cut = big > max_step
         dq[cut] *= (max_step / big[cut])[:, None]
         Qn = Q[act].copy()
         Qn[:, free] += dq

@@ -198,7 +198,10 @@ def inverse_kinematics(model, markers: Trial, *, tasks=None, time_range=None, co
     ik.fit(model, trial, progress=progress)
     res = ik.result_
     times = file_time[frames]
-    motion = Trial(times, {c: res[c] for c in order if c in res}, meta={"name": "Coordinates"})
+    # every coordinate of the model, as OpenSim's Kinematics reporter writes them: a locked one at its value
+    held = {} if cmap is None else cmap.welded
+    motion = Trial(times, {c: res[c] if c in res else np.full(times.size, float(held.get(c, 0.0))) for c in order},
+                   meta={"name": "Coordinates"})
     err = ik.marker_error_
     sq = np.where(np.isfinite(err), err ** 2, 0.0)
     total = sq.sum(axis=1)
