@@ -415,12 +415,20 @@ class InverseKinematics(Fitter):
         iters = np.zeros(n, dtype=int)
         conv = np.zeros(n, dtype=bool)
         solved = np.zeros(0, dtype=int)
+        with np.errstate(invalid="ignore"):
+            span = np.where(np.isfinite(hi - lo), hi - lo, 0.0)
+            margin = np.where(np.isfinite(lo) & np.isfinite(hi), 0.01 * span, np.where(np.isfinite(lo) | np.isfinite(hi), 1e-3, 0.0))
+            mid = np.where(np.isfinite(lo) & np.isfinite(hi), 0.5 * (lo + hi), np.where(np.isfinite(lo), lo, hi))
+            mid = np.where(np.isfinite(mid), mid, 0.0)
         for stride in strides:
             frames = np.unique(np.r_[np.arange(0, n, stride), n - 1])
             new = np.setdiff1d(frames, solved)
             if new.size == 0:
                 continue
             Qs = np.repeat(q[None], new.size, axis=0) if solved.size == 0 else _interpolate(solved, Q[solved], new)
+            # seeds strictly inside the bounds (a default pose on a range's end would hold that coordinate there
+            # from the first step on: descent pushes it out, so the active set keeps it)
+            Qs = np.clip(Qs, np.minimum(lo + margin, mid), np.maximum(hi - margin, mid))
             it, cv = _lm_frames(evaluate, Y[new], W[new], Qs, free, task_cols, task_w, task_y[new], lo, hi,
                                 max_iter=self.max_iter, tol=self.tol, max_step=self.max_step, turning=turning,
                                 progress=progress)
@@ -689,6 +697,15 @@ def _lm_frames(evaluate, Y, W, Q, free, task_cols, task_w, task_y, lo, hi, *, ma
         d = np.einsum("nii->ni", H).copy()
         d[d <= 0] = 1.0
         A = H + lam[act, None, None] * d[:, :, None] * eye
+        if bounded:
+            # the active set: a coordinate at a bound that descent would push through it stays there this
+            # step (its row and column out of the system), the others step on the bound's face
+            qf = Q[act][:, free]
+            held = ((qf <= lo[free] + 1e-12) & (g > 0)) | ((qf >= hi[free] - 1e-12) & (g < 0))
+            if held.any():
+                g = np.where(held, 0.0, g)
+                keep = ~held
+                A = A * (keep[:, :, None] & keep[:, None, :]) + held[:, :, None] * eye
         dq = -np.linalg.solve(A, g[..., None])[..., 0]
         # a trust region on the rotations (no jumps by whole turns); a translation enters the markers
         # nearly linearly, so its Gauss-Newton step is kept whole

@@ -138,14 +138,18 @@ def inverse_kinematics(model, markers: Trial, *, tasks=None, time_range=None, co
                        accuracy: float = 1e-5, progress=None, where: str = "") -> IKOutcome:
     """OpenSim's IK of ``markers`` (a Trial of ``<marker>_{x,y,z}``, m) on ``model``.
 
-    ``tasks``: :class:`~pinmsk.io.ik_tasks.IKTask` s (None: every model marker in the trial, weight 1);
-    an applied marker task must name a model marker and a marker of the trial.  ``time_range`` (s),
+    ``tasks``: :class:`~pinmsk.io.ik_tasks.IKTask` s; without an applied marker task (None, or none
+    applied) every model marker in the trial is tracked with weight 1, as OpenSim does; an applied
+    marker task must name a model marker and a marker of the trial.  ``time_range`` (s),
     ``coordinate_trial`` (targets of ``from_file`` coordinate tasks, rad/m), ``accuracy`` (the step
     tolerance is a tenth of it, rad or m).  ``where`` prefixes messages (the setup file).
     """
     mset = model_marker_set(model)
     in_trial = set(marker_names(markers))
-    if tasks is None:
+    marker_tasks = [t for t in (tasks or ()) if t.kind == "marker" and t.apply]
+    if not marker_tasks:
+        # no applied marker task: OpenSim's MarkersReference then tracks every marker of the file the
+        # model has, at its default weight 1
         used = [m for m in mset.markers if m.name in in_trial]
         if not used:
             raise TrialError(f"{markers.meta.get('source', 'the marker trial')}: none of model '{model.name}''s "
@@ -154,9 +158,7 @@ def inverse_kinematics(model, markers: Trial, *, tasks=None, time_range=None, co
     else:
         by_name = {m.name: m for m in mset.markers}
         used = []
-        for t in tasks:
-            if t.kind != "marker" or not t.apply:
-                continue
+        for t in marker_tasks:
             if t.name not in by_name:
                 raise ModelError(f"{t.where}: marker task '{t.name}': model '{model.name}' has no such marker"
                                  f"{_close(t.name, by_name)}")
@@ -165,8 +167,6 @@ def inverse_kinematics(model, markers: Trial, *, tasks=None, time_range=None, co
                                  f"{markers.meta.get('source', '')} has no such marker{_close(t.name, in_trial)}")
             m = by_name[t.name]
             used.append(ModelMarker(m.name, m.body, m.position, t.weight))
-        if not used:
-            raise PinmskError(f"{where}no marker task is applied: IK needs markers")
     # OpenSim's frames and times are the marker file's Time column as written (pinmsk's reader rebuilds
     # rounded times from the rate; the file's are kept in meta["file_time"])
     file_time = markers.meta.get("file_time")
