@@ -273,3 +273,40 @@ def test_knee_map_in_one_pass_matches_the_coordinate_map(gait10dof):
     qp, J = _fast_map(cmap)(Q)
     np.testing.assert_allclose(qp, cmap.expand(Q)[0], atol=1e-13)
     np.testing.assert_allclose(J, cmap.jacobian(Q), atol=1e-12)
+
+
+@pytest.mark.slow
+def test_rajagopal_walk_reaches_opensims_optimum(tmp_path):
+    """A 39-coordinate model with coupled knees and clamped ranges, no task set (every marker, weight 1):
+    on every frame pinmsk's objective (the total squared marker error, the weights being 1) is at most
+    OpenSim's, and the lower body's coordinates agree with OpenSim's."""
+    osim = require_opensim()
+    from pinmsk.tools.inverse_kinematics import run, rotational_coordinates
+    d = shared_folder("opensim-models/RajagopalWalk", "subject_walk_scaled.osim")
+    trc = shared_folder("real/opensim-moco-walk-emg", "markers_walk.trc") / "markers_walk.trc"
+    setup = tmp_path / "raj_ik.xml"
+    setup.write_text(f'<?xml version="1.0" encoding="UTF-8" ?>\n<OpenSimDocument Version="40600">'
+                     f'<InverseKinematicsTool name="raj"><model_file>{d / "subject_walk_scaled.osim"}</model_file>'
+                     f'<marker_file>{trc}</marker_file><time_range>0.5 0.8</time_range>'
+                     f'<output_motion_file>raj_ik.mot</output_motion_file><results_directory>.</results_directory>'
+                     f'<constraint_weight>Inf</constraint_weight><accuracy>1e-5</accuracy>'
+                     f'<report_errors>true</report_errors></InverseKinematicsTool></OpenSimDocument>\n')
+    ours = run(read_setup(setup), results_dir=tmp_path / "pinmsk")
+    (tmp_path / "opensim").mkdir()
+    tool = osim.InverseKinematicsTool(str(setup))
+    tool.setResultsDir(str(tmp_path / "opensim"))
+    tool.setOutputMotionFileName(str(tmp_path / "opensim" / "raj_ik.mot"))
+    assert tool.run()
+    a, b = read_trial(ours[1]), read_trial(tmp_path / "opensim" / "raj_ik_marker_errors.sto")
+    assert a.n_frames == b.n_frames == 31
+    assert np.all(a["total_squared_error"] <= b["total_squared_error"] * (1 + 1e-4))
+    assert abs(np.mean(a["marker_error_RMS"]) - np.mean(b["marker_error_RMS"])) < 5e-5
+    model = _osim_model(d / "subject_walk_scaled.osim")
+    rot = set(rotational_coordinates(model))
+    qa = read_trial(ours[0], angular=rot)
+    qb = read_trial(tmp_path / "opensim" / "raj_ik.mot", angular=rot)
+    assert qa.names == qb.names
+    legs = [c for c in qb.names if c.startswith(("pelvis", "hip", "knee_angle", "ankle", "lumbar"))]
+    for c in legs:
+        tol = np.deg2rad(1.0) if c in rot or c.endswith("_beta") else 2e-3
+        assert np.sqrt(np.mean((qa[c] - qb[c]) ** 2)) < tol, c
