@@ -532,8 +532,8 @@ class BatchKinematics:
         n = q.shape[0]
         # one (n, 3, 3) / (n, 3) array per joint; the constants of a joint meet its parent's rotation in one
         # 2-D product of the (3n, 3) stack
-        R = [None] * self.njoints
-        p = [None] * self.njoints
+        R = [np.broadcast_to(np.eye(3), (n, 3, 3))] + [None] * (self.njoints - 1)     # the universe: markers on
+        p = [np.zeros((n, 3))] + [None] * (self.njoints - 1)                           # ground stay put
         axes = [None] * self.njoints
         s, c = np.sin(q), 1.0 - np.cos(q)
         for j, parent, C, rev, iq in self.joints:

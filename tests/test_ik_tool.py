@@ -310,3 +310,25 @@ def test_rajagopal_walk_reaches_opensims_optimum(tmp_path):
     for c in legs:
         tol = np.deg2rad(1.0) if c in rot or c.endswith("_beta") else 2e-3
         assert np.sqrt(np.mean((qa[c] - qb[c]) ** 2)) < tol, c
+
+
+def test_arm26_setup_with_its_task_set_in_a_file_reproduces_opensims_motion(tmp_path):
+    """The task set given as ``<IKTaskSet file=...>`` (read from that file, relative to the setup);
+    the elbow flexion trial against OpenSim's shipped IK motion."""
+    from pinmsk.tools.inverse_kinematics import run
+
+    def edit(tool):
+        tasks = tool.find("IKTaskSet")
+        doc = ET.Element("OpenSimDocument", Version="30000")
+        doc.append(tasks)
+        ET.ElementTree(doc).write(tmp_path / "arm26_tasks.xml")
+        tool.remove(tasks)
+        ET.SubElement(tool, "IKTaskSet", file="arm26_tasks.xml")
+    written = run(_arm26_setup(tmp_path, edit), results_dir=tmp_path / "out")
+    assert [p.name for p in written] == ["arm26_InverseKinematics.mot", "arm26_ik_marker_errors.sto"]
+    d = shared_folder("opensim-models/Arm26", "arm26_Setup_InverseKinematics.xml")
+    model = _osim_model(d / "arm26.osim")
+    ours, rot = _read_mot(written[0], model)
+    ref, _ = _read_mot(d / "arm26_InverseKinematics.mot", model)
+    rot_rms, _ = _compare(ours, ref, rot)
+    assert ours.names == ("r_shoulder_elev", "r_elbow_flex") and rot_rms < 0.5, rot_rms
