@@ -204,23 +204,36 @@ class InverseKinematics(Fitter):
 
             def batch_eval(Qs, cols, jacobian=True):
                 """Marker positions (n, M, A) and Jacobians (n, M, A, len(cols)) in the solved coordinates."""
-                if cmap is None:
-                    qp, Jm = Qs, None
-                elif mapping is not None:
-                    qp, Jm = mapping(Qs, jacobian)
+                if mapping is not None:
+                    qp, slopes = mapping(Qs, jacobian)
+                    pos = np.full(nq, -1)
+                    pos[cols] = np.arange(len(cols))
+                    columns = {}
+                    for jq, ic in zip(*mapping.same):
+                        if pos[ic] >= 0:
+                            columns[jq] = [(pos[ic], None)]
+                    for js, ic, D1 in slopes:
+                        if pos[ic] >= 0:
+                            for g, jq in enumerate(js):
+                                columns.setdefault(jq, []).append((pos[ic], D1[g]))
+                    X, Jp = kin(qp, jacobian, columns, len(cols))
+                    Jm = None
                 else:
-                    qp, Jm = cmap.expand(Qs)[0], (cmap.jacobian(Qs) if jacobian else None)
-                X, Jp = kin(qp, jacobian)
+                    if cmap is None:
+                        qp, Jm = Qs, None
+                    else:
+                        qp, Jm = cmap.expand(Qs)[0], (cmap.jacobian(Qs) if jacobian else None)
+                    X, Jp = kin(qp, jacobian)
+                    if jacobian:
+                        Jp = Jp[..., cols] if Jm is None else \
+                            (Jp.reshape(len(Qs), -1, Jp.shape[-1]) @ Jm[:, :, cols]).reshape(Jp.shape[:3] + (len(cols),))
                 if not all_axes:
                     X = X[:, :, ax]
                 if not jacobian:
                     return X, None
                 if not all_axes:
                     Jp = Jp[:, :, ax, :]
-                if Jm is None:
-                    return X, Jp[..., cols]
-                Jm = Jm[:, :, cols]
-                return X, (Jp.reshape(len(Qs), -1, Jp.shape[-1]) @ Jm).reshape(Jp.shape[:3] + (len(cols),))
+                return X, Jp
 
             J0 = batch_eval(q[None], np.arange(nq))[1][0]
         else:
@@ -526,8 +539,13 @@ class BatchKinematics:
     def supports(pm: pin.Model) -> bool:
         return all(pm.joints[j].shortname() in _ONE_DOF for j in range(1, pm.njoints))
 
-    def __call__(self, q: np.ndarray, jacobian: bool = True):
-        """Positions (N, M, 3) and, with ``jacobian``, d position / d q (N, M, 3, nq) at ``q`` (N, nq)."""
+    def __call__(self, q: np.ndarray, jacobian: bool = True, columns: dict | None = None, width: int | None = None):
+        """Positions (N, M, 3) and, with ``jacobian``, d position / d q (N, M, 3, nq) at ``q`` (N, nq).
+
+        ``columns`` (with ``width``) folds the Jacobian into other coordinates as it is built:
+        ``{q index: [(column, scale), ...]}``, each joint's column added to those columns of a
+        (N, M, 3, width) result, times ``scale`` ((N,) or None for 1): the chain rule of a coordinate
+        map, ``d x / d q_osim = sum_j d x / d q_j  d q_j / d q_osim``, without the dense product."""
         q = np.atleast_2d(q)
         n = q.shape[0]
         # one (n, 3, 3) / (n, 3) array per joint; the constants of a joint meet its parent's rotation in one
@@ -560,16 +578,19 @@ class BatchKinematics:
             X[:, ms] = (R[j] @ pts).transpose(0, 2, 1) + p[j][:, None, :]
         if not jacobian:
             return X, None
-        J = np.zeros((n, self.n_markers, 3, self.nq))
+        J = np.zeros((n, self.n_markers, 3, self.nq if columns is None else width))
         for j, parent, C, rev, iq in self.joints:
             ms = self.moved[j]
-            if ms.size == 0:
+            targets = [(iq, None)] if columns is None else columns.get(iq, ())
+            if ms.size == 0 or not targets:
                 continue
-            col = J[..., iq]
             if rev:
-                col[:, ms] = _cross(axes[j][:, None, :], X[:, ms] - p[j][:, None, :])
+                d = _cross(axes[j][:, None, :], X[:, ms] - p[j][:, None, :])
             else:
-                col[:, ms] = axes[j][:, None, :]
+                d = np.broadcast_to(axes[j][:, None, :], (n, ms.size, 3))
+            for oc, scale in targets:
+                col = J[..., oc]
+                col[:, ms] += d if scale is None else d * scale[:, None, None]
         return X, J
 
 
@@ -591,28 +612,27 @@ def _batch_kinematics(pm: pin.Model, mset: MarkerSet) -> "BatchKinematics":
 
 
 def _fast_map(cmap):
-    """``(q_pinocchio, d q_pinocchio / d q)`` of a coordinate map in one pass, when it has no couplers and
-    each dependent joint is a one-argument function in one of its banks (an imported knee): the banks'
-    values and slopes from one evaluation.  None when the map needs its general path."""
+    """``(q_pinocchio, slopes)`` of a coordinate map in one pass, when it has no couplers and each
+    dependent joint is a one-argument function in one of its banks (an imported knee): the banks' values
+    and slopes from one evaluation (``mapping.same``: the joints that are OpenSim coordinates, and
+    their columns).  None when the map needs its general path."""
     if cmap.couplers or not getattr(cmap, "_all_banked", False):
         return None
     same_j, same_i, banks = cmap._same_j, cmap._same_i, cmap._banks
-    nj, nc = len(cmap.joints), len(cmap.osim_coordinates)
+    nj = len(cmap.joints)
 
     def mapping(Q, jacobian=True):
+        """Pinocchio's q (n, nj) and the banks' slopes [(joints, OpenSim column, (size, n) slopes)]."""
         n = Q.shape[0]
         qp = np.empty((n, nj))
         qp[:, same_j] = Q[:, same_i]
-        J = None
-        if jacobian:
-            J = np.zeros((n, nj, nc))
-            J[:, same_j, same_i] = 1.0
+        slopes = []
         for col, js, bank in banks:
             F, D1 = _bank_values(bank, Q[:, col])
             qp[:, js] = F.T
-            if jacobian:
-                J[:, js, col] = D1.T
-        return qp, J
+            slopes.append((js, col, D1))
+        return qp, slopes
+    mapping.same = (same_j, same_i)
     return mapping
 
 
