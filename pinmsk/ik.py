@@ -225,8 +225,11 @@ class InverseKinematics(Fitter):
                         qp, Jm = cmap.expand(Qs)[0], (cmap.jacobian(Qs) if jacobian else None)
                     X, Jp = kin(qp, jacobian)
                     if jacobian:
-                        Jp = Jp[..., cols] if Jm is None else \
-                            (Jp.reshape(len(Qs), -1, Jp.shape[-1]) @ Jm[:, :, cols]).reshape(Jp.shape[:3] + (len(cols),))
+                        if Jm is None:
+                            Jp = Jp[..., cols]
+                        else:
+                            Jp = (Jp.reshape(len(Qs), -1, Jp.shape[-1]) @ Jm[:, :, cols]).reshape(
+                                Jp.shape[:3] + (len(cols),))
                 if not all_axes:
                     X = X[:, :, ax]
                 if not jacobian:
@@ -241,7 +244,7 @@ class InverseKinematics(Fitter):
             pd = pm.createData()
 
             def evaluate(qk, x, Jall):
-                """Marker positions (and Jacobians in the solved coordinates) at qk into x (nm, na), Jall (nm, na, nq)."""
+                """Marker positions and Jacobians (solved coordinates) at qk into x (nm, na), Jall (nm, na, nq)."""
                 qp = qk if cmap is None else cmap.expand(qk[None])[0][0]
                 Jm = None if cmap is None else cmap.jacobian(qk[None])[0]
                 pin.computeJointJacobians(pm, pd, qp)      # also runs forward kinematics
@@ -430,7 +433,8 @@ class InverseKinematics(Fitter):
         solved = np.zeros(0, dtype=int)
         with np.errstate(invalid="ignore"):
             span = np.where(np.isfinite(hi - lo), hi - lo, 0.0)
-            margin = np.where(np.isfinite(lo) & np.isfinite(hi), 0.01 * span, np.where(np.isfinite(lo) | np.isfinite(hi), 1e-3, 0.0))
+            one = np.isfinite(lo) | np.isfinite(hi)
+            margin = np.where(np.isfinite(lo) & np.isfinite(hi), 0.01 * span, np.where(one, 1e-3, 0.0))
             mid = np.where(np.isfinite(lo) & np.isfinite(hi), 0.5 * (lo + hi), np.where(np.isfinite(lo), lo, hi))
             mid = np.where(np.isfinite(mid), mid, 0.0)
         for stride in strides:
@@ -674,7 +678,8 @@ def _lm_frames(evaluate, Y, W, Q, free, task_cols, task_w, task_y, lo, hi, *, ma
     """Levenberg-Marquardt on every frame at once (each frame its own damping, acceptance and end).
 
     ``evaluate(Q)`` -> marker positions (n, M, A) and their Jacobians (n, M, A, nf) in the free
-    coordinates ``free`` (column indices of ``Q``); ``Y`` (n, M, A) measured (0 where missing), ``W`` (n, M) weights (0 where missing);
+    coordinates ``free`` (column indices of ``Q``); ``Y`` (n, M, A) measured (0 where missing), ``W`` (n, M)
+    weights (0 where missing);
     ``Q`` (n, nq) the start, solved in place.  Coordinate tasks add rows ``sqrt(wc Wk) (q_c - y_c)``
     with ``Wk`` the frame's total marker weight (Simbody's Assembler divides the marker goal by it).
     ``lo``/``hi`` (nq,) bound the coordinates (projected steps); ``turning`` (nf,) marks the rotations,

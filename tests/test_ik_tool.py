@@ -269,7 +269,8 @@ def test_knee_map_in_one_pass_matches_the_coordinate_map(gait10dof):
     d, _, _ = gait10dof
     cmap = coordinate_map(_osim_model(d / "subject01.osim"))
     rng = np.random.default_rng(5)
-    Q = np.array([cmap.defaults[c] for c in cmap.osim_coordinates]) + rng.uniform(-1.0, 0.1, (40, len(cmap.osim_coordinates)))
+    n_os = len(cmap.osim_coordinates)
+    Q = np.array([cmap.defaults[c] for c in cmap.osim_coordinates]) + rng.uniform(-1.0, 0.1, (40, n_os))
     mapping = _fast_map(cmap)
     qp, slopes = mapping(Q)
     np.testing.assert_allclose(qp, cmap.expand(Q)[0], atol=1e-13)

@@ -33,7 +33,7 @@ import numpy as np
 
 from ..errors import ModelError, PinmskError, TrialError
 from ..ik import InverseKinematics
-from ..io.ik_tasks import IKTask, ik_tasks_from_node
+from ..io.ik_tasks import ik_tasks_from_node
 from ..io.opensim_setup import SetupError, SetupFile
 from ..io.output_files import output_folder, output_transaction
 from ..io.tables import read_trial, write_trial
@@ -89,7 +89,7 @@ def _close(name, names) -> str:
     return f"; did you mean {', '.join(map(repr, hint))}?" if hint else ""
 
 
-def _coordinate_targets(tasks, model, coordinates, defaults, coordinate_trial, time, rotational, where):
+def _coordinate_targets(tasks, model, coordinates, defaults, coordinate_trial, time, where):
     """``{coordinate: (weight, target)}`` of the applied coordinate tasks (targets in rad or m)."""
     cmap = coordinate_map(model)
     locked = set(cmap.welded) if cmap is not None else set(model.meta.get("locked_coordinates") or ())
@@ -184,7 +184,7 @@ def inverse_kinematics(model, markers: Trial, *, tasks=None, time_range=None, co
         order = coordinates
     rotational = rotational_coordinates(model)
     targets = _coordinate_targets(tasks or (), model, coordinates, defaults, coordinate_trial, file_time[frames],
-                                  rotational, where)
+                                  where)
     bounds = {}
     pm = model.pin
     for c in model.meta.get("clamped_coordinates") or ():
@@ -260,6 +260,8 @@ def run(setup: SetupFile, *, results_dir=None) -> list[Path]:
     time_range = node.numbers("time_range", 2)
     tasks = ik_tasks_from_node(node)
     output = node.text("output_motion_file")
+    if output == "Unassigned":          # OpenSim writes no motion then
+        output = None
     results = node.text("results_directory")
     report_errors = node.flag("report_errors", True)
     if node.flag("report_marker_locations", False):
@@ -330,7 +332,8 @@ def command(args, progress_factory) -> list[Path]:
     written = write_outputs(outcome, args.output, errors_path, precision=getattr(args, "precision", None))
     e = outcome.errors
     print(f"IK of {e.n_frames} frames, {len(outcome.fitter.marker_rms_)} markers: marker error RMS "
-          f"{1000 * float(np.mean(e['marker_error_RMS'])):.2f} mm mean, max {1000 * float(np.max(e['marker_error_max'])):.2f} mm; "
+          f"{1000 * float(np.mean(e['marker_error_RMS'])):.2f} mm mean, "
+          f"max {1000 * float(np.max(e['marker_error_max'])):.2f} mm; "
           f"{int(outcome.fitter.converged_.sum())}/{e.n_frames} frames converged")
     for p in written:
         print(f"wrote {p}")
