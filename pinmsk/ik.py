@@ -579,7 +579,7 @@ class BatchKinematics:
                 p[j] = pb + aw * q[:, iq, None]
         X = np.empty((n, self.n_markers, 3))
         for j, ms, pts in self.groups:
-            X[:, ms] = (R[j] @ pts).transpose(0, 2, 1) + p[j][:, None, :]
+            X[:, ms] = (R[j].reshape(3 * n, 3) @ pts).reshape(n, 3, -1).transpose(0, 2, 1) + p[j][:, None, :]
         if not jacobian:
             return X, None
         J = np.zeros((n, self.n_markers, 3, self.nq if columns is None else width))
@@ -588,13 +588,17 @@ class BatchKinematics:
             targets = [(iq, None)] if columns is None else columns.get(iq, ())
             if ms.size == 0 or not targets:
                 continue
+            every = ms.size == self.n_markers          # a joint above every marker: no gather, no scatter
             if rev:
-                d = _cross(axes[j][:, None, :], X[:, ms] - p[j][:, None, :])
+                d = _cross(axes[j][:, None, :], (X if every else X[:, ms]) - p[j][:, None, :])
             else:
                 d = np.broadcast_to(axes[j][:, None, :], (n, ms.size, 3))
             for oc, scale in targets:
                 col = J[..., oc]
-                col[:, ms] += d if scale is None else d * scale[:, None, None]
+                if every:
+                    col += d if scale is None else d * scale[:, None, None]
+                else:
+                    col[:, ms] += d if scale is None else d * scale[:, None, None]
         return X, J
 
 
