@@ -592,7 +592,7 @@ class BatchKinematics:
             if rev:
                 d = _cross(axes[j][:, None, :], (X if every else X[:, ms]) - p[j][:, None, :])
             else:
-                d = np.broadcast_to(axes[j][:, None, :], (n, ms.size, 3))
+                d = axes[j][:, None, :]                  # the same for every marker below
             for oc, scale in targets:
                 col = J[..., oc]
                 if every:
