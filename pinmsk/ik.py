@@ -18,7 +18,9 @@ frame with its own damping, acceptance and end), coarse to fine in time: key fra
 pose), every quarter of that from the cubic interpolation of their solutions, down to every
 frame.  A frame ends when its step, or the error left estimated from the linear rate of
 Gauss-Newton on a nonzero residual (``step * rho / (1 - rho)``, ``rho`` the ratio of the last
-two steps), is below ``tol``.  ``method="frames"`` solves frame after frame instead, warm-started
+two steps), is below ``tol``, or when a step lowers its objective by less than 1e-9 of it (a direction
+the markers hardly see, such as a forearm's pronation, then moves no further: the fit is the same to
+that part).  ``method="frames"`` solves frame after frame instead, warm-started
 from the previous one, with Pinocchio frame Jacobians (``LOCAL_WORLD_ALIGNED``), for any joints.
 Coordinates that no marker moves (and no coordinate task names) are held at ``q0``.
 Coordinate tasks (``coordinate_tasks``, OpenSim's IKCoordinateTask) and bounds (``bounds``,
@@ -757,7 +759,10 @@ def _lm_frames(evaluate, Y, W, Q, free, task_cols, task_w, task_y, lo, hi, *, ma
         its[act] += 1
         a_ok = act[ok]
         Q[a_ok] = Qn[ok]
-        small = (step < tol) | (ok & (left < tol)) | (ok & (cost[act] - cn <= 1e-14 * cost[act]))
+        # done: a small step, a small error left, or a near Gauss-Newton step (not one damped after
+        # rejections) that hardly lowers the objective
+        flat = ok & (lam[act] <= 1e-4) & (cost[act] - cn <= 1e-9 * cost[act])
+        small = (step < tol) | (ok & (left < tol)) | flat
         prev[act] = np.where(ok, step, prev[act])
         cost[a_ok] = cn[ok]
         r[ok] = rn[ok]
