@@ -284,7 +284,7 @@ def run(setup: SetupFile, *, results_dir=None) -> list[Path]:
     markers = read_trc(marker_file, max_gap=0, warn=False)
     coords = read_coordinates(coordinate_file, model) if coordinate_file is not None else None
     from ..presentation.progress import Progress
-    frames = frame_range(np.asarray(markers.meta.get("file_time", markers.time)), time_range)
+    frames = frame_range(np.asarray(markers.meta.get("file_time", markers.time)), time_range, where)
     with Progress(frames.stop - frames.start, "IK", unit="frames") as bar:    # drawn on a terminal, after 2 s
         outcome = inverse_kinematics(model, markers, tasks=tasks, time_range=time_range, coordinate_trial=coords,
                                      accuracy=accuracy, progress=bar, where=where)
