@@ -699,10 +699,11 @@ def _lm_frames(evaluate, Y, W, Q, free, task_cols, task_w, task_y, lo, hi, *, ma
     tw = np.sqrt(task_w[None, :] * W.sum(axis=1)[:, None]) if task_cols.size else None   # (n, T)
     tpos = np.array([int(np.flatnonzero(free == c)[0]) for c in task_cols], dtype=int)
 
-    def residual(idx, Qs):
+    def residual(idx, Qs, Ya, swa):
+        """Weighted residuals and Jacobian rows of the frames ``idx`` (their measurements ``Ya``, ``swa``)."""
         X, J = evaluate(Qs)
-        r = ((X - Y[idx]) * sw[idx]).reshape(len(idx), nm * na)
-        Jf = (J * sw[idx][..., None]).reshape(len(idx), nm * na, nf)
+        r = ((X - Ya) * swa).reshape(len(idx), nm * na)
+        Jf = (J * swa[..., None]).reshape(len(idx), nm * na, nf)
         if tw is not None:
             rt = tw[idx] * (Qs[:, task_cols] - task_y[idx])
             Jt = np.zeros((len(idx), task_cols.size, nf))
@@ -712,7 +713,8 @@ def _lm_frames(evaluate, Y, W, Q, free, task_cols, task_w, task_y, lo, hi, *, ma
         return r, Jf
 
     act = np.arange(n)
-    r, J = residual(act, Q)
+    Ya, swa = Y, sw                       # the active frames' measurements, kept in step with ``act``
+    r, J = residual(act, Q, Ya, swa)
     cost = np.einsum("ni,ni->n", r, r)
     lam = np.full(n, 1e-6)
     prev = np.full(n, np.inf)
@@ -753,7 +755,7 @@ def _lm_frames(evaluate, Y, W, Q, free, task_cols, task_w, task_y, lo, hi, *, ma
         with np.errstate(divide="ignore", invalid="ignore"):
             rho = np.where(np.isfinite(prev[act]), step / prev[act], np.inf)
             left = np.where(rho < 0.5, step * rho / (1.0 - rho), np.inf)
-        rn, Jn = residual(act, Qn)
+        rn, Jn = residual(act, Qn, Ya, swa)
         cn = np.einsum("ni,ni->n", rn, rn)
         ok = cn <= cost[act]
         its[act] += 1
@@ -765,8 +767,11 @@ def _lm_frames(evaluate, Y, W, Q, free, task_cols, task_w, task_y, lo, hi, *, ma
         small = (step < tol) | (ok & (left < tol)) | flat
         prev[act] = np.where(ok, step, prev[act])
         cost[a_ok] = cn[ok]
-        r[ok] = rn[ok]
-        J[ok] = Jn[ok]
+        if ok.all():
+            r, J = rn, Jn
+        else:
+            r[ok] = rn[ok]
+            J[ok] = Jn[ok]
         lam[a_ok] = np.maximum(lam[a_ok] / 10.0, 1e-12)
         lam[act[~ok]] *= 10.0
         stuck = lam[act] > 1e10
@@ -777,8 +782,9 @@ def _lm_frames(evaluate, Y, W, Q, free, task_cols, task_w, task_y, lo, hi, *, ma
             conv[act[stuck]] |= gmax < 1e-12
         if progress is not None and done.any():
             progress.update(int(done.sum()))
-        keep = ~done
-        act, r, J = act[keep], r[keep], J[keep]
+        if done.any():
+            keep = ~done
+            act, r, J, Ya, swa = act[keep], r[keep], J[keep], Ya[keep], swa[keep]
     if progress is not None and act.size:
         progress.update(int(act.size))
     return its, conv
