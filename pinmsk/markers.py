@@ -3,6 +3,7 @@
 :func:`load_marker_set` reads a TOML ``[[markers]]`` table, e.g.
 ``urdf/markers_gait2d.toml``.  Reading measured markers is :mod:`pinmsk.io.trc`
 (and :mod:`pinmsk.io.c3d`); their gaps are :mod:`pinmsk.signals.gaps`.
+:func:`model_marker_set` gives a model's own markers (an imported ``.osim``'s MarkerSet).
 """
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ from .builtin_models import builtin_dir
 from .errors import ModelError
 from .io.toml_files import read_toml
 
-__all__ = ["ModelMarker", "MarkerSet", "load_marker_set"]
+__all__ = ["ModelMarker", "MarkerSet", "load_marker_set", "model_marker_set"]
 
 
 @dataclass(frozen=True)
@@ -107,3 +108,18 @@ def load_marker_set(path) -> MarkerSet:
             raise ModelError(f"{p}: set {s!r} names unknown markers {bad}")
     return MarkerSet(tuple(out), sets, doc.get("model", {}).get("name") if isinstance(doc.get("model"), dict)
                      else doc.get("model"), str(p))
+
+
+def model_marker_set(model) -> MarkerSet:
+    """The markers of ``model``: an imported ``.osim``'s MarkerSet (``model.meta["markers"]``: name,
+    body, position in the body's frame, m), else the built-in marker set of that name
+    (``urdf/markers_<name>.toml``); ModelError naming the model when it has neither."""
+    entries = (getattr(model, "meta", None) or {}).get("markers")
+    if entries:
+        return MarkerSet(tuple(ModelMarker(str(e["name"]), str(e["body"]), tuple(float(x) for x in e["position"]))
+                               for e in entries), {}, model.name, f"model '{model.name}'")
+    p = builtin_dir() / f"markers_{model.name}.toml"
+    if p.exists():
+        return load_marker_set(p)
+    raise ModelError(f"model '{model.name}' has no markers (an .osim's <MarkerSet> or a built-in "
+                     f"markers_{model.name}.toml); give a marker set file")

@@ -103,9 +103,10 @@ def test_marker_positions_follow_the_body(gait2d):
     np.testing.assert_allclose(x[1, :2], [0.0, 1.0681 + 0.266], atol=1e-12)
 
 
-def test_coordinate_target_weighs_against_markers(gait2d):
-    # every marker shifted by d along x, only torso_x solved: the markers alone put it at q + d; a target q
-    # with weight w against n markers of weight 1 gives the weighted mean q + n d / (n + w)
+def test_coordinate_task_weighs_against_markers(gait2d):
+    # every marker shifted by d along x, only torso_x solved: the markers alone put it at q + d; a task on
+    # q with weight w (times the frame's total marker weight n, as OpenSim's IKCoordinateTask) against n
+    # markers of weight 1 gives the weighted mean q + n d / (n + w n) = q + d / (1 + w)
     ms = load_marker_set("gait2d").subset("csu")
     t, q = _motion(gait2d, n=3)
     mk = markers_trial(gait2d, ms, t, q, axes="xy")
@@ -113,15 +114,13 @@ def test_coordinate_target_weighs_against_markers(gait2d):
     shifted = Trial(t, {k: mk[k] + (d if k.endswith("_x") else 0.0) for k in mk.names}, meta=dict(mk.meta))
     ix = gait2d.coordinate_index("torso_x")
     w = 7.0
-    targets = {"torso_x": (float(q[1, ix]), w)}
+    tasks = {"torso_x": (w, float(q[1, ix]))}
     q0 = {c: float(q[1, gait2d.coordinate_index(c)]) for c in gait2d.coordinates}
-    ik = InverseKinematics(markers=ms, q0=q0, coordinates=["torso_x"], coordinate_targets=targets,
-                           tol=1e-13).fit(gait2d, Trial(t[1:2], {k: shifted[k][1:2] for k in shifted.names},
-                                                        meta=dict(mk.meta)))
-    n = len(ms)
-    assert ik.q_[0, ix] == pytest.approx(q[1, ix] + n * d / (n + w), abs=1e-9)
-    free = InverseKinematics(markers=ms, q0=q0, coordinates=["torso_x"]).fit(
-        gait2d, Trial(t[1:2], {k: shifted[k][1:2] for k in shifted.names}, meta=dict(mk.meta)))
+    one = Trial(t[1:2], {k: shifted[k][1:2] for k in shifted.names}, meta=dict(mk.meta))
+    ik = InverseKinematics(markers=ms, q0=q0, coordinates=["torso_x"], coordinate_tasks=tasks,
+                           tol=1e-13).fit(gait2d, one)
+    assert ik.q_[0, ix] == pytest.approx(q[1, ix] + d / (1 + w), abs=1e-9)
+    free = InverseKinematics(markers=ms, q0=q0, coordinates=["torso_x"]).fit(gait2d, one)
     assert free.q_[0, ix] == pytest.approx(q[1, ix] + d, abs=1e-9)
     with pytest.raises(pinmsk.ModelError, match="weights must be finite"):
-        InverseKinematics(markers=ms, coordinate_targets={"torso_x": (0.0, -1.0)}).fit(gait2d, mk)
+        InverseKinematics(markers=ms, coordinate_tasks={"torso_x": (-1.0, 0.0)}).fit(gait2d, mk)

@@ -86,7 +86,8 @@ def read_trc(path, *, max_gap: int = DEFAULT_MAX_GAP, units: str | None = None,
 
     ``meta``: ``source``, ``format="trc"``, ``markers``, ``units`` (as declared),
     ``rate`` (``DataRate``), ``header`` (the key/value fields), ``gaps``,
-    ``declared_frames``.  Missing cells (empty or NaN) are gaps.  The header's
+    ``declared_frames``, and ``file_time`` (the Time column as written) when rounded times were rebuilt
+from the rate.  Missing cells (empty or NaN) are gaps.  The header's
     ``NumFrames`` may exceed the rows present (excerpts); this is noted in
     ``meta["read_notes"]``, not an error.
     """
@@ -169,6 +170,7 @@ def read_trc(path, *, max_gap: int = DEFAULT_MAX_GAP, units: str | None = None,
         for j, a in enumerate(AXES):
             chans[f"{m}_{a}"] = xyz[:, i, j]
     t = np.asarray(times)
+    file_time = None
     dt = np.diff(t)
     if dt.size and np.any(dt <= 0):
         r = int(np.flatnonzero(dt <= 0)[0])
@@ -183,9 +185,12 @@ def read_trc(path, *, max_gap: int = DEFAULT_MAX_GAP, units: str | None = None,
             # times printed with too few decimals (0.007, 0.006, ... at 150 Hz): rebuild from the rate
             notes.append(f"Time column rounded (steps {dt.min():.6g}-{dt.max():.6g} s); times rebuilt as "
                          f"t0 + k / DataRate ({rate:g} Hz)")
+            file_time = t
             t = t[0] + np.arange(t.size) / rate
     meta = {"source": str(path), "format": "trc", "markers": tuple(markers), "units": unit,
             "rate": rate, "header": header, "declared_frames": declared, "read_notes": tuple(notes)}
+    if file_time is not None:
+        meta["file_time"] = file_time
     trial = Trial(t, chans, units={c: "m" for c in chans}, meta=meta)
     return fill_gaps(trial, max_gap=max_gap, warn=warn)
 

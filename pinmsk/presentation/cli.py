@@ -199,6 +199,12 @@ def cmd_id(args) -> int:
     return 0
 
 
+def cmd_ik(args) -> int:
+    from ..tools.inverse_kinematics import command
+    command(args, _progress)
+    return 0
+
+
 def cmd_muscles(args) -> int:
     from ..solvers.muscle_analysis import muscle_analysis
     model = _model(args)
@@ -582,6 +588,26 @@ def build_parser() -> argparse.ArgumentParser:
     _add_read_flags(s)
     _nonlinear_flag(s)
     s.set_defaults(func=cmd_id)
+
+    s = sub.add_parser("ik", help="inverse kinematics from a marker file, as OpenSim's IK tool: a .mot of coordinates",
+                       description="Solve the model's coordinates frame by frame from measured markers (OpenSim's "
+                                   "IK problem: weighted marker and coordinate tasks) and write the .mot and "
+                                   "the marker errors (.sto) as OpenSim's InverseKinematicsTool writes them.")
+    s.add_argument("model", help="built-in name, .toml or .osim (exact import)")
+    s.add_argument("trc", metavar="TRC", help="marker file (.trc)")
+    s.add_argument("-o", "--output", required=True, help="output motion (.mot)")
+    s.add_argument("--tasks", metavar="TASKS.xml", default=None,
+                   help="an OpenSim IK task set (IKMarkerTask / IKCoordinateTask weights); default: every "
+                        "model marker in the file, weight 1")
+    s.add_argument("--coordinates", metavar="FILE", default=None,
+                   help="coordinate file (.mot/.sto) giving the targets of from_file coordinate tasks")
+    s.add_argument("--time", nargs=2, type=float, metavar=("START", "END"), default=None,
+                   help="time range (s); default: the whole file")
+    s.add_argument("--marker-errors", metavar="FILE", default=None,
+                   help="marker error file (default: <output stem>_ik_marker_errors.sto beside the output)")
+    _precision_flag(s)
+    _nonlinear_flag(s)
+    s.set_defaults(func=cmd_ik)
 
     s = sub.add_parser("muscles", help="muscle analysis of a trial: <muscle>_length, _fiber_length, "
                                        "_moment_arm_<coord> channels")

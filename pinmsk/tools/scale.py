@@ -162,8 +162,7 @@ def place_markers(root, static: Trial, *, time_range, marker_weights: Mapping[st
     target_trial = Trial(np.array([t0]), ch, meta={"markers": list(mset.names)})
     defaults = sc.coordinate_defaults(tree)
     # Simbody's assembler minimises sum(w_m r_m^2) / (2 sum w_m) + sum w_c (q_c - v_c)^2 / 2
-    # (AssemblyCondition_Markers, _QValue): in pinmsk's sum(w_m r_m^2) the coordinate weights grow by sum w_m
-    w_markers = sum(m.weight for m in mm if np.all(np.isfinite(ik_target[m.name])))
+    # (AssemblyCondition_Markers, _QValue): InverseKinematics's coordinate tasks carry that sum w_m
     tasks = {}
     for c, (v, w) in (coordinate_tasks or {}).items():
         if c not in defaults:
@@ -173,8 +172,8 @@ def place_markers(root, static: Trial, *, time_range, marker_weights: Mapping[st
                 raise PinmskError(f"marker placement: coordinate task '{c}' takes its value from the coordinate "
                                   "file, which " + ("is not given" if coordinates is None else "has no such column"))
             v = float(np.interp(t0, coordinates.time, coordinates[c]))
-        tasks[c] = (defaults[c] if v is None else float(v), float(w) * w_markers)
-    ik = InverseKinematics(markers=mset, axes="xyz", q0=dict(defaults), coordinate_targets=tasks,
+        tasks[c] = (float(w), defaults[c] if v is None else float(v))
+    ik = InverseKinematics(markers=mset, axes="xyz", q0=dict(defaults), coordinate_tasks=tasks,
                            max_iter=200, tol=1e-12).fit(model, target_trial)
     pose = {c: float(ik.result_[c][0]) for c in defaults if c in ik.result_}
     for c, v in defaults.items():
