@@ -40,7 +40,7 @@ import numpy as np
 from pinmsk.backend import is_symbolic
 from pinmsk.errors import ModelError, PinmskError
 
-__all__ = ["MomentArmPath", "PolynomialPath", "DisplayPoints", "display_points_from_sidecar", "path_variants"]
+__all__ = ["MomentArmPath", "PolynomialPath", "PolynomialPathOnUse", "DisplayPoints", "display_points_from_sidecar", "path_variants"]
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -681,3 +681,66 @@ class PolynomialPath:
                 quad = quad + f * vt[:, :, i] * vt[:, :, j]
         out = np.einsum("nmj,nj->nm", grad, a) + self._reduce(self._coef * quad)
         return out[0] if single else out
+
+
+def _lazy_rebuild(fit, muscles, coordinates, fitted):  # pickle support
+    path = PolynomialPathOnUse(fit, muscles=muscles, coordinates=coordinates)
+    if fitted is not None:
+        path._adopt(fitted)
+    return path
+
+
+class PolynomialPathOnUse(PolynomialPath):
+    """A :class:`PolynomialPath` whose terms are made when they are first needed.
+
+    ``fit()`` (a picklable callable) returns the PolynomialPath; it runs on the first use of anything
+    but :attr:`muscles`, :attr:`coordinates`, :attr:`n_muscles` and :attr:`nv`, which are known before.
+    Afterwards this object is that path (the same numbers).  An OpenSim import makes its muscle paths so
+    (:mod:`pinmsk.opensim.muscle_import`): an analysis that never evaluates a path, inverse dynamics,
+    never pays for fitting the polynomials.  :attr:`fitted` says whether the fit has run.
+    """
+
+    __slots__ = ("_fit", "_done")
+
+    def __init__(self, fit, *, muscles, coordinates):
+        set_ = object.__setattr__
+        set_(self, "_fit", fit)
+        set_(self, "_done", False)
+        set_(self, "_muscles", tuple(str(m) for m in muscles))
+        set_(self, "_coordinates", tuple(str(c) for c in coordinates))
+
+    @property
+    def fitted(self) -> bool:
+        return self._done
+
+    def _adopt(self, path: PolynomialPath) -> None:
+        if path.muscles != self._muscles or path.coordinates != self._coordinates:
+            raise ModelError(f"PolynomialPathOnUse: the fit made a path of muscles {list(path.muscles)} over "
+                             f"{list(path.coordinates)}, not of {list(self._muscles)} over {list(self._coordinates)}")
+        for name in PolynomialPath.__slots__:
+            object.__setattr__(self, name, getattr(path, name))
+        object.__setattr__(self, "_done", True)
+
+    def __getattr__(self, name):
+        # called only for an attribute not set yet: the fitted path's
+        if name.startswith("__") or name in ("_fit", "_done") or name not in PolynomialPath.__slots__:
+            raise AttributeError(name)
+        if self._done:
+            raise AttributeError(name)
+        try:
+            path = self._fit()
+        except AttributeError as exc:      # not to be taken for a missing attribute by getattr()
+            raise RuntimeError(f"fitting the muscle paths failed: {exc}") from exc
+        self._adopt(path)
+        return object.__getattribute__(self, name)
+
+    def __reduce__(self):
+        fitted = PolynomialPath(muscles=self._muscles, coordinates=self._coordinates,
+                                terms=[dict(t) for t in self._terms]) if self._done else None
+        return (_lazy_rebuild, (self._fit, self._muscles, self._coordinates, fitted))
+
+    def __repr__(self) -> str:
+        if self._done:
+            return super().__repr__()
+        return (f"PolynomialPath({len(self._muscles)} muscles x {len(self._coordinates)} coordinates, fitted on "
+                "first use)")

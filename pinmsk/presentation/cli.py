@@ -173,9 +173,11 @@ def cmd_import(args) -> int:
     if args.fit_over:       # read here, so a file's problem is named with the CLI's own strictness
         from ..io.tables import read_trial
         fit_over = read_trial(args.fit_over, strict=not args.lenient)
-    # the report is printed
+    # the report is printed (the muscle paths' fit, which writing runs, need not warn of it too)
     model, report = import_osim(args.model, nonlinear=args.nonlinear or "exact", fit_over=fit_over)
-    files = write_import(model, args.out, name=args.name)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=r".*muscle path\(s\) fitted by polynomials", category=UserWarning)
+        files = write_import(model, args.out, name=args.name)
     print(report.format(verbose=args.verbose))
     for what in ("urdf", "sidecar", "markers", "report"):
         print(f"wrote {files[what]}")
