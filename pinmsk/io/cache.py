@@ -119,9 +119,8 @@ def code_fingerprint() -> str:
     """A digest of pinmsk's version and its source files (names, sizes, modification times): a changed
     pinmsk, installed or edited, makes new keys."""
     if not _FINGERPRINT:
-        import pinmsk
-        root = Path(pinmsk.__file__).resolve().parent
-        parts = [getattr(pinmsk, "__version__", "")]
+        root = Path(__file__).resolve().parents[1]
+        parts = [getattr(sys.modules.get("pinmsk"), "__version__", "")]
         for p in sorted(root.rglob("*.py")):
             try:
                 st = p.stat()

@@ -245,6 +245,10 @@ def write_import(model_or_path, out_dir, *, name: str | None = None, hooks: Sequ
     imp = read_import(path, locked=locked, nonlinear=options.get("nonlinear", "exact"), hooks=hooks or ())
     if report is None:
         report, muscles, components = imp.report, imp.muscles, imp.components
+    import warnings
+    with warnings.catch_warnings():     # the fit's errors are written to the sidecar and the report
+        warnings.filterwarnings("ignore", message=r".*muscle path\(s\) fitted by polynomials", category=UserWarning)
+        report.entries                  # runs the deferred work (the muscle paths' fit)
     skel = imp.skeleton
     entries, unwritten = _component_entries(components)
     if unwritten:

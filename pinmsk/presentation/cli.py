@@ -33,9 +33,22 @@ from .progress import Progress
 
 
 def _model(args):
+    """The command's MODEL, after its TRIAL (if it has one) is checked: a trial that cannot be read is
+    reported before the model is loaded (an .osim import, its muscle paths' fit, take seconds)."""
     from ..model import load_model
+    if getattr(args, "trial", None):
+        _check_trial(args)
     return load_model(args.model, moment_arms=getattr(args, "moment_arms", None),
                       nonlinear=getattr(args, "nonlinear", None))
+
+
+def _check_trial(args) -> None:
+    """Read the trial as :func:`_read` will (file, header, columns, ``--map``), without the model: its
+    problems raise here; its warnings and notes are left to the real read."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        read_mapped(args.trial, model=None, cmap=getattr(args, "map", None),
+                    strict=not getattr(args, "lenient", False), require_coordinates=False)
 
 
 class _EffectFamiliesHelp(argparse.HelpFormatter):
@@ -173,11 +186,9 @@ def cmd_import(args) -> int:
     if args.fit_over:       # read here, so a file's problem is named with the CLI's own strictness
         from ..io.tables import read_trial
         fit_over = read_trial(args.fit_over, strict=not args.lenient)
-    # the report is printed (the muscle paths' fit, which writing runs, need not warn of it too)
+    # the report is printed
     model, report = import_osim(args.model, nonlinear=args.nonlinear or "exact", fit_over=fit_over)
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message=r".*muscle path\(s\) fitted by polynomials", category=UserWarning)
-        files = write_import(model, args.out, name=args.name)
+    files = write_import(model, args.out, name=args.name)
     print(report.format(verbose=args.verbose))
     for what in ("urdf", "sidecar", "markers", "report"):
         print(f"wrote {files[what]}")
@@ -801,11 +812,16 @@ def _run(argv) -> int:
 def main(argv=None) -> int:
     """Run the command line; returns the exit status (2 for errors pinmsk recognises).
 
+    BLAS runs on one thread (:func:`pinmsk._blas.one_thread`) unless the user set its thread count:
+    the commands' many small solves are slower with more, several-fold on a busy machine.
+
     A closed output pipe (``pinmsk models | head -1``) ends the command quietly
     with status 1, as the Python documentation recommends for ``SIGPIPE``
     (library/signal.html, "Note on SIGPIPE"): stdout is pointed at devnull so
     the interpreter's final flush cannot fail again.
     """
+    from .._blas import one_thread
+    one_thread()
     try:
         try:
             return _run(argv)
