@@ -39,7 +39,6 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence
-from xml.sax.saxutils import quoteattr
 
 import numpy as np
 import pinocchio as pin
@@ -283,6 +282,12 @@ def _num(x: float) -> str:
 
 def _vec(v) -> str:
     return " ".join(_num(x) for x in v)
+
+
+def quoteattr(text: str) -> str:
+    """``xml.sax.saxutils.quoteattr`` (imported when a URDF is written: it imports urllib)."""
+    from xml.sax.saxutils import quoteattr as quote
+    return quote(text)
 
 
 def urdf_string(skel: Skeleton, *, name: str, frames: Mapping[str, tuple[str, np.ndarray]] | None = None) -> str:

@@ -17,7 +17,6 @@ import functools
 import os
 import sys
 import warnings
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 import numpy as np
@@ -477,6 +476,7 @@ def cmd_batch(args) -> int:
 
 def _version() -> str:
     """The installed distribution's version, or the package's own when not installed."""
+    from importlib.metadata import PackageNotFoundError, version
     try:
         return version("pinmsk")
     except PackageNotFoundError:
