@@ -19,7 +19,7 @@ import numpy as np
 __all__ = ["DENSE", "not_a_knot", "design_matrix", "derivative_step"]
 
 #: Time grids up to this many samples get dense maps (an N x N collocation matrix); longer ones SciPy's sparse ones.
-DENSE = 1200
+DENSE = 1500
 
 
 def not_a_knot(x: np.ndarray, k: int) -> np.ndarray:

@@ -26,7 +26,7 @@ import numpy as np
 __all__ = ["SHORT", "butter_sos", "sosfilt_zi", "lfilter_zi", "sosfilt", "lfilter", "lfiltic"]
 
 #: Signals up to this many samples are filtered here; longer ones by ``scipy.signal``.
-SHORT = 2000
+SHORT = 5000
 
 
 def butter_sos(order: int, wn: float) -> np.ndarray:
