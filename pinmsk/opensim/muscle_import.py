@@ -24,6 +24,9 @@ DeGrooteFregly2016Muscle elements it builds one
   held-out poses), locked ones stay at their default values (their moment
   arms are 0 in pinmsk).
 
+The fit is deferred to the paths' first use: the MuscleSet's path is a
+:class:`~pinmsk.muscles.paths.PolynomialPathOnUse` whose :class:`DeferredPathFit` runs it (and is a
+deferred item of the report), so an analysis that evaluates no path (inverse dynamics) fits none.
 The report gets one entry per muscle group (the muscles crossing the same
 coordinates) with the fit's largest length and moment-arm errors on the
 held-out poses, and one entry with the muscle-curve notes
