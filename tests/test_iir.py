@@ -13,6 +13,21 @@ from pinmsk.signals import bspline, filtering, iir
 signal = pytest.importorskip("scipy.signal")
 
 
+@pytest.fixture(autouse=True)
+def numpy_paths(monkeypatch):
+    """The numpy code paths by length alone (this module has imported SciPy, which would switch them off)."""
+    monkeypatch.setattr(iir, "use_numpy", lambda n, *args, **kwargs: n <= iir.SHORT)
+    monkeypatch.setattr(bspline, "use_dense", lambda n: n <= bspline.DENSE)
+
+
+def test_scipy_takes_over_once_imported_or_after_the_budget(monkeypatch):
+    monkeypatch.undo()
+    assert not iir.use_numpy(100)                        # scipy.signal is imported (above)
+    assert iir.use_numpy(100, module="a.module.not.imported", spent=[0.0])
+    assert not iir.use_numpy(100, module="a.module.not.imported", spent=[iir.BUDGET])
+    assert not iir.use_numpy(iir.SHORT + 1, module="a.module.not.imported", spent=[0.0])
+
+
 @pytest.mark.parametrize("order", range(1, 11))
 def test_the_butterworth_design_and_its_initial_state_are_scipys(order):
     for wn in (0.005, 0.04, 0.12, 0.3, 0.5, 0.77, 0.97):

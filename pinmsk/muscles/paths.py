@@ -33,6 +33,7 @@ coordinates at once (the only Python loop is over the polynomial degree).
 from __future__ import annotations
 
 import difflib
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -408,6 +409,31 @@ def display_points_from_sidecar(muscle_entries, *, bodies=None, source=None) -> 
     return tuple(out)
 
 
+#: Frames a polynomial path evaluates at a time: its monomials' work arrays (frames x terms x variables)
+#: stay this size, in memory and in the CPU cache, however long the motion.
+BLOCK_FRAMES = 2048
+
+
+def _in_blocks(n_arrays: int):
+    """Run a PolynomialPath method over blocks of :data:`BLOCK_FRAMES` frames of its first ``n_arrays``
+    arguments (each (N, nv)) and join the results along the frames (the same numbers: frames are
+    independent)."""
+    def wrap(method):
+        @functools.wraps(method)
+        def run(self, *args, **kwargs):
+            first = np.asarray(args[0]) if args else None
+            if first is None or first.ndim != 2 or first.shape[0] <= BLOCK_FRAMES or len(args) < n_arrays:
+                return method(self, *args, **kwargs)
+            arrays, rest = [np.asarray(a) for a in args[:n_arrays]], args[n_arrays:]
+            parts = [method(self, *(a[s:s + BLOCK_FRAMES] for a in arrays), *rest, **kwargs)
+                     for s in range(0, first.shape[0], BLOCK_FRAMES)]
+            if isinstance(parts[0], tuple):
+                return tuple(np.concatenate(p) for p in zip(*parts))
+            return np.concatenate(parts)
+        return run
+    return wrap
+
+
 def _products_of_others(p):
     """For each v, the product over the last axis of ``p`` (N, T, V) without entry v: (N, T) each, from
     prefix and suffix products (no division, so exact zeros stay zeros)."""
@@ -598,6 +624,7 @@ class PolynomialPath:
             out[:, rows, self._cidx[rows, v]] += g[:, rows, v]
         return out
 
+    @_in_blocks(1)
     def lengths(self, q) -> np.ndarray:
         """Muscle-tendon lengths l(q): (N, m), or (m,) for one frame."""
         (q,), single = self._frames(q=q)
@@ -605,12 +632,14 @@ class PolynomialPath:
         out = self._reduce(self._coef * np.prod(p0, axis=2))
         return out[0] if single else out
 
+    @_in_blocks(1)
     def moment_arms(self, q) -> np.ndarray:
         """Moment arms r = -dl/dq: (N, m, nv), or (m, nv) for one frame."""
         (q,), single = self._frames(q=q)
         out = -self._scatter(self._grad_x(self._monomial_parts(q, (0, 1))))
         return out[0] if single else out
 
+    @_in_blocks(1)
     def lengths_and_moment_arms(self, q) -> tuple[np.ndarray, np.ndarray]:
         """``(lengths(q), moment_arms(q))`` from one evaluation of the monomials (the same numbers)."""
         (q,), single = self._frames(q=q)
@@ -619,6 +648,7 @@ class PolynomialPath:
         arms = -self._scatter(self._grad_x(parts))
         return (lengths[0], arms[0]) if single else (lengths, arms)
 
+    @_in_blocks(1)
     def moment_arm_derivative(self, q, order: int = 1) -> np.ndarray:
         """``d^order r_ij / dq_j^order`` along each arm's own coordinate (the diagonal; cross terms
         are in :meth:`accelerations`): (N, m, nv), or (m, nv) for one frame."""
@@ -691,6 +721,7 @@ class PolynomialPath:
         out = -np.einsum("nmj,nj->nm", self.moment_arms(q), v)
         return out[0] if single else out
 
+    @_in_blocks(3)
     def accelerations(self, q, v, a) -> np.ndarray:
         """d2l/dt2 = sum_j dl/dq_j a_j + sum_jk d2l/dq_j dq_k v_j v_k: (N, m), or (m,)."""
         (q, v, a), single = self._frames(q=q, v=v, a=a)

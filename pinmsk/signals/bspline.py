@@ -1,7 +1,8 @@
 """B-spline bases as dense numpy matrices, for the short time grids of :func:`pinmsk.signals.filtering.differentiate`.
 
 ``scipy.interpolate`` and ``scipy.sparse`` cost more to import than differentiating a short trial; up to
-:data:`DENSE` samples the quintic spline's maps are built here as dense arrays, computing what
+:data:`DENSE` samples (while SciPy's are not imported and the dense maps have cost less than
+:data:`BUDGET` seconds in the process) the quintic spline's maps are built here as dense arrays, computing what
 ``make_interp_spline(k=5)`` (not-a-knot knots), ``BSpline.design_matrix`` and the derivative
 coefficient maps of ``splder`` give:
 
@@ -20,6 +21,16 @@ __all__ = ["DENSE", "not_a_knot", "design_matrix", "derivative_step"]
 
 #: Time grids up to this many samples get dense maps (an N x N collocation matrix); longer ones SciPy's sparse ones.
 DENSE = 1500
+#: Seconds of dense maps after which SciPy's are used for every grid (see :data:`pinmsk.signals.iir.BUDGET`).
+BUDGET = 0.5
+SPENT = [0.0]
+
+
+def use_dense(n: int) -> bool:
+    """Whether a grid of ``n`` samples gets dense maps: it is short, ``scipy.interpolate`` is not imported and
+    the dense maps have not yet cost :data:`BUDGET` seconds in this process."""
+    import sys
+    return n <= DENSE and "scipy.interpolate" not in sys.modules and SPENT[0] < BUDGET
 
 
 def not_a_knot(x: np.ndarray, k: int) -> np.ndarray:

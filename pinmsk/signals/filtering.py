@@ -223,9 +223,12 @@ class _QuinticOperators:
     __slots__ = ("t", "lu", "d1", "d2", "collocation")
 
     def __init__(self, t: np.ndarray):
-        from .bspline import DENSE
-        if t.size <= DENSE:
+        from .bspline import SPENT, use_dense
+        if use_dense(t.size):
+            import time
+            t0 = time.perf_counter()
             self._dense(t)
+            SPENT[0] += time.perf_counter() - t0
             return
         from scipy.interpolate import BSpline, make_interp_spline
         from scipy.sparse import diags_array
@@ -273,7 +276,13 @@ class _QuinticOperators:
     def solve(self, x: np.ndarray) -> np.ndarray:
         """The coefficients ``(N, k)`` of the interpolating splines through the columns of ``x`` ``(N, k)``."""
         if self.lu is None:
-            return np.linalg.solve(self.collocation, x)
+            import time
+
+            from .bspline import SPENT
+            t0 = time.perf_counter()
+            out = np.linalg.solve(self.collocation, x)
+            SPENT[0] += time.perf_counter() - t0
+            return out
         return self.lu.solve(np.ascontiguousarray(x))
 
 

@@ -17,7 +17,9 @@ compute:
 * :func:`sosfilt`, :func:`lfilter` (with an initial state) and :func:`lfiltic` -- the recursions of the
   transposed direct form II.  Up to :data:`SHORT` samples they run as a loop over the samples
   (vectorised over the channels); longer signals go to ``scipy.signal``'s compiled loops, whose import
-  is then small beside the work.  Both evaluate the same recursion in the same order of operations.
+  is then small beside the work, and so does every signal once ``scipy.signal`` is imported or the loops
+  have cost :data:`BUDGET` seconds in the process.  Both evaluate the same recursion in the same order of
+  operations (the same numbers to the bit).
 """
 from __future__ import annotations
 
@@ -27,6 +29,32 @@ __all__ = ["SHORT", "butter_sos", "sosfilt_zi", "lfilter_zi", "sosfilt", "lfilte
 
 #: Signals up to this many samples are filtered here; longer ones by ``scipy.signal``.
 SHORT = 5000
+#: Seconds of filtering here after which ``scipy.signal`` is imported and used for every signal: a
+#: process that filters many short trials pays the import once rather than the slower loop each time.
+BUDGET = 0.5
+_SPENT = [0.0]
+
+
+def use_numpy(n: int, module: str = "scipy.signal", spent: list = _SPENT, budget: float | None = None) -> bool:
+    """Whether a signal of ``n`` samples is computed here: it is short, ``module`` is not imported yet and
+    the loops here have not yet cost ``budget`` seconds (``spent[0]``) in this process."""
+    import sys
+    return n <= SHORT and module not in sys.modules and spent[0] < (BUDGET if budget is None else budget)
+
+
+class _Clock:
+    """Adds the seconds of its ``with`` block to ``spent[0]``."""
+
+    def __init__(self, spent):
+        self.spent = spent
+
+    def __enter__(self):
+        import time
+        self.t0 = time.perf_counter()
+
+    def __exit__(self, *exc):
+        import time
+        self.spent[0] += time.perf_counter() - self.t0
 
 
 def butter_sos(order: int, wn: float) -> np.ndarray:
@@ -204,9 +232,14 @@ def sosfilt(sos, x, *, zi):
     sos = np.asarray(sos, dtype=float)
     x = np.asarray(x, dtype=float)
     zi = np.asarray(zi, dtype=float)
-    if x.shape[0] > SHORT:
+    if not use_numpy(x.shape[0]):
         from scipy.signal import sosfilt as scipy_sosfilt
         return scipy_sosfilt(sos.copy(), x, axis=0, zi=zi)
+    with _Clock(_SPENT):
+        return _sosfilt(sos, x, zi)
+
+
+def _sosfilt(sos, x, zi):
     flat, shape = _as_columns(x)
     z = np.broadcast_to(zi, (sos.shape[0], 2) + shape[1:]).reshape(sos.shape[0], 2, -1).copy()
     y = flat.copy()
@@ -230,9 +263,14 @@ def lfilter(b, a, x, *, zi):
     a = np.atleast_1d(np.asarray(a, dtype=float))
     x = np.asarray(x, dtype=float)
     zi = np.asarray(zi, dtype=float)
-    if x.shape[0] > SHORT:
+    if not use_numpy(x.shape[0]):
         from scipy.signal import lfilter as scipy_lfilter
         return scipy_lfilter(b, a, x, axis=0, zi=zi)
+    with _Clock(_SPENT):
+        return _lfilter(b, a, x, zi)
+
+
+def _lfilter(b, a, x, zi):
     b, a = b / a[0], a / a[0]
     k = max(len(a), len(b))
     a = np.concatenate((a, np.zeros(k - len(a))))
