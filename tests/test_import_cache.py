@@ -222,3 +222,31 @@ def test_an_unwritable_cache_folder_is_skipped(tmp_path, monkeypatch, leg):
     model, _ = _fresh(leg)
     assert model.nq > 0 and cache.store("import", "0" * 40, 1) is None
     clear_import_cache()
+
+
+def test_cli_id_of_a_short_trial_imports_no_scipy_signal(tmp_path):
+    """``pinmsk id`` on the walk (151 frames) pays for no scipy.signal, scipy.interpolate or scipy.sparse."""
+    import subprocess
+    import sys
+    d = shared_folder(GAIT, "subject01.osim")
+    code = ("import sys\n"
+            "from pinmsk.presentation.cli import main\n"
+            f"assert main(['id', {str(d / 'subject01.osim')!r}, {str(d / 'IK/subject01_walk_IK.mot')!r}, "
+            f"'--external-loads', {str(d / 'ExperimentalData/subject01_walk_grf.xml')!r}, "
+            f"'-o', {str(tmp_path / 'id.sto')!r}]) == 0\n"
+            "print(sorted(m for m in sys.modules if m.startswith(('scipy.signal', 'scipy.interpolate', "
+            "'scipy.sparse'))))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip().splitlines()[-1] == "[]"
+
+
+def test_a_bad_trial_is_named_before_the_model_is_loaded(tmp_path, monkeypatch, capsys):
+    from pinmsk.presentation.cli import main
+    import pinmsk.model
+    loaded = []
+    monkeypatch.setattr(pinmsk.model, "load_model", lambda *a, **k: loaded.append(a) or 1 / 0)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time,a\n0,1\n0.1\n")
+    assert main(["id", "model.osim", str(bad), "-o", str(tmp_path / "out.sto")]) == 2
+    err = capsys.readouterr().err
+    assert "bad.csv" in err and "line 3" in err and loaded == []

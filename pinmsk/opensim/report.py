@@ -115,7 +115,8 @@ class ImportReport:
             return NotImplemented
         return self.source == other.source and self.entries == other.entries
 
-    __hash__ = None
+    def __hash__(self) -> int:
+        return hash(self.source)          # equal reports have the same source (the entries may be deferred)
 
     def __repr__(self) -> str:
         return f"ImportReport(source={self.source!r}, {len(self.entries_so_far)} entries, {len(self.pending)} pending)"
