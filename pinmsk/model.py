@@ -596,6 +596,13 @@ def import_osim(path, *, locked: str = "joint", nonlinear: str = "exact", gravit
     sharing it is safe), without refitting the muscle paths (arm26: 2-4 s).  A changed file is imported
     again.  :func:`clear_import_cache` empties the cache; ``pinmsk import`` writes a sidecar that loads
     fast in a new process.
+
+    Imports with the default hooks (not ``fit_over``) are also kept on disk (:mod:`pinmsk.io.cache`: the
+    user's cache folder, ``PINMSK_CACHE_DIR``, off with ``PINMSK_NO_CACHE=1``), keyed by the file's path
+    and bytes, the files it names (``file="..."``), the options, the hooks and pinmsk's code: a new
+    process reads the model back (a corrupt entry is imported again).  The muscle paths' polynomials are
+    fitted when first used (:class:`pinmsk.opensim.muscle_import.DeferredPathFit`; the report's
+    ``pending`` until then), and the fit is kept on disk too.
     """
     from .opensim.contacts import contact_hook
     from .opensim.muscle_import import DEFAULT_HOOKS
@@ -690,8 +697,8 @@ _IMPORTS: dict = {}
 
 
 def clear_import_cache(path=None) -> None:
-    """Forget the models :func:`import_osim` cached (the next import reads and fits the file again): all of
-    them, or those of the file at ``path``."""
+    """Forget the models :func:`import_osim` cached in this process: all of them, or those of the file at
+    ``path`` (the next import reads the on-disk cache, :mod:`pinmsk.io.cache`, or the file)."""
     if path is None:
         _IMPORTS.clear()
         return
