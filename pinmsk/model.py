@@ -655,7 +655,8 @@ def _build_import(path, *, locked, nonlinear, gravity, hooks):
 def _stored_key(path, key, hooks) -> str | None:
     """The import cache's key (:mod:`pinmsk.io.cache`) of an import: the in-process key's file and options,
     the content of the files the .osim names (``file="..."`` attributes), the hooks by qualified name and
-    pinmsk's code; None (not stored) if the cache is off or a hook is no module-level function."""
+    pinmsk's code; None (not stored) if the cache is off or a hook is not one of pinmsk's module-level
+    functions (a user's hook may change without changing its name)."""
     import re
     import sys
 
@@ -665,7 +666,8 @@ def _stored_key(path, key, hooks) -> str | None:
     names = []
     for hook in hooks:
         module, qual = getattr(hook, "__module__", None), getattr(hook, "__qualname__", "")
-        if module is None or "<" in qual or getattr(sys.modules.get(module), qual, None) is not hook:
+        if (module is None or not module.startswith("pinmsk.") or "<" in qual
+                or getattr(sys.modules.get(module), qual, None) is not hook):
             return None
         names.append(f"{module}.{qual}")
     p = Path(key[0])
