@@ -250,3 +250,17 @@ def test_a_bad_trial_is_named_before_the_model_is_loaded(tmp_path, monkeypatch, 
     assert main(["id", "model.osim", str(bad), "-o", str(tmp_path / "out.sto")]) == 2
     err = capsys.readouterr().err
     assert "bad.csv" in err and "line 3" in err and loaded == []
+
+
+def _own_hook(doc, skeleton):
+    from pinmsk.opensim.hooks import HookResult
+    return HookResult()
+
+
+def test_an_import_with_a_users_hook_or_fit_over_is_not_stored(cache_dir, leg):
+    from pinmsk.model import _import_key, _stored_key
+    folder, built = cache_dir
+    hooks = (_own_hook,)
+    assert _stored_key(leg, _import_key(leg, "joint", "exact", None, hooks), hooks) is None
+    _fresh(leg, hooks=hooks)
+    assert _entries(folder) == [] and len(built) == 1
