@@ -226,9 +226,15 @@ def _as_columns(x):
     return x.reshape(x.shape[0], -1), x.shape
 
 
-def sosfilt(sos, x, *, zi):
+def _axis_zero(axis) -> None:
+    if axis != 0:
+        raise ValueError(f"pinmsk.signals.iir filters along axis 0 (time first), not axis {axis}")
+
+
+def sosfilt(sos, x, *, zi, axis: int = 0):
     """``(y, final state)`` of the cascade ``sos`` over ``x`` along axis 0 from the state ``zi``
     ``(sections, 2, ...)`` (``scipy.signal.sosfilt(sos, x, axis=0, zi=zi)``)."""
+    _axis_zero(axis)
     sos = np.asarray(sos, dtype=float)
     x = np.asarray(x, dtype=float)
     zi = np.asarray(zi, dtype=float)
@@ -256,9 +262,10 @@ def _sosfilt(sos, x, zi):
     return y.reshape(shape), z.reshape((sos.shape[0], 2) + shape[1:])
 
 
-def lfilter(b, a, x, *, zi):
+def lfilter(b, a, x, *, zi, axis: int = 0):
     """``(y, final state)`` of the filter ``b / a`` over ``x`` along axis 0 from the state ``zi``
     ``(max(len(a), len(b)) - 1, ...)`` (``scipy.signal.lfilter(b, a, x, axis=0, zi=zi)``)."""
+    _axis_zero(axis)
     b = np.atleast_1d(np.asarray(b, dtype=float))
     a = np.atleast_1d(np.asarray(a, dtype=float))
     x = np.asarray(x, dtype=float)
