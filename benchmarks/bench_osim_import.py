@@ -32,6 +32,7 @@ import os
 
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
+os.environ["PINMSK_NO_CACHE"] = "1"     # the import is timed, not the on-disk import cache (pinmsk.io.cache)
 
 import argparse  # noqa: E402
 import sys  # noqa: E402

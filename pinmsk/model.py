@@ -596,8 +596,14 @@ def import_osim(path, *, locked: str = "joint", nonlinear: str = "exact", gravit
     sharing it is safe), without refitting the muscle paths (arm26: 2-4 s).  A changed file is imported
     again.  :func:`clear_import_cache` empties the cache; ``pinmsk import`` writes a sidecar that loads
     fast in a new process.
+
+    Imports with the default hooks (not ``fit_over``) are also kept on disk (:mod:`pinmsk.io.cache`: the
+    user's cache folder, ``PINMSK_CACHE_DIR``, off with ``PINMSK_NO_CACHE=1``), keyed by the file's path
+    and bytes, the files it names (``file="..."``), the options, the hooks and pinmsk's code: a new
+    process reads the model back (a corrupt entry is imported again).  The muscle paths' polynomials are
+    fitted when first used (:class:`pinmsk.opensim.muscle_import.DeferredPathFit`; the report's
+    ``pending`` until then), and the fit is kept on disk too.
     """
-    from .opensim.importer import read_import
     from .opensim.contacts import contact_hook
     from .opensim.muscle_import import DEFAULT_HOOKS
     if fit_over is not None:
@@ -615,6 +621,25 @@ def import_osim(path, *, locked: str = "joint", nonlinear: str = "exact", gravit
     if key is not None and key in _IMPORTS:
         _IMPORTS[key] = _IMPORTS.pop(key)            # most recently used last
         return _IMPORTS[key]
+    from .io import cache
+    stored = _stored_key(path, key, hooks) if fit_over is None else None
+    out = _stored_import(cache.load("import", stored)) if stored else None
+    if out is None:
+        out = _build_import(path, locked=locked, nonlinear=nonlinear, gravity=gravity, hooks=hooks)
+        if stored:
+            for item in out[1].pending:           # the muscle paths' fit, when it runs, is cached too
+                if hasattr(item, "cache_key"):
+                    item.cache_key = stored
+            cache.store("import", stored, out)
+    if key is not None:
+        _IMPORTS[key] = out
+        while len(_IMPORTS) > MAX_CACHED_IMPORTS:
+            del _IMPORTS[next(iter(_IMPORTS))]
+    return out
+
+
+def _build_import(path, *, locked, nonlinear, gravity, hooks):
+    from .opensim.importer import read_import
     from .opensim.report import NOTE, ReportEntry
     imp = read_import(path, locked=locked, nonlinear=nonlinear, hooks=hooks)
     report = imp.report
@@ -624,12 +649,48 @@ def import_osim(path, *, locked: str = "joint", nonlinear: str = "exact", gravit
             f"replaced by gravity {imp.pin_model.gravity.linear.tolist()} m/s^2 (given to the import)"))])
     model = Model._make(name=imp.name, pin_model=imp.pin_model, muscles=imp.muscles, effects=(), contacts=(),
                         meta={**imp.meta, "import_report": report})
-    out = (model.with_effect(*imp.components) if imp.components else model), report
-    if key is not None:
-        _IMPORTS[key] = out
-        while len(_IMPORTS) > MAX_CACHED_IMPORTS:
-            del _IMPORTS[next(iter(_IMPORTS))]
-    return out
+    return (model.with_effect(*imp.components) if imp.components else model), report
+
+
+def _stored_key(path, key, hooks) -> str | None:
+    """The import cache's key (:mod:`pinmsk.io.cache`) of an import: the in-process key's file and options,
+    the content of the files the .osim names (``file="..."`` attributes), the hooks by qualified name and
+    pinmsk's code; None (not stored) if the cache is off or a hook is not one of pinmsk's module-level
+    functions (a user's hook may change without changing its name)."""
+    import re
+    import sys
+
+    from .io import cache
+    if key is None or cache.cache_dir() is None:
+        return None
+    names = []
+    for hook in hooks:
+        module, qual = getattr(hook, "__module__", None), getattr(hook, "__qualname__", "")
+        if (module is None or not module.startswith("pinmsk.") or "<" in qual
+                or getattr(sys.modules.get(module), qual, None) is not hook):
+            return None
+        names.append(f"{module}.{qual}")
+    p = Path(key[0])
+    try:
+        text = p.read_bytes()
+        linked = []
+        for ref in sorted(set(re.findall(rb'\bfile\s*=\s*"([^"]+)"', text))):
+            f = p.parent / ref.decode(errors="replace")
+            linked += [ref, f.read_bytes() if f.is_file() else b"<missing>"]
+    except OSError:
+        return None
+    path_, _mtime, _size, _digest, locked, nonlinear, g, _hooks = key
+    return cache.key("osim-import", cache.code_fingerprint(), path_, text, *linked, locked, nonlinear, g,
+                     tuple(names))
+
+
+def _stored_import(value):
+    """A cached ``(Model, ImportReport)``, or None if ``value`` is not one."""
+    from .opensim.report import ImportReport
+    if (isinstance(value, tuple) and len(value) == 2 and isinstance(value[0], Model)
+            and isinstance(value[1], ImportReport)):
+        return value
+    return None
 
 
 #: How many imported models :func:`import_osim` keeps (least recently used dropped first).
@@ -638,8 +699,8 @@ _IMPORTS: dict = {}
 
 
 def clear_import_cache(path=None) -> None:
-    """Forget the models :func:`import_osim` cached (the next import reads and fits the file again): all of
-    them, or those of the file at ``path``."""
+    """Forget the models :func:`import_osim` cached in this process: all of them, or those of the file at
+    ``path`` (the next import reads the on-disk cache, :mod:`pinmsk.io.cache`, or the file)."""
     if path is None:
         _IMPORTS.clear()
         return

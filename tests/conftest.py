@@ -1,15 +1,26 @@
 """Shared test helpers: where the optional real data lives, headless matplotlib, the forearm on its Gaussian motion,
 and running an example script."""
+import atexit
 import contextlib
 import io
+import os
 import runpy
+import shutil
 import sys
+import tempfile
 from pathlib import Path
 
 import matplotlib
 import pytest
 
 matplotlib.use("Agg")
+
+# the import cache (pinmsk.io.cache) of this test run is its own temporary folder, never the user's
+# (inherited by the command lines the tests run); a test that needs another one sets the variable itself
+_CACHE = tempfile.mkdtemp(prefix="pinmsk-test-cache-")
+os.environ["PINMSK_CACHE_DIR"] = _CACHE
+os.environ.pop("PINMSK_NO_CACHE", None)
+atexit.register(shutil.rmtree, _CACHE, ignore_errors=True)
 
 from pinmsk import load_model  # noqa: E402  (after the headless backend is chosen)
 from pinmsk.io.shared_data import shared_data_dir  # noqa: E402

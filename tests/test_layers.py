@@ -12,8 +12,8 @@ PKG = Path(__file__).resolve().parents[1] / "pinmsk"
 
 #: Module (dotted, without ``pinmsk.``) or package prefix -> layer; the longest prefix wins.
 LAYERS = {
-    "errors": 0, "_lazy": 0, "stats": 0, "backend": 0,
-    "signals.sampling": 1, "signals.filtering": 1,
+    "errors": 0, "_lazy": 0, "_blas": 0, "stats": 0, "backend": 0,
+    "signals.sampling": 1, "signals.filtering": 1, "signals.iir": 1, "signals.bspline": 1,
     "trial": 2,
     "signals": 3,
     "io": 4,

@@ -896,10 +896,16 @@ def test_inverse_dynamics_matches_opensim_on_exact_skeletons(tmp_path, leg_path)
 # ---------------------------------------------------------------------------
 
 def test_load_model_and_write_import_round_trip(leg_path, tmp_path):
-    with pytest.warns(UserWarning, match=r"leg\.osim: 1 muscle path\(s\) fitted by polynomials.*"
-                      r"the import report") as caught:
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
         model = pinmsk.load_model(leg_path)     # the .osim branch of load_model: exact knee and patella
     assert not any("not imported" in str(w.message) for w in caught)      # contacts and actuators are imported
+    # the muscle paths are fitted on first use, which warns with the fit's errors
+    assert model.meta["import_report"].pending and not model.muscles.path.fitted
+    with pytest.warns(UserWarning, match=r"leg\.osim: 1 muscle path\(s\) fitted by polynomials.*"
+                      r"the import report"):
+        assert model.muscles.path.degree >= 1
+    assert not model.meta["import_report"].pending and model.muscles.path.fitted
     # the actuators are components (the default hooks: tests/test_actuators.py)
     assert [c.label for c in model.components if c.kind == "actuator"] == [
         "coordinate_actuator:lumbar_reserve", "point_actuator:FX", "torque_actuator:MZ"]

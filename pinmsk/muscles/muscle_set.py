@@ -208,6 +208,20 @@ class MuscleSet(Component):
     def moment_arms(self, q) -> np.ndarray:
         return self.path.moment_arms(q)
 
+    def path_kinematics(self, q, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(lengths (N, m), lengthening velocities (N, m), moment arms (N, m, nv))`` of the frames: the
+        path's ``lengths_and_moment_arms`` evaluated once where it has one (a polynomial path's monomials
+        are the cost), ``dl/dt = -R v`` (the paths' convention)."""
+        both = getattr(self.path, "lengths_and_moment_arms", None)
+        if both is None:
+            return self.lengths(q), self.velocities(q, v), self.moment_arms(q)
+        lengths, R = both(q)
+        return lengths, -np.einsum("nmj,nj->nm", R, np.asarray(v, dtype=float)), R
+
+    def force_limits_from(self, lengths, velocities) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`force_limits` from the paths' lengths and velocities (:meth:`path_kinematics`)."""
+        return self.mtu.force_limits(lengths, velocities)
+
     def lengths_at(self, q):
         """The path's lengths at one pose, numpy (nv,) -> (m,) or CasADi (nv, 1) -> (m, 1)
         (``path.lengths_at``; paths without a closed form refuse by name)."""

@@ -33,6 +33,7 @@ coordinates at once (the only Python loop is over the polynomial degree).
 from __future__ import annotations
 
 import difflib
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,7 +41,7 @@ import numpy as np
 from pinmsk.backend import is_symbolic
 from pinmsk.errors import ModelError, PinmskError
 
-__all__ = ["MomentArmPath", "PolynomialPath", "DisplayPoints", "display_points_from_sidecar", "path_variants"]
+__all__ = ["MomentArmPath", "PolynomialPath", "PolynomialPathOnUse", "DisplayPoints", "display_points_from_sidecar", "path_variants"]
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -408,6 +409,48 @@ def display_points_from_sidecar(muscle_entries, *, bodies=None, source=None) -> 
     return tuple(out)
 
 
+#: Frames a polynomial path evaluates at a time: its monomials' work arrays (frames x terms x variables)
+#: stay this size, in memory and in the CPU cache, however long the motion.
+BLOCK_FRAMES = 2048
+
+
+def _in_blocks(n_arrays: int):
+    """Run a PolynomialPath method over blocks of :data:`BLOCK_FRAMES` frames of its first ``n_arrays``
+    arguments (each (N, nv)) and join the results along the frames (the same numbers: frames are
+    independent)."""
+    def wrap(method):
+        @functools.wraps(method)
+        def run(self, *args, **kwargs):
+            first = np.asarray(args[0]) if args else None
+            if first is None or first.ndim != 2 or first.shape[0] <= BLOCK_FRAMES or len(args) < n_arrays:
+                return method(self, *args, **kwargs)
+            arrays, rest = [np.asarray(a) for a in args[:n_arrays]], args[n_arrays:]
+            parts = [method(self, *(a[s:s + BLOCK_FRAMES] for a in arrays), *rest, **kwargs)
+                     for s in range(0, first.shape[0], BLOCK_FRAMES)]
+            if isinstance(parts[0], tuple):
+                return tuple(np.concatenate(p) for p in zip(*parts))
+            return np.concatenate(parts)
+        return run
+    return wrap
+
+
+def _products_of_others(p):
+    """For each v, the product over the last axis of ``p`` (N, T, V) without entry v: (N, T) each, from
+    prefix and suffix products (no division, so exact zeros stay zeros)."""
+    V = p.shape[2]
+    if V == 1:
+        return [np.ones(p.shape[:2])]
+    before = [np.ones(p.shape[:2])]
+    for v in range(1, V):
+        before.append(before[-1] * p[:, :, v - 1])
+    out = [None] * V
+    after = None
+    for v in range(V - 1, -1, -1):
+        out[v] = before[v] if after is None else before[v] * after
+        after = p[:, :, v] if after is None else after * p[:, :, v]
+    return out
+
+
 def _poly_rebuild(cls, muscles, coordinates, terms):  # pickle support
     return cls(muscles=muscles, coordinates=coordinates, terms=terms)
 
@@ -535,9 +578,15 @@ class PolynomialPath:
         """Per term and variable v, d^o(x_v^e)/dx_v^o for each o in orders -> {o: (N, T, V)}."""
         x = self._x(q)
         K = self._degree
-        pw = x[..., None] ** np.arange(K + 1)                              # (N, m, V, K+1)
+        N = x.shape[0]
+        V = self._exps.shape[1]
+        pw = np.empty(x.shape + (K + 1,))                                  # x^0 .. x^K by products
+        pw[..., 0] = 1.0
+        if K:
+            np.cumprod(np.broadcast_to(x[..., None], x.shape + (K,)), axis=-1, out=pw[..., 1:])
+        pw = pw.reshape(N, -1)                                              # (N, m * V * (K+1))
         out = {}
-        v = np.arange(self._exps.shape[1])[None, :]
+        v = np.arange(V)[None, :]
         for o in orders:
             k = np.arange(K + 1)
             fall = np.ones(K + 1)
@@ -545,8 +594,11 @@ class PolynomialPath:
                 fall = fall * (k - s)
             e = self._exps - o
             ok = e >= 0
-            vals = pw[:, self._tmus[:, None], v, np.maximum(e, 0)]             # (N, T, V)
-            out[o] = np.where(ok, vals * fall[np.maximum(self._exps, 0)], 0.0)
+            # one flat gather (np.take) of x_v^(e - o) per term and variable: the same numbers as indexing
+            # pw[:, muscle, v, e - o], several times faster
+            flat = (self._tmus[:, None] * V + v) * (K + 1) + np.maximum(e, 0)     # (T, V)
+            factor = np.where(ok, fall[np.maximum(self._exps, 0)], 0.0)           # (T, V)
+            out[o] = np.take(pw, flat, axis=1) * factor                            # (N, T, V)
         return out
 
     def _reduce(self, a):
@@ -558,8 +610,7 @@ class PolynomialPath:
         p0, p1 = parts[0], parts[1]
         V = p0.shape[2]
         g = []
-        for v in range(V):
-            others = np.prod(np.delete(p0, v, axis=2), axis=2) if V > 1 else np.ones(p0.shape[:2])
+        for v, others in enumerate(_products_of_others(p0)):
             g.append(self._reduce(self._coef * p1[:, :, v] * others))
         return np.stack(g, axis=2)
 
@@ -573,6 +624,7 @@ class PolynomialPath:
             out[:, rows, self._cidx[rows, v]] += g[:, rows, v]
         return out
 
+    @_in_blocks(1)
     def lengths(self, q) -> np.ndarray:
         """Muscle-tendon lengths l(q): (N, m), or (m,) for one frame."""
         (q,), single = self._frames(q=q)
@@ -580,12 +632,23 @@ class PolynomialPath:
         out = self._reduce(self._coef * np.prod(p0, axis=2))
         return out[0] if single else out
 
+    @_in_blocks(1)
     def moment_arms(self, q) -> np.ndarray:
         """Moment arms r = -dl/dq: (N, m, nv), or (m, nv) for one frame."""
         (q,), single = self._frames(q=q)
         out = -self._scatter(self._grad_x(self._monomial_parts(q, (0, 1))))
         return out[0] if single else out
 
+    @_in_blocks(1)
+    def lengths_and_moment_arms(self, q) -> tuple[np.ndarray, np.ndarray]:
+        """``(lengths(q), moment_arms(q))`` from one evaluation of the monomials (the same numbers)."""
+        (q,), single = self._frames(q=q)
+        parts = self._monomial_parts(q, (0, 1))
+        lengths = self._reduce(self._coef * np.prod(parts[0], axis=2))
+        arms = -self._scatter(self._grad_x(parts))
+        return (lengths[0], arms[0]) if single else (lengths, arms)
+
+    @_in_blocks(1)
     def moment_arm_derivative(self, q, order: int = 1) -> np.ndarray:
         """``d^order r_ij / dq_j^order`` along each arm's own coordinate (the diagonal; cross terms
         are in :meth:`accelerations`): (N, m, nv), or (m, nv) for one frame."""
@@ -593,10 +656,8 @@ class PolynomialPath:
         o = int(order) + 1
         parts = self._monomial_parts(q, (0, o))
         p0, po = parts[0], parts[o]
-        V = p0.shape[2]
         g = []
-        for v in range(V):
-            others = np.prod(np.delete(p0, v, axis=2), axis=2) if V > 1 else np.ones(p0.shape[:2])
+        for v, others in enumerate(_products_of_others(p0)):
             g.append(self._reduce(self._coef * po[:, :, v] * others))
         gx = np.stack(g, axis=2) / self._scale ** (o - 1)
         out = -self._scatter(gx)
@@ -660,6 +721,7 @@ class PolynomialPath:
         out = -np.einsum("nmj,nj->nm", self.moment_arms(q), v)
         return out[0] if single else out
 
+    @_in_blocks(3)
     def accelerations(self, q, v, a) -> np.ndarray:
         """d2l/dt2 = sum_j dl/dq_j a_j + sum_jk d2l/dq_j dq_k v_j v_k: (N, m), or (m,)."""
         (q, v, a), single = self._frames(q=q, v=v, a=a)
@@ -671,13 +733,77 @@ class PolynomialPath:
         vt = vx[:, self._tmus]                                                               # (N, T, V)
         V = p0.shape[2]
         quad = np.zeros(p0.shape[:2])
+        others = _products_of_others(p0)
         for i in range(V):
             for j in range(V):
                 if i == j:
-                    f = p2[:, :, i] * np.prod(np.delete(p0, i, axis=2), axis=2) if V > 1 else p2[:, :, i]
+                    f = p2[:, :, i] * others[i]
                 else:
                     rest = np.prod(np.delete(p0, [i, j], axis=2), axis=2) if V > 2 else 1.0
                     f = p1[:, :, i] * p1[:, :, j] * rest
                 quad = quad + f * vt[:, :, i] * vt[:, :, j]
         out = np.einsum("nmj,nj->nm", grad, a) + self._reduce(self._coef * quad)
         return out[0] if single else out
+
+
+def _lazy_rebuild(fit, muscles, coordinates, fitted):  # pickle support
+    path = PolynomialPathOnUse(fit, muscles=muscles, coordinates=coordinates)
+    if fitted is not None:
+        path._adopt(fitted)
+    return path
+
+
+class PolynomialPathOnUse(PolynomialPath):
+    """A :class:`PolynomialPath` whose terms are made when they are first needed.
+
+    ``fit()`` (a picklable callable) returns the PolynomialPath; it runs on the first use of anything
+    but :attr:`muscles`, :attr:`coordinates`, :attr:`n_muscles` and :attr:`nv`, which are known before.
+    Afterwards this object is that path (the same numbers).  An OpenSim import makes its muscle paths so
+    (:mod:`pinmsk.opensim.muscle_import`): an analysis that never evaluates a path, inverse dynamics,
+    never pays for fitting the polynomials.  :attr:`fitted` says whether the fit has run.
+    """
+
+    __slots__ = ("_fit", "_done")
+
+    def __init__(self, fit, *, muscles, coordinates):
+        set_ = object.__setattr__
+        set_(self, "_fit", fit)
+        set_(self, "_done", False)
+        set_(self, "_muscles", tuple(str(m) for m in muscles))
+        set_(self, "_coordinates", tuple(str(c) for c in coordinates))
+
+    @property
+    def fitted(self) -> bool:
+        return self._done
+
+    def _adopt(self, path: PolynomialPath) -> None:
+        if path.muscles != self._muscles or path.coordinates != self._coordinates:
+            raise ModelError(f"PolynomialPathOnUse: the fit made a path of muscles {list(path.muscles)} over "
+                             f"{list(path.coordinates)}, not of {list(self._muscles)} over {list(self._coordinates)}")
+        for name in PolynomialPath.__slots__:
+            object.__setattr__(self, name, getattr(path, name))
+        object.__setattr__(self, "_done", True)
+
+    def __getattr__(self, name):
+        # called only for an attribute not set yet: the fitted path's
+        if name.startswith("__") or name in ("_fit", "_done") or name not in PolynomialPath.__slots__:
+            raise AttributeError(name)
+        if self._done:
+            raise AttributeError(name)
+        try:
+            path = self._fit()
+        except AttributeError as exc:      # not to be taken for a missing attribute by getattr()
+            raise RuntimeError(f"fitting the muscle paths failed: {exc}") from exc
+        self._adopt(path)
+        return object.__getattribute__(self, name)
+
+    def __reduce__(self):
+        fitted = PolynomialPath(muscles=self._muscles, coordinates=self._coordinates,
+                                terms=[dict(t) for t in self._terms]) if self._done else None
+        return (_lazy_rebuild, (self._fit, self._muscles, self._coordinates, fitted))
+
+    def __repr__(self) -> str:
+        if self._done:
+            return super().__repr__()
+        return (f"PolynomialPath({len(self._muscles)} muscles x {len(self._coordinates)} coordinates, fitted on "
+                "first use)")

@@ -39,7 +39,6 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence
-from xml.sax.saxutils import quoteattr
 
 import numpy as np
 import pinocchio as pin
@@ -47,7 +46,7 @@ import pinocchio as pin
 from ..errors import ModelError
 from ..io.osim import OsimDocument, read_osim
 from .hooks import HookResult, ImportHook
-from .report import NOT_IMPORTED, ImportReport, ReportEntry
+from .report import APPROXIMATED, NOT_IMPORTED, ImportReport, ReportEntry, paths_warning
 from .skeleton import LOCKED_MODES, NONLINEAR_MODES, Skeleton, build_skeleton
 
 __all__ = ["OsimImport", "HookResult", "ImportHook", "read_import", "write_import", "warn_report",
@@ -102,8 +101,11 @@ def read_import(path, *, locked: str = "joint", nonlinear: str = "exact",
     report = ImportReport(source=str(p), entries=tuple(entries), bounds=dict(skel.bounds))
     meta = _meta(doc, skel, p)
     meta["import_report"] = report
-    meta["description"] = (f"imported from OpenSim model '{doc.name}' ({p.name}): {len(report.approximations)} "
-                           f"approximated element(s), {len(report.not_imported)} element(s) not imported "
+    known = report.entries_so_far          # the muscle paths' fit is deferred to their first use
+    fitted = " besides the muscle paths' polynomial fits" if report.pending else ""
+    meta["description"] = (f"imported from OpenSim model '{doc.name}' ({p.name}): "
+                           f"{sum(e.status == APPROXIMATED for e in known)} approximated element(s){fitted}, "
+                           f"{sum(e.status == NOT_IMPORTED for e in known)} element(s) not imported "
                            "(model.meta['import_report'])")
     return OsimImport(name=p.stem, pin_model=pm, meta=meta, report=report, skeleton=skel, muscles=muscles,
                       components=tuple(components))
@@ -111,12 +113,13 @@ def read_import(path, *, locked: str = "joint", nonlinear: str = "exact",
 
 def warn_report(report: ImportReport, *, stacklevel: int = 3) -> None:
     """One UserWarning naming the approximated joints (with their errors) and counting what is not
-    imported, if there is any (``load_model`` of an .osim: the numbers are never silently approximate)."""
+    imported, if there is any (``load_model`` of an .osim: the numbers are never silently approximate).
+    Deferred work is not run for it: the muscle paths' fit warns when it runs (on first use)."""
     import warnings
 
+    entries = report.entries_so_far
     parts = []
-    paths = [e for e in report.approximations if e.details.get("kind") == "muscle paths"]
-    joints = [e for e in report.approximations if e.details.get("kind") != "muscle paths"]
+    joints = [e for e in entries if e.status == APPROXIMATED and e.details.get("kind") != "muscle paths"]
     if joints:
         each = []
         for e in joints:
@@ -129,15 +132,13 @@ def warn_report(report: ImportReport, *, stacklevel: int = 3) -> None:
             frame, worst = max(report.bounds.items(), key=lambda kv: kv[1])
             text += f", positions below them off by up to {worst * 1000:.3g} mm (a bound; at {frame})"
         parts.append(text)
+    paths = paths_warning(entries)
     if paths:
-        worst = max(paths, key=lambda e: e.max_error)
-        parts.append(f"{sum(len(e.details.get('muscles', ())) for e in paths)} muscle path(s) fitted by polynomials "
-                     f"(max length error {1e3 * max(e.details['length_max'] for e in paths):.3g} mm, max moment-arm "
-                     f"error {1e3 * max(e.details['moment_arm_max'] for e in paths):.3g} mm; worst group "
-                     f"{', '.join(worst.details['muscles'][:3])})")
-    if report.not_imported:
-        kinds = sorted({e.element.split("<", 1)[-1].split(" ", 1)[0] for e in report.not_imported})
-        parts.append(f"{len(report.not_imported)} element(s) not imported yet ({', '.join(kinds)})")
+        parts.append(paths)
+    missing = [e for e in entries if e.status == NOT_IMPORTED]
+    if missing:
+        kinds = sorted({e.element.split("<", 1)[-1].split(" ", 1)[0] for e in missing})
+        parts.append(f"{len(missing)} element(s) not imported yet ({', '.join(kinds)})")
     if parts:
         warnings.warn(f"{Path(report.source).name}: {'; '.join(parts)}; the import report is "
                       "model.meta['import_report']", UserWarning, stacklevel=stacklevel)
@@ -243,6 +244,10 @@ def write_import(model_or_path, out_dir, *, name: str | None = None, hooks: Sequ
     imp = read_import(path, locked=locked, nonlinear=options.get("nonlinear", "exact"), hooks=hooks or ())
     if report is None:
         report, muscles, components = imp.report, imp.muscles, imp.components
+    import warnings
+    with warnings.catch_warnings():     # the fit's errors are written to the sidecar and the report
+        warnings.filterwarnings("ignore", message=r".*muscle path\(s\) fitted by polynomials", category=UserWarning)
+        report.entries                  # runs the deferred work (the muscle paths' fit)
     skel = imp.skeleton
     entries, unwritten = _component_entries(components)
     if unwritten:
@@ -277,6 +282,12 @@ def _num(x: float) -> str:
 
 def _vec(v) -> str:
     return " ".join(_num(x) for x in v)
+
+
+def quoteattr(text: str) -> str:
+    """``xml.sax.saxutils.quoteattr`` (imported when a URDF is written: it imports urllib)."""
+    from xml.sax.saxutils import quoteattr as quote
+    return quote(text)
 
 
 def urdf_string(skel: Skeleton, *, name: str, frames: Mapping[str, tuple[str, np.ndarray]] | None = None) -> str:

@@ -24,6 +24,9 @@ DeGrooteFregly2016Muscle elements it builds one
   held-out poses), locked ones stay at their default values (their moment
   arms are 0 in pinmsk).
 
+The fit is deferred to the paths' first use: the MuscleSet's path is a
+:class:`~pinmsk.muscles.paths.PolynomialPathOnUse` whose :class:`DeferredPathFit` runs it (and is a
+deferred item of the report), so an analysis that evaluates no path (inverse dynamics) fits none.
 The report gets one entry per muscle group (the muscles crossing the same
 coordinates) with the fit's largest length and moment-arm errors on the
 held-out poses, and one entry with the muscle-curve notes
@@ -33,6 +36,7 @@ path forces that are not muscles are left to the "not imported" entries.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 import xml.etree.ElementTree as ET
 from collections import defaultdict
 
@@ -41,16 +45,17 @@ import numpy as np
 from ..errors import ModelError
 from ..io.osim import OsimDocument, _parse_xml
 from ..muscles.muscle_set import MuscleSet
+from ..muscles.paths import PolynomialPathOnUse
 from .actuators import actuator_hook
 from .muscles import MUSCLE_TYPES, muscle_model_from_osim, properties_from_xml, summarize_notes
 from .hooks import HookResult
 from .paths import GeometricPaths, fit_polynomial_paths, path_specs
-from .report import APPROXIMATED, NOTE, ReportEntry
+from .report import APPROXIMATED, NOTE, ReportEntry, paths_warning
 from .skeleton import OsimKinematics, Skeleton
 
 __all__ = ["muscle_hook", "default_muscle_hook", "DEFAULT_HOOKS", "MAX_MUSCLES", "geometric_paths",
            "muscle_control_bounds", "osim_geometric_paths", "MAX_ROTATION_SPAN", "FIT_SAMPLES", "TEST_SAMPLES",
-           "MAX_DEGREE", "TOLERANCE"]
+           "MAX_DEGREE", "TOLERANCE", "DeferredPathFit"]
 
 #: Training and held-out poses of the polynomial fit (per fit; the fit's cost grows with them).
 FIT_SAMPLES = 250
@@ -131,13 +136,13 @@ def muscle_hook(doc: OsimDocument, skeleton: Skeleton, *, ranges=None, max_muscl
     if unknown:
         raise ModelError(f"{doc.source}: muscle fit ranges name coordinate(s) {unknown} the model does not have")
     ranges = {**_fit_ranges(doc, skeleton), **{c: (float(lo), float(hi)) for c, (lo, hi) in given.items()}}
-    path, fits = fit_polynomial_paths(geometric, ranges=ranges, coordinates=fit_coords, couplings=couplers,
-                                      crossing=crossing,
-                                      n_train=FIT_SAMPLES, n_test=TEST_SAMPLES, max_degree=MAX_DEGREE,
-                                      tolerance=TOLERANCE, model_coordinates=model_coords)
+    fit = DeferredPathFit(geometric=geometric, ranges=ranges, coordinates=fit_coords, couplings=couplers,
+                          crossing=crossing, model_coordinates=model_coords, source=str(doc.source),
+                          muscles=tuple(names))
+    path = PolynomialPathOnUse(fit, muscles=names, coordinates=model_coords)
     muscles = MuscleSet(names=names, model_type=imp.model_type, mtu=imp.mtu, path=path, tendon=imp.tendon)
 
-    entries = motion_entry + _fit_entries(doc, chosen, fits, ranges)
+    entries = motion_entry + [fit]
     used = [c for c in couplers if c[0] in crossed]
     if used:
         entries.append(ReportEntry(
@@ -172,6 +177,72 @@ def default_muscle_hook(doc: OsimDocument, skeleton: Skeleton):
 DEFAULT_HOOKS = (default_muscle_hook, actuator_hook)
 
 
+class DeferredPathFit:
+    """The polynomial fit of an import's muscle paths (:func:`~pinmsk.opensim.paths.fit_polynomial_paths`),
+    run when the paths or the report's fit entries are first needed, once.
+
+    It is the ``fit`` of the muscles' :class:`~pinmsk.muscles.paths.PolynomialPathOnUse` and a deferred
+    item of the :class:`~pinmsk.opensim.report.ImportReport` (``done``, ``report_entries()``: one entry per
+    muscle group, as :func:`muscle_hook` describes).  With a ``cache_key`` (set by the import cache,
+    :func:`pinmsk.model.import_osim`) the fitted polynomials are read from and written to the import cache
+    (:mod:`pinmsk.io.cache`) under that key, so a later process does not fit them again.  Fitting issues
+    one UserWarning with the fits' largest errors, as ``load_model`` does for the skeleton's approximations.
+    :attr:`runs` counts the fits this process has run (reading the cache is not one).
+    """
+
+    runs = 0
+
+    def __init__(self, *, geometric, ranges, coordinates, couplings, crossing, model_coordinates, source, muscles):
+        self.geometric, self.ranges, self.coordinates = geometric, dict(ranges), tuple(coordinates)
+        self.couplings, self.crossing = tuple(couplings), dict(crossing)
+        self.model_coordinates, self.source, self.muscles = tuple(model_coordinates), str(source), tuple(muscles)
+        self.cache_key = None
+        self._result = None
+
+    @property
+    def done(self) -> bool:
+        return self._result is not None
+
+    def __call__(self):
+        """The fitted :class:`~pinmsk.muscles.paths.PolynomialPath`."""
+        return self._run()[0]
+
+    def report_entries(self) -> tuple[ReportEntry, ...]:
+        return self._run()[2]
+
+    def _run(self):
+        if self._result is None:
+            from ..io import cache
+            stored = cache.load("paths", self.cache_key) if self.cache_key else None
+            if stored is None or not self._valid(stored):
+                path, fits = fit_polynomial_paths(
+                    self.geometric, ranges=self.ranges, coordinates=self.coordinates, couplings=self.couplings,
+                    crossing=self.crossing, n_train=FIT_SAMPLES, n_test=TEST_SAMPLES, max_degree=MAX_DEGREE,
+                    tolerance=TOLERANCE, model_coordinates=self.model_coordinates)
+                type(self).runs += 1
+                stored = (path, tuple(fits))
+                if self.cache_key:
+                    cache.store("paths", self.cache_key, stored)
+            path, fits = stored
+            entries = tuple(_fit_entries(self.source, self.muscles, fits, self.ranges))
+            self._result = (path, fits, entries)
+            text = paths_warning(entries)
+            if text:
+                import warnings
+                warnings.warn(f"{Path(self.source).name}: {text}; the import report is model.meta['import_report']",
+                              UserWarning, stacklevel=4)
+        return self._result
+
+    def _valid(self, stored) -> bool:
+        """A cached fit of these muscles over these coordinates (anything else is refitted)."""
+        try:
+            path, fits = stored
+            return (tuple(path.muscles) == self.muscles and tuple(path.coordinates) == self.model_coordinates
+                    and len(fits) == len(self.muscles) and all(f.muscle == m for f, m in zip(fits, self.muscles)))
+        except (TypeError, ValueError, AttributeError):
+            return False
+
+
 class _Placements:
     """Body placements of OpenSim's kinematics, locked coordinates at their defaults and coupled ones (``coupled``:
     ``(column, independent columns, function, scale)``) set by their couplers (picklable, so the model that keeps
@@ -194,7 +265,7 @@ class _Placements:
 
 def geometric_paths(report) -> GeometricPaths | None:
     """The exact (geometric) paths an import's muscle hook fitted its polynomials to, from its report."""
-    for e in getattr(report, "entries", ()):
+    for e in getattr(report, "entries_so_far", ()):
         gp = e.details.get("geometric_paths")
         if gp is not None:
             return gp
@@ -204,7 +275,7 @@ def geometric_paths(report) -> GeometricPaths | None:
 def muscle_control_bounds(report) -> dict | None:
     """``{muscle: (min_control, max_control)}`` of an import's muscles (OpenSim's excitation bounds, which its
     static optimization takes as activation bounds), from its report; None if it has none."""
-    for e in getattr(report, "entries", ()):
+    for e in getattr(report, "entries_so_far", ()):
         cb = e.details.get("control_bounds")
         if cb is not None:
             return dict(cb)
@@ -273,20 +344,20 @@ def _fit_ranges(doc, skeleton) -> dict[str, tuple[float, float]]:
     return out
 
 
-def _fit_entries(doc, chosen, fits, ranges) -> list[ReportEntry]:
+def _fit_entries(source, names, fits, ranges) -> list[ReportEntry]:
     """One report entry per group of muscles crossing the same coordinates."""
     groups = defaultdict(list)
-    for m, f in zip(chosen, fits):
+    for m, f in zip(names, fits):
         groups[f.coordinates].append((m, f))
     out = []
     for coords, members in groups.items():
         l_max = max(f.length_max for _, f in members)
         r_max = max(f.moment_arm_max for _, f in members)
-        worst = max(members, key=lambda mf: max(mf[1].length_max, mf[1].moment_arm_max))[0].name
+        worst = max(members, key=lambda mf: max(mf[1].length_max, mf[1].moment_arm_max))[0]
         span = ", ".join(f"{c} [{ranges[c][0]:.3g}, {ranges[c][1]:.3g}]" for c in coords) or "no coordinate"
-        muscle_names = [m.name for m, _ in members]
+        muscle_names = [m for m, _ in members]
         out.append(ReportEntry(
-            element=f"{doc.source}: muscles {', '.join(muscle_names)}",
+            element=f"{source}: muscles {', '.join(muscle_names)}",
             became=f"{len(members)} muscle path(s) as polynomials of degree <= "
                    f"{max(f.degree for _, f in members)} in {', '.join(coords) or 'no coordinate'}",
             approximation=(f"geometric paths fitted over the coordinate ranges {span}: max length error "

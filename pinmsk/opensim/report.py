@@ -14,10 +14,10 @@ over the coordinates' ranges (see :mod:`pinmsk.opensim.skeleton`);
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Iterable, Mapping
 
-__all__ = ["ReportEntry", "ImportReport", "EXACT", "APPROXIMATED", "NOT_IMPORTED", "NOTE"]
+__all__ = ["ReportEntry", "ImportReport", "paths_warning", "EXACT", "APPROXIMATED", "NOT_IMPORTED", "NOTE"]
 
 EXACT = "exact"
 APPROXIMATED = "approximated"
@@ -63,19 +63,87 @@ class ReportEntry:
         return text
 
 
+def paths_warning(entries) -> str:
+    """The muscle-path part of an import's warning: how many paths the polynomials fit and their largest
+    errors (``""`` if ``entries`` have no fitted paths)."""
+    paths = [e for e in entries if e.status == APPROXIMATED and e.details.get("kind") == "muscle paths"]
+    if not paths:
+        return ""
+    worst = max(paths, key=lambda e: e.max_error)
+    return (f"{sum(len(e.details.get('muscles', ())) for e in paths)} muscle path(s) fitted by polynomials "
+            f"(max length error {1e3 * max(e.details['length_max'] for e in paths):.3g} mm, max moment-arm "
+            f"error {1e3 * max(e.details['moment_arm_max'] for e in paths):.3g} mm; worst group "
+            f"{', '.join(worst.details['muscles'][:3])})")
+
+
+def _deferred(item) -> bool:
+    return not isinstance(item, ReportEntry)
+
+
 def _fmt(x: float, unit: str) -> str:
     if unit == "m":
         return f"{x * 1000:.3g} mm" if x >= 1e-4 else f"{x:.2e} m"
     return f"{x:.3g} {unit}"
 
 
-@dataclass(frozen=True)
 class ImportReport:
-    """What an OpenSim import made of each element (see the module docstring)."""
+    """What an OpenSim import made of each element (see the module docstring).
 
-    source: str
-    entries: tuple[ReportEntry, ...] = ()
-    bounds: Mapping[str, float] = field(default_factory=dict, compare=False)
+    ``entries`` may hold *deferred* items besides :class:`ReportEntry` objects: work the import left
+    for first use (an object with ``done`` (bool) and ``report_entries()``, such as the fit of the
+    muscle paths, :class:`pinmsk.opensim.muscle_import.DeferredPathFit`).  :attr:`entries` is the
+    whole report, so reading it runs that work; :attr:`entries_so_far` is what is known without it,
+    and :attr:`pending` the deferred work not run yet.
+    """
+
+    __slots__ = ("source", "_items", "bounds")
+
+    def __init__(self, source: str, entries: Iterable = (), bounds: Mapping[str, float] | None = None):
+        set_ = object.__setattr__
+        set_(self, "source", source)
+        set_(self, "_items", tuple(entries))
+        set_(self, "bounds", dict(bounds or {}))
+
+    def __setattr__(self, name, value):
+        raise AttributeError(f"ImportReport is immutable; cannot set {name!r}")
+
+    def __reduce__(self):
+        return (ImportReport, (self.source, self._items, self.bounds))
+
+    def __eq__(self, other) -> bool:
+        if not isinstance(other, ImportReport):
+            return NotImplemented
+        return self.source == other.source and self.entries == other.entries
+
+    def __hash__(self) -> int:
+        return hash(self.source)          # equal reports have the same source (the entries may be deferred)
+
+    def __repr__(self) -> str:
+        return f"ImportReport(source={self.source!r}, {len(self.entries_so_far)} entries, {len(self.pending)} pending)"
+
+    @property
+    def entries(self) -> tuple[ReportEntry, ...]:
+        """Every entry, the deferred work's too (which this runs if it has not run yet)."""
+        out = []
+        for item in self._items:
+            out.extend(item.report_entries() if _deferred(item) else (item,))
+        return tuple(out)
+
+    @property
+    def entries_so_far(self) -> tuple[ReportEntry, ...]:
+        """The entries known without running deferred work (those of deferred work already run included)."""
+        out = []
+        for item in self._items:
+            if not _deferred(item):
+                out.append(item)
+            elif item.done:
+                out.extend(item.report_entries())
+        return tuple(out)
+
+    @property
+    def pending(self) -> tuple:
+        """The deferred work not run yet (e.g. the muscle paths' fit, run when the paths are first used)."""
+        return tuple(item for item in self._items if _deferred(item) and not item.done)
 
     @property
     def approximations(self) -> tuple[ReportEntry, ...]:
@@ -98,8 +166,8 @@ class ImportReport:
         """A report with ``entries`` added; entries whose element is in ``replacing`` are removed first
         (how a later stage, e.g. the muscle import, replaces the "not imported" entries it handles)."""
         drop = set(replacing)
-        kept = tuple(e for e in self.entries if e.element not in drop)
-        return replace(self, entries=kept + tuple(entries))
+        kept = tuple(e for e in self._items if _deferred(e) or e.element not in drop)
+        return ImportReport(self.source, kept + tuple(entries), self.bounds)
 
     def find(self, text: str) -> tuple[ReportEntry, ...]:
         """Entries whose element contains ``text`` (e.g. ``'name="knee_r"'``)."""

@@ -17,7 +17,6 @@ import functools
 import os
 import sys
 import warnings
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 import numpy as np
@@ -33,9 +32,22 @@ from .progress import Progress
 
 
 def _model(args):
+    """The command's MODEL, after its TRIAL (if it has one) is checked: a trial that cannot be read is
+    reported before the model is loaded (an .osim import, its muscle paths' fit, take seconds)."""
     from ..model import load_model
+    if getattr(args, "trial", None):
+        _check_trial(args)
     return load_model(args.model, moment_arms=getattr(args, "moment_arms", None),
                       nonlinear=getattr(args, "nonlinear", None))
+
+
+def _check_trial(args) -> None:
+    """Read the trial as :func:`_read` will (file, header, columns, ``--map``), without the model: its
+    problems raise here; its warnings and notes are left to the real read."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        read_mapped(args.trial, model=None, cmap=getattr(args, "map", None),
+                    strict=not getattr(args, "lenient", False), require_coordinates=False)
 
 
 class _EffectFamiliesHelp(argparse.HelpFormatter):
@@ -497,6 +509,7 @@ def cmd_batch(args) -> int:
 
 def _version() -> str:
     """The installed distribution's version, or the package's own when not installed."""
+    from importlib.metadata import PackageNotFoundError, version
     try:
         return version("pinmsk")
     except PackageNotFoundError:
@@ -886,11 +899,16 @@ def _run(argv) -> int:
 def main(argv=None) -> int:
     """Run the command line; returns the exit status (2 for errors pinmsk recognises).
 
+    BLAS runs on one thread (:func:`pinmsk._blas.one_thread`) unless the user set its thread count:
+    the commands' many small solves are slower with more, several-fold on a busy machine.
+
     A closed output pipe (``pinmsk models | head -1``) ends the command quietly
     with status 1, as the Python documentation recommends for ``SIGPIPE``
     (library/signal.html, "Note on SIGPIPE"): stdout is pointed at devnull so
     the interpreter's final flush cannot fail again.
     """
+    from .._blas import one_thread
+    one_thread()
     try:
         try:
             return _run(argv)

@@ -129,15 +129,15 @@ def lowpass(x, *, rate: float, cutoff: float, order: int = 4) -> np.ndarray:
         )
     padlen = filter_padlen(order, rate=rate, cutoff=cutoff, n=n)
     _check_finite(x, "lowpass input")
-    from scipy.signal import sosfilt  # here, not at import: scipy.signal costs ~1 s
+    from .iir import sosfilt  # scipy.signal's (imported only for long signals: it costs ~1 s)
 
     # scipy's sosfiltfilt (padtype="odd", axis 0) step by step, with the design's initial state kept
     # with the design (scipy solves for it on every call): the same operations, the same numbers
     sos, zi = _butterworth_state(int(order), float(cutoff / nyquist))
     zi = zi.reshape(zi.shape + (1,) * (x.ndim - 1))          # (sections, 2[, 1]): broadcast over columns
     ext = np.concatenate((2 * x[0:1] - x[padlen:0:-1], x, 2 * x[-1:] - x[-2:-(padlen + 2):-1]), axis=0)
-    y, _ = sosfilt(sos.copy(), ext, axis=0, zi=zi * ext[0:1])
-    y, _ = sosfilt(sos.copy(), y[::-1], axis=0, zi=zi * y[-1:])
+    y, _ = sosfilt(sos, ext, zi=zi * ext[0:1])
+    y, _ = sosfilt(sos, y[::-1], zi=zi * y[-1:])
     return y[::-1][padlen:-padlen]
 
 
@@ -145,7 +145,7 @@ def lowpass(x, *, rate: float, cutoff: float, order: int = 4) -> np.ndarray:
 def _butterworth_state(order: int, wn: float) -> tuple[np.ndarray, np.ndarray]:
     """The design and its steady-state initial conditions per unit step (``scipy.signal.sosfilt_zi``),
     cached together (read-only)."""
-    from scipy.signal import sosfilt_zi
+    from .iir import sosfilt_zi
 
     sos = _butterworth(order, wn)
     zi = sosfilt_zi(sos.copy())
@@ -157,9 +157,9 @@ def _butterworth_state(order: int, wn: float) -> tuple[np.ndarray, np.ndarray]:
 def _butterworth(order: int, wn: float) -> np.ndarray:
     """Second-order sections of the low-pass Butterworth design (cached: analyses filter many
     short trials at the same few cut-offs, and the design costs more than filtering them)."""
-    from scipy.signal import butter
+    from .iir import butter_sos
 
-    sos = butter(order, wn, btype="low", output="sos")
+    sos = butter_sos(order, wn)         # scipy.signal.butter(order, wn, output="sos")
     sos.flags.writeable = False            # shared by every caller: never changed
     return sos
 
@@ -317,9 +317,16 @@ class _QuinticOperators:
     collocation matrices).  A trial's channels, and later trials on the same grid, share them: one
     factorization, then a triangular solve and two sparse products per call."""
 
-    __slots__ = ("t", "lu", "d1", "d2")
+    __slots__ = ("t", "lu", "d1", "d2", "collocation")
 
     def __init__(self, t: np.ndarray):
+        from .bspline import SPENT, use_dense
+        if use_dense(t.size):
+            import time
+            t0 = time.perf_counter()
+            self._dense(t)
+            SPENT[0] += time.perf_counter() - t0
+            return
         from scipy.interpolate import BSpline, make_interp_spline
         from scipy.sparse import diags_array
         from scipy.sparse.linalg import splu
@@ -343,8 +350,36 @@ class _QuinticOperators:
             ops.append((BSpline.design_matrix(t, tk, kk) @ D).tocsr())
         self.d1, self.d2 = ops
 
+    def _dense(self, t: np.ndarray) -> None:
+        """The same maps as dense arrays (:mod:`pinmsk.signals.bspline`), for a short grid: no SciPy import,
+        the collocation matrix kept and solved by LAPACK's LU on each call."""
+        from .bspline import derivative_step, design_matrix, not_a_knot
+
+        k = 5
+        knots = not_a_knot(t, k)
+        self.t = t.copy()
+        self.lu = None
+        ops = [design_matrix(t, knots, k)]
+        tk, kk, maps = knots, k, []
+        for _ in range(2):
+            B = design_matrix(t, tk[1:-1], kk - 1)
+            for tj, kj in reversed(maps + [(tk, kk)]):     # B_(k-1) @ S_(k) [@ S_(k+1)]
+                B = derivative_step(B, tj, kj)
+            maps.append((tk, kk))
+            ops.append(B)
+            tk, kk = tk[1:-1], kk - 1
+        self.collocation, self.d1, self.d2 = ops
+
     def solve(self, x: np.ndarray) -> np.ndarray:
         """The coefficients ``(N, k)`` of the interpolating splines through the columns of ``x`` ``(N, k)``."""
+        if self.lu is None:
+            import time
+
+            from .bspline import SPENT
+            t0 = time.perf_counter()
+            out = np.linalg.solve(self.collocation, x)
+            SPENT[0] += time.perf_counter() - t0
+            return out
         return self.lu.solve(np.ascontiguousarray(x))
 
 

@@ -428,18 +428,22 @@ class ChunkedSOProblem:
         """Moment arms (n, m, ns) and ``F = c x + d`` coefficients (n, m) of frames ``rows`` (a slice or indices)."""
         muscles, q, v = self._muscle_set, self._q[rows], self._v[rows]
         n = q.shape[0]
-        R = np.asarray(muscles.moment_arms(q), dtype=float)
+        if self.mode == "force":
+            R = np.asarray(muscles.moment_arms(q), dtype=float)
+        else:           # the paths evaluated once for the arms, lengths and velocities
+            lengths, speeds, R = muscles.path_kinematics(q, v)
+            R = np.asarray(R, dtype=float)
         if self._space is not None:
             R = self._space.arms(R, rows)
         if self.mode == "force":
             f_max = np.asarray(muscles.f_max, dtype=float)
             return R, np.broadcast_to(f_max, (n, f_max.size)).copy(), np.zeros((n, f_max.size))
         if self.convention == "opensim":
-            c = opensim_static_optimization_capacity(muscles.mtu, muscles.lengths(q), muscles.velocities(q, v))
+            c = opensim_static_optimization_capacity(muscles.mtu, lengths, speeds)
             c = np.asarray(c, dtype=float)
             d = np.zeros_like(c)
         else:
-            fa, fp = muscles.force_limits(q, v)
+            fa, fp = muscles.force_limits_from(lengths, speeds)
             c = np.maximum(np.asarray(fa, dtype=float), 0.0)
             d = np.asarray(fp, dtype=float)
         if not (np.all(np.isfinite(c)) and np.all(np.isfinite(d))):
