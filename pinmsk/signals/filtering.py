@@ -208,7 +208,7 @@ def lowpass_iir(x, *, rate: float, cutoff: float) -> np.ndarray:
     """OpenSim's ``Storage::lowpassIIR``: the filter of :func:`iir_coefficients` run forwards, then
     backwards, each pass started with its first three outputs equal to its inputs (OpenSim's start, not
     a steady state); every column at once."""
-    from scipy.signal import lfilter, lfiltic  # here, not at import: scipy.signal costs ~1 s
+    from .iir import lfilter, lfiltic  # scipy.signal's (imported only for long signals: it costs ~1 s)
 
     x = np.asarray(x, dtype=float)
     if x.shape[0] < 4:
