@@ -70,26 +70,12 @@ def model_file(node, prop: str = "model_file", *, folder=None) -> Path:
 
 def load_setup_model(node, path: Path, prop: str = "model_file", *, muscles: bool = True):
     """The model at ``path`` (an ``.osim``, imported as :func:`pinmsk.model.load_model` does; its
-    approximations warned of).  ``muscles=False``: without the muscles, which an analysis that applies
-    none (inverse dynamics with the muscles excluded) does not need (their path fits are most of an
-    import's time); its actuators and contacts are imported as ever."""
-    from ..model import import_osim, load_model
+    approximations warned of).  Its muscle paths are fitted on first use, so an analysis that applies no
+    muscle (inverse dynamics with the muscles excluded, ``muscles=False``) pays for none."""
+    from ..model import load_model
 
     try:
-        if muscles or path.suffix.lower() != ".osim":
-            return load_model(path)
-        from dataclasses import replace
-
-        from ..opensim.actuators import actuator_hook
-        from ..opensim.contacts import contact_hook
-        from ..opensim.importer import warn_report
-        from ..io.osim import read_osim
-
-        model, report = import_osim(path, hooks=(actuator_hook, contact_hook))
-        left_out = {m.where for m in read_osim(path).muscles}
-        warn_report(replace(report, entries=tuple(e for e in report.entries if e.element not in left_out)),
-                    stacklevel=4)
-        return model
+        return load_model(path)
     except PinmskError as exc:
         raise node.error(prop, str(exc)) from None
 
