@@ -197,3 +197,28 @@ def import_opensim():
     with contextlib.suppress(Exception):
         opensim.Logger.removeFileSink()
     return opensim, ""
+
+
+def osim_numbers(el, path: str = "", out: dict | None = None) -> dict:
+    """Every numeric property of an OpenSim XML tree ``el``: ``{path: values}``, each path the tags (with
+    their ``name`` where an element has one, never for a GeometryPath, the Model or a function's parts)
+    and a ``#k`` index for the k-th repeat of a key.  Two trees compare number by number on it."""
+    import numpy as np
+
+    out = {} if out is None else out
+    count: dict = {}
+    for c in el:
+        if not isinstance(c.tag, str):
+            continue
+        name = None if c.tag in ("GeometryPath", "Model") or path.endswith("/function") else c.get("name")
+        key = c.tag + (f"[{name}]" if name else "")
+        count[key] = count.get(key, 0) + 1
+        p = f"{path}/{key}#{count[key]}" if count[key] > 1 else f"{path}/{key}"
+        try:
+            v = [float(w) for w in (c.text or "").split()]
+        except ValueError:
+            v = []
+        if v:
+            out[p] = np.array(v)
+        osim_numbers(c, p, out)
+    return out

@@ -17,7 +17,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from conftest import shared_folder
+from conftest import osim_numbers, shared_folder
 from pinmsk.io.trc import read_trc
 from pinmsk.opensim import scaling as sc
 from pinmsk.trial import marker_array, marker_names
@@ -119,31 +119,11 @@ def test_masses_and_inertias(case):
                                    err_msg=name)
 
 
-def _flatten(el, path, out):
-    """``{path: numbers}`` of every numeric element, keyed by tag[name] (nested function names dropped)."""
-    count = {}
-    for c in el:
-        if not isinstance(c.tag, str):
-            continue
-        name = None if c.tag in ("GeometryPath", "Model") or path.endswith("/function") else c.get("name")
-        key = c.tag + (f"[{name}]" if name else "")
-        count[key] = count.get(key, 0) + 1
-        p = f"{path}/{key}#{count[key]}" if count[key] > 1 else f"{path}/{key}"
-        try:
-            v = [float(w) for w in (c.text or "").split()]
-        except ValueError:
-            v = []
-        if v:
-            out[p] = np.array(v)
-        _flatten(c, p, out)
-    return out
-
-
 def test_every_scaled_number_matches_reference(case):
     d, root, _, _, _, scaled = case
-    ref = _flatten(ET.parse(d / "OutputReference/subject01_scaledOnly.osim").getroot(), "", {})
-    ours = _flatten(scaled, "", {})
-    generic = _flatten(root, "", {})
+    ref = osim_numbers(ET.parse(d / "OutputReference/subject01_scaledOnly.osim").getroot(), "", {})
+    ours = osim_numbers(scaled, "", {})
+    generic = osim_numbers(root, "", {})
     assert set(ref) == set(ours)
     changed = 0
     for p, v in ref.items():

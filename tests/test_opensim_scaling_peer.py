@@ -13,7 +13,7 @@ import warnings
 import numpy as np
 import pytest
 
-from conftest import require_opensim, shared_folder
+from conftest import osim_numbers, require_opensim, shared_folder
 from pinmsk.opensim import scaling as sc
 
 CASES = {  # model: (uniform factors, preserve mass distribution)
@@ -29,26 +29,6 @@ def zoo(tmp_path_factory):
     with tarfile.open(d / "zoo_models.tar.xz") as tar:
         members = [m for m in tar.getmembers() if m.name.removesuffix(".osim") in CASES]
         tar.extractall(out, members=members, filter="data")
-    return out
-
-
-def _numbers(root, path="", out=None):
-    out = {} if out is None else out
-    count = {}
-    for c in root:
-        if not isinstance(c.tag, str):
-            continue
-        name = None if c.tag in ("GeometryPath", "Model") or path.endswith("/function") else c.get("name")
-        key = c.tag + (f"[{name}]" if name else "")
-        count[key] = count.get(key, 0) + 1
-        p = f"{path}/{key}#{count[key]}"
-        try:
-            v = [float(w) for w in (c.text or "").split()]
-        except ValueError:
-            v = []
-        if v:
-            out[p] = np.array(v)
-        _numbers(c, p, out)
     return out
 
 
@@ -80,13 +60,13 @@ def test_scaled_model_matches_opensim(zoo, tmp_path, name):
         ours = sc.scale_model(root, factors, mass=70.0, preserve_mass_distribution=preserve)
     if sc.total_mass(root) > 0:           # (Wrist's bodies are massless: no mass step, as in OpenSim)
         assert sc.total_mass(ours) == pytest.approx(70.0, rel=1e-13)
-    peer = _numbers(sc.read_osim_tree(tmp_path / "peer.osim"))
-    mine = _numbers(sc._parse(sc._to_bytes(ours), name))
+    peer = osim_numbers(sc.read_osim_tree(tmp_path / "peer.osim"))
+    mine = osim_numbers(sc._parse(sc._to_bytes(ours), name))
     peer_keys = {k for k in peer if "FiberForceLengthCurve" not in k}      # OpenSim names unnamed curves
     assert peer_keys <= set(mine)
     for k in peer_keys:
         np.testing.assert_allclose(mine[k], peer[k], rtol=1e-9, atol=1e-14, err_msg=k)
-    generic = _numbers(root)
+    generic = osim_numbers(root)
     changed = sum(1 for k in peer_keys if k in generic and generic[k].shape == peer[k].shape
                   and not np.allclose(generic[k], peer[k], rtol=1e-12))
     assert changed > 20

@@ -15,7 +15,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from conftest import require_opensim, shared_folder
+from conftest import osim_numbers, require_opensim, shared_folder
 from pinmsk.io.opensim_setup import read_setup
 from pinmsk.io.tables import read_trial
 from pinmsk.opensim import scaling as sc
@@ -42,28 +42,10 @@ def both(tmp_path_factory):
     return d, peer, ours
 
 
-def _numbers(el, path, out):
-    count = {}
-    for c in el:
-        if not isinstance(c.tag, str):
-            continue
-        key = c.tag + (f"[{c.get('name')}]" if c.get("name") and c.tag not in ("GeometryPath", "Model") else "")
-        count[key] = count.get(key, 0) + 1
-        p = f"{path}/{key}#{count[key]}"
-        try:
-            v = [float(w) for w in (c.text or "").split()]
-        except ValueError:
-            v = []
-        if v:
-            out[p] = np.array(v)
-        _numbers(c, p, out)
-    return out
-
-
 def test_scaled_model_matches_opensim(both):
     _, peer, ours = both
-    a = _numbers(ET.parse(ours / "subject01_scaledOnly.osim").getroot(), "", {})
-    b = _numbers(ET.parse(peer / "subject01_scaledOnly.osim").getroot(), "", {})
+    a = osim_numbers(ET.parse(ours / "subject01_scaledOnly.osim").getroot(), "", {})
+    b = osim_numbers(ET.parse(peer / "subject01_scaledOnly.osim").getroot(), "", {})
     assert set(a) == set(b)
     for p in b:
         np.testing.assert_allclose(a[p], b[p], rtol=1e-12, atol=1e-15, err_msg=p)
@@ -166,8 +148,8 @@ def test_order_axes_apply_and_mass_rule_as_opensim(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", sc.ScaleWarning)
         st.run(read_setup(tmp_path / SETUP), results_dir=tmp_path / "ours")
-    a = _numbers(ET.parse(tmp_path / "ours" / "subject01_scaledOnly.osim").getroot(), "", {})
-    b = _numbers(ET.parse(tmp_path / "subject01_scaledOnly.osim").getroot(), "", {})
+    a = osim_numbers(ET.parse(tmp_path / "ours" / "subject01_scaledOnly.osim").getroot(), "", {})
+    b = osim_numbers(ET.parse(tmp_path / "subject01_scaledOnly.osim").getroot(), "", {})
     assert set(a) == set(b)
     for p in b:
         np.testing.assert_allclose(a[p], b[p], rtol=1e-12, atol=1e-15, err_msg=p)

@@ -292,3 +292,32 @@ def output_name(node, prop: str, default: str) -> str:
 
 
 __all__ = ["SetupError"]
+
+
+def loads_and_frames(node, loads_path, trial: Trial, start: float, end: float, prop: str):
+    """The external loads of the setup and the frames they cover: ``(cut, keep, rows, kw)``: the
+    (filtered) ``trial`` cut to the frames the loads' data cover (``keep``, indices into ``trial``),
+    the reported ``rows`` (indices into ``trial``, :func:`reported_rows`) and the loads as keyword
+    arguments of the analyses (``external_loads``, ``grf``).  Reported frames beyond the loads' data are
+    refused by name (``prop``: the setup's time property)."""
+    from ..io.external_loads import read_external_loads
+
+    kw = {}
+    keep = np.arange(trial.n_frames)
+    span = ""
+    if loads_path is not None:
+        loads = read_external_loads(loads_path)
+        if loads.datafile is None:
+            raise node.error("external_loads_file", f"{loads_path} names no <datafile>")
+        grf = held_ends(read_trial(loads.datafile), trial.time)
+        tg = np.asarray(grf.time, dtype=float)
+        keep = np.flatnonzero((trial.time >= tg[0] - 1e-9) & (trial.time <= tg[-1] + 1e-9))
+        kw = dict(external_loads=loads, grf=grf)
+        span = f" ({tg[0]:.6g}-{tg[-1]:.6g} s)"
+    rows = reported_rows(trial.time, start, end)
+    if not keep.size or rows[0] < keep[0] or rows[-1] > keep[-1]:
+        raise node.error(prop, f"the frames {trial.time[rows[0]]:.6g}-{trial.time[rows[-1]]:.6g} s reach "
+                               f"beyond the external loads' data{span}")
+    cut = trial if keep.size == trial.n_frames else Trial.from_array(
+        np.asarray(trial.time)[keep], trial.names, np.asarray(trial.values)[keep], meta=dict(trial.meta))
+    return cut, keep, rows, kw

@@ -119,8 +119,6 @@ def _read_analysis(member) -> _Analysis | None:
 
 def run(setup, *, results_dir=None) -> list[Path]:
     """Run an AnalyzeTool setup (see the module docstring); the files written, in order."""
-    from ..io.external_loads import read_external_loads
-    from ..io.tables import read_trial
 
     node = setup.node
     folder = _common.input_folder(node)
@@ -166,22 +164,7 @@ def run(setup, *, results_dir=None) -> list[Path]:
     coords = _common.read_coordinates(node, "coordinates_file", coords_path, model)
     _common.check_range(node, "initial_time", coords.time, start, end)
     trial = _common.opensim_filtered(coords, cutoff, str(coords_path))
-    kw = {}
-    keep = np.arange(trial.n_frames)
-    if loads_path is not None:
-        loads = read_external_loads(loads_path)
-        if loads.datafile is None:
-            raise node.error("external_loads_file", f"{loads_path} names no <datafile>")
-        grf = _common.held_ends(read_trial(loads.datafile), trial.time)
-        tg = np.asarray(grf.time, dtype=float)
-        keep = np.flatnonzero((trial.time >= tg[0] - 1e-9) & (trial.time <= tg[-1] + 1e-9))
-        kw = dict(external_loads=loads, grf=grf)
-    rows = _common.reported_rows(trial.time, start, end)
-    if not keep.size or rows[0] < keep[0] or rows[-1] > keep[-1]:
-        raise node.error("initial_time", f"the frames {trial.time[rows[0]]:.6g}-{trial.time[rows[-1]]:.6g} s "
-                                         "reach beyond the external loads' data")
-    cut = trial if keep.size == trial.n_frames else type(trial).from_array(
-        np.asarray(trial.time)[keep], trial.names, np.asarray(trial.values)[keep], meta=dict(trial.meta))
+    cut, keep, rows, kw = _common.loads_and_frames(node, loads_path, trial, start, end, "initial_time")
     base = setup.name or node.name or "analyze"
     tables = []
     for a in analyses:

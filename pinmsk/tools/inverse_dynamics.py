@@ -30,8 +30,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from . import _common, layout
 
 __all__ = ["run"]
@@ -40,8 +38,6 @@ __all__ = ["run"]
 def run(setup, *, results_dir=None) -> list[Path]:
     """Run an InverseDynamicsTool setup (see the module docstring); the file written, as a list."""
     from ..dynamics import inverse_dynamics_result
-    from ..io.external_loads import read_external_loads
-    from ..io.tables import read_trial
 
     node = setup.node
     folder = _common.input_folder(node)
@@ -67,23 +63,7 @@ def run(setup, *, results_dir=None) -> list[Path]:
                                       degrees_prop="coordinates_in_degrees")
     _common.check_range(node, "time_range", coords.time, start, end)
     trial = _common.opensim_filtered(coords, cutoff, str(coords_path))
-    kw = {}
-    if loads_path is not None:
-        loads = read_external_loads(loads_path)
-        if loads.datafile is None:
-            raise node.error("external_loads_file", f"{loads_path} names no <datafile>")
-        grf = _common.held_ends(read_trial(loads.datafile), trial.time)
-        tg = np.asarray(grf.time, dtype=float)
-        keep = np.flatnonzero((trial.time >= tg[0] - 1e-9) & (trial.time <= tg[-1] + 1e-9))
-        kw = dict(external_loads=loads, grf=grf)
-    else:
-        keep = np.arange(trial.n_frames)
-    rows = _common.reported_rows(trial.time, start, end)
-    if not keep.size or rows[0] < keep[0] or rows[-1] > keep[-1]:
-        raise node.error("time_range", f"the frames {trial.time[rows[0]]:.6g}-{trial.time[rows[-1]]:.6g} s reach "
-                                       f"beyond the external loads' data ({tg[0]:.6g}-{tg[-1]:.6g} s)")
-    cut = trial if keep.size == trial.n_frames else type(trial).from_array(
-        np.asarray(trial.time)[keep], trial.names, np.asarray(trial.values)[keep], meta=dict(trial.meta))
+    cut, keep, rows, kw = _common.loads_and_frames(node, loads_path, trial, start, end, "time_range")
     res = inverse_dynamics_result(choice.model, cut, cutoff=0, components=choice.components,
                                   missing_coordinates="default", **kw)
     table = layout.id_table(model, res.trial, rows=rows - keep[0])
