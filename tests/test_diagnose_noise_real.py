@@ -269,3 +269,22 @@ def test_subject01_walk_floor_holds_and_is_not_at_the_floor(shared_data):
     # the pelvis tilt residual's mean over the walk, against its Newey-West error
     tilt = js["stopping"]["systematic"]["channels"]["pelvis_tilt_moment"]
     assert abs(tilt["mean"]) == pytest.approx(10.0, abs=2.0) and abs(tilt["mean_z"]) > 2.0
+
+
+def test_records_without_noise_have_no_floor_to_call_noise(forearm):
+    """A trial whose records hold no noise (``noise=None``: the model's own moments, smoothed data's
+    stand-in) with a hidden sensor offset left out of the candidates: the propagated floor lies orders of
+    magnitude below the residual on every channel, so it is said to be not estimable, each channel is
+    weighed by its own residual, and the verdict is never at_noise_floor; a stated noise level restores a
+    floor to judge against."""
+    trial = make_trial(forearm, ["sensor_offset:elbow_flexion:offset=0.3"], duration=4.0, rate=100.0, noise=None)
+    d = diagnose(forearm, trial, candidates=["joint_damping"])
+    info = d.comparison.noise.info
+    assert info["estimable"] is False and d.stopping["floor_estimable"] is False
+    assert "NOT ESTIMABLE" in d.comparison.noise.method
+    rms = d.comparison.rmse()
+    assert d.noise_floor["elbow_flexion_moment"] == pytest.approx(rms["elbow_flexion_moment"], rel=1e-9)
+    assert max(info["estimate"].values()) < 1e-3 * rms["elbow_flexion_moment"]
+    assert d.verdict == "missing_effect" and "not estimable" in d.verdict_line()
+    stated = diagnose(forearm, trial, candidates=["joint_damping"], noise={"moments": 0.05})
+    assert stated.comparison.noise.info["estimable"] is True and stated.stopping["floor_estimable"]

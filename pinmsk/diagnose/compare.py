@@ -674,7 +674,9 @@ def _no_stated_noise(noise, mode: str) -> None:
 def _remake(c: Comparison, model) -> Comparison:
     """``c`` again for another model: the same frames, inputs and options; the noise floor is
     propagated again through the new model (the trial's noise models are reused), unless it was given."""
-    given = c.noise if c.options.get("noise_given") else None
+    # a floor the records do not determine (processed data) stays the weights of the model as given
+    unknown = (c.eq_noise.info or {}).get("estimable") is False
+    given = c.noise if c.options.get("noise_given") or unknown else None
     fits = None if given is not None else (c.eq_noise.fits or None)
     opts = {k: v for k, v in c.options.items() if k != "noise_given"}
     return compare(model, c.trial, mode=c.mode, cutoff=c.cutoff, noise_floor=given, _inputs=c.inputs,

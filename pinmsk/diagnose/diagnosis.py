@@ -179,9 +179,11 @@ class Diagnosis:
         systematic = systematic_residual(comparison, held, alpha=settings["alpha"],
                                          channels=[moment_channel(x) for x in comparison.eq.coordinates])
         self.stopping["systematic"] = systematic
+        estimable = (comparison.eq_noise.info or {}).get("estimable", True) is not False
+        self.stopping["floor_estimable"] = estimable
         if self.best is not None or self.best_pair is not None:
             self.verdict = "missing_effect"
-        elif ok and not unidentified and not systematic["systematic"]:
+        elif ok and not unidentified and not systematic["systematic"] and estimable:
             self.verdict = "at_noise_floor"
         else:
             self.verdict = "missing_effect"
@@ -343,7 +345,11 @@ class Diagnosis:
             lines.append(f"noise floor: {c.noise.method}")
         unit = _unit(c)
         w = max([len(ch) for ch in c.channels] + [8])
-        lines.append(f"  {'channel':<{w}}  {'rmse':>10}  {'noise floor':>11}  {'ratio':>6}")
+        unknown = (c.eq_noise.info or {}).get("estimable") is False
+        floor_head = "weight" if unknown else "noise floor"
+        lines.append(f"  {'channel':<{w}}  {'rmse':>10}  {floor_head:>11}  {'ratio':>6}"
+                     + ("   (floor not estimable: each channel weighed by its residual's RMS as given)"
+                        if unknown else ""))
         for ch in c.channels:
             r, f = self.rmse[ch], self.noise_floor[ch]
             lines.append(f"  {ch:<{w}}  {r:>10.4g}  {f:>11.4g}  {r / f:>5.1f}x")
@@ -521,8 +527,15 @@ class Diagnosis:
         also = (f"; the model holds {', '.join(held)}, whose parameters this trial does not determine (held at "
                 "their values, see the flags): remove it and diagnose again" if held else "")
         sysch = (st.get("systematic") or {}).get("systematic") or []
+        what = "; ".join(f"{ch}: {describe_systematic(st['systematic']['channels'][ch])}" for ch in sysch)
+        if st.get("floor_estimable") is False:
+            return ("verdict: missing_effect -- the noise floor is not estimable from these records (no "
+                    "measurable noise in them: smoothed or processed data), so nothing can be called noise; no "
+                    "catalog effect explains the residual out of sample, each channel weighed by its own "
+                    "residual (see what the residual follows above" + (f"; it is systematic: {what}" if sysch else "")
+                    + "); state the noise with --noise NAME=SIGMA "
+                    "to judge it against a floor" + also)
         if sysch:
-            what = "; ".join(f"{ch}: {describe_systematic(st['systematic']['channels'][ch])}" for ch in sysch)
             size = (f"held-out {st['held_out_ratio']:.2f}x, within what the noise model allows, "
                     f"{st['consistent_limit']:.2f}x" if st.get("consistent_with_noise") else
                     f"held-out {st['held_out_ratio']:.2f}x, more than the noise model allows, "

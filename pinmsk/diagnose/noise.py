@@ -83,6 +83,10 @@ __all__ = ["CONSISTENT_RATIO", "REALISATIONS", "STATED_GROUPS", "consistency", "
 REALISATIONS = 3
 #: A floor more than this factor above the residual's RMS on a channel is inconsistent with it (capped).
 CONSISTENT_RATIO = 1.5
+#: records whose propagated floor lies more than this factor below the residual on every channel hold no
+#: measurable noise (smoothed or processed data, e.g. coordinates from IK and RRA, filtered plates): the
+#: floor is not estimable from them (:func:`propagated_floor`)
+PROCESSED_RATIO = 1e3
 _SEED = 12345
 
 
@@ -446,11 +450,26 @@ def propagated_floor(eq, trial, *, mode: str, excitation_kind: str | None, cutof
         f = check["factors"]
         sigma, kin_rms, dir_rms = sigma * f, kin_rms * f, dir_rms * f
         method += "; " + check["text"]
+    rms = np.sqrt(np.mean(np.asarray(eq.e, dtype=float) ** 2, axis=0))
+    estimable = bool(stated or not np.all(rms > PROCESSED_RATIO * sigma))
+    if not estimable:
+        # no noise in the records to speak of: a floor of 1e-5 N would weigh the channels by its accidents;
+        # each is weighed by its own residual instead, and the floor is said to be unknown
+        f = rms / sigma
+        estimate = sigma
+        sigma, kin_rms, dir_rms = rms.copy(), kin_rms * f, dir_rms * f
+        method += (f"; the records hold no measurable noise above {band_start:.3g} Hz (the propagated floor, "
+                   f"{float(np.sqrt(np.mean(estimate ** 2))):.3g} over the channels, lies more than "
+                   f"{PROCESSED_RATIO:.0f} times below the residual on every channel: smoothed or processed "
+                   "data): the floor is NOT ESTIMABLE from them, so each channel is weighed by its residual's "
+                   "RMS (as given) instead; state the noise with --noise NAME=SIGMA")
     info = {"method": "propagated noise models", "band_start_hz": band_start, "realisations": REALISATIONS,
             "sources": {g: m.to_dict() for g, m in used.items()},
             "kinematic": {c: float(v) for c, v in zip(channels, kin_rms)},
             "direct": {c: float(v) for c, v in zip(channels, dir_rms)},
             "consistency": {k: v for k, v in check.items() if k not in ("factors", "text")},
+            "estimable": estimable,
+            **({} if estimable else {"estimate": {c: float(v) for c, v in zip(channels, estimate)}}),
             **({"stated": {c: v for c, v in stated}} if stated else {})}
     if correction is not None:
         edges = band_edges(band_start, rate)
