@@ -496,9 +496,13 @@ def cmd_scale(args) -> int:
 
 def cmd_batch(args) -> int:
     from ..pipeline import batch_cli
-    summary = batch_cli(args.config, scheduler=args.scheduler, jobs=args.jobs)
+    summary = batch_cli(args.config, scheduler=args.scheduler, jobs=args.jobs, force=args.force,
+                        shard=args.shard)
     n = len(summary["rows"])
-    print(f"{n - len(summary['failed'])}/{n} trials done; summary table {summary['table']}")
+    shard = f" (shard {summary['shard'][0]}/{summary['shard'][1]})" if summary["shard"] else ""
+    print(f"{n - len(summary['failed'])}/{n} trials done{shard}, {len(summary['skipped'])} skipped "
+          f"(done before: same inputs and options); summary table {summary['table']}, "
+          f"report {summary['report']}")
     for name in summary["failed"]:
         reason = summary.get("reasons", {}).get(name, "failed").removeprefix("failed: ")
         print(f"  failed: {name}: {reason}", file=sys.stderr)
@@ -851,6 +855,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--jobs", type=int, default=None, help="parallel local workers (default: all cores)")
     s.add_argument("--scheduler", default=None,
                    help="Dask distributed scheduler ADDRESS (needs `pip install distributed`)")
+    s.add_argument("--force", action="store_true",
+                   help="run every trial again (default: skip trials whose folder is complete for the same "
+                        "inputs and options)")
+    s.add_argument("--shard", metavar="I/N", default=None,
+                   help="run only the trials with index %% N == I-1 (I from 1; e.g. a Slurm array's "
+                        "$SLURM_ARRAY_TASK_ID/N); writes summary-I-of-N.csv and report-I-of-N.html")
     s.set_defaults(func=cmd_batch)
     return p
 
