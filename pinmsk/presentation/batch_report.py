@@ -3,9 +3,9 @@
 One row per trial: its status (``ok``, ``skipped (done)`` for a trial a rerun found
 complete, or the failure), the time it took, its frames, the peak joint moments and
 torso residuals of ``summary.csv``, and links to the files in the trial's folder
-(relative links, so the output folder can be moved or shared as a whole).  A
-thumbnail of ``moments.png`` links to the figure when the trial wrote one.  No
-scripts, stylesheets or fonts are fetched.
+(relative links, so the output folder can be moved or shared as a whole: the
+figures ``moments.png`` and ``residuals.png`` among them).  No scripts,
+stylesheets or fonts are fetched.
 """
 from __future__ import annotations
 
@@ -19,11 +19,12 @@ from ..io.output_files import atomic_write
 __all__ = ["render_batch_report", "write_batch_report"]
 
 _CSS = """
-body{font-family:system-ui,-apple-system,'Segoe UI',sans-serif;max-width:1200px;margin:2em auto;padding:0 1em;color:#222}
+body{font-family:system-ui,-apple-system,'Segoe UI',sans-serif;max-width:1400px;margin:2em auto;padding:0 1em;color:#222}
 h1{font-size:1.5em}table{border-collapse:collapse;margin:.5em 0;font-size:.9em}
 td,th{border:1px solid #ccc;padding:.3em .6em;text-align:right;vertical-align:top}th{background:#f3f3f3}
 td.l,th.l{text-align:left}.ok{color:#1e8449}.skipped{color:#566573}.failed{color:#b03a2e;font-weight:bold}
-.files a{margin-right:.6em;white-space:nowrap}img{width:160px;border:1px solid #eee}.small{color:#666;font-size:.85em}
+.files{font-size:.85em}.files a{display:block;white-space:nowrap}.status{max-width:18em}
+.small{color:#666;font-size:.85em}
 """
 
 
@@ -48,13 +49,16 @@ def render_batch_report(rows: Sequence[dict], out, *, title: str = "pinmsk batch
     counts = {"ok": 0, "skipped": 0, "failed": 0}
     for r in rows:
         counts[_status(r)[0]] += 1
-    moments = [k for r in rows for k in r if k.endswith(("_peak_abs_nm_per_kg", "_peak_abs_nm"))]
-    moments = list(dict.fromkeys(moments))
+    moments = list(dict.fromkeys(k for r in rows for k in r if k.endswith("_peak_abs_nm_per_kg")))
+    moments += list(dict.fromkeys(k for r in rows for k in r if k.endswith("_peak_abs_nm")))
     residuals = list(dict.fromkeys(k for r in rows for k in r if k.endswith("_residual_rms")))
-    header = (["trial", "kind", "status", "time (s)", "frames"]
-              + [k.replace("_peak_abs_nm_per_kg", " peak |M| (N m/kg)").replace("_peak_abs_nm", " peak |M| (N m)")
-                 for k in moments]
-              + [k.replace("_residual_rms", " residual RMS") for k in residuals] + ["files", "moments"])
+    per_kg = [k for k in moments if k.endswith("_per_kg")]
+    groups = [("", 5), ("peak |joint moment| (N m/kg)", len(per_kg)),
+              ("peak |joint moment| (N m)", len(moments) - len(per_kg)),
+              ("residual RMS (N, N m)", len(residuals))]
+    names = (["trial", "status", "time (s)", "frames", "files"]
+             + [k.removesuffix("_peak_abs_nm_per_kg").removesuffix("_peak_abs_nm") for k in moments]
+             + [k.removesuffix("_residual_rms") for k in residuals])
     parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{_e(title)}</title>"
              f"<style>{_CSS}</style></head><body><h1>{_e(title)}</h1>",
              f"<p>{len(rows)} trials{f' of model {_e(model)}' if model is not None else ''}: "
@@ -62,22 +66,20 @@ def render_batch_report(rows: Sequence[dict], out, *, title: str = "pinmsk batch
              f"<span class='skipped'>{counts['skipped']} skipped (done before, same inputs and options)</span>, "
              f"<span class='failed'>{counts['failed']} failed</span>. "
              "The table of numbers is <a href='summary.csv'>summary.csv</a>.</p>",
-             "<table><tr>" + "".join(f"<th class='{'l' if h in ('trial', 'kind', 'status', 'files') else ''}'>"
-                                     f"{_e(h)}</th>" for h in header) + "</tr>"]
+             "<table><tr>" + "".join(f"<th colspan='{c}'>{_e(g)}</th>" for g, c in groups if c) + "</tr>",
+             "<tr>" + "".join(f"<th class='{'l' if h in ('trial', 'status', 'files') else ''}'>{_e(h)}</th>"
+                              for h in names) + "</tr>"]
     for r in rows:
         cls, text = _status(r)
         name = str(r.get("name"))
         folder = out / name
         files = sorted(p.name for p in folder.iterdir() if p.is_file()) if folder.is_dir() else []
         links = "".join(f"<a href='{quote(name)}/{quote(f)}'>{_e(f)}</a>" for f in files if f != "done.json")
-        thumb = (f"<a href='{quote(name)}/moments.png'><img alt='moments of {_e(name)}' "
-                 f"src='{quote(name)}/moments.png'></a>") if "moments.png" in files else ""
-        time_s = r.get("time_total_s")
-        cells = ([f"<td class='l'>{_e(name)}</td>", f"<td class='l'>{_e(r.get('kind', ''))}</td>",
-                  f"<td class='l {cls}'>{_e(text)}</td>", f"<td>{_num(time_s, '{:.2f}')}</td>",
-                  f"<td>{_num(r.get('frames'), '{:d}')}</td>"]
-                 + [f"<td>{_num(r.get(k))}</td>" for k in moments + residuals]
-                 + [f"<td class='l files'>{links or '–'}</td>", f"<td>{thumb}</td>"])
+        cells = ([f"<td class='l'>{_e(name)}<br><span class='small'>{_e(r.get('kind', ''))}</span></td>",
+                  f"<td class='l status {cls}'>{_e(text)}</td>",
+                  f"<td>{_num(r.get('time_total_s'), '{:.2f}')}</td>", f"<td>{_num(r.get('frames'), '{:d}')}</td>",
+                  f"<td class='l files'>{links or '–'}</td>"]
+                 + [f"<td>{_num(r.get(k))}</td>" for k in moments + residuals])
         parts.append("<tr>" + "".join(cells) + "</tr>")
     parts.append("</table><p class='small'>time: the trial's own run (for a skipped trial, the run that "
                  "wrote its folder).</p></body></html>")
