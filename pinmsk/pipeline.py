@@ -38,7 +38,12 @@ Each trial is processed by :func:`run_trial` (a plain top-level function of
 picklable arguments, so any ``concurrent.futures``-style executor can run it):
 one folder ``<out>/<name>/`` with ``kinematics.sto``, ``inverse_dynamics.sto``,
 ``residuals.sto``, ``activations.sto`` (if the model has muscles), ``summary.json`` and
-``moments.png`` / ``residuals.png`` (``plots = false`` in a trial or ``[defaults]`` skips them); :func:`batch` writes ``<out>/summary.csv`` (one row per trial).
+``moments.png`` / ``residuals.png`` (``plots = false`` in a trial or ``[defaults]`` skips them)
+and last ``done.json``; :func:`batch` writes ``<out>/summary.csv`` (one row per trial) and
+``<out>/report.html`` (:mod:`pinmsk.presentation.batch_report`).
+A rerun skips the trials whose ``done.json`` matches :func:`trial_key` (options, model, input
+file contents); ``force=True`` reruns them; ``shard=(i, n)`` runs every n-th trial
+(:func:`shard_indices`), for job arrays.
 OpenSim ``.sto``/``.mot`` inputs are read leniently (``strict=False``); the repairs made
 are listed under ``info.read_repairs`` in ``summary.json``.
 
