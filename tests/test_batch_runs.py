@@ -168,3 +168,59 @@ def test_dask_scheduler_gives_the_serial_results(gait2d, tmp_path):
         assert a.names == b.names and a.n_frames == serial[["a", "b"].index(name)]["frames"]
         for c in a.names:
             np.testing.assert_array_equal(a[c], b[c])
+
+
+# -- a folder of subjects -------------------------------------------------------------------------
+
+def test_folder_of_subjects_runs_configs_with_resume_and_shards(gait2d, tmp_path, capsys):
+    lab = tmp_path / "lab"
+    for sub, names in (("S01", ["w1", "w2"]), ("S02", ["w1"])):
+        d = lab / sub
+        d.mkdir(parents=True)
+        _write_inputs(gait2d, d, names)
+        _synthetic_trc(gait2d, d / f"{sub}_Static.trc", n=10)
+        _config(d, names)
+    (lab / "notes").mkdir()                                        # no static .trc: not a subject
+    assert main(["batch", str(lab)]) == 0
+    cap = capsys.readouterr()
+    assert "2/2 subjects done; table" in cap.out and "not subjects (no static .trc): notes" in cap.err
+    subject_lines = [ln for ln in cap.err.splitlines() if ln.startswith("subject [")]
+    assert [ln.split(":")[0] for ln in subject_lines] == ["subject [1/2] S01 (config)", "subject [2/2] S02 (config)"]
+    with open(lab / "subjects.csv") as fh:
+        table = list(csv.DictReader(fh))
+    assert [(r["subject"], r["run"], r["skipped"], r["failed"]) for r in table] == [
+        ("S01", "2", "0", "0"), ("S02", "1", "0", "0")]
+    assert (lab / "S01" / "res" / "w2" / DONE).is_file() and (lab / "S02" / "res" / "report.html").is_file()
+
+    # the second subject alone (shard 2/2), resumed: its one trial skipped
+    assert main(["batch", str(lab), "--shard", "2/2"]) == 0
+    capsys.readouterr()
+    with open(lab / "subjects-2-of-2.csv") as fh:
+        assert [(r["subject"], r["run"], r["skipped"]) for r in csv.DictReader(fh)] == [("S02", "0", "1")]
+    assert main(["batch", str(lab / "notes")]) == 2
+    assert "no subject folders" in capsys.readouterr().err
+
+
+def test_folder_subject_with_opensim_setups_gives_run_setups_results(tmp_path, capsys):
+    import shutil
+
+    from conftest import shared_folder
+    from pinmsk.tools import run_setup
+
+    src = shared_folder("opensim-models/Arm26", "arm26_Setup_InverseDynamics.xml")
+    sub = tmp_path / "lab" / "arm"
+    sub.mkdir(parents=True)
+    for f in ("arm26.osim", "arm26_InverseKinematics.mot", "arm26_Setup_InverseDynamics.xml",
+              "arm26_Reserve_Actuators.xml"):          # a ForceSet: an input, not a setup to run
+        shutil.copy(src / f, sub / f)
+    shutil.copy(src / "arm26_elbow_flex.trc", sub / "arm_static.trc")
+    assert main(["batch", str(tmp_path / "lab")]) == 0
+    assert "subject [1/1] arm (setups): done in" in capsys.readouterr().err
+    got = pinmsk.read_trial(sub / "FilteredResults" / "arm26_InverseDynamics.sto")
+    ref = pinmsk.read_trial(run_setup(src / "arm26_Setup_InverseDynamics.xml", results_dir=tmp_path / "direct")[0])
+    assert got.names == ref.names and got.n_frames == ref.n_frames > 0
+    for c in ref.names:
+        np.testing.assert_array_equal(got[c], ref[c])
+    (sub / "arm26_Setup_InverseDynamics.xml").unlink()
+    assert main(["batch", str(tmp_path / "lab")]) == 1
+    assert "no batch.toml and no OpenSim setup" in capsys.readouterr().err
