@@ -224,3 +224,25 @@ def test_folder_subject_with_opensim_setups_gives_run_setups_results(tmp_path, c
     (sub / "arm26_Setup_InverseDynamics.xml").unlink()
     assert main(["batch", str(tmp_path / "lab")]) == 1
     assert "no batch.toml and no OpenSim setup" in capsys.readouterr().err
+
+
+def test_progress_note_prints_its_line_above_the_bar_drawn_or_not():
+    import io
+
+    from pinmsk.presentation.progress import Progress
+
+    quiet = io.StringIO()
+    with Progress(2, "batch", stream=quiet, force=False) as bar:
+        bar.note("[1/2] a: done in 0.1 s")
+        bar.update(1)
+    assert quiet.getvalue() == "[1/2] a: done in 0.1 s\n"
+    drawn = io.StringIO()
+    with Progress(2, "batch", stream=drawn, force=True, delay=0.0) as bar:
+        bar.update(1)
+        bar.note("[1/2] a: skipped (done)")
+    text = drawn.getvalue()
+    first = text.index("\r") + 1
+    bar_line = text[first:text.index("\r", first)]
+    assert bar_line.startswith("batch [") and "1/2" in bar_line
+    # the drawn bar is blanked, the note printed on its own line, the bar drawn again below it
+    assert text[first + len(bar_line):].startswith("\r" + " " * len(bar_line) + "\r[1/2] a: skipped (done)\n\r")
