@@ -201,11 +201,10 @@ def test_folder_of_subjects_runs_configs_with_resume_and_shards(gait2d, tmp_path
     assert "no subject folders" in capsys.readouterr().err
 
 
-def test_folder_subject_with_opensim_setups_gives_run_setups_results(tmp_path, capsys):
+def test_folder_subject_with_opensim_setups_gives_opensims_results(tmp_path, capsys):
     import shutil
 
     from conftest import shared_folder
-    from pinmsk.tools import run_setup
 
     src = shared_folder("opensim-models/Arm26", "arm26_Setup_InverseDynamics.xml")
     sub = tmp_path / "lab" / "arm"
@@ -217,10 +216,12 @@ def test_folder_subject_with_opensim_setups_gives_run_setups_results(tmp_path, c
     assert main(["batch", str(tmp_path / "lab")]) == 0
     assert "subject [1/1] arm (setups): done in" in capsys.readouterr().err
     got = pinmsk.read_trial(sub / "FilteredResults" / "arm26_InverseDynamics.sto")
-    ref = pinmsk.read_trial(run_setup(src / "arm26_Setup_InverseDynamics.xml", results_dir=tmp_path / "direct")[0])
-    assert got.names == ref.names and got.n_frames == ref.n_frames > 0
+    # OpenSim's own result of that setup (as tests/test_tools_run.py checks run_setup against it)
+    ref = pinmsk.read_trial(src / "reference_outputs" / "InverseDynamics_Filtered" / "arm26_InverseDynamics.sto")
+    assert sorted(got.names) == sorted(ref.names) and got.n_frames == ref.n_frames > 0
     for c in ref.names:
-        np.testing.assert_array_equal(got[c], ref[c])
+        err = np.sqrt(np.mean((np.asarray(got[c]) - np.asarray(ref[c])) ** 2)) / np.max(np.abs(ref[c]))
+        assert err < 1e-4, (c, err)
     (sub / "arm26_Setup_InverseDynamics.xml").unlink()
     assert main(["batch", str(tmp_path / "lab")]) == 1
     assert "no batch.toml and no OpenSim setup" in capsys.readouterr().err
