@@ -38,7 +38,12 @@ Each trial is processed by :func:`run_trial` (a plain top-level function of
 picklable arguments, so any ``concurrent.futures``-style executor can run it):
 one folder ``<out>/<name>/`` with ``kinematics.sto``, ``inverse_dynamics.sto``,
 ``residuals.sto``, ``activations.sto`` (if the model has muscles), ``summary.json`` and
-``moments.png`` / ``residuals.png`` (``plots = false`` in a trial or ``[defaults]`` skips them); :func:`batch` writes ``<out>/summary.csv`` (one row per trial).
+``moments.png`` / ``residuals.png`` (``plots = false`` in a trial or ``[defaults]`` skips them)
+and last ``done.json``; :func:`batch` writes ``<out>/summary.csv`` (one row per trial) and
+``<out>/report.html`` (:mod:`pinmsk.presentation.batch_report`).
+A rerun skips the trials whose ``done.json`` matches :func:`trial_key` (options, model, input
+file contents); ``force=True`` reruns them; ``shard=(i, n)`` runs every n-th trial
+(:func:`shard_indices`), for job arrays.
 OpenSim ``.sto``/``.mot`` inputs are read leniently (``strict=False``); the repairs made
 are listed under ``info.read_repairs`` in ``summary.json``.
 
@@ -54,6 +59,8 @@ from __future__ import annotations
 import concurrent.futures as cf
 import contextlib
 import csv
+import hashlib
+import json
 import os
 import shutil
 import tempfile
@@ -87,7 +94,8 @@ from .solvers.static import StaticOptimization
 from .trial import Trial, moment_channel
 
 __all__ = ["opensim_to_gait2d", "frame_positions", "transferred_cops", "run_trial", "batch",
-           "batch_cli", "load_config", "RAJAGOPAL_HIP_OFFSET", "KINDS", "contact_fit_task", "optimize_task"]
+           "batch_cli", "trial_key", "done_row", "parse_shard", "shard_indices", "DONE", "load_config",
+           "RAJAGOPAL_HIP_OFFSET", "KINDS", "contact_fit_task", "optimize_task"]
 
 KINDS = ("csu", "opensim", "trc")
 
@@ -224,11 +232,14 @@ def _kinematics(model, spec: dict, base: Path):
     return kin, ext, info
 
 
-def run_trial(spec: dict, *, model="gait2d", out_dir=None, base_dir=".") -> dict:
+def run_trial(spec: dict, *, model="gait2d", out_dir=None, base_dir=".", key: str | None = None) -> dict:
     """IK (or coordinate mapping) -> ID -> SO for one trial spec; writes ``out_dir`` if given.
 
     Returns a summary row (JSON-serialisable).  Never raises on a bad trial: the row gets
     ``status = "failed: <message>"`` instead, so one bad file does not stop a batch.
+    The last file written in ``out_dir`` is ``done.json`` (:data:`DONE`: ``key``, see
+    :func:`trial_key`, the row and the files), inside the folder that is renamed into
+    place whole, so a folder with a matching ``done.json`` is a complete trial.
     """
     t0 = _time.perf_counter()
     name = spec.get("name", "trial")
@@ -280,16 +291,91 @@ def run_trial(spec: dict, *, model="gait2d", out_dir=None, base_dir=".") -> dict
                 if spec.get("plots", True):
                     row["figures"] = _figures(m, d, idt, res)
                 write_json(d / "summary.json", {"row": row, "info": info, "residuals": rsum}, default=str)
+                row["time_total_s"] = _time.perf_counter() - t0
+                files = sorted(p.name for p in d.iterdir())
+                write_json(d / DONE, {"key": key, "row": row, "files": files}, default=str)
     except PinmskError as exc:
         row["status"] = f"failed: {exc}"
     except Exception as exc:  # noqa: BLE001 - a batch reports, it does not stop
         row["status"] = f"failed: {type(exc).__name__}: {exc}"
         row["traceback"] = traceback.format_exc(limit=5)
-    row["time_total_s"] = _time.perf_counter() - t0
+    row.setdefault("time_total_s", _time.perf_counter() - t0)    # (set before done.json when written)
     return row
 
 
 _PARTIAL = ".partial-"
+
+#: The marker file of a complete trial folder (see :func:`run_trial` and :func:`done_row`).
+DONE = "done.json"
+
+#: Trial keys whose string values may name input files (hashed by :func:`trial_key`).
+_INPUT_KEYS = ("path", "coordinates", "grf", "trc", "markers", "marker_file")
+
+
+def trial_key(spec: Mapping, *, model="gait2d", base_dir=".") -> str:
+    """SHA-256 of what a trial's results depend on: its options, the model and its input files.
+
+    The options are the trial spec (``[defaults]`` merged in) as canonical JSON, with the
+    model (a name, or a sidecar path's content) and pinmsk's version; each input file
+    (the string values of :data:`_INPUT_KEYS` that name an existing file, and the model
+    file) enters by its content, so an edited or replaced file changes the key and a
+    moved-but-identical one does not.
+    """
+    from . import __version__
+    h = hashlib.sha256()
+    model_name = getattr(model, "name", None) if hasattr(model, "pin") else str(model)
+    h.update(json.dumps({"spec": spec, "model": model_name, "pinmsk": __version__},
+                        sort_keys=True, default=str).encode())
+    base = Path(base_dir)
+    files = [(k, spec[k]) for k in _INPUT_KEYS if isinstance(spec.get(k), str)]
+    if isinstance(model, (str, Path)):
+        files.append(("model", str(model)))
+    for k, v in files:
+        p = _path(base, v)
+        if p.is_file():
+            h.update(f"\0{k}\0".encode())
+            with open(p, "rb") as fh:
+                for chunk in iter(lambda: fh.read(1 << 20), b""):
+                    h.update(chunk)
+    return h.hexdigest()
+
+
+def done_row(out_dir, key: str) -> dict | None:
+    """The stored row of the trial folder ``out_dir`` if it is complete for ``key``, else None.
+
+    Complete: its :data:`DONE` marker exists, parses, holds ``key`` and every file it lists
+    is still there.
+    """
+    marker = Path(out_dir) / DONE
+    try:
+        done = json.loads(marker.read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(done, dict) or done.get("key") != key or not isinstance(done.get("row"), dict):
+        return None
+    if not all((Path(out_dir) / f).is_file() for f in done.get("files", [])):
+        return None
+    return done["row"]
+
+
+def parse_shard(text) -> tuple[int, int]:
+    """``"i/n"`` -> ``(i, n)`` with ``1 <= i <= n`` (a Slurm array's ``$SLURM_ARRAY_TASK_ID/n``)."""
+    try:
+        i, n = (int(x) for x in str(text).split("/"))
+    except ValueError:
+        raise TrialError(f"--shard {text!r}: expected I/N, two whole numbers such as 1/4") from None
+    if n < 1 or not 1 <= i <= n:
+        raise TrialError(f"--shard {text!r}: I must be between 1 and N (N >= 1), e.g. 1/{max(n, 1)} "
+                         f"to {max(n, 1)}/{max(n, 1)}")
+    return i, n
+
+
+def shard_indices(count: int, shard) -> list[int]:
+    """The trial indices (0-based, config order) shard ``(i, n)`` runs: those with ``k % n == i - 1``."""
+    if shard is None:
+        return list(range(count))
+    i, n = parse_shard(shard) if isinstance(shard, str) else parse_shard(f"{shard[0]}/{shard[1]}")
+    return [k for k in range(count) if k % n == i - 1]
 
 
 @contextlib.contextmanager
@@ -377,35 +463,84 @@ def _executor(scheduler, jobs):
     return cf.ProcessPoolExecutor(max_workers=jobs), None
 
 
+def _finished_line(k: int, n: int, row: dict) -> str:
+    """``[k/n] name: done in X s`` / ``skipped (done)`` / ``FAILED: reason``."""
+    status = str(row.get("status", "failed"))
+    if row.get("skipped"):
+        what = "skipped (done)"
+    elif status.startswith("ok"):
+        what = f"done in {row.get('time_total_s', 0.0):.1f} s"
+    else:
+        what = f"FAILED: {status.removeprefix('failed: ')}"
+    return f"[{k}/{n}] {row.get('name')}: {what}"
+
+
+def _suffix(shard) -> str:
+    if shard is None:
+        return ""
+    i, n = parse_shard(shard) if isinstance(shard, str) else shard
+    return f"-{i}-of-{n}"
+
+
 def batch(trials: Sequence[dict], *, model="gait2d", out=None, base_dir=".", jobs: int | None = None,
-          scheduler: str | None = None, progress: bool | None = None) -> list[dict]:
-    """Run :func:`run_trial` over ``trials`` in parallel; write ``<out>/summary.csv``; return the rows.
+          scheduler: str | None = None, progress: bool | None = None, force: bool = False,
+          shard=None, log: bool = False, report: bool = True) -> list[dict]:
+    """Run :func:`run_trial` over ``trials`` in parallel; write ``<out>/summary.csv`` and
+    ``<out>/report.html``; return the rows.
 
     ``jobs=1`` runs in this process (no pool).  Rows keep the order of ``trials``.
     Each trial's folder is written under a temporary name and renamed when
     complete, so an interrupted batch (Ctrl-C) leaves complete trial folders or
     none; the temporary folders of interrupted trials are removed.
+
+    Resume: a trial whose folder holds a ``done.json`` with the same :func:`trial_key`
+    (same options, model and input file contents) and all its files is not run again;
+    its stored row comes back with ``skipped = True`` (every row has ``skipped``).
+    ``force=True`` runs every trial.  ``shard=(i, n)`` (or ``"i/n"``) runs only the
+    trials with index ``k % n == i - 1`` (:func:`shard_indices`) and names its table
+    and report ``summary-i-of-n.csv`` / ``report-i-of-n.html``; a later unsharded run
+    finds them all done and writes the whole table.  ``log=True`` prints one line per
+    finished trial (:func:`_finished_line`) through :meth:`Progress.note`.
+    ``report=False`` skips the HTML report (:mod:`pinmsk.presentation.batch_report`).
     """
     out = None if out is None else Path(out)
     jobs = jobs or os.cpu_count() or 1
-    rows: list = [None] * len(trials)
-    args = [dict(model=model, out_dir=None if out is None else str(out / t["name"]), base_dir=str(base_dir))
-            for t in trials]
+    picked = shard_indices(len(trials), shard)
+    trials = [trials[k] for k in picked]
+    n = len(trials)
+    rows: list = [None] * n
+    keys = [trial_key(t, model=model, base_dir=base_dir) if out is not None else None for t in trials]
+    args = [dict(model=model, out_dir=None if out is None else str(out / t["name"]), base_dir=str(base_dir),
+                 key=keys[i]) for i, t in enumerate(trials)]
     if out is not None:
         output_folder(out)
-    try:
-        with Progress(len(trials), "batch", unit="trials", force=progress) as bar:
-            if jobs == 1 and not scheduler:
-                for i, t in enumerate(trials):
-                    rows[i] = run_trial(t, **args[i])
-                    bar.update(1)
+    todo = []
+    finished = 0
+    with Progress(n, "batch", unit="trials", force=progress) as bar:
+        def finish(i, row):
+            nonlocal finished
+            finished += 1
+            rows[i] = row
+            if log:
+                bar.note(_finished_line(finished, n, row))
+            bar.update(1)
+
+        for i, t in enumerate(trials):
+            stored = None if (out is None or force) else done_row(out / t["name"], keys[i])
+            if stored is not None:
+                finish(i, {**stored, "skipped": True})
             else:
+                todo.append(i)
+        try:
+            if todo and jobs == 1 and not scheduler:
+                for i in todo:
+                    finish(i, {**run_trial(trials[i], **args[i]), "skipped": False})
+            elif todo:
                 ex, client = _executor(scheduler, jobs)
                 try:
-                    futs = {ex.submit(run_trial, t, **a): i for i, (t, a) in enumerate(zip(trials, args))}
+                    futs = {ex.submit(run_trial, trials[i], **args[i]): i for i in todo}
                     for f in cf.as_completed(futs):
-                        rows[futs[f]] = f.result()
-                        bar.update(1)
+                        finish(futs[f], {**f.result(), "skipped": False})
                 except BaseException:
                     ex.shutdown(wait=True, cancel_futures=True)
                     raise
@@ -413,41 +548,52 @@ def batch(trials: Sequence[dict], *, model="gait2d", out=None, base_dir=".", job
                     ex.shutdown(wait=True)
                     if client is not None:
                         client.close()
-    except BaseException:
-        if out is not None:   # a worker stopped mid-trial may not have cleaned up
-            _remove_partial_folders(out, [t["name"] for t in trials])
-        raise
+        except BaseException:
+            if out is not None:   # a worker stopped mid-trial may not have cleaned up
+                _remove_partial_folders(out, [trials[i]["name"] for i in todo])
+            raise
     if out is not None:
-        keys: list = []
+        cols: list = ["name", "status"] if not rows else []
         for r in rows:
-            keys += [k for k in r if k not in keys and k != "traceback"]
+            cols += [k for k in r if k not in cols and k != "traceback"]
 
         def write(fh):
-            w = csv.DictWriter(fh, fieldnames=keys, extrasaction="ignore")
+            w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
             w.writeheader()
             for r in rows:
                 w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
 
-        atomic_write(out / "summary.csv", write)
+        atomic_write(out / f"summary{_suffix(shard)}.csv", write)
+        if report:
+            from .presentation.batch_report import write_batch_report
+            write_batch_report(out / f"report{_suffix(shard)}.html", rows, out,
+                               model=getattr(model, "name", model),
+                               title=f"pinmsk batch{'' if shard is None else ' shard ' + _suffix(shard)[1:]}")
     return rows
 
 
-def batch_cli(config_path, *, scheduler: str | None = None, jobs: int | None = None) -> dict:
-    """``pinmsk batch CONFIG``: run the config's trials; returns ``{"rows", "table", "failed", "reasons"}``.
+def batch_cli(config_path, *, scheduler: str | None = None, jobs: int | None = None, force: bool = False,
+              shard: str | None = None) -> dict:
+    """``pinmsk batch CONFIG``: run the config's trials; returns ``{"rows", "table", "report", "failed",
+    "reasons", "skipped", "shard"}``.
 
     ``failed`` lists the names of the trials that failed, ``reasons`` maps each to its status
-    (``"failed: <message>"``).
+    (``"failed: <message>"``), ``skipped`` names the trials found done (see :func:`batch`'s
+    resume), ``shard`` is ``(i, n)`` or None.  One line per finished trial goes to stderr.
     """
     path = Path(config_path).resolve()
+    sh = None if shard is None else parse_shard(shard)       # a bad shard is refused before any work
     cfg = load_config(path)
     b = cfg["batch"]
     out = _path(path.parent, b.get("out", "results"))
     rows = batch(cfg["trials"], model=b.get("model", "gait2d"), out=out, base_dir=path.parent,
                  jobs=jobs if jobs is not None else b.get("jobs"), scheduler=scheduler or b.get("scheduler"),
-                 progress=None)
+                 progress=None, force=force, shard=sh, log=True)
     failed = [r["name"] for r in rows if not str(r.get("status", "")).startswith("ok")]
     reasons = {r["name"]: str(r.get("status", "failed")) for r in rows if r["name"] in failed}
-    return {"rows": rows, "table": str(out / "summary.csv"), "failed": failed, "reasons": reasons}
+    return {"rows": rows, "table": str(out / f"summary{_suffix(sh)}.csv"),
+            "report": str(out / f"report{_suffix(sh)}.html"), "failed": failed, "reasons": reasons,
+            "skipped": [r["name"] for r in rows if r.get("skipped")], "shard": sh}
 
 
 # -- single tasks the CLI runs: an analysis, then its files -----------------------------------

@@ -25,7 +25,7 @@ LAYERS = {
     "solvers": 11,
     "diagnose": 12,
     "presentation": 13,
-    "pipeline": 14, "demo": 14, "gait_validation": 14, "tools": 14,
+    "pipeline": 14, "demo": 14, "gait_validation": 14, "tools": 14, "subjects": 14,
     "presentation.cli": 15, "__main__": 15,
 }
 

@@ -173,10 +173,15 @@ def test_interrupted_batch_leaves_complete_trial_folders_or_none(gait2d, tmp_pat
         batch(trials, out=out, base_dir=tmp_path, jobs=1)
     assert sorted(p.name for p in out.iterdir()) == ["one"]   # no "two", no ".two.partial-*", no summary
     assert sorted(p.name for p in (out / "one").iterdir()) == [
-        "inverse_dynamics.sto", "kinematics.sto", "residuals.sto", "summary.json"]
-    # a rerun replaces the complete folder only once the new one is complete
+        "done.json", "inverse_dynamics.sto", "kinematics.sto", "residuals.sto", "summary.json"]
+    # a rerun finds "one" complete and runs only "two"
     before = (out / "one" / "summary.json").read_text()
-    rows = batch(trials[:1], out=out, base_dir=tmp_path, jobs=1)
-    assert rows[0]["status"] == "ok"
-    assert sorted(p.name for p in out.iterdir()) == ["one", "summary.csv"]
+    monkeypatch.setattr(pipeline_module, "write_trial", write)
+    rows = batch(trials, out=out, base_dir=tmp_path, jobs=1)
+    assert [(r["status"], r["skipped"]) for r in rows] == [("ok", True), ("ok", False)]
+    assert (out / "one" / "summary.json").read_text() == before
+    # --force replaces the complete folder only once the new one is complete
+    rows = batch(trials[:1], out=out, base_dir=tmp_path, jobs=1, force=True)
+    assert rows[0]["status"] == "ok" and not rows[0]["skipped"]
+    assert sorted(p.name for p in out.iterdir()) == ["one", "report.html", "summary.csv", "two"]
     assert (out / "one" / "summary.json").read_text() != before          # the new run's timings

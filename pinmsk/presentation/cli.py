@@ -496,9 +496,23 @@ def cmd_scale(args) -> int:
 
 def cmd_batch(args) -> int:
     from ..pipeline import batch_cli
-    summary = batch_cli(args.config, scheduler=args.scheduler, jobs=args.jobs)
+    if Path(args.config).is_dir():
+        from ..subjects import batch_folder
+        summary = batch_folder(args.config, scheduler=args.scheduler, jobs=args.jobs, force=args.force,
+                               shard=args.shard)
+        n = len(summary["rows"])
+        shard = f" (shard {summary['shard'][0]}/{summary['shard'][1]})" if summary["shard"] else ""
+        print(f"{n - len(summary['failed'])}/{n} subjects done{shard}; table {summary['table']}")
+        if summary["ignored"]:
+            print(f"  not subjects (no static .trc): {', '.join(summary['ignored'])}", file=sys.stderr)
+        return 1 if summary["failed"] else 0
+    summary = batch_cli(args.config, scheduler=args.scheduler, jobs=args.jobs, force=args.force,
+                        shard=args.shard)
     n = len(summary["rows"])
-    print(f"{n - len(summary['failed'])}/{n} trials done; summary table {summary['table']}")
+    shard = f" (shard {summary['shard'][0]}/{summary['shard'][1]})" if summary["shard"] else ""
+    print(f"{n - len(summary['failed'])}/{n} trials done{shard}, {len(summary['skipped'])} skipped "
+          f"(done before: same inputs and options); summary table {summary['table']}, "
+          f"report {summary['report']}")
     for name in summary["failed"]:
         reason = summary.get("reasons", {}).get(name, "failed").removeprefix("failed: ")
         print(f"  failed: {name}: {reason}", file=sys.stderr)
@@ -846,11 +860,21 @@ def build_parser() -> argparse.ArgumentParser:
                         "weights 1); writes <OUTPUT stem>_static_pose.mot")
     s.set_defaults(func=cmd_scale)
 
-    s = sub.add_parser("batch", help="run IK -> ID -> SO -> report over the trials of a config file")
-    s.add_argument("config", help="TOML config listing trials (see pinmsk.pipeline)")
+    s = sub.add_parser("batch", help="run IK -> ID -> SO -> report over the trials of a config file "
+                                           "(or of each subject of a folder)")
+    s.add_argument("config", metavar="CONFIG|FOLDER",
+                   help="TOML config listing trials (see pinmsk.pipeline), or a folder of subject folders "
+                        "(each with a static .trc and a batch.toml or OpenSim setups; see pinmsk.subjects)")
     s.add_argument("--jobs", type=int, default=None, help="parallel local workers (default: all cores)")
     s.add_argument("--scheduler", default=None,
                    help="Dask distributed scheduler ADDRESS (needs `pip install distributed`)")
+    s.add_argument("--force", action="store_true",
+                   help="run every trial again (default: skip trials whose folder is complete for the same "
+                        "inputs and options)")
+    s.add_argument("--shard", metavar="I/N", default=None,
+                   help="run only the trials (for a FOLDER: the subjects) with index %% N == I-1 (I from 1; "
+                        "e.g. a Slurm array's $SLURM_ARRAY_TASK_ID/N); writes summary-I-of-N.csv and "
+                        "report-I-of-N.html")
     s.set_defaults(func=cmd_batch)
     return p
 

@@ -5,6 +5,8 @@ optimizer) take an optional ``progress`` object with ``update(n)``; the CLI
 passes a :class:`Progress`.  It draws nothing unless stderr is a terminal, so
 piped or logged runs stay clean, and nothing for steps that end within
 ``delay`` seconds (2 s), so quick commands print only their results.
+:meth:`Progress.note` prints one permanent line (a result, e.g. a batch's
+finished trial) on the same stream, terminal or not, above the bar.
 """
 from __future__ import annotations
 
@@ -107,6 +109,18 @@ class Progress:
             parts.append(f"{_count(self.count)}{self.unit}, {_count(rate)}{self.unit}/s, "
                          f"{_duration(elapsed)}")
         return " ".join(parts)
+
+    def note(self, text: str) -> None:
+        """Print ``text`` as its own line on the stream (always, drawn bar or not), the bar redrawn below it."""
+        try:
+            if self.shown and self.enabled:
+                self.stream.write("\r" + " " * self._length + "\r")
+            self.stream.write(text + "\n")
+            self.stream.flush()
+        except (OSError, ValueError):   # a closed stream must not stop the computation
+            return
+        if self.shown and self.enabled:
+            self._draw(time.perf_counter())
 
     def _draw(self, now: float) -> None:
         text = self.line(now)
