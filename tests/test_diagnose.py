@@ -264,6 +264,7 @@ def test_synth_effect_strings():
         synth.effect_from_text("joint_damping:elbow_flexion:k=1")
 
 
+@pytest.mark.slow          # gait2d's other hidden effects are recovered in the default suite
 def test_gait2d_missing_riener_edrich_with_joint_moments():
     """A leg model without its passive moments, measured moments at every joint: Eq. 5.11 is found."""
     full = model("gait2d")

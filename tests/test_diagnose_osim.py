@@ -149,7 +149,8 @@ def test_synthetic_trials_are_refused_by_name_on_an_exact_model(gait):
 @pytest.mark.filterwarnings("ignore::pinmsk.errors.ResidualWarning")      # no GRF: the actuated rows only
 @pytest.mark.parametrize("family, target, name, value", [
     ("joint_damping", "knee_angle_r", "c", 2.0),          # acts on a coordinate that is a joint
-    ("segment_mass", "tibia_r", "delta", 0.15),            # its generalized forces reach the dependent joints
+    pytest.param("segment_mass", "tibia_r", "delta", 0.15,  # its generalized forces reach the dependent joints
+                 marks=pytest.mark.slow),
 ])
 def test_a_hidden_effect_is_recovered_on_the_exact_model(gait, family, target, name, value):
     """Measured moments from pinmsk's exact ID of the richer model without the GRF (white noise of 0.2 N m

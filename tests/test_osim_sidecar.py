@@ -331,6 +331,7 @@ def test_moco_2d_gait_full_import_round_trip(tmp_path):
     assert _same_so(direct, back, _moco_trial(path.parent, 20)) > 1e-3
 
 
+@pytest.mark.slow          # the legs' and Moco 2-D gait's sidecar actuators round trip by default
 def test_rajagopals_thirteen_actuators_round_trip(tmp_path):
     path = _shared(RAJAGOPAL)
     direct = _quiet(pinmsk.load_model, path)
