@@ -35,28 +35,6 @@ def test_padding_is_half_the_trial_by_point_reflection():
     assert pad == 100 and np.max(np.abs(y[pad:pad + 201] - x)) < 1e-5
 
 
-def test_same_numbers_as_opensims_storage():
-    """``Storage.pad(n // 2)`` then ``Storage.lowpassIIR(fc)`` in OpenSim itself gives the same samples."""
-    osim = pytest.importorskip("opensim")
-    rate, fc = 60.0, 6.0
-    t = np.arange(90) / rate
-    x = np.sin(2 * np.pi * 1.3 * t) + 0.1 * np.cos(2 * np.pi * 9 * t) + t ** 2
-    st = osim.Storage()
-    labels = osim.ArrayStr()
-    labels.append("time")
-    labels.append("x")
-    st.setColumnLabels(labels)
-    for k in range(t.size):
-        row = osim.Vector(1, float(x[k]))
-        st.append(float(t[k]), row)
-    st.pad(t.size // 2)
-    st.lowpassIIR(fc)
-    theirs = np.array([st.getStateVector(i).getData().get(0) for i in range(st.getSize())])
-    ours, pad = lowpass_opensim(x, rate=rate, cutoff=fc)
-    assert theirs.shape == ours.shape
-    assert np.max(np.abs(theirs - ours)) < 1e-10
-
-
 def test_opensim_method_differentiates_through_the_padded_spline():
     """On a parabola the symmetric filter changes only the offset, so the derivatives in the trial's core
     are the parabola's; a bad method is refused by name."""

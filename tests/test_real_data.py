@@ -90,7 +90,6 @@ def test_real_c3d_markers_analogs(real):
     assert np.all(env.values >= 0) and np.max(env["Biceps.EMG4"]) > 0
 
 
-@pytest.mark.slow          # the Rajagopal walk's diagnosis runs by default in test_diagnose_osim and the tutorial tests
 def test_rajagopal_case_study(real, tmp_path):
     if not (real / "opensim-moco-walk-emg").is_dir():
         pytest.skip("opensim-moco-walk-emg absent")

@@ -1,9 +1,9 @@
 """``pinmsk run SETUP.xml``: OpenSim's setup files run by pinmsk, their results in OpenSim's files.
 
 The InverseDynamicsTool setups of OpenSim's examples (Arm26, Gait10dof18musc, Gait2354) against OpenSim's
-reference outputs shipped beside them; OpenSim's coordinate filter (pad + IIR) against OpenSim's own
-``Storage`` (the opensim peer); bad setups refused in one line, exit status 2, nothing written.
-Needs ``../shared/data`` (and ``opensim`` for the filter check); skips cleanly without them.
+reference outputs shipped beside them; bad setups refused in one line, exit status 2, nothing written
+(the checks against OpenSim run by its peer are in ``test_tools_run_peer.py``).  Needs ``../shared/data``;
+skips cleanly without it.
 """
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import shutil
 import numpy as np
 import pytest
 
-from conftest import require_opensim, shared_folder
+from conftest import shared_folder
 
 from pinmsk.io.opensim_setup import SetupError
 from pinmsk.io.tables import read_sto_header, read_trial
@@ -110,47 +110,6 @@ def test_gait2354_id_setup_within_half_a_percent_of_opensims_reference(tmp_path)
     ref = read_trial(d / "OutputReference" / "ResultsInverseDynamics" / "inverse_dynamics.sto")
     errs = _rms_of_peak(read_trial(files[0]), ref)
     assert max(errs.values()) < 0.5, errs
-
-
-def test_the_columns_are_in_opensim_4s_tree_order(tmp_path):
-    # OpenSim 4 writes the coordinates in multibody-tree order (the joints a depth at a time from the
-    # ground: pelvis, hips and back, knees, ankles); the shipped reference, older, in the file's order
-    osim = require_opensim()
-    d = shared_folder(f"{MODELS}/Gait10dof18musc", "ID/walk_Setup_ID.xml")
-    work = tmp_path / "work" / "ID"       # its tool opens <model_file> from the working directory
-    work.mkdir(parents=True)
-    (work.parent / "subject01.osim").symlink_to(d / "subject01.osim")
-    import os
-    cwd = os.getcwd()
-    try:
-        os.chdir(work)
-        tool = osim.InverseDynamicsTool(str(d / "ID" / "walk_Setup_ID.xml"))
-        tool.setResultsDir(str(tmp_path / "opensim"))
-        assert tool.run()
-    finally:
-        os.chdir(cwd)
-    theirs = read_trial(tmp_path / "opensim" / "subject01_walk_ID.sto")
-    mine = read_trial(run_setup(d / "ID" / "walk_Setup_ID.xml", results_dir=tmp_path / "pinmsk")[0])
-    assert mine.names == theirs.names
-    assert mine.names[3:6] == ("hip_flexion_r_moment", "hip_flexion_l_moment", "lumbar_extension_moment")
-    assert max(_rms_of_peak(mine, theirs).values()) < 0.5
-
-
-def test_opensims_coordinate_filter_matches_opensims_storage():
-    # pad by half, resample at the smallest step (the file's times are rounded), lowpassIIR: OpenSim's own
-    osim = require_opensim()
-    from pinmsk.tools._common import opensim_filtered
-    d = shared_folder(f"{MODELS}/Gait10dof18musc", "IK/subject01_walk_IK.mot")
-    path = d / "IK" / "subject01_walk_IK.mot"
-    sto = osim.Storage(str(path))
-    sto.pad(sto.getSize() // 2)
-    sto.lowpassIIR(6.0)
-    t = np.array([sto.getStateVector(i).getTime() for i in range(sto.getSize())])
-    k = sto.getColumnLabels().getSize() - 1
-    X = np.array([[sto.getStateVector(i).getData().get(j) for j in range(k)] for i in range(sto.getSize())])
-    mine = opensim_filtered(read_trial(path, angular=()), 6.0, str(path))
-    assert np.array_equal(np.asarray(mine.time), t)
-    assert np.max(np.abs(mine.values - X)) < 1e-6 * np.max(np.abs(X))
 
 
 # -- the command and its refusals ----------------------------------------------------------------------
