@@ -356,6 +356,7 @@ def test_csu_reader_locates_the_foot_from_heel_and_mt5_markers(shared_data):
         read_csu_foot2d(shared_data / CSU, anchor="knee")
 
 
+@pytest.mark.slow          # the contact models' nesting is checked on synthetic data by default
 def test_real_data_hypervolumetric_is_not_worse_than_what_it_contains(shared_data):
     """CSU trial, the CLI's defaults: the hyper-volumetric fit ends below the volumetric one (contained
     exactly) and below the undamped point contact (contained in the small-penetration limit).  The

@@ -120,6 +120,7 @@ def test_effect_spec_values_are_held(forearm):
     assert spring.values["k"] == pytest.approx(2.0, rel=0.02)
 
 
+@pytest.mark.slow          # the removal itself runs by default in test_an_exact_alias_is_dropped_and_the_true_effect_kept
 def test_cli_suggests_and_does_the_removal(tmp_path, capsys):
     src = tmp_path / "pay.csv"
     assert main(["synth", "forearm", "--effect", "payload:hand:mass=0.5", "--seed", "1", "-o", str(src)]) == 0

@@ -343,6 +343,7 @@ def test_gait2d_whole_body_mass_is_a_scale_not_one_segment():
     assert hat.best.label == "segment_mass:hat" and hat.best.params["delta"] == pytest.approx(0.1, rel=0.05)
 
 
+@pytest.mark.slow          # the per-side refit of gait2d is also in the hat-mass golden and the loop tests
 def test_gait2d_segment_masses_per_side_both_reported():
     g = model("gait2d")
     trial = make_trial(g, ["segment_mass:thigh_r:delta=0.4", "segment_mass:thigh_l:delta=0.15"], duration=6.0,

@@ -1056,7 +1056,8 @@ def _shared(key):
     return p
 
 
-@pytest.mark.parametrize("key", sorted(SHARED))
+@pytest.mark.parametrize("key", [pytest.param(k, marks=pytest.mark.slow) if k == "subject_walk_scaled" else k
+                                 for k in sorted(SHARED)])     # Rajagopal's import is also run by test_diagnose_osim
 def test_shared_models_parse_build_and_report(key):
     path = _shared(key)
     model, report, _ = _shared_import(key)
