@@ -128,11 +128,13 @@ def render_report(run, *, title: str | None = None) -> str:
         if d.ranking:
             how = ("contact models scored by BIC with the noise floor as sigma; explained = 1 - chi2 after / before"
                    if d.comparison.mode == "contact" else
-                   "blocked cross-validation; explained = held-out share")
+                   "blocked cross-validation; explained = held-out share; \"yes (mean)\": significant by the "
+                   "held-out test of the residual's systematic mean")
             parts.append(f"<p>Ranked effects ({how}):</p>")
             parts.append(_table(["#", "effect", "explained", "rmse after", "significant", "parameters"],
                                 [[i + 1, s.label, f"{100 * s.explained_fraction:.1f}%", _g(s.rmse_after["total"]),
-                                  "yes" if s.significant else "no", s.describe_params()]
+                                  ("yes (mean)" if s.test.get("passes_by") == "mean" else "yes") if s.significant else "no",
+                                  s.describe_params()]
                                  for i, s in enumerate(d.ranking)], left={1, 5}))
         parts.append(_img(plots.plot_comparison(d)))
         if k == 0:
