@@ -148,15 +148,13 @@ def opensim_filtered(trial: Trial, cutoff: float | None, where: str) -> Trial:
     if dt <= 0:
         raise PinmskError(f"{where}: the time column does not increase; the coordinates cannot be filtered")
     if (t[-1] - t[0]) / (t.size - 1) - dt > _RESAMPLE_EPS:
-        from scipy.interpolate import make_interp_spline
-
         grid = []
         x = t[0]
         while x <= t[-1]:              # OpenSim's accumulated steps from the first time
             grid.append(x)
             x += dt
         grid = np.array(grid)
-        X = make_interp_spline(t, X, k=5)(grid)
+        X = _quintic_resample(t, X, grid)
         t = grid
     X = lowpass_iir(X, rate=1.0 / dt, cutoff=cutoff)
     return Trial.from_array(t, trial.names, X, meta=dict(trial.meta))
@@ -321,3 +319,16 @@ def loads_and_frames(node, loads_path, trial: Trial, start: float, end: float, p
     cut = trial if keep.size == trial.n_frames else Trial.from_array(
         np.asarray(trial.time)[keep], trial.names, np.asarray(trial.values)[keep], meta=dict(trial.meta))
     return cut, keep, rows, kw
+
+
+def _quintic_resample(t: np.ndarray, X: np.ndarray, grid: np.ndarray) -> np.ndarray:
+    """The quintic not-a-knot interpolating spline through ``X`` (N, k) at ``t``, evaluated at ``grid``:
+    dense maps for a short trial (:mod:`pinmsk.signals.bspline`, no SciPy import), SciPy's otherwise."""
+    from ..signals.bspline import design_matrix, not_a_knot, use_dense
+
+    if use_dense(t.size):
+        knots = not_a_knot(t, 5)
+        coef = np.linalg.solve(design_matrix(t, knots, 5), X)
+        return design_matrix(grid, knots, 5) @ coef
+    from scipy.interpolate import make_interp_spline
+    return make_interp_spline(t, X, k=5)(grid)
