@@ -21,7 +21,6 @@ model and a trial is :func:`pinmsk.grf.plates_from_external_loads`.  No
 """
 from __future__ import annotations
 
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -67,13 +66,10 @@ def _text(elem, tag: str) -> str | None:
 
 def read_external_loads(path) -> ExternalLoads:
     """Read an OpenSim ExternalLoads ``.xml`` (see the module docstring)."""
+    from .opensim_setup import parse_xml
+
     path = Path(path)
-    if not path.exists():
-        raise TrialError(f"ExternalLoads file not found: {path}")
-    try:
-        root = ET.parse(path).getroot()
-    except ET.ParseError as exc:
-        raise TrialError(f"{path}: not a readable XML file ({exc})") from None
+    root = parse_xml(path, "ExternalLoads file", TrialError)
     el = root if root.tag == "ExternalLoads" else root.find(".//ExternalLoads")
     if el is None:
         raise TrialError(f"{path}: no <ExternalLoads> element; is this an OpenSim ExternalLoads file?")

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from ..errors import PinmskError
 
-__all__ = ["SetupError", "SetupFile", "SetupNode", "read_setup"]
+__all__ = ["SetupError", "SetupFile", "SetupNode", "parse_xml", "read_setup"]
 
 
 class SetupError(PinmskError):
@@ -213,15 +213,23 @@ class SetupFile:
         return f"<SetupFile {self.tool} '{self.name}' from {self.path}>"
 
 
+def parse_xml(path, what: str, error=SetupError) -> ET.Element:
+    """The root element of the XML file ``path`` (an OpenSim ``what``: "setup file", "ExternalLoads
+    file"); ``error`` (a :class:`~pinmsk.errors.PinmskError` class) names a missing file with the path it
+    resolved to, and a file that is not XML with the parser's line and column."""
+    p = Path(path)
+    if not p.exists():
+        raise error(f"{what} '{path}' not found (resolved to {p.resolve()})")
+    try:
+        return ET.parse(p).getroot()
+    except ET.ParseError as exc:
+        raise error(f"{p}: not a valid XML file ({exc})") from None
+
+
 def read_setup(path) -> SetupFile:
     """Read an OpenSim setup file; refused by name when it is missing, not XML, or not a setup."""
     p = Path(path)
-    if not p.exists():
-        raise SetupError(f"setup file '{path}' not found (resolved to {p.resolve()})")
-    try:
-        root = ET.parse(p).getroot()
-    except ET.ParseError as exc:
-        raise SetupError(f"{p}: not a valid XML file ({exc})") from None
+    root = parse_xml(p, "setup file")
     if root.tag != "OpenSimDocument":
         raise SetupError(f"{p}: the root element is <{root.tag}>, not <OpenSimDocument>: not an OpenSim setup file")
     return SetupFile(p, root)
