@@ -222,3 +222,15 @@ def osim_numbers(el, path: str = "", out: dict | None = None) -> dict:
             out[p] = np.array(v)
         osim_numbers(c, p, out)
     return out
+
+
+def arm26_setup(tmp_path, name: str, edit):
+    """Arm26's setup ``name`` (shared data) written to ``tmp_path/setup.xml`` with its model and motion as
+    absolute paths and ``edit`` (text -> text) applied: a setup to change one property of."""
+    d = shared_folder("opensim-models/Arm26", name)
+    text = (d / name).read_text()
+    for f in ("arm26.osim", "arm26_InverseKinematics.mot"):
+        text = text.replace(f"> {f} <", f"> {d / f} <")
+    setup = tmp_path / "setup.xml"
+    setup.write_text(edit(text))
+    return setup

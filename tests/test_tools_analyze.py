@@ -13,7 +13,7 @@ import warnings
 import numpy as np
 import pytest
 
-from conftest import require_opensim, shared_folder
+from conftest import arm26_setup, require_opensim, shared_folder
 
 from pinmsk.io.tables import read_trial
 from pinmsk.presentation.cli import main
@@ -39,13 +39,7 @@ def _same_layout(mine, theirs):
 
 
 def _arm26_setup(tmp_path, edit):
-    d = shared_folder(f"{MODELS}/Arm26", "arm26_Setup_StaticOptimization.xml")
-    text = (d / "arm26_Setup_StaticOptimization.xml").read_text()
-    for f in ("arm26.osim", "arm26_InverseKinematics.mot"):
-        text = text.replace(f"> {f} <", f"> {d / f} <")
-    setup = tmp_path / "setup.xml"
-    setup.write_text(edit(text))
-    return setup
+    return arm26_setup(tmp_path, "arm26_Setup_StaticOptimization.xml", edit)
 
 
 @pytest.mark.parametrize("physiology", ["true", "false"])

@@ -12,7 +12,7 @@ import shutil
 import numpy as np
 import pytest
 
-from conftest import shared_folder
+from conftest import arm26_setup, shared_folder
 
 from pinmsk.io.opensim_setup import SetupError
 from pinmsk.io.tables import read_sto_header, read_trial
@@ -121,13 +121,7 @@ def test_cli_run_prints_the_files_written(tmp_path, capsys):
 
 
 def _arm26_setup(tmp_path, edit):
-    d = shared_folder(f"{MODELS}/Arm26", "arm26_Setup_InverseDynamics.xml")
-    text = (d / "arm26_Setup_InverseDynamics.xml").read_text()
-    for f in ("arm26.osim", "arm26_InverseKinematics.mot"):
-        text = text.replace(f"> {f} <", f"> {d / f} <")
-    setup = tmp_path / "setup.xml"
-    setup.write_text(edit(text))
-    return setup
+    return arm26_setup(tmp_path, "arm26_Setup_InverseDynamics.xml", edit)
 
 
 def _refused(tmp_path, capsys, setup, *words):

@@ -166,17 +166,24 @@ def test_cli_bad_input_exit_2(tmp_path, capsys):
     assert list(tmp_path.iterdir()) == []
 
 
-def test_coordinate_file_task_and_marker_movement(tmp_path):
-    case = _copy_case(tmp_path)
-    t = np.arange(0.9, 1.1001, 0.025)              # OpenSim's GCV spline needs 6 or more samples
+def coordinate_file_task(case) -> str:
+    """The Gait2354 Scale setup in ``case`` with lumbar_extension's coordinate task taken ``from_file``: a
+    coordinate file written beside it (6 deg at 1 s, 40 deg/s; OpenSim's GCV spline needs 6 or more
+    samples).  Returns the setup's text, not yet written back."""
+    t = np.arange(0.9, 1.1001, 0.025)
     (case / "static_coords.mot").write_text(
         f"Coordinates\nversion=1\nnRows={t.size}\nnColumns=2\ninDegrees=yes\nendheader\ntime\tlumbar_extension\n"
         + "".join(f"{x:.4f}\t{6 + 40 * (x - 1):.6f}\n" for x in t))
     text = (case / SETUP).read_text()
     task = text.index('<IKCoordinateTask name="lumbar_extension">')
     end = text.index("</IKCoordinateTask>", task)
-    text = (text[:task] + text[task:end].replace("manual_value", "from_file") + text[end:])
-    text = text.replace("<coordinate_file> </coordinate_file>", "<coordinate_file> static_coords.mot </coordinate_file>")
+    text = text[:task] + text[task:end].replace("manual_value", "from_file") + text[end:]
+    return text.replace("<coordinate_file> </coordinate_file>", "<coordinate_file> static_coords.mot </coordinate_file>")
+
+
+def test_coordinate_file_task_and_marker_movement(tmp_path):
+    case = _copy_case(tmp_path)
+    text = coordinate_file_task(case)
     text = text.replace("<max_marker_movement>      -1.00000000 </max_marker_movement>",
                         "<max_marker_movement> 0.2 </max_marker_movement>")   # mm, the file's unit
     (case / SETUP).write_text(text)

@@ -21,6 +21,7 @@ from pinmsk.io.tables import read_trial
 from pinmsk.opensim import scaling as sc
 from pinmsk.opensim.skeleton import OsimKinematics
 from pinmsk.tools import scale as st
+from test_tools_scale import coordinate_file_task
 
 REL = "opensim-models/Gait2354Pipeline"
 SETUP = "subject01_Setup_Scale.xml"
@@ -103,15 +104,7 @@ def test_coordinate_file_task_as_opensim(tmp_path):
     osim = require_opensim()
     for f in FILES:
         shutil.copy(d / f, tmp_path / f)
-    t = np.arange(0.9, 1.1001, 0.025)
-    (tmp_path / "static_coords.mot").write_text(
-        f"Coordinates\nversion=1\nnRows={t.size}\nnColumns=2\ninDegrees=yes\nendheader\ntime\tlumbar_extension\n"
-        + "".join(f"{x:.4f}\t{6 + 40 * (x - 1):.6f}\n" for x in t))
-    text = (tmp_path / SETUP).read_text()
-    i = text.index('<IKCoordinateTask name="lumbar_extension">')
-    j = text.index("</IKCoordinateTask>", i)
-    text = text[:i] + text[i:j].replace("manual_value", "from_file") + text[j:]
-    text = text.replace("<coordinate_file> </coordinate_file>", "<coordinate_file> static_coords.mot </coordinate_file>")
+    text = coordinate_file_task(tmp_path)
     (tmp_path / SETUP).write_text(text)
     assert osim.ScaleTool(str(tmp_path / SETUP)).run()
     peer = _pose(tmp_path / "subject01_static_output.mot")
