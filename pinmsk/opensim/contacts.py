@@ -9,13 +9,14 @@ Geometry.  The ``ContactSphere`` becomes a Pinocchio frame (``OP_FRAME``) on its
 after the sphere (``heel_r``; ``heel_r_sphere`` where a body, joint or marker has that name or a
 second force of the same type uses the sphere), placed where OpenSim places it (the offset frames of its ``socket_frame``, then its
 ``location`` and ``orientation``); the component is fixed to that frame with its centre at the
-origin.  The ``ContactHalfSpace`` must be fixed to the ground: its outward normal is ``-x`` of its
-frame and its surface passes through its origin.  The frames are added to the skeleton's
+origin.  The ``ContactHalfSpace`` must be fixed in the world (to the ground, or to a body welded to it,
+as Walker's Platform): its outward normal is ``-x`` of its frame and its surface passes through its
+origin.  The frames are added to the skeleton's
 Pinocchio model (the hook's one side effect; the written URDF holds the skeleton only).
 
 The report gets one entry per component (what became what, the sphere, its body and the half
 space) and names what is not imported: a force on a geometry pinmsk has no law for
-(``ContactMesh``, ``ContactEllipsoid``, ...), a half space on a moving body, a sphere on the
+(``ContactMesh``, ``ContactEllipsoid``, ...), a half space on a body that moves, a sphere on the
 ground, a HuntCrossleyForce whose sphere and half space have different stiffness (Simbody then
 moves the contact point off the midway plane), an ``ElasticFoundationForce`` (a mesh contact).
 Properties OpenSim does not read (the Moco model's ``derivative_smoothing``, an older name) get a
@@ -209,10 +210,17 @@ class _Frames:
 
     def half_space(self, g: ContactGeometry):
         body, chain = self.doc.frame_body(g.frame)
-        if body is not self.doc.ground:
-            raise _NotImported(f"its half space '{g.name}' is fixed to body '{body.name}'; pinmsk's half spaces are "
-                               "fixed to the ground")
         T = _chain(chain) @ _offset(g.location, g.orientation)
+        if body is not self.doc.ground:
+            # a body welded to the ground (Walker's Platform): a fixed place in the world
+            pm = self.pm
+            if not pm.existFrame(body.name, pin.FrameType.BODY):
+                raise ModelError(f"{self.doc.source}: body '{body.name}' has no frame in the skeleton")
+            bf = pm.frames[pm.getFrameId(body.name, pin.FrameType.BODY)]
+            if bf.parentJoint != 0:
+                raise _NotImported(f"its half space '{g.name}' is fixed to body '{body.name}', which moves; "
+                                   "pinmsk's half spaces are fixed in the world")
+            T = bf.placement.homogeneous @ T
         return tuple(-T[:3, 0]), tuple(T[:3, 3])
 
     def component(self, cls, force: ContactForce, sphere: ContactGeometry, half: ContactGeometry, plane, values):
