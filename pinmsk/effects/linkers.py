@@ -59,7 +59,7 @@ def frame_kinematics(model, frame: str, motion: Motion, data=None):
             R[k], p[k] = pl.rotation, pl.translation
             mv = pin.getFrameVelocity(pm, pd, fid, lwa)
             v[k], w[k] = mv.linear, mv.angular
-            J[k] = pin.computeFrameJacobian(pm, pd, motion.q[k], fid, lwa)
+            J[k] = np.reshape(pin.computeFrameJacobian(pm, pd, motion.q[k], fid, lwa), (6, pm.nv))
         return R, p, v, w, J
 
     return motion_cached(data, model, ("frame_kinematics", fid), motion, compute)
@@ -214,10 +214,12 @@ class LinearBushing(FramePairForce):
     family = "bushing"
     linear = True
     parameters = tuple(
-        Parameter(f"{what}_{kind}_{a}", 0.0, 0.0, 1e9, unit, f"{kind} {'about' if what == 'rotational' else 'along'} "
+        Parameter(f"{what}_{kind}_{a}", default, 0.0, 1e9, unit, f"{kind} {'about' if what == 'rotational' else 'along'} "
                   f"frame 1's {a} axis")
-        for what, kind, unit in (("rotational", "stiffness", "N m/rad"), ("translational", "stiffness", "N/m"),
-                                 ("rotational", "damping", "N m s/rad"), ("translational", "damping", "N s/m"))
+        for what, kind, unit, default in (("translational", "stiffness", "N/m", 1e3),
+                                          ("rotational", "stiffness", "N m/rad", 10.0),
+                                          ("rotational", "damping", "N m s/rad", 0.1),
+                                          ("translational", "damping", "N s/m", 10.0))
         for a in _AXES)
     zero_params = {p.name: 0.0 for p in parameters}
 

@@ -533,7 +533,8 @@ def _component_frames(entries: Mapping[str, list], skel: Skeleton, pm: pin.Model
     skeleton's URDF has not (the contact spheres' frames the contact hook added to ``pm``)."""
     have = set(skel.links) | set(skel.markers) | {j.name for j in skel.joints}
     names = [e["frame"] for e in entries.get("contacts", ())]
-    names += [e["target"] for e in entries.get("effects", ()) if e.get("target") and pm.existFrame(e["target"])]
+    names += [e[key] for e in entries.get("effects", ()) for key in ("target", "frame2")
+              if isinstance(e.get(key), str) and pm.existFrame(e[key])]
     out = {}
     for name in dict.fromkeys(names):
         if name in have:
