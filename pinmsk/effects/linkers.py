@@ -295,3 +295,95 @@ def _vec3(x, what: str, owner: str) -> tuple[float, float, float]:
     if len(out) != 3 or not all(math.isfinite(v) for v in out):
         raise ModelError(f"{owner}: {what} must be 3 finite numbers, got {x!r}")
     return out
+
+
+@register
+class HuntCrossleyPair(FramePairForce):
+    """Simbody's ``HuntCrossleyForce`` (OpenSim's) between a ContactSphere centred at frame ``target``'s
+    origin and, on another body (frame ``frame2``), a ContactHalfSpace (``other="half_space"``: the solid
+    ``x > 0`` of ``frame2``, outward normal ``-x``) or a ContactSphere centred at its origin
+    (``other="sphere"``, radius ``other_radius``), both of the same material (Simbody's
+    ``HuntCrossleyForceImpl::calcForce`` with its HalfSpaceSphere / SphereSphere contact geometry):
+
+        f_n = max(0, 4/3 k sqrt(R k) x^(3/2) (1 + 3/2 c v_n)),   k = E^(2/3) / 2,
+
+    ``x`` the overlap, ``R`` the sphere's radius (``R_1 R_2 / (R_1 + R_2)`` for two spheres), ``v_n``
+    the compression rate of the sphere's point against the other body's point at the contact point
+    midway through the overlap, and Simbody's friction (M. Hollars) on their relative slip there.  The
+    sphere gets the force, the other body its opposite at the same point.  Use it where the half space
+    moves or the other geometry is a sphere; a half space fixed in the world is
+    :class:`pinmsk.contact.HuntCrossleyForce`, the same law.
+    """
+
+    family = "hunt_crossley_pair"
+    parameters = (
+        Parameter("radius", 0.05, 1e-6, 10.0, "m", "radius of the sphere on frame 1", vary=False),
+        Parameter("stiffness", 1e6, 0.0, 1e12, "N/m^2", "plane-strain modulus E of both materials"),
+        Parameter("dissipation", 0.5, 0.0, 1e3, "s/m", "Hunt-Crossley dissipation c"),
+        Parameter("static_friction", 0.0, 0.0, 10.0, "", "coefficient of static friction u_s"),
+        Parameter("dynamic_friction", 0.0, 0.0, 10.0, "", "coefficient of dynamic friction u_d"),
+        Parameter("viscous_friction", 0.0, 0.0, 1e3, "s/m", "coefficient of viscous friction u_v"),
+        Parameter("transition_velocity", 0.01, 1e-9, 100.0, "m/s", "slip speed at which static friction peaks"),
+    )
+    zero_params = {"stiffness": 0.0}
+
+    def __init__(self, target: str, *, frame2: str | None = None, other: str = "half_space",
+                 other_radius: float = 0.0, **values: float):
+        if other not in ("half_space", "sphere"):
+            raise ModelError(f"{self.family}:{target}: other must be 'half_space' or 'sphere', got {other!r}")
+        if other == "sphere" and not (math.isfinite(other_radius) and other_radius > 0):
+            raise ModelError(f"{self.family}:{target}: a sphere needs other_radius > 0 (m), got {other_radius!r}")
+        self.other = other
+        self.other_radius = float(other_radius) if other == "sphere" else 0.0
+        super().__init__(target, frame2=frame2, **values)
+
+    def wrenches(self, k1, k2, p):
+        R1, c1, v1, w1 = k1
+        R2, p2, v2, w2 = k2
+        xp = backend_of(c1[0], p2[0])
+        R = p["radius"]
+        if self.other == "half_space":
+            n = [-R2[0][0], -R2[1][0], -R2[2][0]]                 # -x of the half space's frame
+            depth = R - sum((a - b) * m for a, b, m in zip(c1, p2, n))
+            radius = R
+            point = [a - (R - 0.5 * depth) * m for a, m in zip(c1, n)]
+        else:
+            d = _sub(c1, p2)
+            dist = xp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+            n = [x / dist for x in d]                              # from sphere 2 towards sphere 1
+            depth = R + self.other_radius - dist
+            radius = R * self.other_radius / (R + self.other_radius)
+            point = [a + (self.other_radius - 0.5 * depth) * m for a, m in zip(p2, n)]
+        r1, r2 = _sub(point, c1), _sub(point, p2)
+        vel = _sub(_add(v1, _cross(w1, r1)), _add(v2, _cross(w2, r2)))      # sphere's point relative to the other's
+        vn = vel[0] * n[0] + vel[1] * n[1] + vel[2] * n[2]
+        x = xp.maximum(depth, 0.0)
+        k = 0.5 * xp.power(p["stiffness"], 2.0 / 3.0)
+        fh = (4.0 / 3.0) * k * x * xp.sqrt(radius * k * x)
+        fn = xp.maximum(fh * (1.0 - 1.5 * p["dissipation"] * vn), 0.0)
+        slip = [a - vn * m for a, m in zip(vel, n)]
+        v2s = slip[0] * slip[0] + slip[1] * slip[1] + slip[2] * slip[2]
+        vt = p["transition_velocity"]
+        below = v2s < vt * vt
+        vs = xp.sqrt(xp.where(below, vt * vt, v2s))                # only the branch v >= v_t divides by v
+        g = xp.where(below, 1.0 / vt, 1.0 / vs)
+        us, ud, uv = p["static_friction"], p["dynamic_friction"], p["viscous_friction"]
+        mu = g * (ud + 2.0 * (us - ud) / (1.0 + v2s / (vt * vt))) + uv
+        f1 = [fn * m - fn * mu * s for m, s in zip(n, slip)]
+        return (f1, _cross(r1, f1)), (_neg(f1), _cross(r2, _neg(f1)))
+
+    def param_jacobian(self, model, motion: Motion, params=None, cache=None) -> np.ndarray:
+        """``dQ/dtheta`` ``(N, nv, 7)`` by central differences of the law (the kinematics cached)."""
+        kin = cache if cache is not None else self.prepare(model, motion)
+        p = self._p(params)
+        cols = []
+        for name, decl in self.params.items():
+            h = 1e-6 * max(abs(p[name]), 1e-3)
+            lo, hi = max(p[name] - h, decl.min), min(p[name] + h, decl.max)
+            fp = self.generalized_force(model, motion, {**p, name: hi}, kin)
+            fm = self.generalized_force(model, motion, {**p, name: lo}, kin)
+            cols.append((fp - fm) / (hi - lo))
+        return np.stack(cols, axis=-1)
+
+    def _options(self) -> tuple:
+        return (self.frame2, self.other, self.other_radius)

@@ -4,7 +4,7 @@ Shared by the test and by ``make_references.py`` (which runs OpenSim on the same
 ``references.npz`` beside this file).  The states are sinusoids in OpenSim's coordinates reaching
 60 % of each coordinate's range beyond its middle, so the CoordinateLimitForces press and the
 contact spheres sink into their half spaces; a locked coordinate stays at its default value
-(OpenSim does not change it) with zero speed, a clamped one is clamped to its range (as OpenSim clamps it); a FreeJoint's rotations get zero speed (OpenSim's
+(OpenSim does not change it) with zero speed, a free ball is moved onto a sphere it touches,, a clamped one is clamped to its range (as OpenSim clamps it); a FreeJoint's rotations get zero speed (OpenSim's
 speeds there are angular velocities, pinmsk's the angles' rates, which differ elsewhere).
 """
 from __future__ import annotations
@@ -23,8 +23,12 @@ FORCES = {
     "Walker": ("CoordinateLimitForce", "HuntCrossleyForce"),
     "Jumper": ("CoordinateLimitForce", "HuntCrossleyForce"),
     "BouncingBlock": ("CoordinateLimitForce", "BushingForce", "PointToPointSpring", "HuntCrossleyForce"),
-    "ToyLanding": ("CoordinateLimitForce", "BushingForce"),
+    "ToyLanding": ("CoordinateLimitForce", "BushingForce", "HuntCrossleyForce"),
+    "SoccerKick": ("CoordinateLimitForce", "HuntCrossleyForce"),
 }
+#: models whose free ball (its FreeJoint's translations) is moved onto a contact sphere at every frame, so
+#: that the sphere-sphere contacts press: model -> the ball's translation coordinates
+BALLS = {"SoccerKick": ("ball_tx", "ball_ty", "ball_tz")}
 #: models whose whole inverse dynamics (every force on) is compared with OpenSim's
 ID_MODELS = ("Walker",)
 N_FRAMES = 24
@@ -76,4 +80,43 @@ def states(path: Path, n: int = N_FRAMES, seed: int = 0):
         A[:, j] = -amp * w * w * np.sin(w * t + ph)
         if clamped:
             Q[:, j] = np.clip(Q[:, j], lo, hi)
-    return [r[0] for r in table], t, Q, V, A
+    names = [r[0] for r in table]
+    if path.stem in BALLS:
+        _onto_ball(path, names, Q, V, BALLS[path.stem], rng)
+    return names, t, Q, V, A
+
+
+def _onto_ball(path, names, Q, V, ball, rng):
+    """Move the ball (its translation coordinates ``ball``) so that at frame k it overlaps by 1-8 mm,
+    in a random direction, the k-th (cyclically) sphere that has a sphere-sphere contact with it, and
+    give it a random velocity (pinmsk's import finds the spheres and their frames)."""
+    import warnings
+
+    import pinocchio as pin
+
+    from pinmsk.model import import_osim
+    from pinmsk.opensim.contacts import contact_hook
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model, _ = import_osim(path, hooks=(contact_hook,))
+    pairs = [c for c in model.components if c.family == "hunt_crossley_pair" and c.other == "sphere"]
+    cmap = model.meta["coordinate_map"]
+    order = list(cmap.osim_coordinates) if cmap is not None else list(model.coordinates)
+    cols = [names.index(c) for c in order]
+    tcols = [names.index(c) for c in ball]
+    pm, pd = model.pin, model.pin.createData()
+
+    def centre(q_osim, frame):
+        q = cmap.expand(q_osim[None, cols], couplers=False)[0][0] if cmap is not None else q_osim[cols]
+        pin.framesForwardKinematics(pm, pd, q)
+        return pd.oMf[pm.getFrameId(frame)].translation.copy()
+
+    for k in range(Q.shape[0]):
+        c = pairs[k % len(pairs)]
+        base = centre(Q[k], c.frame2)
+        B = np.column_stack([centre(Q[k] + np.eye(Q.shape[1])[j] * 1.0, c.frame2) - base for j in tcols])
+        d = rng.normal(size=3)
+        d /= np.linalg.norm(d)
+        goal = centre(Q[k], c.target) + d * (c.values["radius"] + c.other_radius - rng.uniform(0.001, 0.008))
+        Q[k, tcols] += np.linalg.solve(B, goal - base)
+        V[k, tcols] = rng.normal(0.0, 0.3, 3)

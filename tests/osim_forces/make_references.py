@@ -69,6 +69,7 @@ def main() -> None:
         for name, path in paths.items():
             names, t, Q, V, A = cases.states(path)
             out[f"{name}/__names__"] = np.array(names)
+            out[f"{name}/__free__"] = np.array([r[3] for r in cases.coordinate_table(path)])
             for key, x in (("t", t), ("q", Q), ("v", V), ("a", A)):
                 out[f"{name}/__{key}__"] = x
             probe = osim.Model(str(path))
