@@ -54,3 +54,26 @@ def test_pair_forces_on_the_optimal_control_skeleton(imported):
                  for s in (1, -1)]
             cols.append((f[0] - f[1]) / (2 * h))
         np.testing.assert_allclose(jac, np.stack(cols, axis=1), rtol=1e-5, atol=1e-5 * max(1.0, np.abs(val).max()))
+
+
+def test_expression_force_at_one_state_on_casadi():
+    """OpenSim's ExpressionBasedCoordinateForce as CasADi at one state: the numpy value, and CasADi's
+    derivatives equal to the exact (forward-mode) state derivatives of the batched law."""
+    ca = require_casadi()
+    from pinmsk import load_model
+    from pinmsk.effects import CoordinateExpressionForce
+    model = load_model("forearm")
+    c = model.coordinates[-1]
+    eff = CoordinateExpressionForce(c, expression=cases.DERIVED["WalkerExpression"][1].split("<expression>")[1]
+                                    .split("</expression>")[0], scale=1.5)
+    qs, vs = ca.SX.sym("q", model.nv), ca.SX.sym("v", model.nv)
+    Q = eff.generalized_force_at(model, qs, vs)
+    F = ca.Function("Q", [qs, vs], [Q, ca.jacobian(Q, qs), ca.jacobian(Q, vs)])
+    q, v = np.full(model.nv, 0.4), np.full(model.nv, -0.7)
+    mo = Motion(np.zeros(1), q[None], v[None], np.zeros((1, model.nv)))
+    val, dq, dv = (np.array(ca.DM(x), dtype=float) for x in F(q, v))
+    i = model.coordinate_index(c)
+    np.testing.assert_allclose(val[:, 0], eff.generalized_force(model, mo)[0], rtol=1e-12)
+    a, b = eff.state_derivatives(model, mo)
+    np.testing.assert_allclose(dq[i, i], a[0, i, i], rtol=1e-12)
+    np.testing.assert_allclose(dv[i, i], b[0, i, i], rtol=1e-12)

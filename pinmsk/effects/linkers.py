@@ -169,6 +169,26 @@ class FramePairForce(Component):
             out += np.einsum("nkv,nk->nv", J[:, :3, :], F) + np.einsum("nkv,nk->nv", J[:, 3:, :], M)
         return out
 
+    def param_jacobian(self, model, motion: Motion, params=None, cache=None) -> np.ndarray:
+        """``dQ/dtheta`` ``(N, nv, n_params)``, exact: :meth:`wrenches` on forward-mode
+        :class:`~pinmsk.contact.dual.Dual` parameters, mapped by the frames' Jacobians."""
+        from ..contact.dual import Dual
+        kin = cache if cache is not None else self.prepare(model, motion)
+        p = self._p(params)
+        names = list(self.params)
+        seeds = Dual.variables([p[n] for n in names])
+        (f1, m1), (f2, m2) = self.wrenches(self._split(kin[0]), self._split(kin[1]),
+                                           {n: seeds[i] for i, n in enumerate(names)})
+        n, P = motion.n_frames, len(names)
+
+        def der(vec):
+            return np.stack([np.broadcast_to(c.der, (n, P)) if isinstance(c, Dual) else np.zeros((n, P))
+                             for c in vec], axis=1)
+        out = np.zeros((n, model.nv, P))
+        for (_, _, _, _, J), F, M in ((kin[0], f1, m1), (kin[1], f2, m2)):
+            out += np.einsum("nkv,nkp->nvp", J[:, :3, :], der(F)) + np.einsum("nkv,nkp->nvp", J[:, 3:, :], der(M))
+        return out
+
     def generalized_force_on(self, skeleton, q, v):
         """The generalized force at one state on the optimal-control engine's symbolic skeleton
         (:class:`pinmsk.solvers.ocp.skeleton.SymbolicSkeleton`): :meth:`wrenches` on its frame
@@ -371,19 +391,6 @@ class HuntCrossleyPair(FramePairForce):
         mu = g * (ud + 2.0 * (us - ud) / (1.0 + v2s / (vt * vt))) + uv
         f1 = [fn * m - fn * mu * s for m, s in zip(n, slip)]
         return (f1, _cross(r1, f1)), (_neg(f1), _cross(r2, _neg(f1)))
-
-    def param_jacobian(self, model, motion: Motion, params=None, cache=None) -> np.ndarray:
-        """``dQ/dtheta`` ``(N, nv, 7)`` by central differences of the law (the kinematics cached)."""
-        kin = cache if cache is not None else self.prepare(model, motion)
-        p = self._p(params)
-        cols = []
-        for name, decl in self.params.items():
-            h = 1e-6 * max(abs(p[name]), 1e-3)
-            lo, hi = max(p[name] - h, decl.min), min(p[name] + h, decl.max)
-            fp = self.generalized_force(model, motion, {**p, name: hi}, kin)
-            fm = self.generalized_force(model, motion, {**p, name: lo}, kin)
-            cols.append((fp - fm) / (hi - lo))
-        return np.stack(cols, axis=-1)
 
     def _options(self) -> tuple:
         return (self.frame2, self.other, self.other_radius)

@@ -9,6 +9,7 @@ BushingForce                 :class:`~pinmsk.effects.LinearBushing` between its 
 PointToPointSpring           :class:`~pinmsk.effects.PointToPointSpring`                 exact
 SpringGeneralizedForce       :class:`~pinmsk.effects.JointSpring` and                    exact
                              :class:`~pinmsk.effects.JointDamping`
+ExpressionBasedCoordinateForce :class:`~pinmsk.effects.CoordinateExpressionForce`          exact
 ===========================  ==========================================================  ==========
 
 CoordinateLimitForce (``CoordinateLimitForce.cpp``, ``calcLimitForce``): beyond ``upper_limit`` a
@@ -37,7 +38,8 @@ import math
 import numpy as np
 import pinocchio as pin
 
-from ..effects import EndStopLower, EndStopUpper, JointDamping, JointSpring, LinearBushing, PointToPointSpring
+from ..effects import (CoordinateExpressionForce, EndStopLower, EndStopUpper, JointDamping, JointSpring,
+                       LinearBushing, PointToPointSpring)
 from ..errors import ModelError
 from ..io.osim import OsimDocument, OtherElement
 from .hooks import HookResult
@@ -47,7 +49,8 @@ from .skeleton import Skeleton, _chain
 __all__ = ["force_hook", "IMPORTED_FORCES"]
 
 #: The OpenSim force types :func:`force_hook` makes into components.
-IMPORTED_FORCES = ("CoordinateLimitForce", "BushingForce", "PointToPointSpring", "SpringGeneralizedForce")
+IMPORTED_FORCES = ("CoordinateLimitForce", "BushingForce", "PointToPointSpring", "SpringGeneralizedForce",
+                   "ExpressionBasedCoordinateForce")
 
 
 def force_hook(doc: OsimDocument, skeleton: Skeleton) -> HookResult:
@@ -219,7 +222,18 @@ def _generalized_spring(force, props, skeleton, frames):
     return made, ([] if made else ["stiffness and viscosity 0: no force"])
 
 
-_MAKERS = {"CoordinateLimitForce": _coordinate_limit, "BushingForce": _bushing,
+def _expression(force, props, skeleton, frames):
+    coord = str(props.get("coordinate", "") or "").rsplit("/", 1)[-1]
+    joint = _coordinate(force, coord, skeleton)
+    if joint is None:
+        return [], [f"left out: its coordinate '{coord}' is welded (locked='weld'), so it cannot move"]
+    text = props.get("expression", "0.0")
+    text = "0.0" if text in ("", None) else str(text) if not isinstance(text, float) else repr(text)
+    comp = CoordinateExpressionForce(joint, expression=text)
+    return [(comp, f"{comp.label}: Q = {text} (q, qdot in SI); OpenSim's expression exactly")], []
+
+
+_MAKERS = {"ExpressionBasedCoordinateForce": _expression, "CoordinateLimitForce": _coordinate_limit, "BushingForce": _bushing,
            "PointToPointSpring": _point_spring, "SpringGeneralizedForce": _generalized_spring}
 
 

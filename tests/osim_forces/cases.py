@@ -25,7 +25,18 @@ FORCES = {
     "BouncingBlock": ("CoordinateLimitForce", "BushingForce", "PointToPointSpring", "HuntCrossleyForce"),
     "ToyLanding": ("CoordinateLimitForce", "BushingForce", "HuntCrossleyForce"),
     "SoccerKick": ("CoordinateLimitForce", "HuntCrossleyForce"),
+    "WalkerExpression": ("ExpressionBasedCoordinateForce",),
 }
+#: models made here from a zoo model: name -> (zoo model, forces added to its ForceSet)
+DERIVED = {"WalkerExpression": ("Walker", """
+				<ExpressionBasedCoordinateForce name="knee_expression">
+					<coordinate>LKnee_rz</coordinate>
+					<expression>-2*q - 0.5*qdot + 0.3*sin(q)^2 + step(q + 1)*exp(-qdot^2) - max(q, 0.2)*atan(qdot)</expression>
+				</ExpressionBasedCoordinateForce>
+				<ExpressionBasedCoordinateForce name="pelvis_expression">
+					<coordinate>Pelvis_ty</coordinate>
+					<expression>-100*(q - 0.5)*abs(q - 0.5) - 3*qdot + square(tanh(q))/recip(2) - cube(cos(q))</expression>
+				</ExpressionBasedCoordinateForce>""")}
 #: models whose free ball (its FreeJoint's translations) is moved onto a contact sphere at every frame, so
 #: that the sphere-sphere contacts press: model -> the ball's translation coordinates
 BALLS = {"SoccerKick": ("ball_tx", "ball_ty", "ball_tz")}
@@ -41,7 +52,13 @@ def extract(archive: Path, names, out: Path) -> dict[str, Path]:
         for name in names:
             target = out / f"{name}.osim"
             if not target.is_file():
-                target.write_bytes(tar.extractfile(f"{name}.osim").read())
+                source, added = DERIVED.get(name, (name, None))
+                data = tar.extractfile(f"{source}.osim").read()
+                if added is not None:      # the forces go first in the ForceSet's objects
+                    text = data.decode("utf-8")
+                    at = text.index("<objects>", text.index("<ForceSet")) + len("<objects>")
+                    data = (text[:at] + added + text[at:]).encode("utf-8")
+                target.write_bytes(data)
             paths[name] = target
     return paths
 
