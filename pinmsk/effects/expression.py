@@ -122,7 +122,9 @@ class CoordinateExpressionForce(JointEffect):
 
     def _expr(self, q, v):
         out = evaluate(self._tree, q, v)
-        return out + 0.0 * q if np.ndim(out) == 0 and not backend_of(q).symbolic else out
+        if backend_of(q, v).symbolic or backend_of(out).symbolic:
+            return out + 0.0 * q
+        return out + 0.0 * q if np.ndim(out) == 0 else out
 
     def _force(self, q, v, p):
         return p["scale"] * self._expr(q, v)

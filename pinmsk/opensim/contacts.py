@@ -14,11 +14,17 @@ as Walker's Platform): its outward normal is ``-x`` of its frame and its surface
 origin.  The frames are added to the skeleton's
 Pinocchio model (the hook's one side effect; the written URDF holds the skeleton only).
 
+A HuntCrossleyForce's sphere against a half space on a body that moves (ToyLanding's platform), and
+its spheres against spheres of other bodies (SoccerKick's ball against the foot), become
+:class:`~pinmsk.effects.HuntCrossleyPair` forces between the two geometries' frames (each geometry a
+frame of its own, placed and turned as OpenSim places it); every pair of geometries on different
+bodies is one, as Simbody's contact tracker pairs them.
+
 The report gets one entry per component (what became what, the sphere, its body and the half
 space) and names what is not imported: a force on a geometry pinmsk has no law for
-(``ContactMesh``, ``ContactEllipsoid``, ...), a half space on a body that moves, a sphere on the
-ground, a HuntCrossleyForce whose sphere and half space have different stiffness (Simbody then
-moves the contact point off the midway plane), an ``ElasticFoundationForce`` (a mesh contact).
+(``ContactMesh``, ``ContactEllipsoid``, ...), a HuntCrossleyForce whose surfaces have different
+stiffness (Simbody then moves the contact point off the midway plane), an ``ElasticFoundationForce``
+(a mesh contact).
 Properties OpenSim does not read (the Moco model's ``derivative_smoothing``, an older name) get a
 note, and are ignored as OpenSim ignores them.
 """
