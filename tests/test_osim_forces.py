@@ -194,6 +194,19 @@ def test_left_out_forces_are_named(imported, zoo):
     assert "and 19 more" in str(w.message)
 
 
+def test_elastic_foundation_between_spheres_is_no_force(imported):
+    """An ElasticFoundationForce between Walker's foot spheres and its Platform: OpenSim applies no force
+    at states where the same spheres' HuntCrossleyForces press (Simbody's elastic foundation acts on
+    ContactMesh faces only); pinmsk makes no component and says so."""
+    np.testing.assert_array_equal(REF["WalkerElasticFoundation/__q__"], REF["Walker/__q__"])
+    assert np.abs(REF["Walker/LFootForce"]).max() > 1e3 and np.abs(REF["Walker/RFootForce"]).max() > 1e3
+    assert np.abs(REF["WalkerElasticFoundation/foot_foundation"]).max() == 0.0
+    model, report = imported["WalkerElasticFoundation"]
+    (entry,) = report.find('name="foot_foundation">')
+    assert entry.status == "note" and "ContactMesh" in entry.became
+    assert len(model.components) == len(imported["Walker"][0].components)
+
+
 def test_bushing_parameter_jacobian_is_exact(imported):
     """Q is linear in the bushing's 12 parameters: its Jacobian reproduces Q."""
     model, _ = imported["ToyLanding"]

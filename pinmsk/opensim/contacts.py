@@ -24,7 +24,8 @@ The report gets one entry per component (what became what, the sphere, its body 
 space) and names what is not imported: a force on a geometry pinmsk has no law for
 (``ContactMesh``, ``ContactEllipsoid``, ...), a HuntCrossleyForce whose surfaces have different
 stiffness (Simbody then moves the contact point off the midway plane), an ``ElasticFoundationForce``
-(a mesh contact).
+with a mesh (an ElasticFoundationForce between spheres and half spaces gets a note: Simbody applies
+no force there).
 Properties OpenSim does not read (the Moco model's ``derivative_smoothing``, an older name) get a
 note, and are ignored as OpenSim ignores them.
 """
@@ -65,6 +66,13 @@ def contact_hook(doc: OsimDocument, skeleton: Skeleton) -> HookResult:
     for force in doc.contact_forces:
         handled.append(force.where)
         if force.type not in _LAWS:
+            kinds = {geometry[n].type if n in geometry else "?" for n in force.geometry}
+            if force.type == "ElasticFoundationForce" and kinds <= {"ContactSphere", "ContactHalfSpace"}:
+                # Simbody's ElasticFoundationForce acts on the faces of a ContactMesh only
+                entries.append(ReportEntry(element=force.where, status=NOTE, became=(
+                    f"no force between {', '.join(force.geometry)} (spheres and half spaces): Simbody's "
+                    "ElasticFoundationForce acts only where a ContactMesh takes part, so OpenSim applies none")))
+                continue
             entries.append(_not_imported(force, f"{force.type} (a contact between {', '.join(force.geometry)}): "
                                                 "pinmsk has no elastic-foundation (mesh) contact"))
             continue

@@ -26,6 +26,7 @@ FORCES = {
     "ToyLanding": ("CoordinateLimitForce", "BushingForce", "HuntCrossleyForce"),
     "SoccerKick": ("CoordinateLimitForce", "HuntCrossleyForce"),
     "WalkerExpression": ("ExpressionBasedCoordinateForce",),
+    "WalkerElasticFoundation": ("ElasticFoundationForce",),
 }
 #: models made here from a zoo model: name -> (zoo model, forces added to its ForceSet)
 DERIVED = {"WalkerExpression": ("Walker", """
@@ -36,7 +37,24 @@ DERIVED = {"WalkerExpression": ("Walker", """
 				<ExpressionBasedCoordinateForce name="pelvis_expression">
 					<coordinate>Pelvis_ty</coordinate>
 					<expression>-100*(q - 0.5)*abs(q - 0.5) - 3*qdot + square(tanh(q))/recip(2) - cube(cos(q))</expression>
-				</ExpressionBasedCoordinateForce>""")}
+				</ExpressionBasedCoordinateForce>"""),
+           "WalkerElasticFoundation": ("Walker", """
+				<ElasticFoundationForce name="foot_foundation">
+					<ElasticFoundationForce::ContactParametersSet name="contact_parameters">
+						<objects>
+							<ElasticFoundationForce::ContactParameters>
+								<geometry>LFootContact RFootContact PlatformContact</geometry>
+								<stiffness>1000000</stiffness>
+								<dissipation>1</dissipation>
+								<static_friction>0.8</static_friction>
+								<dynamic_friction>0.4</dynamic_friction>
+								<viscous_friction>0.4</viscous_friction>
+							</ElasticFoundationForce::ContactParameters>
+						</objects>
+						<groups />
+					</ElasticFoundationForce::ContactParametersSet>
+					<transition_velocity>0.2</transition_velocity>
+				</ElasticFoundationForce>""")}
 #: models whose free ball (its FreeJoint's translations) is moved onto a contact sphere at every frame, so
 #: that the sphere-sphere contacts press: model -> the ball's translation coordinates
 BALLS = {"SoccerKick": ("ball_tx", "ball_ty", "ball_tz")}
