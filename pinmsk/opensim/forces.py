@@ -164,7 +164,7 @@ def _coordinate_limit(force, props, skeleton, frames):
     made, notes = [], []
     for cls, side in ((EndStopUpper, "upper"), (EndStopLower, "lower")):
         k = _number(force, props, f"{side}_stiffness", 1.0)
-        lim = _number(force, props, f"{side}_limit", 90.0 if side == "upper" else -90.0)
+        lim = _number(force, props, f"{side}_limit", 0.0)
         if k < 0:
             raise ModelError(f"{force.where}: <{side}_stiffness> must be >= 0, got {k:g}")
         if k == 0:

@@ -25,7 +25,7 @@ FORCES = {
     "BouncingBlock": ("CoordinateLimitForce", "BushingForce", "PointToPointSpring", "HuntCrossleyForce"),
     "ToyLanding": ("CoordinateLimitForce", "BushingForce", "HuntCrossleyForce"),
     "SoccerKick": ("CoordinateLimitForce", "HuntCrossleyForce"),
-    "WalkerExpression": ("ExpressionBasedCoordinateForce",),
+    "WalkerExpression": ("ExpressionBasedCoordinateForce", "SpringGeneralizedForce"),
     "WalkerElasticFoundation": ("ElasticFoundationForce",),
 }
 #: models made here from a zoo model: name -> (zoo model, forces added to its ForceSet)
@@ -34,6 +34,12 @@ DERIVED = {"WalkerExpression": ("Walker", """
 					<coordinate>LKnee_rz</coordinate>
 					<expression>-2*q - 0.5*qdot + 0.3*sin(q)^2 + step(q + 1)*exp(-qdot^2) - max(q, 0.2)*atan(qdot)</expression>
 				</ExpressionBasedCoordinateForce>
+				<SpringGeneralizedForce name="hip_spring">
+					<coordinate>RHip_rz</coordinate>
+					<stiffness>3.5</stiffness>
+					<rest_length>0.3</rest_length>
+					<viscosity>0.2</viscosity>
+				</SpringGeneralizedForce>
 				<ExpressionBasedCoordinateForce name="pelvis_expression">
 					<coordinate>Pelvis_ty</coordinate>
 					<expression>-100*(q - 0.5)*abs(q - 0.5) - 3*qdot + square(tanh(q))/recip(2) - cube(cos(q))</expression>
