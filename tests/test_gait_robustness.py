@@ -1,5 +1,5 @@
 """examples/gait_robustness.py: the default predictive gait (pinmsk.solvers.ocp.gait) from several
-generic guesses, and the spread of its optima (issue 17: convergence from at least 3 guesses)."""
+generic guesses, and the spread of its optima (it must converge from at least 3 guesses)."""
 from __future__ import annotations
 
 import json
