@@ -216,4 +216,5 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    from _record import run
+    run(main)

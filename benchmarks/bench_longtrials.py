@@ -184,4 +184,5 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    from _record import run
+    run(main)

@@ -286,4 +286,5 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    from _record import run
+    run(main)

@@ -197,4 +197,5 @@ def _rajagopal_id(osim, raj: Path, walk: Path, repeat: int) -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from _record import run
+    sys.exit(run(main))
