@@ -1039,7 +1039,7 @@ _IMPORTS = {}
 
 
 def _shared_import(key):
-    """``(model, report, seconds)`` of one shared model, imported once per test session."""
+    """``(model, report, seconds)`` of one shared model, imported once per test run."""
     if key not in _IMPORTS:
         path = _shared(key)
         t = time.perf_counter()
