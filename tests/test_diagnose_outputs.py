@@ -132,7 +132,7 @@ def test_subject01_walk_means_match_pinmsk_id(shared_data):
         x = res.trial[f"{c}_moment"][rows]
         assert row["mean"] == pytest.approx(np.mean(x), abs=1e-6)
         assert row["rms"] == pytest.approx(np.sqrt(np.mean(x * x)), abs=1e-6)
-    # the figure: a pelvis-tilt mean near -10 N m, large against RRA's -3.4
+    # the pelvis-tilt mean OpenSim's ID of this walk gives: near -10 N m, large against RRA's -3.4
     assert -12.0 < st["coordinates"]["pelvis_tilt"]["mean"] < -8.0
 
 
