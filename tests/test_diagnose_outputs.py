@@ -315,7 +315,8 @@ def test_written_osim_com_offset_and_mass_match_opensim(tmp_path, shared_data):
     fixed = m.with_effect(registry.get("com_offset")("r_ulna_radius_hand", dx=0.02, dy=-0.03, dz=0.01),
                           registry.get("segment_mass")("r_ulna_radius_hand", delta=-0.1),
                           registry.get("payload")("r_humerus@com", mass=0.7),
-                          registry.get("payload")("r_ulna_radius_hand@axis", mass=0.4, distance=0.31))
+                          registry.get("payload")("r_ulna_radius_hand@axis", mass=0.4, distance=0.31),
+                          registry.get("payload")("r_humerus@point", mass=0.3, x=0.02, y=-0.1, z=0.01))
     res = write_osim(fixed, tmp_path / "arm26_com.osim")
     assert not res.not_exported
     body = {b.get("name"): b for b in ET.parse(res.path).getroot().iter("Body")}["r_ulna_radius_hand"]

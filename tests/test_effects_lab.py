@@ -16,7 +16,7 @@ from pinmsk.dynamics import inverse_dynamics_array, skeleton_with_inertias
 from pinmsk.effects import (ComOffset, EndStopLower, EndStopUpper, Payload, PlateCopOffset, PlateGain,
                             PlateLag, PlateOffset, PlateTilt, SegmentMass)
 from pinmsk.effects.anthropometry import ALLOWANCE, DE_LEVA_1996, body_mass, mass_range
-from pinmsk.effects.payload import AxisPayload, payload_sites
+from pinmsk.effects.payload import AxisPayload, PointPayload, payload_sites, trunk_bodies
 from pinmsk.errors import ModelError
 from pinmsk.io.shared_data import shared_data_dir
 from pinmsk.kinematics import prepare
@@ -219,6 +219,31 @@ def test_diagnosis_finds_a_payload_beyond_the_segment_end_on_its_axis(forearm):
     assert d.best is not None and d.best.label == "payload:forearm_hand@axis", d.verdict_line()
     for name in ("mass", "distance"):
         assert abs(d.best.params[name] - true.values[name]) < 3 * d.best.stderr[name], (name, d.best.params)
+
+
+def test_point_payload_is_the_point_mass_with_exact_derivatives(gait2d):
+    mo = _motion(gait2d)
+    p = PointPayload.on_body(gait2d, "hat", mass=4.0, x=-0.12, y=0.3)
+    assert isinstance(Payload("hat@point"), PointPayload) and trunk_bodies(gait2d) == ["hat"]
+    assert p.params["z"].vary is False and p.params["x"].vary and p.params["y"].vary   # planar: z unseen
+    np.testing.assert_allclose(p.generalized_force(gait2d, mo), _id_change(gait2d, p, mo), rtol=1e-9, atol=1e-8)
+    J = p.param_jacobian(gait2d, mo)
+    for k, name in enumerate(("mass", "x", "y", "z")):
+        h = 1e-6
+        up = p.generalized_force(gait2d, mo, {name: p.values[name] + h})
+        dn = p.generalized_force(gait2d, mo, {name: p.values[name] - h})
+        np.testing.assert_allclose(J[..., k], (up - dn) / (2 * h), rtol=1e-6, atol=1e-6)
+
+
+def test_diagnosis_finds_a_backpack_and_where_it_sits(gait2d):
+    """A 5 kg load 12 cm behind and 30 cm up the trunk: mass and place, not a heavier trunk."""
+    true = PointPayload.on_body(gait2d, "hat", mass=5.0, x=-0.12, y=0.3)
+    tr = synth.make_trial(gait2d, [true], duration=8, seed=2)
+    d = diagnose(gait2d, tr, candidates=["payload:hat@point", "segment_mass:hat", "com_offset:hat"])
+    assert d.best is not None and d.best.label == "payload:hat@point", d.verdict_line()
+    for name in ("mass", "x", "y"):
+        assert abs(d.best.params[name] - true.values[name]) < 3 * d.best.stderr[name], (name, d.best.params)
+    assert d.best.stderr["mass"] < 0.5
 
 
 def test_imported_arm_offers_its_wrist_marker_and_finds_the_held_mass():

@@ -940,14 +940,26 @@ def _diagnose_contact(c, candidates, folds, threshold, at_floor, window, cutoff,
     return d
 
 
-def _same_site(a, b, model) -> bool:
-    """Whether two candidates are payload sites on one body (its centre of mass, its axis, a marker on it)."""
-    if model is None or a.effect.family != "payload" or b.effect.family != "payload":
-        return False
+def _body_joint(effect, model):
+    """The joint carrying the body an inertial effect acts on (a payload's site, a segment's mass or
+    centre of mass), else None."""
     try:
-        return a.effect.site(model)[0] == b.effect.site(model)[0]
+        if effect.family == "payload":
+            return effect.site(model)[0]
+        if effect.family in ("segment_mass", "com_offset"):
+            return effect._joint(model)
     except PinmskError:
+        return None
+    return None
+
+
+def _same_site(a, b, model) -> bool:
+    """Whether two candidates, one of them a payload, load one body: payload sites on it (its centre of
+    mass, its axis, a fitted point, a marker) or a payload and the body's own mass or centre of mass."""
+    if model is None or "payload" not in (a.effect.family, b.effect.family):
         return False
+    ja, jb = _body_joint(a.effect, model), _body_joint(b.effect, model)
+    return ja is not None and ja == jb
 
 
 def _order(ranking: list, model=None, sigma=None, z_critical: float = 2.0, tie: float = 0.05) -> list:

@@ -3,7 +3,8 @@
 :func:`follow` is the loop a user follows: diagnose, add the best significant candidate, diagnose again,
 until nothing is significant.  :func:`judge` compares what was added with ``truth.json``: the right
 family at the right target (a payload at the right site, within 2 cm, or on a fitted body axis that
-passes within 2 cm of it, its distance along the axis then judged as a value; or an exact alias the truth
+passes within 2 cm of it, its distance along the axis then judged as a value, or at a fitted point
+on the right body, its coordinates judged as values; or an exact alias the truth
 declares, such as a payload at a body's centre of mass for a change of its mass), each value the fit
 varies within 3 standard
 errors (its relative error is reported too), nothing added that the truth does not hold, and the
@@ -145,6 +146,10 @@ def _matches(eff, t: dict, model) -> tuple[bool, str]:
     if tgt == t["target"]:
         return True, "target"
     site = t.get("site", {})
+    if fam == "payload" and str(tgt).endswith("@point"):
+        if site.get("body") == str(tgt)[:-len("@point")]:
+            return True, "a fitted point on the body"
+        return False, ""
     if fam == "payload" and site.get("ground_at_zero") is not None and str(tgt).endswith("@axis"):
         along, off = axis_distance(model, eff, site["ground_at_zero"])
         if off <= 0.02:             # the true site is on the fitted axis: its distance is judged as a value
@@ -162,6 +167,8 @@ def _match(eff, t: dict, model):
     ``aliases`` (another family that changes the data identically, with its own values), else None."""
     ok, how = _matches(eff, t, model)
     if ok:
+        if str(eff.target).endswith("@point"):
+            return how, {**t, "params": {**t["params"], **dict(zip("xyz", map(float, t["site"]["location"])))}}
         if str(eff.target).endswith("@axis") and t.get("site", {}).get("ground_at_zero") is not None:
             along, _ = axis_distance(model, eff, t["site"]["ground_at_zero"])
             return how, {**t, "params": {**t["params"], "distance": along}}
