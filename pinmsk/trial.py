@@ -794,13 +794,17 @@ class Trial:
                 "but it was not converted from degrees because it was not recognised as "
                 f"an angle; pass angular=[..., {name!r}] to read_trial"
             )
+        elif self._meta.get("format") == "csv" and not declared:
+            fix = ("but a CSV is read in radians; if it is in degrees, pass --degrees (command line) or "
+                   "read_trial(path, in_degrees=True) (Python)")
         elif declared is None:
             fix = (
-                "but the file does not declare inDegrees (radians assumed); set inDegrees=yes "
-                "in the header or convert"
+                "but the file does not declare inDegrees (radians assumed); if it is in degrees, pass "
+                "--degrees (command line) or in_degrees=True (Python), or set inDegrees=yes in the header"
             )
         else:
-            fix = "but the file declares radians; set inDegrees=yes in the header or convert"
+            fix = ("but the file declares radians; if it is in degrees, pass --degrees (command line) or "
+                   "in_degrees=True (Python), or set inDegrees=yes in the header")
         others = f" (also {', '.join(repr(self._names[idx[i]]) for i in over[1:4])})" if over.size > 1 else ""
         raise TrialError(f"{self._where()}{what} {fix}{others}")
 

@@ -226,7 +226,8 @@ def test_validate_reports_degrees_where_radians_declared():
     )
     message = (
         "file 'ik.mot': column 'elbow_flexion' looks like degrees (max 118.0) but the file declares "
-        "radians; set inDegrees=yes in the header or convert"
+        "radians; if it is in degrees, pass --degrees (command line) or in_degrees=True (Python), or set "
+        "inDegrees=yes in the header"
     )
     with pytest.raises(TrialError, match=re.escape(message)):
         tr.validate(coordinates=["elbow_flexion", "pelvis_tx"])  # pelvis_tx is a translation: not checked

@@ -47,7 +47,12 @@ def _check_trial(args) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         read_mapped(args.trial, model=None, cmap=getattr(args, "map", None),
-                    strict=not getattr(args, "lenient", False), require_coordinates=False)
+                    strict=not getattr(args, "lenient", False), require_coordinates=False, **_units(args))
+
+
+def _units(args) -> dict:
+    """``--time-unit`` and ``--degrees`` as :func:`pinmsk.io.read_trial` takes them."""
+    return dict(time_unit=getattr(args, "time_unit", None), in_degrees=True if getattr(args, "degrees", False) else None)
 
 
 class _EffectFamiliesHelp(argparse.HelpFormatter):
@@ -80,7 +85,8 @@ def _read(path, model=None, args=None, *, coordinates: bool = True):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RepairWarning)
         trial = read_mapped(path, model=model, cmap=getattr(args, "map", None),
-                            strict=not getattr(args, "lenient", False), require_coordinates=coordinates)
+                            strict=not getattr(args, "lenient", False), require_coordinates=coordinates,
+                            **_units(args))
     for w in caught:
         if issubclass(w.category, RepairWarning):
             print(f"pinmsk: warning: {w.message}", file=sys.stderr)
@@ -91,15 +97,26 @@ def _read(path, model=None, args=None, *, coordinates: bool = True):
     return trial
 
 
+def _unit_flags(s) -> None:
+    """``--degrees`` and ``--time-unit`` on a command that reads a trial."""
+    s.add_argument("--degrees", action="store_true",
+                   help="the trial's angles are in degrees (a CSV cannot say so; a .sto/.mot's inDegrees is "
+                        "overridden): converted to radians on reading")
+    s.add_argument("--time-unit", choices=["s", "ms"], default=None,
+                   help="unit of the trial's time column (default: the unit in its label, 'Time (ms)', else s)")
+
+
 def _add_read_flags(s) -> None:
-    """``--lenient`` and ``--map`` on a command that reads a trial (read by :func:`_read`)."""
+    """``--lenient``, ``--map``, ``--degrees`` and ``--time-unit`` on a command that reads a trial (read by
+    :func:`_read`)."""
+    _unit_flags(s)
     s.add_argument("--lenient", action="store_true",
                    help="read files whose header row/column counts disagree with the data, or that "
                         "repeat a time stamp; prints one warning per repair")
     s.add_argument("--map", metavar="MAP", default=None,
                    help="rename columns first: a TOML map file ([rename] old = \"new\", optional "
-                        "[scale], [offset]) or a built-in map: opensim-gait2d, rajagopal-gait2d, "
-                        "gait10dof-gait2d (see pinmsk.io.channel_map)")
+                        "[scale], [offset] keyed by the old or the new name) or a built-in map: opensim-gait2d, "
+                        "rajagopal-gait2d, gait10dof-gait2d (docs/tutorials/your_own_csv.md)")
 
 
 def _write(trial, path, precision=None):
@@ -184,7 +201,7 @@ def cmd_import(args) -> int:
     fit_over = None
     if args.fit_over:       # read here, so a file's problem is named with the CLI's own strictness
         from ..io.tables import read_trial
-        fit_over = read_trial(args.fit_over, strict=not args.lenient)
+        fit_over = read_trial(args.fit_over, strict=not args.lenient, **_units(args))
     # the report is printed
     model, report = import_osim(args.model, nonlinear=args.nonlinear or "exact", fit_over=fit_over)
     files = write_import(model, args.out, name=args.name)
@@ -403,7 +420,11 @@ def cmd_contact_fit(args) -> int:
         opts["cutoff"] = args.cutoff or None
     if args.ground_speed is not None:
         opts["ground_speed"] = args.ground_speed
-    out = contact_fit_task(args.model, args.trial, json_path=args.json, plot_dir=args.plot, **opts)
+    trial = args.trial
+    if args.degrees or args.time_unit:        # a .csv/.sto/.mot in other units (a CSU text file has its own)
+        from ..io.tables import read_trial
+        trial = read_trial(args.trial, **_units(args))
+    out = contact_fit_task(args.model, trial, json_path=args.json, plot_dir=args.plot, **opts)
     print("\n".join(settings_lines(out["settings"])))
     for k, (label, j) in enumerate(zip(out["start_labels"], out["starts"])):
         print(f"  start {k + 1}, {label}: J {j:.5g}{' (best)' if k == out['best_start'] else ''}")
@@ -599,6 +620,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "states/coordinates .sto")
     s.add_argument("--lenient", action="store_true",
                    help="read a --fit-over file whose header row/column counts disagree with the data")
+    _unit_flags(s)
     _nonlinear_flag(s)
     s.set_defaults(func=cmd_import)
 
@@ -800,6 +822,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", metavar="OUT.json", default=None,
                    help="write objective, params, rmse and seconds as JSON")
     c.add_argument("--plot", metavar="DIR", default=None, help="write GRF and COP figures (PNG) to DIR")
+    _unit_flags(c)
     c.set_defaults(func=cmd_contact_fit)
 
     s = sub.add_parser(
