@@ -68,7 +68,7 @@ from typing import Mapping
 import numpy as np
 
 from ..errors import TrialError
-from ..trial import Trial, close_matches
+from ..trial import Trial, close_matches, parse_ground_reaction
 from .tables import read_trial, state_path_coordinate
 from .toml_files import read_toml
 
@@ -398,17 +398,41 @@ def with_state_path_coordinates(trial: Trial, coordinates) -> Trial:
     return trial.with_channels(add) if add else trial
 
 
+#: Words of a column name that say it is no coordinate (a load, a muscle signal, a rate).
+_NOT_COORDINATE = {"speed", "moment", "force", "torque", "activation", "excitation", "emg", "acceleration", "grf",
+                   "cop", "velocity", "power"}
+
+
+def _words(name: str) -> list[str]:
+    import re
+    return [w for w in re.split(r"[^a-z0-9]+", name.lower()) if w]
+
+
+def _guess_column(coordinate: str, columns) -> str | None:
+    """The column most like ``coordinate``: sharing its first word (``Elbow angle`` for
+    ``elbow_flexion``), else by :func:`close_matches`; columns naming a load or a rate are never guessed."""
+    import difflib
+    free = [n for n in columns if not (set(_words(n)) & _NOT_COORDINATE)
+            and parse_ground_reaction(n) is None]
+    words = _words(coordinate)
+    if not words:
+        return None
+    norm = "_".join(words)
+    sharing = [n for n in free if words[0] in _words(n)]
+    if sharing:
+        return max(sharing, key=lambda n: difflib.SequenceMatcher(None, norm, "_".join(_words(n))).ratio())
+    found = close_matches(coordinate, free, n=1)
+    return found[0] if found else None
+
+
 def map_hint(trial: Trial, missing) -> str:
     """How to give ``trial`` the ``missing`` coordinates with a map file: one line naming ``--map`` and
     a map to start from, as a one-line TOML table (a guessed column for each coordinate, from the
     trial's names, or ``YOUR_COLUMN``)."""
-    from ..trial import parse_ground_reaction
-    derived = ("_speed", "_moment", "_force", "_activation", "_excitation", "_emg", "_acceleration")
-    free = [n for n in trial.names if not n.endswith(derived) and parse_ground_reaction(n) is None]
     taken: set[str] = set()
     pairs = []
     for c in missing:
-        guess = next(iter(close_matches(c, [n for n in free if n not in taken], n=1)), None)
+        guess = _guess_column(c, [n for n in trial.names if n not in taken])
         if guess is not None:
             taken.add(guess)
         key = guess or f"YOUR_{c}_COLUMN"
