@@ -76,6 +76,14 @@ def _nonlinear_flag(s) -> None:
                         "best-fitting fixed-axis joints (their errors are in the import report)")
 
 
+def _moment_arms_flag(s) -> None:
+    """``--moment-arms`` on a command that takes a MODEL whose muscles declare path variants."""
+    s.add_argument("--moment-arms", choices=["constant", "angle"], default=None,
+                   help="muscle path variant of a model that declares several (the forearm's: 'constant' "
+                        "moment arms, Table 3.5, or 'angle', moment arms varying with the joint angle); default: "
+                        "the model's default_paths")
+
+
 def _read(path, model=None, args=None, *, coordinates: bool = True):
     """Read a trial as ``--lenient`` / ``--map`` ask (:func:`pinmsk.io.channel_map.read_mapped`).
 
@@ -178,14 +186,16 @@ def _plot(args, trial, channels, stem, ylabel) -> None:
 
 def cmd_models(args) -> int:
     from ..model import load_model
-    print(f"{'model':<10} {'dof':>4} {'muscles':>8}  description")
+    from .model_table import models_table
+    rows = []
     for name in builtin_names():
         try:
             m = load_model(name)
         except PinmskError as exc:
-            print(f"{name:<10} {'?':>4} {'?':>8}  unavailable: {exc}")
+            rows.append((name, "?", "?", f"unavailable: {exc}"))
             continue
-        print(f"{name:<10} {m.nv:>4} {m.n_muscles:>8}  {m.meta.get('description', '')[:70]}")
+        rows.append((name, m.nv, m.n_muscles, m.meta.get("description", "")))
+    print("\n".join(models_table(rows)))
     return 0
 
 
@@ -600,8 +610,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("info", help="describe a model (built-in name or path to .toml/.urdf/.osim)")
     s.add_argument("model")
-    s.add_argument("--moment-arms", choices=["constant", "angle"], default=None,
-                   help="muscle path variant (models that declare several)")
+    _moment_arms_flag(s)
     _nonlinear_flag(s)
     s.set_defaults(func=cmd_info)
 
@@ -632,7 +641,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "generalized forces only, <coord>_moment and <coord>_force for translations)")
     _precision_flag(s)
     input_flags(s)
-    s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
+    _moment_arms_flag(s)
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
     _add_read_flags(s)
     _nonlinear_flag(s)
@@ -702,7 +711,7 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--reserves", action="store_true",
                        help="ideal reserve actuators per dof at high cost instead of failing on infeasible frames; "
                             "coordinates no muscle spans (a floating base) get reserves equal to the force they need")
-        s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
+        _moment_arms_flag(s)
         input_flags(s)
         s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
         s.add_argument("--report", metavar="OUT.html", default=None, help="write a self-contained HTML report")
@@ -775,7 +784,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--without", action="append", metavar="LABEL",
                    help="leave this component of the model out (repeatable; e.g. the contact spheres when the "
                         "trial's measured GRF loads the feet); `pinmsk info MODEL` lists the labels")
-    s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
+    _moment_arms_flag(s)
     s.add_argument("--noise", action="append", metavar="NAME=SIGMA",
                    help="a noise level you know, in place of the one fitted to the data: a measured channel "
                         "(pelvis_tx=0.5mm, knee_angle_r=0.2deg, elbow_flexion_moment=0.2) or a group (angles, "
@@ -908,7 +917,11 @@ _OUTPUT_FOLDERS = ("plot", "out")
 
 
 def _check_outputs(args) -> None:
-    """Refuse, before any work, outputs whose folder is missing or read-only; create --plot folders."""
+    """Refuse, before any work, outputs of a type the command cannot write or whose folder is missing or
+    read-only, and misspelt effect names; create --plot folders."""
+    from .cli_checks import check_effect_names, check_output_suffixes
+    check_output_suffixes(args)
+    check_effect_names(args)
     for name in _OUTPUT_FILES:
         if getattr(args, name, None):
             check_output_file(getattr(args, name))
