@@ -634,6 +634,8 @@ def optimize_task(task_path, out_path=None, progress=None, *, precision: int | N
     status and the most violated constraint; nothing is written then (it is not a solution).
     """
     from .errors import ConvergenceError
+    from .solvers.ocp.tasks import resolve_task
+    task_path = resolve_task(task_path)          # a path, or a shipped task's name
     spec = load_task(task_path)
     prob = build_from_task(spec, base_dir=Path(task_path).parent, progress=progress)
     res = prob.fit().result_

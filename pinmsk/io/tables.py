@@ -60,7 +60,7 @@ from pathlib import Path
 import numpy as np
 
 from pinmsk.errors import RepairWarning, TrialError
-from pinmsk.trial import TIME, Trial, is_angular_name
+from pinmsk.trial import TIME, TIME_UNITS, Trial, is_angular_name, time_label_unit
 
 from ..signals.sampling import median_step
 from .c3d import read_c3d
@@ -74,37 +74,11 @@ FORMATS = {".csv": "csv", ".sto": "sto", ".mot": "mot"}
 
 #: Significant digits written by default (``write_trial(precision=...)``, CLI ``--precision``).
 DEFAULT_PRECISION = 9
-#: Time units :func:`read_trial` takes (``time_unit``), as factors to seconds.
-TIME_UNITS = {"s": 1.0, "ms": 1e-3}
 #: A median time step above this (s), i.e. a rate below 5 Hz, is not a motion recording in
 #: seconds; with a step of at most 100 it is one in milliseconds (10 Hz - 5 kHz).
 _MS_STEP = (0.2, 100.0)
-#: A time column's label: ``time`` or ``t`` (any case), with an optional unit in brackets or after
-#: an underscore: ``Time (s)``, ``time [ms]``, ``t_ms``, ``Time (seconds)``.
-_TIME_LABEL = re.compile(r"^(?:time|t)\s*(?:[(\[]\s*(?P<unit>[^)\]]*?)\s*[)\]]|_(?P<bare>[a-z]+))?$",
-                         re.IGNORECASE)
-#: Spellings of the time units in a column label.
-_UNIT_WORDS = {"s": "s", "sec": "s", "secs": "s", "second": "s", "seconds": "s",
-               "ms": "ms", "msec": "ms", "msecs": "ms", "millisecond": "ms", "milliseconds": "ms"}
 _KEY_VALUE = re.compile(r"^([A-Za-z_][\w.\-]*)\s*=\s*(.*)$")
 _OLD_KEY = re.compile(r"^(datarows|datacolumns)\s+(\S+)$", re.IGNORECASE)
-
-
-def time_label_unit(label: str) -> str | None:
-    """The unit a time column's label declares: ``""`` for ``time`` / ``t`` alone (undeclared),
-    ``"s"`` or ``"ms"`` for ``Time (s)``, ``Time [ms]``, ``t_ms``...; ``None`` if the label is not a
-    time column.  A unit pinmsk does not convert (``Time (min)``) raises TrialError naming it."""
-    m = _TIME_LABEL.match(label.strip())
-    if m is None:
-        return None
-    word = m["unit"] if m["unit"] is not None else m["bare"]
-    if word is None:
-        return ""
-    unit = _UNIT_WORDS.get(word.strip().lower())
-    if unit is None:
-        raise TrialError(f"time column {label!r}: unit {word!r} is not one of s, ms "
-                         f"({', '.join(sorted(_UNIT_WORDS))})")
-    return unit
 
 
 def _format_of(path: Path, *, reading: bool = False) -> str:

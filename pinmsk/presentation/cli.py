@@ -840,7 +840,8 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description="Optimal control by direct collocation with exact derivatives (thesis Ch. 3, 5.1).",
         epilog=_OPTIMIZE_EPILOG)
-    s.add_argument("task", help="TOML task file (examples in data/tasks/)")
+    s.add_argument("task", help="TOML task file, or the name of a shipped one (gait2d_predictive, "
+                                "forearm_ift_j1, ...: data/tasks/)")
     s.add_argument("-o", "--output", default=None, help="result trial (.sto/.csv), plus OUT.json")
     _precision_flag(s)
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
