@@ -186,9 +186,12 @@ def _unknown(key: str, valid, what: str, where: str) -> TrialError:
 
 
 def _number(value, where: str, what: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-        raise TrialError(f"{where}: {what} = {value!r} must be a finite number")
-    return float(value)
+    ok = not isinstance(value, bool) and isinstance(value, (int, float))
+    number = float(value) if ok and abs(value) < 1e308 else float("nan")     # a TOML integer may exceed a float
+    if not np.isfinite(number):
+        shown = repr(value) if len(repr(value)) < 40 else repr(value)[:37] + "..."
+        raise TrialError(f"{where}: {what} = {shown} must be a finite number")
+    return number
 
 
 def load_channel_map(spec) -> ChannelMap:

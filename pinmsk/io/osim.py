@@ -125,6 +125,10 @@ def _parse_xml(data: bytes, source: str) -> _Node:
     except xml.parsers.expat.ExpatError as exc:
         raise ModelError(f"{source}:{exc.lineno}: not a valid .osim file: the XML is malformed "
                          f"({xml.parsers.expat.ErrorString(exc.code)}, column {exc.offset + 1})") from None
+    except (LookupError, UnicodeError, ValueError) as exc:     # an encoding the declaration names but Python lacks
+        raise ModelError(f"{source}: not a readable .osim file ({' '.join(str(exc).split())})") from None
+    if not root:
+        raise ModelError(f"{source}: not a valid .osim file: no root element")
     return root[0]
 
 
