@@ -427,7 +427,7 @@ def test_read_trial_opens_c3d_parts(tmp_path):
     with pytest.raises(TrialError, match=r"part='markers' applies to .c3d files only"):
         read_trial(tmp_path / "x.sto", part="markers")
     (tmp_path / "bad.c3d").write_bytes(b"not a c3d")
-    with pytest.raises(TrialError, match=r"bad.c3d: cannot read it as a C3D file \(File must be a valid c3d"):
+    with pytest.raises(TrialError, match=r"bad.c3d: not a readable C3D file: 9 bytes, shorter than its 512-byte header"):
         read_trial(tmp_path / "bad.c3d")
 
 
