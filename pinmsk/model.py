@@ -542,7 +542,14 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
             raise ModelError(f"{p}: moment_arms and tendon do not apply to an OpenSim model (its muscles "
                              "come from the .osim: their paths are fitted polynomials, their tendons as OpenSim sets them)")
         from .opensim.importer import warn_report
-        model, report = import_osim(p, gravity=gravity, nonlinear=nonlinear or "exact")
+        try:
+            model, report = import_osim(p, gravity=gravity, nonlinear=nonlinear or "exact")
+        except PinmskError:
+            raise
+        except (TypeError, ValueError, KeyError, IndexError, AttributeError, OverflowError) as exc:
+            # a value of a kind the import's checks did not expect: named with the file, not a traceback
+            what = " ".join(str(exc).split()) or type(exc).__name__
+            raise ModelError(f"{p}: cannot import this .osim ({type(exc).__name__}: {what[:200]})") from None
         warn_report(report)
         return model
     if nonlinear is not None:

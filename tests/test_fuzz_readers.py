@@ -33,7 +33,7 @@ from pinmsk.errors import PinmskError  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 
 #: cases per format: the default suite's and the slow set's
-FAST, SLOW = 30, 150
+FAST, SLOW = 25, 150
 
 
 def _settings(n: int, *, fixed: bool):
@@ -393,7 +393,7 @@ def _c3d_case(n, fixed):
 
 
 def test_a_broken_c3d_gets_one_clear_line():
-    _c3d_case(FAST // 2, True)
+    _c3d_case(12, True)
 
 
 @pytest.mark.slow
@@ -427,7 +427,7 @@ def _cli_case(kind, n, fixed):
 
 @pytest.mark.parametrize("kind", ["sto", "csv"])
 def test_pinmsk_id_on_a_broken_trial_exits_2_with_one_line(kind):
-    _cli_case(kind, FAST, True)
+    _cli_case(kind, 20, True)
 
 
 @pytest.mark.slow

@@ -913,7 +913,12 @@ def parse_osim(data: bytes | str, *, source: str = "<string>") -> OsimDocument:
         data = data.encode("utf-8")
     root = _parse_xml(data, source)
     if root.tag == "OpenSimDocument":
-        version = int(float(root.attrib.get("Version", "0") or 0))
+        text = root.attrib.get("Version", "0") or "0"
+        try:
+            version = int(float(text))
+        except (ValueError, OverflowError):
+            raise ModelError(f"{source}:{root.line}: <OpenSimDocument Version={text!r}> is not a version number "
+                             "(OpenSim 4 writes 40000)") from None
         model = root.child("Model")
     elif root.tag == "Model":
         version, model = 0, root
