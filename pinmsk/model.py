@@ -546,8 +546,9 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
             model, report = import_osim(p, gravity=gravity, nonlinear=nonlinear or "exact")
         except PinmskError:
             raise
-        except (TypeError, ValueError, KeyError, IndexError, AttributeError, OverflowError) as exc:
-            # a value of a kind the import's checks did not expect: named with the file, not a traceback
+        except (TypeError, ValueError, KeyError, IndexError, AttributeError, OverflowError, RuntimeError) as exc:
+            # a value of a kind the import's checks did not expect (Pinocchio raises RuntimeError on an
+            # inertia it refuses): named with the file, not a traceback
             what = " ".join(str(exc).split()) or type(exc).__name__
             raise ModelError(f"{p}: cannot import this .osim ({type(exc).__name__}: {what[:200]})") from None
         warn_report(report)
