@@ -1,4 +1,4 @@
-"""Which physical limit sets the maximum finger-tapping frequency (issue 16 point 6, thesis Sec. 3.2.2).
+"""Which physical limit sets the maximum finger-tapping frequency (thesis Sec. 3.2.2).
 
 The literature-based finger (built-in model ``finger_literature``: segments approximately after
 Buchner et al. 1988, FDS+FDP and EDC architecture of Gonzalez et al. 1997 after Lieber et al.
@@ -159,7 +159,7 @@ def variants(model, quick=False):
         "v_max": [(f"x{s:g}", s, with_mtu(model, v_max=np.asarray(mtu.v_max) * s), "rigid") for s in (0.5, 2.0)],
         "tendon": [("compliant", 1.0, model, "compliant")],
         "segment inertia": [(f"x{s:g}", s, scale_masses(model, s), "rigid") for s in (0.5, 2.0)],
-        # not asked for by the issue, but the check of the mechanism found at the limit (the weak
+        # beyond the thesis's factors: the check of the mechanism found at the limit (the weak
         # extensor's moment against the inertial moment I (2 pi f)^2 A): F_max of both muscles
         "F_max": [(f"x{s:g}", s, with_mtu(model, f_max=np.asarray(mtu.f_max) * s), "rigid") for s in (0.5, 2.0)],
     }

@@ -165,7 +165,7 @@ def main(argv=None) -> int:
     for s in (float(x) for x in args.scales.split(",")):
         # a sensitivity study: the changed model starts from the nominal optimum (its half cycle,
         # one 25-interval solve), so both optima are the same gait's; from the generic guess the
-        # 67 % problem lands in another of the gait's local optima (README, "2D gait")
+        # 67 % problem lands in another of the gait's local optima (docs/reference/validation.md, "2D gait")
         warm = {} if args.cold or not runs else {"guess": runs[0]["result"], "coarse_intervals": None}
         run = solve(s, verbose=args.verbose, **warm)
         r = run["result"]

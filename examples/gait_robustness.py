@@ -1,4 +1,4 @@
-"""Robustness of the predictive gait (issue 17): the default problem from several generic guesses.
+"""Robustness of the predictive gait: the default problem from several generic guesses.
 
     python examples/gait_robustness.py --out out/robustness [--guesses walking,standing,qr1,qr2] [--jobs 2]
 

@@ -1,6 +1,6 @@
 """Bad input on the command line: one line ``pinmsk: error: ...``, exit status 2, no output left behind.
 
-Each test feeds one kind of bad input (issue 12, item 4) and checks the message names the
+Each test feeds one kind of bad input and checks the message names the
 problem (channel, row, time, path, key) and that no output file, temporary file or
 half-written set of outputs remains.
 """

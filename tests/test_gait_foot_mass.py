@@ -127,7 +127,7 @@ def test_foot_mass_example_code_on_a_tiny_problem(tmp_path):
 @pytest.mark.slow
 def test_foot_mass_67_percent_lowers_the_objective(tmp_path):
     """The default predictive gait and the 67 % one warm-started from its optimum (measured: 160 s +
-    77 s, objective -2.4 %; README "2D gait"); default-suite cover of the same code:
+    77 s, objective -2.4 %; docs/reference/validation.md, "2D gait"); default-suite cover of the same code:
     test_foot_mass_example_code_on_a_tiny_problem and test_predictive_gait_foot_mass_scales_both_feet_of_the_problem."""
     require_casadi()
     out = run_example("gait_foot_mass.py", "--out", tmp_path)

@@ -842,7 +842,7 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
             ranking.append(scorer.score(comp))
         except PinmskError as exc:
             skipped.append((comp.label, str(exc)))
-    ranking = _order(ranking)
+    ranking = _order(ranking, c.model, c.eq_noise.sigma, settings["z_critical"])
     _aliases(ranking, c.eq_noise.sigma)
     found = []
     if pairs and ranking:
@@ -940,8 +940,28 @@ def _diagnose_contact(c, candidates, folds, threshold, at_floor, window, cutoff,
     return d
 
 
-def _order(ranking: list, tie: float = 0.05) -> list:
-    """Best held-out improvement first; within ``tie`` (noise variances) the fewer parameters first."""
+def _same_site(a, b, model) -> bool:
+    """Whether two candidates are payload sites on one body (its centre of mass, its axis, a marker on it)."""
+    if model is None or a.effect.family != "payload" or b.effect.family != "payload":
+        return False
+    try:
+        return a.effect.site(model)[0] == b.effect.site(model)[0]
+    except PinmskError:
+        return False
+
+
+def _order(ranking: list, model=None, sigma=None, z_critical: float = 2.0, tie: float = 0.05) -> list:
+    """Best held-out improvement first.  Of two candidates with one target the one with fewer parameters
+    comes first when the other's held-out gain is within ``tie`` noise variances of it.  Of two payload
+    sites on one body (:func:`_same_site`: a marker and a fitted point on the body's axis) the one with
+    fewer parameters comes first when it is significant itself, unless the other is better held out by
+    the bar every candidate meets: the extra parameter must earn its place out of sample,
+    ``z >= z_critical`` in the paired :func:`held_out_test`."""
+    def richer_wins(a, b) -> bool:
+        if sigma is None or a.heldout is None or b.heldout is None:
+            return True
+        return held_out_test(b.heldout / sigma, a.heldout / sigma)["z"] >= z_critical
+
     # exact aliases (a gain and a segment mass on one body) tie: the physical effect first
     out = sorted(ranking, key=lambda s: (not s.converged, -float(f"{s.improvement:.9g}"),
                                          getattr(s.effect, "level", "") == "sensor"))
@@ -954,6 +974,20 @@ def _order(ranking: list, tie: float = 0.05) -> list:
                 out[i], out[i + 1] = b, a
                 swapped = True
         if not swapped:
+            break
+    for _ in range(len(out)):
+        moved = False
+        for i in range(len(out)):
+            for k in range(i + 1, len(out)):
+                a, b = out[i], out[k]
+                if (a.converged == b.converged and a.fit.stats.k > b.fit.stats.k and a.target != b.target
+                        and _same_site(a, b, model) and b.significant and not richer_wins(a, b)):
+                    out.insert(i, out.pop(k))
+                    moved = True
+                    break
+            if moved:
+                break
+        if not moved:
             break
     return out
 

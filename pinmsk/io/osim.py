@@ -374,6 +374,8 @@ class OtherElement(OsimElement):
 
     category: str = ""
     properties: dict = field(default_factory=dict, compare=False)
+    #: a force's sockets as absolute paths (``{"frame1": "/forceset/b/pelvis_offset", ...}``)
+    sockets: dict = field(default_factory=dict, compare=False)
 
 
 @dataclass(frozen=True)
@@ -805,7 +807,14 @@ class _Reader:
                 props["contact_parameters"] = tuple(params)
             sink.contact_forces.append(ContactForce(**self.base(node), geometry=geo, properties=props))
         else:
-            sink.other.append(OtherElement(**self.base(node), category="force", properties=self.properties(node)))
+            # the frames a force owns (a BushingForce's offset frames) and its sockets, as absolute paths
+            for f in _children_of(node.child("frames")):
+                if f.tag == "PhysicalOffsetFrame":
+                    self.offset_frame(f, path)
+            sockets = {c.tag[len("socket_"):]: self.socket(node, path, c.tag) for c in node.children
+                       if c.tag.startswith("socket_") and c.text}
+            sink.other.append(OtherElement(**self.base(node), category="force", sockets=sockets,
+                                           properties=self.properties(node, skip=("frames",))))
 
 
 class _Sink:
