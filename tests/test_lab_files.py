@@ -147,37 +147,3 @@ def test_the_template_for_columns_with_no_guess_is_valid_toml(tmp_path, capsys):
     parsed = tomllib.loads(template.replace(", ...", ""))      # the six shown, one key each
     assert len(parsed["rename"]) == 6
 
-
-# -- the tutorial ----------------------------------------------------------------------------------
-
-def test_the_your_own_csv_page_runs_as_written(tmp_path, monkeypatch, capsys):
-    """docs/tutorials/your_own_csv.md in one empty folder: its ```toml files written, its scripts and
-    commands run in this process, each output against the ```text excerpt after it."""
-    from test_docs_tutorials import ROOT, _blocks, assert_excerpt
-
-    page = ROOT / "docs" / "tutorials" / "your_own_csv.md"
-    monkeypatch.chdir(tmp_path)
-    steps = 0
-    pending = None            # (what ran, its output) waiting for its excerpt
-    for lang, body in _blocks(page):
-        if lang == "toml":
-            name = body.splitlines()[0].removeprefix("#").strip()
-            (tmp_path / name).write_text(body)
-        elif lang == "python":
-            exec(compile(body, f"{page.name} step {steps}", "exec"), {})
-            pending = (body, capsys.readouterr().out)
-        elif lang == "sh":
-            argv = body.split()
-            assert argv[0] == "pinmsk"
-            rc = main(argv[1:])
-            cap = capsys.readouterr()
-            pending = (body, cap.out + cap.err)
-            assert rc == (2 if "pinmsk: error:" in cap.err else 0), cap.err
-        elif lang == "text":
-            assert pending is not None
-            assert_excerpt(body, pending[1], pending[0].strip()[:60])
-            pending = None
-        steps += 1
-    assert steps >= 12
-    np.testing.assert_array_equal(read_trial(tmp_path / "id.sto").values,
-                                  read_trial(tmp_path / "id_old_names.sto").values)

@@ -443,7 +443,7 @@ def map_hint(trial: Trial, missing) -> str:
     shown = ", ".join(pairs[:6]) + (", ..." if len(pairs) > 6 else "")
     return ("to rename the file's columns, pass --map MAP.toml (command line) or cmap='MAP.toml' (Python) with "
             f"MAP.toml holding: rename = {{{shown}}} (add [scale] / [offset] for a sign or a zero; "
-            "docs/tutorials/your_own_csv.md)")
+            "docs/tutorials/own_csv.md)")
 
 
 def read_mapped(path, *, model=None, cmap=None, strict: bool = True, require_coordinates: bool = True,

@@ -124,7 +124,7 @@ def _add_read_flags(s) -> None:
     s.add_argument("--map", metavar="MAP", default=None,
                    help="rename columns first: a TOML map file ([rename] old = \"new\", optional "
                         "[scale], [offset] keyed by the old or the new name) or a built-in map: opensim-gait2d, "
-                        "rajagopal-gait2d, gait10dof-gait2d (docs/tutorials/your_own_csv.md)")
+                        "rajagopal-gait2d, gait10dof-gait2d (docs/tutorials/own_csv.md)")
 
 
 def _write(trial, path, precision=None):
