@@ -38,7 +38,6 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -47,6 +46,7 @@ from pinmsk.muscles.muscle_set import MuscleSet
 from pinmsk.solvers import ocp
 from pinmsk.solvers.ocp.tasks import scale_masses   # masses and inertias x factor, COMs kept
 from pinmsk.solvers.parametrization import Polynomial
+from _common import output_folder
 
 J2_LIMIT = 0.25          # examples/finger_tapping.py's criterion
 MU = 0.1                 # thesis Eq. 3.3
@@ -255,11 +255,10 @@ def study(model, *, periodic, scan, bisections, quick):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default="out/finger_frequency_limit")
+    ap.add_argument("--out", default=None, help="output folder (default: a new temporary folder)")
     ap.add_argument("--quick", action="store_true", help="coarse scan, no bisection, one variant (for tests)")
     args = ap.parse_args(argv)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_folder(args.out, "finger_frequency_limit")
     t_all = time.perf_counter()
     model = pinmsk.load_model("finger_literature")
     scan = QUICK_SCAN if args.quick else SCAN

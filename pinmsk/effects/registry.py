@@ -42,9 +42,9 @@ def get(family: str) -> type:
         return _REGISTRY[family]
     except KeyError:
         close = difflib.get_close_matches(family, list(_REGISTRY), n=3)
-        hint = f"; did you mean {', '.join(map(repr, close))}?" if close else ""
+        hint = f" (did you mean {' or '.join(map(repr, close))}?)" if close else ""
         raise ModelError(
-            f"unknown effect '{family}'{hint}. Known effects: {', '.join(sorted(_REGISTRY))}"
+            f"unknown effect '{family}'{hint}; known effects: {', '.join(sorted(_REGISTRY))}"
         ) from None
 
 
