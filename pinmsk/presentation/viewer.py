@@ -55,7 +55,9 @@ import difflib
 import io
 import os
 import re
+import signal
 import sys
+import threading
 import time
 import warnings
 from collections import namedtuple
@@ -1177,15 +1179,70 @@ def view_cli(model_name, trial_path=None, results_path=None, *, open_browser: bo
     results = read_trial(results_path) if results_path else None
     if trial is not None:
         _coordinates_of(trial, model, "trial")       # refuse a bad motion before starting a server
-    viewer = Viewer(model, open_browser=open_browser)
-    if trial is not None:
-        try:
-            viewer.play(trial, results=results)
-        except BaseException:
-            viewer.close()
-            raise
-        print(f"pinmsk viewer: playing {trial.meta.get('source') or 'the trial'} ({trial.time[-1] - trial.time[0]:.2f} s); "
-              "open 'Open Controls' > Animations for the time slider", flush=True)
-    if block:
-        viewer.serve(timeout=timeout)
+    # blocking: the server stops on every way out; returning: the caller owns it
+    with signals_raise_exit() if block else contextlib.nullcontext():
+        viewer = Viewer(model, open_browser=open_browser)     # stops its server if its setup fails
+        with _closing(viewer) if block else _closing_on_error(viewer):
+            if trial is not None:
+                viewer.play(trial, results=results)
+                print(f"pinmsk viewer: playing {trial.meta.get('source') or 'the trial'} "
+                      f"({trial.time[-1] - trial.time[0]:.2f} s); "
+                      "open 'Open Controls' > Animations for the time slider", flush=True)
+            if block:
+                viewer.serve(timeout=timeout)
     return viewer
+
+
+#: Signals that end a blocking viewer: a service manager's stop, a closed terminal.
+END_SIGNALS = tuple(getattr(signal, n) for n in ("SIGTERM", "SIGHUP") if hasattr(signal, n))
+
+
+@contextlib.contextmanager
+def signals_raise_exit(signals: Sequence[int] = END_SIGNALS):
+    """Within the block, SIGTERM and SIGHUP raise ``SystemExit(128 + signum)`` (the shell's code).
+
+    meshcat starts its server in a session of its own (so a closed terminal's
+    SIGHUP does not reach it) and stops it from ``atexit``, which Python skips
+    when a signal's default action ends the process.  Raising instead lets
+    ``finally`` clauses and :meth:`Viewer.close` run.  The previous handlers
+    are restored on leaving; outside the main thread (where Python cannot set
+    handlers) the block runs unchanged.
+    """
+    def end(signum, frame):
+        raise SystemExit(128 + signum)
+
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in signals:
+            previous[sig] = signal.signal(sig, end)
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+@contextlib.contextmanager
+def closing_on_signals(viewer: "Viewer"):
+    """Stop ``viewer``'s meshcat server when the block ends by any way: normally,
+    Ctrl-C, an exception, SIGTERM or SIGHUP (see :func:`signals_raise_exit`)."""
+    with signals_raise_exit(), _closing(viewer):
+        yield viewer
+
+
+@contextlib.contextmanager
+def _closing(viewer: "Viewer"):
+    try:
+        yield viewer
+    finally:
+        viewer.close()
+
+
+@contextlib.contextmanager
+def _closing_on_error(viewer: "Viewer"):
+    """Stop ``viewer``'s server if the block raises; leave it running otherwise."""
+    try:
+        yield viewer
+    except BaseException:
+        viewer.close()
+        raise
