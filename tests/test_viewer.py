@@ -393,3 +393,37 @@ def test_example_without_terminal_exits_by_itself():
                          capture_output=True, text=True, timeout=120, env=env, cwd=REPO)
     assert res.returncode == 0, res.stderr
     assert "http://127.0.0.1:" in res.stdout and "not serving" in res.stdout
+
+
+# --------------------------------------------------------------- colour legend
+
+def test_legend_bar_runs_from_level_0_at_the_bottom_to_the_top_level():
+    import matplotlib.image as mpimg
+    import io as _io
+    from pinmsk.presentation.viewer import legend_png
+
+    colors = vg.color_levels(8)
+    rgb = mpimg.imread(_io.BytesIO(legend_png(colors, "activation")), format="png")[..., :3]
+    h, w, _ = rgb.shape
+    assert w / h == pytest.approx(pinmsk.presentation.viewer.LEGEND_ASPECT, rel=0.02)
+    # the bar's column: the one where the most pixels match some level's colour
+    dist = np.linalg.norm(rgb[:, :, None, :] - colors[None, None], axis=-1)       # (h, w, levels)
+    match = dist.min(axis=-1) < 0.02
+    col = int(np.argmax(match.sum(axis=0)))
+    rows = np.flatnonzero(match[:, col])
+    levels = dist[rows, col].argmin(axis=-1)
+    assert set(levels) == set(range(8))                      # every level is shown
+    assert levels[0] == 7 and levels[-1] == 0                # image rows run top-down: 1 on top
+    assert np.all(np.diff(levels) <= 0)                      # monotone up the bar
+
+
+def test_legend_is_drawn_with_colours_and_labelled_by_what_they_mean(viewer, forearm):
+    viewer.display()
+    assert not any(c.path.endswith("/legend") for c in viewer.commands if c.kind == "set_object")
+    viewer.display(activation={forearm.muscle_names[0]: 0.5})
+    assert viewer._legend == "activation"
+    assert any(c.path == "/meshcat/legend" for c in viewer.commands if c.kind == "set_object")
+    t = np.linspace(0, 1, 11)
+    forces = pinmsk.Trial(t, {f"{forearm.muscle_names[0]}_force": 10 * t})
+    viewer.play(_flexion_trial(forearm, n=11, duration=1.0, activation=False), results=forces)
+    assert viewer._legend == "force / max isometric force"

@@ -108,11 +108,37 @@ def test_screenshot_shows_the_model(scene, tmp_path):
     with_model = browser.warm_fraction(rgb)
     # the same view with the model hidden: the warm (bone/muscle) pixels must go away
     viewer.vis["pinmsk/model"].set_property("visible", False)
+    viewer.vis["legend"].set_property("visible", False)
     try:
-        page.wait_for("!viewer.scene_tree.children.meshcat.children.pinmsk.children.model.object.visible")
+        page.wait_for("!viewer.scene_tree.children.meshcat.children.pinmsk.children.model.object.visible"
+                      " && !viewer.scene_tree.children.meshcat.children.legend.object.visible")
         time.sleep(0.3)
         empty = browser.warm_fraction(browser.read_png(page.screenshot(tmp_path / "empty.png")))
     finally:
         viewer.vis["pinmsk/model"].set_property("visible", True)
+        viewer.vis["legend"].set_property("visible", True)
     assert with_model > 0.004, f"only {with_model:.4f} of the pixels have the model's colours"
     assert empty < 0.1 * with_model, (with_model, empty)
+
+
+def test_colour_legend_is_on_screen_beside_the_model(scene, tmp_path):
+    model, trial, viewer, page = scene
+    # the legend is a textured card: on screen, white with every colour level on it
+    box = page.evaluate("""(() => { let mesh = null;
+        viewer.scene_tree.children.meshcat.children.legend.object.traverse(o => { if (o.isMesh) mesh = o; });
+        mesh.updateMatrixWorld(true); mesh.geometry.computeBoundingBox();
+        const b = mesh.geometry.boundingBox, V = mesh.position.constructor;
+        return [[b.min.x, b.min.y], [b.max.x, b.max.y]].map(([x, y]) => {
+            const v = mesh.localToWorld(new V(x, y, 0)).project(viewer.camera);
+            return [(v.x + 1) / 2, (1 - v.y) / 2]; }); })()""")
+    (x0, y0), (x1, y1) = box
+    assert all(0.0 <= v <= 1.0 for v in (x0, y0, x1, y1)), f"the legend is off screen: {box}"
+    rgb = browser.read_png(page.screenshot(tmp_path / "legend.png")).astype(float) / 255
+    h, w, _ = rgb.shape
+    card = rgb[int(h * min(y0, y1)):int(h * max(y0, y1)), int(w * min(x0, x1)):int(w * max(x0, x1))]
+    colours = viewer._colors
+    dist = np.linalg.norm(card[:, :, None] - colours[None, None], axis=-1)
+    nearest = np.where(dist.min(axis=-1) < 0.15, dist.argmin(axis=-1), -1)
+    seen = np.array([np.mean(nearest == k) for k in range(len(colours))])
+    assert seen.min() > 0.001, f"share of the card in each colour level: {np.round(seen, 4)}"
+    assert np.mean(card.min(axis=-1) > 0.9) > 0.3, "the card is not mostly white"

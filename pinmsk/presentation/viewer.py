@@ -370,6 +370,7 @@ class Viewer:
             for i, path in enumerate(segs):
                 self._node(path).set_transform(_scaled_matrix(pos[0, i], quat[0, i], size[0, i]))
             if values is not None:
+                self._build_legend("force / max isometric force" if activation is None else "activation")
                 self._ensure_levels(name)
                 self._set_level(f"muscle:{name}", segs, values.get(name, 0.0))
         for k, (label, fid, pos, radius) in enumerate(self._contacts):
@@ -578,6 +579,9 @@ class Viewer:
                      residual=None if res is None else np.abs(res[0]), residual_scale=scale if res is not None else None,
                      ghost_q=None if gq is None else gq[0], ghost_offset=ghost_offset,
                      grf={side: (F[0], P[0]) for side, (F, P) in grf.items()} or None)
+        if values:
+            forces_only = not any(n.endswith("_activation") for s in sources for n in s.names)
+            self._build_legend("force / max isometric force" if forces_only else "activation")
         for mname, (radius, segs) in self._muscle_segments.items():
             if mname not in values:
                 self._set_level(f"muscle:{mname}", segs, None)
@@ -617,6 +621,43 @@ class Viewer:
         return out
 
     # -------------------------------------------------------------- camera
+    def _build_legend(self, label: str) -> None:
+        """A colour bar of the muscle colour levels (0 at the bottom, 1 at the top) with ``label``,
+        standing beside the model and facing the camera (node ``/legend``; drawn once)."""
+        if getattr(self, "_legend", None) == label:
+            return
+        import meshcat.geometry as mg
+
+        cache = self.__dict__.setdefault("_legend_pngs", {})
+        if label not in cache:
+            cache[label] = legend_png(self._colors, label)
+        self._legend_png = cache[label]
+        self._legend = label
+        self._place_legend()
+
+    def _place_legend(self) -> None:
+        """Stand the legend beside the model (to its left on the screen), its face towards the camera."""
+        if getattr(self, "_legend", None) is None:
+            return
+        import meshcat.geometry as mg
+
+        extent = getattr(self, "_extent", 1.0)
+        h = 0.5 * extent                       # half the model's size
+        self.vis["legend"].set_object(
+            mg.Box([h * LEGEND_ASPECT, h, 0.001]),
+            mg.MeshBasicMaterial(map=mg.ImageTexture(mg.PngImage(self._legend_png)), transparent=True))
+        view = getattr(self, "_view", np.array([0.7, -1.0, 0.35]))
+        extent = getattr(self, "_extent", 1.0)
+        yaw = np.arctan2(view[1], view[0])
+        right = np.array([np.sin(yaw), -np.cos(yaw), 0.0])
+        # the box's face (+z) turned towards the camera, its image upright along world z
+        face = np.array([np.cos(yaw), np.sin(yaw), 0.0])
+        R = np.column_stack([-right, [0.0, 0.0, 1.0], face])
+        T = np.eye(4)
+        T[:3, :3] = R
+        T[:3, 3] = 0.55 * extent * right        # 'right' of the view direction: the screen's left
+        self.vis["legend"].set_transform(T)
+
     def frame_camera(self, qs: Sequence[np.ndarray] | None = None, *, distance: float | None = None) -> None:
         """Point the camera at the model (at configurations ``qs``), seen from its right side.
 
@@ -641,6 +682,8 @@ class Viewer:
         T[:3, 3] = -centre
         self.vis[self._root].set_transform(T)
         self.centre = centre
+        self._extent, self._view = extent, direction
+        self._place_legend()
         # the camera object lives in three.js's y-up frame: (x, y, z)_world -> (x, z, -y)
         self.vis["/Cameras/default/rotated/<object>"].set_property(
             "position", [float(offset[0]), float(offset[2]), float(-offset[1])])
@@ -718,6 +761,31 @@ def _start_quietly(meshcat):
     with contextlib.redirect_stdout(buf):
         vis = meshcat.Visualizer()
     return vis
+
+
+#: Width / height of the legend image.
+LEGEND_ASPECT = 0.45
+
+
+def legend_png(colors: np.ndarray, label: str) -> bytes:
+    """PNG of a vertical colour bar: the ``colors`` levels from 0 (bottom) to 1 (top), ticks 0, 0.5, 1
+    and ``label`` along its side, on a white card (matplotlib's Agg canvas)."""
+    from matplotlib.colors import ListedColormap, BoundaryNorm
+    from matplotlib.figure import Figure
+    from matplotlib.colorbar import ColorbarBase
+
+    n = len(colors)
+    fig = Figure(figsize=(2.0 * LEGEND_ASPECT * 2, 4.0), dpi=100)
+    fig.patch.set_facecolor("white")
+    ax = fig.add_axes([0.08, 0.05, 0.25, 0.9])
+    ColorbarBase(ax, cmap=ListedColormap(colors), norm=BoundaryNorm(np.linspace(0, 1, n + 1), n),
+                 ticks=[0.0, 0.5, 1.0], orientation="vertical")
+    ax.tick_params(labelsize=16)
+    ax.set_ylabel(label, fontsize=16 if len(label) < 20 else 12, labelpad=4)
+    ax.yaxis.set_label_position("right")
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    return buf.getvalue()
 
 
 def _has_display() -> bool:
