@@ -15,6 +15,7 @@ from typing import Sequence
 from urllib.parse import quote
 
 from ..io.output_files import atomic_write
+from .shown_paths import portable_text
 
 __all__ = ["render_batch_report", "write_batch_report"]
 
@@ -86,7 +87,7 @@ def render_batch_report(rows: Sequence[dict], out, *, title: str = "pinmsk batch
         parts.append("<tr>" + "".join(cells) + "</tr>")
     parts.append("</table><p class='small'>time: the trial's own run (for a skipped trial, the run that "
                  "wrote its folder).</p></body></html>")
-    return "\n".join(parts)
+    return portable_text("\n".join(parts))
 
 
 def write_batch_report(path, rows: Sequence[dict], out=None, **kw) -> Path:
