@@ -411,6 +411,28 @@ def _channels(c, max_channels):
     return keep
 
 
+def channel_unit(c, j: int) -> str:
+    """SI unit of compared channel ``j`` of comparison ``c``: the trial's stated unit, else by its
+    level -- contact: N (forces) or m (centre of pressure); motion: rad or m; torque/muscle: the
+    coordinate's generalized force, N m (rotation) or N (translation)."""
+    name = c.channels[j]
+    stated = (getattr(c.trial, "units", None) or {}).get(name, "")
+    if stated:
+        return stated
+    if c.mode == "contact":
+        return "m" if name[-3:-1] == "_p" else "N"
+    coord = c.coordinates[j] if len(c.coordinates) == len(c.channels) else name
+    try:
+        from ..effects._base import is_prismatic
+
+        prismatic = is_prismatic(c.model, coord)
+    except Exception:          # a channel that is no joint of the model (a sensor): rotational
+        prismatic = False
+    if c.mode == "motion":
+        return "m" if prismatic else "rad"
+    return "N" if prismatic else "N m"
+
+
 def plot_comparison(diag, path=None, *, title: str | None = None, max_channels: int = 6) -> Figure:
     """Model vs measurement per channel (noise floor as a band around the model), residual beneath."""
     c = diag.comparison
@@ -428,10 +450,12 @@ def plot_comparison(diag, path=None, *, title: str | None = None, max_channels: 
         ax.plot(t, c.modelled[:, j], color=_MODEL, lw=1.2, label="model")
         ratio = np.sqrt(np.mean(c.residual[:, j] ** 2)) / sig
         ax.set_title(f"{c.channels[j]}  (rmse {ratio:.1f}x noise floor)", fontsize=9, loc="left")
+        unit = channel_unit(c, j)
+        ax.set_ylabel(unit, fontsize=8)
         ax.grid(alpha=0.3)
         axr.axhspan(-sig, sig, color=_BAND, lw=0)
         axr.plot(t, c.residual[:, j], color="k", lw=0.7)
-        axr.set_ylabel("residual", fontsize=8)
+        axr.set_ylabel(f"residual ({unit})", fontsize=8)
         axr.grid(alpha=0.3)
         if k == 0:
             ax.legend(fontsize=7, loc="upper right", ncol=3)
@@ -442,19 +466,34 @@ def plot_comparison(diag, path=None, *, title: str | None = None, max_channels: 
     return fig
 
 
-def plot_residual_heatmap(diag, path=None, *, clip: float = 5.0) -> Figure:
-    """Residual divided by the noise floor, time x channel (clipped at ``clip``)."""
+def plot_residual_heatmap(diag, path=None, *, clip: float | None = None) -> Figure:
+    """Residual divided by the noise floor, time x channel, on a symmetric log colour scale.
+
+    Linear within one noise floor (|z| <= 1), logarithmic beyond, up to the
+    data's largest |z| (or ``clip`` if given): residuals of 2 and of 200 floors
+    stay distinguishable instead of saturating the scale.
+    """
+    from matplotlib.colors import SymLogNorm
+
     c = diag.comparison
-    z = np.clip(c.residual / c.noise.sigma, -clip, clip)
+    z = c.residual / c.noise.sigma
+    finite = np.abs(z[np.isfinite(z)])
+    top = float(clip) if clip is not None else max(float(finite.max()) if finite.size else 1.0, 2.0)
+    z = np.clip(z, -top, top)
     fig = new_figure(9.0, 1.5 + 0.35 * len(c.channels))
     ax = fig.subplots()
-    im = ax.imshow(z.T, aspect="auto", cmap="RdBu_r", vmin=-clip, vmax=clip, interpolation="nearest",
+    norm = SymLogNorm(linthresh=1.0, linscale=0.6, vmin=-top, vmax=top, base=10)
+    im = ax.imshow(z.T, aspect="auto", cmap="RdBu_r", norm=norm, interpolation="nearest",
                    extent=[c.time[0], c.time[-1], len(c.channels) - 0.5, -0.5])
     ax.set_yticks(range(len(c.channels)))
     ax.set_yticklabels(c.channels, fontsize=7)
     ax.set_xlabel("time (s)")
-    ax.set_title("residual / noise floor", fontsize=9, loc="left")
-    fig.colorbar(im, ax=ax, label="residual / floor")
+    ax.set_title("residual / noise floor (symmetric log scale, linear within ±1)", fontsize=9, loc="left")
+    decades = [10.0 ** k for k in range(0, int(np.floor(np.log10(top))) + 1)]
+    ticks = [-d for d in decades[::-1]] + [0.0] + decades
+    bar = fig.colorbar(im, ax=ax, ticks=ticks)
+    bar.ax.set_yticklabels([f"{v:g}" for v in ticks], fontsize=7)
+    bar.set_label("residual / floor", fontsize=8)
     if path is not None:
         save_figure(fig, path)
     return fig
@@ -528,12 +567,25 @@ def plot_effect_contribution(diag, path=None, *, score=None) -> Figure:
         name = c.eq.coordinates[j]
         # contact-mode equations are the GRF channels themselves; otherwise generalized forces
         ax.set_title(name if c.mode == "contact" else moment_channel(name), fontsize=9, loc="left")
+        ax.set_ylabel(_eq_unit(c, name), fontsize=8)
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=7)
     axes[-1].set_xlabel("time (s)")
     if path is not None:
         save_figure(fig, path)
     return fig
+
+
+def _eq_unit(c, name: str) -> str:
+    """Unit of the equation error of coordinate (or contact channel) ``name``."""
+    if c.mode == "contact":
+        return "m" if name[-3:-1] == "_p" else "N"
+    try:
+        from ..effects._base import is_prismatic
+
+        return "N" if is_prismatic(c.model, name) else "N m"
+    except Exception:
+        return "N m"
 
 
 def save_diagnosis_figures(run, out_dir) -> dict[str, Path]:
