@@ -115,3 +115,25 @@ def test_results_report_of_static_optimization_in_browser(page, tmp_path):
     assert [i[2:] for i in images][:2] == [[900, 400], [900, 400]]     # forces, activations
     rgb = browser.read_png(tmp_path / "so.png")
     assert browser.distinct_colors(rgb) > 8                              # figures drawn, not blank
+
+
+def test_report_shows_no_absolute_path_in_browser(page, tmp_path, monkeypatch):
+    """The text a reader sees names files relative to the working folder, or by their name."""
+    from pathlib import Path
+
+    import pinmsk
+    from pinmsk.presentation.report import write_results_report
+
+    work = tmp_path / "work"
+    (work / "out").mkdir(parents=True)
+    monkeypatch.chdir(work)
+    pkg = Path(pinmsk.__file__).resolve().parent
+    t = np.linspace(0.0, 1.0, 21)
+    trial = pinmsk.Trial(t, {"elbow_flexion": 0.5 * t}, meta={"source": str(pkg / "data" / "elbow.mot")})
+    results = pinmsk.Trial(t, {"BRD_activation": t}, meta={"source": str(work / "out" / "so.sto")})
+    out = write_results_report(work / "out" / "so.html", model=pinmsk.load_model("forearm"), trial=trial,
+                               results=results, text=f"wrote {work / 'out' / 'so.sto'}")
+    check_html_in_browser(page, out, min_images=1)
+    text = page.evaluate("document.body.innerText")
+    assert "elbow.mot" in text and "out/so.sto" in text
+    assert str(tmp_path) not in text and str(pkg.parent) not in text
