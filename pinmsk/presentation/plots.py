@@ -55,9 +55,9 @@ _SIG = "#1f77b4"
 _NOT = "0.7"
 
 
-def new_figure(width: float = 8.0, height: float = 4.0) -> Figure:
-    """A Figure on its own Agg canvas."""
-    fig = Figure(figsize=(width, height), dpi=100, layout="constrained")
+def new_figure(width: float = 8.0, height: float = 4.0, *, layout: str | None = "constrained") -> Figure:
+    """A Figure on its own Agg canvas (``layout=None``: placed by ``subplots_adjust``)."""
+    fig = Figure(figsize=(width, height), dpi=100, layout=layout)
     FigureCanvasAgg(fig)
     return fig
 
@@ -129,7 +129,7 @@ def plot_moments(trial, coordinates=None, *, title: str | None = None, path=None
 
 # -- muscles, EMG, comparisons -----------------------------------------------------------------
 
-_QUANTITIES = {"force": ("_force", "force (N)"), "activation": ("_activation", "activation")}
+_QUANTITIES = {"force": ("_force", "force (N)"), "activation": ("_activation", "activation (0-1)")}
 
 
 def _suffix(quantity: str) -> tuple[str, str]:
@@ -217,6 +217,16 @@ def _colors(n):
     return [cmap(i % cmap.N) for i in range(n)]
 
 
+def muscle_group(name: str) -> str:
+    """A muscle's group: its name without the digits that number its bundles, side kept
+    (``glmax1_r`` -> ``glmax_r``, ``vasmed_l`` -> ``vasmed_l``, ``BICLH`` -> ``BICLH``)."""
+    import re
+
+    m = re.fullmatch(r"(.*?)(_[lr])?", name)
+    base, side = m.group(1), m.group(2) or ""
+    return re.sub(r"(?<=[A-Za-z])\d+$", "", base) + side
+
+
 def _grid(fig, n, ncols):
     ncols = min(ncols, n)
     nrows = -(-n // ncols)
@@ -279,14 +289,26 @@ def plot_muscles(results, *, quantity: str = "force", muscles=None, emg=None, no
         axes = [ax]
         default = f"muscle {quantity}"
     else:
-        fig = new_figure(12.0, 0.8 + 1.6 * -(-len(mus) // 4))
-        axes, _, _ = _grid(fig, len(mus), 4)
-        for ax, m in zip(axes, mus):
-            ax.plot(t, results[m + suf], color=_SIG, lw=1.0)
-            ax.set_title(m, fontsize=8, loc="left")
+        # one small panel per muscle group (bundles overlaid), laid out on a fixed grid: the
+        # constrained layout of dozens of panels costs more than the solve that made them
+        groups: dict[str, list[str]] = {}
+        for m in mus:
+            groups.setdefault(muscle_group(m), []).append(m)
+        nrows = -(-len(groups) // 4)
+        height = 0.8 + 1.5 * nrows
+        fig = new_figure(12.0, height, layout=None)
+        axes, _, _ = _grid(fig, len(groups), 4)
+        fig.subplots_adjust(left=0.06, right=0.99, bottom=0.5 / height, top=1 - 0.55 / height,
+                            wspace=0.25, hspace=0.45)
+        for ax, (g, ms) in zip(axes, groups.items()):
+            for m, color in zip(ms, _colors(len(ms))):
+                ax.plot(t, results[m + suf], color=color, lw=1.0, label=m)
+            ax.set_title(g if len(ms) == 1 else f"{g} ({len(ms)})", fontsize=8, loc="left")
             ax.tick_params(labelsize=7)
             ax.grid(alpha=0.3)
-        default = f"muscle {quantity} ({unit})"
+        for ax in axes[::4]:
+            ax.set_ylabel(unit, fontsize=8)
+        default = f"muscle {unit}, by muscle group"
     for ax in axes[-2:]:
         ax.set_xlabel("time (s)")
     fig.suptitle(title or default, fontsize=10)

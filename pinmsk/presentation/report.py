@@ -20,7 +20,7 @@ from ..io.output_files import atomic_write
 from ..signals.sampling import median_step
 from ..solvers.static import STATUS
 from . import plots
-from .plots import figure_png, muscles_in
+from .plots import figure_png, muscle_group, muscles_in
 from .shown_paths import portable_text, shown_path
 
 __all__ = ["write_report", "render_report", "write_results_report", "render_results_report"]
@@ -29,7 +29,8 @@ _CSS = """
 body{font-family:system-ui,-apple-system,'Segoe UI',sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}
 h1{font-size:1.5em}h2{font-size:1.15em;border-bottom:1px solid #ddd;padding-bottom:.2em;margin-top:1.6em}
 table{border-collapse:collapse;margin:.5em 0;font-size:.9em}td,th{border:1px solid #ccc;padding:.25em .6em;text-align:right}
-th{background:#f3f3f3}td.l,th.l{text-align:left}pre{background:#f7f7f7;padding:.8em;overflow-x:auto;font-size:.8em}
+th{background:#f3f3f3}td.l,th.l{text-align:left}pre{background:#f7f7f7;padding:.8em;overflow-x:auto;font-size:.8em;white-space:pre-wrap;overflow-wrap:anywhere}
+summary{cursor:pointer;color:#245;margin:.4em 0}
 .v-missing_effect{color:#b03a2e;font-weight:bold}.v-at_noise_floor{color:#1e8449;font-weight:bold}
 img{max-width:100%;border:1px solid #eee;margin:.4em 0}.small{color:#666;font-size:.85em}
 """
@@ -286,12 +287,85 @@ def status_counts(results) -> list[list]:
             for c, n in zip(codes, counts)]
 
 
+#: Tables and lists longer than this are collapsed (<details>) below the summary.
+SHOWN_ROWS = 20
+#: Frames listed as the worst in the summary.
+WORST_FRAMES = 5
+
+
+def _collapsed(summary: str, body: str, collapse: bool) -> str:
+    """``body`` (HTML) inside a closed <details> titled ``summary`` when ``collapse``, else as is."""
+    return f"<details><summary>{_e(summary)}</summary>{body}</details>" if collapse else body
+
+
+def _unmet_channels(results) -> list[str]:
+    """The channels of what the muscles did not supply: reserves, residuals, other actuators' forces."""
+    units = dict(results.units)
+    muscles = set(muscles_in(results, "force"))
+    return [n for n in results.names
+            if n.endswith(("_reserve", "_residual"))
+            or (n.endswith("_force") and n[:-len("_force")] not in muscles and units.get(n))]
+
+
+def _summary_section(results) -> list[str]:
+    """The answer first: frames not solved, the worst frames, the reserves and residuals, the
+    activations by muscle group."""
+    out = ["<h2>Summary</h2>"]
+    t = np.asarray(results.time, dtype=float)
+    rows = [("frames", results.n_frames), ("time (s)", f"{t[0]:.4g} to {t[-1]:.4g}")]
+    if "status" in results:
+        st = np.asarray(results["status"], dtype=float)
+        rows.append(("frames not solved to optimality", f"{int(np.sum(st != 0))} of {st.size}"))
+    out.append(_table(["item", "value"], rows, left=2))
+    unmet = _unmet_channels(results)
+    units = dict(results.units)
+    if unmet:
+        X = np.abs(np.column_stack([np.asarray(results[n], dtype=float) for n in unmet]))
+        peak_i = np.nanargmax(np.where(np.isfinite(X), X, -np.inf), axis=0)
+        table = sorted(([n, units.get(n, ""), float(X[i, j]), float(t[i]), float(np.sqrt(np.nanmean(X[:, j] ** 2)))]
+                        for j, (n, i) in enumerate(zip(unmet, peak_i))), key=lambda r: -r[2])
+        out.append("<p>Reserves and residuals (what the muscles did not supply), the largest first:</p>")
+        body = [[r[0], r[1], _g(r[2]), _g(r[3]), _g(r[4])] for r in table]
+        head = ["channel", "unit", "peak |value|", "time of peak (s)", "RMS"]
+        out.append(_table(head, body[:10], left=2))
+        if len(body) > 10:
+            out.append(_collapsed(f"{len(body) - 10} more", _table(head, body[10:], left=2), True))
+        # the worst frames: the largest reserve or residual in units of its own RMS over the trial
+        rms = np.array([r[4] for r in sorted(table, key=lambda r: unmet.index(r[0]))])
+        score = np.nanmax(X / np.where(rms > 0, rms, 1.0), axis=1)
+        worst = np.argsort(-np.nan_to_num(score, nan=-np.inf))[:WORST_FRAMES]
+        out.append("<p>Worst frames (largest reserve or residual):</p>")
+        wrows = []
+        for i in sorted(worst, key=lambda i: -score[i]):
+            j = int(np.nanargmax(X[i]))
+            wrows.append([int(i), _g(float(t[i])), unmet[j], f"{_g(float(X[i, j]))} {units.get(unmet[j], '')}".strip()])
+        out.append(_table(["frame", "time (s)", "largest", "|value|"], wrows, left={2}))
+    acts = muscles_in(results, "activation")
+    if acts:
+        groups: dict[str, list[str]] = {}
+        for m in acts:
+            groups.setdefault(muscle_group(m), []).append(m)
+        A = {g: np.column_stack([np.asarray(results[f"{m}_activation"], dtype=float) for m in ms])
+             for g, ms in groups.items()}
+        grows = sorted(([g, len(groups[g]), float(np.nanmax(a)), float(t[int(np.nanargmax(np.nanmax(a, axis=1)))]),
+                         float(np.nanmean(a))] for g, a in A.items()), key=lambda r: -r[2])
+        out.append(f"<p>Activations by muscle group ({len(acts)} muscles in {len(groups)} groups), "
+                   "the most active first:</p>")
+        head = ["group", "muscles", "peak activation", "time of peak (s)", "mean activation"]
+        body = [[r[0], r[1], _g(r[2]), _g(r[3]), _g(r[4])] for r in grows]
+        out.append(_table(head, body[:SHOWN_ROWS]))
+        if len(body) > SHOWN_ROWS:
+            out.append(_collapsed(f"{len(body) - SHOWN_ROWS} more groups", _table(head, body[SHOWN_ROWS:]), True))
+    return out
+
+
 def render_results_report(*, model, trial, results, title: str | None = None, text: str | None = None,
                           tables=None, extra_figures=None, emg=None) -> str:
     """The results report as an HTML string (see :func:`write_results_report`)."""
     title = title or f"pinmsk results: {model.name}"
     parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{_e(title)}</title>"
              f"<style>{_CSS}</style></head><body>", f"<h1>{_e(title)}</h1>"]
+    parts += _summary_section(results)
     parts.append("<h2>Model</h2><pre>" + _e(model.describe()) + "</pre>")
     parts.append("<h2>Data</h2>")
     for label, tr in (("trial", trial), ("results", results)):
@@ -304,8 +378,8 @@ def render_results_report(*, model, trial, results, title: str | None = None, te
             ("source", shown_path(tr.meta.get("source") or tr.meta.get("analysis") or "-")),
             ("frames", tr.n_frames), ("duration (s)", f"{tr.duration:.4g}"),
             ("time (s)", f"{t[0]:.4g} to {t[-1]:.4g}"), ("rate (Hz)", _g(rate)),
-            ("channels", f"{tr.n_channels}: " + ", ".join(tr.names)),
         ], left=2))
+        parts.append(_collapsed(f"{tr.n_channels} channels", _e(", ".join(tr.names)), tr.n_channels > SHOWN_ROWS))
     if emg is None:
         emg = plots.find_emg(results, trial)
     figs = plots.results_figures(results, trial=trial, emg=emg, coordinates=model.coordinates)
@@ -319,9 +393,9 @@ def render_results_report(*, model, trial, results, title: str | None = None, te
     parts.append("<h2>Muscles</h2>")
     rows = muscle_stats(results)
     if rows:
-        parts.append(_table(["muscle", "peak force (N)", "time of peak (s)", "mean force (N)",
-                             "mean activation", "peak activation"],
-                            [[r[0]] + [_g(x) for x in r[1:]] for r in rows]))
+        parts.append(_collapsed(f"{len(rows)} muscles", _table(
+            ["muscle", "peak force (N)", "time of peak (s)", "mean force (N)", "mean activation",
+             "peak activation"], [[r[0]] + [_g(x) for x in r[1:]] for r in rows]), len(rows) > SHOWN_ROWS))
     else:
         parts.append("<p>No muscle force or activation channels in the results.</p>")
     if emg is not None:
@@ -335,8 +409,10 @@ def render_results_report(*, model, trial, results, title: str | None = None, te
         parts.append("<h2>Solver status</h2>")
         parts.append(_table(["status", "frames", "meaning"], st, left={0, 2}))
     parts.append("<h2>Result channels</h2>")
-    parts.append(_table(["channel", "unit", "min", "max", "mean", "RMS"],
-                        [r[:2] + [_g(x) for x in r[2:]] for r in channel_stats(results)], left=2))
+    stats = channel_stats(results)
+    parts.append(_collapsed(f"{len(stats)} channels", _table(
+        ["channel", "unit", "min", "max", "mean", "RMS"], [r[:2] + [_g(x) for x in r[2:]] for r in stats],
+        left=2), len(stats) > SHOWN_ROWS))
     for cap, tab in dict(tables or {}).items():
         header, trows = tab
         parts.append(f"<h2>{_e(cap)}</h2>")

@@ -1,0 +1,68 @@
+"""The results report opens with a summary: unsolved frames, reserves and residuals, the worst
+frames, the activations by muscle group; long lists are collapsed."""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+import pinmsk
+from pinmsk.presentation import report
+from pinmsk.presentation.plots import muscle_group
+
+
+def test_muscle_group_drops_bundle_numbers_and_keeps_the_side():
+    assert muscle_group("glmax1_r") == "glmax_r"
+    assert muscle_group("glmax3_r") == "glmax_r"
+    assert muscle_group("vasmed_l") == "vasmed_l"
+    assert muscle_group("BICLH") == "BICLH"
+    assert muscle_group("addlong_r") == "addlong_r"
+
+
+def _results(n_muscles=30):
+    t = np.linspace(0.0, 1.0, 51)
+    ch, units = {}, {}
+    for k in range(n_muscles):
+        name = f"mus{chr(97 + k // 3)}{k % 3 + 1}_r"          # groups of three bundles: musa1_r ...
+        ch[f"{name}_force"] = 100.0 * (k + 1) * t
+        units[f"{name}_force"] = "N"
+        ch[f"{name}_activation"] = (k + 1) / n_muscles * t
+    ch["hip_flexion_r_reserve"] = np.where(np.arange(t.size) == 17, 40.0, 1.0)
+    units["hip_flexion_r_reserve"] = "N*m"
+    ch["pelvis_ty_residual"] = 5.0 * np.sin(2 * np.pi * t)
+    units["pelvis_ty_residual"] = "N"
+    ch["status"] = np.where(np.arange(t.size) == 30, 1.0, 0.0)
+    return pinmsk.Trial(t, ch, units=units, meta={"analysis": "static_optimization"})
+
+
+@pytest.fixture(scope="module")
+def page_html():
+    return report.render_results_report(model=pinmsk.load_model("forearm"), trial=None, results=_results())
+
+
+def test_summary_comes_first_with_reserves_and_worst_frames(page_html):
+    html = page_html
+    assert html.index("<h2>Summary</h2>") < html.index("<h2>Model</h2>")
+    summary = html[html.index("<h2>Summary</h2>"):html.index("<h2>Model</h2>")]
+    assert "1 of 51" in summary                                           # one frame not optimal
+    rows = re.findall(r"<tr><td class=\"l\">(\w+_(?:reserve|residual))</td><td class=\"l\">([^<]*)</td>"
+                      r"<td class=\"\">([^<]*)</td><td class=\"\">([^<]*)</td>", summary)
+    assert rows[0] == ("hip_flexion_r_reserve", "N*m", "40", "0.34")      # largest first, at frame 17
+    peak = np.max(np.abs(5.0 * np.sin(2 * np.pi * np.linspace(0, 1, 51))))
+    assert rows[1][:3] == ("pelvis_ty_residual", "N", f"{peak:.4g}")
+    assert re.search(r"<tr><td class=\"\">17</td><td class=\"\">0.34</td>"
+                     r"<td class=\"l\">hip_flexion_r_reserve</td>", summary)
+    # 30 muscles in 10 groups, the most active first
+    assert "30 muscles in 10 groups" in summary
+    first = re.search(r"most active first:</p>\s*<table>.*?<tr><td class=\"l\">(\w+)</td><td class=\"\">(\d+)</td>"
+                      r"<td class=\"\">([^<]*)</td>", summary, re.S)
+    assert first.groups() == ("musj_r", "3", "1")
+
+
+def test_long_lists_are_collapsed(page_html):
+    html = page_html
+    after = html[html.index("<h2>Model</h2>"):]
+    assert "<details><summary>30 muscles</summary>" in after
+    assert re.search(r"<details><summary>\d+ channels</summary>", after)
+    assert "white-space:pre-wrap" in html                                 # the model text wraps
