@@ -137,3 +137,22 @@ def test_report_shows_no_absolute_path_in_browser(page, tmp_path, monkeypatch):
     text = page.evaluate("document.body.innerText")
     assert "elbow.mot" in text and "out/so.sto" in text
     assert str(tmp_path) not in text and str(pkg.parent) not in text
+
+
+def test_results_report_opens_with_its_summary_and_long_lists_closed(page, tmp_path):
+    """Summary first on the screen; the 51-channel and 24-muscle lists collapsed until opened."""
+    import pinmsk
+    from pinmsk.presentation.report import write_results_report
+    from test_report_summary import _results
+
+    out = write_results_report(tmp_path / "so.html", model=pinmsk.load_model("forearm"), trial=None,
+                               results=_results(24))
+    check_html_in_browser(page, out, min_images=2, screenshot=tmp_path / "so.png")
+    first = page.evaluate("(() => { const h = document.querySelector('h2'); "
+                          "return [h.textContent, h.getBoundingClientRect().top]; })()")
+    assert first[0] == "Summary" and first[1] < 150
+    closed = page.evaluate("[...document.querySelectorAll('details')].map(d => "
+                           "[d.querySelector('summary').textContent, d.open, d.getBoundingClientRect().height])")
+    names = [c[0] for c in closed]
+    assert "51 channels" in names and "24 muscles" in names
+    assert all(not c[1] and c[2] < 40 for c in closed)                # closed: one line tall

@@ -66,3 +66,26 @@ def test_long_lists_are_collapsed(page_html):
     assert "<details><summary>30 muscles</summary>" in after
     assert re.search(r"<details><summary>\d+ channels</summary>", after)
     assert "white-space:pre-wrap" in html                                 # the model text wraps
+
+
+def test_so_report_and_plot_draw_each_figure_once(tmp_path, monkeypatch):
+    """``--report --plot``: the report embeds the PNGs --plot wrote, byte for byte."""
+    import base64
+
+    from pinmsk.io.tables import write_trial
+    from pinmsk.presentation import plots
+    from pinmsk.presentation.cli import main
+    from pinmsk.solvers.analytical import gaussian_elbow_trial
+
+    src = tmp_path / "gauss.csv"
+    write_trial(gaussian_elbow_trial(n_frames=81), src)
+    calls = []
+    real = plots.results_figures
+    monkeypatch.setattr(plots, "results_figures", lambda *a, **k: calls.append(1) or real(*a, **k))
+    assert main(["so", "forearm", str(src), "-o", str(tmp_path / "so.sto"), "--report", str(tmp_path / "so.html"),
+                 "--plot", str(tmp_path / "fig")]) == 0
+    assert len(calls) == 1
+    html = (tmp_path / "so.html").read_text()
+    embedded = {base64.b64decode(b) for b in re.findall(r'src="data:image/png;base64,([^"]+)"', html)}
+    written = {p.read_bytes() for p in (tmp_path / "fig").glob("*.png")}
+    assert written and written <= embedded

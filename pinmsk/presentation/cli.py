@@ -286,14 +286,17 @@ def _so_options(args) -> dict:
 
 
 def _report_results(args, model, trial, result, title, text):
+    figures = None
     if args.plot:
         from . import plots
-        for path in plots.save_results_figures(result, args.plot, trial=trial).values():
+        figures = plots.save_results_figures(result, args.plot, trial=trial, coordinates=model.coordinates)
+        for path in figures.values():
             print(f"wrote {path}")
     if args.report:
         from .report import write_results_report
+        # the report embeds the PNGs just written instead of drawing the figures again
         write_results_report(args.report, model=model, trial=trial, results=result,
-                             title=title.replace("_", " "), text=text)
+                             title=title.replace("_", " "), text=text, figures=figures)
         print(f"wrote {args.report}")
 
 

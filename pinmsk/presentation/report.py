@@ -360,7 +360,7 @@ def _summary_section(results) -> list[str]:
 
 
 def render_results_report(*, model, trial, results, title: str | None = None, text: str | None = None,
-                          tables=None, extra_figures=None, emg=None) -> str:
+                          tables=None, extra_figures=None, emg=None, figures=None) -> str:
     """The results report as an HTML string (see :func:`write_results_report`)."""
     title = title or f"pinmsk results: {model.name}"
     parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{_e(title)}</title>"
@@ -382,7 +382,8 @@ def render_results_report(*, model, trial, results, title: str | None = None, te
         parts.append(_collapsed(f"{tr.n_channels} channels", _e(", ".join(tr.names)), tr.n_channels > SHOWN_ROWS))
     if emg is None:
         emg = plots.find_emg(results, trial)
-    figs = plots.results_figures(results, trial=trial, emg=emg, coordinates=model.coordinates)
+    figs = (plots.results_figures(results, trial=trial, emg=emg, coordinates=model.coordinates)
+            if figures is None else dict(figures))
     captions = {"moments": "joint moments", "forces": "muscle forces", "activations": "muscle activations",
                 "activations_vs_emg": "activations vs EMG", "forces_vs_emg": "forces vs EMG"}
     parts.append("<h2>Figures</h2>")
@@ -425,7 +426,7 @@ def render_results_report(*, model, trial, results, title: str | None = None, te
 
 
 def write_results_report(path, *, model, trial, results, title: str | None = None, text: str | None = None,
-                         tables=None, extra_figures=None, emg=None) -> Path:
+                         tables=None, extra_figures=None, emg=None, figures=None) -> Path:
     """Write one self-contained HTML report of a result (SO, FSO, ...) to ``path``; returns the path.
 
     Sections: model (``model.describe()``), data (frames, duration, rate,
@@ -433,7 +434,9 @@ def write_results_report(path, *, model, trial, results, title: str | None = Non
     moments when ``<coord>_moment`` channels exist, muscle forces and
     activations, vs EMG when ``<muscle>_emg`` channels are in ``results`` or
     ``trial`` or ``emg`` -- True or an EMG Trial -- is given), then
-    ``extra_figures`` (``{caption: Figure | PNG bytes | PNG path}``); tables:
+    ``extra_figures`` (``{caption: Figure | PNG bytes | PNG path}``); ``figures`` (the same form,
+    keyed by :func:`~pinmsk.presentation.plots.results_figures`' names) in place of drawing them again,
+    e.g. the PNGs :func:`~pinmsk.presentation.plots.save_results_figures` wrote; tables:
     per muscle peak force, its time, mean force, mean and peak activation; EMG
     correlation; solver status counts (``status`` channel); per channel
     min/max/mean/RMS; ``tables`` (``{caption: (header, rows)}``); ``text``
@@ -442,4 +445,4 @@ def write_results_report(path, *, model, trial, results, title: str | None = Non
     """
     return _atomic_write(path, render_results_report(model=model, trial=trial, results=results, title=title,
                                                      text=text, tables=tables, extra_figures=extra_figures,
-                                                     emg=emg))
+                                                     emg=emg, figures=figures))
