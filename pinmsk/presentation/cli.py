@@ -458,7 +458,9 @@ _OPTIMIZE_EPILOG = (
     "  muscle-tendon forces, 'ift' joint torques; kind: 'nodes' | 'polynomial' | 'fourier' | 'spline';\n"
     "  free_period = true frees the Fourier period.\n"
     "Every key of every section: pinmsk.solvers.ocp.tasks.TASK_SCHEMA (unknown keys are errors).\n"
-    "A problem that does not converge exits with status 2 and writes nothing.\n"
+    "A problem that does not converge exits with status 2 and writes nothing; with --keep-unconverged it\n"
+    "  writes the last iterate (\"converged\": false in OUT.json) and still exits with status 2.\n"
+    "Progress: one line per IPOPT solve stage on stderr (live on a terminal), then a summary line.\n"
     "A [gait] task with --report OUT.html also writes the gait validation report of the solved stride.\n"
     "Examples: data/tasks/*.toml")
 
@@ -480,8 +482,20 @@ def cmd_optimize(args) -> int:
     from ..pipeline import optimize_task
     if args.report:
         _check_gait_report(args)
-    res = optimize_task(args.task, args.output, precision=args.precision)
+    from .solve_progress import SolveProgress, summary_line
+    if args.keep_unconverged and not args.output:
+        raise PinmskError("--keep-unconverged writes the last iterate to -o OUT: give -o; nothing was run")
+    # the live line only without IPOPT's own log on the terminal (both would interleave)
+    progress = SolveProgress(live=False if args.verbose else None)
+    res = optimize_task(args.task, args.output, precision=args.precision, monitor=progress,
+                        verbose=args.verbose, solver_log=args.solver_log, max_iter=args.max_iter,
+                        keep_unconverged=args.keep_unconverged)
+    if not res.converged:      # --keep-unconverged: written, flagged, and not a solution (status 2)
+        print(f"pinmsk: error: {args.task}: the optimizer did not converge ({res.status}); the last iterate "
+              f"was written to {args.output} and {args.output}.json (converged=false)", file=sys.stderr)
+        return 2
     print(res.report())
+    print(summary_line(res.summary))
     if args.report:
         # the stride just solved (the Result written to OUT.sto: its info carries the JSON's speed,
         # cost of transport and body weight) against Winter's Table A.1, the measured walk and the
@@ -848,6 +862,16 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--report", metavar="OUT.html", default=None,
                    help="[gait] tasks: write the validation report (joint angles vs Winter and the measured "
                         "walk, GRF double hump, activations vs EMG, published bands; needs matplotlib)")
+    s.add_argument("--solver-log", metavar="FILE", default=None,
+                   help="write IPOPT's own iteration log of every solve stage to FILE (replaced)")
+    s.add_argument("--verbose", action="store_true",
+                   help="print IPOPT's own log on stdout (default: none; a terminal shows one live progress "
+                        "line per stage on stderr, a pipe one line per stage at its end)")
+    s.add_argument("--max-iter", metavar="N", type=int, default=None,
+                   help="IPOPT's iteration limit of each stage (default: the task's [solver] maxiter)")
+    s.add_argument("--keep-unconverged", action="store_true",
+                   help="if IPOPT does not converge, still write the last iterate to -o OUT and OUT.json, "
+                        "flagged \"converged\": false (e.g. a gait task's next guess); the exit status stays 2")
     s.set_defaults(func=cmd_optimize)
 
     s = sub.add_parser("view", help="meshcat viewer: the model, optionally playing a trial with results")
@@ -913,7 +937,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: Arguments naming output files, and output folders, of any command (checked before it runs).
-_OUTPUT_FILES = ("output", "json", "report", "save_model", "save_osim")
+_OUTPUT_FILES = ("output", "json", "report", "save_model", "save_osim", "solver_log")
 _OUTPUT_FOLDERS = ("plot", "out")
 
 
