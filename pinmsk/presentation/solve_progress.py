@@ -42,7 +42,7 @@ def stage_line(number: int, label: str, record: dict | None, *, iteration: int =
     if record is None:
         head, it, obj, viol, sec = "interrupted", iteration, objective, violation, seconds
     else:
-        head = ("converged" if record["converged"] else "NOT CONVERGED") + f" ({record['status']})"
+        head = ("converged" if record["converged"] else "NOT CONVERGED") + f" ({record['status'].split(';')[0]})"
         it, obj, viol, sec = record["iterations"], record["objective"], record["violation"], record["seconds"]
     return f"optimize stage {number} ({label}): {head}, {_iterate_text(it, obj, viol)}, {_elapsed(sec)}"
 
@@ -71,17 +71,23 @@ class SolveProgress:
         self._t0 = time.perf_counter()
         self._last = (0, float("nan"), float("nan"))
         if self.live:
+            import shutil
             from tqdm import tqdm
-            self._bar = tqdm(total=None, desc=f"optimize stage {self.stage} ({label})", file=self.stream,
-                             unit="it", leave=False, dynamic_ncols=True, mininterval=0.2,
-                             bar_format="{desc}: {postfix}, {elapsed}")
-            self._bar.set_postfix_str("starting", refresh=True)
+            # the terminal's size, or 100 x 24 where it reports none: a pseudo-terminal of size 0 x 0
+            # would make tqdm draw nothing (it hides lines below the last row)
+            size = shutil.get_terminal_size((100, 24))
+            self._bar = tqdm(total=None, desc=self._text("starting"), file=self.stream, unit="it",
+                             leave=False, ncols=size.columns, nrows=size.lines, mininterval=0.2,
+                             bar_format="{desc}, {elapsed}")
 
     def iteration(self, iteration: int, objective: float, violation: float) -> None:
         self._last = (iteration, objective, violation)
         if self._bar is not None:
-            self._bar.set_postfix_str(_iterate_text(iteration, objective, violation), refresh=False)
+            self._bar.set_description_str(self._text(_iterate_text(iteration, objective, violation)), refresh=False)
             self._bar.update(1)
+
+    def _text(self, what: str) -> str:
+        return f"optimize stage {self.stage} ({self._label}): {what}"
 
     def end(self, record: dict | None) -> None:
         it, obj, viol = self._last
