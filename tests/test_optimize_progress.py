@@ -60,9 +60,13 @@ class _Recorder(SolveProgress):
         super().iteration(iteration, objective, violation)
 
 
+@pytest.fixture(autouse=True)
+def _no_forced_progress(monkeypatch):
+    monkeypatch.delenv("PINMSK_PROGRESS", raising=False)      # the streams' isatty decides
+
+
 @pytest.fixture
-def task(tmp_path, monkeypatch):
-    monkeypatch.delenv("PINMSK_PROGRESS", raising=False)
+def task(tmp_path):
     path = tmp_path / "tiny.toml"
     path.write_text(TINY)
     return path
@@ -88,6 +92,13 @@ def test_a_pipe_gets_one_line_per_stage_with_the_solves_numbers(task):
     assert its == list(range(res.iterations + 1))
     assert mon.iterates[-1][1] == pytest.approx(res.objective, rel=1e-9)
     assert mon.iterates[0][2] > 1e3 * mon.iterates[-1][2]   # the guess violates the dynamics, the solution does not
+
+
+def test_progress_env_forces_the_live_line_on_or_off(monkeypatch):
+    monkeypatch.setenv("PINMSK_PROGRESS", "1")
+    assert SolveProgress(_Pipe()).live
+    monkeypatch.setenv("PINMSK_PROGRESS", "0")
+    assert not SolveProgress(_Terminal()).live
 
 
 def test_a_terminal_gets_a_live_line_replaced_by_the_stage_line():
