@@ -667,7 +667,9 @@ def optimize_task(task_path, out_path=None, progress=None, *, precision: int | N
         from .solvers.ocp.gait import stride_result
         res, gait_numbers = stride_result(prob, mirror=spec["gait"].get("kind", "predictive") == "predictive")
         summary.update(gait_numbers)
-    res = Result.from_trial(res, stats=res.stats, info=dict(res.info, summary=summary), report=res._report)
+    # the report is the solve's (for a gait, of the half cycle the stride is made of)
+    res = Result.from_trial(res, stats=res.stats, info=dict(res.info, summary=summary),
+                            report=prob.result_.report())
     if out_path is not None:
         out = Path(out_path)
         write_json(out.with_suffix(out.suffix + ".json"), summary)
