@@ -190,7 +190,8 @@ class Collocation(Fitter):
       start the solver (a warm start);
     - ``n_starts``: automatic guesses to try (the best converged one is the result);
     - ``solver``: IPOPT settings ``tol`` (1e-8), ``max_iter`` (1000), ``constraint_tol`` (1e-6,
-      scaled), ``print_level``, ``hessian`` (``"exact"`` or ``"limited-memory"``), ...;
+      scaled), ``print_level`` (5: the level of IPOPT's log when ``verbose`` or in ``solver_log``),
+      ``hessian`` (``"exact"`` or ``"limited-memory"``), ...;
     - ``verbose``: IPOPT's iteration table on stdout (default: when stdout is a terminal);
     - ``monitor``: an object told of each IPOPT solve (a *stage*: every start, and both grids of
       :class:`~pinmsk.solvers.ocp.gait.CoarseToFine`): ``start(label)``, then
