@@ -210,3 +210,29 @@ def test_gait_keep_unconverged_has_two_stages_and_the_gaits_numbers(tmp_path, ca
         assert np.isfinite(summary[key])
     assert summary["stride_length"] == pytest.approx(summary["speed"] * summary["duration"], rel=1e-9)
     assert " m/s, stride " in summary_line(summary)
+
+
+def test_ctrl_c_ends_the_fit_with_the_stage_marked_interrupted(task):
+    """SIGINT inside IPOPT stops it at the next iteration and the fit raises KeyboardInterrupt (CasADi alone
+    would report a failed stage and let a coarse-to-fine fit go on to its next one)."""
+    import os
+    import signal
+    from pinmsk.pipeline import optimize_task
+
+    class CtrlC(_Recorder):
+        def iteration(self, iteration, objective, violation):
+            super().iteration(iteration, objective, violation)
+            if iteration == 4:
+                os.kill(os.getpid(), signal.SIGINT)
+
+    stream = _Pipe()
+    mon = CtrlC(stream)
+    saved = signal.signal(signal.SIGINT, signal.default_int_handler)   # as in a command line
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            optimize_task(task, monitor=mon)
+    finally:
+        signal.signal(signal.SIGINT, saved)
+    assert signal.getsignal(signal.SIGINT) is saved
+    assert [k for k, _, _ in mon.iterates] == [0, 1, 2, 3, 4]        # no iteration after the one interrupted
+    assert stream.getvalue().startswith("optimize stage 1 (8 intervals): interrupted, iter 4, ")

@@ -43,6 +43,7 @@ solution.
 """
 from __future__ import annotations
 
+import contextlib
 import sys
 import time as _time
 
@@ -137,10 +138,12 @@ def _iteration_callback_class():
             self.monitor, self.nx = monitor, int(nx)
             self.lbg, self.ubg = np.asarray(lbg, dtype=float), np.asarray(ubg, dtype=float)
             self.count = 0
+            self.interrupted = False
             self.construct("pinmsk_iteration", {})
 
         def reset(self):
             self.count = 0
+            self.interrupted = False
 
         def get_n_in(self):
             return ca.nlpsol_n_out()
@@ -159,9 +162,12 @@ def _iteration_callback_class():
             return ca.Sparsity.dense(n) if n else ca.Sparsity(0, 0)
 
         def eval(self, arg):
-            g = np.asarray(arg[2], dtype=float).ravel()
-            viol = np.maximum(np.maximum(self.lbg - g, g - self.ubg), 0.0)
-            self.monitor.iteration(self.count, float(arg[1]), float(viol.max()) if viol.size else 0.0)
+            if self.interrupted:  # non-zero: IPOPT stops (User_Requested_Stop)
+                return [1]
+            if self.monitor is not None:
+                g = np.asarray(arg[2], dtype=float).ravel()
+                viol = np.maximum(np.maximum(self.lbg - g, g - self.ubg), 0.0)
+                self.monitor.iteration(self.count, float(arg[1]), float(viol.max()) if viol.size else 0.0)
             self.count += 1       # IPOPT calls it at iteration 0 (the start) too
             return [0]
 
@@ -170,6 +176,28 @@ def _iteration_callback_class():
 
 def _IterationCallback(monitor, nx, lbg, ubg):
     return _iteration_callback_class()(monitor, nx, lbg, ubg)
+
+
+@contextlib.contextmanager
+def _interrupt_flag(callback):
+    """During the block, SIGINT (Ctrl-C) sets ``callback.interrupted`` instead of raising inside
+    IPOPT's callbacks, where CasADi would turn it into a failed solve (``NonIpopt_Exception_Thrown``)
+    and a fit of several stages would go on to the next; the callback then stops IPOPT and the fit
+    raises ``KeyboardInterrupt``.  Only Python's default handler in the main thread is replaced."""
+    import signal
+    import threading
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
+        yield
+        return
+
+    def _flag(signum, frame):
+        callback.interrupted = True
+    signal.signal(signal.SIGINT, _flag)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 class Collocation(Fitter):
@@ -912,10 +940,9 @@ class Collocation(Fitter):
         opts.update(jac_g=nlp["jac_g"], hess_lag=nlp["hess_lag"])
         if nlp["grad_f"] is not None:
             opts["grad_f"] = nlp["grad_f"]
-        callback = None
-        if self.monitor is not None:
-            callback = _IterationCallback(self.monitor, nlp["w"].numel(), nlp["lbg"], nlp["ubg"])
-            opts["iteration_callback"] = callback
+        # every iteration passes through it: the monitor's progress, and Ctrl-C ends the fit
+        callback = _IterationCallback(self.monitor, nlp["w"].numel(), nlp["lbg"], nlp["ubg"])
+        opts["iteration_callback"] = callback
         solver = ca.nlpsol("ocp", "ipopt", {"x": nlp["w"], "f": nlp["J"], "g": nlp["g"]}, opts)
         out_fn = ca.Function("outputs", [nlp["w"]], list(nlp["outputs"].values()))
         records, best = [], None
@@ -926,14 +953,17 @@ class Collocation(Fitter):
             if self.solver_log is not None:
                 with open(self.solver_log, "a", encoding="utf-8") as fh:
                     fh.write(f"# pinmsk: IPOPT solve of model '{self.model.name}', {label}\n")
-            if callback is not None:
-                callback.reset()
+            callback.reset()
+            if self.monitor is not None:
                 self.monitor.start(label)
             t0 = _time.perf_counter()
             try:
-                sol = solver(x0=w0, lbx=nlp["lbx"], ubx=nlp["ubx"], lbg=nlp["lbg"], ubg=nlp["ubg"])
+                with _interrupt_flag(callback):
+                    sol = solver(x0=w0, lbx=nlp["lbx"], ubx=nlp["ubx"], lbg=nlp["lbg"], ubg=nlp["ubg"])
+                if callback.interrupted:      # Ctrl-C: IPOPT stopped at the callback's request
+                    raise KeyboardInterrupt
             except BaseException:
-                if callback is not None:      # an interrupted solve closes its progress line
+                if self.monitor is not None:      # an interrupted solve closes its progress line
                     self.monitor.end(None)
                 raise
             stats = solver.stats()
@@ -952,7 +982,7 @@ class Collocation(Fitter):
                    "iterations": int(stats.get("iter_count", -1)), "seconds": _time.perf_counter() - t0,
                    "violation": viol}
             records.append(rec)
-            if callback is not None:
+            if self.monitor is not None:
                 self.monitor.end(rec)
             if best is None or (ok and (not best[0]["converged"] or rec["objective"] < best[0]["objective"])):
                 best = (rec, wv)
