@@ -126,6 +126,10 @@ def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, ex
     meta = {"analysis": "inverse_dynamics", "model": model.name, **inputs.meta()}
     if external:
         meta["ground_reaction"] = "given by the caller: " + ", ".join(e.frame for e in ext)
+    euler = model.meta.get("euler_rate_convention")     # an imported model's FreeJoints and BallJoints
+    if euler:
+        meta["euler_rate_convention"] = euler
+        warnings.warn(f"model '{model.name}', {euler}", UserWarning, stacklevel=3)
     if residuals.coordinates:
         meta["residuals"] = "; ".join(
             f"{c} peak {p:.4g} {u} (threshold {th:.4g})" for c, p, u, th in
