@@ -159,6 +159,9 @@ def _meta(doc: OsimDocument, skel: Skeleton, path: Path) -> dict:
         "credits": doc.credits,
         # Simbody's Ball and Free mobilizers: their rotations' speeds are angular-velocity components
         "euler_rate_convention": _euler_rate_convention(doc),
+        # each FreeJoint's/BallJoint's body-fixed X-Y-Z rotation coordinates (OpenSim's ID tool convention)
+        "euler_rotation_coordinates": [[c.name for c in j.coordinates[:3]] for j in doc.joints
+                                       if j.type in ("FreeJoint", "BallJoint") and len(j.coordinates) >= 3],
     }
 
 

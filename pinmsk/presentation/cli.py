@@ -199,7 +199,7 @@ def cmd_id(args) -> int:
     model = _model(args)
     trial = _read(args.trial, model, args)
     with _progress(trial.n_frames, "ID", "frames") as bar:
-        res = inverse_dynamics_result(model, trial, **_inputs(args), progress=bar)
+        res = inverse_dynamics_result(model, trial, **_inputs(args), progress=bar, convention=args.convention)
     print(res.report())
     out = res.trial
     from ..tools.layout import id_table, is_opensim_model
@@ -611,6 +611,10 @@ def build_parser() -> argparse.ArgumentParser:
     _precision_flag(s)
     input_flags(s)
     s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
+    s.add_argument("--convention", choices=["pinmsk", "opensim"], default="pinmsk",
+                   help="FreeJoint/BallJoint rotations: 'pinmsk' differentiates the Euler angles (physically "
+                        "consistent, default); 'opensim' reproduces OpenSim's InverseDynamicsTool, which reads "
+                        "the angles' rates as angular velocity")
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
     _add_read_flags(s)
     _nonlinear_flag(s)
