@@ -55,11 +55,16 @@ def main(argv=None) -> int:
             fit = r.fit_s
             rows.append((r, fit))
             worst = f"{100 * r.worst:.3g} % ({r.worst_coordinate})" if r.status != "refused" else r.message
-            print(f"{r.model:24s} {r.status:8s} import {r.import_s:6.2f} s  path fit {fit:6.2f} s  ID worst {worst}",
+            print(f"{r.model:24s} {r.status:8s} import {r.import_s:6.2f} s  path fit {fit:6.2f} s  "
+                  f"paths {r.path_length:.2g} m / {r.path_arm:.2g} m  ID worst {worst}",
                   flush=True)
     if args.write_docs:
         _write_docs(rows, ROOT / "docs" / "zoo.md")
     return 0
+
+
+def _m(x: float) -> str:
+    return "" if x != x else f"{x:.2g}"
 
 
 def _write_docs(rows, path: Path) -> None:
@@ -71,23 +76,28 @@ def _write_docs(rows, path: Path) -> None:
         f"{len(rows)} OpenSim models (opensim-models, OpenCap's LaiUhlrich2022 and opensim-jam's Lenhart2015; "
         "see `../shared/data/osim-zoo/SOURCE.md`), each imported by `pinmsk.model.import_osim` and its inverse "
         "dynamics on a synthetic motion (every coordinate a sine within its range, `tests/data/zoo/make_references.py`) "
-        "compared with OpenSim's InverseDynamicsTool on the same motion (`pinmsk id --convention opensim`). "
-        f"The goal: every coordinate within {100 * zoo_check.ID_GOAL:g} % RMS of its peak.",
+        "compared with OpenSim's InverseDynamicsTool on the same motion (`pinmsk id --convention opensim`), and "
+        "the geometric muscle paths' lengths and moment arms (up to 20 muscles, no coupled coordinates) with "
+        "OpenSim's at three of its poses. "
+        f"The goal: every coordinate within {100 * zoo_check.ID_GOAL:g} % RMS of its peak, paths within "
+        f"{zoo_check.PATH_GOAL:g} m. Import and path-fit times are of one run on a shared 2-core machine "
+        "(one BLAS thread); the path fit runs when a command first needs the muscle paths.",
         "",
         f"**{len(passed)} of {len(imported)} imported models meet the goal; "
         f"{len(rows) - len(imported)} refused in one line.**",
         "",
-        "| model | result | import (s) | path fit (s) | worst ID error (RMS / peak) | note |",
-        "|---|---|---|---|---|---|",
+        "| model | result | import (s) | path fit (s) | worst ID error (RMS / peak) | muscle length / moment arm "
+        "error (m) | note |",
+        "|---|---|---|---|---|---|---|",
     ]
     for r, fit in rows:
         if r.status == "refused":
-            lines.append(f"| {r.model} | refused | | | | {r.message.split(': ', 1)[-1]} |")
+            lines.append(f"| {r.model} | refused | | | | | {r.message.split(': ', 1)[-1]} |")
             continue
         left = sorted({e.split("<")[-1].split(" ")[0] for e in r.not_imported if "<" in e})
         note = ("elements not imported: " + ", ".join(left)) if left and r.status == "fail" else ""
         lines.append(f"| {r.model} | {r.status} | {r.import_s:.2f} | {fit:.2f} | {100 * r.worst:.3g} % "
-                     f"({r.worst_coordinate}) | {note} |")
+                     f"({r.worst_coordinate}) | {_m(r.path_length)} / {_m(r.path_arm)} | {note} |")
     lines += ["", "Regenerate: `python benchmarks/bench_zoo.py --write-docs` (the references: "
               "`python tests/data/zoo/make_references.py`, with the optional peer `opensim`).", ""]
     path.write_text("\n".join(lines))

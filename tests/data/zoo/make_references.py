@@ -8,7 +8,7 @@ range / 4)`` (rad or m), ``c`` its default value moved into ``[min + A, max - A]
 dependent coordinate of each CoordinateCouplerConstraint is set from its function, as OpenSim's
 solvers set it (kept in the references, float64).  The motion is written as a .mot file and OpenSim's ``InverseDynamicsTool`` (no filter)
 computes the generalized forces (the muscles excluded, as its setup files exclude them); the references keep every other frame between 0.1 s and 0.9 s (the
-spline derivatives' end effects left out), in float32.  Needs the optional peer ``opensim``.
+spline derivatives' end effects left out), in float32; the muscles' lengths (and moment arms, up to 20 muscles) at 3 frames in float64.  Needs the optional peer ``opensim``.
 
 :func:`synthetic_motion` is what the tests rebuild the motion with (they need no ``opensim``).
 """
@@ -78,6 +78,7 @@ def reference(osim_path: Path, work: Path):
             for j, n in enumerate(ind):
                 x.set(j, float(X[r, col[n]]))
             X[r, dep] = s * fn.calcValue(x)
+    lengths, arms = _paths(model, names, X)
     mot = work / f"{osim_path.stem}.mot"
     _write_mot(mot, names, X)
     tool = osim.InverseDynamicsTool()
@@ -95,7 +96,46 @@ def reference(osim_path: Path, work: Path):
     table = osim.TimeSeriesTable(str(work / f"{osim_path.stem}_id.sto"))
     labels = list(table.getColumnLabels())
     values = np.stack([table.getDependentColumn(lb).to_numpy() for lb in labels], 1)[KEEP]
-    return coords, labels, values.astype(np.float32), dependent, X[:, [col[n] for n in dependent]]
+    global muscle_names
+    muscle_names = _muscle_names(model)
+    return coords, labels, values.astype(np.float32), dependent, X[:, [col[n] for n in dependent]], lengths, arms
+
+
+#: The frames of the synthetic motion where muscle lengths (and, up to ARM_MUSCLES muscles, moment arms)
+#: are kept.
+POSES = (50, 100, 150)
+ARM_MUSCLES = 20
+
+
+def _muscle_names(model):
+    import opensim as osim
+    fs = model.getForceSet()
+    return [f.getName() for f in (fs.get(i) for i in range(fs.getSize())) if osim.Muscle.safeDownCast(f) is not None]
+
+
+def _paths(model, names, X):
+    """OpenSim's muscle lengths (len(POSES), m) and moment arms (len(POSES), m, n) or None, at POSES."""
+    import opensim as osim
+    fs = model.getForceSet()
+    muscles = [mu for mu in (osim.Muscle.safeDownCast(fs.get(i)) for i in range(fs.getSize())) if mu is not None]
+    m = len(muscles)
+    if m == 0:
+        return None, None
+    state = model.getWorkingState()
+    cs = model.getCoordinateSet()
+    L = np.zeros((len(POSES), m))
+    R = np.zeros((len(POSES), m, len(names))) if m <= ARM_MUSCLES else None
+    for k, r in enumerate(POSES):
+        for j, n in enumerate(names):
+            cs.get(n).setValue(state, float(X[r, j]), False)
+        model.realizePosition(state)
+        for i in range(m):
+            mus = muscles[i]
+            L[k, i] = mus.getLength(state)
+            if R is not None:
+                for j, n in enumerate(names):
+                    R[k, i, j] = mus.computeMomentArm(state, cs.get(n))
+    return L, R
 
 
 def main(argv=None) -> int:
@@ -114,8 +154,13 @@ def main(argv=None) -> int:
                 index[p.stem] = None
                 print(f"{p.stem}: OpenSim does not load it")
                 continue
-            coords, labels, values, dependent, xdep = got
+            coords, labels, values, dependent, xdep, lengths, arms = got
             index[p.stem] = {"coordinates": [list(c) for c in coords], "labels": labels, "dependent": dependent}
+            if lengths is not None:
+                index[p.stem]["muscles"] = muscle_names
+                arrays[f"{p.stem}__lengths"] = lengths
+                if arms is not None:
+                    arrays[f"{p.stem}__arms"] = arms
             arrays[f"{p.stem}__id"] = values
             if dependent:
                 arrays[f"{p.stem}__dependent"] = xdep

@@ -21,6 +21,8 @@ REFERENCES = HERE / "references.npz"
 
 #: The goal: ID within this fraction of each coordinate's peak (RMS over the frames).
 ID_GOAL = 5e-3
+#: The goal for the geometric muscle paths: lengths and moment arms within this (m) of OpenSim's.
+PATH_GOAL = 1e-6
 
 
 def references() -> tuple[dict, dict]:
@@ -42,6 +44,8 @@ class ZooResult:
     message: str = ""
     errors: dict = field(default_factory=dict)
     not_imported: tuple = ()
+    path_length: float = float("nan")   # largest muscle-length difference at the stored poses (m)
+    path_arm: float = float("nan")      # largest moment-arm difference there (m)
 
 
 def check(osim: Path, index: dict, arrays: dict, *, convention: str = "opensim") -> ZooResult:
@@ -92,6 +96,28 @@ def check(osim: Path, index: dict, arrays: dict, *, convention: str = "opensim")
         err = float(np.sqrt(np.mean((p - v) ** 2)))
         errors[label] = err / peak if peak > 1e-6 else err          # a zero reference: the absolute error
     worst_c = max(errors, key=errors.get)
+    path_length, path_arm = _path_errors(osim, ref, arrays, X)
     left = tuple(e.element for e in report.entries if e.status == "not imported")
     return ZooResult(name, "pass" if errors[worst_c] <= ID_GOAL else "fail", dt, fit_s, errors[worst_c], worst_c,
-                     errors=errors, not_imported=left)
+                     errors=errors, not_imported=left, path_length=path_length, path_arm=path_arm)
+
+
+def _path_errors(osim, ref, arrays, X):
+    """Largest |length| and |moment arm| differences (m) of the geometric paths from OpenSim's at the
+    stored poses (NaN where none are stored; moment arms only without coupled coordinates, whose OpenSim
+    moment arms are total derivatives)."""
+    from make_references import POSES
+    from pinmsk.opensim.muscle_import import osim_geometric_paths
+    if f"{osim.stem}__lengths" not in arrays:
+        return float("nan"), float("nan")
+    gp = osim_geometric_paths(osim)
+    names = [c[0] for c in ref["coordinates"]]
+    q = X[list(POSES)][:, [names.index(c) for c in gp.coordinates]]
+    ln, arm = gp.lengths_and_moment_arms(q)
+    cols = [list(gp.muscles).index(m) for m in ref["muscles"]]
+    dl = float(np.abs(ln[:, cols] - arrays[f"{osim.stem}__lengths"]).max())
+    da = float("nan")
+    if f"{osim.stem}__arms" in arrays and not ref.get("dependent"):
+        expect = arrays[f"{osim.stem}__arms"][:, :, [names.index(c) for c in gp.coordinates]]
+        da = float(np.abs(arm[:, cols] - expect).max())
+    return dl, da
