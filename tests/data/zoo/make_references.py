@@ -51,7 +51,8 @@ def _write_mot(path, names, X):
 
 
 def reference(osim_path: Path, work: Path):
-    """``(coords, ID labels, ID values (n_keep, m))`` of one model, or None when OpenSim cannot load it."""
+    """``(coords, ID labels, ID values (n_keep, m), dependent names, their values, muscle lengths, moment arms,
+    muscle names)`` of one model, or None when OpenSim cannot load it."""
     import opensim as osim
     try:
         model = osim.Model(str(osim_path))
@@ -96,9 +97,8 @@ def reference(osim_path: Path, work: Path):
     table = osim.TimeSeriesTable(str(work / f"{osim_path.stem}_id.sto"))
     labels = list(table.getColumnLabels())
     values = np.stack([table.getDependentColumn(lb).to_numpy() for lb in labels], 1)[KEEP]
-    global muscle_names
-    muscle_names = _muscle_names(model)
-    return coords, labels, values.astype(np.float32), dependent, X[:, [col[n] for n in dependent]], lengths, arms
+    return (coords, labels, values.astype(np.float32), dependent, X[:, [col[n] for n in dependent]], lengths, arms,
+            _muscle_names(model))
 
 
 #: The frames of the synthetic motion where muscle lengths (and, up to ARM_MUSCLES muscles, moment arms)
@@ -154,7 +154,7 @@ def main(argv=None) -> int:
                 index[p.stem] = None
                 print(f"{p.stem}: OpenSim does not load it")
                 continue
-            coords, labels, values, dependent, xdep, lengths, arms = got
+            coords, labels, values, dependent, xdep, lengths, arms, muscle_names = got
             index[p.stem] = {"coordinates": [list(c) for c in coords], "labels": labels, "dependent": dependent}
             if lengths is not None:
                 index[p.stem]["muscles"] = muscle_names
