@@ -142,3 +142,26 @@ def test_bouncing_block_convention(zoo, refs):
     worst = max(np.sqrt(np.mean((own[c] - expect[:, j]) ** 2)) / np.abs(expect[:, j]).max()
                 for j, c in enumerate(free))
     assert worst > 0.01         # the tool's reading of the rates changes the result
+
+
+def test_cli_id_convention_opensim(zoo, refs, tmp_path):
+    """``pinmsk id --convention opensim`` writes the tool's FreeJoint numbers and says which convention."""
+    from pinmsk.io.tables import read_trial, write_trial
+    from pinmsk.presentation.cli import main
+    from pinmsk.trial import Trial
+    index, arrays = refs
+    ref = index["BouncingBlock"]
+    coords = [tuple(c) for c in ref["coordinates"]]
+    write_trial(Trial.from_array(zoo_check.T, [c[0] for c in coords], zoo_check.synthetic_motion(coords)),
+                tmp_path / "motion.sto")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["id", str(zoo / "BouncingBlock.osim"), str(tmp_path / "motion.sto"), "-o",
+                     str(tmp_path / "id.sto"), "--cutoff", "0", "--convention", "opensim"]) == 0
+    text = (tmp_path / "id.sto").read_text()
+    assert "convention 'opensim'" in text.split("endheader")[0]
+    out = read_trial(tmp_path / "id.sto")
+    j = ref["labels"].index("yRotation_moment")
+    expect = arrays["BouncingBlock__id"][:, j].astype(float)
+    got = np.asarray(out["yRotation_moment"])[zoo_check.KEEP]
+    assert np.sqrt(np.mean((got - expect) ** 2)) <= 1e-4 * np.abs(expect).max()
