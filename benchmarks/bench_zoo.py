@@ -93,7 +93,7 @@ def _write_docs(rows, path: Path) -> None:
     ]
     for r, fit in rows:
         if r.status == "refused":
-            text = re.sub(r"\S*/(?=[^/\s]+\.osim)", "", r.message.split(": ", 1)[-1])     # no temporary folder
+            text = re.sub(r"/\S*/(?=[^/\s]+\.osim)", "", r.message.split(": ", 1)[-1])     # no temporary folder
             lines.append(f"| {r.model} | refused | | | | | {text} |")
             continue
         left = sorted({e.split("<")[-1].split(" ")[0] for e in r.not_imported if "<" in e})
