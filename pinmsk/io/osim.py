@@ -936,12 +936,13 @@ def parse_osim(data: bytes | str, *, source: str = "<string>") -> OsimDocument:
                          "not <OpenSimDocument> with a <Model>")
     if model is None:
         raise ModelError(f"{source}:{root.line}: <OpenSimDocument> holds no <Model>")
-    plugin = _plugin_element(model)
-    if plugin is not None:
-        node, name = plugin
+    plugin = _plugin_elements(model)
+    if plugin:
+        node, name = plugin[0]
+        kinds = ", ".join(dict.fromkeys(n.written for n, _ in plugin))
         raise ModelError(f"{source}:{node.line}: <{node.written} name=\"{node.attrib.get('name', '')}\">: "
-                         f"a component of the {name} plugin, which OpenSim 4.x loads only with that plugin "
-                         "and pinmsk does not import")
+                         f"the model needs the {name} plugin ({kinds}), which OpenSim 4.x loads only with "
+                         "that plugin and pinmsk does not import")
     if BETA_VERSIONS[0] <= version < BETA_VERSIONS[1]:
         try:
             return _parse_model(model, source, version)
@@ -964,15 +965,15 @@ PLUGIN_TYPES = {
 }
 
 
-def _plugin_element(node: _Node):
-    """The first element (depth first) whose type needs a plugin, with the plugin's name, or None."""
-    stack = [node]
+def _plugin_elements(node: _Node) -> list:
+    """``(element, plugin name)`` of every element (in document order) whose type needs a plugin."""
+    out, stack = [], [node]
     while stack:
         n = stack.pop()
         if n.written in PLUGIN_TYPES:
-            return n, PLUGIN_TYPES[n.written]
+            out.append((n, PLUGIN_TYPES[n.written]))
         stack.extend(reversed(n.children))
-    return None
+    return out
 
 
 def _parse_model(model: _Node, source: str, version: int) -> OsimDocument:
