@@ -20,12 +20,9 @@ from pinmsk.errors import ModelError  # noqa: E402
 from pinmsk.model import import_osim  # noqa: E402
 from pinmsk.opensim.paths import _monomials  # noqa: E402
 
-#: Models whose ID misses the goal only because OpenSim forces act that pinmsk does not import yet.
-DROPPED_FORCES = {
-    "BouncingBlock": "HuntCrossleyForce, CoordinateLimitForce and BushingForce not imported",
-    "Walker": "CoordinateLimitForces and HuntCrossleyForces not imported",
-    "Jumper": "CoordinateLimitForces and HuntCrossleyForces not imported",
-    "ToyLanding": "CoordinateLimitForces, HuntCrossleyForces and BushingForces not imported",
+#: Models whose ID misses the goal, and why.
+KNOWN = {
+    "Jumper": "the left leg's and pelvis' moments are 2-11 % off OpenSim's; cause not found",
 }
 #: The one-line refusals: model -> the words the line must hold.
 REFUSED = {
@@ -60,10 +57,9 @@ def _sweep(zoo, refs, name):
         assert r.status == "refused" and REFUSED[name] in r.message and "\n" not in r.message, r.message
         return
     assert r.status != "refused", r.message
-    if name in DROPPED_FORCES:
-        assert r.not_imported, f"{name} misses the goal ({r.worst:.3g} at {r.worst_coordinate}) with every force imported"
-        pytest.xfail(f"{name}: {DROPPED_FORCES[name]} (worst {100 * r.worst:.3g} % at {r.worst_coordinate})")
     bad = {c: e for c, e in r.errors.items() if e > zoo_check.ID_GOAL}
+    if bad and name in KNOWN:
+        pytest.xfail(f"{name}: {KNOWN[name]} (worst {100 * r.worst:.3g} % at {r.worst_coordinate})")
     assert not bad, f"{name}: ID off OpenSim's by more than 0.5 % RMS of peak: {bad}"
     for what, err in (("length", r.path_length), ("moment arm", r.path_arm)):
         assert not err > zoo_check.PATH_GOAL, f"{name}: muscle {what}s off OpenSim's by {err:.3g} m"
