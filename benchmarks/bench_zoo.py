@@ -97,7 +97,8 @@ def _write_docs(rows, path: Path) -> None:
             lines.append(f"| {r.model} | refused | | | | | {text} |")
             continue
         left = sorted({e.split("<")[-1].split(" ")[0] for e in r.not_imported if "<" in e})
-        note = ("elements not imported: " + ", ".join(left)) if left and r.status == "fail" else ""
+        note = (("elements not imported: " + ", ".join(left)) if left else
+                "every force imported; the cause is not found yet") if r.status == "fail" else ""
         lines.append(f"| {r.model} | {r.status} | {r.import_s:.2f} | {fit:.2f} | {100 * r.worst:.3g} % "
                      f"({r.worst_coordinate}) | {_m(r.path_length)} / {_m(r.path_arm)} | {note} |")
     lines += ["", "A model fails where OpenSim forces act that pinmsk does not import yet (the note names them): "
