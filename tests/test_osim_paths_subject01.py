@@ -1,0 +1,62 @@
+"""Geometric paths of Gait10dof18musc's scaled subject (Working_with_Static_Optimization/subject01.osim)
+at the walk's IK poses against OpenSim's ``GeometryPath`` values stored in
+``tests/opensim_paths/subject01_walk_paths.json`` (written by ``tests/opensim_paths/make_reference.py``).
+
+The model's glut_max_r/l are four-point paths (pelvis, pelvis, femur, femur) and the model has no wrap
+object at all (nor has the generic gait10dof18musc.osim): there is no wrap to be off.  Read from the same
+file at the same poses, the exact paths of all 18 muscles agree with OpenSim to 2e-16 m of length and
+1.5e-10 m of moment arm; this test holds that for glut_max as for the others."""
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import require_opensim, shared_folder
+
+REF = Path(__file__).resolve().parent / "opensim_paths" / "subject01_walk_paths.json"
+
+
+def _pinmsk(ref, folder):
+    from pinmsk.opensim.muscle_import import osim_geometric_paths
+    gp = osim_geometric_paths(folder / "Working_with_Static_Optimization" / "subject01.osim")
+    names = ref["coordinates"]
+    q_ref = np.asarray(ref["q"])
+    q = np.column_stack([q_ref[:, names.index(c)] for c in gp.coordinates])
+    L, A = gp.lengths_and_moment_arms(q)
+    cols = [gp.coordinates.index(c) for c in names]
+    rows = [gp.muscles.index(m) for m in ref["muscles"]]
+    return L[:, rows], A[:, rows][:, :, cols]
+
+
+def test_subject01_paths_match_the_stored_opensim_reference():
+    """All 18 muscles, glut_max included: lengths and moment arms within 1e-9 m / 1e-8 m of OpenSim's
+    (measured 2e-16 m, 1.5e-10 m)."""
+    folder = shared_folder("opensim-models/Gait10dof18musc", "Working_with_Static_Optimization/subject01.osim")
+    ref = json.loads(REF.read_text())
+    L, A = _pinmsk(ref, folder)
+    el = np.abs(L - np.asarray(ref["lengths"])).max(axis=0)
+    ea = np.abs(A - np.asarray(ref["moment_arms"])).max(axis=(0, 2))
+    assert len(ref["muscles"]) == 18 and {"glut_max_r", "glut_max_l"} <= set(ref["muscles"])
+    assert el.max() < 1e-9, f"length {el.max():.3g} m at {ref['muscles'][int(el.argmax())]}"
+    assert ea.max() < 1e-8, f"moment arm {ea.max():.3g} m at {ref['muscles'][int(ea.argmax())]}"
+    # the reference is not trivially flat: glut_max's hip moment arm changes over the walk
+    hip = ref["coordinates"].index("hip_flexion_r")
+    g = np.asarray(ref["moment_arms"])[:, ref["muscles"].index("glut_max_r"), hip]
+    assert np.ptp(g) > 5e-3
+
+
+@pytest.mark.slow
+def test_subject01_reference_regenerates_with_opensim():
+    """The stored reference is what the opensim package computes now (the script beside it)."""
+    require_opensim()
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("make_reference", REF.parent / "make_reference.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    shared = shared_folder("opensim-models", "Gait10dof18musc/Working_with_Static_Optimization/subject01.osim").parent
+    new = mod.reference(shared)
+    old = json.loads(REF.read_text())
+    assert new["muscles"] == old["muscles"] and new["coordinates"] == old["coordinates"]
+    assert np.abs(np.asarray(new["lengths"]) - old["lengths"]).max() < 1e-12
+    assert np.abs(np.asarray(new["moment_arms"]) - old["moment_arms"]).max() < 1e-10
