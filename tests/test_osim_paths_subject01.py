@@ -60,3 +60,42 @@ def test_subject01_reference_regenerates_with_opensim():
     assert new["muscles"] == old["muscles"] and new["coordinates"] == old["coordinates"]
     assert np.abs(np.asarray(new["lengths"]) - old["lengths"]).max() < 1e-12
     assert np.abs(np.asarray(new["moment_arms"]) - old["moment_arms"]).max() < 1e-10
+
+
+def _imported(folder):
+    from pinmsk.model import import_osim
+    model, _ = import_osim(folder / "Working_with_Static_Optimization" / "subject01.osim")
+    return model
+
+
+def _model_q(model, ref):
+    q_ref = np.asarray(ref["q"])
+    q = np.zeros((q_ref.shape[0], model.nv))
+    for k, c in enumerate(ref["coordinates"]):
+        if c in model.coordinate_order:
+            q[:, model.coordinate_index(c)] = q_ref[:, k]
+    return q
+
+
+def test_exact_path_kinematics_of_an_import_is_opensims_and_the_surrogate_check_names_the_worst():
+    """exact_path_kinematics (model coordinates, model muscle order) reproduces the stored OpenSim values;
+    check_surrogates reports the polynomials' largest errors against them, muscle and coordinate named."""
+    from pinmsk.opensim.path_check import DEFAULT_TOLERANCE, check_surrogates, exact_path_kinematics
+    folder = shared_folder("opensim-models/Gait10dof18musc", "Working_with_Static_Optimization/subject01.osim")
+    ref = json.loads(REF.read_text())
+    model = _imported(folder)
+    q = _model_q(model, ref)
+    L, A = exact_path_kinematics(model, q)
+    rows = [ref["muscles"].index(m) for m in model.muscles.names]
+    assert np.abs(L - np.asarray(ref["lengths"])[:, rows]).max() < 1e-9
+    hip = ref["coordinates"].index("hip_flexion_r")
+    arm = A[:, :, model.coordinate_index("hip_flexion_r")]
+    assert np.abs(arm - np.asarray(ref["moment_arms"])[:, rows, hip]).max() < 1e-8
+    check = check_surrogates(model, q)
+    Ls, As = model.muscles.lengths(q), model.muscles.moment_arms(q)
+    assert check.length_error == pytest.approx(np.abs(Ls - L).max(), rel=1e-12)
+    assert check.moment_arm_error == pytest.approx(np.abs(As - A).max(), rel=1e-12)
+    i = model.muscles.names.index(check.length_muscle)
+    assert np.abs(Ls[:, i] - L[:, i]).max() == pytest.approx(check.length_error, rel=1e-12)
+    assert check.frames == q.shape[0] and check.length_muscle in check.line()
+    assert 0.0 < check.length_error < DEFAULT_TOLERANCE      # the whole-range fit of this small model is good
