@@ -29,7 +29,7 @@ def _geometric_q(model, gp, q, signals=None):
     q = np.atleast_2d(np.asarray(q, dtype=float))
     qg = np.zeros((q.shape[0], len(gp.coordinates)))
     for k, c in enumerate(gp.coordinates):
-        if c in model.coordinate_order:
+        if c in model.coordinates:
             qg[:, k] = q[:, model.coordinate_index(c)]
         elif signals is not None and c in signals:
             qg[:, k] = np.asarray(signals[c], dtype=float)
@@ -47,7 +47,7 @@ def exact_path_kinematics(model, q, *, signals=None, gp=None):
         raise ValueError(f"model '{model.name}' has no geometric paths (not imported from an .osim)")
     names = tuple(model.muscles.names)
     rows = [gp.muscles.index(n) for n in names]
-    cols = [c for c in gp.coordinates if c in model.coordinate_order]
+    cols = [c for c in gp.coordinates if c in model.coordinates]
     L, A = gp.lengths_and_moment_arms(_geometric_q(model, gp, q, signals), coordinates=cols)
     arms = np.zeros((L.shape[0], len(names), model.nv))
     for k, c in enumerate(cols):
@@ -91,5 +91,5 @@ def check_surrogates(model, q, *, signals=None, gp=None) -> SurrogateCheck:
     n, j, v = np.unravel_index(int(np.argmax(ea)), ea.shape)
     return SurrogateCheck(length_error=float(el.max()), length_muscle=names[i],
                           moment_arm_error=float(ea.max()), moment_arm_muscle=names[j],
-                          moment_arm_coordinate=model.coordinate_order[v] if v < len(model.coordinate_order)
+                          moment_arm_coordinate=model.coordinates[v] if v < len(model.coordinates)
                           else str(v), frames=int(q.shape[0]))
