@@ -99,3 +99,26 @@ def test_exact_path_kinematics_of_an_import_is_opensims_and_the_surrogate_check_
     assert np.abs(Ls[:, i] - L[:, i]).max() == pytest.approx(check.length_error, rel=1e-12)
     assert check.frames == q.shape[0] and check.length_muscle in check.line()
     assert 0.0 < check.length_error < DEFAULT_TOLERANCE      # the whole-range fit of this small model is good
+
+
+def test_choose_paths_takes_exact_paths_by_default_and_refuses_surrogates_above_the_tolerance():
+    """Default: the muscle set's paths are the exact ones (path_kinematics = OpenSim's values); with
+    surrogates the header line gives the largest error, and a tolerance below it is refused by name."""
+    from pinmsk.errors import ModelError
+    from pinmsk.opensim.path_check import check_surrogates, choose_paths
+    folder = shared_folder("opensim-models/Gait10dof18musc", "Working_with_Static_Optimization/subject01.osim")
+    ref = json.loads(REF.read_text())
+    model = _imported(folder)
+    q = _model_q(model, ref)
+    exact, line = choose_paths(model, q)
+    assert "exact" in line
+    L, _, R = exact.muscles.path_kinematics(q, np.zeros_like(q))
+    rows = [ref["muscles"].index(m) for m in model.muscles.names]
+    assert np.abs(L - np.asarray(ref["lengths"])[:, rows]).max() < 1e-9
+    worst = check_surrogates(model, q)
+    # the whole-range fit misses vasti's moment arm by about 2 mm at the walk's poses: refused at 1 mm
+    assert worst.worst > 1e-3
+    with pytest.raises(ModelError, match="path tolerance"):
+        choose_paths(model, q, surrogate=True)
+    same, line = choose_paths(model, q, surrogate=True, tolerance=2.0 * worst.worst)
+    assert same is model and line == worst.line()

@@ -17,7 +17,8 @@ import numpy as np
 
 from .muscle_import import geometric_paths
 
-__all__ = ["DEFAULT_TOLERANCE", "SurrogateCheck", "exact_path_kinematics", "check_surrogates"]
+__all__ = ["DEFAULT_TOLERANCE", "SurrogateCheck", "ExactPaths", "exact_path_kinematics", "check_surrogates",
+           "with_exact_paths", "choose_paths"]
 
 #: largest surrogate error (m, of length or moment arm) an analysis accepts without being asked
 DEFAULT_TOLERANCE = 1e-3
@@ -93,3 +94,66 @@ def check_surrogates(model, q, *, signals=None, gp=None) -> SurrogateCheck:
                           moment_arm_error=float(ea.max()), moment_arm_muscle=names[j],
                           moment_arm_coordinate=model.coordinates[v] if v < len(model.coordinates)
                           else str(v), frames=int(q.shape[0]))
+
+
+class ExactPaths:
+    """The exact paths of an imported model as a muscle set's path (numpy, frames in rows): ``lengths``,
+    ``velocities``, ``moment_arms`` and ``lengths_and_moment_arms`` of model coordinates, from
+    :func:`exact_path_kinematics`.  It has no CasADi form: optimal control refuses it by name."""
+
+    def __init__(self, model, gp=None):
+        self._model = model
+        self._gp = gp if gp is not None else geometric_paths(model.meta.get("import_report"))
+        if self._gp is None:
+            raise ValueError(f"model '{model.name}' has no geometric paths (not imported from an .osim)")
+
+    def __repr__(self):
+        return f"ExactPaths({len(self._gp.muscles)} muscles)"
+
+    def lengths_and_moment_arms(self, q):
+        q = np.asarray(q, dtype=float)
+        L, A = exact_path_kinematics(self._model, np.atleast_2d(q), gp=self._gp)
+        return (L[0], A[0]) if q.ndim == 1 else (L, A)
+
+    def lengths(self, q):
+        return self.lengths_and_moment_arms(q)[0]
+
+    def moment_arms(self, q):
+        return self.lengths_and_moment_arms(q)[1]
+
+    def velocities(self, q, v):
+        """Lengthening velocities ``dl/dt = -R v`` (the paths' convention)."""
+        R = np.atleast_3d(self.moment_arms(np.atleast_2d(q)))
+        out = -np.einsum("nmj,nj->nm", R, np.atleast_2d(np.asarray(v, dtype=float)))
+        return out[0] if np.asarray(q).ndim == 1 else out
+
+
+def with_exact_paths(model):
+    """``model`` with its muscles' paths replaced by :class:`ExactPaths` (parameters, bounds and what
+    varies kept); a model without geometric paths comes back unchanged."""
+    import copy
+    if model.muscles is None or geometric_paths(model.meta.get("import_report")) is None:
+        return model
+    ms = copy.copy(model.muscles)
+    object.__setattr__(ms, "path", ExactPaths(model))     # a copy: the original set is unchanged
+    return model.with_muscles(ms)
+
+
+def choose_paths(model, q, *, surrogate: bool = False, tolerance: float = DEFAULT_TOLERANCE):
+    """The model an analysis runs on and the header line naming its paths.
+
+    By default (``surrogate`` False) the exact paths of an imported model (:func:`with_exact_paths`).
+    With ``surrogate`` the model's polynomial paths, checked against the exact ones at frames ``q``
+    (:func:`check_surrogates`); a largest error above ``tolerance`` (m) raises
+    :class:`pinmsk.errors.ModelError` naming the muscle.  A model without geometric paths keeps its own."""
+    from ..errors import ModelError
+    if model.muscles is None or geometric_paths(model.meta.get("import_report")) is None:
+        return model, f"paths: the model's own ({type(getattr(model.muscles, 'path', None)).__name__})"
+    if not surrogate:
+        return with_exact_paths(model), "paths: exact (OpenSim's geometric path algorithm)"
+    check = check_surrogates(model, q)
+    if check.worst > tolerance:
+        raise ModelError(f"{check.line()}: above the {1e3 * tolerance:.3g} mm path tolerance; fit the "
+                         "surrogates over this trial (pinmsk import --fit-over), raise --path-tolerance, or "
+                         "use the exact paths (leave out --surrogate-paths)")
+    return model, check.line()
