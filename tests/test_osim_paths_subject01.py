@@ -122,3 +122,28 @@ def test_choose_paths_takes_exact_paths_by_default_and_refuses_surrogates_above_
         choose_paths(model, q, surrogate=True)
     same, line = choose_paths(model, q, surrogate=True, tolerance=2.0 * worst.worst)
     assert same is model and line == worst.line()
+
+
+@pytest.mark.slow
+def test_so_cli_exact_by_default_and_surrogates_refused_above_the_tolerance(tmp_path, capsys):
+    """``pinmsk so`` on subject01's walk: exact paths by default; ``--surrogate-paths`` refused at the
+    1 mm default (exit 2, no file), accepted with ``--path-tolerance 3`` with the error in the header; the
+    two runs' muscle forces differ by the surrogates' error only (within 10 % of the peak force)."""
+    from pinmsk.io.tables import read_trial
+    from pinmsk.presentation.cli import main
+    folder = shared_folder("opensim-models/Gait10dof18musc", "Working_with_Static_Optimization/subject01.osim")
+    model = str(folder / "Working_with_Static_Optimization" / "subject01.osim")
+    ik = str(folder / "IK" / "subject01_walk_IK.mot")
+    dofs = ["--dofs", "hip_flexion_r,knee_angle_r,ankle_angle_r,hip_flexion_l,knee_angle_l,ankle_angle_l"]
+    assert main(["so", model, ik, "-o", str(tmp_path / "e.sto"), *dofs]) == 0
+    assert "paths: exact" in capsys.readouterr().out
+    assert main(["so", model, ik, "-o", str(tmp_path / "r.sto"), *dofs, "--surrogate-paths"]) == 2
+    assert "path tolerance" in capsys.readouterr().err and not list(tmp_path.glob("r*"))
+    assert main(["so", model, ik, "-o", str(tmp_path / "s.sto"), *dofs, "--surrogate-paths",
+                 "--path-tolerance", "3"]) == 0
+    header = (tmp_path / "s_force.sto").read_text().split("endheader")[0]
+    assert "paths=path surrogates vs exact paths at 151 frames" in header
+    e, s = read_trial(tmp_path / "e_force.sto"), read_trial(tmp_path / "s_force.sto")
+    fe = np.column_stack([e[c] for c in e.names])
+    fs = np.column_stack([s[c] for c in e.names])
+    assert 0.0 < np.abs(fe - fs).max() < 0.1 * np.abs(fe).max()
