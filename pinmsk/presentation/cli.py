@@ -330,9 +330,10 @@ def _run_solver(args, solver, total: int | None, label: str, title: str, *, open
 def _analysis_paths(args, model, trial):
     """The model with the paths ``--surrogate-paths`` / ``--path-tolerance`` ask for
     (:func:`pinmsk.opensim.path_check.choose_paths`); the choice is printed as one header line."""
+    from ..opensim.muscle_import import geometric_paths
     from ..opensim.path_check import choose_paths
-    if getattr(model, "muscles", None) is None:
-        return model
+    if getattr(model, "muscles", None) is None or geometric_paths(model.meta.get("import_report")) is None:
+        return model            # a model with only its own paths runs on them
     q = np.column_stack([np.asarray(trial[c], dtype=float) if c in trial else
                          np.zeros(trial.n_frames) for c in model.coordinates])
     model, line = choose_paths(model, q, surrogate=getattr(args, "surrogate_paths", False),
