@@ -139,7 +139,8 @@ def with_exact_paths(model):
     return model.with_muscles(ms)
 
 
-def choose_paths(model, q, *, surrogate: bool = False, tolerance: float = DEFAULT_TOLERANCE):
+def choose_paths(model, q, *, surrogate: bool = False, tolerance: float = DEFAULT_TOLERANCE,
+                 exact_hint: str = "or use the exact paths (leave out --surrogate-paths)"):
     """The model an analysis runs on and the header line naming its paths.
 
     By default (``surrogate`` False) the exact paths of an imported model (:func:`with_exact_paths`).
@@ -154,6 +155,6 @@ def choose_paths(model, q, *, surrogate: bool = False, tolerance: float = DEFAUL
     check = check_surrogates(model, q)
     if check.worst > tolerance:
         raise ModelError(f"{check.line()}: above the {1e3 * tolerance:.3g} mm path tolerance; fit the "
-                         "surrogates over this trial (pinmsk import --fit-over), raise --path-tolerance, or "
-                         "use the exact paths (leave out --surrogate-paths)")
+                         f"surrogates over this trial (pinmsk import --fit-over), raise --path-tolerance"
+                         + (f", {exact_hint}" if exact_hint else ""))
     return model, check.line()

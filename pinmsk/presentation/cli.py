@@ -302,7 +302,9 @@ def _run_solver(args, solver, total: int | None, label: str, title: str, *, open
     (``opensim_files``: a model from OpenSim gets OpenSim's activation and force files)."""
     model = _model(args)
     trial = _read(args.trial, model, args)
-    model = _analysis_paths(args, model, trial)
+    # FSO evaluates the paths at every integration step, one frame at a time: there the surrogates,
+    # checked against the exact paths at the trial's frames (the exact paths cost minutes per trial)
+    model = _analysis_paths(args, model, trial, surrogate=label == "FSO")
     kw = _inputs(args)
     if getattr(args, "moments", None):
         kw["moments"] = args.moments
@@ -327,7 +329,7 @@ def _run_solver(args, solver, total: int | None, label: str, title: str, *, open
     return 0
 
 
-def _analysis_paths(args, model, trial):
+def _analysis_paths(args, model, trial, *, surrogate: bool = False):
     """The model with the paths ``--surrogate-paths`` / ``--path-tolerance`` ask for
     (:func:`pinmsk.opensim.path_check.choose_paths`); the choice is printed as one header line."""
     from ..opensim.muscle_import import geometric_paths
@@ -336,7 +338,8 @@ def _analysis_paths(args, model, trial):
         return model            # a model with only its own paths runs on them
     q = np.column_stack([np.asarray(trial[c], dtype=float) if c in trial else
                          np.zeros(trial.n_frames) for c in model.coordinates])
-    model, line = choose_paths(model, q, surrogate=getattr(args, "surrogate_paths", False),
+    model, line = choose_paths(model, q, surrogate=surrogate or getattr(args, "surrogate_paths", False),
+                               exact_hint="" if surrogate else "or use the exact paths (leave out --surrogate-paths)",
                                tolerance=1e-3 * getattr(args, "path_tolerance", 1.0))
     print(line)
     args._paths_line = line
@@ -724,8 +727,8 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("model")
         s.add_argument("trial", help="trial with the coordinates (and optionally <coord>_moment)")
         s.add_argument("--surrogate-paths", action="store_true",
-                       help="an imported model's polynomial path surrogates instead of its exact paths, checked "
-                            "against the exact paths at the trial's frames (docs/paths.md)")
+                       help="an imported model's polynomial path surrogates instead of its exact paths (fso: always), "
+                            "checked against the exact paths at the trial's frames (docs/paths.md)")
         s.add_argument("--path-tolerance", type=float, default=1.0, metavar="MM",
                        help="largest surrogate error (mm, length or moment arm) --surrogate-paths accepts "
                             "(default 1)")
