@@ -629,9 +629,10 @@ def solve_frames(prob: SOProblem, *, minmax: bool = False, reserve_weight: float
             # the multipliers interpolated in time between their solved neighbours
             first = np.arange(0, sel.size, COARSE)
             second = np.setdiff1d(np.arange(sel.size), first)
-            lam_known = np.full((sel.size, nd), np.nan)
+            lam_known = np.full((first.size, nd), np.nan)       # the multipliers of the first pass' frames
             for start, stop in spans:
-                ip = first[(sel[first] >= start) & (sel[first] < stop)]
+                inside = (sel[first] >= start) & (sel[first] < stop)
+                ip = first[inside]
                 if ip.size:
                     if chunked:   # build the rows of these frames alone
                         part = prob.frames_at(sel[ip])
@@ -639,12 +640,11 @@ def solve_frames(prob: SOProblem, *, minmax: bool = False, reserve_weight: float
                     else:
                         got = rows(prob)
                     ok, lam = batch(got, ip, None)
-                    lam_known[ip[ok]] = lam[ok]
-            if not np.isnan(lam_known).all():
-                good = np.flatnonzero(~np.isnan(lam_known[:, 0])) if nd else np.zeros(0, int)
-                if good.size >= 2:
-                    lam0_all = np.column_stack([np.interp(second, good, lam_known[good, j])
-                                                for j in range(nd)])
+                    lam_known[np.flatnonzero(inside)[ok]] = lam[ok]
+            good = np.flatnonzero(~np.isnan(lam_known[:, 0])) if nd else np.zeros(0, int)
+            if good.size >= 2:
+                # interpolated a chunk at a time, where they are used
+                lam0_all = (first[good], lam_known[good])
     fq = _frame_qp(prob, exponent=P, minmax=minmax, reserve_weight=reserve_weight, tol=tol)
     use_lp = (method == "auto" and (minmax or P == 1.0) and reserve_weight is None)
     remaining = np.zeros(N, dtype=bool)
@@ -658,7 +658,11 @@ def solve_frames(prob: SOProblem, *, minmax: bool = False, reserve_weight: float
         if dual:
             inside = (sel[second] >= start) & (sel[second] < stop)
             if inside.any():
-                batch(rows(sub, off), second[inside], None if lam0_all is None else lam0_all[inside])
+                lam0 = None
+                if lam0_all is not None:
+                    at, known = lam0_all
+                    lam0 = np.column_stack([np.interp(second[inside], at, known[:, j]) for j in range(nd)])
+                batch(rows(sub, off), second[inside], lam0)
             done = here[batched_ok[here]]
             solved[done] = True
             path[done] = 0
@@ -1129,7 +1133,31 @@ class StaticOptimization(Fitter):
             meta["balanced_moments"] = plan.source
             meta["balanced_dofs"] = ", ".join(plan.dofs)
         units["violation"] = "N*m"
-        return Trial(prob.time, ch, units=units, meta=meta)
+        return self._columns(prob, ch, units, meta)
+
+    def _columns(self, prob, ch: dict, units, meta) -> Trial:
+        """The Trial of the channels ``ch``: one column-major (N, C) array filled channel by channel, the
+        fitted arrays re-bound to their columns as soon as these are filled (read-only views of the
+        result's: a long motion's forces and activations are held once, not twice)."""
+        names = list(ch)
+        pos = {n: i for i, n in enumerate(names)}
+        values = np.empty((len(names), prob.time.size), dtype=float).T
+        blocks = {}
+        for attr, fmt, items in (("forces_", "{}_force", prob.muscles), ("activations_", "{}_activation", prob.muscles),
+                                 ("reserves_", "{}_reserve", prob.dofs), ("cost_", "{}", ("cost",)),
+                                 ("violation_", "{}", ("violation",))):
+            cols = [pos.get(fmt.format(x)) for x in items]
+            if (items and getattr(self, attr, None) is not None and None not in cols
+                    and cols == list(range(cols[0], cols[0] + len(cols)))):
+                blocks.setdefault(cols[-1], []).append((attr, cols[0], len(cols) == 1 and attr in ("cost_", "violation_")))
+        for i, n in enumerate(names):
+            values[:, i] = ch[n]
+            ch[n] = None                       # the column's source goes once it is copied
+            for attr, first, single in blocks.get(i, ()):
+                view = values[:, i] if single else values[:, first:i + 1]
+                setattr(self, attr, view)
+        out = Trial._adopt(prob.time, names, values, units=units, meta=meta)
+        return out
 
     # -- reporting -----------------------------------------------------------
     def criterion(self) -> str:
