@@ -186,6 +186,10 @@ class SOProblem:
         return np.einsum("na,naj->nj", u, self.C)
 
     def cost(self, x, minmax: bool) -> np.ndarray:
+        x = np.asarray(x)
+        if x.shape[0] > CHUNK_FRAMES:      # a long motion's temporaries a chunk of frames at a time
+            return np.concatenate([self.cost(x[k:k + CHUNK_FRAMES], minmax)
+                                   for k in range(0, x.shape[0], CHUNK_FRAMES)])
         x = np.maximum(x, 0.0)
         if minmax:
             return np.max(self.u * x, axis=1)
@@ -264,7 +268,7 @@ def _coordinate_column(model, coords, name) -> int:
 #: Frames per chunk in which :class:`StaticOptimization` builds and solves a long motion:
 #: the per-frame arrays of one chunk only are in memory, and the batched solve's
 #: working set stays in the CPU cache (``StaticOptimization(chunk_size=...)``).
-CHUNK_FRAMES = 20000
+CHUNK_FRAMES = 5000
 
 #: An actuator without a bound gets a finite stand-in for the solvers (proxsuite needs finite boxes):
 #: this many times the control that alone would give the largest scaled moment of the problem.  A
@@ -1056,27 +1060,41 @@ class StaticOptimization(Fitter):
                 raise SolverError(f"actuator '{name}' (no control bound) reached the solver's stand-in bound "
                                   f"{stand_in[cols[j]]:.4g} at frame {k} (t = {prob.time[k]:.4g} s): give it "
                                   "min_control / max_control, or a larger optimal_force")
+        # the per-frame arrays of a long motion are reused in place where their values are no longer needed
         F = prob.forces(x) if fr.forces is None else fr.forces
         u = prob.controls(x)
-        reserves = fr.rho * prob.scale
-        moment = prob.moments(F) + prob.actuator_moments(u) if fr.moments is None else fr.moments
+        used = np.any(np.abs(fr.rho) > 1e-6, axis=1) if W is not None else None
+        reserves = fr.rho
+        reserves *= prob.scale
+        if fr.moments is None:
+            moment = prob.moments(F)
+            moment += prob.actuator_moments(u)
+        else:
+            moment = fr.moments
         if W is not None:
-            moment = moment + reserves
-        self.forces_ = F
-        self.controls_ = u
-        self.actuator_forces_ = u * (prob.optimal_force if prob.actuators else np.zeros(0))
-        self.activations_ = x[:, :m] if prob.mode == "activation" else F / prob.f_max
-        self.reserves_ = reserves if W is not None else None
-        self.cost_ = prob.cost(x, bool(self.minmax))
-        self.violation_ = np.max(np.abs(moment - prob.tau), axis=1)
-        status = fr.path.copy()
+            moment += reserves
+        status = fr.path
         if W is not None:
-            used = np.any(np.abs(fr.rho) > 1e-6, axis=1)
             status[used] = 2
-        self.status_ = status
         self.n_iter_ = fr.iterations
         self.n_qp_ = fr.qp_solves
         self.n_batched_ = fr.batched_frames
+        fr = None
+        self.forces_ = F
+        self.controls_ = u
+        self.actuator_forces_ = u * (prob.optimal_force if prob.actuators else np.zeros(0))
+        self.cost_ = prob.cost(x, bool(self.minmax))
+        if prob.mode == "activation":
+            self.activations_ = x[:, :m]
+        else:                                   # x is spent: its muscle columns take the activations
+            self.activations_ = np.divide(F, prob.f_max, out=x[:, :m])
+        x = None
+        self.reserves_ = reserves if W is not None else None
+        moment -= prob.tau
+        np.abs(moment, out=moment)
+        self.violation_ = np.max(moment, axis=1)
+        moment = None
+        self.status_ = status
         self.dofs_ = prob.dofs
         self.muscles_ = prob.muscles
         return self
