@@ -568,7 +568,8 @@ class FramesResult:
     qp_solves: int           # proxsuite QPs
     batched_frames: int
     forces: np.ndarray | None = None    # (N, m) N, when solved chunk by chunk
-    moments: np.ndarray | None = None   # (N, nd) N m of the muscles and actuators, likewise
+    moments: np.ndarray | None = None   # (N, nd) N m of the muscles and actuators, in one piece
+    violation: np.ndarray | None = None  # (N,) largest |moments (+ reserves) - tau|, when solved by chunks
 
 
 def _frame_qp(prob: SOProblem, *, exponent, minmax, reserve_weight, tol) -> _qp.FrameQP:
@@ -602,7 +603,7 @@ def solve_frames(prob: SOProblem, *, minmax: bool = False, reserve_weight: float
     solved = np.zeros(N, dtype=bool)
     path = np.full(N, -1, dtype=int)
     forces = np.full((N, len(prob.muscles)), np.nan) if chunked else None
-    moments = np.zeros((N, nd)) if chunked else None
+    violation = np.zeros(N) if chunked else None
     iters = 0
     nqp = 0
     batched = 0
@@ -721,10 +722,14 @@ def solve_frames(prob: SOProblem, *, minmax: bool = False, reserve_weight: float
         x[start:stop] = np.where(np.isfinite(xs), np.clip(xs, sub.lo, sub.hi), xs)   # proxsuite: inside to ~1e-16
         if chunked:
             forces[start:stop] = sub.forces(x[start:stop])
-            moments[start:stop] = (sub.moments(forces[start:stop])
-                                   + sub.actuator_moments(sub.controls(x[start:stop])))
+            # the balance each frame reaches, a chunk at a time (the whole motion's moments are not kept)
+            bal = sub.moments(forces[start:stop]) + sub.actuator_moments(sub.controls(x[start:stop]))
+            if reserve_weight is not None:
+                bal += rho[start:stop] * prob.scale
+            bal -= sub.tau
+            violation[start:stop] = np.max(np.abs(bal), axis=1, initial=0.0)
     return FramesResult(x=x, rho=rho, solved=solved, path=path, iterations=iters, qp_solves=nqp,
-                        batched_frames=batched, forces=forces, moments=moments)
+                        batched_frames=batched, forces=forces, violation=violation)
 
 
 def _by_chunk(prob, frames):
@@ -1066,13 +1071,13 @@ class StaticOptimization(Fitter):
         used = np.any(np.abs(fr.rho) > 1e-6, axis=1) if W is not None else None
         reserves = fr.rho
         reserves *= prob.scale
-        if fr.moments is None:
+        violation = fr.violation
+        moment = None
+        if violation is None:
             moment = prob.moments(F)
             moment += prob.actuator_moments(u)
-        else:
-            moment = fr.moments
-        if W is not None:
-            moment += reserves
+            if W is not None:
+                moment += reserves
         status = fr.path
         if W is not None:
             status[used] = 2
@@ -1090,10 +1095,12 @@ class StaticOptimization(Fitter):
             self.activations_ = np.divide(F, prob.f_max, out=x[:, :m])
         x = None
         self.reserves_ = reserves if W is not None else None
-        moment -= prob.tau
-        np.abs(moment, out=moment)
-        self.violation_ = np.max(moment, axis=1)
-        moment = None
+        if violation is None:
+            moment -= prob.tau
+            np.abs(moment, out=moment)
+            violation = np.max(moment, axis=1, initial=0.0)
+            moment = None
+        self.violation_ = violation
         self.status_ = status
         self.dofs_ = prob.dofs
         self.muscles_ = prob.muscles
