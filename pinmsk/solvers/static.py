@@ -268,7 +268,7 @@ def _coordinate_column(model, coords, name) -> int:
 #: Frames per chunk in which :class:`StaticOptimization` builds and solves a long motion:
 #: the per-frame arrays of one chunk only are in memory, and the batched solve's
 #: working set stays in the CPU cache (``StaticOptimization(chunk_size=...)``).
-CHUNK_FRAMES = 5000
+CHUNK_FRAMES = 2500
 
 #: An actuator without a bound gets a finite stand-in for the solvers (proxsuite needs finite boxes):
 #: this many times the control that alone would give the largest scaled moment of the problem.  A
