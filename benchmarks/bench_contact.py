@@ -2,10 +2,10 @@
 
     python benchmarks/bench_contact.py [--skip-fit]
 
-Targets (issue 6): <= 1 ms for the 1,000-frame evaluation, <= 60 s for the
+Targets: <= 1 ms for the 1,000-frame evaluation, <= 60 s for the
 hyper-volumetric identification on the real stance phase on 2 cores.  The
 identification is timed with the defaults of ``pinmsk contact fit`` and, in the
-same run, with what they replaced (issue 12): the finite-difference Jacobian
+same run, with what they replaced: the finite-difference Jacobian
 (``jacobian="2-point"``) against the exact one, one start against the multi-start
 with the simpler models' optima, serial against two processes.  All figures are
 measured in this run (wall time; the machine may be shared).
@@ -123,4 +123,5 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    from _record import run
+    run(main)

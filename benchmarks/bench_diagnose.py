@@ -3,7 +3,7 @@
     python benchmarks/bench_diagnose.py            # speed, ~1 min
     python benchmarks/bench_diagnose.py --sensitivity [--seeds 10]   # + detection sensitivity, ~5 min
 
-Speed.  Targets (issues 4 and 15): a 10 s, 100 Hz forearm trial against the full catalog in
+Speed.  Targets: a 10 s, 100 Hz forearm trial against the full catalog in
 <= 2 s, with the effects added before refitted jointly with every candidate; a 10 s gait2d walk
 <= 5 s.  Each case is timed end to end on a synthetic trial with hidden effects (best of 3 runs,
 one core), with the time split into the comparison (kinematics, inverse dynamics, noise floor) and
@@ -216,4 +216,5 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    from _record import run
+    run(main)

@@ -1,4 +1,4 @@
-"""Moco's own 2-D walking problems (``example2DWalking``), timed, side by side with pinmsk (issue 17).
+"""Moco's own 2-D walking problems (``example2DWalking``), timed, side by side with pinmsk.
 
     python benchmarks/bench_gait_moco.py [--moco-only | --pinmsk-only] [--problems tracking,predictive]
         [--timeout-tracking 900] [--timeout-predictive 600] [--out DIR] [--data DIR]
@@ -53,8 +53,8 @@ Each Moco stride is also mapped onto gait2d (:func:`moco_stride_on_gait2d`) and 
 the GRF double hump, activations against EMG): ``<problem>_validation.json`` / ``.html``.
 
 Measured here in one run (``python benchmarks/bench_gait_moco.py``; 2 cores shared with other jobs,
-pip opensim 4.6, OMP/BLAS threads 1; objectives in Moco's units, both tools; issue 17 reported Moco's
-tracking at 387 s and its prediction unconverged after 58 min):
+pip opensim 4.6, OMP/BLAS threads 1; objectives in Moco's units, both tools; an earlier run on
+another machine had Moco's tracking at 387 s and its prediction unconverged after 58 min):
 
 | problem | tool | status | objective | iterations | wall (s) | Moco/pinmsk | joint RMS max (deg) | GRF RMS max (% BW) |
 |---|---|---|---|---|---|---|---|---|
@@ -725,4 +725,5 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from _record import run
+    sys.exit(run(main))

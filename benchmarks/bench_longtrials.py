@@ -15,7 +15,7 @@
   the whole ``fit``, in one piece (``chunk_size = N``, the old code path's
   arrays) and in chunks of :data:`pinmsk.solvers.static.CHUNK_FRAMES`.
 
-Targets (issue 12): ``--help`` <= 0.5 s, ``import pinmsk`` <= 1 s; writing ~5x
+Targets: ``--help`` <= 0.5 s, ``import pinmsk`` <= 1 s; writing ~5x
 faster; SO on 1M frames under 2 GB with a near-constant cost per frame.
 Run on one core: OMP_NUM_THREADS=1 is set below before numpy loads.
 """
@@ -85,7 +85,7 @@ def writing() -> None:
     trial = pinmsk.Trial.from_array(t, names, values)
 
     def old_rows(fh, table, delimiter, precision=17):
-        np.savetxt(fh, table, fmt="%.17g", delimiter=delimiter)   # the writer before issue 12
+        np.savetxt(fh, table, fmt="%.17g", delimiter=delimiter)   # the former writer (%.17g, one np.savetxt)
 
     print(f"\nWriting {n:,} frames x 23 columns (.sto, write_trial, CPU s, atomic write included)")
     out = {}
@@ -184,4 +184,5 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    from _record import run
+    run(main)

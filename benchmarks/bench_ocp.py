@@ -1,4 +1,4 @@
-"""Optimal-control speed (issue 16, point 5): the new engine against the old one and against a plain
+"""Optimal-control speed: the new engine against the old one and against a plain
 CasADi model of the same equations, all measured in this one run.
 
     python benchmarks/bench_ocp.py [--old-jobs 2] [--skip-old] [--repeat 3]
@@ -275,7 +275,7 @@ def main(argv=None):
             print(f"  {key:8s} old / new (whole fit): {o['seconds'] / sec:6.1f}x   objective new/old - 1: "
                   f"{r.objective / o['objective'] - 1:+.2%}")
         target = 0.5
-        print(f"  {key:8s} new whole fit {sec:.3f} s against the issue's target <= {target} s: "
+        print(f"  {key:8s} new whole fit {sec:.3f} s against the target <= {target} s: "
               f"{'met' if sec <= target else 'NOT met'}")
     r, sec, solve = new["forearm"]
     J, nit, status, whole, solve_p = plain
@@ -286,4 +286,5 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    from _record import run
+    run(main)

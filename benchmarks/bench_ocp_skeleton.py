@@ -1,5 +1,5 @@
 """The skeleton's inverse dynamics and its Jacobian at 100 collocation nodes: AD through CasADi
-against Pinocchio's analytic derivatives in a CasADi callback (issue 16).
+against Pinocchio's analytic derivatives in a CasADi callback.
 
     python benchmarks/bench_ocp_skeleton.py [--jit]
 
@@ -119,4 +119,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from _record import run
+    run(main)

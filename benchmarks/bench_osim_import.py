@@ -2,7 +2,7 @@
 
     python benchmarks/bench_osim_import.py [--repeat 5] [--data DIR]
 
-Issue 14's speed targets, each measured here in the same run (one core: BLAS/OpenMP threads are
+The speed targets, each measured here in the same run (one core: BLAS/OpenMP threads are
 limited to 1):
 
 * **import**: ``pinmsk.model.import_osim`` of RajagopalWalk's ``subject_walk_scaled.osim`` and of
@@ -197,4 +197,5 @@ def _rajagopal_id(osim, raj: Path, walk: Path, repeat: int) -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from _record import run
+    sys.exit(run(main))

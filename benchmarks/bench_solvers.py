@@ -15,7 +15,7 @@
 * FSO of the forearm (100 control points, P = 2 and 3, RK4 and RK45);
 * ratios to the thesis's CPU times (SO 6-31 s, FSO 20-29 s, MATLAB/Maple, 2016).
 
-Targets (issue 3): SO >= 30x faster than SLSQP per frame with max force
+Targets: SO >= 30x faster than SLSQP per frame with max force
 difference < 1e-4 F_max; <= 30 us/frame on gait2d; FSO <= 0.2 s.
 Run on one core: OMP_NUM_THREADS=1 is set below before numpy loads.
 Timings are the best of several repeats.
@@ -142,7 +142,7 @@ def main():
 
     g2 = results[("gait2d", 2, False)]
     f2 = results[("forearm", 2, False)]
-    print("\nTargets (issue 3)")
+    print("\nTargets")
     print(f"  SO vs SLSQP >= 30x, P = 2:    forearm x{f2['ratio']:.0f}, gait2d x{g2['ratio']:.0f}  "
           f"{'MET' if min(f2['ratio'], g2['ratio']) >= 30 else 'NOT MET'}")
     print(f"  same optimum < 1e-4 F_max:    forearm {f2['diff']:.1e}, gait2d {g2['diff']:.1e}  "
@@ -158,4 +158,5 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    from _record import run
+    run(main)

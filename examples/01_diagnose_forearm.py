@@ -5,17 +5,17 @@
 The trial (data/forearm_payload_damping.csv) was recorded -- synthesised, see
 data/README.md -- from a forearm holding 0.5 kg with 0.2 N m s/rad of joint
 damping; the model knows neither.  Two rounds of "rank, add the best" find both.
-Headless: writes figures and an HTML report to OUT_DIR (default: current folder).
+Headless: writes figures and an HTML report to OUT_DIR (default: a new temporary folder).
 """
 import sys
-from pathlib import Path
 
 import pinmsk
 from pinmsk import diagnose as dx
 from pinmsk.io.shared_data import shipped_trial
 from pinmsk.presentation.report import save_diagnosis
+from _common import output_folder
 
-out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(".")
+out = output_folder(sys.argv[1] if len(sys.argv) > 1 else None, "01_diagnose_forearm")
 model = pinmsk.load_model("forearm")
 trial = pinmsk.read_trial(shipped_trial("forearm_payload_damping.csv"))
 

@@ -9,10 +9,9 @@ for P = 1, 2, 3, 10 and the min/max criterion.  Each solution is checked
 against the closed-form 1-dof optimum (Eq. 2.22-2.24, 3.31-3.40 with the KKT
 branch choice and saturation).  gait2d: a synthetic walking-like motion with
 16 bi-articular-capable muscles, P = 2, results written as .sto.
-Headless: writes PNG figures and .sto files to OUT_DIR (default: current folder).
+Headless: writes PNG figures and .sto files to OUT_DIR (default: a new temporary folder).
 """
 import sys
-from pathlib import Path
 
 import matplotlib
 
@@ -24,9 +23,9 @@ import pinmsk  # noqa: E402
 from pinmsk.diagnose.synth import walking_motion  # noqa: E402
 from pinmsk.solvers import StaticOptimization  # noqa: E402
 from pinmsk.solvers.analytical import gaussian_elbow_motion, one_dof_forces  # noqa: E402
+from _common import output_folder
 
-out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(".")
-out.mkdir(parents=True, exist_ok=True)
+out = output_folder(sys.argv[1] if len(sys.argv) > 1 else None, "02_static_optimization")
 
 model = pinmsk.load_model("forearm")
 motion = gaussian_elbow_motion()                   # Fig. 3.13

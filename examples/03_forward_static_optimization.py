@@ -16,7 +16,6 @@ t_k as well, for reference).  Headless: writes PNGs to OUT_DIR.
 """
 import sys
 import warnings
-from pathlib import Path
 
 import matplotlib
 
@@ -27,9 +26,9 @@ import numpy as np  # noqa: E402
 import pinmsk  # noqa: E402
 from pinmsk.solvers import FSO, StaticOptimization  # noqa: E402
 from pinmsk.solvers.analytical import gaussian_elbow_motion  # noqa: E402
+from _common import output_folder
 
-out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(".")
-out.mkdir(parents=True, exist_ok=True)
+out = output_folder(sys.argv[1] if len(sys.argv) > 1 else None, "03_forward_static_optimization")
 
 model = pinmsk.load_model("forearm")
 motion = gaussian_elbow_motion()

@@ -16,7 +16,6 @@ Prints timings, objectives and the largest differences; writes one PNG per
 speed to OUT_DIR.
 """
 import sys
-from pathlib import Path
 
 import matplotlib
 
@@ -27,9 +26,9 @@ import numpy as np  # noqa: E402
 import pinmsk  # noqa: E402
 from pinmsk.solvers import EID, ModifiedStaticOptimization, StaticOptimization  # noqa: E402
 from pinmsk.solvers.analytical import gaussian_elbow_motion  # noqa: E402
+from _common import output_folder
 
-out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(".")
-out.mkdir(parents=True, exist_ok=True)
+out = output_folder(sys.argv[1] if len(sys.argv) > 1 else None, "04_so_mso_eid")
 model = pinmsk.load_model("forearm")
 names = model.muscles.names
 show = [0, 2, 3, 5]            # BRD, BICSH, BRA, TRIMH

@@ -41,6 +41,7 @@ matplotlib.use("Agg")
 from pinmsk.contact import synthetic_foot_trial  # noqa: E402
 from pinmsk.contact.identify import VARIANTS, fit_contact_models, settings_lines  # noqa: E402
 from pinmsk.presentation.plots import contact_fit_figures  # noqa: E402
+from _common import output_folder
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_DATA = HERE.parent.parent / "shared" / "data" / "real" / "csu-treadmill-leg2d" / "rawdata.txt"
@@ -50,7 +51,8 @@ THESIS_SENSITIVITY = {"heel": 2.4, "metatarsal": 6.3, "toe": 1.3}
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=None)
-    ap.add_argument("--out", type=Path, default=Path(os.environ.get("PINMSK_EXAMPLE_OUT", HERE / "out" / "contact")))
+    ap.add_argument("--out", default=os.environ.get("PINMSK_EXAMPLE_OUT"),
+                    help="output folder (default: a new temporary folder)")
     ap.add_argument("--starts", type=int, default=None, help="starting points per model (default: ContactFit's)")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--relax-range", type=float, default=0.02,
@@ -87,7 +89,7 @@ def main(argv=None) -> dict:
         if val is not None:
             opts[key] = val
 
-    args.out.mkdir(parents=True, exist_ok=True)
+    args.out = output_folder(args.out, "05_contact_identification")
     fits = {}
     for toe in args.toe:
         models = fit_contact_models(None, trial, VARIANTS, toe=toe, relax_range=args.relax_range,

@@ -6,9 +6,22 @@ from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
 from pathlib import Path
 
 from pinmsk.io.shared_data import shared_data_dir
+
+
+def output_folder(given, name: str) -> Path:
+    """Where an example writes: the folder ``given`` (created), or a new temporary folder (printed), never
+    the current folder unasked."""
+    if given:
+        out = Path(given)
+        out.mkdir(parents=True, exist_ok=True)
+        return out
+    out = Path(tempfile.mkdtemp(prefix=f"pinmsk-{name}-"))
+    print(f"{name}: no output folder given; writing to {out}")
+    return out
 
 
 def viewer_arguments(argv, *, description: str) -> argparse.Namespace:
@@ -38,7 +51,7 @@ def data_file_main(argv, *, description: str, name: str, out: str, relative: str
     file is absent and returns 0 (nothing is written then).
     """
     p = argparse.ArgumentParser(description=description)
-    p.add_argument("--out", default=out)
+    p.add_argument("--out", default=None, help=f"output folder (default: a new temporary folder; e.g. {out})")
     p.add_argument("--data", default=None)
     p.add_argument("--no-plots", action="store_true")
     a = p.parse_args(argv)
@@ -47,5 +60,5 @@ def data_file_main(argv, *, description: str, name: str, out: str, relative: str
     if path is None or not path.exists():
         print(f"{name}: ../shared/data/{relative} is absent; nothing to do")
         return 0
-    run(path, Path(a.out), plots=not a.no_plots)
+    run(path, output_folder(a.out, name), plots=not a.no_plots)
     return 0

@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -31,6 +30,7 @@ from pinmsk.solvers import ocp
 from pinmsk.solvers.ocp import Target
 from pinmsk.solvers.ocp.tasks import scale_masses
 from pinmsk.solvers.parametrization import Polynomial
+from _common import output_folder
 
 THESIS = {"frequencies": [2, 4, 5, 6, 7], "J": [0.041, 0.196, 0.211, 0.898, 1.553],
           "J1": [0.101, 0.145, 0.176, 0.109, 0.097], "J2": [0.035, 0.201, 0.215, 0.986, 1.714],
@@ -169,11 +169,10 @@ def table_figure(freqs, J, J1, J2, fmax, path, extra=None, solved=None):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default="out/finger_tapping")
+    ap.add_argument("--out", default=None, help="output folder (default: a new temporary folder)")
     ap.add_argument("--quick", action="store_true", help="two frequencies, no search (for tests)")
     args = ap.parse_args(argv)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_folder(args.out, "finger_tapping")
     model = pinmsk.load_model("finger")
     freqs = [2.0, 6.0] if args.quick else [2.0, 4.0, 5.0, 6.0, 7.0]
     rows, seconds, results = [], [], {}

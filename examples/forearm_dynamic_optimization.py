@@ -31,7 +31,6 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -41,6 +40,7 @@ from pinmsk.solvers.ocp import Target
 from pinmsk.solvers.parametrization import Fourier, Polynomial, Spline
 
 from finger_tapping import signals
+from _common import output_folder
 
 PERIOD = 1.9
 TOL = 0.1
@@ -149,15 +149,14 @@ def compare_designs(model, names, *, intervals, path):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default="out/forearm")
+    ap.add_argument("--out", default=None, help="output folder (default: a new temporary folder)")
     ap.add_argument("--quick", action="store_true", help="J4 with Fourier series only, FF and IFT (tests)")
     ap.add_argument("--intervals", type=int, default=50, help="collocation intervals")
     ap.add_argument("--moment-arms", default="angle", choices=("angle", "constant"),
                     help="moment arms as functions of the elbow angle (as the thesis, Fig. 3.5; "
                          "default) or constant (Table 3.5)")
     args = ap.parse_args(argv)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_folder(args.out, "forearm_dynamic_optimization")
     model = pinmsk.load_model("forearm", moment_arms=args.moment_arms)
     runs = [("J4", "fourier")] if args.quick else \
         [(k, p) for p in PARAMETRIZATIONS for k in OBJECTIVES]

@@ -37,6 +37,7 @@ from pinmsk.gait_validation import gait_cycle, validate_gait
 from pinmsk.io import write_trial
 from pinmsk.solvers.ocp.gait import predictive_gait, stride_result
 from pinmsk.trial import Trial
+from _common import output_folder
 
 JOINTS = ("hip_r", "knee_r", "ankle_r")
 
@@ -151,7 +152,7 @@ def figure(runs: list[dict], path: Path) -> Path:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default="out/foot_mass", help="output folder")
+    ap.add_argument("--out", default=None, help="output folder (default: a new temporary folder)")
     ap.add_argument("--scales", default="1.0,0.67", help="foot-mass scales, comma-separated (first = reference)")
     ap.add_argument("--cold", action="store_true",
                     help="solve every scale from the default walking guess (coarse-to-fine) instead of "
@@ -159,13 +160,12 @@ def main(argv=None) -> int:
     ap.add_argument("--no-plots", action="store_true", help="skip the figure")
     ap.add_argument("--verbose", action="store_true", help="IPOPT's iteration log")
     args = ap.parse_args(argv)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_folder(args.out, "gait_foot_mass")
     runs = []
     for s in (float(x) for x in args.scales.split(",")):
         # a sensitivity study: the changed model starts from the nominal optimum (its half cycle,
         # one 25-interval solve), so both optima are the same gait's; from the generic guess the
-        # 67 % problem lands in another of the gait's local optima (README, "2D gait")
+        # 67 % problem lands in another of the gait's local optima (docs/reference/validation.md, "2D gait")
         warm = {} if args.cold or not runs else {"guess": runs[0]["result"], "coarse_intervals": None}
         run = solve(s, verbose=args.verbose, **warm)
         r = run["result"]

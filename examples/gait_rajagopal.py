@@ -43,6 +43,7 @@ from pinmsk.signals.emg import on_off, onset_times
 from pinmsk.grf import external_forces, torso_residuals
 from pinmsk.io.trc import read_trc
 from pinmsk.pipeline import opensim_to_gait2d, transferred_cops
+from _common import output_folder
 
 JOINTS = (("hip", "hip_flexion_{s}_moment", -1.0), ("knee", "knee_angle_{s}_moment", 1.0),
           ("ankle", "ankle_angle_{s}_moment", -1.0))
@@ -237,7 +238,7 @@ def run(folder: Path, out: Path, *, diagnose: bool = True, plots: bool = True) -
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", default="out/rajagopal")
+    p.add_argument("--out", default=None, help="output folder (default: a new temporary folder)")
     p.add_argument("--data", default=None, help="the shared data folder (default ../shared/data)")
     p.add_argument("--no-diagnose", action="store_true")
     p.add_argument("--no-plots", action="store_true")
@@ -247,8 +248,9 @@ def main(argv=None) -> int:
     if folder is None or not folder.is_dir():
         print("gait_rajagopal: data folder ../shared/data/real/opensim-moco-walk-emg is absent; nothing to do")
         return 0
-    run(folder, Path(a.out), diagnose=not a.no_diagnose, plots=not a.no_plots)
-    print(f"wrote {Path(a.out) / 'gait_rajagopal.json'}")
+    out = output_folder(a.out, "gait_rajagopal")
+    run(folder, out, diagnose=not a.no_diagnose, plots=not a.no_plots)
+    print(f"wrote {out / 'gait_rajagopal.json'}")
     return 0
 
 

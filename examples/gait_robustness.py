@@ -1,4 +1,4 @@
-"""Robustness of the predictive gait (issue 17): the default problem from several generic guesses.
+"""Robustness of the predictive gait: the default problem from several generic guesses.
 
     python examples/gait_robustness.py --out out/robustness [--guesses walking,standing,qr1,qr2] [--jobs 2]
 
@@ -20,9 +20,9 @@ import argparse
 import json
 import sys
 from concurrent.futures import ProcessPoolExecutor
-from pathlib import Path
 
 import numpy as np
+from _common import output_folder
 
 JOINTS = ("hip_r", "knee_r", "ankle_r")
 
@@ -93,14 +93,14 @@ def table(rows: list[dict]) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, default=Path("out/robustness"))
+    ap.add_argument("--out", default=None, help="output folder (default: a new temporary folder)")
     ap.add_argument("--guesses", default="walking,standing,qr1,qr2")
     ap.add_argument("--jobs", type=int, default=1, help="solves at a time (each in its own process)")
     a = ap.parse_args(argv)
     names = [g.strip() for g in a.guesses.split(",") if g.strip()]
     for g in names:
         guess_options(g)                       # refuse a bad name before any solve
-    a.out.mkdir(parents=True, exist_ok=True)
+    a.out = output_folder(a.out, "gait_robustness")
     if a.jobs > 1:
         with ProcessPoolExecutor(max_workers=a.jobs) as ex:
             rows = list(ex.map(solve, names))

@@ -39,6 +39,7 @@ import numpy as np
 from . import grf as _grf
 from .components import Motion
 from .errors import ModelError, TrialError
+from .io.channel_map import map_hint
 from .io.external_loads import read_external_loads
 from .io.tables import read_trial
 from .signals.filtering import DEFAULT_CUTOFF, FILTER_ORDER, lowpass
@@ -301,9 +302,9 @@ def source_coordinate_gaps(model, trial, *, missing_coordinates: str = "refuse")
         try:
             trial.require(free)
         except TrialError as exc:
-            raise TrialError(f"{exc}; to hold a coordinate the file leaves out at its default value, as OpenSim's "
-                             "ID tool does, pass --missing-coordinates default (missing_coordinates='default')"
-                             ) from None
+            raise TrialError(f"{exc}; {map_hint(trial, [c for c in free if c not in trial])}; or, to hold a "
+                             "coordinate the file leaves out at its default value, as OpenSim's ID tool does, pass "
+                             "--missing-coordinates default (missing_coordinates='default')") from None
     for c in free:
         fill[c] = cmap.defaults[c]
         notes.append(f"{c}: not in the trial; held at its default value {cmap.defaults[c]:.6g} "
@@ -332,7 +333,12 @@ def _motion(model, trial, *, cutoff, signals=None, missing_coordinates="refuse",
     check_coordinate_columns(model, trial)
     notes: tuple[str, ...] = ()
     if cmap is None:
-        trial.require(model.coordinates)
+        missing = [c for c in model.coordinates if c not in trial]
+        if missing:
+            try:
+                trial.require(model.coordinates)
+            except TrialError as exc:
+                raise TrialError(f"{exc}; {map_hint(trial, missing)}") from None
         q, v, a = trial.kinematics(model.coordinates, cutoff=cutoff_value(cutoff), method=method)
         measured = model.coordinates
     else:

@@ -36,7 +36,7 @@ from .actuators import from_spec as actuator_from_spec
 from .components import Component, Motion, ParameterKeyError, Parameters
 from .contact.spec import from_spec as contact_from_spec
 from .effects import registry
-from .errors import ModelError
+from .errors import ModelError, PinmskError
 from .skeleton import skeleton_constant
 from . import kinematics
 from .kinematics import DEFAULT_CUTOFF
@@ -542,7 +542,15 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
             raise ModelError(f"{p}: moment_arms and tendon do not apply to an OpenSim model (its muscles "
                              "come from the .osim: their paths are fitted polynomials, their tendons as OpenSim sets them)")
         from .opensim.importer import warn_report
-        model, report = import_osim(p, gravity=gravity, nonlinear=nonlinear or "exact")
+        try:
+            model, report = import_osim(p, gravity=gravity, nonlinear=nonlinear or "exact")
+        except PinmskError:
+            raise
+        except (TypeError, ValueError, KeyError, IndexError, AttributeError, OverflowError, RuntimeError) as exc:
+            # a value of a kind the import's checks did not expect (Pinocchio raises RuntimeError on an
+            # inertia it refuses): named with the file, not a traceback
+            what = " ".join(str(exc).split()) or type(exc).__name__
+            raise ModelError(f"{p}: cannot import this .osim ({type(exc).__name__}: {what[:200]})") from None
         warn_report(report)
         return model
     if nonlinear is not None:
@@ -574,7 +582,15 @@ def load_model(name_or_path: str | Path, *, moment_arms: str | None = None,
                 "or pass the path of a .toml sidecar, a .urdf or an OpenSim .osim file"
             )
         sidecar = builtin_models.builtin_sidecar(str(name_or_path))
-    return _load_sidecar(sidecar, moment_arms=moment_arms, tendon=tendon, gravity=gravity)
+    try:
+        return _load_sidecar(sidecar, moment_arms=moment_arms, tendon=tendon, gravity=gravity)
+    except PinmskError:
+        raise
+    except (TypeError, ValueError, KeyError, IndexError, AttributeError, OverflowError) as exc:
+        # a value of the wrong kind where the checks above did not look (a table for a number, a list
+        # too short): named with the file rather than shown as a traceback
+        what = " ".join(str(exc).split()) or type(exc).__name__
+        raise ModelError(f"{sidecar}: invalid model sidecar ({type(exc).__name__}: {what[:200]})") from None
 
 
 def import_osim(path, *, locked: str = "joint", nonlinear: str = "exact", gravity=None, hooks=None,
@@ -905,7 +921,10 @@ def _build_muscles(entries, mm: dict, path, tendon: str, sidecar: Path):
         vals = []
         for e in entries:
             if key in e:
-                vals.append(float(e[key]))
+                v = e[key]
+                if isinstance(v, bool) or not isinstance(v, (int, float)):
+                    raise ModelError(f"{sidecar}: muscle '{e['name']}': {key} = {v!r} must be a number")
+                vals.append(float(v))
             elif required and default is None:
                 raise ModelError(f"{sidecar}: muscle '{e['name']}' has no '{key}'")
             else:

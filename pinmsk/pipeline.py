@@ -258,7 +258,7 @@ def run_trial(spec: dict, *, model="gait2d", out_dir=None, base_dir=".", key: st
         bm = info.get("body_mass")
         res, rsum = torso_residuals(m, idt, body_mass=bm)
         row.update({"frames": kin.n_frames, "duration_s": float(kin.time[-1] - kin.time[0]),
-                    "body_mass": bm})
+                    "body_mass_kg": bm})
         for k, v in info.items():
             if k.startswith("ik_") and isinstance(v, dict):
                 row["ik_rms_mm_max"] = max(v.values())
@@ -267,8 +267,8 @@ def run_trial(spec: dict, *, model="gait2d", out_dir=None, base_dir=".", key: st
             if c.startswith(("hip", "knee", "ankle")):
                 row[f"{c}_peak_abs_nm_per_kg" if bm else f"{c}_peak_abs_nm"] = float(
                     np.max(np.abs(idt[moment_channel(c)])) / norm)
-        for c, s in rsum.items():
-            row[f"{c}_residual_rms"] = s["rms"]
+        for c, s in rsum.items():                   # the unit in the name: N (translations) or N m
+            row[f"{c}_residual_rms_{'nm' if s['unit'] == 'N*m' else 'n'}"] = s["rms"]
         act = None
         if m.n_muscles and spec.get("so", True) is not False:
             opts = dict(spec.get("so") or {}) if isinstance(spec.get("so"), dict) else {}
@@ -634,6 +634,8 @@ def optimize_task(task_path, out_path=None, progress=None, *, precision: int | N
     status and the most violated constraint; nothing is written then (it is not a solution).
     """
     from .errors import ConvergenceError
+    from .solvers.ocp.tasks import resolve_task
+    task_path = resolve_task(task_path)          # a path, or a shipped task's name
     spec = load_task(task_path)
     prob = build_from_task(spec, base_dir=Path(task_path).parent, progress=progress)
     res = prob.fit().result_

@@ -59,6 +59,8 @@ __all__ = [
     "parse_ground_reaction",
     "is_angular_name",
     "close_matches",
+    "time_label_unit",
+    "TIME_UNITS",
 ]
 
 # ---------------------------------------------------------------------------
@@ -72,6 +74,36 @@ ACTIVATION_SUFFIX = "_activation"
 EXCITATION_SUFFIX = "_excitation"
 EMG_SUFFIX = "_emg"
 FORCE_SUFFIX = "_force"
+
+#: Time units :func:`read_trial` takes (``time_unit``), as factors to seconds.
+#: Time units a time column may be in (``read_trial(time_unit=...)``, ``--time-unit``), as factors to s.
+TIME_UNITS = {"s": 1.0, "ms": 1e-3}
+
+#: A time column's label: ``time`` or ``t`` (any case), with an optional unit in brackets or after
+#: an underscore: ``Time (s)``, ``time [ms]``, ``t_ms``, ``Time (seconds)``.
+_TIME_LABEL = re.compile(r"^(?:time|t)\s*(?:[(\[]\s*(?P<unit>[^)\]]*?)\s*[)\]]|_(?P<bare>[a-z]+))?$",
+                         re.IGNORECASE)
+#: Spellings of the time units in a column label.
+_UNIT_WORDS = {"s": "s", "sec": "s", "secs": "s", "second": "s", "seconds": "s",
+               "ms": "ms", "msec": "ms", "msecs": "ms", "millisecond": "ms", "milliseconds": "ms"}
+
+
+def time_label_unit(label: str) -> str | None:
+    """The unit a time column's label declares: ``""`` for ``time`` / ``t`` alone (undeclared),
+    ``"s"`` or ``"ms"`` for ``Time (s)``, ``Time [ms]``, ``t_ms``...; ``None`` if the label is not a
+    time column.  A unit pinmsk does not convert (``Time (min)``) raises TrialError naming it."""
+    m = _TIME_LABEL.match(label.strip())
+    if m is None:
+        return None
+    word = m["unit"] if m["unit"] is not None else m["bare"]
+    if word is None:
+        return ""
+    unit = _UNIT_WORDS.get(word.strip().lower())
+    if unit is None:
+        raise TrialError(f"time column {label!r}: unit {word!r} is not one of s, ms "
+                         f"({', '.join(sorted(_UNIT_WORDS))})")
+    return unit
+
 
 #: The nine ground-reaction channels of one force plate, without side prefix.
 GROUND_REACTION_CHANNELS = (
@@ -292,6 +324,17 @@ def marker_array(trial: Trial, names: Sequence[str] | None = None, *, axes: str 
     return trial.get(cols).reshape(trial.n_frames, len(names), len(axes))
 
 
+def _pandas(what: str):
+    """pandas, imported when a method needs it; MissingDependencyError naming the method otherwise."""
+    try:
+        import pandas
+    except ImportError:
+        from pinmsk.errors import MissingDependencyError
+        raise MissingDependencyError(f"{what} needs pandas, which pinmsk does not install: pip install pandas "
+                                     "(or pip install pinmsk[pandas])") from None
+    return pandas
+
+
 def _readonly(a: np.ndarray) -> np.ndarray:
     a.setflags(write=False)
     return a
@@ -315,7 +358,9 @@ class Trial:
     Notes
     -----
     ``time``, ``values`` and the arrays returned by ``trial[name]`` are
-    read-only views; copy them to modify.  ``meta`` and ``units`` are
+    read-only views; copy them to modify.  One name gives one shape
+    everywhere: ``trial[name]`` and ``trial.get(name)`` are (N,) (the latter
+    a copy); a list of names, ``trial.get([a, b])``, is (N, k).  ``meta`` and ``units`` are
     read-only mappings; use :meth:`with_meta` / :meth:`with_units`.
     """
 
@@ -493,18 +538,78 @@ class Trial:
         return [self._index[n] for n in names]
 
     def get(self, names, *, rows=None) -> np.ndarray:
-        """Channels ``names`` as an (N, k) array (a copy), in the order given.
+        """Channels as a writable copy: one name (a string) gives its samples (N,), as ``trial[name]``;
+        a list or tuple of k names gives an (N, k) array in the order given (also for one name in a
+        list: ``trial.get(["knee_r"])`` is (N, 1)), as NumPy and pandas index ``x["a"]`` / ``x[["a"]]``.
 
-        A single string gives an (N, 1) array; ``rows`` (frame indices) takes only those frames.
+        ``rows`` (frame indices or a boolean mask) takes only those frames.
         """
+        single = isinstance(names, str)
         idx = self._indices(_as_names(names))
-        return self._values[:, idx] if rows is None else self._values[np.ix_(np.asarray(rows), idx)]
+        if rows is None:
+            out = self._values[:, idx]
+        else:
+            rows = np.asarray(rows)
+            rows = np.flatnonzero(rows) if rows.dtype == bool else rows
+            out = self._values[np.ix_(rows, idx)]
+        return out[:, 0] if single else out
 
     def channels_matching(self, pattern) -> tuple[str, ...]:
         """Names matching a glob pattern (``"*_moment"``) or a compiled regex (search)."""
         if isinstance(pattern, re.Pattern):
             return tuple(n for n in self._names if pattern.search(n))
         return tuple(n for n in self._names if fnmatch.fnmatchcase(n, pattern))
+
+    def to_pandas(self):
+        """A ``pandas.DataFrame``: one column per channel (copies), indexed by the time in s (index name
+        ``time``); ``df.attrs`` holds ``units`` and ``meta``.  Needs pandas (``pip install pandas``);
+        pinmsk itself does not.  :meth:`from_pandas` reads it back."""
+        pd = _pandas("Trial.to_pandas")
+        df = pd.DataFrame(self._values.copy(), columns=list(self._names),
+                          index=pd.Index(self._time.copy(), name=TIME))
+        df.attrs["units"] = dict(self._units)
+        df.attrs["meta"] = dict(self._meta)
+        return df
+
+    @classmethod
+    def from_pandas(cls, df, *, time: str | None = None, units=None, meta=None) -> Trial:
+        """A Trial from a ``pandas.DataFrame`` of numeric columns.
+
+        The time base is the column ``time`` (or that column's name given as ``time``; a label
+        with a unit such as ``Time (ms)`` is converted to s, as :func:`pinmsk.io.read_trial` does),
+        else the index (as :meth:`to_pandas` writes it).  Every other column is a channel.
+        ``units`` / ``meta`` default to ``df.attrs`` (what :meth:`to_pandas` stored).  Needs pandas.
+        """
+        pd = _pandas("Trial.from_pandas")
+        if not isinstance(df, pd.DataFrame):
+            raise TrialError(f"from_pandas needs a pandas.DataFrame, got {type(df).__name__}")
+        names = [str(c) for c in df.columns]
+        if len(set(names)) != len(names):
+            raise TrialError(f"from_pandas: duplicate column names {sorted({n for n in names if names.count(n) > 1})}")
+        if time is None:
+            found = [c for c in df.columns if time_label_unit(str(c)) is not None]
+            if len(found) > 1:
+                raise TrialError(f"from_pandas: several time columns {found}; pass time=NAME")
+            time = found[0] if found else None
+        elif time not in df.columns:
+            raise TrialError(f"from_pandas: no column {time!r} for the time (columns: {', '.join(names[:12])})")
+        if time is None:
+            t = np.asarray(df.index, dtype=float) if pd.api.types.is_numeric_dtype(df.index) else None
+            if t is None:
+                raise TrialError("from_pandas: no 'time' column and the index is not numeric; pass time=NAME")
+            data = df
+        else:
+            unit = time_label_unit(str(time)) or "s"
+            t = np.asarray(df[time], dtype=float) * TIME_UNITS[unit]
+            data = df.drop(columns=[time])
+        bad = [str(c) for c in data.columns if not pd.api.types.is_numeric_dtype(data[c])]
+        if bad:
+            raise TrialError(f"from_pandas: column(s) {', '.join(map(repr, bad[:5]))} are not numeric")
+        attrs = getattr(df, "attrs", {}) or {}
+        units = dict(attrs.get("units", {})) if units is None else units
+        meta = dict(attrs.get("meta", {})) if meta is None else meta
+        units = {k: v for k, v in units.items() if k in set(map(str, data.columns))}
+        return cls.from_array(t, [str(c) for c in data.columns], data.to_numpy(dtype=float), units=units, meta=meta)
 
     def to_dict(self) -> dict[str, np.ndarray]:
         """``{"time": time, name: samples, ...}`` with writable copies."""
@@ -804,13 +909,17 @@ class Trial:
                 "but it was not converted from degrees because it was not recognised as "
                 f"an angle; pass angular=[..., {name!r}] to read_trial"
             )
+        elif self._meta.get("format") == "csv" and not declared:
+            fix = ("but a CSV is read in radians; if it is in degrees, pass --degrees (command line) or "
+                   "read_trial(path, in_degrees=True) (Python)")
         elif declared is None:
             fix = (
-                "but the file does not declare inDegrees (radians assumed); set inDegrees=yes "
-                "in the header or convert"
+                "but the file does not declare inDegrees (radians assumed); if it is in degrees, pass "
+                "--degrees (command line) or in_degrees=True (Python), or set inDegrees=yes in the header"
             )
         else:
-            fix = "but the file declares radians; set inDegrees=yes in the header or convert"
+            fix = ("but the file declares radians; if it is in degrees, pass --degrees (command line) or "
+                   "in_degrees=True (Python), or set inDegrees=yes in the header")
         others = f" (also {', '.join(repr(self._names[idx[i]]) for i in over[1:4])})" if over.size > 1 else ""
         raise TrialError(f"{self._where()}{what} {fix}{others}")
 

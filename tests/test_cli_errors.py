@@ -1,6 +1,6 @@
 """Bad input on the command line: one line ``pinmsk: error: ...``, exit status 2, no output left behind.
 
-Each test feeds one kind of bad input (issue 12, item 4) and checks the message names the
+Each test feeds one kind of bad input and checks the message names the
 problem (channel, row, time, path, key) and that no output file, temporary file or
 half-written set of outputs remains.
 """
@@ -205,7 +205,6 @@ def test_broken_pipe_exits_quietly():
 # -- 5. NaN for the viewer ---------------------------------------------------------------------
 
 def test_view_refuses_nan_before_starting_a_server(tmp_path, capsys):
-    pytest.importorskip("meshcat")
     t = np.arange(101) / 100.0
     q = 1.0 + 0.2 * t
     q[7] = np.nan
@@ -227,7 +226,7 @@ def test_time_in_milliseconds_is_refused_and_can_be_declared(tmp_path, capsys):
     src.write_text("time,elbow_flexion\n" + "".join(f"{a:g},{float(b)!r}\n" for a, b in zip(t_ms, q)))
     with pytest.raises(TrialError, match=r"looks like milliseconds: its median step is 10, which in seconds "
                                          r"would be a 0\.1 Hz recording \(100 Hz if it is ms\).*"
-                                         r"divide the time column by 1000.*time_unit='ms'"):
+                                         r"label the column 'Time \(ms\)', pass --time-unit ms.*time_unit='ms'"):
         read_trial(src)
     tr = read_trial(src, time_unit="ms")
     np.testing.assert_allclose(tr.time, t_ms / 1000.0)
@@ -236,6 +235,8 @@ def test_time_in_milliseconds_is_refused_and_can_be_declared(tmp_path, capsys):
     assert main(["id", "forearm", str(src), "-o", str(tmp_path / "id.sto")]) == 2
     assert "looks like milliseconds" in _one_error_line(capsys.readouterr().err)
     assert not (tmp_path / "id.sto").exists()
+    assert main(["id", "forearm", str(src), "-o", str(tmp_path / "id.sto"), "--time-unit", "ms"]) == 0
+    np.testing.assert_allclose(read_trial(tmp_path / "id.sto").time, t_ms / 1000.0)
     with pytest.raises(TrialError, match="time_unit must be one of s, ms"):
         read_trial(src, time_unit="min")
     _elbow_csv(tmp_path / "ok.csv", n=11, rate=2.0)                     # 2 Hz in seconds: also refused

@@ -1,4 +1,4 @@
-"""Conformance of the components at one state (issue 16): effects' ``generalized_force_at``, paths'
+"""Conformance of the components at one state: effects' ``generalized_force_at``, paths'
 ``lengths_at`` / ``moment_arms_at`` and contacts' ``wrench_at`` give, on CasADi, the numbers of the
 batched numpy code (rel 1e-12), and CasADi's exact Jacobians equal central finite differences of
 that numpy code.  The numpy single-state forms equal the batched ones exactly."""

@@ -1,4 +1,4 @@
-"""Conformance of the muscle, activation and metabolic laws under CasADi (issue 16).
+"""Conformance of the muscle, activation and metabolic laws under CasADi.
 
 Each law is written once against :mod:`pinmsk.backend`; here the CasADi
 expression of it must give the numpy numbers (rel 1e-12) at random valid

@@ -1,4 +1,4 @@
-"""Diagnosis hook of the contact models (issue 6 item 7): the contact mode of pinmsk.diagnose.
+"""Diagnosis hook of the contact models: the contact mode of pinmsk.diagnose.
 
 Ground truth: a hyper-volumetric foot (thesis Table 4.4 parameters) made by
 :func:`pinmsk.contact.synthetic_foot_trial` with the pivot 30 mm above the belt

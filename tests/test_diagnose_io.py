@@ -70,7 +70,7 @@ def test_too_few_samples(forearm):
 
 def test_unknown_effect_or_target_lists_what_exists(forearm, damped):
     with pytest.raises(ModelError, match="unknown effect 'joint_dampng'.*did you mean 'joint_damping'.*"
-                                         "Known effects: .*coulomb_friction"):
+                                         "known effects: .*coulomb_friction"):
         run(forearm, damped, add=["joint_dampng"])
     with pytest.raises(ModelError, match="no coordinate 'knee'.*Targets for joint_damping.*elbow_flexion"):
         run(forearm, damped, add=["joint_damping:knee"])

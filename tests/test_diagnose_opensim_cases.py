@@ -50,6 +50,9 @@ SOLVED = (
     "arm26_forearm_mass",
     "arm26_forearm_mass_noisy",
     "arm26_payload_styloid",
+    "pendulum_tip_payload",
+    "gait_backpack",
+    "gait_consistent_backpack",
     "arm26_payload_hand_com",
     "arm26_payload_damping",
     "arm26_shoulder_friction",
@@ -75,12 +78,6 @@ PENDING = {
                                       "the damping and the end stop are not significant after it",
     "pendulum_q2_damping": "joint_damping:q2 is found (0.79 +- 0.09, true 0.8), but " + _FLOOR + " at 9.2x: "
                            "the angle noise is fitted white at 0.023 deg (true 0.2 deg, low-passed at 12 Hz)",
-    "pendulum_tip_payload": "payload:rod2@end takes 0.90 +- 0.10 kg for the true 0.5 kg: @end sits at twice the "
-                            "centre of mass's distance, not at rod2's tip (no marker there)",
-    "gait_backpack": "segment_mass:torso +18 % and com_offset:torso, then at_noise_floor (the backpack's mass "
-                     "and lever, not a payload site: none on a floating-base model)",
-    "gait_consistent_backpack": "segment_mass:torso +18 %, com_offset:torso and two pelvis effects, then "
-                                "at_noise_floor",
 }
 
 

@@ -132,7 +132,7 @@ def test_subject01_walk_means_match_pinmsk_id(shared_data):
         x = res.trial[f"{c}_moment"][rows]
         assert row["mean"] == pytest.approx(np.mean(x), abs=1e-6)
         assert row["rms"] == pytest.approx(np.sqrt(np.mean(x * x)), abs=1e-6)
-    # the figure: a pelvis-tilt mean near -10 N m, large against RRA's -3.4
+    # the pelvis-tilt mean OpenSim's ID of this walk gives: near -10 N m, large against RRA's -3.4
     assert -12.0 < st["coordinates"]["pelvis_tilt"]["mean"] < -8.0
 
 
@@ -314,7 +314,9 @@ def test_written_osim_com_offset_and_mass_match_opensim(tmp_path, shared_data):
     m = pinmsk.load_model(src)
     fixed = m.with_effect(registry.get("com_offset")("r_ulna_radius_hand", dx=0.02, dy=-0.03, dz=0.01),
                           registry.get("segment_mass")("r_ulna_radius_hand", delta=-0.1),
-                          registry.get("payload")("r_humerus@com", mass=0.7))
+                          registry.get("payload")("r_humerus@com", mass=0.7),
+                          registry.get("payload")("r_ulna_radius_hand@axis", mass=0.4, distance=0.31),
+                          registry.get("payload")("r_humerus@point", mass=0.3, x=0.02, y=-0.1, z=0.01))
     res = write_osim(fixed, tmp_path / "arm26_com.osim")
     assert not res.not_exported
     body = {b.get("name"): b for b in ET.parse(res.path).getroot().iter("Body")}["r_ulna_radius_hand"]

@@ -132,3 +132,150 @@ def test_the_rajagopal_page_runs_as_written(tmp_path):
         assert run.returncode == (2 if refused else 0), f"step {k}: {body}\n{out}"
         for excerpt in excerpts:
             assert_excerpt(excerpt, out, f"step {k} ({body.strip()[:60]}...)")
+
+
+# -- every page of docs/ and the README: commands that parse, pages that run ----------------------------
+
+DOCS = ROOT / "docs"
+#: Pages whose every step runs in a few seconds: run as written by the default suite.
+FAST_PAGES = ("tutorials/own_csv.md", "tutorials/static_optimization.md")
+#: Pages that run as written with the repository's own data only, in the slow set. The optimal-control page solves
+#: with casadi in this process, so this module runs in the casadi group of tests/conftest.py.
+SLOW_PAGES = ("tutorials/diagnosis.md", "tutorials/optimal_control.md")
+#: What the ``$VAR``s of the pages' shell lines stand for when they are only parsed.
+PLACEHOLDERS = {"M": "M", "W": "W", "SLURM_CPUS_PER_TASK": "2", "SLURM_ARRAY_TASK_ID": "1",
+                "SLURM_ARRAY_TASK_COUNT": "8"}
+
+
+def _pages() -> list[Path]:
+    return [ROOT / "README.md", *sorted(DOCS.rglob("*.md"))]
+
+
+def _command_lines(page: Path) -> list[str]:
+    """Every ``pinmsk ...`` command of the page's shell blocks (``sh``, ``bash``), continuation lines
+    joined, after any ``&&``; ``$ `` prompts are taken off."""
+    out = []
+    for lang, body in _blocks(page):
+        if lang not in ("sh", "bash"):
+            continue
+        for line in body.replace("\\\n", " ").splitlines():
+            line = line.strip()
+            line = line[2:] if line.startswith("$ ") else line
+            line = line.replace("python -m pinmsk ", "pinmsk ")
+            for part in line.split("&&"):
+                part = part.strip()
+                if part.startswith("pinmsk "):
+                    out.append(part)
+    return out
+
+
+def _argv(command: str) -> list[str]:
+    for k, v in PLACEHOLDERS.items():
+        command = command.replace("${" + k + "}", v).replace("$" + k, v)
+    return shlex.split(command, comments=True)[1:]
+
+
+def test_every_documented_command_parses():
+    """Each ``pinmsk`` command on a page of docs/ or in the README is one the command line accepts
+    (its options and their values), so a renamed option cannot leave a page behind."""
+    from pinmsk.presentation.cli import build_parser
+
+    seen = 0
+    for page in _pages():
+        for command in _command_lines(page):
+            argv = _argv(command)
+            if "--help" in argv or "-h" in argv or "--version" in argv:
+                continue
+            try:
+                build_parser().parse_args(argv)
+            except SystemExit as exc:
+                raise AssertionError(f"{page.relative_to(ROOT)}: the command line refuses {command!r}") from exc
+            seen += 1
+    assert seen > 40
+
+
+def _run_step(lang: str, body: str, cwd: Path) -> tuple[int, str]:
+    """One step of a page, in this process, in ``cwd``: ``(exit status, stdout + stderr)``."""
+    import contextlib
+    import io
+    import traceback
+
+    buf = io.StringIO()
+    rc = 0
+    with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(buf), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        if lang == "sh":
+            for command in _command_lines_of(body):
+                rc = main(_argv(command))
+                if rc:
+                    break
+        else:
+            try:
+                exec(compile(body, "<docs>", "exec"), {"__name__": "__main__"})
+            except Exception:                     # the page's script failed: show it in the assertion
+                traceback.print_exc(file=buf)
+                rc = 1
+    return rc, buf.getvalue()
+
+
+def _command_lines_of(body: str) -> list[str]:
+    return [c for c in (line.strip() for line in body.replace("\\\n", " ").splitlines())
+            if c.startswith("pinmsk ")]
+
+
+def run_page(page: Path, tmp_path: Path, monkeypatch) -> None:
+    """Every step of ``page`` in order in one empty folder holding a link to the repository's ``data/``,
+    each output against its excerpts (an excerpt starting ``pinmsk: error:`` expects exit status 2)."""
+    (tmp_path / "data").symlink_to(ROOT / "data")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+    for k, (lang, body, excerpts) in enumerate(_steps(page)):
+        rc, out = _run_step(lang, body, tmp_path)
+        refused = any(x.lstrip().startswith("pinmsk: error:") for x in excerpts)
+        assert rc == (2 if refused else 0), f"{page.name} step {k}: {body}\n{out}"
+        for excerpt in excerpts:
+            assert_excerpt(excerpt, out, f"{page.name} step {k} ({body.strip()[:60]}...)")
+
+
+@pytest.mark.parametrize("name", FAST_PAGES)
+def test_the_fast_pages_run_as_written(name, tmp_path, monkeypatch):
+    run_page(DOCS / name, tmp_path, monkeypatch)
+
+
+@pytest.mark.slow          # diagnoses and optimal-control solves, each a few seconds to minutes
+@pytest.mark.parametrize("name", SLOW_PAGES)
+def test_the_slow_pages_run_as_written(name, tmp_path, monkeypatch):
+    run_page(DOCS / name, tmp_path, monkeypatch)
+
+
+def test_every_runnable_page_has_steps_with_excerpts():
+    """The pages the tests run have commands or scripts, and the commands' outputs are quoted."""
+    for name in FAST_PAGES + SLOW_PAGES:
+        steps = _steps(DOCS / name)
+        assert any(lang == "sh" for lang, _, _ in steps), name
+        assert all(excerpts for lang, _, excerpts in steps if lang == "sh"), name
+
+
+def test_every_python_block_compiles_and_its_imports_exist():
+    """The Python blocks the tests do not run (``py`` blocks, the README's later ones, the reference pages')
+    compile, and every name they import exists, so a moved function cannot leave a page behind."""
+    import ast
+    import importlib
+
+    checked = 0
+    for page in _pages():
+        for lang, body in _blocks(page):
+            if lang not in ("python", "py"):
+                continue
+            tree = ast.parse(body, filename=str(page))
+            for node in ast.walk(tree):
+                if isinstance(node, ast.ImportFrom) and node.module:
+                    mod = importlib.import_module(node.module)
+                    for alias in node.names:
+                        assert hasattr(mod, alias.name) or importlib.util.find_spec(f"{node.module}.{alias.name}"), \
+                            f"{page.relative_to(ROOT)}: from {node.module} import {alias.name}"
+                elif isinstance(node, ast.Import):
+                    for alias in node.names:
+                        importlib.import_module(alias.name)
+            checked += 1
+    assert checked >= 8

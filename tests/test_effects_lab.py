@@ -16,7 +16,7 @@ from pinmsk.dynamics import inverse_dynamics_array, skeleton_with_inertias
 from pinmsk.effects import (ComOffset, EndStopLower, EndStopUpper, Payload, PlateCopOffset, PlateGain,
                             PlateLag, PlateOffset, PlateTilt, SegmentMass)
 from pinmsk.effects.anthropometry import ALLOWANCE, DE_LEVA_1996, body_mass, mass_range
-from pinmsk.effects.payload import payload_sites
+from pinmsk.effects.payload import AxisPayload, PointPayload, payload_sites, trunk_bodies
 from pinmsk.errors import ModelError
 from pinmsk.io.shared_data import shared_data_dir
 from pinmsk.kinematics import prepare
@@ -192,13 +192,67 @@ def test_payload_at_a_body_com_is_inverse_dynamics_of_the_point_mass(forearm):
     np.testing.assert_allclose(Payload("forearm_hand@end").site(forearm)[1], 2 * c)     # a uniform rod's tip
 
 
+def test_axis_payload_is_the_point_mass_at_its_distance_with_exact_derivatives(forearm):
+    mo = _motion(forearm)
+    c = np.array(forearm.pin.inertias[1].lever)
+    p = AxisPayload.on_body(forearm, "forearm_hand", mass=1.3, distance=1.7 * np.linalg.norm(c))
+    assert isinstance(Payload("forearm_hand@axis"), AxisPayload) and p.family == "payload"
+    np.testing.assert_allclose(p.site(forearm)[1], 1.7 * c)
+    np.testing.assert_allclose(p.generalized_force(forearm, mo), _id_change(forearm, p, mo), rtol=1e-9, atol=1e-9)
+    assert p.params["distance"].max == pytest.approx(4 * np.linalg.norm(c))
+    J = p.param_jacobian(forearm, mo)
+    for k, name in enumerate(("mass", "distance")):
+        h = 1e-6
+        up = p.generalized_force(forearm, mo, {name: p.values[name] + h})
+        dn = p.generalized_force(forearm, mo, {name: p.values[name] - h})
+        np.testing.assert_allclose(J[..., k], (up - dn) / (2 * h), rtol=1e-6, atol=1e-7)
+    with pytest.raises(ModelError, match="unknown parameter"):
+        Payload("hand", distance=0.2)
+
+
+def test_diagnosis_finds_a_payload_beyond_the_segment_end_on_its_axis(forearm):
+    """Neither a marker nor the segment's estimated end is at the load: its distance is fitted."""
+    c = np.array(forearm.pin.inertias[1].lever)
+    true = AxisPayload.on_body(forearm, "forearm_hand", mass=1.0, distance=2.6 * np.linalg.norm(c))
+    tr = synth.make_trial(forearm, [true], duration=8, seed=3)
+    d = diagnose(forearm, tr, candidates=["payload:forearm_hand@axis", "payload:forearm_hand@com"])
+    assert d.best is not None and d.best.label == "payload:forearm_hand@axis", d.verdict_line()
+    for name in ("mass", "distance"):
+        assert abs(d.best.params[name] - true.values[name]) < 3 * d.best.stderr[name], (name, d.best.params)
+
+
+def test_point_payload_is_the_point_mass_with_exact_derivatives(gait2d):
+    mo = _motion(gait2d)
+    p = PointPayload.on_body(gait2d, "hat", mass=4.0, x=-0.12, y=0.3)
+    assert isinstance(Payload("hat@point"), PointPayload) and trunk_bodies(gait2d) == ["hat"]
+    assert p.params["z"].vary is False and p.params["x"].vary and p.params["y"].vary   # planar: z unseen
+    np.testing.assert_allclose(p.generalized_force(gait2d, mo), _id_change(gait2d, p, mo), rtol=1e-9, atol=1e-8)
+    J = p.param_jacobian(gait2d, mo)
+    for k, name in enumerate(("mass", "x", "y", "z")):
+        h = 1e-6
+        up = p.generalized_force(gait2d, mo, {name: p.values[name] + h})
+        dn = p.generalized_force(gait2d, mo, {name: p.values[name] - h})
+        np.testing.assert_allclose(J[..., k], (up - dn) / (2 * h), rtol=1e-6, atol=1e-6)
+
+
+def test_diagnosis_finds_a_backpack_and_where_it_sits(gait2d):
+    """A 5 kg load 12 cm behind and 30 cm up the trunk: mass and place, not a heavier trunk."""
+    true = PointPayload.on_body(gait2d, "hat", mass=5.0, x=-0.12, y=0.3)
+    tr = synth.make_trial(gait2d, [true], duration=8, seed=2)
+    d = diagnose(gait2d, tr, candidates=["payload:hat@point", "segment_mass:hat", "com_offset:hat"])
+    assert d.best is not None and d.best.label == "payload:hat@point", d.verdict_line()
+    for name in ("mass", "x", "y"):
+        assert abs(d.best.params[name] - true.values[name]) < 3 * d.best.stderr[name], (name, d.best.params)
+    assert d.best.stderr["mass"] < 0.5
+
+
 def test_imported_arm_offers_its_wrist_marker_and_finds_the_held_mass():
     path = shared_file("opensim-models/Arm26/arm26.osim")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         arm = pinmsk.load_model(path)
     sites = payload_sites(arm)
-    assert sites == ["r_ulna_radius_hand@com", "r_ulna_radius_hand@end", "r_radius_styloid", "r_ulna_radius_hand"]
+    assert sites == ["r_ulna_radius_hand@com", "r_ulna_radius_hand@axis", "r_radius_styloid", "r_ulna_radius_hand"]
     tr = synth.make_trial(arm, [Payload("r_radius_styloid", mass=1.5)], duration=8, seed=1)
     d = diagnose(arm, tr)
     assert d.best is not None and d.best.label == "payload:r_radius_styloid", d.verdict_line()

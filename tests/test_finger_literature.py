@@ -1,4 +1,4 @@
-"""The literature-based finger (built-in ``finger_literature``, issue 16 point 6).
+"""The literature-based finger (built-in ``finger_literature``).
 
 Its parameters are the cited values (urdf/finger_literature.toml, urdf/README.md): the inertia
 about the MCP is recomputed here from the segment table, the lumped flexor from the FDSI and FDPI

@@ -120,14 +120,13 @@ def test_foot_mass_example_code_on_a_tiny_problem(tmp_path):
     text = ex.table(rows)
     assert "100 % foot mass" in text and "67 % foot mass" in text and "mean activation soleus" in text
     assert f" {rows[1]['objective']:.4g} |" in text and "+0.0 %" in text
-    pytest.importorskip("matplotlib")
     assert ex.figure(runs, tmp_path / "f.png").stat().st_size > 10_000
 
 
 @pytest.mark.slow
 def test_foot_mass_67_percent_lowers_the_objective(tmp_path):
     """The default predictive gait and the 67 % one warm-started from its optimum (measured: 160 s +
-    77 s, objective -2.4 %; README "2D gait"); default-suite cover of the same code:
+    77 s, objective -2.4 %; docs/reference/validation.md, "2D gait"); default-suite cover of the same code:
     test_foot_mass_example_code_on_a_tiny_problem and test_predictive_gait_foot_mass_scales_both_feet_of_the_problem."""
     require_casadi()
     out = run_example("gait_foot_mass.py", "--out", tmp_path)
@@ -162,7 +161,6 @@ def _fake_optimize(calls):
 
 
 def test_optimize_report_validates_the_solved_stride(tmp_path, monkeypatch, capsys):
-    pytest.importorskip("matplotlib")
     calls = []
     monkeypatch.setattr(pinmsk.pipeline, "optimize_task", _fake_optimize(calls))
     html = tmp_path / "gait.html"

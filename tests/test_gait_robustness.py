@@ -1,5 +1,5 @@
 """examples/gait_robustness.py: the default predictive gait (pinmsk.solvers.ocp.gait) from several
-generic guesses, and the spread of its optima (issue 17: convergence from at least 3 guesses)."""
+generic guesses, and the spread of its optima (it must converge from at least 3 guesses)."""
 from __future__ import annotations
 
 import json
@@ -38,7 +38,7 @@ def test_robustness_guesses_and_table_on_a_tiny_problem():
 
 @pytest.mark.slow
 def test_predictive_gait_converges_from_three_generic_guesses(tmp_path):
-    """Walking, standing and quasi-random (seed 2) guesses all converge (measured: README "2D gait",
+    """Walking, standing and quasi-random (seed 2) guesses all converge (measured: docs/reference/validation.md, "2D gait",
     robustness table); default-suite cover: test_robustness_guesses_and_table_on_a_tiny_problem and
     tests/test_ocp_gait.py::test_gait_task_files_build_the_half_cycle_problem."""
     require_casadi()

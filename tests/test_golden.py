@@ -5,7 +5,7 @@ runs one public command -- ``pinmsk id``, ``so``, ``fso``, ``diagnose --json`` a
 --json`` -- on a trial shipped in ``data/`` (the contact fit on ``tests/golden/inputs/``, as no foot
 trial ships in ``data/``) and compares the numbers with ``tests/golden/<case>.json`` within
 tolerances set by the numerics of that command (each is justified where it is defined).  The
-commands spell out the options whose defaults issue 13 may change on purpose (the low-pass
+commands spell out the options whose defaults may change on purpose (the low-pass
 cut-off), so a deliberate change of a default does not move the goldens; the defaults are tested
 elsewhere.  Where the trial hides a known effect, the fresh result is also checked against that
 truth, so a refresh cannot enshrine a wrong answer.  ``tests/golden/README.md`` says how each file

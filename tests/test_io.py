@@ -268,10 +268,16 @@ def test_degrees_in_a_radians_file_are_caught_by_validate(tmp_path):
     tr = read_trial(path)
     message = (
         f"file '{path}': column 'elbow_flexion' looks like degrees (max 118.0) but the file "
-        "declares radians; set inDegrees=yes in the header or convert"
+        "declares radians; if it is in degrees, pass --degrees (command line) or in_degrees=True (Python), "
+        "or set inDegrees=yes in the header"
     )
     with pytest.raises(TrialError, match=re.escape(message)):
         tr.validate(coordinates=["elbow_flexion"])
+    # told so, the reader converts it (the header's inDegrees=no overridden)
+    told = read_trial(path, in_degrees=True)
+    np.testing.assert_allclose(told["elbow_flexion"], np.deg2rad([12.5, 118.0]))
+    assert told.meta["in_degrees"] is True and told.meta["converted_to_radians"] == ("elbow_flexion",)
+    told.validate(coordinates=["elbow_flexion"])
 
 
 # -- atomic writes ------------------------------------------------------------------------

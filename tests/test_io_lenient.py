@@ -199,7 +199,10 @@ def test_cli_simulate_maps_the_moments_trial(tmp_path, capsys):
     ('[rename]\na = "b"\n[scales]\na = 2\n', r"m.toml: unknown section 'scales' \(did you mean 'scale'\?\)"),
     ('a = "b"\n', r"m.toml: unknown section 'a'.*put column renames under a \[rename\] table"),
     ('[rename]\nknee = "k"\n[offset]\nkne = 1\n',
-     r"m.toml: unknown \[offset\] key \(not a \[rename\] entry\) 'kne' \(did you mean 'knee'\?\)"),
+     r"m.toml: unknown \[offset\] key \(neither an old nor a new name of a \[rename\] entry\) 'kne' "
+     r"\(did you mean 'knee'\?\)"),
+    ('[rename]\nknee = "k"\n[scale]\nknee = -1\nk = -1\n',
+     r"m.toml: \[scale\] knee and k name the same \[rename\] entry knee = 'k'; keep one"),
     ('[rename]\na = "x"\nb = "x"\n', r"m.toml: \[rename\] 'a' and 'b' both map to 'x'"),
     ('[rename]\na = 3\n', r"m.toml: \[rename\] a = 3: the new name must be a non-empty string"),
     ('[rename]\na = "b"\n[scale]\na = "minus"\n', r"m.toml: \[scale\] a = 'minus' must be a finite number"),
@@ -424,7 +427,7 @@ def test_read_trial_opens_c3d_parts(tmp_path):
     with pytest.raises(TrialError, match=r"part='markers' applies to .c3d files only"):
         read_trial(tmp_path / "x.sto", part="markers")
     (tmp_path / "bad.c3d").write_bytes(b"not a c3d")
-    with pytest.raises(TrialError, match=r"bad.c3d: cannot read it as a C3D file \(File must be a valid c3d"):
+    with pytest.raises(TrialError, match=r"bad.c3d: not a readable C3D file: 9 bytes, shorter than its 512-byte header"):
         read_trial(tmp_path / "bad.c3d")
 
 

@@ -1,7 +1,7 @@
 """The one-way house: every import inside pinmsk points down the layers, and none closes a cycle.
 
 Read from the source (module-level and function-level imports alike), so a deferred
-import cannot hide a cycle.  The layers are those of the README's "Repository layout".
+import cannot hide a cycle.  The layers are those of docs/development.md, "Repository layout".
 """
 from __future__ import annotations
 
@@ -49,7 +49,7 @@ def layer(module: str) -> int:
         key = ".".join(parts[:k])
         if key in LAYERS:
             return LAYERS[key]
-    raise AssertionError(f"pinmsk.{module} has no layer in tests/test_layers.py: add it (and to the README)")
+    raise AssertionError(f"pinmsk.{module} has no layer in tests/test_layers.py: add it (and to docs/development.md)")
 
 
 def _imports(module: str, path: Path) -> list[tuple[int, str]]:

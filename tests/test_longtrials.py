@@ -1,4 +1,4 @@
-"""Long trials: progress lines, write precision, start-up cost and --version (issue 12, item 7)."""
+"""Long trials: progress lines, write precision, start-up cost and --version."""
 import io
 import subprocess
 import sys

@@ -1,4 +1,4 @@
-"""Inverse dynamics of imported OpenSim models, like for like against OpenSim (issue 14, item 4).
+"""Inverse dynamics of imported OpenSim models, like for like against OpenSim.
 
 gait10dof18musc ``subject01`` (its IK motion and ``subject01_walk_grf.xml``) against OpenSim's reference
 ID output: both with OpenSim's own filter of the coordinates (``walk_Setup_ID.xml``: 6 Hz, applied by

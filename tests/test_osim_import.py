@@ -1,4 +1,4 @@
-"""OpenSim .osim import (issue 14): the parser, OpenSim's functions, the skeleton, the report, the round trip.
+"""OpenSim .osim import: the parser, OpenSim's functions, the skeleton, the report, the round trip.
 
 The fast tests run on small .osim files written here (a planar leg with a spline knee, a patella
 coupled to it, a locked lumbar joint, a muscle, an actuator and a contact; a chain of every joint
@@ -1039,7 +1039,7 @@ _IMPORTS = {}
 
 
 def _shared_import(key):
-    """``(model, report, seconds)`` of one shared model, imported once per test session."""
+    """``(model, report, seconds)`` of one shared model, imported once per test run."""
     if key not in _IMPORTS:
         path = _shared(key)
         t = time.perf_counter()
@@ -1062,7 +1062,7 @@ def test_shared_models_parse_build_and_report(key):
     path = _shared(key)
     model, report, _ = _shared_import(key)
     doc = read_osim(path)
-    # the import time (issue 14: <= 5 s for Rajagopal) is measured by benchmarks/bench_osim_import.py, not here
+    # the import time is measured by benchmarks/bench_osim_import.py, not here
     cmap = coordinate_map(model)
     # OpenSim's coordinates, each a joint or (exact mode) mapped to dependent joints
     assert (model.nq if cmap is None else len(cmap.osim_coordinates)) == len(doc.coordinates)

@@ -19,7 +19,7 @@ _CACHE: dict = {}
 
 
 def _imported(relative):
-    """(model, report, import seconds) of a shared model, imported once per session."""
+    """(model, report, import seconds) of a shared model, imported once per test run."""
     if relative not in _CACHE:
         from pinmsk import load_model
         path = _model(relative)
@@ -42,7 +42,7 @@ def _reference(relative, every):
 
 
 def _reference_paths(relative, every, muscles):
-    """(ref, q, OpenSim's lengths, moment arms) over the IK poses, computed once per session."""
+    """(ref, q, OpenSim's lengths, moment arms) over the IK poses, computed once per test run."""
     key = ("paths", relative, every)
     if key not in _CACHE:
         ref, q = _reference(relative, every)

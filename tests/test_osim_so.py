@@ -1,6 +1,5 @@
 """Static optimization of imported OpenSim models, like for like against OpenSim's own StaticOptimization
-(issue 14, item 4: "SO on gait10dof18musc with the same reserves matches OpenSim's SO activations to within
-0.02"), and pinmsk's actuator columns against OpenSim's generalized forces.
+(gait10dof18musc with the same reserves: activations within 0.02 of OpenSim's SO), and pinmsk's actuator columns against OpenSim's generalized forces.
 
 OpenSim runs here (an AnalyzeTool with a StaticOptimization analysis, results in tmp_path) on a few frames;
 pinmsk's SO (``convention="opensim"``: OpenSim's muscle model; the actuators of the same force set file)

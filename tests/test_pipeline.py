@@ -99,6 +99,14 @@ def test_batch_parallel_writes_folders_and_summary(gait2d, tmp_path):
     with open(tmp_path / "out" / "summary.csv") as fh:
         table = list(csv.DictReader(fh))
     assert [r["name"] for r in table] == ["a", "b", "missing"]
+    # every number of the table names its unit (or is a count, a fraction, a status)
+    unitless = {"name", "kind", "status", "frames", "so_max_activation", "so_reserve_frames", "ground_reaction",
+                "figures", "skipped", "files"}
+    units = ("_s", "_hz", "_kg", "_n", "_nm", "_nm_per_kg", "_mm_max")
+    assert {"torso_x_residual_rms_n", "torso_y_residual_rms_n", "torso_angle_residual_rms_nm",
+            "body_mass_kg"} <= set(table[0])
+    assert [c for c in table[0] if c not in unitless and not c.endswith(units)] == []
+    assert float(table[0]["body_mass_kg"]) == 65.0
     back = pinmsk.read_trial(tmp_path / "out" / "a" / "kinematics.sto")
     np.testing.assert_allclose(back["knee_r"], 0.4 + 0.3 * np.sin(2 * np.pi * back.time + 1), atol=1e-6)
     info = json.loads((tmp_path / "out" / "a" / "summary.json").read_text())

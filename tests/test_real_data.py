@@ -112,7 +112,7 @@ def test_rajagopal_case_study(real, tmp_path):
     miss = (res["subject_mass_kg"] - res["model_mass_kg"]) * 9.81
     assert res["torso_residuals"]["torso_y"]["mean"] == pytest.approx(-miss, rel=0.1)
     if isinstance(res.get("diagnosis"), dict):
-        # gait2d is not scaled to this subject: the whole-body scale, not the HAT alone (issue 15)
+        # gait2d is not scaled to this subject: the whole-body scale, not the HAT alone
         assert res["diagnosis"]["best"] == "scale"
         assert "model 65.7 kg" in res["diagnosis"]["summary"]
     for png in ("rajagopal_moments.png", "rajagopal_so_vs_emg.png"):

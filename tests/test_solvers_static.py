@@ -265,7 +265,7 @@ def test_build_problem_scaling(forearm, motion):
 
 
 def test_so_says_the_models_activation_dynamics_do_not_change_its_frames(forearm, motion):
-    # an effect in the model is used or named, never silently ignored (issue 15): SO's activations are
+    # an effect in the model is used or named, never silently ignored: SO's activations are
     # per frame, so activation dynamics leave them unchanged, and the report says so
     from pinmsk.effects import ActivationDynamics
     plain = StaticOptimization().fit(forearm, motion)

@@ -80,7 +80,16 @@ def test_from_array_and_get(trial):
     assert got.shape == (101, 2)
     np.testing.assert_array_equal(got[:, 0], trial["shoulder_elev"])
     np.testing.assert_array_equal(got[:, 1], trial["elbow_flexion"])
-    assert trial.get("shoulder_elev").shape == (101, 1)
+    # one name: (N,) as trial[name], a writable copy; a list of one name keeps its column axis
+    one = trial.get("shoulder_elev")
+    assert one.shape == (101,) and one.flags.writeable
+    np.testing.assert_array_equal(one, trial["shoulder_elev"])
+    one[0] = 1e9
+    assert trial["shoulder_elev"][0] != 1e9
+    assert trial.get(["shoulder_elev"]).shape == (101, 1) and trial.get(("shoulder_elev",)).shape == (101, 1)
+    assert trial.get("elbow_flexion", rows=[0, 2]).shape == (2,)
+    np.testing.assert_array_equal(trial.get(["elbow_flexion"], rows=trial.time < 0.1)[:, 0],
+                                  trial["elbow_flexion"][trial.time < 0.1])
     with pytest.raises(TrialError, match=r"values have shape \(101, 3\), expected \(N, C\) = \(101, 4\)"):
         Trial.from_array(trial.time, trial.names, trial.values[:, :3])
 
@@ -226,7 +235,8 @@ def test_validate_reports_degrees_where_radians_declared():
     )
     message = (
         "file 'ik.mot': column 'elbow_flexion' looks like degrees (max 118.0) but the file declares "
-        "radians; set inDegrees=yes in the header or convert"
+        "radians; if it is in degrees, pass --degrees (command line) or in_degrees=True (Python), or set "
+        "inDegrees=yes in the header"
     )
     with pytest.raises(TrialError, match=re.escape(message)):
         tr.validate(coordinates=["elbow_flexion", "pelvis_tx"])  # pelvis_tx is a translation: not checked

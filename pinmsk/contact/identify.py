@@ -7,7 +7,7 @@ angle is the 11-term Fourier series of Eq. 4.1 over the analysed window (period 
 window length).  By default (``toe="kinematic"``, the thesis procedure) its
 coefficients are identified beforehand from the kinematics
 (:func:`toe_from_kinematics`) and held fixed; ``toe="fit"`` fits them with the
-contact parameters (the issue's Eq. 4.1 setting), each within ``+-toe_range`` of the
+contact parameters (Eq. 4.1 as written: toe and contact identified together), each within ``+-toe_range`` of the
 kinematic estimate so the toe cannot act as a free force generator.  The objective is
 Eq. 4.2 sampled uniformly,
 
@@ -346,7 +346,7 @@ class ContactFit(Fitter):
                    ``"kinematic"`` (default; the thesis procedure: the toe angle is
                    identified beforehand from the kinematics, :func:`toe_from_kinematics`,
                    and held fixed during the contact fit), ``"fit"`` (the series is fitted
-                   with the contact parameters, the issue's Eq. 4.1 setting, each coefficient
+                   with the contact parameters, as Eq. 4.1 is written, each coefficient
                    bounded to +-``toe_range`` rad around the kinematic estimate so the toe
                    cannot act as a free force generator), ``"flat"`` (legacy: the series of
                    ``mtp = -max(foot_angle, 0)``), or ``"channel"`` (the trial's ``mtp``)

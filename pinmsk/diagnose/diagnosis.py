@@ -842,7 +842,7 @@ def diagnose(model, trial, *, mode: str = "auto", cutoff: float | None = DEFAULT
             ranking.append(scorer.score(comp))
         except PinmskError as exc:
             skipped.append((comp.label, str(exc)))
-    ranking = _order(ranking)
+    ranking = _order(ranking, c.model, c.eq_noise.sigma, settings["z_critical"])
     _aliases(ranking, c.eq_noise.sigma)
     found = []
     if pairs and ranking:
@@ -940,8 +940,40 @@ def _diagnose_contact(c, candidates, folds, threshold, at_floor, window, cutoff,
     return d
 
 
-def _order(ranking: list, tie: float = 0.05) -> list:
-    """Best held-out improvement first; within ``tie`` (noise variances) the fewer parameters first."""
+def _body_joint(effect, model):
+    """The joint carrying the body an inertial effect acts on (a payload's site, a segment's mass or
+    centre of mass), else None."""
+    try:
+        if effect.family == "payload":
+            return effect.site(model)[0]
+        if effect.family in ("segment_mass", "com_offset"):
+            return effect._joint(model)
+    except PinmskError:
+        return None
+    return None
+
+
+def _same_site(a, b, model) -> bool:
+    """Whether two candidates, one of them a payload, load one body: payload sites on it (its centre of
+    mass, its axis, a fitted point, a marker) or a payload and the body's own mass or centre of mass."""
+    if model is None or "payload" not in (a.effect.family, b.effect.family):
+        return False
+    ja, jb = _body_joint(a.effect, model), _body_joint(b.effect, model)
+    return ja is not None and ja == jb
+
+
+def _order(ranking: list, model=None, sigma=None, z_critical: float = 2.0, tie: float = 0.05) -> list:
+    """Best held-out improvement first.  Of two candidates with one target the one with fewer parameters
+    comes first when the other's held-out gain is within ``tie`` noise variances of it.  Of two payload
+    sites on one body (:func:`_same_site`: a marker and a fitted point on the body's axis) the one with
+    fewer parameters comes first when it is significant itself, unless the other is better held out by
+    the bar every candidate meets: the extra parameter must earn its place out of sample,
+    ``z >= z_critical`` in the paired :func:`held_out_test`."""
+    def richer_wins(a, b) -> bool:
+        if sigma is None or a.heldout is None or b.heldout is None:
+            return True
+        return held_out_test(b.heldout / sigma, a.heldout / sigma)["z"] >= z_critical
+
     # exact aliases (a gain and a segment mass on one body) tie: the physical effect first
     out = sorted(ranking, key=lambda s: (not s.converged, -float(f"{s.improvement:.9g}"),
                                          getattr(s.effect, "level", "") == "sensor"))
@@ -954,6 +986,20 @@ def _order(ranking: list, tie: float = 0.05) -> list:
                 out[i], out[i + 1] = b, a
                 swapped = True
         if not swapped:
+            break
+    for _ in range(len(out)):
+        moved = False
+        for i in range(len(out)):
+            for k in range(i + 1, len(out)):
+                a, b = out[i], out[k]
+                if (a.converged == b.converged and a.fit.stats.k > b.fit.stats.k and a.target != b.target
+                        and _same_site(a, b, model) and b.significant and not richer_wins(a, b)):
+                    out.insert(i, out.pop(k))
+                    moved = True
+                    break
+            if moved:
+                break
+        if not moved:
             break
     return out
 

@@ -465,6 +465,11 @@ class Scorer:
             ident = dict(ident, identifiable=False, plausible=False,
                          flags=list(ident.get("flags", [])) + implausible)
         note = "" if conv else f"fit did not converge: {fit.stats.message}"
+        # the held-out errors rest on one fit per fold: a fold that stopped short is said, never hidden
+        test["folds_converged"] = bool(cv_ok)
+        if not cv_ok:
+            note = (note + "; " if note else "") + ("a cross-validation fold's fit did not converge (its "
+                                                    "held-out error is that of its last iterate)")
         if not ident.get("identifiable", True):
             note = (note + "; " if note else "") + "not identifiable: " + "; ".join(ident["flags"]) + \
                 " (shown, never suggested)"

@@ -13,6 +13,12 @@ joint_spring               coordinate   ``-k (q - q0)``, ``q0`` within the joint
 passive_elastic            coordinate   ``A [exp(-k_lo (q - theta_0)) - exp(k_hi (q - theta_0))]``
 end_stop_upper             coordinate   ``-K S((q - q_up) / d) (q - q_up)``: OpenSim's CoordinateLimitForce, upper side
 end_stop_lower             coordinate   ``-K S((q_lo - q) / d) (q - q_lo)``: the same, lower side
+coordinate_expression      coordinate   ``scale * expression(q, qdot)`` (OpenSim's ExpressionBasedCoordinateForce)
+bushing                    frame pair   ``-(k q + c qdot)`` on the X-Y-Z angles and offset between two frames
+                                        (Simbody's LinearBushing: OpenSim's BushingForce)
+point_to_point_spring      frame pair   ``k (|d| - L0)`` between two body points (OpenSim's PointToPointSpring)
+hunt_crossley_pair         frame pair   OpenSim's HuntCrossleyForce between a sphere and a moving half space or a
+                                        sphere on another body
 riener_edrich_1999         side r / l   thesis Eq. 5.11 on hip, knee, ankle (x ``scale``)
 payload                    frame        ``-m J_p^T (a_p - g)`` (point mass; inertial)
 segment_mass               body         ``-delta Y_j pi_j`` (mass/inertia scale; inertial)
@@ -75,7 +81,9 @@ from .com_offset import ComOffset
 from .damping import JointDamping
 from .delay import ElectromechanicalDelay
 from .end_stop import EndStop, EndStopLower, EndStopUpper
+from .expression import CoordinateExpressionForce
 from .friction import CoulombFriction
+from .linkers import FramePairForce, HuntCrossleyPair, LinearBushing, PointToPointSpring
 from .passive import PassiveElastic, RienerEdrich1999PassiveMoment
 from .payload import Payload
 from .plate import PlateCopOffset, PlateEffect, PlateGain, PlateLag, PlateOffset, PlateTilt
@@ -96,9 +104,9 @@ def unregister(family: str) -> None:
 _BUILTIN = frozenset(families())
 
 __all__ = [
-    "ActivationDynamics", "ComOffset", "CoulombFriction", "DelayedActivationDynamics", "ElectromechanicalDelay",
+    "ActivationDynamics", "ComOffset", "CoordinateExpressionForce", "CoulombFriction", "DelayedActivationDynamics", "ElectromechanicalDelay",
     "EndStop", "EndStopLower", "EndStopUpper", "ExcitationPath", "excitation_path",
-    "JointDamping", "JointEffect", "JointSpring", "MassScale", "MeasurementEffect", "PassiveElastic", "Payload", "PlateCopOffset", "PlateEffect", "PlateGain", "PlateLag",
+    "FramePairForce", "HuntCrossleyPair", "JointDamping", "JointEffect", "JointSpring", "LinearBushing", "PointToPointSpring", "MassScale", "MeasurementEffect", "PassiveElastic", "Payload", "PlateCopOffset", "PlateEffect", "PlateGain", "PlateLag",
     "PlateOffset", "PlateTilt",
     "RienerEdrich1999PassiveMoment", "SegmentMass", "SensorGain", "SensorOffset", "SignalEffect", "families",
     "from_spec", "get", "register", "unregister",

@@ -367,6 +367,25 @@ def torque_regressor(model, motion: Motion, data=None) -> np.ndarray:
     return motion_cached(data, model, "torque_regressor", motion, compute)
 
 
+def visible_directions(model, joint: int, D: np.ndarray, samples: int = 6) -> np.ndarray:
+    """Boolean (k,): which columns of ``D`` (10, k), changes of joint ``joint``'s dynamic parameters,
+    change some generalized force, from the joint torque regressor at ``samples`` seeded random states
+    (a planar model's dynamics are blind to a shift normal to its plane)."""
+    pm = model.pin
+    rng = np.random.default_rng(0)
+    pd = pm.createData()
+    lo = np.where(np.isfinite(pm.lowerPositionLimit), pm.lowerPositionLimit, -1.0).clip(-1.0, 1.0)
+    hi = np.where(np.isfinite(pm.upperPositionLimit), pm.upperPositionLimit, 1.0).clip(-1.0, 1.0)
+    B = []
+    for _ in range(samples):
+        q = pin.randomConfiguration(pm, lo, hi) if pm.nq == pm.nv else pin.neutral(pm)
+        v, a = rng.normal(size=pm.nv), rng.normal(size=pm.nv)
+        Y = np.asarray(pin.computeJointTorqueRegressor(pm, pd, q, v, a))[:, 10 * (joint - 1):10 * joint]
+        B.append(Y @ D)
+    norms = np.linalg.norm(np.vstack(B), axis=0)
+    return norms > 1e-9 * max(norms.max(), 1e-300)
+
+
 def add_dynamic_parameters(pin_model, joint: int, dpi: np.ndarray) -> None:
     """``pin_model.inertias[joint] += dpi`` in dynamic-parameter space (exact, any sign)."""
     pi = pin_model.inertias[joint].toDynamicParameters() + np.asarray(dpi, dtype=float)

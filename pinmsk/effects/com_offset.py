@@ -30,7 +30,8 @@ import pinocchio as pin
 
 from ..components import Component, Parameter
 from ..errors import ModelError
-from ._base import add_dynamic_parameters, moving_bodies, torque_regressor, unactuated_coordinates
+from ._base import (add_dynamic_parameters, moving_bodies, torque_regressor, unactuated_coordinates,
+                    visible_directions)
 from .registry import register
 
 __all__ = ["ComOffset"]
@@ -120,25 +121,10 @@ class ComOffset(Component):
         return k if abs(u[k]) >= 0.9 * n else None
 
     def visible_axes(self, model, samples: int = 6) -> np.ndarray:
-        """Boolean (3,): the body-frame axes along which a COM shift changes some generalized force, from
-        the joint torque regressor at ``samples`` seeded random states (a planar model's dynamics are blind
-        to the axis normal to its plane)."""
-        pm = model.pin
-        j = self._joint(model)
-        rng = np.random.default_rng(0)
-        pd = pm.createData()
-        lo = np.where(np.isfinite(pm.lowerPositionLimit), pm.lowerPositionLimit, -1.0).clip(-1.0, 1.0)
-        hi = np.where(np.isfinite(pm.upperPositionLimit), pm.upperPositionLimit, 1.0).clip(-1.0, 1.0)
-        D = self._dpi_dd(model, np.zeros(3))
-        B = []
-        for _ in range(samples):
-            q = pin.randomConfiguration(pm, lo, hi) if pm.nq == pm.nv else pin.neutral(pm)
-            v, a = rng.normal(size=pm.nv), rng.normal(size=pm.nv)
-            Y = np.asarray(pin.computeJointTorqueRegressor(pm, pd, q, v, a))[:, 10 * (j - 1):10 * j]
-            B.append(Y @ D)
-        B = np.vstack(B)
-        norms = np.linalg.norm(B, axis=0)
-        return norms > 1e-9 * max(norms.max(), 1e-300)
+        """Boolean (3,): the body-frame axes along which a COM shift changes some generalized force
+        (:func:`~._base.visible_directions`: a planar model's dynamics are blind to the axis normal to its
+        plane)."""
+        return visible_directions(model, self._joint(model), self._dpi_dd(model, np.zeros(3)), samples)
 
     # -- the law --------------------------------------------------------------------
     def _rotation(self, model) -> np.ndarray:

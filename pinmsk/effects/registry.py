@@ -42,9 +42,9 @@ def get(family: str) -> type:
         return _REGISTRY[family]
     except KeyError:
         close = difflib.get_close_matches(family, list(_REGISTRY), n=3)
-        hint = f"; did you mean {', '.join(map(repr, close))}?" if close else ""
+        hint = f" (did you mean {' or '.join(map(repr, close))}?)" if close else ""
         raise ModelError(
-            f"unknown effect '{family}'{hint}. Known effects: {', '.join(sorted(_REGISTRY))}"
+            f"unknown effect '{family}'{hint}; known effects: {', '.join(sorted(_REGISTRY))}"
         ) from None
 
 
@@ -67,7 +67,8 @@ def from_spec(spec: dict, *, where: str = "[[effects]]"):
     cls = get(family)
     options = [n for n, p in inspect.signature(cls.__init__).parameters.items()
                if p.kind is inspect.Parameter.KEYWORD_ONLY]
-    check_keys(spec, ["target", "params", *options, *(p.name for p in cls.parameters)], where=where,
+    declared = cls.parameters_for(spec.get("target")) if hasattr(cls, "parameters_for") else cls.parameters
+    check_keys(spec, ["target", "params", *options, *(p.name for p in declared)], where=where,
                section=f"an effect of type '{family}'")
     target = spec.pop("target", None)
     params = spec.pop("params", {})

@@ -25,6 +25,7 @@ import numpy as np
 from ..errors import MissingDependencyError, TrialError
 from ..signals.gaps import DEFAULT_MAX_GAP, fill_gaps
 from ..trial import Trial
+from .c3d_check import check_c3d_structure
 from .trc import UNIT_SCALE
 
 __all__ = ["read_c3d", "C3DData", "remap_axes", "require_ezc3d"]
@@ -67,10 +68,23 @@ def read_c3d(path, *, max_gap: int = DEFAULT_MAX_GAP, platforms: bool = True) ->
     path = Path(path)
     if not path.exists():
         raise TrialError(f"C3D file not found: {path}")
+    check_c3d_structure(path)            # sizes that do not fit the file would hang or crash ezc3d
     try:
         c = ezc3d.c3d(str(path), extract_forceplat_data=platforms)
-    except (OSError, RuntimeError, ValueError) as exc:   # ezc3d's errors on a broken file or platform
-        raise TrialError(f"{path}: cannot read it as a C3D file ({exc})") from None
+    except (OSError, RuntimeError, ValueError, IndexError, KeyError) as exc:   # ezc3d's errors on a broken file
+        raise TrialError(f"{path}: cannot read it as a C3D file ({' '.join(str(exc).split())})") from None
+    try:
+        return _contents(c, path, max_gap, platforms)
+    except TrialError:
+        raise
+    except (KeyError, IndexError, TypeError, ValueError, ZeroDivisionError, AttributeError) as exc:
+        # a parameter the file lacks or holds in another shape (POINT:RATE, ANALOG:LABELS, ...)
+        raise TrialError(f"{path}: cannot read it as a C3D file ({type(exc).__name__}: "
+                         f"{' '.join(str(exc).split())[:200]})") from None
+
+
+def _contents(c, path: Path, max_gap: int, platforms: bool) -> C3DData:
+    """The markers, analogs and platforms of ezc3d's reading ``c`` of ``path``."""
     P = c["parameters"]
     out = C3DData(None, None, [], {"source": str(path)})
     pts = c["data"]["points"]            # (4, M, N)

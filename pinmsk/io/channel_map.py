@@ -9,7 +9,7 @@ A map is a TOML file (``--map map.toml``, :func:`load_channel_map`)::
     pelvis_ty = "torso_y"
 
     [scale]              # optional: new = scale * old + offset (default scale 1)
-    hip_flexion_r = -1
+    hip_r = -1           # keyed by the new name (hip_r) or the old one (hip_flexion_r)
 
     [offset]             # optional, in the new channel's SI unit (rad, m; default 0)
     pelvis_ty = 0.1
@@ -21,6 +21,8 @@ A map is a TOML file (``--map map.toml``, :func:`load_channel_map`)::
   no offset (a sign flip of a coordinate flips its speed and moment).
 * An old name also matches an OpenSim 4 state path ``/jointset/<joint>/<old>/value``.
 * Columns the map does not name are kept as they are.
+* ``[scale]`` and ``[offset]`` keys name a ``[rename]`` entry by its old column
+  name or by its new channel name (not both for one entry).
 * Errors name the file and the entry: an unknown section or a ``[scale]`` /
   ``[offset]`` key that is not a ``[rename]`` entry (with a "did you mean"), an
   entry naming a column the trial lacks, two entries with one new name, a new
@@ -66,12 +68,12 @@ from typing import Mapping
 import numpy as np
 
 from ..errors import TrialError
-from ..trial import Trial, close_matches
+from ..trial import Trial, close_matches, parse_ground_reaction
 from .tables import read_trial, state_path_coordinate
 from .toml_files import read_toml
 
 __all__ = ["MapEntry", "ChannelMap", "load_channel_map", "apply_channel_map", "read_mapped", "suggest_map",
-           "with_state_path_coordinates",
+           "with_state_path_coordinates", "map_hint",
            "BUILTIN_MAPS", "MAP_SCHEMA", "opensim_gait2d_map", "RAJAGOPAL_HIP_OFFSET", "GAIT10DOF_HIP_OFFSET"]
 
 #: Hip joint centre in the pelvis frame of the Rajagopal et al. (2016) model (unscaled, m;
@@ -85,8 +87,8 @@ GAIT10DOF_HIP_OFFSET = (-0.0707, -0.0661)
 #: Sections of a map file and what they hold.
 MAP_SCHEMA = {
     "rename": "old column name = \"new channel name\" (required)",
-    "scale": "old column name = factor: new = scale * old + offset (default 1)",
-    "offset": "old column name = value in the new channel's SI unit, rad or m (default 0)",
+    "scale": "old column name or new channel name = factor: new = scale * old + offset (default 1)",
+    "offset": "old column name or new channel name = value in the new channel's SI unit, rad or m (default 0)",
 }
 
 #: Derived columns an entry carries along (same scale, no offset).
@@ -184,9 +186,12 @@ def _unknown(key: str, valid, what: str, where: str) -> TrialError:
 
 
 def _number(value, where: str, what: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-        raise TrialError(f"{where}: {what} = {value!r} must be a finite number")
-    return float(value)
+    ok = not isinstance(value, bool) and isinstance(value, (int, float))
+    number = float(value) if ok and abs(value) < 1e308 else float("nan")     # a TOML integer may exceed a float
+    if not np.isfinite(number):
+        shown = repr(value) if len(repr(value)) < 40 else repr(value)[:37] + "..."
+        raise TrialError(f"{where}: {what} = {shown} must be a finite number")
+    return number
 
 
 def load_channel_map(spec) -> ChannelMap:
@@ -225,16 +230,27 @@ def load_channel_map(spec) -> ChannelMap:
         if new in targets:
             raise TrialError(f"{where}: [rename] {targets[new]!r} and {old!r} both map to {new!r}")
         targets[new] = old
+    by_new = {new.strip(): old for old, new in rename.items()}
+    keyed: dict[str, dict[str, tuple[str, object]]] = {}     # section -> old name -> (key as written, value)
     for section in ("scale", "offset"):
-        for key in raw.get(section, {}):
-            if key not in rename:
-                raise _unknown(key, list(rename), f"[{section}] key (not a [rename] entry)", where)
+        keyed[section] = {}
+        for key, value in raw.get(section, {}).items():
+            old = key if key in rename else by_new.get(key)
+            if old is None:
+                raise _unknown(key, list(rename) + [n for n in by_new if n not in rename],
+                               f"[{section}] key (neither an old nor a new name of a [rename] entry)", where)
+            if old in keyed[section]:
+                raise TrialError(f"{where}: [{section}] {keyed[section][old][0]} and {key} name the same "
+                                 f"[rename] entry {old} = {rename[old]!r}; keep one")
+            keyed[section][old] = (key, value)
     entries = []
     for old, new in rename.items():
-        scale = _number(raw.get("scale", {}).get(old, 1.0), where, f"[scale] {old}")
+        key, value = keyed["scale"].get(old, (old, 1.0))
+        scale = _number(value, where, f"[scale] {key}")
         if scale == 0.0:
-            raise TrialError(f"{where}: [scale] {old} = 0 would erase the column")
-        offset = _number(raw.get("offset", {}).get(old, 0.0), where, f"[offset] {old}")
+            raise TrialError(f"{where}: [scale] {key} = 0 would erase the column")
+        key, value = keyed["offset"].get(old, (old, 0.0))
+        offset = _number(value, where, f"[offset] {key}")
         entries.append(MapEntry(old, new.strip(), scale, offset))
     return ChannelMap(path.stem, tuple(entries), where, required=True)
 
@@ -356,7 +372,8 @@ def apply_channel_map(trial: Trial, cmap, *, model=None, require_coordinates: bo
         if missing:
             shown = ", ".join(f"{c} (from {cmap.origins[c]})" if c in cmap.origins else c for c in missing)
             raise TrialError(f"{src} mapped with {cmap.where} lacks {len(missing)} coordinate(s) of model "
-                             f"{model.name!r}: {shown}")
+                             f"{model.name!r}: {shown}; "
+                             + map_hint(Trial(trial.time, out), missing).replace("to rename", "to rename more of"))
     meta = {**trial.meta, "channel_map": {"name": cmap.name, "where": cmap.where, "notes": tuple(notes),
                                           "renamed": {c: t for c, (t, _) in mapped.items()}}}
     return Trial(trial.time, out, units=units, meta=meta)
@@ -384,8 +401,56 @@ def with_state_path_coordinates(trial: Trial, coordinates) -> Trial:
     return trial.with_channels(add) if add else trial
 
 
-def read_mapped(path, *, model=None, cmap=None, strict: bool = True, require_coordinates: bool = True) -> Trial:
+#: Words of a column name that say it is no coordinate (a load, a muscle signal, a rate).
+_NOT_COORDINATE = {"speed", "moment", "force", "torque", "activation", "excitation", "emg", "acceleration", "grf",
+                   "cop", "velocity", "power"}
+
+
+def _words(name: str) -> list[str]:
+    import re
+    return [w for w in re.split(r"[^a-z0-9]+", name.lower()) if w]
+
+
+def _guess_column(coordinate: str, columns) -> str | None:
+    """The column most like ``coordinate``: sharing its first word (``Elbow angle`` for
+    ``elbow_flexion``), else by :func:`close_matches`; columns naming a load or a rate are never guessed."""
+    import difflib
+    free = [n for n in columns if not (set(_words(n)) & _NOT_COORDINATE)
+            and parse_ground_reaction(n) is None]
+    words = _words(coordinate)
+    if not words:
+        return None
+    norm = "_".join(words)
+    sharing = [n for n in free if words[0] in _words(n)]
+    if sharing:
+        return max(sharing, key=lambda n: difflib.SequenceMatcher(None, norm, "_".join(_words(n))).ratio())
+    found = close_matches(coordinate, free, n=1)
+    return found[0] if found else None
+
+
+def map_hint(trial: Trial, missing) -> str:
+    """How to give ``trial`` the ``missing`` coordinates with a map file: one line naming ``--map`` and
+    a map to start from, as a one-line TOML table (a guessed column for each coordinate, from the
+    trial's names, or ``YOUR_COLUMN``)."""
+    taken: set[str] = set()
+    pairs = []
+    for c in missing:
+        guess = _guess_column(c, [n for n in trial.names if n not in taken])
+        if guess is not None:
+            taken.add(guess)
+        key = guess or f"YOUR_{c}_COLUMN"
+        pairs.append(f'{key} = "{c}"' if key.replace("_", "").isalnum() else f'"{key}" = "{c}"')
+    shown = ", ".join(pairs[:6]) + (", ..." if len(pairs) > 6 else "")
+    return ("to rename the file's columns, pass --map MAP.toml (command line) or cmap='MAP.toml' (Python) with "
+            f"MAP.toml holding: rename = {{{shown}}} (add [scale] / [offset] for a sign or a zero; "
+            "docs/tutorials/own_csv.md)")
+
+
+def read_mapped(path, *, model=None, cmap=None, strict: bool = True, require_coordinates: bool = True,
+                time_unit: str | None = None, in_degrees: bool | None = None) -> Trial:
     """:func:`pinmsk.io.read_trial`, then :func:`apply_channel_map` (what the CLI's ``--map`` does).
+
+    ``time_unit`` and ``in_degrees`` are :func:`~pinmsk.io.read_trial`'s (``--time-unit``, ``--degrees``).
 
     With ``model``, the angles read from degrees are the model's rotational coordinates and
     the map's sources that become them.  Without ``cmap``, a trial that lacks the model's
@@ -395,7 +460,7 @@ def read_mapped(path, *, model=None, cmap=None, strict: bool = True, require_coo
     angular = None
     if model is not None:
         angular = set(model.rotational_coordinates) | (cmap.angular_sources(model) if cmap else set())
-    trial = read_trial(path, angular=angular, strict=strict)
+    trial = read_trial(path, angular=angular, strict=strict, time_unit=time_unit, in_degrees=in_degrees)
     if cmap is not None:
         return apply_channel_map(trial, cmap, model=model, require_coordinates=require_coordinates)
     if model is not None:

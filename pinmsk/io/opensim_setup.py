@@ -224,6 +224,8 @@ def parse_xml(path, what: str, error=SetupError) -> ET.Element:
         return ET.parse(p).getroot()
     except ET.ParseError as exc:
         raise error(f"{p}: not a valid XML file ({exc})") from None
+    except (LookupError, UnicodeError, ValueError) as exc:      # an encoding the declaration names but Python lacks
+        raise error(f"{p}: not a readable XML file ({' '.join(str(exc).split())})") from None
 
 
 def read_setup(path) -> SetupFile:

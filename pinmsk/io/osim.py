@@ -125,6 +125,10 @@ def _parse_xml(data: bytes, source: str) -> _Node:
     except xml.parsers.expat.ExpatError as exc:
         raise ModelError(f"{source}:{exc.lineno}: not a valid .osim file: the XML is malformed "
                          f"({xml.parsers.expat.ErrorString(exc.code)}, column {exc.offset + 1})") from None
+    except (LookupError, UnicodeError, ValueError) as exc:     # an encoding the declaration names but Python lacks
+        raise ModelError(f"{source}: not a readable .osim file ({' '.join(str(exc).split())})") from None
+    if not root:
+        raise ModelError(f"{source}: not a valid .osim file: no root element")
     return root[0]
 
 
@@ -370,6 +374,8 @@ class OtherElement(OsimElement):
 
     category: str = ""
     properties: dict = field(default_factory=dict, compare=False)
+    #: a force's sockets as absolute paths (``{"frame1": "/forceset/b/pelvis_offset", ...}``)
+    sockets: dict = field(default_factory=dict, compare=False)
 
 
 @dataclass(frozen=True)
@@ -801,7 +807,14 @@ class _Reader:
                 props["contact_parameters"] = tuple(params)
             sink.contact_forces.append(ContactForce(**self.base(node), geometry=geo, properties=props))
         else:
-            sink.other.append(OtherElement(**self.base(node), category="force", properties=self.properties(node)))
+            # the frames a force owns (a BushingForce's offset frames) and its sockets, as absolute paths
+            for f in _children_of(node.child("frames")):
+                if f.tag == "PhysicalOffsetFrame":
+                    self.offset_frame(f, path)
+            sockets = {c.tag[len("socket_"):]: self.socket(node, path, c.tag) for c in node.children
+                       if c.tag.startswith("socket_") and c.text}
+            sink.other.append(OtherElement(**self.base(node), category="force", sockets=sockets,
+                                           properties=self.properties(node, skip=("frames",))))
 
 
 class _Sink:
@@ -909,7 +922,12 @@ def parse_osim(data: bytes | str, *, source: str = "<string>") -> OsimDocument:
         data = data.encode("utf-8")
     root = _parse_xml(data, source)
     if root.tag == "OpenSimDocument":
-        version = int(float(root.attrib.get("Version", "0") or 0))
+        text = root.attrib.get("Version", "0") or "0"
+        try:
+            version = int(float(text))
+        except (ValueError, OverflowError):
+            raise ModelError(f"{source}:{root.line}: <OpenSimDocument Version={text!r}> is not a version number "
+                             "(OpenSim 4 writes 40000)") from None
         model = root.child("Model")
     elif root.tag == "Model":
         version, model = 0, root

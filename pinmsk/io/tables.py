@@ -2,9 +2,11 @@
 
 Formats (chosen by suffix, case-insensitive):
 
-* ``.csv``: one header row of column names, the first of which must be
-  ``time``; then one row per frame.  Values are SI (angles in radians);
-  CSV cannot declare degrees.
+* ``.csv``: one header row of column names, the first of which is the time
+  (``time``, ``t``, ``Time (s)``, ``Time [ms]``: a unit in the label is
+  converted to seconds); then one row per frame.  Values are SI (angles in
+  radians) unless the reader is told otherwise (``in_degrees=True``,
+  ``--degrees``): a CSV cannot declare degrees itself.
 * ``.sto`` / ``.mot`` (OpenSim storage): header lines up to a line
   ``endheader``.  The first line is the table name unless it is a
   ``key=value`` line; ``key=value`` lines give fields such as ``version``,
@@ -37,8 +39,9 @@ measured or computed channels carry); ``precision=17`` writes every float64
 exactly, so a write then read gives the same values.  The time column gets
 more digits where 9 would not keep its steps distinct to 1 %.
 
-Time is in seconds; a time column that looks like milliseconds (a median step
-of 0.2 to 100) is refused unless ``time_unit`` says what it is.
+Time is in seconds, or in the unit its label declares; a time column without a
+unit that looks like milliseconds (a median step of 0.2 to 100) is refused
+unless ``time_unit`` (``--time-unit``) says what it is.
 
 Errors are :class:`pinmsk.errors.TrialError` naming the file, line and column.
 """
@@ -57,7 +60,7 @@ from pathlib import Path
 import numpy as np
 
 from pinmsk.errors import RepairWarning, TrialError
-from pinmsk.trial import TIME, Trial, is_angular_name
+from pinmsk.trial import TIME, TIME_UNITS, Trial, is_angular_name, time_label_unit
 
 from ..signals.sampling import median_step
 from .c3d import read_c3d
@@ -71,8 +74,6 @@ FORMATS = {".csv": "csv", ".sto": "sto", ".mot": "mot"}
 
 #: Significant digits written by default (``write_trial(precision=...)``, CLI ``--precision``).
 DEFAULT_PRECISION = 9
-#: Time units :func:`read_trial` takes (``time_unit``), as factors to seconds.
-TIME_UNITS = {"s": 1.0, "ms": 1e-3}
 #: A median time step above this (s), i.e. a rate below 5 Hz, is not a motion recording in
 #: seconds; with a step of at most 100 it is one in milliseconds (10 Hz - 5 kHz).
 _MS_STEP = (0.2, 100.0)
@@ -229,10 +230,15 @@ def _table(
     labels = [lab.strip() for lab in labels]
     if not labels:
         raise TrialError(f"file {src!r}, line {label_line}: no column labels")
-    if labels[0].lower() != TIME:
+    try:
+        unit = time_label_unit(labels[0])
+    except TrialError as exc:
+        raise TrialError(f"file {src!r}, line {label_line}: {exc}") from None
+    if unit is None:
         raise TrialError(
             f"file {src!r}, line {label_line}: missing time column; the first column is "
-            f"{labels[0]!r} but must be 'time' (seconds)"
+            f"{labels[0]!r} but must be the time: 'time', 't', 'Time (s)' or 'Time [ms]' "
+            "(a unit in brackets is converted)"
         )
     empty = [j + 1 for j, lab in enumerate(labels) if not lab]
     if empty:
@@ -299,7 +305,7 @@ def _table(
             f"than {float(time[k - 1])!r} on line {linenos[k - 1]}; time must be strictly increasing "
             f"({back.size} such row(s)){fix}"
         )
-    return time, labels[1:], values[:, 1:]
+    return time, labels[1:], values[:, 1:], unit
 
 
 def _split_sto(line: str, delimiter: str | None) -> list[str]:
@@ -381,7 +387,7 @@ def _read_sto(path: Path, lines: list[str], notes: list[str], strict: bool):
             notes,
             strict,
         )
-    time, names, values = _table(path, labels, label_idx + 1, rows, linenos, notes, strict)
+    time, names, values, unit = _table(path, labels, label_idx + 1, rows, linenos, notes, strict)
     n_rows = header.n_rows
     if n_rows is not None and n_rows != len(rows):
         key = header._lookup("nrows", "datarows")[0]
@@ -394,7 +400,7 @@ def _read_sto(path: Path, lines: list[str], notes: list[str], strict: bool):
             notes,
             strict,
         )
-    return header, time, names, values
+    return header, time, names, values, unit
 
 
 def _read_csv(path: Path, lines: list[str], notes: list[str], strict: bool):
@@ -411,11 +417,16 @@ def _read_csv(path: Path, lines: list[str], notes: list[str], strict: bool):
     return _table(path, rows[0], linenos[0], rows[1:], linenos[1:], notes, strict)
 
 
-def _check_time_unit(path: Path, time: np.ndarray, time_unit) -> np.ndarray:
-    """Time in seconds: scaled by ``time_unit``; with ``None``, refused if it looks like ms."""
+def _check_time_unit(path: Path, time: np.ndarray, time_unit, label_unit: str = "") -> np.ndarray:
+    """Time in seconds: scaled by ``time_unit`` or the unit of the column's label (they must agree
+    when both are given); with neither, refused if it looks like ms."""
+    if time_unit is not None and time_unit not in TIME_UNITS:
+        raise TrialError(f"time_unit must be one of {', '.join(TIME_UNITS)}, got {time_unit!r}")
+    if label_unit and time_unit is not None and label_unit != time_unit:
+        raise TrialError(f"file {str(path)!r}: the time column's label declares {label_unit} but the time "
+                         f"unit asked for is {time_unit} (--time-unit / time_unit); drop one of them")
+    time_unit = time_unit or label_unit or None
     if time_unit is not None:
-        if time_unit not in TIME_UNITS:
-            raise TrialError(f"time_unit must be one of {', '.join(TIME_UNITS)}, got {time_unit!r}")
         return time * TIME_UNITS[time_unit]
     if time.size < 3:
         return time
@@ -424,8 +435,8 @@ def _check_time_unit(path: Path, time: np.ndarray, time_unit) -> np.ndarray:
         raise TrialError(
             f"file {str(path)!r}: the time column looks like milliseconds: its median step is {step:.6g}, "
             f"which in seconds would be a {1 / step:.3g} Hz recording ({1000 / step:.4g} Hz if it is ms); "
-            "time must be in seconds: divide the time column by 1000, or read it with "
-            "read_trial(path, time_unit='ms') (time_unit='s' keeps a slow recording in seconds)"
+            "time must be in seconds: label the column 'Time (ms)', pass --time-unit ms (command line) or "
+            "read_trial(path, time_unit='ms') (Python); --time-unit s keeps a slow recording in seconds"
         )
     return time
 
@@ -477,7 +488,7 @@ def _read_c3d_part(path: Path, part: str) -> Trial:
 
 
 def read_trial(path, *, angular=None, strict: bool = True, part: str | None = None,
-               time_unit: str | None = None) -> Trial:
+               time_unit: str | None = None, in_degrees: bool | None = None) -> Trial:
     """Read a Trial from a ``.csv``, ``.sto``, ``.mot`` or ``.c3d`` file.
 
     Parameters
@@ -511,11 +522,18 @@ def read_trial(path, *, angular=None, strict: bool = True, part: str | None = No
         ... by platform number when there are several).  No axis change is
         made (see :func:`pinmsk.io.c3d.remap_axes`).
     time_unit : {None, "s", "ms"}
-        Unit of the time column.  ``None`` (default): seconds, and a file whose
-        median time step is between 0.2 and 100 (below 5 Hz in seconds, but
-        10 Hz to 5 kHz in milliseconds) is refused as "looks like
-        milliseconds".  ``"ms"`` converts from milliseconds; ``"s"`` takes
-        seconds without that check.
+        Unit of the time column.  ``None`` (default): the unit its label
+        declares (``Time (s)``, ``Time [ms]``, ``t_ms``: converted to seconds),
+        else seconds, and then a file whose median time step is between 0.2
+        and 100 (below 5 Hz in seconds, but 10 Hz to 5 kHz in milliseconds) is
+        refused as "looks like milliseconds".  ``"ms"`` converts from
+        milliseconds; ``"s"`` takes seconds without that check.  A label
+        declaring another unit than ``time_unit`` is an error.
+    in_degrees : bool or None
+        Whether the angular channels are in degrees.  ``None`` (default): as
+        the file declares (``inDegrees`` of a ``.sto``/``.mot``; a CSV is in
+        radians).  ``True`` / ``False`` override the file (a CSV exported in
+        degrees: ``in_degrees=True``, ``--degrees`` on the command line).
 
     Returns
     -------
@@ -528,19 +546,25 @@ def read_trial(path, *, angular=None, strict: bool = True, part: str | None = No
     """
     path = Path(path)
     if path.suffix.lower() == ".c3d":
+        if time_unit is not None or in_degrees is not None:
+            raise TrialError(f"file {str(path)!r}: a C3D file states its own units; time_unit and in_degrees "
+                             "(--time-unit, --degrees) apply to .csv/.sto/.mot files")
         return _read_c3d_part(path, "markers" if part is None else part)
     if part is not None:
         raise TrialError(f"file {str(path)!r}: part={part!r} applies to .c3d files only")
     kind = _format_of(path, reading=True)
     lines = _read_lines(path)
     notes: list[str] = []
+    if in_degrees is not None and not isinstance(in_degrees, bool):
+        raise TrialError(f"in_degrees must be True, False or None, got {in_degrees!r}")
     if kind == "csv":
-        time, names, values = _read_csv(path, lines, notes, strict)
-        name, in_degrees, fields = path.stem, False, {}
+        time, names, values, label_unit = _read_csv(path, lines, notes, strict)
+        name, declared, fields = path.stem, False, {}
     else:
-        header, time, names, values = _read_sto(path, lines, notes, strict)
-        name, in_degrees, fields = header.name, header.in_degrees, dict(header.fields)
-    time = _check_time_unit(path, time, time_unit)
+        header, time, names, values, label_unit = _read_sto(path, lines, notes, strict)
+        name, declared, fields = header.name, header.in_degrees, dict(header.fields)
+    in_degrees = declared if in_degrees is None else in_degrees
+    time = _check_time_unit(path, time, time_unit, label_unit)
     if angular is None:
         angular_names = tuple(n for n in names if is_angular_name(n))
     else:

@@ -30,7 +30,9 @@ def read_toml(path, *, what: str = "TOML file", error: type = ModelError) -> dic
     except IsADirectoryError:
         raise error(f"{what} {p} is a folder, not a file") from None
     except tomllib.TOMLDecodeError as exc:
-        raise error(f"{p}: invalid TOML ({exc})") from None
+        raise error(f"{p}: invalid TOML ({' '.join(str(exc).split())})") from None
+    except UnicodeDecodeError as exc:
+        raise error(f"{p}: invalid TOML (not UTF-8: byte {exc.object[exc.start]:#04x} at offset {exc.start})") from None
 
 
 def check_keys(table, valid, *, where: str, section: str, error: type = ModelError) -> None:

@@ -12,7 +12,10 @@ Below ``model.py`` (which builds the Model from these parts), above the reader :
 * :mod:`.actuators` -- CoordinateActuator, PointActuator, TorqueActuator as pinmsk ideal actuators
   (the import hook, and OpenSim force set files such as ``*_Reserve_Actuators.xml``);
 * :mod:`.contacts` -- :func:`contact_hook`: SmoothSphereHalfSpaceForce and HuntCrossleyForce as
-  :mod:`pinmsk.contact` components (Simbody's laws), each sphere a frame on its body.
+  :mod:`pinmsk.contact` components (Simbody's laws), each sphere a frame on its body; a half space
+  that moves and sphere-sphere contacts as :class:`pinmsk.effects.HuntCrossleyPair`.
+* :mod:`.forces` -- :func:`force_hook`: CoordinateLimitForce, BushingForce, PointToPointSpring,
+  SpringGeneralizedForce and ExpressionBasedCoordinateForce as effects.
 * :mod:`.scaling` -- OpenSim's ScaleTool scaling: scale factors from marker measurements and manual
   scales, and the scaled ``.osim`` (bodies, joints, markers, paths, wrap objects, masses, muscles)
   with its scale set (the setup runner is :mod:`pinmsk.tools.scale`).
@@ -27,7 +30,7 @@ _EXPORTS = {
     "read_import": "importer", "write_import": "importer", "ImportReport": "report", "ReportEntry": "report",
     "build_skeleton": "skeleton", "OsimKinematics": "skeleton", "CoordinateMap": "skeleton",
     "from_osim": "functions", "contact_hook": "contacts", "read_actuators": "actuators",
-    "actuator_hook": "actuators",
+    "actuator_hook": "actuators", "force_hook": "forces",
 }
 __all__ = sorted(_EXPORTS)
 __getattr__, __dir__ = lazy_attributes(__name__, _EXPORTS, __all__)

@@ -9,15 +9,23 @@ Geometry.  The ``ContactSphere`` becomes a Pinocchio frame (``OP_FRAME``) on its
 after the sphere (``heel_r``; ``heel_r_sphere`` where a body, joint or marker has that name or a
 second force of the same type uses the sphere), placed where OpenSim places it (the offset frames of its ``socket_frame``, then its
 ``location`` and ``orientation``); the component is fixed to that frame with its centre at the
-origin.  The ``ContactHalfSpace`` must be fixed to the ground: its outward normal is ``-x`` of its
-frame and its surface passes through its origin.  The frames are added to the skeleton's
+origin.  The ``ContactHalfSpace`` must be fixed in the world (to the ground, or to a body welded to it,
+as Walker's Platform): its outward normal is ``-x`` of its frame and its surface passes through its
+origin.  The frames are added to the skeleton's
 Pinocchio model (the hook's one side effect; the written URDF holds the skeleton only).
+
+A HuntCrossleyForce's sphere against a half space on a body that moves (ToyLanding's platform), and
+its spheres against spheres of other bodies (SoccerKick's ball against the foot), become
+:class:`~pinmsk.effects.HuntCrossleyPair` forces between the two geometries' frames (each geometry a
+frame of its own, placed and turned as OpenSim places it); every pair of geometries on different
+bodies is one, as Simbody's contact tracker pairs them.
 
 The report gets one entry per component (what became what, the sphere, its body and the half
 space) and names what is not imported: a force on a geometry pinmsk has no law for
-(``ContactMesh``, ``ContactEllipsoid``, ...), a half space on a moving body, a sphere on the
-ground, a HuntCrossleyForce whose sphere and half space have different stiffness (Simbody then
-moves the contact point off the midway plane), an ``ElasticFoundationForce`` (a mesh contact).
+(``ContactMesh``, ``ContactEllipsoid``, ...), a HuntCrossleyForce whose surfaces have different
+stiffness (Simbody then moves the contact point off the midway plane), an ``ElasticFoundationForce``
+with a mesh (an ElasticFoundationForce between spheres and half spaces gets a note: Simbody applies
+no force there).
 Properties OpenSim does not read (the Moco model's ``derivative_smoothing``, an older name) get a
 note, and are ignored as OpenSim ignores them.
 """
@@ -29,6 +37,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..contact import HuntCrossleyForce, SmoothSphereHalfSpaceForce
+from ..effects import HuntCrossleyPair
 from ..errors import ModelError
 from ..io.osim import ContactForce, ContactGeometry, OsimDocument
 from .hooks import HookResult
@@ -57,6 +66,13 @@ def contact_hook(doc: OsimDocument, skeleton: Skeleton) -> HookResult:
     for force in doc.contact_forces:
         handled.append(force.where)
         if force.type not in _LAWS:
+            kinds = {geometry[n].type if n in geometry else "?" for n in force.geometry}
+            if force.type == "ElasticFoundationForce" and kinds <= {"ContactSphere", "ContactHalfSpace"}:
+                # Simbody's ElasticFoundationForce acts on the faces of a ContactMesh only
+                entries.append(ReportEntry(element=force.where, status=NOTE, became=(
+                    f"no force between {', '.join(force.geometry)} (spheres and half spaces): Simbody's "
+                    "ElasticFoundationForce acts only where a ContactMesh takes part, so OpenSim applies none")))
+                continue
             entries.append(_not_imported(force, f"{force.type} (a contact between {', '.join(force.geometry)}): "
                                                 "pinmsk has no elastic-foundation (mesh) contact"))
             continue
@@ -155,27 +171,39 @@ def _hunt_crossley(force: ContactForce, geometry: dict, frames: "_Frames"):
     spheres = [g for g in geoms if g.type == "ContactSphere"]
     halves = [g for g in geoms if g.type == "ContactHalfSpace"]
     others = [g for g in geoms if g not in spheres and g not in halves]
-    if not spheres or not halves:
-        raise _NotImported(f"it has {len(spheres)} sphere(s) and {len(halves)} half space(s); pinmsk's "
-                           "HuntCrossleyForce is a sphere against a half space")
-    for s in spheres:                 # checked before any frame is added
-        for h in halves:
-            ks, kh = material[s.name]["stiffness"], material[h.name]["stiffness"]
-            if ks != kh:
-                raise _NotImported(f"sphere '{s.name}' (stiffness {ks:g}) and half space '{h.name}' ({kh:g}) differ "
-                                   "in stiffness: Simbody then moves the contact point off the midway plane, which "
-                                   "pinmsk's HuntCrossleyForce does not")
+    body = {g.name: frames.doc.frame_body(g.frame)[0].name for g in spheres + halves}
+    pairs = [(s, h) for h in halves for s in spheres if body[s.name] != body[h.name]]
+    pairs += [(a, b) for i, a in enumerate(spheres) for b in spheres[i + 1:] if body[a.name] != body[b.name]]
+    uses = {g.name: sum(g in pr for pr in pairs) for g in spheres + halves}
+    # the sphere in fewer pairs acts as frame 1 (a ball against a foot's spheres: the foot's name each pair)
+    pairs = [(b, a) if b.type == "ContactSphere" and uses[b.name] < uses[a.name] else (a, b) for a, b in pairs]
+    if not pairs:
+        raise _NotImported(f"it has {len(spheres)} sphere(s) and {len(halves)} half space(s) on "
+                           f"{len(set(body.values()))} bodies: no sphere touches a half space or a sphere of "
+                           "another body")
+    for a, b in pairs:                 # checked before any frame is added
+        ka, kb = material[a.name]["stiffness"], material[b.name]["stiffness"]
+        if ka != kb:
+            raise _NotImported(f"'{a.name}' (stiffness {ka:g}) and '{b.name}' ({kb:g}) differ in stiffness: "
+                               "Simbody then moves the contact point off the midway plane, which pinmsk's "
+                               "Hunt-Crossley contacts do not")
     vt = _number(force, force.properties, "transition_velocity", 0.01)
-    planes = {h.name: frames.half_space(h) for h in halves}
     made = []
-    for h in halves:
-        for s in spheres:
-            ms, mh = material[s.name], material[h.name]
-            values = {"stiffness": ms["stiffness"], "dissipation": 0.5 * (ms["dissipation"] + mh["dissipation"]),
-                      "transition_velocity": vt}
-            for k in ("static_friction", "dynamic_friction", "viscous_friction"):
-                values[k] = _combined(ms[k], mh[k])
-            made.append(frames.component(HuntCrossleyForce, force, s, h, planes[h.name], values))
+    for a, b in pairs:
+        ma, mb = material[a.name], material[b.name]
+        values = {"stiffness": ma["stiffness"], "dissipation": 0.5 * (ma["dissipation"] + mb["dissipation"]),
+                  "transition_velocity": vt}
+        for k in ("static_friction", "dynamic_friction", "viscous_friction"):
+            values[k] = _combined(ma[k], mb[k])
+        if b.type == "ContactHalfSpace":
+            try:
+                plane = frames.half_space(b)
+            except _NotImported:       # a half space on a body that moves: a force between two bodies
+                made.append(frames.pair(force, a, b, values))
+            else:
+                made.append(frames.component(HuntCrossleyForce, force, a, b, plane, values))
+        else:
+            made.append(frames.pair(force, a, b, values))
     notes = []
     meshes = [g for g in others if g.type == "ContactMesh"]
     if meshes:
@@ -184,13 +212,12 @@ def _hunt_crossley(force: ContactForce, geometry: dict, frames: "_Frames"):
     if len(meshes) < len(others):
         notes.append((NOT_IMPORTED, "not imported: its contacts with "
                       + ", ".join(f"{g.type} {g.name!r}" for g in others if g not in meshes)
-                      + " (pinmsk's HuntCrossleyForce is a sphere against a half space)"))
-    if len(spheres) > 1:
-        notes.append(f"{len(spheres)} spheres in one force: contacts between them (Simbody's sphere-sphere "
-                     "contacts, only where they overlap) are not modelled; and where one sphere would pull, "
-                     "Simbody skips the pairs after it in its sweep order, while pinmsk gives that sphere no force")
-    if any(material[s.name] != material[h.name] for s in spheres for h in halves):
-        notes.append("sphere and half space have different dissipation or friction: combined as Simbody does "
+                      + " (pinmsk's Hunt-Crossley contacts are between spheres and half spaces)"))
+    if len(pairs) > 1:
+        notes.append(f"{len(pairs)} contact pairs in one force: where one would pull, Simbody skips the pairs "
+                     "after it in its sweep order, while pinmsk gives that pair no force and keeps the others")
+    if any(material[a.name] != material[b.name] for a, b in pairs):
+        notes.append("its surfaces have different dissipation or friction: combined as Simbody does "
                      "(c = (c1 + c2) / 2 at equal stiffness, u = 2 u1 u2 / (u1 + u2))")
     return made, notes + _unread(force, force.properties, ("transition_velocity",))
 
@@ -209,10 +236,17 @@ class _Frames:
 
     def half_space(self, g: ContactGeometry):
         body, chain = self.doc.frame_body(g.frame)
-        if body is not self.doc.ground:
-            raise _NotImported(f"its half space '{g.name}' is fixed to body '{body.name}'; pinmsk's half spaces are "
-                               "fixed to the ground")
         T = _chain(chain) @ _offset(g.location, g.orientation)
+        if body is not self.doc.ground:
+            # a body welded to the ground (Walker's Platform): a fixed place in the world
+            pm = self.pm
+            if not pm.existFrame(body.name, pin.FrameType.BODY):
+                raise ModelError(f"{self.doc.source}: body '{body.name}' has no frame in the skeleton")
+            bf = pm.frames[pm.getFrameId(body.name, pin.FrameType.BODY)]
+            if bf.parentJoint != 0:
+                raise _NotImported(f"its half space '{g.name}' is fixed to body '{body.name}', which moves; "
+                                   "pinmsk's half spaces are fixed in the world")
+            T = bf.placement.homogeneous @ T
         return tuple(-T[:3, 0]), tuple(T[:3, 3])
 
     def component(self, cls, force: ContactForce, sphere: ContactGeometry, half: ContactGeometry, plane, values):
@@ -236,20 +270,58 @@ class _Frames:
                 f"{point[2]:.3g}) m); Simbody's law exactly")
         return comp, text
 
+    def pair(self, force: ContactForce, sphere: ContactGeometry, other: ContactGeometry, values):
+        """A :class:`~pinmsk.effects.HuntCrossleyPair` between ``sphere`` and ``other`` (a half space on a
+        body that moves, or a sphere on another body), each on a frame of its own; the sphere on the
+        ground, if any, is the second."""
+        ground = self.doc.ground
+        if self.doc.frame_body(sphere.frame)[0] is ground:
+            sphere, other = other, sphere
+        for g in (sphere, other):
+            if g.type == "ContactSphere" and g.radius is None:
+                raise ModelError(f"{g.where}: a ContactSphere needs a <radius>")
+        family = HuntCrossleyPair.family
+        f1 = self.geometry_frame(sphere, family)
+        f2 = self.geometry_frame(other, family + ":other")
+        kind = "sphere" if other.type == "ContactSphere" else "half_space"
+        comp = HuntCrossleyPair(f1, frame2=f2, other=kind, other_radius=other.radius if kind == "sphere" else 0.0)
+        comp = comp.with_params({"radius": sphere.radius, **values},
+                                bounds={k: (min(v, comp.params[k].min), max(v, comp.params[k].max))
+                                        for k, v in {"radius": sphere.radius, **values}.items()})
+        if comp.label in self.labels:
+            raise ModelError(f"{force.where}: sphere '{sphere.name}' would get two Hunt-Crossley pairs of one label")
+        self.labels.add(comp.label)
+        what = (f"sphere '{other.name}' (R = {1e3 * other.radius:.4g} mm)" if kind == "sphere"
+                else f"half space '{other.name}'")
+        return comp, (f"{comp.label}: sphere '{sphere.name}' (R = {1e3 * sphere.radius:.4g} mm, frame '{f1}') against "
+                      f"{what} on body '{self.doc.frame_body(other.frame)[0].name}' (frame '{f2}'); Simbody's law "
+                      "exactly")
+
+    def geometry_frame(self, g: ContactGeometry, family: str) -> str:
+        """A frame at a contact geometry's place and orientation (on the ground too)."""
+        body, chain = self.doc.frame_body(g.frame)
+        T = _chain(chain) @ _offset(g.location, g.orientation)
+        if body is self.doc.ground:
+            return self._frame(g.name, None, T, family)
+        return self._frame(g.name, body.name, T, family)
+
     def _frame(self, name: str, body: str, T: np.ndarray, family: str) -> str:
         """The frame of a sphere (added once; reused by the hook run again on the same skeleton)."""
         pm = self.pm
-        if not pm.existFrame(body, pin.FrameType.BODY):
-            raise ModelError(f"{self.doc.source}: body '{body}' has no frame in the skeleton")
-        bf = pm.frames[pm.getFrameId(body, pin.FrameType.BODY)]
-        placement = bf.placement * pin.SE3(T)
+        if body is None:                      # on the ground
+            joint, parent, placement = 0, 0, pin.SE3(T)
+        else:
+            if not pm.existFrame(body, pin.FrameType.BODY):
+                raise ModelError(f"{self.doc.source}: body '{body}' has no frame in the skeleton")
+            parent = pm.getFrameId(body, pin.FrameType.BODY)
+            bf = pm.frames[parent]
+            joint, placement = bf.parentJoint, bf.placement * pin.SE3(T)
         for candidate in itertools.chain((name, f"{name}_sphere"), (f"{name}_sphere_{i}" for i in itertools.count(2))):
             if f"{family}:{candidate}" not in self.labels:
                 if not pm.existFrame(candidate):
-                    pm.addFrame(pin.Frame(candidate, bf.parentJoint, pm.getFrameId(body, pin.FrameType.BODY),
-                                          placement, pin.FrameType.OP_FRAME))
+                    pm.addFrame(pin.Frame(candidate, joint, parent, placement, pin.FrameType.OP_FRAME))
                     return candidate
                 f = pm.frames[pm.getFrameId(candidate)]
-                if f.type == pin.FrameType.OP_FRAME and f.parentJoint == bf.parentJoint and \
+                if f.type == pin.FrameType.OP_FRAME and f.parentJoint == joint and \
                         f.placement.isApprox(placement, 1e-14):
                     return candidate

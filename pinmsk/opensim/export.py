@@ -408,8 +408,8 @@ def write_osim(model, path, *, source=None) -> OsimExport:
                                                               and fam != "payload"):
             inertial.append(comp)
         elif fam == "payload":
-            if comp.target.endswith("@com"):            # at a body's centre of mass
-                body, point = _com_in_body(model, comp.target[:-len("@com")], bodies)
+            if "@" in comp.target:                      # at a body's centre of mass, far end or axis
+                body, point = _site_in_body(model, comp, bodies)
             else:
                 body, point = _frame_in_body(model, comp.target, bodies)
             if body is None:
@@ -583,14 +583,15 @@ def _set_body(doc: _Doc, k: int, src, name, mass, com, I6) -> None:
             doc.set_text(c, " ".join(repr(float(f"{x:.15g}")) for x in val))
 
 
-def _com_in_body(model, body: str, bodies) -> tuple[str | None, np.ndarray]:
-    """``(body, its joint's centre of mass in the body's frame)``: a payload at ``<body>@com``."""
+def _site_in_body(model, comp, bodies) -> tuple[str | None, np.ndarray]:
+    """``(body, the payload's point in the body's frame)``: a payload at ``<body>@com``, ``@end`` or
+    ``@axis`` (its point is given in the frame of the body's joint)."""
+    body = comp.target.split("@", 1)[0]
     if body not in bodies:
         return None, np.zeros(3)
-    pm = model.pin
-    f = pm.frames[model.frame_id(body)]
-    return body, np.asarray(f.placement.actInv(np.asarray(pm.inertias[f.parentJoint].lever, dtype=float)),
-                            dtype=float)
+    f = model.pin.frames[model.frame_id(body)]
+    _, point = comp.site(model)
+    return body, np.asarray(f.placement.actInv(np.asarray(point, dtype=float)), dtype=float)
 
 
 def _why_not(family: str) -> str:

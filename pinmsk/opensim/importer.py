@@ -137,11 +137,29 @@ def warn_report(report: ImportReport, *, stacklevel: int = 3) -> None:
         parts.append(paths)
     missing = [e for e in entries if e.status == NOT_IMPORTED]
     if missing:
-        kinds = sorted({e.element.split("<", 1)[-1].split(" ", 1)[0] for e in missing})
-        parts.append(f"{len(missing)} element(s) not imported yet ({', '.join(kinds)})")
+        parts.append(f"{len(missing)} element(s) not imported yet ({missing_names(missing)})")
     if parts:
         warnings.warn(f"{Path(report.source).name}: {'; '.join(parts)}; the import report is "
                       "model.meta['import_report']", UserWarning, stacklevel=stacklevel)
+
+
+def missing_names(entries, most: int = 6) -> str:
+    """The elements of report ``entries`` by type and name: ``HuntCrossleyForce foot_r, foot_l;
+    PrescribedController R-inverter-controls`` (at most ``most`` names a type, then how many more)."""
+    by_type: dict[str, list[str]] = {}
+    for e in entries:
+        tag = e.element.split("<", 1)[-1]
+        kind = tag.split(" ", 1)[0].rstrip(">")
+        name = tag.split('name="', 1)[1].split('"', 1)[0] if 'name="' in tag else ""
+        names = by_type.setdefault(kind, [])
+        if name and name not in names:
+            names.append(name)
+    out = []
+    for kind in sorted(by_type):
+        names = by_type[kind]
+        more = f" and {len(names) - most} more" if len(names) > most else ""
+        out.append(f"{kind} {', '.join(names[:most])}{more}" if names else kind)
+    return "; ".join(out)
 
 
 def _meta(doc: OsimDocument, skel: Skeleton, path: Path) -> dict:
@@ -515,7 +533,8 @@ def _component_frames(entries: Mapping[str, list], skel: Skeleton, pm: pin.Model
     skeleton's URDF has not (the contact spheres' frames the contact hook added to ``pm``)."""
     have = set(skel.links) | set(skel.markers) | {j.name for j in skel.joints}
     names = [e["frame"] for e in entries.get("contacts", ())]
-    names += [e["target"] for e in entries.get("effects", ()) if e.get("target") and pm.existFrame(e["target"])]
+    names += [e[key] for e in entries.get("effects", ()) for key in ("target", "frame2")
+              if isinstance(e.get(key), str) and pm.existFrame(e[key])]
     out = {}
     for name in dict.fromkeys(names):
         if name in have:

@@ -47,6 +47,7 @@ from ..io.osim import OsimDocument, _parse_xml
 from ..muscles.muscle_set import MuscleSet
 from ..muscles.paths import PolynomialPathOnUse
 from .actuators import actuator_hook
+from .forces import force_hook
 from .muscles import MUSCLE_TYPES, muscle_model_from_osim, properties_from_xml, summarize_notes
 from .hooks import HookResult
 from .paths import GeometricPaths, fit_polynomial_paths, path_specs
@@ -172,9 +173,10 @@ def default_muscle_hook(doc: OsimDocument, skeleton: Skeleton):
     return muscle_hook(doc, skeleton, max_muscles=MAX_MUSCLES)
 
 
-#: The hooks :func:`pinmsk.model.import_osim` (and ``load_model``) runs by default: the muscles and the
-#: actuators (:func:`pinmsk.opensim.actuators.actuator_hook`).
-DEFAULT_HOOKS = (default_muscle_hook, actuator_hook)
+#: The hooks :func:`pinmsk.model.import_osim` (and ``load_model``) runs by default: the muscles, the
+#: actuators (:func:`pinmsk.opensim.actuators.actuator_hook`) and the passive forces
+#: (:func:`pinmsk.opensim.forces.force_hook`).
+DEFAULT_HOOKS = (default_muscle_hook, actuator_hook, force_hook)
 
 
 class DeferredPathFit:

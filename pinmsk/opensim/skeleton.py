@@ -1244,10 +1244,15 @@ def _joint_model(kind: str, axis) -> pin.JointModel:
     return pin.JointModelRevoluteUnaligned(a) if kind == "revolute" else pin.JointModelPrismaticUnaligned(a)
 
 
-def _inertia(link: UrdfLink) -> pin.Inertia:
+def _inertia(link: UrdfLink, source: str = "") -> pin.Inertia:
     if link.inertia is None:
         return pin.Inertia.Zero()
-    return pin.Inertia(link.mass, np.asarray(link.com, dtype=float), np.asarray(link.inertia, dtype=float))
+    com, inertia = np.asarray(link.com, dtype=float), np.asarray(link.inertia, dtype=float)
+    if not (np.isfinite(link.mass) and np.all(np.isfinite(com)) and np.all(np.isfinite(inertia))):
+        where = f"{source}: " if source else ""
+        raise ModelError(f"{where}body {link.name!r}: mass {link.mass!r}, mass_center {com.tolist()} and "
+                         f"inertia {inertia.ravel().tolist()} must be finite numbers")
+    return pin.Inertia(link.mass, com, inertia)
 
 
 def _pinocchio(doc, links, ordered, markers) -> pin.Model:
@@ -1260,7 +1265,7 @@ def _pinocchio(doc, links, ordered, markers) -> pin.Model:
     for uj in ordered:
         pj, pM, pf = at[uj.parent]
         placement = pM * pin.SE3(uj.origin)
-        Y = _inertia(links[uj.child])
+        Y = _inertia(links[uj.child], doc.source)
         if uj.kind == "fixed":
             ff = pm.addFrame(pin.Frame(uj.name, pj, pf, placement, pin.FrameType.FIXED_JOINT))
             pm.appendBodyToJoint(pj, Y, placement)

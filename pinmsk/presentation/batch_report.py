@@ -51,14 +51,17 @@ def render_batch_report(rows: Sequence[dict], out, *, title: str = "pinmsk batch
         counts[_status(r)[0]] += 1
     moments = list(dict.fromkeys(k for r in rows for k in r if k.endswith("_peak_abs_nm_per_kg")))
     moments += list(dict.fromkeys(k for r in rows for k in r if k.endswith("_peak_abs_nm")))
-    residuals = list(dict.fromkeys(k for r in rows for k in r if k.endswith("_residual_rms")))
+    forces = list(dict.fromkeys(k for r in rows for k in r if k.endswith("_residual_rms_n")))
+    torques = list(dict.fromkeys(k for r in rows for k in r if k.endswith("_residual_rms_nm")))
+    residuals = forces + torques
     per_kg = [k for k in moments if k.endswith("_per_kg")]
     groups = [("", 5), ("peak |joint moment| (N m/kg)", len(per_kg)),
               ("peak |joint moment| (N m)", len(moments) - len(per_kg)),
-              ("residual RMS (N, N m)", len(residuals))]
+              ("residual force RMS (N)", len(forces)), ("residual moment RMS (N m)", len(torques))]
     names = (["trial", "status", "time (s)", "frames", "files"]
              + [k.removesuffix("_peak_abs_nm_per_kg").removesuffix("_peak_abs_nm") for k in moments]
-             + [k.removesuffix("_residual_rms") for k in residuals])
+             + [k.removesuffix("_residual_rms_n") for k in forces]
+             + [k.removesuffix("_residual_rms_nm") for k in torques])
     parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{_e(title)}</title>"
              f"<style>{_CSS}</style></head><body><h1>{_e(title)}</h1>",
              f"<p>{len(rows)} trials{f' of model {_e(model)}' if model is not None else ''}: "

@@ -47,7 +47,12 @@ def _check_trial(args) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         read_mapped(args.trial, model=None, cmap=getattr(args, "map", None),
-                    strict=not getattr(args, "lenient", False), require_coordinates=False)
+                    strict=not getattr(args, "lenient", False), require_coordinates=False, **_units(args))
+
+
+def _units(args) -> dict:
+    """``--time-unit`` and ``--degrees`` as :func:`pinmsk.io.read_trial` takes them."""
+    return dict(time_unit=getattr(args, "time_unit", None), in_degrees=True if getattr(args, "degrees", False) else None)
 
 
 class _EffectFamiliesHelp(argparse.HelpFormatter):
@@ -71,6 +76,14 @@ def _nonlinear_flag(s) -> None:
                         "best-fitting fixed-axis joints (their errors are in the import report)")
 
 
+def _moment_arms_flag(s) -> None:
+    """``--moment-arms`` on a command that takes a MODEL whose muscles declare path variants."""
+    s.add_argument("--moment-arms", choices=["constant", "angle"], default=None,
+                   help="muscle path variant of a model that declares several (the forearm's: 'constant' "
+                        "moment arms, Table 3.5, or 'angle', moment arms varying with the joint angle); default: "
+                        "the model's default_paths")
+
+
 def _read(path, model=None, args=None, *, coordinates: bool = True):
     """Read a trial as ``--lenient`` / ``--map`` ask (:func:`pinmsk.io.channel_map.read_mapped`).
 
@@ -80,7 +93,8 @@ def _read(path, model=None, args=None, *, coordinates: bool = True):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RepairWarning)
         trial = read_mapped(path, model=model, cmap=getattr(args, "map", None),
-                            strict=not getattr(args, "lenient", False), require_coordinates=coordinates)
+                            strict=not getattr(args, "lenient", False), require_coordinates=coordinates,
+                            **_units(args))
     for w in caught:
         if issubclass(w.category, RepairWarning):
             print(f"pinmsk: warning: {w.message}", file=sys.stderr)
@@ -91,15 +105,26 @@ def _read(path, model=None, args=None, *, coordinates: bool = True):
     return trial
 
 
+def _unit_flags(s) -> None:
+    """``--degrees`` and ``--time-unit`` on a command that reads a trial."""
+    s.add_argument("--degrees", action="store_true",
+                   help="the trial's angles are in degrees (a CSV cannot say so; a .sto/.mot's inDegrees is "
+                        "overridden): converted to radians on reading")
+    s.add_argument("--time-unit", choices=["s", "ms"], default=None,
+                   help="unit of the trial's time column (default: the unit in its label, 'Time (ms)', else s)")
+
+
 def _add_read_flags(s) -> None:
-    """``--lenient`` and ``--map`` on a command that reads a trial (read by :func:`_read`)."""
+    """``--lenient``, ``--map``, ``--degrees`` and ``--time-unit`` on a command that reads a trial (read by
+    :func:`_read`)."""
+    _unit_flags(s)
     s.add_argument("--lenient", action="store_true",
                    help="read files whose header row/column counts disagree with the data, or that "
                         "repeat a time stamp; prints one warning per repair")
     s.add_argument("--map", metavar="MAP", default=None,
                    help="rename columns first: a TOML map file ([rename] old = \"new\", optional "
-                        "[scale], [offset]) or a built-in map: opensim-gait2d, rajagopal-gait2d, "
-                        "gait10dof-gait2d (see pinmsk.io.channel_map)")
+                        "[scale], [offset] keyed by the old or the new name) or a built-in map: opensim-gait2d, "
+                        "rajagopal-gait2d, gait10dof-gait2d (docs/tutorials/own_csv.md)")
 
 
 def _write(trial, path, precision=None):
@@ -161,14 +186,16 @@ def _plot(args, trial, channels, stem, ylabel) -> None:
 
 def cmd_models(args) -> int:
     from ..model import load_model
-    print(f"{'model':<10} {'dof':>4} {'muscles':>8}  description")
+    from .model_table import models_table
+    rows = []
     for name in builtin_names():
         try:
             m = load_model(name)
         except PinmskError as exc:
-            print(f"{name:<10} {'?':>4} {'?':>8}  unavailable: {exc}")
+            rows.append((name, "?", "?", f"unavailable: {exc}"))
             continue
-        print(f"{name:<10} {m.nv:>4} {m.n_muscles:>8}  {m.meta.get('description', '')[:70]}")
+        rows.append((name, m.nv, m.n_muscles, m.meta.get("description", "")))
+    print("\n".join(models_table(rows)))
     return 0
 
 
@@ -184,7 +211,7 @@ def cmd_import(args) -> int:
     fit_over = None
     if args.fit_over:       # read here, so a file's problem is named with the CLI's own strictness
         from ..io.tables import read_trial
-        fit_over = read_trial(args.fit_over, strict=not args.lenient)
+        fit_over = read_trial(args.fit_over, strict=not args.lenient, **_units(args))
     # the report is printed
     model, report = import_osim(args.model, nonlinear=args.nonlinear or "exact", fit_over=fit_over)
     files = write_import(model, args.out, name=args.name)
@@ -403,7 +430,11 @@ def cmd_contact_fit(args) -> int:
         opts["cutoff"] = args.cutoff or None
     if args.ground_speed is not None:
         opts["ground_speed"] = args.ground_speed
-    out = contact_fit_task(args.model, args.trial, json_path=args.json, plot_dir=args.plot, **opts)
+    trial = args.trial
+    if args.degrees or args.time_unit:        # a .csv/.sto/.mot in other units (a CSU text file has its own)
+        from ..io.tables import read_trial
+        trial = read_trial(args.trial, **_units(args))
+    out = contact_fit_task(args.model, trial, json_path=args.json, plot_dir=args.plot, **opts)
     print("\n".join(settings_lines(out["settings"])))
     for k, (label, j) in enumerate(zip(out["start_labels"], out["starts"])):
         print(f"  start {k + 1}, {label}: J {j:.5g}{' (best)' if k == out['best_start'] else ''}")
@@ -579,8 +610,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("info", help="describe a model (built-in name or path to .toml/.urdf/.osim)")
     s.add_argument("model")
-    s.add_argument("--moment-arms", choices=["constant", "angle"], default=None,
-                   help="muscle path variant (models that declare several)")
+    _moment_arms_flag(s)
     _nonlinear_flag(s)
     s.set_defaults(func=cmd_info)
 
@@ -599,6 +629,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "states/coordinates .sto")
     s.add_argument("--lenient", action="store_true",
                    help="read a --fit-over file whose header row/column counts disagree with the data")
+    _unit_flags(s)
     _nonlinear_flag(s)
     s.set_defaults(func=cmd_import)
 
@@ -610,7 +641,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "generalized forces only, <coord>_moment and <coord>_force for translations)")
     _precision_flag(s)
     input_flags(s)
-    s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
+    _moment_arms_flag(s)
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
     _add_read_flags(s)
     _nonlinear_flag(s)
@@ -680,7 +711,7 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--reserves", action="store_true",
                        help="ideal reserve actuators per dof at high cost instead of failing on infeasible frames; "
                             "coordinates no muscle spans (a floating base) get reserves equal to the force they need")
-        s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
+        _moment_arms_flag(s)
         input_flags(s)
         s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
         s.add_argument("--report", metavar="OUT.html", default=None, help="write a self-contained HTML report")
@@ -753,7 +784,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--without", action="append", metavar="LABEL",
                    help="leave this component of the model out (repeatable; e.g. the contact spheres when the "
                         "trial's measured GRF loads the feet); `pinmsk info MODEL` lists the labels")
-    s.add_argument("--moment-arms", choices=["constant", "angle"], default=None)
+    _moment_arms_flag(s)
     s.add_argument("--noise", action="append", metavar="NAME=SIGMA",
                    help="a noise level you know, in place of the one fitted to the data: a measured channel "
                         "(pelvis_tx=0.5mm, knee_angle_r=0.2deg, elbow_flexion_moment=0.2) or a group (angles, "
@@ -800,6 +831,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", metavar="OUT.json", default=None,
                    help="write objective, params, rmse and seconds as JSON")
     c.add_argument("--plot", metavar="DIR", default=None, help="write GRF and COP figures (PNG) to DIR")
+    _unit_flags(c)
     c.set_defaults(func=cmd_contact_fit)
 
     s = sub.add_parser(
@@ -808,7 +840,8 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description="Optimal control by direct collocation with exact derivatives (thesis Ch. 3, 5.1).",
         epilog=_OPTIMIZE_EPILOG)
-    s.add_argument("task", help="TOML task file (examples in data/tasks/)")
+    s.add_argument("task", help="TOML task file, or the name of a shipped one (gait2d_predictive, "
+                                "forearm_ift_j1, ...: data/tasks/)")
     s.add_argument("-o", "--output", default=None, help="result trial (.sto/.csv), plus OUT.json")
     _precision_flag(s)
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
@@ -885,7 +918,11 @@ _OUTPUT_FOLDERS = ("plot", "out")
 
 
 def _check_outputs(args) -> None:
-    """Refuse, before any work, outputs whose folder is missing or read-only; create --plot folders."""
+    """Refuse, before any work, outputs of a type the command cannot write or whose folder is missing or
+    read-only, and misspelt effect names; create --plot folders."""
+    from .cli_checks import check_effect_names, check_output_suffixes
+    check_output_suffixes(args)
+    check_effect_names(args)
     for name in _OUTPUT_FILES:
         if getattr(args, name, None):
             check_output_file(getattr(args, name))

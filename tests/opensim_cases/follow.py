@@ -2,7 +2,9 @@
 
 :func:`follow` is the loop a user follows: diagnose, add the best significant candidate, diagnose again,
 until nothing is significant.  :func:`judge` compares what was added with ``truth.json``: the right
-family at the right target (a payload at the right site, within 2 cm; or an exact alias the truth
+family at the right target (a payload at the right site, within 2 cm, or on a fitted body axis that
+passes within 2 cm of it, its distance along the axis then judged as a value, or at a fitted point
+on the right body, its coordinates judged as values; or an exact alias the truth
 declares, such as a payload at a body's centre of mass for a change of its mass), each value the fit
 varies within 3 standard
 errors (its relative error is reported too), nothing added that the truth does not hold, and the
@@ -103,6 +105,40 @@ def frame_position(model, target: str) -> np.ndarray | None:
     return np.array(data.oMf[fid].translation)
 
 
+def site_position(model, eff) -> np.ndarray | None:
+    """World position, every coordinate at zero, of where payload ``eff`` sits: its frame, or its point
+    on a body (``<body>@com``, ``@end``, ``@axis``: :meth:`Payload.site`)."""
+    p = frame_position(model, eff.target)
+    if p is not None or not hasattr(eff, "site"):
+        return p
+    import pinocchio as pin
+    try:
+        j, point = eff.site(model)
+    except Exception:
+        return None
+    pm = model.pin
+    data = pm.createData()
+    pin.forwardKinematics(pm, data, pin.neutral(pm))
+    return np.array(data.oMi[j].act(np.asarray(point, dtype=float)))
+
+
+def axis_distance(model, eff, point) -> tuple[float, float] | None:
+    """``(distance along, distance off)`` of world ``point`` (coordinates at zero) from the axis of an
+    ``@axis`` payload: where on its line the point is, and how far from the line."""
+    if not str(eff.target).endswith("@axis"):
+        return None
+    import pinocchio as pin
+    j, _ = eff.site(model)
+    pm = model.pin
+    data = pm.createData()
+    pin.forwardKinematics(pm, data, pin.neutral(pm))
+    u = np.asarray(pm.inertias[j].lever, dtype=float)
+    u = data.oMi[j].rotation @ (u / np.linalg.norm(u))
+    r = np.asarray(point, dtype=float) - data.oMi[j].translation
+    along = float(r @ u)
+    return along, float(np.linalg.norm(r - along * u))
+
+
 def _matches(eff, t: dict, model) -> tuple[bool, str]:
     fam, tgt = eff.family, eff.target
     if fam != t["family"]:
@@ -110,8 +146,17 @@ def _matches(eff, t: dict, model) -> tuple[bool, str]:
     if tgt == t["target"]:
         return True, "target"
     site = t.get("site", {})
+    if fam == "payload" and str(tgt).endswith("@point"):
+        if site.get("body") == str(tgt)[:-len("@point")]:
+            return True, "a fitted point on the body"
+        return False, ""
+    if fam == "payload" and site.get("ground_at_zero") is not None and str(tgt).endswith("@axis"):
+        along, off = axis_distance(model, eff, site["ground_at_zero"])
+        if off <= 0.02:             # the true site is on the fitted axis: its distance is judged as a value
+            return True, f"on the axis {1000 * off:.0f} mm off it, {along:.3f} m along"
+        return False, ""
     if fam == "payload" and site.get("ground_at_zero") is not None and tgt:
-        p = frame_position(model, tgt)
+        p = site_position(model, eff)
         if p is not None and np.linalg.norm(p - np.asarray(site["ground_at_zero"])) <= 0.02:
             return True, f"site within {1000 * np.linalg.norm(p - np.asarray(site['ground_at_zero'])):.0f} mm"
     return False, ""
@@ -122,6 +167,11 @@ def _match(eff, t: dict, model):
     ``aliases`` (another family that changes the data identically, with its own values), else None."""
     ok, how = _matches(eff, t, model)
     if ok:
+        if str(eff.target).endswith("@point"):
+            return how, {**t, "params": {**t["params"], **dict(zip("xyz", map(float, t["site"]["location"])))}}
+        if str(eff.target).endswith("@axis") and t.get("site", {}).get("ground_at_zero") is not None:
+            along, _ = axis_distance(model, eff, t["site"]["ground_at_zero"])
+            return how, {**t, "params": {**t["params"], "distance": along}}
         return how, t
     for a in t.get("aliases", ()):
         ok, how = _matches(eff, a, model)

@@ -15,7 +15,7 @@ The half gait cycle (thesis Sec. 5.2, as Moco's ``example2DWalking``):
   problem);
   by default its muscles become De Groote 2016 units with a rigid tendon (same parameters) and
   IPOPT uses a limited-memory Hessian, the two changes that make the solve converge (Moco's and
-  PredSim's choices; measurements in :func:`predictive_gait` and :func:`_solver`);
+  PredSim's choices; the reasons in :func:`predictive_gait` and :func:`_solver`);
 - constraints: the end state is the start state mirrored left/right (Eq. 5.8), the unpaired
   coordinates and the forward speed periodic (Eq. 5.9), no knee hyper-extension (Eq. 5.10),
   a prescribed average speed (or free), and box bounds on every coordinate, speed, acceleration
@@ -300,42 +300,29 @@ def predictive_gait(model=None, *, speed: float | None = 1.3, duration=0.55, int
     ``mtp_stiffness`` (N m/rad), ``mtp_damping`` (N m s/rad): the toe joints' passive spring and
     damper (:func:`with_toe_joints`; None: none), left out of the coarse stage.
 
-    Why the defaults (measured on 2 loaded cores with :func:`pinmsk.gait_validation.validate_gait`,
-    RMS / correlation of the right joint angles against Winter's Table A.1; seconds vary 1.5-2x
-    with the machine's load):
+    Why the defaults (each compared with :func:`pinmsk.gait_validation.validate_gait`: the right joint
+    angles against Winter's Table A.1, the GRF against the measured walk; the figures of each
+    alternative are on the documentation's benchmarks page):
 
     - gait2d's 16 muscles as De Groote 2016 units with a rigid tendon and IPOPT with a
       limited-memory Hessian (:func:`_solver`): the only combination that converges (with the
-      model's Nagano-Gerritsen muscles or the compliant tendon it does not, or over 1000 it);
-    - ``trunk=(-0.15, 0.15)`` (+-9 deg): with the former +-0.6 rad every solution leaned the trunk
-      forward ~30 deg, which hides in the hip angle (trunk to thigh): hip RMS 30 deg whatever the
-      guess; walking trunks lean 0-10 deg (PredSim and Moco's example2DWalking bound the pelvis
-      tilt as tightly);
-    - ``guess="walking"``: from standing (15 intervals) the optimum is a shuffling gait,
-      CoT 6.9 J/kg/m, hip / knee / ankle 30 / 20 / 13 deg (corr 0.27 / 0.58 / -0.2); with the
-      bounded trunk from standing CoT 2.8, 13 / 26 / 9 deg, knee corr 0.05; from the walking
-      guess CoT 2.08, 15 / 19 / 13 deg (corr 0.67 / 0.51 / -0.34), GRF RMS 39 % BW vs the
-      measured walk (2853 it, 80-130 s);
-    - ``coarse_intervals=15, intervals=25``: the 25-interval refinement of that solution has
-      CoT 2.24, hip / knee / ankle 12.7 / 18.4 / 11.6 deg (corr 0.78 / 0.60 / -0.09), 7.2 / 20.9
-      deg (corr 0.91 / 0.77) against the measured walk, GRF RMS 30 % BW, peaks 139 / 174 % BW
-      (4503 it in all, 137-250 s).  30 intervals from the same coarse solution fell into another
-      optimum (CoT 4.5, hip corr -0.13);
+      model's Nagano-Gerritsen muscles, a compliant tendon or the exact Hessian it does not);
+    - ``trunk=(-0.15, 0.15)`` (+-9 deg): with a wider range every solution leans the trunk far
+      forward, which hides in the hip angle (trunk to thigh); walking trunks lean 0-10 deg (PredSim
+      and Moco's example2DWalking bound the pelvis tilt as tightly);
+    - ``guess="walking"`` (:func:`walking_guess`, built from the speed alone): from standing the
+      optimum is a shuffling gait or a costlier walk with more knee flexion;
+    - ``coarse_intervals=15, intervals=25``: the 25-interval problem started from the 15-interval
+      solution; other refinements of the same coarse solution can fall into another optimum, and
+      a finer grid (50 intervals) gives the same knee and GRF, so the grid does not cause them;
     - ``mtp_stiffness=20, mtp_damping=0.5`` (:func:`with_toe_joints`), the coarse stage without
-      them: gait2d's toes have no passive moment, and in every solution above they hung on their
-      -1 rad limit in swing; with the toe springs in the 25-interval stage (from the same 15-interval
-      solution) the objective falls from 2.25 to 1.99 (CoT 1.98) and the knee comes right: 7.2 deg
-      RMS against Winter (corr 0.98; it was 18.4, 0.60), swing flexion 51 deg (37 before; Winter
-      64-69), hip 13.0 (0.78), ankle 11.9 (-0.03), EMG correlation 0.37 on average (0.18; vasti and
-      rectus femoris nearly silent: 0.19 over the five active groups), second
-      GRF peak 195 % BW (174), 5203 it in all, 152 s.  With the springs in the coarse stage too the
-      15-interval solve ran (CoT 5.4, stance 29 %); 50 N m/rad, 1 N m s/rad stopped at 3000 it;
-    - not defaults: 50 intervals from the 25-interval solution: CoT 2.87 with the same knee and GRF
-      (the grid does not cause them); effort ``a^3`` with weight 1 ran (CoT 5.2); a free speed from
-      the walking guess ran at 2.0 m/s (CoT 2.81), from the 1.3 m/s optimum (with the toe springs)
-      it settles at 1.296 m/s (CoT 1.979, 2093 it); a free duration in [0.45, 0.65] s ran to the 0.45 s bound (CoT 6.1, a worse
-      optimum); a smoothness weight 1e-3 did not converge in 3000 it; a loose coarse stage
-      (tol 1e-2) saves nothing (the refinement then needs ~2000 it).
+      them: gait2d's toes have no passive moment, and without one they hang on their -1 rad limit
+      in swing and the forefoot cannot push through them (knee far from Winter's, swing flexion too
+      small); with the springs in the coarse stage too, the 15-interval solve runs instead of
+      walking; stiffer springs (50 N m/rad) do not converge;
+    - not defaults: effort ``a^3`` with weight 1 runs; a free speed from the walking guess runs
+      (from the 1.3 m/s optimum it settles near 1.3 m/s); a free duration runs to its lower bound;
+      a smoothness term does not converge; a loose coarse tolerance saves nothing.
     """
     bare = gait_model("gait2d" if model is None else model, muscle_model=muscle_model, tendon=tendon,
                       contact=contact, contact_smoothing=contact_smoothing, friction_velocity=friction_velocity)

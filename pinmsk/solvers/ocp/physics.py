@@ -200,7 +200,10 @@ class PointModel:
             if self.metabolic is not None:
                 pt["metabolic_rate"] = self._metabolic(e_act, a, l_ce, v_ce)
         for c in self.effects:
-            tau = tau + ca.vec(c.generalized_force_at(self.model, q, v))
+            if hasattr(c, "generalized_force_on"):        # a force between two frames (a bushing)
+                tau = tau + ca.vec(c.generalized_force_on(self.sk, q, v))
+            else:
+                tau = tau + ca.vec(c.generalized_force_at(self.model, q, v))
         if self.actuators:
             u_act = rows(u, co["act"])
             for k_, (a_, j) in enumerate(zip(self.actuators, self._act_cols)):

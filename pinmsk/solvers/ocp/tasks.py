@@ -97,11 +97,34 @@ def _check_keys(table: dict, section: str, where: str):
     check_keys(table, TASK_SCHEMA[section], where=where, section=f"[{section}]")
 
 
+def shipped_tasks() -> dict[str, Path]:
+    """The task files shipped with pinmsk (``data/tasks/``, installed as ``pinmsk._data.tasks``) by name."""
+    from ...io.shared_data import shipped_data_dir
+    folder = shipped_data_dir() / "tasks"
+    return {p.stem: p for p in sorted(folder.glob("*.toml"))} if folder.is_dir() else {}
+
+
+def resolve_task(task) -> Path:
+    """The task file ``task`` names: a path that exists, else a shipped task by name (``gait2d_predictive``,
+    with or without ``.toml``); ModelError listing the shipped tasks otherwise."""
+    p = Path(str(task))
+    if p.exists():
+        return p
+    shipped = shipped_tasks()
+    name = p.stem if p.suffix.lower() in (".toml", "") and p.parent == Path(".") else None
+    if name in shipped:
+        return shipped[name]
+    from ...trial import close_matches
+    hint = close_matches(p.stem, list(shipped), n=1)
+    did = f" (did you mean {hint[0]!r}?)" if hint else ""
+    raise ModelError(f"task file not found: {p}{did}; shipped tasks, run by name (pinmsk optimize NAME): "
+                     f"{', '.join(shipped) or 'none'}")
+
+
 def load_task(task_path) -> dict:
-    """Read and validate a task file (TOML or JSON); see :data:`TASK_SCHEMA`."""
-    p = Path(task_path)
-    if not p.exists():
-        raise ModelError(f"task file not found: {p}")
+    """Read and validate a task file (TOML or JSON; a path, or a shipped task's name: :func:`resolve_task`);
+    see :data:`TASK_SCHEMA`."""
+    p = resolve_task(task_path)
     if p.suffix.lower() == ".json":
         try:
             spec = json.loads(p.read_text())
