@@ -428,6 +428,10 @@ class _QuinticOperators:
 #: (N, hash of the time grid) -> its :class:`_QuinticOperators` (the grid itself checked on a hit)
 _OPERATORS: dict[tuple, _QuinticOperators] = {}
 
+#: Grids of more samples are not kept between calls: their operators (some 300 bytes a sample) would
+#: outlive the analysis of a long trial, and building them again costs as much as one use.
+CACHE_SAMPLES = 50_000
+
 
 def _quintic_operators(t: np.ndarray) -> _QuinticOperators:
     key = (t.size, hash(t.tobytes()))
@@ -435,6 +439,8 @@ def _quintic_operators(t: np.ndarray) -> _QuinticOperators:
     if hit is not None and np.array_equal(hit.t, t):
         return hit
     ops = _QuinticOperators(t)
+    if t.size > CACHE_SAMPLES:
+        return ops
     if len(_OPERATORS) >= 16:
         _OPERATORS.pop(next(iter(_OPERATORS)))
     _OPERATORS[key] = ops
