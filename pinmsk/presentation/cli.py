@@ -226,7 +226,7 @@ def cmd_id(args) -> int:
     model = _model(args)
     trial = _read(args.trial, model, args)
     with _progress(trial.n_frames, "ID", "frames") as bar:
-        res = inverse_dynamics_result(model, trial, **_inputs(args), progress=bar)
+        res = inverse_dynamics_result(model, trial, **_inputs(args), progress=bar, convention=args.convention)
     print(res.report())
     out = res.trial
     from ..tools.layout import id_table, is_opensim_model
@@ -302,6 +302,9 @@ def _run_solver(args, solver, total: int | None, label: str, title: str, *, open
     (``opensim_files``: a model from OpenSim gets OpenSim's activation and force files)."""
     model = _model(args)
     trial = _read(args.trial, model, args)
+    # FSO evaluates the paths at every integration step, one frame at a time: there the surrogates,
+    # checked against the exact paths at the trial's frames (the exact paths cost minutes per trial)
+    model = _analysis_paths(args, model, trial, surrogate=label == "FSO")
     kw = _inputs(args)
     if getattr(args, "moments", None):
         kw["moments"] = args.moments
@@ -314,11 +317,33 @@ def _run_solver(args, solver, total: int | None, label: str, title: str, *, open
     if opensim_files and is_opensim_model(model):
         tables = so_tables(model, solver.result_, [a.name for a in solver.actuators_])
         for path, table in zip(so_paths(args.output), tables):
+            if getattr(args, "_paths_line", None):
+                table = table.with_meta(paths=args._paths_line)
             _write(table, path, args.precision)
     else:
-        _write(solver.result_, args.output, args.precision)
+        result = solver.result_
+        if getattr(args, "_paths_line", None):
+            result = result.with_meta(paths=args._paths_line)          # in the output's header
+        _write(result, args.output, args.precision)
     _report_results(args, model, trial, solver.result_, title, text)
     return 0
+
+
+def _analysis_paths(args, model, trial, *, surrogate: bool = False):
+    """The model with the paths ``--surrogate-paths`` / ``--path-tolerance`` ask for
+    (:func:`pinmsk.opensim.path_check.choose_paths`); the choice is printed as one header line."""
+    from ..opensim.muscle_import import geometric_paths
+    from ..opensim.path_check import choose_paths
+    if getattr(model, "muscles", None) is None or geometric_paths(model.meta.get("import_report")) is None:
+        return model            # a model with only its own paths runs on them
+    q = np.column_stack([np.asarray(trial[c], dtype=float) if c in trial else
+                         np.zeros(trial.n_frames) for c in model.coordinates])
+    model, line = choose_paths(model, q, surrogate=surrogate or getattr(args, "surrogate_paths", False),
+                               exact_hint="" if surrogate else "or use the exact paths (leave out --surrogate-paths)",
+                               tolerance=1e-3 * getattr(args, "path_tolerance", 1.0))
+    print(line)
+    args._paths_line = line
+    return model
 
 
 def cmd_so(args) -> int:
@@ -656,6 +681,10 @@ def build_parser() -> argparse.ArgumentParser:
     _precision_flag(s)
     input_flags(s)
     _moment_arms_flag(s)
+    s.add_argument("--convention", choices=["pinmsk", "opensim"], default="pinmsk",
+                   help="FreeJoint/BallJoint rotations: 'pinmsk' differentiates the Euler angles (physically "
+                        "consistent, default); 'opensim' reproduces OpenSim's InverseDynamicsTool, which reads "
+                        "the angles' rates as angular velocity")
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
     _add_read_flags(s)
     _nonlinear_flag(s)
@@ -715,6 +744,12 @@ def build_parser() -> argparse.ArgumentParser:
     def so_flags(s):
         s.add_argument("model")
         s.add_argument("trial", help="trial with the coordinates (and optionally <coord>_moment)")
+        s.add_argument("--surrogate-paths", action="store_true",
+                       help="an imported model's polynomial path surrogates instead of its exact paths (fso: always), "
+                            "checked against the exact paths at the trial's frames (docs/paths.md)")
+        s.add_argument("--path-tolerance", type=float, default=1.0, metavar="MM",
+                       help="largest surrogate error (mm, length or moment arm) --surrogate-paths accepts "
+                            "(default 1)")
         s.add_argument("-o", "--output", required=True, help="output .sto or .csv")
         _precision_flag(s)
         s.add_argument("--mode", choices=["force", "activation"], default="force",
