@@ -1,7 +1,7 @@
 """Cost per frame and peak memory of ID and SO on an imported OpenSim model, from 1e3 to 1e6 frames.
 
-    python benchmarks/bench_frames.py            # 1e3, 1e4, 1e5 frames
-    python benchmarks/bench_frames.py --million  # and 1e6 (slow: minutes, about 1 GB)
+    python benchmarks/bench_frames.py           # 1e3, 1e4, 1e5 and 1e6 frames (minutes; about 1 GB)
+    python benchmarks/bench_frames.py --quick   # 1e3, 1e4, 1e5 frames
 
 The model is Gait10dof18musc's ``subject01.osim`` (exact knee, 18 muscles with polynomial paths),
 imported once into a temporary import cache before the clock starts (its muscle paths fitted).  The
@@ -83,7 +83,7 @@ def main(argv=None) -> int:
     if gait is None or not (gait / "subject01.osim").is_file():
         print("bench_frames: ../shared/data/opensim-models is absent; nothing to time")
         return 0
-    sizes = [1_000, 10_000, 100_000] + ([1_000_000] if "--million" in argv else [])
+    sizes = [1_000, 10_000, 100_000] + ([] if "--quick" in argv else [1_000_000])
     with tempfile.TemporaryDirectory(prefix="pinmsk-bench-frames-") as tmp:
         env = dict(os.environ, PINMSK_CACHE_DIR=tmp, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1",
                    MKL_NUM_THREADS="1", PYTHONPATH=os.pathsep.join([str(REPO)] + [os.environ.get("PYTHONPATH", "")]))

@@ -169,7 +169,11 @@ def _unknown(name, known, what: str) -> str:
 
 
 def _read_only(x) -> np.ndarray:
-    """A read-only float copy of ``x`` (C order)."""
+    """A read-only float copy of ``x`` (C order); ``x`` itself when it is one already (a read-only float
+    array in C order that owns its data: no other view can write to it)."""
+    if (isinstance(x, np.ndarray) and x.dtype == np.float64 and x.flags.c_contiguous and not x.flags.writeable
+            and x.flags.owndata):
+        return x
     arr = np.array(x, dtype=float, order="C")
     arr.flags.writeable = False
     return arr

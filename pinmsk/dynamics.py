@@ -101,8 +101,17 @@ def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, ex
                             frames=None, ground_reaction: str = "auto", grf_cutoff="auto",
                             external: Sequence[skeleton.ExternalForce] = (),
                             components: bool = True, progress=None,
-                            missing_coordinates: str = "refuse") -> InverseDynamicsResult:
-    """Inverse dynamics with its inputs and residual report (see :func:`inverse_dynamics`)."""
+                            missing_coordinates: str = "refuse", convention: str = "pinmsk") -> InverseDynamicsResult:
+    """Inverse dynamics with its inputs and residual report (see :func:`inverse_dynamics`).
+
+    ``convention='opensim'`` reproduces OpenSim's InverseDynamicsTool on an imported model's FreeJoints and
+    BallJoints: the tool hands the motion's Euler-angle rates ``q'`` and ``q''`` to Simbody's Free/Ball
+    mobilizer as its speeds ``u`` (the angular velocity ``w`` of the child in the parent frame) and their
+    rates, so it computes the dynamics of the motion with ``w = q'``, ``w' = q''`` and reports the
+    mobilizer's generalized forces (the joint moment in the parent frame).  Here that motion's angle rates
+    are ``E^-1 w`` and ``E^-1 (w' - E' E^-1 w)`` (``w = E(q) q'`` of body-fixed X-Y-Z angles) and the moments
+    ``E^-T tau`` (virtual work: ``tau . q' = M . w``).  The default ``'pinmsk'`` differentiates the angles:
+    the physically consistent result, which OpenSim's own solver gives with consistent speeds."""
     inputs = prepare(model, trial, cutoff=cutoff, grf=grf, external_loads=external_loads, frames=frames,
                      ground_reaction=ground_reaction, grf_cutoff=grf_cutoff,
                      missing_coordinates=missing_coordinates)
@@ -117,15 +126,28 @@ def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, ex
         inputs = replace(inputs, external=ext, filtering=replace(inputs.filtering, has_grf=True),
                          notes=inputs.notes + ("external wrenches given by the caller on "
                                                + ", ".join(e.frame for e in ext),))
+    if convention not in ("pinmsk", "opensim"):
+        raise TrialError(f"convention={convention!r}: use 'pinmsk' or 'opensim'")
     motion = inputs.motion
+    tool = _opensim_tool_rotations(model) if convention == "opensim" else []
+    if tool:
+        motion = _as_opensim_tool_reads(motion, tool)
     with _workspace(model) as data:     # one workspace for the whole analysis
         tau = inverse_dynamics_array(model, motion, external=ext, components=components, progress=progress,
                                      data=data, actuated=False)
         residuals = floating_base_residuals(model, motion, tau, ext, data=data.pin)
+    if tool:
+        tau = _as_opensim_tool_forces(motion, tau, tool)
     names, q_out, tau_out = source_coordinates(model, motion, tau)
     meta = {"analysis": "inverse_dynamics", "model": model.name, **inputs.meta()}
     if external:
         meta["ground_reaction"] = "given by the caller: " + ", ".join(e.frame for e in ext)
+    euler = model.meta.get("euler_rate_convention")     # an imported model's FreeJoints and BallJoints
+    if euler:
+        meta["euler_rate_convention"] = ("convention 'opensim' (the tool's numbers): " if tool else
+                                         "convention 'pinmsk' (the angles differentiated): ") + euler
+        if not tool:
+            warnings.warn(f"model '{model.name}', {euler}", UserWarning, stacklevel=3)
     if residuals.coordinates:
         meta["residuals"] = "; ".join(
             f"{c} peak {p:.4g} {u} (threshold {th:.4g})" for c, p, u, th in
@@ -136,6 +158,54 @@ def inverse_dynamics_result(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, ex
     if residuals.warning():
         warnings.warn(residuals.warning(), ResidualWarning, stacklevel=3)
     return InverseDynamicsResult(out, inputs, residuals)
+
+
+def _opensim_tool_rotations(model) -> list[list[int]]:
+    """The q/v columns of each FreeJoint's and BallJoint's X-Y-Z rotation coordinates of an imported model."""
+    out = []
+    for names in model.meta.get("euler_rotation_coordinates") or ():
+        try:
+            out.append([model.coordinate_index(c) for c in names])
+        except Exception:        # a locked or folded rotation: no Euler-rate reading to reproduce
+            continue
+    return out if model.pin.nq == model.pin.nv else []
+
+
+def _euler_columns(q3):
+    """Columns (N, 3, 3) of ``E`` in ``w = E q'`` for body-fixed X-Y-Z angles (w in the parent frame):
+    ``e_x``, ``R_x e_y``, ``R_x R_y e_z``."""
+    a, b = q3[:, 0], q3[:, 1]
+    ca, sa, cb, sb = np.cos(a), np.sin(a), np.cos(b), np.sin(b)
+    n = len(a)
+    c1 = np.tile([1.0, 0.0, 0.0], (n, 1))
+    c2 = np.stack([np.zeros(n), ca, sa], 1)
+    c3 = np.stack([sb, -sa * cb, ca * cb], 1)
+    return c1, c2, c3
+
+
+def _as_opensim_tool_reads(motion, tool):
+    """The motion OpenSim's ID tool computes when it reads Euler-angle rates as angular velocity."""
+    v, a = np.array(motion.v), np.array(motion.a)
+    for cols in tool:
+        c1, c2, c3 = _euler_columns(motion.q[:, cols])
+        E = np.stack([c1, c2, c3], axis=2)                          # (N, 3, 3)
+        w, wd = v[:, cols], a[:, cols]                              # what the tool takes as w and w'
+        qd = np.linalg.solve(E, w[..., None])[..., 0]
+        # E' q' = a' b' (e_x x c2) + c' (a' e_x + b' c2) x c3
+        edq = (qd[:, :1] * qd[:, 1:2] * np.cross(c1, c2)
+               + qd[:, 2:3] * np.cross(qd[:, :1] * c1 + qd[:, 1:2] * c2, c3))
+        v[:, cols] = qd
+        a[:, cols] = np.linalg.solve(E, (wd - edq)[..., None])[..., 0]
+    return replace(motion, v=v, a=a)
+
+
+def _as_opensim_tool_forces(motion, tau, tool):
+    """The tool's generalized forces of the rotations: ``E^-T tau`` (the moment in the parent frame)."""
+    tau = np.array(tau)
+    for cols in tool:
+        E = np.stack(_euler_columns(motion.q[:, cols]), axis=2)
+        tau[:, cols] = np.linalg.solve(np.transpose(E, (0, 2, 1)), tau[:, cols][..., None])[..., 0]
+    return tau
 
 
 _WORKSPACES = threading.local()

@@ -347,8 +347,7 @@ def _motion(model, trial, *, cutoff, signals=None, missing_coordinates="refuse",
         measured = cmap.osim_coordinates
         fill, notes = source_coordinate_gaps(model, trial, missing_coordinates=missing_coordinates)
         source = trial.with_channels({c: np.full(trial.n_frames, x) for c, x in fill.items()}) if fill else trial
-        q_os, v_os, a_os = source.kinematics(measured, cutoff=cutoff_value(cutoff), method=method)
-        q, v, a, q_os = cmap.expand(q_os, v_os, a_os, with_source=True)
+        q, v, a, q_os = _expand_rows(cmap, *source.kinematics(measured, cutoff=cutoff_value(cutoff), method=method))
         notes = _coupler_notes(cmap, trial, q_os) + notes
     names = [n for n in trial.names if n not in measured] if signals is None else list(signals)
     sig = {n: trial[n] for n in names}
@@ -358,6 +357,31 @@ def _motion(model, trial, *, cutoff, signals=None, missing_coordinates="refuse",
         # moments map back at the same coordinates (source_coordinates)
         sig.update({c: q_os[:, i] for i, c in enumerate(measured) if c not in model.coordinates})
     return Motion(np.asarray(trial.time, dtype=float), q, v, a, sig), notes
+
+
+#: Frames a coordinate map expands at a time (its intermediate arrays are several times the result's).
+EXPAND_ROWS = 20000
+
+
+def _expand_rows(cmap, q_os, v_os, a_os):
+    """``cmap.expand(q_os, v_os, a_os, with_source=True)`` (the map is per frame), :data:`EXPAND_ROWS`
+    frames at a time into arrays of the whole motion, made read-only (a Motion keeps them uncopied)."""
+    n = q_os.shape[0]
+    if n <= EXPAND_ROWS:
+        out = cmap.expand(q_os, v_os, a_os, with_source=True)
+    else:
+        out = None
+        for k in range(0, n, EXPAND_ROWS):
+            part = cmap.expand(q_os[k:k + EXPAND_ROWS], v_os[k:k + EXPAND_ROWS], a_os[k:k + EXPAND_ROWS],
+                               with_source=True)
+            if out is None:
+                out = tuple(np.empty((n,) + np.shape(p)[1:]) for p in part)
+            for o, p in zip(out, part):
+                o[k:k + EXPAND_ROWS] = p
+    out = tuple(np.require(x, dtype=float, requirements="CO") for x in out)
+    for x in out:
+        x.flags.writeable = False
+    return out
 
 
 def _coupler_notes(cmap, trial, q_os: np.ndarray) -> tuple[str, ...]:

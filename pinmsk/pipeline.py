@@ -624,29 +624,52 @@ def contact_fit_task(model, trial, *, json_path=None, plot_dir=None, **options) 
     return out
 
 
-def optimize_task(task_path, out_path=None, progress=None, *, precision: int | None = None) -> Result:
+def optimize_task(task_path, out_path=None, progress=None, *, precision: int | None = None,
+                  monitor=None, verbose: bool | None = None, solver_log=None, max_iter: int | None = None,
+                  keep_unconverged: bool = False) -> Result:
     """Run the task file ``task_path`` on the optimal-control engine (:mod:`pinmsk.solvers.ocp`);
     write the result trial to ``out_path`` (.sto/.csv/.mot, ``precision`` significant digits,
     default that of :func:`pinmsk.io.write_trial`) and the JSON summary
-    (:meth:`~pinmsk.solvers.ocp.problem.Collocation.to_dict`) next to it (``<out>.json``).
+    (:meth:`~pinmsk.solvers.ocp.problem.Collocation.to_dict`, plus a gait's speed, stride length,
+    cost of transport and body weight) next to it (``<out>.json``); the summary is also
+    ``result.info["summary"]``.
+
+    ``monitor``: told of every IPOPT solve and iteration (:class:`Collocation`'s ``monitor``,
+    e.g. :class:`pinmsk.presentation.solve_progress.SolveProgress`); ``verbose``: IPOPT's own
+    log on stdout (default: none); ``solver_log``: a file that gets IPOPT's log of this run
+    (replaced); ``max_iter``: IPOPT's iteration limit of every stage (default: the task's
+    ``[solver] maxiter``).
 
     A problem IPOPT did not solve raises :class:`~pinmsk.errors.ConvergenceError` naming its
-    status and the most violated constraint; nothing is written then (it is not a solution).
+    status and the most violated constraint; nothing is written then (it is not a solution),
+    unless ``keep_unconverged``: then the last iterate is written, flagged ``"converged": false``
+    in the JSON, and returned (``result.converged`` is False), e.g. to start the next try from.
     """
-    from .errors import ConvergenceError
+    from .errors import ConvergenceError, ModelError
     from .solvers.ocp.tasks import resolve_task
     task_path = resolve_task(task_path)          # a path, or a shipped task's name
     spec = load_task(task_path)
+    if max_iter is not None:
+        if int(max_iter) < 0:
+            raise ModelError(f"max_iter must be >= 0, got {max_iter}")
+        spec = dict(spec, solver=dict(spec.get("solver", {}), maxiter=int(max_iter)))
     prob = build_from_task(spec, base_dir=Path(task_path).parent, progress=progress)
+    if solver_log is not None:
+        Path(solver_log).write_text("", encoding="utf-8")     # this run's log only (IPOPT appends to it)
+    prob.set_params(monitor=monitor, verbose=bool(verbose), solver_log=solver_log)
     res = prob.fit().result_
-    if not res.converged:
+    if not res.converged and not keep_unconverged:
         raise ConvergenceError(f"{task_path}: the optimizer did not converge ({res.status}); "
-                               "no result written (it is not a solution)")
+                               "no result written (it is not a solution; --keep-unconverged writes "
+                               "the last iterate)")
     summary = prob.to_dict()
     if "gait" in spec:      # a gait task writes one full stride and its gait numbers
         from .solvers.ocp.gait import stride_result
         res, gait_numbers = stride_result(prob, mirror=spec["gait"].get("kind", "predictive") == "predictive")
         summary.update(gait_numbers)
+    # the report is the solve's (for a gait, of the half cycle the stride is made of)
+    res = Result.from_trial(res, stats=res.stats, info=dict(res.info, summary=summary),
+                            report=prob.result_.report())
     if out_path is not None:
         out = Path(out_path)
         write_json(out.with_suffix(out.suffix + ".json"), summary)

@@ -410,7 +410,16 @@ class Trial:
         obj._setup(t, names, v, units, meta)
         return obj
 
-    def _setup(self, t, names, values, units, meta) -> None:
+    @classmethod
+    def _adopt(cls, time, names, values: np.ndarray, *, units=None, meta=None) -> Trial:
+        """A Trial that keeps ``values`` (a float (N, C) array the caller hands over and no longer
+        writes) instead of a copy; it is made read-only."""
+        obj = cls.__new__(cls)
+        obj._setup(np.asarray(time, dtype=float), _as_names(names, "channel names"), values, units, meta,
+                   copy=False)
+        return obj
+
+    def _setup(self, t, names, values, units, meta, copy: bool = True) -> None:
         meta = dict(meta or {})
         where = f"file {meta['source']!r}: " if meta.get("source") else ""
         if t.ndim != 1 or t.shape[0] == 0:
@@ -439,7 +448,8 @@ class Trial:
         if unknown:
             raise TrialError(f"{where}units given for unknown channels: {unknown}")
         self._time = _readonly(np.array(t, dtype=float))
-        self._values = _readonly(np.array(values, dtype=float).reshape(t.shape[0], len(names)))
+        self._values = _readonly((np.array(values, dtype=float) if copy else np.asarray(values, dtype=float))
+                                 .reshape(t.shape[0], len(names)))
         self._names = tuple(names)
         self._index = {n: i for i, n in enumerate(self._names)}
         self._units = types.MappingProxyType(units)

@@ -205,7 +205,6 @@ def test_broken_pipe_exits_quietly():
 # -- 5. NaN for the viewer ---------------------------------------------------------------------
 
 def test_view_refuses_nan_before_starting_a_server(tmp_path, capsys):
-    pytest.importorskip("meshcat")
     t = np.arange(101) / 100.0
     q = 1.0 + 0.2 * t
     q[7] = np.nan

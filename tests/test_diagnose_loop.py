@@ -227,3 +227,24 @@ def test_gait2354_one_stride_walk_diagnoses(shared_data):
     assert diag.stopping["folds"] == 2 and diag.stopping["folds_chosen"] == "auto"
     assert diag.ranking and all(np.isfinite(s.test["z"]) for s in diag.ranking)
     assert diag.verdict in ("at_noise_floor", "missing_effect")
+
+
+def test_a_fold_that_did_not_converge_is_reported(forearm, payload_trial, monkeypatch):
+    """The held-out test rests on one fit per fold: a fold's unconverged fit shows in the note and JSON."""
+    from pinmsk.diagnose.fit import EffectFit, JointProblem
+    real = {cls: cls.cross_validate for cls in (EffectFit, JointProblem)}
+
+    def stopped(cls):
+        def cv(self, *a, **k):
+            e, _ = real[cls](self, *a, **k)
+            return e, False
+        return cv
+
+    d = diagnose(forearm, payload_trial, candidates=["payload:hand"])
+    assert d.ranking[0].test["folds_converged"] is True and "fold" not in d.ranking[0].note
+    for cls in real:
+        monkeypatch.setattr(cls, "cross_validate", stopped(cls))
+    d = diagnose(forearm, payload_trial, candidates=["payload:hand"])
+    s = d.ranking[0]
+    assert s.test["folds_converged"] is False and "cross-validation fold" in s.note
+    assert d.to_dict()["ranking"][0]["held_out_test"]["folds_converged"] is False

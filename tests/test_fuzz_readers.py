@@ -23,11 +23,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-hypothesis = pytest.importorskip("hypothesis")
-from hypothesis import HealthCheck, given, settings  # noqa: E402
-from hypothesis import strategies as st  # noqa: E402
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
-import pinmsk  # noqa: E402
+import pinmsk
 from pinmsk.errors import PinmskError  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

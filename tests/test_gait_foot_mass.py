@@ -120,7 +120,6 @@ def test_foot_mass_example_code_on_a_tiny_problem(tmp_path):
     text = ex.table(rows)
     assert "100 % foot mass" in text and "67 % foot mass" in text and "mean activation soleus" in text
     assert f" {rows[1]['objective']:.4g} |" in text and "+0.0 %" in text
-    pytest.importorskip("matplotlib")
     assert ex.figure(runs, tmp_path / "f.png").stat().st_size > 10_000
 
 
@@ -162,7 +161,6 @@ def _fake_optimize(calls):
 
 
 def test_optimize_report_validates_the_solved_stride(tmp_path, monkeypatch, capsys):
-    pytest.importorskip("matplotlib")
     calls = []
     monkeypatch.setattr(pinmsk.pipeline, "optimize_task", _fake_optimize(calls))
     html = tmp_path / "gait.html"

@@ -122,7 +122,6 @@ def test_gait_cycle_names_missing_coordinates():
 
 
 def test_report_and_figures_are_written(tmp_path):
-    pytest.importorskip("matplotlib")
     v = gv.validate_gait(_synthetic_stride(), winter=False, measured=False, body_weight=700.0)
     path = v.write_report(tmp_path / "gait.html", figures_dir=tmp_path)
     text = path.read_text()

@@ -10,7 +10,7 @@ import pytest
 
 from pinmsk.signals import bspline, filtering, iir
 
-signal = pytest.importorskip("scipy.signal")
+from scipy import signal
 
 
 @pytest.fixture(autouse=True)
@@ -68,7 +68,7 @@ def test_lowpass_is_scipys_sosfiltfilt_step_by_step():
 
 @pytest.mark.parametrize("n", [6, 9, 151, bspline.DENSE])
 def test_dense_spline_maps_are_scipys(n, monkeypatch):
-    interpolate = pytest.importorskip("scipy.interpolate")
+    from scipy import interpolate
     rng = np.random.default_rng(n)
     t = np.sort(rng.uniform(0.0, 2.0, n)) if n < 20 else np.arange(n) / 60.0
     x = np.sin(3.0 * t)[:, None] * np.arange(1.0, 4.0) + 0.01 * rng.standard_normal((n, 3))

@@ -16,7 +16,7 @@ def _trial():
 
 
 def test_to_pandas_and_back():
-    pd = pytest.importorskip("pandas")
+    import pandas as pd
     tr = _trial()
     df = tr.to_pandas()
     assert isinstance(df, pd.DataFrame) and list(df.columns) == ["knee_r", "knee_r_moment"]
@@ -33,7 +33,7 @@ def test_to_pandas_and_back():
 
 
 def test_from_pandas_with_a_time_column_in_ms():
-    pd = pytest.importorskip("pandas")
+    import pandas as pd
     df = pd.DataFrame({"Time (ms)": [0.0, 10.0, 20.0], "hip": [0.1, 0.2, 0.3]})
     tr = Trial.from_pandas(df)
     np.testing.assert_allclose(tr.time, [0.0, 0.01, 0.02])

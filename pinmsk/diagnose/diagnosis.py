@@ -962,13 +962,33 @@ def _same_site(a, b, model) -> bool:
     return ja is not None and ja == jb
 
 
+def _at_own_com(a, b, model, k: float = 2.0) -> bool:
+    """Whether ``a``, a payload at a fitted point, sits at the centre of mass of the body whose own mass
+    ``b`` (``segment_mass``) changes, within ``k`` standard errors on every fitted coordinate: then the
+    two differ only by the rotational inertia, and the body's own mass is the simpler reading."""
+    if not (str(a.target).endswith("@point") and b.effect.family == "segment_mass"):
+        return False
+    pm = model.pin
+    body = a.target[: -len("@point")]
+    f = pm.frames[model.frame_id(body)]
+    c = np.asarray(f.placement.actInv(np.asarray(pm.inertias[f.parentJoint].lever, dtype=float)))
+    for i, n in enumerate(("x", "y", "z")):
+        se = a.stderr.get(n)
+        if se is None or not np.isfinite(se):
+            continue                    # held (a planar model's normal): nothing to compare
+        if abs(a.params[n] - c[i]) > k * se:
+            return False
+    return True
+
+
 def _order(ranking: list, model=None, sigma=None, z_critical: float = 2.0, tie: float = 0.05) -> list:
     """Best held-out improvement first.  Of two candidates with one target the one with fewer parameters
     comes first when the other's held-out gain is within ``tie`` noise variances of it.  Of two payload
     sites on one body (:func:`_same_site`: a marker and a fitted point on the body's axis) the one with
     fewer parameters comes first when it is significant itself, unless the other is better held out by
     the bar every candidate meets: the extra parameter must earn its place out of sample,
-    ``z >= z_critical`` in the paired :func:`held_out_test`."""
+    ``z >= z_critical`` in the paired :func:`held_out_test`; and a payload at a fitted point that sits
+    at its body's centre of mass (:func:`_at_own_com`) comes after that body's own mass."""
     def richer_wins(a, b) -> bool:
         if sigma is None or a.heldout is None or b.heldout is None:
             return True
@@ -993,7 +1013,8 @@ def _order(ranking: list, model=None, sigma=None, z_critical: float = 2.0, tie: 
             for k in range(i + 1, len(out)):
                 a, b = out[i], out[k]
                 if (a.converged == b.converged and a.fit.stats.k > b.fit.stats.k and a.target != b.target
-                        and _same_site(a, b, model) and b.significant and not richer_wins(a, b)):
+                        and _same_site(a, b, model) and b.significant
+                        and (not richer_wins(a, b) or _at_own_com(a, b, model))):
                     out.insert(i, out.pop(k))
                     moved = True
                     break

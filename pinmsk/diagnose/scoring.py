@@ -460,11 +460,24 @@ class Scorer:
         except PinmskError as exc:            # a profile refit that fails: the candidate is not identifiable
             ident = {"identifiable": False, "flags": [f"profile likelihood failed: {exc}"]}
         # a fit outside the physically plausible range (a segment mass beyond the anthropometric table)
-        implausible = _plausibility(jp.components_at(x)[-1], c.model, eq.motion_rows)
+        # ... of the candidate and of every earlier effect as the joint refit moved it (a candidate that
+        # only fits by pushing an earlier one out of its range is no explanation)
+        comps = jp.components_at(x)
+        implausible = _plausibility(comps[-1], c.model, eq.motion_rows)
+        if len(comps) > 1:
+            before = self._earlier_flags()
+            for earlier in comps[:-1]:
+                implausible += [f"with it, {flag}" for flag in _plausibility(earlier, c.model, eq.motion_rows)
+                                if not before.get(earlier.label)]
         if implausible:
             ident = dict(ident, identifiable=False, plausible=False,
                          flags=list(ident.get("flags", [])) + implausible)
         note = "" if conv else f"fit did not converge: {fit.stats.message}"
+        # the held-out errors rest on one fit per fold: a fold that stopped short is said, never hidden
+        test["folds_converged"] = bool(cv_ok)
+        if not cv_ok:
+            note = (note + "; " if note else "") + ("a cross-validation fold's fit did not converge (its "
+                                                    "held-out error is that of its last iterate)")
         if not ident.get("identifiable", True):
             note = (note + "; " if note else "") + "not identifiable: " + "; ".join(ident["flags"]) + \
                 " (shown, never suggested)"
@@ -472,6 +485,14 @@ class Scorer:
         return EffectScore(fit, rmse_after, explained, improvement, significant, bool(conv), note,
                            test=test, identifiability=ident, refit=refit_info,
                            components=jp.components_at(x, fit.info.get("joint_stderr")), heldout=e_cv, x=x)
+
+    def _earlier_flags(self) -> dict:
+        """The plausibility flags of the earlier effects at their own fitted values (an effect the user
+        added out of range is not held against every candidate)."""
+        if getattr(self, "_earlier", None) is None:
+            comps = self.base.components_at(self.base_x) if self.refit else []
+            self._earlier = {e.label: _plausibility(e, self.c.model, self.c.eq.motion_rows) for e in comps}
+        return self._earlier
 
     def _floor_change(self, jp: JointProblem, x) -> float:
         """Muscle level: the fall of the noise-whitened mean square that the joint fit ``x`` makes by

@@ -490,15 +490,13 @@ def _grf(truth, motion: Motion, unact, t, share=None) -> dict:
 
 def _envelope_noise(t, u, lv: dict, rng) -> np.ndarray:
     """Envelopes ``(N, m)`` of simulated raw EMG for excitations ``u`` (N, m) at times ``t`` (see the module notes)."""
-    from scipy.signal import butter, sosfiltfilt
-
     from ..signals.emg import envelope
+    from ..signals.filtering import bandpass
 
     pad = 1.0
     tf = np.arange(t[0] - pad, t[-1] + pad + 0.5 / EMG_RATE, 1.0 / EMG_RATE)
     uf = make_interp_spline(t, u, k=3, axis=0)(np.clip(tf, t[0], t[-1]))
-    sos = butter(4, [EMG_BAND[0] / (0.5 * EMG_RATE), EMG_BAND[1] / (0.5 * EMG_RATE)], btype="band", output="sos")
-    carrier = sosfiltfilt(sos, rng.standard_normal((2,) + uf.shape), axis=1)
+    carrier = bandpass(rng.standard_normal((2,) + uf.shape), rate=EMG_RATE, band=EMG_BAND, order=4, axis=1)
     carrier /= np.mean(np.abs(carrier), axis=1, keepdims=True)       # unit rectified mean
     raw = uf * carrier[0] + lv["excitation_floor"] * carrier[1]
     env = envelope(raw, rate=EMG_RATE, band=None, cutoff=lv["emg_lowpass"])

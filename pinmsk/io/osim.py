@@ -936,6 +936,48 @@ def parse_osim(data: bytes | str, *, source: str = "<string>") -> OsimDocument:
                          "not <OpenSimDocument> with a <Model>")
     if model is None:
         raise ModelError(f"{source}:{root.line}: <OpenSimDocument> holds no <Model>")
+    plugin = _plugin_elements(model)
+    if plugin:
+        node, name = plugin[0]
+        kinds = ", ".join(dict.fromkeys(n.written for n, _ in plugin))
+        raise ModelError(f"{source}:{node.line}: <{node.written} name=\"{node.attrib.get('name', '')}\">: "
+                         f"the model needs the {name} plugin ({kinds}), which OpenSim 4.x loads only with "
+                         "that plugin and pinmsk does not import")
+    if BETA_VERSIONS[0] <= version < BETA_VERSIONS[1]:
+        try:
+            return _parse_model(model, source, version)
+        except ModelError as exc:
+            raise ModelError(f"{source}: OpenSim 4.0-beta format (Version=\"{version}\"); open and save it in "
+                             f"OpenSim 4.x ({exc})") from None
+    return _parse_model(model, source, version)
+
+
+#: OpenSim's document versions of the 4.0 development line (30500 <= Version < 40000): its joints and
+#: paths name their frames by properties later renamed to sockets; OpenSim 4.x upgrades them when it
+#: opens the file (``XMLDocument::getLatestVersion``), pinmsk reads only what the 4.x layout also holds.
+BETA_VERSIONS = (30500, 40000)
+
+#: Components that OpenSim 4.x loads only with a plugin library: type -> the plugin.
+PLUGIN_TYPES = {
+    "Smith2018ArticularContactForce": "opensim-jam (JAM)",
+    "Smith2018ContactMesh": "opensim-jam (JAM)",
+    "Blankevoort1991Ligament": "opensim-jam (JAM)",
+}
+
+
+def _plugin_elements(node: _Node) -> list:
+    """``(element, plugin name)`` of every element (in document order) whose type needs a plugin."""
+    out, stack = [], [node]
+    while stack:
+        n = stack.pop()
+        if n.written in PLUGIN_TYPES:
+            out.append((n, PLUGIN_TYPES[n.written]))
+        stack.extend(reversed(n.children))
+    return out
+
+
+def _parse_model(model: _Node, source: str, version: int) -> OsimDocument:
+    """The :class:`OsimDocument` of a document's ``<Model>`` element."""
     rd = _Reader(source, version)
     sink = _Sink()
 

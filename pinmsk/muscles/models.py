@@ -57,8 +57,9 @@ from .nagano_gerritsen import ng_contraction_rate, ng_equilibrium, ng_fiber_forc
 from .pennation import check_along_positive, pennation_height
 from .tendon import (TENDON_STRAIN0, thelen_tendon_force, thelen_tendon_stiffness, thelen_tendon_strain,
                      winters_tendon_force, winters_tendon_stiffness, winters_tendon_strain)
-from .thelen2003 import (GAMMA, K_PE, PASSIVE_STRAIN0, _speed_scale, thelen_contraction_rate,
-                         thelen_equilibrium, thelen_fiber_force, thelen_force_velocity)
+from .thelen2003 import (_speed_scale, thelen_active_force_length, thelen_active_force_length_derivative,
+                         thelen_contraction_rate, thelen_equilibrium, thelen_fiber_force, thelen_force_velocity,
+                         thelen_passive_force_length, thelen_passive_force_length_derivative)
 
 __all__ = ["MUSCLE_MODELS", "MUSCLE_PARAMETERS", "DeGroote2016", "Millard2012", "MuscleParameter",
            "NaganoGerritsen", "Thelen2003", "Thelen2003OpenSim"]
@@ -459,10 +460,9 @@ class Thelen2003(_MuscleModel):
     def rigid_force(self, a, l_mt, v_mt):
         """Muscle-tendon force (N), rigid tendon (Eq. A.7-A.9); any backend, no input checks."""
         l_ce, v_ce, cos = self.fiber_rigid(l_mt, v_mt)
-        xp = backend_of(l_ce, a)
-        d = l_ce / self.l_opt - 1.0
-        f = thelen_fiber_force(v_ce, a, xp.exp(d * d * (-1.0 / GAMMA)), v_max=self.v_max)
-        f = f + xp.expm1((K_PE / PASSIVE_STRAIN0) * xp.maximum(d, 0.0)) / np.expm1(K_PE)
+        l_norm = l_ce / self.l_opt
+        f = thelen_fiber_force(v_ce, a, thelen_active_force_length(l_norm), v_max=self.v_max)
+        f = f + thelen_passive_force_length(l_norm)
         return self.f_max * f * cos
 
     def _tendon_curve(self, strain):
@@ -473,12 +473,11 @@ class Thelen2003(_MuscleModel):
         return thelen_tendon_strain(force, strain0=self.tendon_strain0)
 
     def _fiber_parts(self, a, l_ce, v_ce):
-        xp = backend_of(a, l_ce, v_ce)
-        d = l_ce / self.l_opt - 1.0
-        fl = xp.exp(d * d * (-1.0 / GAMMA))
+        l_norm = l_ce / self.l_opt
+        fl = thelen_active_force_length(l_norm)
         # Eq. A.9: activation scales the maximum shortening velocity (as thelen_fiber_force)
         fv = thelen_force_velocity(v_ce / (_speed_scale(a) * self.v_max))
-        fpe = xp.expm1((K_PE / PASSIVE_STRAIN0) * xp.maximum(d, 0.0)) / np.expm1(K_PE)
+        fpe = thelen_passive_force_length(l_norm)
         return fl, fv, fpe, 0.0 * fl
 
     def force_limits(self, l_mt, v_mt):
@@ -495,15 +494,13 @@ class Thelen2003(_MuscleModel):
         self._check(l_mt=l_mt, v_mt=v_mt)
         l_mt, slack = self._taut(l_mt)
         l_ce, v_ce, cos = self._rigid(l_mt, v_mt)
-        d = l_ce / self.l_opt - 1.0
+        l_norm = l_ce / self.l_opt
         fmc = self.f_max * cos
-        f_act = np.exp(d * d * (-1.0 / GAMMA))
+        f_act = thelen_active_force_length(l_norm)
         f_act *= thelen_force_velocity(v_ce / self.v_max)
         f_act *= fmc
-        np.maximum(d, 0.0, out=d)
-        d *= K_PE / PASSIVE_STRAIN0
-        f_pas = np.expm1(d, out=d)
-        f_pas *= fmc / np.expm1(K_PE)
+        f_pas = thelen_passive_force_length(l_norm)
+        f_pas *= fmc
         if slack.any():  # a slack unit cannot pull
             f_act = np.where(slack, 0.0, f_act)
             f_pas = np.where(slack, 0.0, f_pas)
@@ -1094,7 +1091,6 @@ class Thelen2003OpenSim(_CurveMuscle):
                          self.height / np.sin(np.maximum(self.max_pennation, 1e-300)), 0.01 * self.l_opt)
         h_min.flags.writeable = False
         object.__setattr__(self, "l_min", h_min)
-        object.__setattr__(self, "_pe_scale", 1.0 / np.expm1(self.passive_shape))
 
     def _kwargs(self) -> dict:
         kw = self._common_kwargs()
@@ -1104,13 +1100,13 @@ class Thelen2003OpenSim(_CurveMuscle):
 
     def _length_curves(self, l_norm):
         xp = backend_of(l_norm)
-        d = xp.asarray(l_norm) - 1.0
-        fl = xp.exp(-(d * d) / self.active_shape)
-        rate = self.passive_shape / self.passive_strain
-        e = xp.exp(rate * xp.maximum(d, 0.0))
-        taut = d > 0.0
-        return (fl, (-2.0 / self.active_shape) * d * fl, xp.where(taut, (e - 1.0) * self._pe_scale, 0.0),
-                xp.where(taut, rate * e * self._pe_scale, 0.0))
+        l_norm = xp.asarray(l_norm)
+        passive = {"k_pe": self.passive_shape, "strain0": self.passive_strain}
+        # OpenSim's passive curve has slope 0 at l_norm = 1 exactly (the left one), Eq. A.7's is the right one
+        return (thelen_active_force_length(l_norm, gamma=self.active_shape),
+                thelen_active_force_length_derivative(l_norm, gamma=self.active_shape),
+                thelen_passive_force_length(l_norm, **passive),
+                xp.where(l_norm > 1.0, thelen_passive_force_length_derivative(l_norm, **passive), 0.0))
 
     def _velocity_curve(self, v_norm):
         xp = backend_of(v_norm)

@@ -76,36 +76,39 @@ _PE_SCALE = 1.0 / math.expm1(K_PE)
 
 
 # --------------------------------------------------------------------------- curves
-def thelen_passive_force_length(l_norm, *, k_pe: float = K_PE, strain0: float = PASSIVE_STRAIN0):
+def thelen_passive_force_length(l_norm, *, k_pe=K_PE, strain0=PASSIVE_STRAIN0):
     """Parallel elastic force, thesis Eq. A.7: ``(exp(k_pe (l - 1)/strain0) - 1)/(exp(k_pe) - 1)``.
 
     Zero below optimal length: the parallel element is slack there (the
     printed formula would give a small negative force; OpenSim clips too).
+    Any backend; ``k_pe`` and ``strain0`` may be per-muscle arrays.
     """
     xp = backend_of(l_norm)
     d = xp.maximum(xp.asarray(l_norm) - 1.0, 0.0)
-    return xp.expm1((k_pe / strain0) * d) / math.expm1(k_pe)
+    return xp.expm1((k_pe / strain0) * d) / np.expm1(k_pe)
 
 
-def thelen_passive_force_length_derivative(l_norm, *, k_pe: float = K_PE,
-                                           strain0: float = PASSIVE_STRAIN0):
-    """d f_pe / d l_norm of Eq. A.7 (right derivative at l_norm = 1, zero below)."""
-    l = np.asarray(l_norm, dtype=float)
+def thelen_passive_force_length_derivative(l_norm, *, k_pe=K_PE, strain0=PASSIVE_STRAIN0):
+    """d f_pe / d l_norm of Eq. A.7 (right derivative at l_norm = 1, zero below); any backend."""
+    xp = backend_of(l_norm)
+    l = xp.asarray(l_norm)
     rate = k_pe / strain0
-    return np.where(l >= 1.0, rate * np.exp(rate * np.maximum(l - 1.0, 0.0)) / math.expm1(k_pe), 0.0)
+    return xp.where(l >= 1.0, rate * xp.exp(rate * xp.maximum(l - 1.0, 0.0)) / np.expm1(k_pe), 0.0)
 
 
-def thelen_active_force_length(l_norm, *, gamma: float = GAMMA):
-    """Thelen 2003 active force-length ``f_isom = exp(-(l - 1)^2 / gamma)``, thesis Eq. A.8."""
+def thelen_active_force_length(l_norm, *, gamma=GAMMA):
+    """Thelen 2003 active force-length ``f_isom = exp(-(l - 1)^2 / gamma)``, thesis Eq. A.8; any backend,
+    ``gamma`` may be a per-muscle array."""
     xp = backend_of(l_norm)
     d = xp.asarray(l_norm) - 1.0
-    return xp.exp(-(d * d) / gamma)
+    return xp.exp(d * d * (-1.0 / gamma))
 
 
-def thelen_active_force_length_derivative(l_norm, *, gamma: float = GAMMA):
-    """d f_isom / d l_norm of Eq. A.8: ``-2 (l - 1)/gamma f_isom``."""
-    d = np.asarray(l_norm, dtype=float) - 1.0
-    return (-2.0 / gamma) * d * np.exp(-(d * d) / gamma)
+def thelen_active_force_length_derivative(l_norm, *, gamma=GAMMA):
+    """d f_isom / d l_norm of Eq. A.8: ``-2 (l - 1)/gamma f_isom``; any backend."""
+    xp = backend_of(l_norm)
+    d = xp.asarray(l_norm) - 1.0
+    return (-2.0 / gamma) * d * xp.exp(d * d * (-1.0 / gamma))
 
 
 FV_SMOOTH_MAX = 0.03     # widest blend: the eccentric hyperbola has its pole at w = -1/_C = -0.04

@@ -175,7 +175,20 @@ def _meta(doc: OsimDocument, skel: Skeleton, path: Path) -> dict:
         "virtual_coordinates": list(skel.virtual),
         "markers": [{"name": n, "body": b, "position": T[:3, 3].tolist()} for n, (b, T) in skel.markers.items()],
         "credits": doc.credits,
+        # Simbody's Ball and Free mobilizers: their rotations' speeds are angular-velocity components
+        "euler_rate_convention": _euler_rate_convention(doc),
+        # each FreeJoint's/BallJoint's body-fixed X-Y-Z rotation coordinates (OpenSim's ID tool convention)
+        "euler_rotation_coordinates": [[c.name for c in j.coordinates[:3]] for j in doc.joints
+                                       if j.type in ("FreeJoint", "BallJoint") and len(j.coordinates) >= 3],
     }
+
+
+def _euler_rate_convention(doc: OsimDocument) -> str | None:
+    """The note on the FreeJoints and BallJoints (Simbody's Ball and Free mobilizers, whose rotations' speeds
+    are angular-velocity components) that inverse dynamics writes in its header and warning; None without."""
+    from .skeleton import EULER_RATE_NOTE
+    euler = [f"{j.name} ({j.type})" for j in doc.joints if j.type in ("FreeJoint", "BallJoint")]
+    return f"joints {', '.join(euler)}: {EULER_RATE_NOTE}" if euler else None
 
 
 def _not_imported(doc: OsimDocument, handled: set) -> list[ReportEntry]:

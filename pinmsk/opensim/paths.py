@@ -1837,7 +1837,7 @@ def _monomials(k: int, degree: int) -> np.ndarray:
             for v in combo:
                 e[v] += 1
             rows.append(e)
-    return np.array(rows, dtype=int).reshape(-1, k)
+    return np.array(rows, dtype=int).reshape(len(rows), k)     # k = 0: the constant term alone (a path crossing only locked coordinates)
 
 
 def _design(x, scale, exps):

@@ -1337,6 +1337,16 @@ def _bounds(doc, kin, approx, reach) -> dict[str, float]:
     return out
 
 
+#: What OpenSim's InverseDynamicsTool does differently on a FreeJoint or BallJoint (Simbody's Free and Ball
+#: mobilizers: speeds u = angular velocity, q' = N(q) u), and what that changes.
+EULER_RATE_NOTE = (
+    "OpenSim's InverseDynamicsTool reads the Euler-angle rates of the motion's FreeJoint/BallJoint rotations "
+    "as the joint's speeds (angular-velocity components) and their second derivatives as its accelerations, "
+    "so its results follow a different motion: the moments of these rotations, the forces of the joint's "
+    "translations and the moments of every joint beyond it differ from pinmsk's, which differentiate the "
+    "angles (physically consistent, as OpenSim's own solver gives with consistent speeds)")
+
+
 def _joint_entry(jk: JointKinematics, new: list[UrdfJoint], fit: _Fit | None, text: str, deps) -> ReportEntry:
     movable = [uj for uj in new if uj.kind != "fixed"]
     if not movable:
@@ -1356,9 +1366,7 @@ def _joint_entry(jk: JointKinematics, new: list[UrdfJoint], fit: _Fit | None, te
                        "functions of their coordinates)")
         if jk.joint.type in ("FreeJoint", "BallJoint"):
             # Simbody's Free and Ball mobilizers take the angular velocity as their speeds, not the angles' rates
-            became += ("; NOTE: in OpenSim the speeds of its rotations are angular-velocity components, in "
-                       "pinmsk the coordinates' time derivatives (X-Y-Z angle rates), so the moments of these "
-                       "rotations differ from OpenSim's inverse dynamics by the angle-rate Jacobian")
+            became += ("; NOTE: " + EULER_RATE_NOTE)
             return ReportEntry(element=jk.joint.where, became=became, status=NOTE)
         return ReportEntry(element=jk.joint.where, became=became)
     details = {"max_origin_error_m": fit.max_translation_error, "max_rotation_error_rad": fit.max_rotation_error,

@@ -226,7 +226,7 @@ def cmd_id(args) -> int:
     model = _model(args)
     trial = _read(args.trial, model, args)
     with _progress(trial.n_frames, "ID", "frames") as bar:
-        res = inverse_dynamics_result(model, trial, **_inputs(args), progress=bar)
+        res = inverse_dynamics_result(model, trial, **_inputs(args), progress=bar, convention=args.convention)
     print(res.report())
     out = res.trial
     from ..tools.layout import id_table, is_opensim_model
@@ -305,6 +305,9 @@ def _run_solver(args, solver, total: int | None, label: str, title: str, *, open
     (``opensim_files``: a model from OpenSim gets OpenSim's activation and force files)."""
     model = _model(args)
     trial = _read(args.trial, model, args)
+    # FSO evaluates the paths at every integration step, one frame at a time: there the surrogates,
+    # checked against the exact paths at the trial's frames (the exact paths cost minutes per trial)
+    model = _analysis_paths(args, model, trial, surrogate=label == "FSO")
     kw = _inputs(args)
     if getattr(args, "moments", None):
         kw["moments"] = args.moments
@@ -317,11 +320,33 @@ def _run_solver(args, solver, total: int | None, label: str, title: str, *, open
     if opensim_files and is_opensim_model(model):
         tables = so_tables(model, solver.result_, [a.name for a in solver.actuators_])
         for path, table in zip(so_paths(args.output), tables):
+            if getattr(args, "_paths_line", None):
+                table = table.with_meta(paths=args._paths_line)
             _write(table, path, args.precision)
     else:
-        _write(solver.result_, args.output, args.precision)
+        result = solver.result_
+        if getattr(args, "_paths_line", None):
+            result = result.with_meta(paths=args._paths_line)          # in the output's header
+        _write(result, args.output, args.precision)
     _report_results(args, model, trial, solver.result_, title, text)
     return 0
+
+
+def _analysis_paths(args, model, trial, *, surrogate: bool = False):
+    """The model with the paths ``--surrogate-paths`` / ``--path-tolerance`` ask for
+    (:func:`pinmsk.opensim.path_check.choose_paths`); the choice is printed as one header line."""
+    from ..opensim.muscle_import import geometric_paths
+    from ..opensim.path_check import choose_paths
+    if getattr(model, "muscles", None) is None or geometric_paths(model.meta.get("import_report")) is None:
+        return model            # a model with only its own paths runs on them
+    q = np.column_stack([np.asarray(trial[c], dtype=float) if c in trial else
+                         np.zeros(trial.n_frames) for c in model.coordinates])
+    model, line = choose_paths(model, q, surrogate=surrogate or getattr(args, "surrogate_paths", False),
+                               exact_hint="" if surrogate else "or use the exact paths (leave out --surrogate-paths)",
+                               tolerance=1e-3 * getattr(args, "path_tolerance", 1.0))
+    print(line)
+    args._paths_line = line
+    return model
 
 
 def cmd_so(args) -> int:
@@ -461,7 +486,9 @@ _OPTIMIZE_EPILOG = (
     "  muscle-tendon forces, 'ift' joint torques; kind: 'nodes' | 'polynomial' | 'fourier' | 'spline';\n"
     "  free_period = true frees the Fourier period.\n"
     "Every key of every section: pinmsk.solvers.ocp.tasks.TASK_SCHEMA (unknown keys are errors).\n"
-    "A problem that does not converge exits with status 2 and writes nothing.\n"
+    "A problem that does not converge exits with status 2 and writes nothing; with --keep-unconverged it\n"
+    "  writes the last iterate (\"converged\": false in OUT.json) and still exits with status 2.\n"
+    "Progress: one line per IPOPT solve stage on stderr (live on a terminal), then a summary line.\n"
     "A [gait] task with --report OUT.html also writes the gait validation report of the solved stride.\n"
     "Examples: data/tasks/*.toml")
 
@@ -483,8 +510,20 @@ def cmd_optimize(args) -> int:
     from ..pipeline import optimize_task
     if args.report:
         _check_gait_report(args)
-    res = optimize_task(args.task, args.output, precision=args.precision)
+    from .solve_progress import SolveProgress, summary_line
+    if args.keep_unconverged and not args.output:
+        raise PinmskError("--keep-unconverged writes the last iterate to -o OUT: give -o; nothing was run")
+    # the live line only without IPOPT's own log on the terminal (both would interleave)
+    progress = SolveProgress(live=False if args.verbose else None)
+    res = optimize_task(args.task, args.output, precision=args.precision, monitor=progress,
+                        verbose=args.verbose, solver_log=args.solver_log, max_iter=args.max_iter,
+                        keep_unconverged=args.keep_unconverged)
+    if not res.converged:      # --keep-unconverged: written, flagged, and not a solution (status 2)
+        print(f"pinmsk: error: {args.task}: the optimizer did not converge ({res.status}); the last iterate "
+              f"was written to {args.output} and {args.output}.json (converged=false)", file=sys.stderr)
+        return 2
     print(res.report())
+    print(summary_line(res.summary))
     if args.report:
         # the stride just solved (the Result written to OUT.sto: its info carries the JSON's speed,
         # cost of transport and body weight) against Winter's Table A.1, the measured walk and the
@@ -645,6 +684,10 @@ def build_parser() -> argparse.ArgumentParser:
     _precision_flag(s)
     input_flags(s)
     _moment_arms_flag(s)
+    s.add_argument("--convention", choices=["pinmsk", "opensim"], default="pinmsk",
+                   help="FreeJoint/BallJoint rotations: 'pinmsk' differentiates the Euler angles (physically "
+                        "consistent, default); 'opensim' reproduces OpenSim's InverseDynamicsTool, which reads "
+                        "the angles' rates as angular velocity")
     s.add_argument("--plot", metavar="DIR", default=None, help="write PNG figures to DIR")
     _add_read_flags(s)
     _nonlinear_flag(s)
@@ -704,6 +747,12 @@ def build_parser() -> argparse.ArgumentParser:
     def so_flags(s):
         s.add_argument("model")
         s.add_argument("trial", help="trial with the coordinates (and optionally <coord>_moment)")
+        s.add_argument("--surrogate-paths", action="store_true",
+                       help="an imported model's polynomial path surrogates instead of its exact paths (fso: always), "
+                            "checked against the exact paths at the trial's frames (docs/paths.md)")
+        s.add_argument("--path-tolerance", type=float, default=1.0, metavar="MM",
+                       help="largest surrogate error (mm, length or moment arm) --surrogate-paths accepts "
+                            "(default 1)")
         s.add_argument("-o", "--output", required=True, help="output .sto or .csv")
         _precision_flag(s)
         s.add_argument("--mode", choices=["force", "activation"], default="force",
@@ -851,6 +900,16 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--report", metavar="OUT.html", default=None,
                    help="[gait] tasks: write the validation report (joint angles vs Winter and the measured "
                         "walk, GRF double hump, activations vs EMG, published bands; needs matplotlib)")
+    s.add_argument("--solver-log", metavar="FILE", default=None,
+                   help="write IPOPT's own iteration log of every solve stage to FILE (replaced)")
+    s.add_argument("--verbose", action="store_true",
+                   help="print IPOPT's own log on stdout (default: none; a terminal shows one live progress "
+                        "line per stage on stderr, a pipe one line per stage at its end)")
+    s.add_argument("--max-iter", metavar="N", type=int, default=None,
+                   help="IPOPT's iteration limit of each stage (default: the task's [solver] maxiter)")
+    s.add_argument("--keep-unconverged", action="store_true",
+                   help="if IPOPT does not converge, still write the last iterate to -o OUT and OUT.json, "
+                        "flagged \"converged\": false (e.g. a gait task's next guess); the exit status stays 2")
     s.set_defaults(func=cmd_optimize)
 
     s = sub.add_parser("view", help="meshcat viewer: the model, optionally playing a trial with results")
@@ -916,7 +975,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: Arguments naming output files, and output folders, of any command (checked before it runs).
-_OUTPUT_FILES = ("output", "json", "report", "save_model", "save_osim")
+_OUTPUT_FILES = ("output", "json", "report", "save_model", "save_osim", "solver_log")
 _OUTPUT_FOLDERS = ("plot", "out")
 
 

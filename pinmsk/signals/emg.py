@@ -23,7 +23,7 @@ import numpy as np
 
 from ..errors import TrialError
 from ..trial import Trial
-from .filtering import filter_padlen, lowpass
+from .filtering import bandpass, filter_padlen, lowpass
 from .sampling import check_rate, measured_rate
 
 __all__ = ["envelope", "envelopes", "normalize", "on_off", "onset_times", "DEFAULT_BAND",
@@ -56,10 +56,8 @@ def envelope(x, *, rate: float, band: tuple[float, float] | None = DEFAULT_BAND,
             raise TrialError(f"{n} EMG samples are too few to band-pass")
         if not np.all(np.isfinite(x)):
             raise TrialError("EMG contains NaN/inf; cut or fill the gap before the envelope")
-        from scipy.signal import butter, sosfiltfilt  # here, not at import (slow)
-
-        sos = butter(order, [lo / (0.5 * rate), hi / (0.5 * rate)], btype="band", output="sos")
-        x = sosfiltfilt(sos, x, axis=0, padtype="odd", padlen=filter_padlen(order))
+        # the pad of the low-pass below, not scipy's default for the band-pass design
+        x = bandpass(x, rate=rate, band=(lo, hi), order=order, padlen=filter_padlen(order))
     env = lowpass(np.abs(x), rate=rate, cutoff=cutoff, order=order)
     return np.maximum(env, 0.0)
 

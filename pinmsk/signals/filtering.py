@@ -9,6 +9,8 @@ channel, and every function works on all columns at once.
   ``|H(f)|**2 = 1 / (1 + (f / cutoff)**(2 * order))``: 0.5 (-6 dB) at
   ``cutoff``, not -3 dB, and the effective order is ``2 * order``.  ``cutoff`` is
   the design frequency of the single pass; no "Winter correction" is applied.
+* :func:`bandpass` is the Butterworth band-pass run forwards and backwards (``sosfiltfilt``),
+  the one pinmsk uses (EMG, noise bands, simulated EMG); its gain is the square of the design's.
 * :func:`differentiate` optionally low-passes, then passes a quintic
   interpolating B-spline (``scipy.interpolate.make_interp_spline(k=5)``, with
   scipy's default not-a-knot end conditions) through the samples and returns
@@ -30,7 +32,7 @@ import numpy as np
 from ..errors import TrialError
 from .sampling import check_increasing, uniform_rate
 
-__all__ = ["lowpass", "differentiate", "filter_padlen", "DEFAULT_CUTOFF", "CONTACT_CUTOFF", "FILTER_ORDER"]
+__all__ = ["lowpass", "bandpass", "bandpass_design", "differentiate", "filter_padlen", "DEFAULT_CUTOFF", "CONTACT_CUTOFF", "FILTER_ORDER"]
 
 #: Default low-pass cut-off (Hz) of kinematics and ground reaction forces in every analysis
 #: (:func:`pinmsk.kinematics.prepare`); ``cutoff=0`` / ``--cutoff 0`` turns filtering off.
@@ -162,6 +164,46 @@ def _butterworth(order: int, wn: float) -> np.ndarray:
     sos = butter_sos(order, wn)         # scipy.signal.butter(order, wn, output="sos")
     sos.flags.writeable = False            # shared by every caller: never changed
     return sos
+
+
+def bandpass_design(band, rate: float, order: int = 4) -> np.ndarray:
+    """Second-order sections of the Butterworth band-pass ``band = (low, high)`` Hz at ``rate`` Hz:
+    ``scipy.signal.butter(order, [low, high] / (rate / 2), btype="band", output="sos")`` (``2 order``
+    poles), cached and read-only.  ``0 < low < high < rate / 2``."""
+    lo, hi = (float(b) for b in band)
+    rate = float(rate)
+    if not (np.isfinite(rate) and rate > 0):
+        raise TrialError(f"sampling rate must be a positive number of Hz, got {rate!r}")
+    if not (0 < lo < hi < 0.5 * rate):
+        raise TrialError(f"band-pass ({lo:g}, {hi:g}) Hz must have 0 < low < high < the Nyquist frequency "
+                         f"{0.5 * rate:g} Hz (rate {rate:g} Hz)")
+    if int(order) != order or order < 1:
+        raise TrialError(f"filter order must be a positive integer, got {order!r}")
+    return _bandpass_sos(int(order), lo, hi, rate)
+
+
+@functools.lru_cache(maxsize=64)
+def _bandpass_sos(order: int, lo: float, hi: float, rate: float) -> np.ndarray:
+    from scipy.signal import butter  # here, not at import (slow)
+
+    sos = butter(order, [lo / (0.5 * rate), hi / (0.5 * rate)], btype="band", output="sos")
+    sos.flags.writeable = False            # shared by every caller: never changed
+    return sos
+
+
+def bandpass(x, *, rate: float, band, order: int = 4, padlen: int | None = None, axis: int = 0) -> np.ndarray:
+    """Zero-lag Butterworth band-pass of ``x`` along ``axis``: :func:`bandpass_design` run forwards and
+    backwards (``scipy.signal.sosfiltfilt``, ``padtype="odd"``), so the gain is ``|H(f)|**2``.
+
+    ``padlen`` is the samples of odd extension at each end: None is scipy's default for this design
+    (``3 (2 n_sections + 1)`` less the sections' zero coefficients); the EMG envelope passes
+    :func:`filter_padlen` of its order, the pad of the low-pass that follows it.
+    """
+    from scipy.signal import sosfiltfilt
+
+    sos = bandpass_design(band, rate, order).copy()      # scipy's filter wants a writeable design
+    return sosfiltfilt(sos, np.asarray(x, dtype=float), axis=axis,
+                       padtype="odd", padlen=padlen)
 
 
 #: the coordinate filters of :func:`differentiate`: pinmsk's own, and OpenSim's ID tool's
@@ -386,6 +428,10 @@ class _QuinticOperators:
 #: (N, hash of the time grid) -> its :class:`_QuinticOperators` (the grid itself checked on a hit)
 _OPERATORS: dict[tuple, _QuinticOperators] = {}
 
+#: Grids of more samples are not kept between calls: their operators (some 300 bytes a sample) would
+#: outlive the analysis of a long trial, and building them again costs as much as one use.
+CACHE_SAMPLES = 50_000
+
 
 def _quintic_operators(t: np.ndarray) -> _QuinticOperators:
     key = (t.size, hash(t.tobytes()))
@@ -393,6 +439,8 @@ def _quintic_operators(t: np.ndarray) -> _QuinticOperators:
     if hit is not None and np.array_equal(hit.t, t):
         return hit
     ops = _QuinticOperators(t)
+    if t.size > CACHE_SAMPLES:
+        return ops
     if len(_OPERATORS) >= 16:
         _OPERATORS.pop(next(iter(_OPERATORS)))
     _OPERATORS[key] = ops

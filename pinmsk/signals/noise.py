@@ -60,7 +60,7 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import TrialError
-from .filtering import FILTER_ORDER, lowpass
+from .filtering import FILTER_ORDER, bandpass, bandpass_design, lowpass
 
 __all__ = ["NoiseModel", "fit_noise", "band_edges", "band_powers", "signal_band", "TOP_BAND", "LOG_VAR"]
 
@@ -69,6 +69,8 @@ TOP_BAND = 0.45
 #: Variance of the log of a band power per independent Gaussian sample (2 / n for n samples).
 LOG_VAR = 2.0
 _ORDERS = (2, 4)
+#: Order of each band's Butterworth band-pass design (four poles; run forwards and backwards).
+BAND_ORDER = 2
 _N_CORNERS = 24
 
 
@@ -106,10 +108,7 @@ def band_edges(band_start: float, rate: float) -> np.ndarray:
 
 @functools.lru_cache(maxsize=32)
 def _band_filters(edges: tuple, rate: float):
-    from scipy.signal import butter
-
-    return [butter(2, [a / (0.5 * rate), b / (0.5 * rate)], btype="band", output="sos")
-            for a, b in zip(edges[:-1], edges[1:])]
+    return [bandpass_design((a, b), rate, order=BAND_ORDER) for a, b in zip(edges[:-1], edges[1:])]
 
 
 @functools.lru_cache(maxsize=32)
@@ -146,16 +145,15 @@ def band_powers(x, rate: float, edges: Sequence[float], *, modulation=None, trim
     samples either side, is left out.  Where less than a quarter of the samples
     remain, ``(MAD / 0.6745)^2``.  ``trim`` samples at each end are left out.
     """
-    from scipy.signal import sosfiltfilt
-
     x = np.asarray(x, dtype=float)
     squeeze = x.ndim == 1
     if squeeze:
         x = x[:, None]
     out = np.empty((len(edges) - 1, x.shape[1]))
     sl = slice(trim, x.shape[0] - trim if trim else None)
-    for j, sos in enumerate(_band_filters(tuple(float(e) for e in edges), float(rate))):
-        y = sosfiltfilt(sos, x, axis=0)
+    edges = tuple(float(e) for e in edges)
+    for j, band in enumerate(zip(edges[:-1], edges[1:])):
+        y = bandpass(x, rate=float(rate), band=band, order=BAND_ORDER)
         if modulation is not None:
             y = y / modulation
         y = y[sl]

@@ -73,7 +73,6 @@ import time as _time
 import warnings
 
 import numpy as np
-import pinocchio as pin
 from scipy.interpolate import CubicHermiteSpline
 
 from ..components import Motion
@@ -84,7 +83,8 @@ from ..errors import ConvergenceError, InfeasibleError, ModelError, SolverError
 from ..fitting import FitStatistics, Fitter, Result, format_report
 from ..kinematics import DEFAULT_CUTOFF, as_motion, prepare, require_independent_joints
 from ..muscles.activation import held_step_excitation, reachable_activation
-from ..skeleton import ExternalForce, external_generalized_force, integrate, world_wrench
+from ..skeleton import (ExternalForce, external_generalized_force, integrate, mass_matrix, nonlinear_effects, rnea,
+                        world_wrench)
 from ..trial import Trial
 from . import qp as _qp
 from .static import MODES, WEIGHTS, _muscle_property, check_model
@@ -412,7 +412,7 @@ class ForwardStaticOptimization(Fitter):
                 lo = np.where(path.declared, np.clip(r_lo, 0.0, 1.0), 0.0)
                 hi = np.where(path.declared, np.clip(r_hi, lo, 1.0), 1.0)
             if not cost_mode:
-                tau_star = pin.rnea(pm, pd, q, v, a_star) - Qcomp
+                tau_star = rnea(pm, q, v, a_star, data=pd)[0] - Qcomp
                 A = (R * c_now[:, None]).T / scale[:, None]
                 b = (tau_star - R.T @ d_now) / scale
                 sol = fq.solve(A, b, lo, hi)
@@ -425,9 +425,8 @@ class ForwardStaticOptimization(Fitter):
                                             else "") + "; pass reserves=True, use enforce='cost', or lower the gains")
                 RHO[kk] = sol.rho * scale
             else:
-                M = pin.crba(pm, pd, q)
-                M = np.triu(M) + np.triu(M, 1).T
-                nle = pin.nonLinearEffects(pm, pd, q, v)
+                M = mass_matrix(pm, q, data=pd)[0]
+                nle = nonlinear_effects(pm, q, v, data=pd)[0]
                 Minv = np.linalg.inv(M)
                 # accelerations in units of each dof's capacity acceleration s_j / M_jj
                 a_ref = scale / np.diag(M)

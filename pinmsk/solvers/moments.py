@@ -60,6 +60,10 @@ def spanned_coordinates(muscles, q: np.ndarray, *, chunk: int = 20000, space=Non
     return out
 
 
+#: Frames of a coordinate map's Jacobian built at a time (:meth:`BalanceSpace.forces`, :meth:`BalanceSpace.arms`).
+ROWS = 20000
+
+
 class BalanceSpace:
     """The coordinates whose equations a solver balances, and the map to them from the model's.
 
@@ -104,13 +108,34 @@ class BalanceSpace:
 
     def forces(self, tau: np.ndarray, rows=slice(None)) -> np.ndarray:
         """Generalized forces (n, nv) of the model -> (n, ns) of the space (``J^T tau``)."""
-        J = self.jacobian(rows)
-        return np.asarray(tau) if J is None else np.einsum("njs,nj->ns", J, tau)
+        if self._cmap is None:
+            return np.asarray(tau)
+        return self._mapped(tau, rows, "njs,nj->ns")
 
     def arms(self, R: np.ndarray, rows=slice(None)) -> np.ndarray:
         """Columns (n, k, nv) of generalized force per unit (moment arms, actuator columns) -> (n, k, ns)."""
-        J = self.jacobian(rows)
-        return np.asarray(R) if J is None else np.einsum("nkj,njs->nks", R, J)
+        if self._cmap is None:
+            return np.asarray(R)
+        return self._mapped(R, rows, "njs,nkj->nks")
+
+    def _mapped(self, X: np.ndarray, rows, spec: str) -> np.ndarray:
+        """``einsum(spec, J, X)`` of the frames ``rows``, the Jacobian built :data:`ROWS` frames at a time
+        (it is ``nv * ns`` numbers a frame: a long motion's whole would dwarf the result)."""
+        X = np.asarray(X)
+        if not isinstance(rows, slice) or X.shape[0] <= ROWS:
+            return np.einsum(spec, self.jacobian(rows), X)
+        frames = np.arange(self._n_frames())[rows]
+        out = None
+        for k in range(0, frames.size, ROWS):
+            part = frames[k:k + ROWS]
+            y = np.einsum(spec, self.jacobian(slice(int(part[0]), int(part[-1]) + 1, rows.step)), X[k:k + ROWS])
+            if out is None:
+                out = np.empty((frames.size,) + y.shape[1:])
+            out[k:k + ROWS] = y
+        return out
+
+    def _n_frames(self) -> int:
+        return next(iter(np.shape(v)[0] for v in self._q.values()))
 
 
 def without_actuators(model):

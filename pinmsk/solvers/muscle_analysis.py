@@ -8,11 +8,18 @@ depends on activation, which a kinematic analysis does not have) and
 ``<muscle>_moment_arm_<coord>`` for each coordinate the muscle's path depends on
 (the others are zero and not written).
 
+A muscle whose muscle-tendon length is not longer than its tendon slack length at
+some frames has no rigid-tendon fiber state there (``x = l_mt - l_slack <= 0``):
+its fiber length is NaN at those frames, the rest of the analysis is kept, and
+one :class:`FiberRoomWarning` line names the muscles and their frame counts.
+
 On a model imported from an ``.osim`` the lengths and moment arms are those of
 the geometric paths (OpenSim's algorithm, exact), not of the fitted polynomials
 the solvers use; ``paths="model"`` takes the model's own paths.
 """
 from __future__ import annotations
+
+import warnings
 
 import numpy as np
 
@@ -22,7 +29,11 @@ from ..opensim.muscle_import import geometric_paths
 from ..signals.filtering import DEFAULT_CUTOFF
 from ..trial import Trial
 
-__all__ = ["muscle_analysis"]
+__all__ = ["muscle_analysis", "FiberRoomWarning"]
+
+
+class FiberRoomWarning(UserWarning):
+    """Some muscles' muscle-tendon length leaves no room for a rigid-tendon fiber at some frames."""
 
 
 def muscle_analysis(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, external_loads=None,
@@ -49,7 +60,7 @@ def muscle_analysis(model, trial, *, cutoff=DEFAULT_CUTOFF, grf=None, external_l
         l_mt, arms = ms.lengths(motion.q), ms.moment_arms(motion.q)     # (N, m), (N, m, nv)
         source = f"the model's paths ({type(ms.path).__name__})"
     v_mt = np.einsum("nmj,nj->nm", -arms, motion.v)
-    l_ce, _ = ms.mtu.fiber_kinematics_rigid(l_mt, v_mt)
+    l_ce = _fiber_lengths(ms, l_mt, v_mt)
     crossed = np.any(np.abs(arms) > 0.0, axis=0)                       # (m, nv)
     if hasattr(ms.path, "terms"):      # a polynomial path names the coordinates each muscle crosses
         crossed = np.zeros_like(crossed)
@@ -89,3 +100,21 @@ def _geometric(model, gp, motion):
     for k, c in enumerate(crossed):
         arms[:, :, model.coordinate_index(c)] = a[:, :, k]
     return lengths, arms
+
+
+def _fiber_lengths(ms, l_mt, v_mt):
+    """Rigid-tendon fiber lengths (N, m); NaN where ``l_mt <= l_slack`` (no fiber state), named in one
+    :class:`FiberRoomWarning` line."""
+    l_slack = np.broadcast_to(np.asarray(ms.mtu.l_slack, dtype=float), l_mt.shape[1:])
+    room = l_mt - l_slack > 0.0
+    if room.all():
+        return ms.mtu.fiber_kinematics_rigid(l_mt, v_mt)[0]
+    # the fiber kinematics of the frames without room are evaluated at a placeholder length, then masked
+    placeholder = np.where(room, l_mt, l_slack + 1e-3)
+    l_ce = np.where(room, ms.mtu.fiber_kinematics_rigid(placeholder, np.where(room, v_mt, 0.0))[0], np.nan)
+    bad = np.flatnonzero(~room.all(axis=0))
+    named = ", ".join(f"{ms.names[i]} ({int((~room[:, i]).sum())} of {room.shape[0]} frames, first at frame "
+                      f"{int(np.argmax(~room[:, i]))})" for i in bad)
+    warnings.warn(f"muscle analysis: no room for the rigid-tendon fiber (l_mt <= tendon slack length) of "
+                  f"{named}; fiber length NaN there", FiberRoomWarning, stacklevel=3)
+    return l_ce

@@ -186,6 +186,10 @@ class SOProblem:
         return np.einsum("na,naj->nj", u, self.C)
 
     def cost(self, x, minmax: bool) -> np.ndarray:
+        x = np.asarray(x)
+        if x.shape[0] > CHUNK_FRAMES:      # a long motion's temporaries a chunk of frames at a time
+            return np.concatenate([self.cost(x[k:k + CHUNK_FRAMES], minmax)
+                                   for k in range(0, x.shape[0], CHUNK_FRAMES)])
         x = np.maximum(x, 0.0)
         if minmax:
             return np.max(self.u * x, axis=1)
@@ -264,7 +268,7 @@ def _coordinate_column(model, coords, name) -> int:
 #: Frames per chunk in which :class:`StaticOptimization` builds and solves a long motion:
 #: the per-frame arrays of one chunk only are in memory, and the batched solve's
 #: working set stays in the CPU cache (``StaticOptimization(chunk_size=...)``).
-CHUNK_FRAMES = 20000
+CHUNK_FRAMES = 2500
 
 #: An actuator without a bound gets a finite stand-in for the solvers (proxsuite needs finite boxes):
 #: this many times the control that alone would give the largest scaled moment of the problem.  A
@@ -564,7 +568,8 @@ class FramesResult:
     qp_solves: int           # proxsuite QPs
     batched_frames: int
     forces: np.ndarray | None = None    # (N, m) N, when solved chunk by chunk
-    moments: np.ndarray | None = None   # (N, nd) N m of the muscles and actuators, likewise
+    moments: np.ndarray | None = None   # (N, nd) N m of the muscles and actuators, in one piece
+    violation: np.ndarray | None = None  # (N,) largest |moments (+ reserves) - tau|, when solved by chunks
 
 
 def _frame_qp(prob: SOProblem, *, exponent, minmax, reserve_weight, tol) -> _qp.FrameQP:
@@ -598,7 +603,7 @@ def solve_frames(prob: SOProblem, *, minmax: bool = False, reserve_weight: float
     solved = np.zeros(N, dtype=bool)
     path = np.full(N, -1, dtype=int)
     forces = np.full((N, len(prob.muscles)), np.nan) if chunked else None
-    moments = np.zeros((N, nd)) if chunked else None
+    violation = np.zeros(N) if chunked else None
     iters = 0
     nqp = 0
     batched = 0
@@ -629,9 +634,10 @@ def solve_frames(prob: SOProblem, *, minmax: bool = False, reserve_weight: float
             # the multipliers interpolated in time between their solved neighbours
             first = np.arange(0, sel.size, COARSE)
             second = np.setdiff1d(np.arange(sel.size), first)
-            lam_known = np.full((sel.size, nd), np.nan)
+            lam_known = np.full((first.size, nd), np.nan)       # the multipliers of the first pass' frames
             for start, stop in spans:
-                ip = first[(sel[first] >= start) & (sel[first] < stop)]
+                inside = (sel[first] >= start) & (sel[first] < stop)
+                ip = first[inside]
                 if ip.size:
                     if chunked:   # build the rows of these frames alone
                         part = prob.frames_at(sel[ip])
@@ -639,12 +645,11 @@ def solve_frames(prob: SOProblem, *, minmax: bool = False, reserve_weight: float
                     else:
                         got = rows(prob)
                     ok, lam = batch(got, ip, None)
-                    lam_known[ip[ok]] = lam[ok]
-            if not np.isnan(lam_known).all():
-                good = np.flatnonzero(~np.isnan(lam_known[:, 0])) if nd else np.zeros(0, int)
-                if good.size >= 2:
-                    lam0_all = np.column_stack([np.interp(second, good, lam_known[good, j])
-                                                for j in range(nd)])
+                    lam_known[np.flatnonzero(inside)[ok]] = lam[ok]
+            good = np.flatnonzero(~np.isnan(lam_known[:, 0])) if nd else np.zeros(0, int)
+            if good.size >= 2:
+                # interpolated a chunk at a time, where they are used
+                lam0_all = (first[good], lam_known[good])
     fq = _frame_qp(prob, exponent=P, minmax=minmax, reserve_weight=reserve_weight, tol=tol)
     use_lp = (method == "auto" and (minmax or P == 1.0) and reserve_weight is None)
     remaining = np.zeros(N, dtype=bool)
@@ -658,7 +663,11 @@ def solve_frames(prob: SOProblem, *, minmax: bool = False, reserve_weight: float
         if dual:
             inside = (sel[second] >= start) & (sel[second] < stop)
             if inside.any():
-                batch(rows(sub, off), second[inside], None if lam0_all is None else lam0_all[inside])
+                lam0 = None
+                if lam0_all is not None:
+                    at, known = lam0_all
+                    lam0 = np.column_stack([np.interp(second[inside], at, known[:, j]) for j in range(nd)])
+                batch(rows(sub, off), second[inside], lam0)
             done = here[batched_ok[here]]
             solved[done] = True
             path[done] = 0
@@ -713,10 +722,14 @@ def solve_frames(prob: SOProblem, *, minmax: bool = False, reserve_weight: float
         x[start:stop] = np.where(np.isfinite(xs), np.clip(xs, sub.lo, sub.hi), xs)   # proxsuite: inside to ~1e-16
         if chunked:
             forces[start:stop] = sub.forces(x[start:stop])
-            moments[start:stop] = (sub.moments(forces[start:stop])
-                                   + sub.actuator_moments(sub.controls(x[start:stop])))
+            # the balance each frame reaches, a chunk at a time (the whole motion's moments are not kept)
+            bal = sub.moments(forces[start:stop]) + sub.actuator_moments(sub.controls(x[start:stop]))
+            if reserve_weight is not None:
+                bal += rho[start:stop] * prob.scale
+            bal -= sub.tau
+            violation[start:stop] = np.max(np.abs(bal), axis=1, initial=0.0)
     return FramesResult(x=x, rho=rho, solved=solved, path=path, iterations=iters, qp_solves=nqp,
-                        batched_frames=batched, forces=forces, moments=moments)
+                        batched_frames=batched, forces=forces, violation=violation)
 
 
 def _by_chunk(prob, frames):
@@ -1052,27 +1065,43 @@ class StaticOptimization(Fitter):
                 raise SolverError(f"actuator '{name}' (no control bound) reached the solver's stand-in bound "
                                   f"{stand_in[cols[j]]:.4g} at frame {k} (t = {prob.time[k]:.4g} s): give it "
                                   "min_control / max_control, or a larger optimal_force")
+        # the per-frame arrays of a long motion are reused in place where their values are no longer needed
         F = prob.forces(x) if fr.forces is None else fr.forces
         u = prob.controls(x)
-        reserves = fr.rho * prob.scale
-        moment = prob.moments(F) + prob.actuator_moments(u) if fr.moments is None else fr.moments
+        used = np.any(np.abs(fr.rho) > 1e-6, axis=1) if W is not None else None
+        reserves = fr.rho
+        reserves *= prob.scale
+        violation = fr.violation
+        moment = None
+        if violation is None:
+            moment = prob.moments(F)
+            moment += prob.actuator_moments(u)
+            if W is not None:
+                moment += reserves
+        status = fr.path
         if W is not None:
-            moment = moment + reserves
-        self.forces_ = F
-        self.controls_ = u
-        self.actuator_forces_ = u * (prob.optimal_force if prob.actuators else np.zeros(0))
-        self.activations_ = x[:, :m] if prob.mode == "activation" else F / prob.f_max
-        self.reserves_ = reserves if W is not None else None
-        self.cost_ = prob.cost(x, bool(self.minmax))
-        self.violation_ = np.max(np.abs(moment - prob.tau), axis=1)
-        status = fr.path.copy()
-        if W is not None:
-            used = np.any(np.abs(fr.rho) > 1e-6, axis=1)
             status[used] = 2
-        self.status_ = status
         self.n_iter_ = fr.iterations
         self.n_qp_ = fr.qp_solves
         self.n_batched_ = fr.batched_frames
+        fr = None
+        self.forces_ = F
+        self.controls_ = u
+        self.actuator_forces_ = u * (prob.optimal_force if prob.actuators else np.zeros(0))
+        self.cost_ = prob.cost(x, bool(self.minmax))
+        if prob.mode == "activation":
+            self.activations_ = x[:, :m]
+        else:                                   # x is spent: its muscle columns take the activations
+            self.activations_ = np.divide(F, prob.f_max, out=x[:, :m])
+        x = None
+        self.reserves_ = reserves if W is not None else None
+        if violation is None:
+            moment -= prob.tau
+            np.abs(moment, out=moment)
+            violation = np.max(moment, axis=1, initial=0.0)
+            moment = None
+        self.violation_ = violation
+        self.status_ = status
         self.dofs_ = prob.dofs
         self.muscles_ = prob.muscles
         return self
@@ -1129,7 +1158,31 @@ class StaticOptimization(Fitter):
             meta["balanced_moments"] = plan.source
             meta["balanced_dofs"] = ", ".join(plan.dofs)
         units["violation"] = "N*m"
-        return Trial(prob.time, ch, units=units, meta=meta)
+        return self._columns(prob, ch, units, meta)
+
+    def _columns(self, prob, ch: dict, units, meta) -> Trial:
+        """The Trial of the channels ``ch``: one column-major (N, C) array filled channel by channel, the
+        fitted arrays re-bound to their columns as soon as these are filled (read-only views of the
+        result's: a long motion's forces and activations are held once, not twice)."""
+        names = list(ch)
+        pos = {n: i for i, n in enumerate(names)}
+        values = np.empty((len(names), prob.time.size), dtype=float).T
+        blocks = {}
+        for attr, fmt, items in (("forces_", "{}_force", prob.muscles), ("activations_", "{}_activation", prob.muscles),
+                                 ("reserves_", "{}_reserve", prob.dofs), ("cost_", "{}", ("cost",)),
+                                 ("violation_", "{}", ("violation",))):
+            cols = [pos.get(fmt.format(x)) for x in items]
+            if (items and getattr(self, attr, None) is not None and None not in cols
+                    and cols == list(range(cols[0], cols[0] + len(cols)))):
+                blocks.setdefault(cols[-1], []).append((attr, cols[0], len(cols) == 1 and attr in ("cost_", "violation_")))
+        for i, n in enumerate(names):
+            values[:, i] = ch[n]
+            ch[n] = None                       # the column's source goes once it is copied
+            for attr, first, single in blocks.get(i, ()):
+                view = values[:, i] if single else values[:, first:i + 1]
+                setattr(self, attr, view)
+        out = Trial._adopt(prob.time, names, values, units=units, meta=meta)
+        return out
 
     # -- reporting -----------------------------------------------------------
     def criterion(self) -> str:

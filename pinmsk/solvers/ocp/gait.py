@@ -363,10 +363,11 @@ class CoarseToFine(Collocation):
     def __init__(self, model, *, coarse_intervals: int, cost, constraints=(), duration=1.0, intervals: int = 50,
                  scheme: str = "hermite-simpson", controls=None, formulation: str = "ff",
                  tendon: str | None = None, guess=None, n_starts: int = 1, solver: dict | None = None,
-                 verbose: bool | None = None, coarse_model=None):
+                 verbose: bool | None = None, coarse_model=None, monitor=None, solver_log=None):
         super().__init__(model, cost=cost, constraints=constraints, duration=duration, intervals=intervals,
                          scheme=scheme, controls=controls, formulation=formulation, tendon=tendon, guess=guess,
-                         n_starts=n_starts, solver=solver, verbose=verbose)
+                         n_starts=n_starts, solver=solver, verbose=verbose, monitor=monitor,
+                         solver_log=solver_log)
         self.coarse_intervals = coarse_intervals
         self.coarse_model = coarse_model
 

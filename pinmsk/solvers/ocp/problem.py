@@ -43,6 +43,7 @@ solution.
 """
 from __future__ import annotations
 
+import contextlib
 import sys
 import time as _time
 
@@ -123,6 +124,82 @@ class _Blocks:
         return float(v.max()) if v.size else 0.0
 
 
+def _iteration_callback_class():
+    """:class:`_IterationCallback`'s base is ``casadi.Callback``, imported when first used."""
+    import casadi as ca
+
+    class IterationCallback(ca.Callback):
+        """CasADi's ``iteration_callback`` of ``nlpsol``: at every IPOPT iteration it gets the
+        iterate (``nlpsol_out``: x, f, g, ...) and tells ``monitor.iteration(k, f, inf_pr)``,
+        ``inf_pr`` being ``max(lbg - g, g - ubg, 0)`` (IPOPT keeps x inside its bounds)."""
+
+        def __init__(self, monitor, nx, lbg, ubg):
+            ca.Callback.__init__(self)
+            self.monitor, self.nx = monitor, int(nx)
+            self.lbg, self.ubg = np.asarray(lbg, dtype=float), np.asarray(ubg, dtype=float)
+            self.count = 0
+            self.interrupted = False
+            self.construct("pinmsk_iteration", {})
+
+        def reset(self):
+            self.count = 0
+            self.interrupted = False
+
+        def get_n_in(self):
+            return ca.nlpsol_n_out()
+
+        def get_n_out(self):
+            return 1
+
+        def get_name_in(self, i):
+            return ca.nlpsol_out(i)
+
+        def get_name_out(self, i):
+            return "ret"
+
+        def get_sparsity_in(self, i):
+            n = {"x": self.nx, "lam_x": self.nx, "g": self.lbg.size, "lam_g": self.lbg.size, "f": 1}.get(ca.nlpsol_out(i), 0)
+            return ca.Sparsity.dense(n) if n else ca.Sparsity(0, 0)
+
+        def eval(self, arg):
+            if self.interrupted:  # non-zero: IPOPT stops (User_Requested_Stop)
+                return [1]
+            if self.monitor is not None:
+                g = np.asarray(arg[2], dtype=float).ravel()
+                viol = np.maximum(np.maximum(self.lbg - g, g - self.ubg), 0.0)
+                self.monitor.iteration(self.count, float(arg[1]), float(viol.max()) if viol.size else 0.0)
+            self.count += 1       # IPOPT calls it at iteration 0 (the start) too
+            return [0]
+
+    return IterationCallback
+
+
+def _IterationCallback(monitor, nx, lbg, ubg):
+    return _iteration_callback_class()(monitor, nx, lbg, ubg)
+
+
+@contextlib.contextmanager
+def _interrupt_flag(callback):
+    """During the block, SIGINT (Ctrl-C) sets ``callback.interrupted`` instead of raising inside
+    IPOPT's callbacks, where CasADi would turn it into a failed solve (``NonIpopt_Exception_Thrown``)
+    and a fit of several stages would go on to the next; the callback then stops IPOPT and the fit
+    raises ``KeyboardInterrupt``.  Only Python's default handler in the main thread is replaced."""
+    import signal
+    import threading
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
+        yield
+        return
+
+    def _flag(signum, frame):
+        callback.interrupted = True
+    signal.signal(signal.SIGINT, _flag)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 class Collocation(Fitter):
     """Direct-collocation optimal control of a musculoskeletal model (see the module docstring).
 
@@ -141,14 +218,23 @@ class Collocation(Fitter):
       start the solver (a warm start);
     - ``n_starts``: automatic guesses to try (the best converged one is the result);
     - ``solver``: IPOPT settings ``tol`` (1e-8), ``max_iter`` (1000), ``constraint_tol`` (1e-6,
-      scaled), ``print_level``, ``hessian`` (``"exact"`` or ``"limited-memory"``), ...;
-    - ``verbose``: IPOPT's iteration table (default: when stdout is a terminal).
+      scaled), ``print_level`` (5: the level of IPOPT's log when ``verbose`` or in ``solver_log``),
+      ``hessian`` (``"exact"`` or ``"limited-memory"``), ...;
+    - ``verbose``: IPOPT's iteration table on stdout (default: when stdout is a terminal);
+    - ``monitor``: an object told of each IPOPT solve (a *stage*: every start, and both grids of
+      :class:`~pinmsk.solvers.ocp.gait.CoarseToFine`): ``start(label)``, then
+      ``iteration(k, objective, violation)`` at every IPOPT iteration (``violation``: the largest
+      constraint violation, IPOPT's ``inf_pr``), then ``end(record)`` with the stage's status,
+      iterations, objective, violation and seconds (e.g.
+      :class:`pinmsk.presentation.solve_progress.SolveProgress`);
+    - ``solver_log``: a file IPOPT's own log (print level 5, or ``solver["print_level"]``) is
+      appended to, each solve under a ``# pinmsk: ...`` header line.
     """
 
     def __init__(self, model, *, cost: Cost, constraints=(), duration=1.0, intervals: int = 50,
                  scheme: str = "hermite-simpson", controls=None, formulation: str = "ff",
                  tendon: str | None = None, guess=None, n_starts: int = 1, solver: dict | None = None,
-                 verbose: bool | None = None):
+                 verbose: bool | None = None, monitor=None, solver_log=None):
         self.model = model
         self.cost = cost
         self.constraints = constraints
@@ -162,6 +248,8 @@ class Collocation(Fitter):
         self.n_starts = n_starts
         self.solver = solver
         self.verbose = verbose
+        self.monitor = monitor
+        self.solver_log = solver_log
 
     # ------------------------------------------------------------------ problem facts
     @property
@@ -810,8 +898,9 @@ class Collocation(Fitter):
     def _ipopt_options(self) -> dict:
         s = self._solver
         verbose = self.verbose if self.verbose is not None else sys.stdout.isatty()
+        level = int(s.get("print_level", 5))
         opts = {"expand": False, "print_time": False,
-                "ipopt.print_level": int(s.get("print_level", 5 if verbose else 0)),
+                "ipopt.print_level": level if verbose else 0,
                 "ipopt.sb": "yes", "ipopt.tol": float(s.get("tol", 1e-8)),
                 "ipopt.max_iter": int(s.get("max_iter", 1000)),
                 "ipopt.mu_strategy": s.get("mu_strategy", "adaptive"),
@@ -824,6 +913,9 @@ class Collocation(Fitter):
             opts["ipopt.acceptable_iter"] = int(s["acceptable_iter"])
         if "nlp_scaling_method" in s:
             opts["ipopt.nlp_scaling_method"] = str(s["nlp_scaling_method"])
+        if self.solver_log is not None:       # appended: every solve of a fit (starts, stages) in one file
+            opts.update({"ipopt.output_file": str(self.solver_log), "ipopt.file_print_level": level,
+                         "ipopt.file_append": "yes"})
         return opts
 
     def fit(self):
@@ -848,14 +940,32 @@ class Collocation(Fitter):
         opts.update(jac_g=nlp["jac_g"], hess_lag=nlp["hess_lag"])
         if nlp["grad_f"] is not None:
             opts["grad_f"] = nlp["grad_f"]
+        # every iteration passes through it: the monitor's progress, and Ctrl-C ends the fit
+        callback = _IterationCallback(self.monitor, nlp["w"].numel(), nlp["lbg"], nlp["ubg"])
+        opts["iteration_callback"] = callback
         solver = ca.nlpsol("ocp", "ipopt", {"x": nlp["w"], "f": nlp["J"], "g": nlp["g"]}, opts)
         out_fn = ca.Function("outputs", [nlp["w"]], list(nlp["outputs"].values()))
         records, best = [], None
         ctol = float(self._solver.get("constraint_tol", 1e-6))
         for k, gs in enumerate(guesses):
             w0 = nlp["w0"] if k == 0 else self._build_guess_only(nlp, gs)
+            label = f"{self._N} intervals" + (f", start {k + 1}/{len(guesses)}" if len(guesses) > 1 else "")
+            if self.solver_log is not None:
+                with open(self.solver_log, "a", encoding="utf-8") as fh:
+                    fh.write(f"# pinmsk: IPOPT solve of model '{self.model.name}', {label}\n")
+            callback.reset()
+            if self.monitor is not None:
+                self.monitor.start(label)
             t0 = _time.perf_counter()
-            sol = solver(x0=w0, lbx=nlp["lbx"], ubx=nlp["ubx"], lbg=nlp["lbg"], ubg=nlp["ubg"])
+            try:
+                with _interrupt_flag(callback):
+                    sol = solver(x0=w0, lbx=nlp["lbx"], ubx=nlp["ubx"], lbg=nlp["lbg"], ubg=nlp["ubg"])
+                if callback.interrupted:      # Ctrl-C: IPOPT stopped at the callback's request
+                    raise KeyboardInterrupt
+            except BaseException:
+                if self.monitor is not None:      # an interrupted solve closes its progress line
+                    self.monitor.end(None)
+                raise
             stats = solver.stats()
             wv = np.asarray(sol["x"]).ravel()
             gv = np.asarray(sol["g"]).ravel()
@@ -872,6 +982,8 @@ class Collocation(Fitter):
                    "iterations": int(stats.get("iter_count", -1)), "seconds": _time.perf_counter() - t0,
                    "violation": viol}
             records.append(rec)
+            if self.monitor is not None:
+                self.monitor.end(rec)
             if best is None or (ok and (not best[0]["converged"] or rec["objective"] < best[0]["objective"])):
                 best = (rec, wv)
         self._nlp = nlp
@@ -948,7 +1060,7 @@ class Collocation(Fitter):
                               iterations=int(rec["iterations"]), violation=float(rec["violation"]),
                               objective=objective)
         res = Result(t, ch, stats=stats, info=info, report=self._report_text(stats, info))
-        if not rec["converged"]:
+        if not rec["converged"] and self.monitor is None:      # a monitor has shown each stage's status
             print(f"pinmsk: optimal control did not converge: {rec['status']}", file=sys.stderr)
         return res
 
