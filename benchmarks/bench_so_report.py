@@ -70,4 +70,5 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from _record import run
+    sys.exit(run(main))
