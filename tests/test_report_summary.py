@@ -38,7 +38,9 @@ def _results(n_muscles=30):
 
 @pytest.fixture(scope="module")
 def page_html():
-    return report.render_results_report(model=pinmsk.load_model("forearm"), trial=None, results=_results())
+    # figures={}: the summary and the tables without drawing figures (the browser test draws them)
+    return report.render_results_report(model=pinmsk.load_model("forearm"), trial=None, results=_results(),
+                                        figures={})
 
 
 def test_summary_comes_first_with_reserves_and_worst_frames(page_html):
