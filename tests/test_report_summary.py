@@ -91,3 +91,17 @@ def test_so_report_and_plot_draw_each_figure_once(tmp_path, monkeypatch):
     embedded = {base64.b64decode(b) for b in re.findall(r'src="data:image/png;base64,([^"]+)"', html)}
     written = {p.read_bytes() for p in (tmp_path / "fig").glob("*.png")}
     assert written and written <= embedded
+
+
+def test_emg_table_marks_nearly_silent_muscles():
+    t = np.linspace(0.0, 1.0, 51)
+    shape = np.sin(np.pi * t)
+    results = pinmsk.Trial(t, {"BRD_activation": 0.5 * shape, "BRA_activation": 1e-4 * shape,
+                               "BRD_emg": shape, "BRA_emg": shape})
+    html = report.render_results_report(model=pinmsk.load_model("forearm"), trial=None, results=results,
+                                        figures={})
+    rows = dict((m, (r, peak, note)) for m, r, peak, note in re.findall(
+        r"<tr><td class=\"l\">(BR[AD])</td><td class=\"\">([^<]*)</td><td class=\"\">([^<]*)</td>"
+        r"<td class=\"l\">([^<]*)</td></tr>", html))
+    assert rows["BRD"] == ("1", "0.5", "")
+    assert rows["BRA"] == ("1", "0.0001", "silent")          # same shape, r = 1, but silent

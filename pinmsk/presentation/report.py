@@ -289,6 +289,8 @@ def status_counts(results) -> list[list]:
 
 #: Tables and lists longer than this are collapsed (<details>) below the summary.
 SHOWN_ROWS = 20
+#: Peak activation below which a muscle counts as silent: its correlation with EMG says nothing.
+SILENT_PEAK = 0.02
 #: Frames listed as the worst in the summary.
 WORST_FRAMES = 5
 
@@ -403,8 +405,16 @@ def render_results_report(*, model, trial, results, title: str | None = None, te
         q = "activation" if plots.muscles_in(results, "activation") else "force"
         r = plots.emg_correlations(results, emg, quantity=q)
         if r:
-            parts.append(f"<p>Correlation of {q} with EMG (Pearson r):</p>")
-            parts.append(_table(["muscle", "r"], [[m, _g(v)] for m, v in r.items()]))
+            # shapes are compared (r does not see scale); a muscle the solution leaves nearly silent
+            # has no shape to compare, whatever its r
+            parts.append(f"<p>Correlation of {q} with EMG (Pearson r of the shapes; a muscle whose peak "
+                         f"activation is below {SILENT_PEAK:g} is marked silent):</p>")
+            peaks = {m: float(np.nanmax(np.asarray(results[f"{m}_activation"], dtype=float)))
+                     for m in r if f"{m}_activation" in results}
+            parts.append(_table(["muscle", "r", "peak activation", "note"],
+                                [[m, _g(v), _g(peaks.get(m)),
+                                  "silent" if peaks.get(m, 1.0) < SILENT_PEAK else ""] for m, v in r.items()],
+                                left={0, 3}))
     st = status_counts(results)
     if st:
         parts.append("<h2>Solver status</h2>")
