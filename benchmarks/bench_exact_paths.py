@@ -72,4 +72,5 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from _record import run
+    raise SystemExit(run(main))

@@ -113,4 +113,5 @@ def _write_docs(rows, path: Path) -> None:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from _record import run
+    raise SystemExit(run(main))
