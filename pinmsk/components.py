@@ -233,6 +233,17 @@ class Motion:
         return (Motion, (self.t, self.q, self.v, self.a, dict(self.signals)))
 
 
+def vec3(x, what: str, owner: str) -> tuple[float, float, float]:
+    """``x`` as three finite floats (a point, a normal), else a ModelError naming ``owner``'s ``what``."""
+    try:
+        out = tuple(float(v) for v in np.asarray(x, dtype=float).reshape(-1))
+    except (TypeError, ValueError):
+        raise ModelError(f"{owner}: {what} must be 3 numbers, got {x!r}") from None
+    if len(out) != 3 or not all(math.isfinite(v) for v in out):
+        raise ModelError(f"{owner}: {what} must be 3 finite numbers, got {x!r}")
+    return out
+
+
 class _Frozen(type):
     """Metaclass of :class:`Component`: instances become read-only once constructed."""
 

@@ -24,13 +24,12 @@ frames and runs on :class:`~pinmsk.contact.dual.Dual` numbers (exact derivatives
 """
 from __future__ import annotations
 
-import math
 from typing import Any, Mapping
 
 import numpy as np
 
 from ..backend import backend_of
-from ..components import Parameter
+from ..components import Parameter, vec3
 from ..errors import ModelError
 from .dual import asarray, vector
 from .friction import hollars_friction
@@ -61,16 +60,6 @@ def hertz_coefficient(stiffness, radius):
     return (4.0 / 3.0) * k * xp.sqrt(asarray(radius) * k)
 
 
-def _vec3(x, what: str, owner: str) -> tuple[float, float, float]:
-    try:
-        out = tuple(float(v) for v in np.asarray(x, dtype=float).reshape(-1))
-    except (TypeError, ValueError):
-        raise ModelError(f"{owner}: {what} must be 3 numbers, got {x!r}") from None
-    if len(out) != 3 or not all(math.isfinite(v) for v in out):
-        raise ModelError(f"{owner}: {what} must be 3 finite numbers, got {x!r}")
-    return out
-
-
 def _dot(a, n):
     """Row-wise ``a . n`` of (N, 3) ``a`` (plain or Dual) and a plain (3,) ``n``."""
     return a[:, 0] * n[0] + a[:, 1] * n[1] + a[:, 2] * n[2]
@@ -94,8 +83,8 @@ class HalfSpaceContact(FrameContact):
                  **values: float):
         self._start(target, bounds)
         owner = self.label
-        self.location = _vec3(location, "location", owner)
-        n = np.asarray(_vec3(plane_normal, "plane_normal", owner))
+        self.location = vec3(location, "location", owner)
+        n = np.asarray(vec3(plane_normal, "plane_normal", owner))
         norm = float(np.linalg.norm(n))
         if not norm > 0.0:
             raise ModelError(f"{owner}: plane_normal {tuple(n)} has no direction")
@@ -105,7 +94,7 @@ class HalfSpaceContact(FrameContact):
             if norm == 1.0:
                 break
         self.plane_normal = tuple(float(v) for v in n)
-        self.plane_point = _vec3(plane_point, "plane_point", owner)
+        self.plane_point = vec3(plane_point, "plane_point", owner)
         self._finish(values)
 
     # -- the force law (subclasses) ---------------------------------------

@@ -33,7 +33,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..backend import backend_of
-from ..components import Component, Motion, Parameter, motion_cached
+from ..components import Component, Motion, Parameter, motion_cached, vec3
 from ..errors import ModelError
 from .registry import register
 
@@ -288,7 +288,7 @@ class PointToPointSpring(FramePairForce):
 
     def __init__(self, target: str, *, frame2: str | None = None, point1=(0.0, 0.0, 0.0), point2=(0.0, 0.0, 0.0),
                  **values: float):
-        self.point1, self.point2 = (_vec3(x, n, f"{self.family}:{target}") for x, n in ((point1, "point1"),
+        self.point1, self.point2 = (vec3(x, n, f"{self.family}:{target}") for x, n in ((point1, "point1"),
                                                                                       (point2, "point2")))
         super().__init__(target, frame2=frame2, **values)
 
@@ -305,16 +305,6 @@ class PointToPointSpring(FramePairForce):
 
     def _options(self) -> tuple:
         return (self.frame2, self.point1, self.point2)
-
-
-def _vec3(x, what: str, owner: str) -> tuple[float, float, float]:
-    try:
-        out = tuple(float(v) for v in np.asarray(x, dtype=float).reshape(-1))
-    except (TypeError, ValueError):
-        raise ModelError(f"{owner}: {what} must be 3 numbers, got {x!r}") from None
-    if len(out) != 3 or not all(math.isfinite(v) for v in out):
-        raise ModelError(f"{owner}: {what} must be 3 finite numbers, got {x!r}")
-    return out
 
 
 @register
