@@ -146,11 +146,15 @@ def _stride_result():
     tr = _synthetic_stride(bw=700.0)
     return Result.from_trial(tr, stats=FitStatistics(converged=True, iterations=7, objective=2.5),
                              info={"speed": 1.3, "body_weight": 700.0, "cost_of_transport": 2.345,
-                                   "stride_length": 1.43})
+                                   "stride_length": 1.43,
+                                   # what the solve's OUT.json holds, for the summary line
+                                   "summary": {"converged": True, "status": "Solve_Succeeded", "objective": 2.5,
+                                               "iterations": 7, "seconds": 1.0, "speed": 1.3,
+                                               "stride_length": 1.43, "cost_of_transport": 2.345}})
 
 
 def _fake_optimize(calls):
-    def optimize_task(task, out, progress=None, *, precision=None):
+    def optimize_task(task, out, progress=None, *, precision=None, **_):
         calls.append(task)
         res = _stride_result()
         if out is not None:

@@ -221,7 +221,12 @@ def test_stored_numbers_are_opensims(zoo):
     osim, why = import_opensim()
     if osim is None:
         pytest.skip(why)
-    import make_references as mk
+    # by its path: tests/data/zoo has a make_references.py too, and a worker may have imported that one
+    import importlib.util
+    spec = importlib.util.spec_from_file_location(
+        "osim_forces_make_references", Path(__file__).resolve().parent / "osim_forces" / "make_references.py")
+    mk = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mk)
     for name, force in (("ToyLanding", "BackBushing"), ("Walker", "LKneeLimitTorque")):
         names, t, Q, V, A = _stored(name)
         rows = slice(0, 3)
